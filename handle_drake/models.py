@@ -1,0 +1,48 @@
+"""Where the project's models live and how Drake finds them.
+
+``models/`` is a Drake package named ``handle_drake_models`` (see its
+``package.xml``); model files refer to each other as
+``package://handle_drake_models/...``. In a checkout it sits at the top of the
+repository; ``pip install .`` installs it as ``handle_drake/_models``.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+
+PACKAGE_NAME = "handle_drake_models"
+
+
+@cache
+def models_dir() -> Path:
+    """The directory holding ``package.xml`` of ``handle_drake_models``."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "models", here / "_models"):
+        if (candidate / "package.xml").is_file():
+            return candidate
+    raise FileNotFoundError(
+        f"handle_drake models not found: looked for package.xml in {here.parent / 'models'} "
+        f"and {here / '_models'}; reinstall handle_drake (pip install .)"
+    )
+
+
+def model_path(relative: str) -> Path:
+    """Absolute path of a file inside ``models/``; raises if it does not exist."""
+    path = models_dir() / relative
+    if not path.is_file():
+        raise FileNotFoundError(f"no model file {relative!r} in {models_dir()}")
+    return path
+
+
+def package_url(relative: str) -> str:
+    """``package://handle_drake_models/<relative>`` for Drake's parser."""
+    model_path(relative)
+    return f"package://{PACKAGE_NAME}/{relative}"
+
+
+def add_package(parser) -> None:
+    """Register ``handle_drake_models`` with a ``pydrake.multibody.parsing.Parser``."""
+    package_map = parser.package_map()
+    if not package_map.Contains(PACKAGE_NAME):
+        package_map.Add(PACKAGE_NAME, str(models_dir()))
