@@ -1,0 +1,112 @@
+"""The ``handle-drake`` command.
+
+Sub-commands:
+
+- ``demo``: the Shadow hand grasps a sphere, lifts it, reports whether it
+  held and writes an HTML replay.
+- ``simulate SCENARIO.yaml``: runs a scenario (live in Meshcat with
+  ``--meshcat``, saved as a self-contained page with ``--html``).
+- the sub-commands each area registers (``register(subparsers)``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from pathlib import Path
+
+# Modules that add their own sub-commands with ``register(subparsers)``.
+AREA_COMMANDS: tuple[str, ...] = ()
+
+
+def _pin_blas() -> None:
+    # Threaded BLAS on small machines makes small solves far slower.
+    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(variable, "1")
+
+
+def _add_simulate(subparsers) -> None:
+    p = subparsers.add_parser("simulate", help="run a scenario file (see diagrams/)")
+    p.add_argument("scenario", type=Path, help="scenario YAML file")
+    p.add_argument("--override", default=None, help="YAML text applied on top of the file")
+    p.add_argument("--duration", type=float, default=None, help="seconds (default: scenario's)")
+    p.add_argument("--meshcat", action="store_true", help="show it live in Meshcat")
+    p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
+    p.set_defaults(func=_cmd_simulate)
+
+
+def _add_demo(subparsers) -> None:
+    p = subparsers.add_parser("demo", help="Shadow hand grasps and lifts a sphere")
+    p.add_argument("--html", type=Path, default=Path("out/demo.html"),
+                   help="HTML replay path (default out/demo.html)")
+    p.add_argument("--meshcat", action="store_true", help="also show it live in Meshcat")
+    p.add_argument("--no-html", action="store_true", help="do not write the HTML replay")
+    p.set_defaults(func=_cmd_demo)
+
+
+def _meshcat(wanted: bool):
+    if not wanted:
+        return None
+    from pydrake.geometry import StartMeshcat
+
+    meshcat = StartMeshcat()
+    print(f"Meshcat: {meshcat.web_url()}", flush=True)
+    return meshcat
+
+
+def _cmd_simulate(args) -> int:
+    from handle_drake.run import ScenarioRunner
+    from handle_drake.scenario import LoadScenario
+
+    scenario = LoadScenario(filename=args.scenario, data=args.override)
+    meshcat = _meshcat(args.meshcat or args.html is not None)
+    runner = ScenarioRunner(scenario, meshcat)
+    result = runner.run(args.duration, html=args.html)
+    print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
+          f"({result.realtime_factor:.1f}x real time)")
+    if result.object_position is not None:
+        print(f"object height: start {result.object_position[0, 2]:.3f} m, "
+              f"end {result.object_position[-1, 2]:.3f} m")
+    if args.html:
+        print(f"replay written to {args.html}")
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from handle_drake.demo import run_demo
+
+    meshcat = _meshcat(args.meshcat or not args.no_html)
+    report = run_demo(meshcat=meshcat, html=None if args.no_html else args.html)
+    print(report.summary())
+    return 0 if report.held else 1
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="handle-drake",
+        description="Dexterous grasping with the Shadow and Barrett hands on Drake.",
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_demo(subparsers)
+    _add_simulate(subparsers)
+    for module_name in AREA_COMMANDS:
+        importlib.import_module(module_name).register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    _pin_blas()
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, TypeError) as error:
+        print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,304 @@
+"""Typed scenarios: what a station simulates (or drives), loaded from YAML.
+
+The dataclasses use ``typing.Union``/``Optional``/``List`` because Drake 1.51's
+``yaml_load_typed`` does not understand ``X | Y`` or ``list[X]`` annotations, and
+this module must not use ``from __future__ import annotations`` (the schema
+reader needs real types, not strings).
+
+A scenario file names the hand and how it is mounted, the object, the table,
+the contact model and time step, the hand driver (a tagged variant: the
+simulated hand, or a CAN hand behind the bus server) and the simulation
+duration. :func:`LoadScenario` reads a file first and then an override string,
+so a trial is "base scenario + parameters as an override":
+
+.. code-block:: yaml
+
+    hand:
+      kind: shadow
+      coupling_ratio: 1.0          # xFJ1 = ratio * xFJ2 (1.0 C6 hand, 1.1 C5)
+      mount: !FloatingWrist
+        X_WB: {translation: [0, 0, 0.3], rotation: !Rpy {deg: [180, 0, 0]}}
+    object: {kind: sphere, size: 0.06, on_table: true}
+    table: {top_height: 0.0}
+    contact_model: point
+    time_step: 0.001
+    driver: !SimHandDriver {}
+    simulation_duration: 2.0
+    random_seed: 0
+
+Units are SI (m, rad, kg, s). Poses are ``pydrake.common.schema.Transform``
+(``translation`` in m, ``rotation`` as ``!Rpy {deg: [...]}`` or
+``!AngleAxis``).
+"""
+
+
+import dataclasses as dc
+import math
+import typing
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+
+
+__all__ = [
+    "CONTACT_MODELS",
+    "CanHandDriver",
+    "FixedMount",
+    "FloatingWrist",
+    "HandConfig",
+    "Keyframe",
+    "LoadScenario",
+    "ObjectConfig",
+    "Scenario",
+    "ScenarioError",
+    "SimHandDriver",
+    "TableConfig",
+    "DumpScenario",
+]
+
+CONTACT_MODELS = ("point", "hydroelastic")
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be built; the message names the field."""
+
+
+@dc.dataclass
+class FixedMount:
+    """The hand base welded to the world at ``X_WB``."""
+
+    X_WB: Transform = dc.field(default_factory=Transform)
+
+
+@dc.dataclass
+class FloatingWrist:
+    """An actuated 6-DOF "floating wrist" carrying the hand base (no arm).
+
+    Three prismatic joints (x, y, z) then three revolute joints (yaw about z,
+    pitch about y, roll about x), so the commanded 6-vector
+    ``[x, y, z, roll, pitch, yaw]`` is the base pose in world with
+    ``R_WB = Rz(yaw) Ry(pitch) Rx(roll)``. ``X_WB`` is the initial pose. The
+    arm that would carry the hand is taken as gravity compensated: gravity is
+    off for the wrist and hand bodies (it still acts on the object).
+    """
+
+    X_WB: Transform = dc.field(default_factory=Transform)
+    translation_kp: float = 2.0e4  # N/m
+    translation_kd: float = 4.0e2  # N*s/m
+    rotation_kp: float = 2.0e3  # N*m/rad
+    rotation_kd: float = 4.0e1  # N*m*s/rad
+
+
+@dc.dataclass
+class HandConfig:
+    kind: str = "shadow"
+    # Shadow: xFJ1 = coupling_ratio * xFJ2 (1.0 for the C6 hand, 1.1 for the C5
+    # hand). None takes the hand's default; the Barrett distal ratio is fixed.
+    coupling_ratio: typing.Optional[float] = None
+    mount: typing.Union[FixedMount, FloatingWrist] = dc.field(default_factory=FixedMount)
+    # Initial joint positions (rad) by actuated joint name; others start at 0.
+    initial_position: typing.Dict[str, float] = dc.field(default_factory=dict)
+
+
+@dc.dataclass
+class ObjectConfig:
+    """The object to grasp; see ``handle_drake.objects`` for kinds and sizes."""
+
+    kind: str = "sphere"
+    size: float = 0.06  # m, the kind's characteristic length
+    mass: typing.Optional[float] = None  # kg; None derives it from the kind's density
+    mu: float = 0.8  # Coulomb friction coefficient (static = dynamic)
+    X_WO: Transform = dc.field(default_factory=Transform)
+    # If true, X_WO's z is replaced so that the object rests on the table top.
+    on_table: bool = True
+
+
+@dc.dataclass
+class TableConfig:
+    top_height: float = 0.0  # m, world z of the table top
+    size_x: float = 0.8
+    size_y: float = 0.8
+
+
+@dc.dataclass
+class SimHandDriver:
+    """The simulated hand: Drake PD actuators tracking the position command.
+
+    ``max_joint_velocity`` (rad/s) rate-limits the command before it reaches
+    the PD loops, like a real hand's controller; 0 disables the limit.
+    """
+
+    max_joint_velocity: float = 4.0
+    # Period (s) of the command rate limiter.
+    control_period: float = 0.002
+
+
+@dc.dataclass
+class Keyframe:
+    """One point of a scripted command; commands are interpolated linearly.
+
+    ``hand`` gives actuated joint positions (rad) by name; joints it does not
+    name keep their value from the previous keyframe (or the initial
+    position). ``wrist`` is ``[x y z roll pitch yaw]`` (m, rad) for a
+    floating-wrist mount, or empty to keep the previous one.
+    """
+
+    time: float = 0.0  # s
+    hand: typing.Dict[str, float] = dc.field(default_factory=dict)
+    wrist: typing.List[float] = dc.field(default_factory=list)
+
+
+@dc.dataclass
+class CanHandDriver:
+    """A real (or simulated-firmware) CAN hand behind the CAN bus server."""
+
+    host: str = "127.0.0.1"
+    port: int = 0
+
+
+@dc.dataclass
+class Scenario:
+    hand: HandConfig = dc.field(default_factory=HandConfig)
+    object: typing.Optional[ObjectConfig] = dc.field(default_factory=ObjectConfig)
+    table: typing.Optional[TableConfig] = dc.field(default_factory=TableConfig)
+    contact_model: str = "point"  # point | hydroelastic
+    time_step: float = 0.001  # s, MultibodyPlant discrete step (SAP solver)
+    driver: typing.Union[SimHandDriver, CanHandDriver] = dc.field(default_factory=SimHandDriver)
+    simulation_duration: float = 2.0  # s
+    random_seed: int = 0
+    # An optional scripted command (hand joints and wrist pose over time), so a
+    # scenario file alone describes a runnable experiment.
+    script: typing.List[Keyframe] = dc.field(default_factory=list)
+    # Meshcat publish period (s) when a Meshcat is given.
+    visualization_period: float = 1.0 / 32
+
+
+def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
+    """Loads a scenario from a YAML file, then applies an optional override string.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ScenarioError: malformed YAML, an unknown field or tag, or an invalid
+            value; the message names the file and the problem.
+    """
+    scenario = Scenario()
+    if filename is not None:
+        path = Path(filename)
+        if not path.is_file():
+            raise FileNotFoundError(f"scenario file not found: {path}")
+        scenario = _load(path.read_text(), scenario, source=str(path))
+    if data is not None:
+        scenario = _load(data, scenario, source="override")
+    validate_scenario(scenario)
+    return scenario
+
+
+def DumpScenario(scenario: Scenario) -> str:
+    """The scenario as YAML text that :func:`LoadScenario` reads back."""
+    return yaml_dump_typed(scenario)
+
+
+def _load(text: str, defaults: Scenario, source: str) -> Scenario:
+    if not text.strip():
+        return defaults
+    try:
+        return yaml_load_typed(schema=Scenario, data=text, defaults=defaults)
+    except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError
+        message = str(error).strip().splitlines()
+        raise ScenarioError(f"invalid scenario ({source}): {' '.join(message)[:500]}") from None
+
+
+def _check_transform(name: str, transform: Transform) -> None:
+    try:
+        X = transform.GetDeterministicValue()
+    except Exception as error:
+        raise ScenarioError(f"{name}: {error}") from None
+    if not np.all(np.isfinite(X.GetAsMatrix4())):
+        raise ScenarioError(f"{name}: pose must be finite, got {X.GetAsMatrix4()[:3].tolist()}")
+
+
+def _check_positive(name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ScenarioError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+def validate_scenario(scenario: Scenario) -> None:
+    """Checks values the YAML schema cannot; raises :class:`ScenarioError`."""
+    from handle_drake.hands import HAND_SPECS
+
+    if scenario.hand.kind not in HAND_SPECS:
+        raise ScenarioError(
+            f"hand.kind: unknown hand {scenario.hand.kind!r}; expected one of {sorted(HAND_SPECS)}"
+        )
+    if scenario.hand.coupling_ratio is not None:
+        _check_positive("hand.coupling_ratio", scenario.hand.coupling_ratio)
+    _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
+    spec = HAND_SPECS[scenario.hand.kind]
+    for name, value in scenario.hand.initial_position.items():
+        if name not in spec.actuated_joint_names:
+            raise ScenarioError(
+                f"hand.initial_position: {name!r} is not an actuated joint of the "
+                f"{spec.name} hand; expected one of {list(spec.actuated_joint_names)}"
+            )
+        if not math.isfinite(value):
+            raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
+    if scenario.object is not None:
+        from handle_drake.objects import OBJECT_KINDS
+
+        if scenario.object.kind not in OBJECT_KINDS:
+            raise ScenarioError(
+                f"object.kind: unknown object {scenario.object.kind!r}; "
+                f"expected one of {sorted(OBJECT_KINDS)}"
+            )
+        _check_positive("object.size", scenario.object.size)
+        if scenario.object.mass is not None:
+            _check_positive("object.mass", scenario.object.mass)
+        if not (math.isfinite(scenario.object.mu) and scenario.object.mu >= 0):
+            raise ScenarioError(f"object.mu must be finite and >= 0, got {scenario.object.mu}")
+        _check_transform("object.X_WO", scenario.object.X_WO)
+    if scenario.table is not None:
+        if not math.isfinite(scenario.table.top_height):
+            raise ScenarioError("table.top_height must be finite")
+        _check_positive("table.size_x", scenario.table.size_x)
+        _check_positive("table.size_y", scenario.table.size_y)
+    if scenario.contact_model not in CONTACT_MODELS:
+        raise ScenarioError(
+            f"contact_model: expected one of {list(CONTACT_MODELS)}, got {scenario.contact_model!r}"
+        )
+    _check_positive("time_step", scenario.time_step)
+    _check_positive("simulation_duration", scenario.simulation_duration)
+    _check_positive("visualization_period", scenario.visualization_period)
+    _validate_script(scenario, spec)
+    if isinstance(scenario.driver, SimHandDriver):
+        if not (math.isfinite(scenario.driver.max_joint_velocity)
+                and scenario.driver.max_joint_velocity >= 0):
+            raise ScenarioError("driver.max_joint_velocity must be finite and >= 0")
+        _check_positive("driver.control_period", scenario.driver.control_period)
+
+
+def _validate_script(scenario: Scenario, spec) -> None:
+    previous = -math.inf
+    for i, keyframe in enumerate(scenario.script):
+        where = f"script[{i}]"
+        if not math.isfinite(keyframe.time) or keyframe.time < 0:
+            raise ScenarioError(f"{where}.time must be finite and >= 0, got {keyframe.time}")
+        if keyframe.time <= previous:
+            raise ScenarioError(f"{where}.time must increase, got {keyframe.time} after {previous}")
+        previous = keyframe.time
+        for name, value in keyframe.hand.items():
+            if name not in spec.actuated_joint_names:
+                raise ScenarioError(
+                    f"{where}.hand: {name!r} is not an actuated joint of the {spec.name} hand"
+                )
+            if not math.isfinite(value):
+                raise ScenarioError(f"{where}.hand[{name}] must be finite, got {value}")
+        if keyframe.wrist:
+            if not isinstance(scenario.hand.mount, FloatingWrist):
+                raise ScenarioError(f"{where}.wrist needs a !FloatingWrist mount")
+            if len(keyframe.wrist) != 6 or not all(math.isfinite(v) for v in keyframe.wrist):
+                raise ScenarioError(
+                    f"{where}.wrist: expected 6 finite values [x y z roll pitch yaw], "
+                    f"got {keyframe.wrist}"
+                )

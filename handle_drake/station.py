@@ -1,0 +1,307 @@
+"""MakeHandStation: one function from a scenario to a diagram, sim or hardware.
+
+Both branches export the same ports (see ``docs/ARCHITECTURE.md``), so every
+controller, trial and notebook is written once and runs against simulation
+or the real hand.
+
+Simulation ports (``nq`` joints, ``nu`` actuated joints of the hand):
+
+================================  =====  ========================  ==========================
+port                              dir    size                      units / frame
+================================  =====  ========================  ==========================
+``hand.position``                 in     nu                        rad, actuated joint order
+``hand.position_commanded``       out    nu                        rad (rate-limited command)
+``hand.position_measured``        out    nq                        rad, ``HandSpec.joint_names``
+``hand.velocity_estimated``       out    nq                        rad/s
+``hand.state_estimated``          out    2 nq                      positions then velocities
+``hand.tactile``                  out    fingertips                N, normal force per fingertip
+``wrist.pose``                    in     6                         ``[x y z roll pitch yaw]`` (m, rad)
+``wrist.pose_measured``           out    6                         same (floating wrist only)
+``object.pose``                   out    ``RigidTransform``        ``X_WO``
+``object.spatial_velocity``       out    ``SpatialVelocity``       ``V_WO`` in world
+``object.position``               out    3                         m, ``p_WO``
+``contact_results``               out    ``ContactResults``        world
+``query_object``                  out    ``QueryObject``
+``body_poses``                    out    ``vector<RigidTransform>``  ``X_WB`` per body
+``plant_state``                   out    plant nq + nv
+================================  =====  ========================  ==========================
+
+The diagram's subsystems are named ``plant``, ``scene_graph``, ``hand_driver``,
+``wrist_driver``, ``tactile`` and ``object_pose``; :func:`GetPlant` returns the
+plant.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.tree import (
+    PdControllerGains,
+    PrismaticJoint,
+    RevoluteJoint,
+    SpatialInertia,
+    UnitInertia,
+)
+from pydrake.systems.framework import DiagramBuilder
+
+from handle_drake.hands import AddHand, get_hand_spec
+from handle_drake.scenario import (
+    CanHandDriver,
+    FixedMount,
+    FloatingWrist,
+    Scenario,
+    SimHandDriver,
+    validate_scenario,
+)
+from handle_drake.systems.hand_driver import WRIST_JOINTS, SimHandDriver as SimHandDriverSystem
+from handle_drake.systems.hand_driver import WristDriver, rpy_pose6
+from handle_drake.systems.sensors import BodyPoseSelector, FingertipTactile
+
+__all__ = [
+    "MakeHandStation",
+    "GetPlant",
+    "hand_initial_command",
+    "actuated_limits",
+    "object_body",
+    "object_initial_pose",
+]
+
+HAND_INSTANCE = "hand"
+WRIST_INSTANCE = "wrist"
+OBJECT_INSTANCE = "object"
+
+
+def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
+    """Builds the station diagram for ``scenario``.
+
+    Args:
+        scenario: a validated :class:`Scenario` (``LoadScenario`` validates).
+        meshcat: an optional ``pydrake.geometry.Meshcat`` to draw into.
+        hardware: build the interface to the real hand (the scenario's driver
+            must then be a ``CanHandDriver``); the plant is used only for
+            visualisation.
+    """
+    validate_scenario(scenario)
+    if hardware:
+        from handle_drake.can_hand.station import MakeHardwareStation
+
+        if not isinstance(scenario.driver, CanHandDriver):
+            raise ValueError(
+                "hardware=True needs a !CanHandDriver driver in the scenario, got "
+                f"{type(scenario.driver).__name__}"
+            )
+        return MakeHardwareStation(scenario, meshcat=meshcat)
+    if not isinstance(scenario.driver, SimHandDriver):
+        raise ValueError(
+            f"a simulated station needs a !SimHandDriver driver, got {type(scenario.driver).__name__}"
+            "; pass hardware=True to drive a CAN hand"
+        )
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(
+        MultibodyPlantConfig(
+            time_step=scenario.time_step,
+            discrete_contact_approximation="sap",
+            contact_model="point" if scenario.contact_model == "point"
+            else "hydroelastic_with_fallback",
+        ),
+        builder,
+    )
+    spec = get_hand_spec(scenario.hand.kind)
+    hand = AddPlantModels(plant, scenario)
+    plant.Finalize()
+
+    lower, upper = actuated_limits(plant, hand, spec, scenario.hand.coupling_ratio)
+    initial = hand_initial_command(scenario, lower, upper)
+    _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
+
+    driver = builder.AddNamedSystem(
+        "hand_driver",
+        SimHandDriverSystem(
+            plant, hand, spec, initial, lower, upper,
+            max_joint_velocity=scenario.driver.max_joint_velocity,
+            control_period=scenario.driver.control_period,
+        ),
+    )
+    builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
+    builder.Connect(driver.GetOutputPort("desired_state"), plant.get_desired_state_input_port(hand))
+    builder.ExportInput(driver.get_command_input_port(), "hand.position")
+    for signal in ("position_commanded", "position_measured", "velocity_estimated",
+                   "state_estimated"):
+        builder.ExportOutput(driver.GetOutputPort(signal), f"hand.{signal}")
+
+    tips = [plant.GetFrameByName(name, hand).body() for name in spec.fingertip_frames]
+    tactile = builder.AddNamedSystem("tactile", FingertipTactile(plant, tips))
+    builder.Connect(plant.get_contact_results_output_port(),
+                    tactile.get_contact_results_input_port())
+    builder.ExportOutput(tactile.GetOutputPort("tactile"), "hand.tactile")
+
+    if isinstance(scenario.hand.mount, FloatingWrist):
+        wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
+        wrist_driver = builder.AddNamedSystem(
+            "wrist_driver",
+            WristDriver(plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue())),
+        )
+        builder.Connect(plant.get_state_output_port(), wrist_driver.get_plant_state_input_port())
+        builder.Connect(wrist_driver.GetOutputPort("desired_state"),
+                        plant.get_desired_state_input_port(wrist))
+        builder.ExportInput(wrist_driver.get_pose_input_port(), "wrist.pose")
+        builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
+
+    if scenario.object is not None:
+        selector = builder.AddNamedSystem("object_pose", BodyPoseSelector(object_body(plant)))
+        builder.Connect(plant.get_body_poses_output_port(), selector.GetInputPort("body_poses"))
+        builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                        selector.GetInputPort("body_spatial_velocities"))
+        builder.ExportOutput(selector.GetOutputPort("pose"), "object.pose")
+        builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
+        builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
+
+    builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+    builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
+    builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
+    builder.ExportOutput(plant.get_state_output_port(), "plant_state")
+
+    if meshcat is not None:
+        _add_visualization(builder, plant, scene_graph, meshcat, scenario)
+
+    diagram = builder.Build()
+    diagram.set_name("hand_station")
+    return diagram
+
+
+def AddPlantModels(plant, scenario: Scenario):
+    """Adds hand, mount, table and object to an unfinalized plant; returns the hand instance."""
+    hand = AddHand(plant, scenario.hand.kind, coupling_ratio=scenario.hand.coupling_ratio,
+                   model_instance_name=HAND_INSTANCE)
+    spec = get_hand_spec(scenario.hand.kind)
+    base_frame = plant.GetBodyByName(spec.base_body, hand).body_frame()
+    mount = scenario.hand.mount
+    if isinstance(mount, FixedMount):
+        plant.WeldFrames(plant.world_frame(), base_frame, mount.X_WB.GetDeterministicValue())
+    else:
+        _add_floating_wrist(plant, base_frame, mount)
+        plant.set_gravity_enabled(hand, False)
+
+    if scenario.table is not None:
+        from handle_drake.objects import AddTable
+
+        AddTable(plant, top_height=scenario.table.top_height,
+                 size=(scenario.table.size_x, scenario.table.size_y))
+    if scenario.object is not None:
+        from handle_drake.objects import AddObject
+
+        AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
+                  hydroelastic=scenario.contact_model == "hydroelastic")
+        plant.SetDefaultFreeBodyPose(object_body(plant), object_initial_pose(scenario))
+    return hand
+
+
+def object_spec(scenario: Scenario):
+    from handle_drake.objects import ObjectSpec
+
+    o = scenario.object
+    return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu)
+
+
+def object_initial_pose(scenario: Scenario) -> RigidTransform:
+    """``X_WO`` at the start; ``on_table`` puts the object on the table top."""
+    X_WO = scenario.object.X_WO.GetDeterministicValue()
+    if scenario.object.on_table:
+        top = scenario.table.top_height if scenario.table is not None else 0.0
+        height = object_spec(scenario).resting_height()
+        p = X_WO.translation().copy()
+        p[2] = top + height
+        X_WO = RigidTransform(X_WO.rotation(), p)
+    return X_WO
+
+
+def object_body(plant):
+    instance = plant.GetModelInstanceByName(OBJECT_INSTANCE)
+    bodies = plant.GetBodyIndices(instance)
+    return plant.get_body(bodies[0])
+
+
+def _add_floating_wrist(plant, base_frame, mount: FloatingWrist) -> None:
+    wrist = plant.AddModelInstance(WRIST_INSTANCE)
+    # Light links between the six joints; the arm they stand for is gravity
+    # compensated, so their mass only sets the wrist's dynamics.
+    inertia = SpatialInertia(0.1, np.zeros(3), UnitInertia.SolidSphere(0.02))
+    parent = plant.world_frame()
+    axes = [np.array(a, dtype=float) for a in
+            ([1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, 1], [0, 1, 0], [1, 0, 0])]
+    for i, (name, axis) in enumerate(zip(WRIST_JOINTS, axes, strict=True)):
+        child = plant.AddRigidBody(f"{name}_link", wrist, inertia).body_frame()
+        if i < 3:
+            joint = PrismaticJoint(name, parent, child, axis, -2.0, 2.0, 0.0)
+            gains = PdControllerGains(p=mount.translation_kp, d=mount.translation_kd)
+        else:
+            joint = RevoluteJoint(name, parent, child, axis, 0.0)
+            gains = PdControllerGains(p=mount.rotation_kp, d=mount.rotation_kd)
+        joint = plant.AddJoint(joint)
+        actuator = plant.AddJointActuator(name, joint)
+        actuator.set_controller_gains(gains)
+        parent = child
+    # Welded, so that all six joints and actuators belong to the wrist instance.
+    plant.WeldFrames(parent, base_frame, RigidTransform())
+    plant.set_gravity_enabled(wrist, False)
+    # Default joint positions give the mount's initial pose.
+    x, y, z, roll, pitch, yaw = rpy_pose6(mount.X_WB.GetDeterministicValue())
+    for name, value in zip(WRIST_JOINTS, (x, y, z, yaw, pitch, roll), strict=True):
+        plant.GetJointByName(name, wrist).set_default_positions([value])
+
+
+def actuated_limits(plant, hand, spec, coupling_ratio=None):
+    """Lower and upper command limits (rad) of the actuated joints.
+
+    A leader joint whose follower is coupled as ``follower = ratio * leader``
+    is limited so that the follower stays within its own limits.
+    """
+    lower, upper = [], []
+    ratios = spec.coupling_ratios(coupling_ratio)
+    for name in spec.actuated_joint_names:
+        joint = plant.GetJointByName(name, hand)
+        lo, hi = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
+        for follower, leader, ratio in ratios:
+            if leader == name and ratio > 0:
+                f = plant.GetJointByName(follower, hand)
+                lo = max(lo, float(f.position_lower_limits()[0]) / ratio)
+                hi = min(hi, float(f.position_upper_limits()[0]) / ratio)
+        lower.append(lo)
+        upper.append(hi)
+    return np.array(lower), np.array(upper)
+
+
+def hand_initial_command(scenario: Scenario, lower, upper) -> np.ndarray:
+    spec = get_hand_spec(scenario.hand.kind)
+    command = np.array([scenario.hand.initial_position.get(name, 0.0)
+                        for name in spec.actuated_joint_names])
+    return np.clip(command, lower, upper)
+
+
+def _set_default_hand_positions(plant, hand, spec, command, coupling_ratio) -> None:
+    values = dict(zip(spec.actuated_joint_names, command, strict=True))
+    for follower, leader, ratio in spec.coupling_ratios(coupling_ratio):
+        values[follower] = ratio * values[leader]
+    for name, value in values.items():
+        plant.GetJointByName(name, hand).set_default_positions([value])
+
+
+def _add_visualization(builder, plant, scene_graph, meshcat, scenario) -> None:
+    from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
+    from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
+
+    meshcat.Delete()
+    params = MeshcatVisualizerParams(publish_period=scenario.visualization_period,
+                                     role=Role.kIllustration, prefix="illustration")
+    MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
+    ContactVisualizer.AddToBuilder(
+        builder, plant, meshcat,
+        ContactVisualizerParams(publish_period=scenario.visualization_period, newtons_per_meter=40),
+    )
+
+
+def GetPlant(station):
+    """The station's MultibodyPlant."""
+    return station.GetSubsystemByName("plant")

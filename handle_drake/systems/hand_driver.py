@@ -1,0 +1,202 @@
+"""The simulated hand driver and the floating-wrist driver.
+
+Both sit between the station's exported command ports and the plant's
+PD-controlled actuators (MultibodyPlant's ``desired_state`` input, SAP solver),
+and translate the plant's full state into the hand's measured signals in the
+joint order of :class:`handle_drake.hands.HandSpec`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RollPitchYaw
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+__all__ = ["SimHandDriver", "WristDriver", "actuated_order"]
+
+
+def actuated_order(plant, model_instance, joint_names) -> np.ndarray:
+    """Permutation p with ``desired_q[i] = command[p[i]]``.
+
+    The plant orders a model instance's desired-state input by its actuators'
+    indices; the command vector follows ``joint_names``.
+    """
+    actuator_joints = [
+        plant.get_joint_actuator(index).joint().name()
+        for index in plant.GetJointActuatorIndices(model_instance)
+    ]
+    if sorted(actuator_joints) != sorted(joint_names):
+        raise ValueError(
+            f"actuated joints of the model {sorted(actuator_joints)} differ from the "
+            f"expected {sorted(joint_names)}"
+        )
+    return np.array([list(joint_names).index(name) for name in actuator_joints], dtype=int)
+
+
+def _joint_state_indices(plant, model_instance, joint_names):
+    q_index, v_index = [], []
+    for name in joint_names:
+        joint = plant.GetJointByName(name, model_instance)
+        if joint.num_positions() != 1:
+            raise ValueError(f"joint {name!r} has {joint.num_positions()} positions, expected 1")
+        q_index.append(joint.position_start())
+        v_index.append(plant.num_positions() + joint.velocity_start())
+    return np.array(q_index), np.array(v_index)
+
+
+class SimHandDriver(LeafSystem):
+    """Tracks a joint position command with the plant's PD actuators.
+
+    The command is rate limited to ``max_joint_velocity`` (rad/s, 0 = off) and
+    clamped to the actuated joints' limits in a periodic update every
+    ``control_period`` seconds, like a hand's own joint controller. Until the
+    ``position`` input is connected or given a value, the driver holds the
+    initial command.
+
+    Ports (``nu`` actuated joints, ``nq`` joints, in :class:`HandSpec` order):
+
+    - input ``position`` (nu, rad): joint position command.
+    - input ``plant_state`` (plant nq + nv): the plant's full state.
+    - output ``desired_state`` (2 nu): ``[q_d; 0]`` in the plant's actuator order.
+    - output ``position_commanded`` (nu, rad): the rate-limited command.
+    - output ``position_measured`` (nq, rad), ``velocity_estimated`` (nq, rad/s),
+      ``state_estimated`` (2 nq).
+    """
+
+    def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
+                 max_joint_velocity=4.0, control_period=0.002):
+        super().__init__()
+        nu = len(spec.actuated_joint_names)
+        initial_command = np.asarray(initial_command, dtype=float)
+        if initial_command.shape != (nu,):
+            raise ValueError(f"initial_command: expected {nu} values, got {initial_command.shape}")
+        self._lower = np.asarray(lower, dtype=float)
+        self._upper = np.asarray(upper, dtype=float)
+        self._max_step = max_joint_velocity * control_period if max_joint_velocity > 0 else np.inf
+        self._actuator_order = actuated_order(plant, model_instance, spec.actuated_joint_names)
+        self._q_index, self._v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
+        nq = len(spec.joint_names)
+        self._initial = np.clip(initial_command, self._lower, self._upper)
+
+        self._command_port = self.DeclareVectorInputPort("position", nu)
+        self._plant_state_port = self.DeclareVectorInputPort(
+            "plant_state", plant.num_positions() + plant.num_velocities()
+        )
+        self._command_state = self.DeclareDiscreteState(self._initial)
+        self.DeclarePeriodicDiscreteUpdateEvent(control_period, 0.0, self._update_command)
+        self.DeclareVectorOutputPort(
+            "desired_state", 2 * nu, self._calc_desired_state,
+            prerequisites_of_calc={self.discrete_state_ticket(self._command_state)},
+        )
+        self.DeclareVectorOutputPort(
+            "position_commanded", nu,
+            lambda context, out: out.SetFromVector(context.get_discrete_state(0).value()),
+            prerequisites_of_calc={self.discrete_state_ticket(self._command_state)},
+        )
+        self.DeclareVectorOutputPort(
+            "position_measured", nq,
+            lambda context, out: out.SetFromVector(self._state(context)[self._q_index]),
+        )
+        self.DeclareVectorOutputPort(
+            "velocity_estimated", nq,
+            lambda context, out: out.SetFromVector(self._state(context)[self._v_index]),
+        )
+        self.DeclareVectorOutputPort(
+            "state_estimated", 2 * nq,
+            lambda context, out: out.SetFromVector(
+                self._state(context)[np.concatenate([self._q_index, self._v_index])]
+            ),
+        )
+
+    def get_command_input_port(self):
+        return self._command_port
+
+    def get_plant_state_input_port(self):
+        return self._plant_state_port
+
+    def _state(self, context):
+        return self._plant_state_port.Eval(context)
+
+    def target(self, context) -> np.ndarray:
+        if not self._command_port.HasValue(context):
+            return self._initial
+        target = self._command_port.Eval(context)
+        if not np.all(np.isfinite(target)):
+            # A non-finite command is ignored (the hand holds), never sent to the PD loops.
+            return context.get_discrete_state(0).value()
+        return np.clip(target, self._lower, self._upper)
+
+    def _update_command(self, context, discrete_state):
+        current = context.get_discrete_state(0).value()
+        step = np.clip(self.target(context) - current, -self._max_step, self._max_step)
+        discrete_state.set_value(0, current + step)
+
+    def _calc_desired_state(self, context, out: BasicVector):
+        command = context.get_discrete_state(0).value()
+        out.SetFromVector(np.concatenate([command[self._actuator_order], np.zeros(len(command))]))
+
+    def set_initial_command(self, context, command):
+        """Sets the held command (for resets); clamped to the limits."""
+        context.get_mutable_discrete_state(0).SetFromVector(
+            np.clip(np.asarray(command, dtype=float), self._lower, self._upper)
+        )
+
+
+WRIST_JOINTS = ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw", "wrist_pitch", "wrist_roll")
+
+
+def pose_to_wrist_joints(pose6: np.ndarray) -> np.ndarray:
+    """``[x y z roll pitch yaw]`` -> wrist joint positions ``[x y z yaw pitch roll]``."""
+    x, y, z, roll, pitch, yaw = pose6
+    return np.array([x, y, z, yaw, pitch, roll])
+
+
+class WristDriver(LeafSystem):
+    """Drives the floating wrist (6 PD-actuated joints) to a commanded base pose.
+
+    Ports:
+
+    - input ``pose`` (6): ``[x y z roll pitch yaw]`` of the hand base in world,
+      m and rad, ``R_WB = Rz(yaw) Ry(pitch) Rx(roll)``. Unconnected: holds the
+      initial pose.
+    - input ``plant_state`` (plant nq + nv).
+    - output ``desired_state`` (12): for the wrist's actuators.
+    - output ``pose_measured`` (6): same convention as ``pose``.
+    """
+
+    def __init__(self, plant, model_instance, initial_pose6):
+        super().__init__()
+        self._initial = np.asarray(initial_pose6, dtype=float)
+        if self._initial.shape != (6,):
+            raise ValueError(f"initial pose: expected 6 values, got {self._initial.shape}")
+        self._actuator_order = actuated_order(plant, model_instance, WRIST_JOINTS)
+        self._q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
+        self._pose_port = self.DeclareVectorInputPort("pose", 6)
+        self._plant_state_port = self.DeclareVectorInputPort(
+            "plant_state", plant.num_positions() + plant.num_velocities()
+        )
+        self.DeclareVectorOutputPort("desired_state", 12, self._calc_desired_state)
+        self.DeclareVectorOutputPort("pose_measured", 6, self._calc_pose_measured)
+
+    def get_pose_input_port(self):
+        return self._pose_port
+
+    def get_plant_state_input_port(self):
+        return self._plant_state_port
+
+    def _calc_desired_state(self, context, out):
+        pose = self._pose_port.Eval(context) if self._pose_port.HasValue(context) else self._initial
+        if not np.all(np.isfinite(pose)):
+            pose = self._initial
+        q = pose_to_wrist_joints(pose)
+        out.SetFromVector(np.concatenate([q[self._actuator_order], np.zeros(6)]))
+
+    def _calc_pose_measured(self, context, out):
+        x, y, z, yaw, pitch, roll = self._plant_state_port.Eval(context)[self._q_index]
+        out.SetFromVector([x, y, z, roll, pitch, yaw])
+
+
+def rpy_pose6(X) -> np.ndarray:
+    """A ``RigidTransform`` as ``[x y z roll pitch yaw]``."""
+    rpy = RollPitchYaw(X.rotation()).vector()
+    return np.concatenate([X.translation(), rpy])

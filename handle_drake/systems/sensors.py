@@ -1,0 +1,122 @@
+"""Simulated sensors of the station: fingertip tactile sensing and object pose.
+
+The real hands carry pressure sensors (PST) or BioTacs in the fingertips; here
+each fingertip reports the normal contact force on its distal link, summed
+over all contacts (point and hydroelastic) the plant reports.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.multibody.math import SpatialVelocity
+from pydrake.multibody.plant import ContactResults
+from pydrake.systems.framework import LeafSystem
+
+__all__ = ["FingertipTactile", "BodyPoseSelector", "fingertip_normal_forces"]
+
+
+def fingertip_normal_forces(contact_results: ContactResults, fingertip_bodies,
+                            geometry_to_body=None) -> np.ndarray:
+    """Normal contact force magnitude (N) on each body of ``fingertip_bodies``.
+
+    ``fingertip_bodies`` is a list of ``BodyIndex``; ``geometry_to_body`` maps
+    the collision ``GeometryId`` of those bodies to their ``BodyIndex`` (needed
+    for hydroelastic contacts, which name geometries, not bodies). A contact
+    between two fingertips counts for both.
+    """
+    slot = {index: i for i, index in enumerate(fingertip_bodies)}
+    forces = np.zeros(len(fingertip_bodies))
+    for i in range(contact_results.num_point_pair_contacts()):
+        info = contact_results.point_pair_contact_info(i)
+        magnitude = abs(float(np.dot(info.contact_force(), info.point_pair().nhat_BA_W)))
+        for body in (info.bodyA_index(), info.bodyB_index()):
+            if body in slot:
+                forces[slot[body]] += magnitude
+    if geometry_to_body:
+        for i in range(contact_results.num_hydroelastic_contacts()):
+            info = contact_results.hydroelastic_contact_info(i)
+            surface = info.contact_surface()
+            magnitude = abs(float(np.dot(info.F_Ac_W().translational(), _mean_normal(surface))))
+            for geometry in (surface.id_M(), surface.id_N()):
+                body = geometry_to_body.get(geometry)
+                if body in slot:
+                    forces[slot[body]] += magnitude
+    return forces
+
+
+def _mean_normal(surface) -> np.ndarray:
+    """Area-weighted unit normal of a hydroelastic contact surface."""
+    n = np.zeros(3)
+    for face in range(surface.num_faces()):
+        n += surface.area(face) * surface.face_normal(face)
+    norm = np.linalg.norm(n)
+    return n / norm if norm > 0 else n
+
+
+class FingertipTactile(LeafSystem):
+    """Normal contact force on each fingertip.
+
+    Ports:
+
+    - input ``contact_results`` (abstract ``ContactResults``).
+    - output ``tactile`` (number of fingertips, N): normal force on each
+      fingertip's distal link, fingertips in :class:`HandSpec` order.
+    """
+
+    def __init__(self, plant, fingertip_bodies):
+        super().__init__()
+        self._bodies = [body.index() for body in fingertip_bodies]
+        self._geometry_to_body = {
+            geometry: body.index()
+            for body in fingertip_bodies
+            for geometry in plant.GetCollisionGeometriesForBody(body)
+        }
+        self._contact_port = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults())
+        )
+        self.DeclareVectorOutputPort("tactile", len(self._bodies), self._calc)
+
+    def get_contact_results_input_port(self):
+        return self._contact_port
+
+    def _calc(self, context, out):
+        out.SetFromVector(fingertip_normal_forces(
+            self._contact_port.Eval(context), self._bodies, self._geometry_to_body))
+
+
+class BodyPoseSelector(LeafSystem):
+    """Picks one body's pose and spatial velocity out of the plant's outputs.
+
+    Ports:
+
+    - input ``body_poses`` (abstract ``vector<RigidTransform>``), input
+      ``body_spatial_velocities`` (abstract ``vector<SpatialVelocity>``).
+    - output ``pose`` (abstract ``RigidTransform``, ``X_WB``).
+    - output ``spatial_velocity`` (abstract ``SpatialVelocity``, ``V_WB`` in world).
+    - output ``position`` (3, m): ``p_WB``, for loggers and plots.
+    """
+
+    def __init__(self, body):
+        super().__init__()
+        self._index = int(body.index())
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()])
+        )
+        self._velocities = self.DeclareAbstractInputPort(
+            "body_spatial_velocities", AbstractValue.Make([SpatialVelocity()])
+        )
+        self.DeclareAbstractOutputPort(
+            "pose", lambda: AbstractValue.Make(RigidTransform()),
+            lambda context, out: out.set_value(self._poses.Eval(context)[self._index]),
+        )
+        self.DeclareAbstractOutputPort(
+            "spatial_velocity", lambda: AbstractValue.Make(SpatialVelocity()),
+            lambda context, out: out.set_value(self._velocities.Eval(context)[self._index]),
+        )
+        self.DeclareVectorOutputPort(
+            "position", 3,
+            lambda context, out: out.SetFromVector(
+                self._poses.Eval(context)[self._index].translation()),
+        )
