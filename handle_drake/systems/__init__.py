@@ -1,0 +1,1 @@
+"""LeafSystems of the station and the controllers."""
