@@ -1,0 +1,51 @@
+"""The CAN-bus hand interface: messages, bus server, simulated firmware, proxy driver.
+
+The chain (seed report, section 2.1: MuscleHandProxy -> TCP -> CANbusServer):
+
+    Drake diagram -- CanHandProxy (LeafSystem) --TCP--> CanBusServer --CAN--> hand
+                                                                       (or SimulatedHandFirmware)
+
+- :mod:`~handle_drake.can_hand.messages`: ``hand.dbc`` and pure encode/decode;
+- :mod:`~handle_drake.can_hand.protocol`: the framed TCP protocol (pure);
+- :mod:`~handle_drake.can_hand.server`: the bus server (rate limits, clamps, watchdog);
+- :mod:`~handle_drake.can_hand.firmware`: a simulated hand on the bus;
+- :mod:`~handle_drake.can_hand.client` and :mod:`~handle_drake.can_hand.driver`: the proxy;
+- :mod:`~handle_drake.can_hand.station`: ``MakeHardwareStation``.
+"""
+
+from handle_drake.can_hand.config import (
+    BusConfig,
+    CanFirmwareConfig,
+    CanHandDriverConfig,
+    CanServerConfig,
+)
+from handle_drake.can_hand.layout import HandLayout, hand_layout
+
+__all__ = [
+    "AddCanHandDriver",
+    "BusConfig",
+    "CanBusServer",
+    "CanFirmwareConfig",
+    "CanHandClient",
+    "CanHandDriverConfig",
+    "CanHandProxy",
+    "CanServerConfig",
+    "HandCodec",
+    "HandLayout",
+    "SimulatedHandFirmware",
+    "hand_layout",
+]
+
+
+def __getattr__(name):
+    # Heavier modules (pydrake systems, sockets, threads) load on first use.
+    lazy = {
+        "AddCanHandDriver": "driver", "CanHandProxy": "driver", "CanBusServer": "server",
+        "CanHandClient": "client", "HandCodec": "messages",
+        "SimulatedHandFirmware": "firmware",
+    }
+    if name in lazy:
+        import importlib
+
+        return getattr(importlib.import_module(f"handle_drake.can_hand.{lazy[name]}"), name)
+    raise AttributeError(f"module 'handle_drake.can_hand' has no attribute {name!r}")

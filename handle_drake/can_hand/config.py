@@ -1,0 +1,192 @@
+"""Configuration of the CAN hand chain: driver (proxy), bus server, simulated firmware.
+
+:class:`CanHandDriverConfig` is what a scenario's ``!CanHandDriver`` holds
+(Drake YAML: plain fields with defaults). The server and firmware configs
+mirror the ``handle-drake can-server`` / ``can-sim`` command-line options.
+Units are SI (s, Hz, rad, rad/s, N).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import ipaddress
+import math
+
+__all__ = [
+    "BUS_INTERFACES",
+    "DEFAULT_SERVER_PORT",
+    "DEFAULT_MULTICAST_GROUP",
+    "DEFAULT_MULTICAST_PORT",
+    "BusConfig",
+    "CanHandDriverConfig",
+    "CanServerConfig",
+    "CanFirmwareConfig",
+]
+
+BUS_INTERFACES = ("virtual", "udp_multicast", "socketcan")
+DEFAULT_SERVER_PORT = 47800
+DEFAULT_MULTICAST_GROUP = "239.74.163.2"  # python-can's IPv4 default group
+DEFAULT_MULTICAST_PORT = 43113
+
+
+def _positive(name: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and value > 0):
+        raise ValueError(f"{name}: expected a finite number > 0, got {value!r}")
+
+
+def _nonnegative(name: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            math.isfinite(value) and value >= 0):
+        raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
+
+
+def _port(name: str, value, allow_zero: bool = True) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not (
+            (0 if allow_zero else 1) <= value <= 65535):
+        raise ValueError(f"{name}: expected an integer port in 0..65535, got {value!r}")
+
+
+@dc.dataclass
+class CanHandDriverConfig:
+    """The proxy driver: where the CAN bus server is and how often to talk to it.
+
+    Attributes:
+        host, port: the server's TCP address (loopback by default).
+        hand_kind: "" to use the station's hand; otherwise it must equal it.
+        period: s, the driver's update period (command out, state in).
+        connect_timeout: s, for one TCP connect + handshake attempt.
+        reconnect_interval: s, wait between attempts while disconnected.
+        status_timeout: s, a connection without STATE for this long counts as
+            "connected, no hand data".
+    """
+
+    host: str = "127.0.0.1"
+    port: int = DEFAULT_SERVER_PORT
+    hand_kind: str = ""
+    period: float = 0.002
+    connect_timeout: float = 0.5
+    reconnect_interval: float = 0.2
+    status_timeout: float = 0.1
+
+    def validate(self) -> None:
+        if not isinstance(self.host, str) or not self.host:
+            raise ValueError(f"host: expected a host name or address, got {self.host!r}")
+        _port("port", self.port, allow_zero=False)
+        if self.hand_kind not in ("", "shadow", "barrett"):
+            raise ValueError(
+                f"hand_kind: expected '', 'shadow' or 'barrett', got {self.hand_kind!r}")
+        for name in ("period", "connect_timeout", "reconnect_interval", "status_timeout"):
+            _positive(name, getattr(self, name))
+
+
+@dc.dataclass
+class BusConfig:
+    """A python-can bus: ``interface`` in virtual | udp_multicast | socketcan.
+
+    ``channel``: the virtual bus name, the multicast group address, or the
+    SocketCAN interface (``can0``, ``vcan0``). ``port``: the UDP port of the
+    multicast bus (ignored otherwise).
+    """
+
+    interface: str = "virtual"
+    channel: str = "handle_drake"
+    port: int = DEFAULT_MULTICAST_PORT
+
+    def validate(self) -> None:
+        if self.interface not in BUS_INTERFACES:
+            raise ValueError(f"bus: expected one of {list(BUS_INTERFACES)}, got {self.interface!r}")
+        if not isinstance(self.channel, str) or not self.channel:
+            raise ValueError(f"channel: expected a non-empty string, got {self.channel!r}")
+        _port("bus port", self.port, allow_zero=False)
+        if self.interface == "udp_multicast":
+            try:
+                address = ipaddress.ip_address(self.channel)
+            except ValueError:
+                raise ValueError(
+                    f"channel: udp_multicast needs a multicast group address, got {self.channel!r}"
+                ) from None
+            if not address.is_multicast:
+                raise ValueError(f"channel: {self.channel} is not a multicast address")
+
+
+@dc.dataclass
+class CanServerConfig:
+    """The CAN bus server.
+
+    Attributes:
+        host, port: TCP listen address; loopback unless told otherwise
+            (port 0 picks a free port).
+        hand_kind, coupling_ratio: the hand on the bus.
+        bus: the CAN bus.
+        max_setpoint_rate: Hz, most commits sent per second (newer commands
+            replace pending ones).
+        max_step: rad, largest change of any joint between two commits.
+        watchdog: s, without a command for this long the setpoint freezes
+            (the hand holds where its setpoint is).
+        velocity_time_constant: s, low-pass of the finite-difference velocity.
+    """
+
+    host: str = "127.0.0.1"
+    port: int = DEFAULT_SERVER_PORT
+    hand_kind: str = "shadow"
+    coupling_ratio: float | None = None
+    bus: BusConfig = dc.field(default_factory=BusConfig)
+    max_setpoint_rate: float = 1000.0
+    max_step: float = 0.02
+    watchdog: float = 0.25
+    velocity_time_constant: float = 0.01
+
+    def validate(self) -> None:
+        if not isinstance(self.host, str) or not self.host:
+            raise ValueError(f"host: expected a listen address, got {self.host!r}")
+        _port("port", self.port)
+        if self.hand_kind not in ("shadow", "barrett"):
+            raise ValueError(f"hand: expected 'shadow' or 'barrett', got {self.hand_kind!r}")
+        self.bus.validate()
+        for name in ("max_setpoint_rate", "max_step", "watchdog"):
+            _positive(name, getattr(self, name))
+        _nonnegative("velocity_time_constant", self.velocity_time_constant)
+
+
+@dc.dataclass
+class CanFirmwareConfig:
+    """The simulated hand on the bus: joint position loops, sensors, a virtual object.
+
+    Each actuated joint is a critically damped (``damping_ratio``) second-order
+    loop of natural frequency ``natural_frequency`` (Hz) on its setpoint,
+    velocity-limited to ``max_velocity`` and stopped at the joint limits;
+    coupled joints follow their leader. Positions carry Gaussian noise
+    (``position_noise`` rad), tactile pads ``tactile_noise`` N.
+
+    ``object_closure`` in (0, 1] places a virtual object: each closing joint
+    stops at ``lower + object_closure * (upper - lower)`` and its fingertip
+    reports ``contact_stiffness`` (N/rad) times how far the setpoint presses
+    past that stop. None: no object.
+    """
+
+    hand_kind: str = "shadow"
+    coupling_ratio: float | None = None
+    bus: BusConfig = dc.field(default_factory=BusConfig)
+    rate: float = 1000.0  # Hz, control loop and publish rate
+    natural_frequency: float = 5.0
+    damping_ratio: float = 1.0
+    max_velocity: float = 4.0
+    position_noise: float = 0.0005
+    tactile_noise: float = 0.005
+    object_closure: float | None = None
+    contact_stiffness: float = 20.0
+    seed: int = 0
+
+    def validate(self) -> None:
+        if self.hand_kind not in ("shadow", "barrett"):
+            raise ValueError(f"hand: expected 'shadow' or 'barrett', got {self.hand_kind!r}")
+        self.bus.validate()
+        for name in ("rate", "natural_frequency", "damping_ratio", "max_velocity",
+                     "contact_stiffness"):
+            _positive(name, getattr(self, name))
+        _nonnegative("position_noise", self.position_noise)
+        _nonnegative("tactile_noise", self.tactile_noise)
+        if self.object_closure is not None and not (0 < self.object_closure <= 1):
+            raise ValueError(
+                f"object_closure: expected a value in (0, 1], got {self.object_closure}")

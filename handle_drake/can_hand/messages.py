@@ -1,0 +1,343 @@
+"""The hand's CAN messages and pure encode/decode functions (no bus, no I/O).
+
+The messages are declared once, in ``hand.dbc`` (read with cantools):
+
+========  ==================  ====  =========  ==================================
+id        name                DLC   direction  signals (little-endian)
+========  ==================  ====  =========  ==================================
+0x100+i   ``SETPOINT_i``       8    host->hand 4 x int16, 1e-4 rad: command entries 4i..4i+3
+0x10F     ``SETPOINT_COMMIT``  4    host->hand SEQ u16, N_FRAMES u8, MODE u8
+0x200+i   ``POSITION_i``       8    hand->host 4 x int16, 1e-4 rad: joints 4i..4i+3
+0x210+i   ``TACTILE_i``        8    hand->host 4 x uint16, 1e-3 N: pads 4i..4i+3
+0x220     ``STATUS``           8    hand->host SEQ_ACK u16, COUNTER u8, STATE u4,
+                                               KIND u4, TIME u32 (1e-6 s)
+========  ==================  ====  =========  ==================================
+
+Joints are packed four to a frame in :class:`~handle_drake.can_hand.layout.HandLayout`
+order: the command in ``actuated_joint_names`` order (Shadow 5 frames,
+Barrett 1), the measured positions in ``joint_names`` order (6 / 2 frames),
+tactile pads in fingertip order (2 / 1 frames); unused slots are zero. A
+command is all setpoint frames followed by one commit, which the hand applies
+atomically. Each hand cycle ends with STATUS, which closes a feedback set.
+
+Bandwidth: an 8-byte standard frame is 111 bits plus stuffing (about 130), so
+a 1 Mbit/s bus carries about 7,500 frames/s; a full Shadow cycle (9 feedback +
+6 command frames) therefore fits about 500 times per second on real CAN. The
+simulated buses here have no such limit.
+
+Everything here is pure: :class:`HandCodec` turns vectors into
+``(arbitration_id, bytes)`` pairs and back, raising
+:class:`ForeignFrameError` for ids that are not the hand's and
+:class:`MalformedFrameError` for a wrong length or an undecodable payload.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+from functools import cache
+from pathlib import Path
+
+import cantools
+import numpy as np
+
+from handle_drake.can_hand.layout import HAND_KIND_CODES, HandLayout
+
+__all__ = [
+    "DBC_PATH",
+    "SETPOINT_BASE_ID",
+    "COMMIT_ID",
+    "POSITION_BASE_ID",
+    "TACTILE_BASE_ID",
+    "STATUS_ID",
+    "STATE_INIT",
+    "STATE_OK",
+    "STATE_FAULT",
+    "MODE_POSITION",
+    "POSITION_SCALE",
+    "TACTILE_SCALE",
+    "CanFrameError",
+    "ForeignFrameError",
+    "MalformedFrameError",
+    "Frame",
+    "FeedbackSnapshot",
+    "HandCodec",
+    "FeedbackAssembler",
+    "SetpointAssembler",
+    "load_database",
+]
+
+DBC_PATH = Path(__file__).with_name("hand.dbc")
+
+SETPOINT_BASE_ID = 0x100
+COMMIT_ID = 0x10F
+POSITION_BASE_ID = 0x200
+TACTILE_BASE_ID = 0x210
+STATUS_ID = 0x220
+STATE_INIT, STATE_OK, STATE_FAULT = 0, 1, 2
+MODE_POSITION = 0
+SLOTS_PER_FRAME = 4
+
+
+class CanFrameError(ValueError):
+    """A CAN frame the hand interface does not accept."""
+
+
+class ForeignFrameError(CanFrameError):
+    """The arbitration id is not one of the hand's messages."""
+
+
+class MalformedFrameError(CanFrameError):
+    """A hand message id with a wrong length or an undecodable payload."""
+
+
+@cache
+def load_database() -> cantools.database.can.Database:
+    """The message database read from ``hand.dbc`` (cached)."""
+    return cantools.database.load_file(str(DBC_PATH))
+
+
+def _scale(message_name: str) -> float:
+    return float(load_database().get_message_by_name(message_name).signals[0].scale)
+
+
+POSITION_SCALE = _scale("POSITION_0")  # rad per count
+TACTILE_SCALE = _scale("TACTILE_0")  # N per count
+
+
+@dc.dataclass(frozen=True)
+class Frame:
+    """One decoded hand frame.
+
+    ``kind`` is "setpoint", "commit", "position", "tactile" or "status";
+    ``index`` is the frame's number within its kind (0 for commit/status);
+    ``values`` holds the physical values (4 slots) or the named fields.
+    """
+
+    kind: str
+    index: int
+    values: tuple | dict
+
+
+@dc.dataclass(frozen=True)
+class FeedbackSnapshot:
+    """One complete hand cycle: positions (nq, rad), tactile (N), status fields."""
+
+    q: np.ndarray
+    tactile: np.ndarray
+    seq_ack: int
+    counter: int
+    state: int
+    hand_time: float  # s, the hand's clock (wraps at 2**32 us)
+
+
+def _frames_for(n: int) -> int:
+    return (n + SLOTS_PER_FRAME - 1) // SLOTS_PER_FRAME
+
+
+class HandCodec:
+    """Encodes and decodes one hand's frames (pure; the layout fixes the sizes).
+
+    Values outside a signal's range (|q| > 3.2767 rad, force outside
+    0..65.535 N) raise ``ValueError`` when encoding setpoints; measured values
+    are saturated to the representable range, as a sensor would.
+    """
+
+    def __init__(self, layout: HandLayout):
+        if not isinstance(layout, HandLayout):
+            raise TypeError(f"layout: expected a HandLayout, got {type(layout).__name__}")
+        self.layout = layout
+        db = load_database()
+        self.num_setpoint_frames = _frames_for(layout.nu)
+        self.num_position_frames = _frames_for(layout.nq)
+        self.num_tactile_frames = _frames_for(layout.num_tactile)
+        self._setpoints = [db.get_message_by_name(f"SETPOINT_{i}")
+                           for i in range(self.num_setpoint_frames)]
+        self._positions = [db.get_message_by_name(f"POSITION_{i}")
+                           for i in range(self.num_position_frames)]
+        self._tactiles = [db.get_message_by_name(f"TACTILE_{i}")
+                          for i in range(self.num_tactile_frames)]
+        self._commit = db.get_message_by_name("SETPOINT_COMMIT")
+        self._status = db.get_message_by_name("STATUS")
+        self._by_id = {}
+        for i, m in enumerate(self._setpoints):
+            self._by_id[m.frame_id] = ("setpoint", i, m)
+        for i, m in enumerate(self._positions):
+            self._by_id[m.frame_id] = ("position", i, m)
+        for i, m in enumerate(self._tactiles):
+            self._by_id[m.frame_id] = ("tactile", i, m)
+        self._by_id[COMMIT_ID] = ("commit", 0, self._commit)
+        self._by_id[STATUS_ID] = ("status", 0, self._status)
+        self._q_limit = float(self._positions[0].signals[0].maximum)
+        self._f_limit = float(self._tactiles[0].signals[0].maximum)
+
+    # -- ids -------------------------------------------------------------
+    @property
+    def host_to_hand_ids(self) -> frozenset[int]:
+        return frozenset([m.frame_id for m in self._setpoints] + [COMMIT_ID])
+
+    @property
+    def hand_to_host_ids(self) -> frozenset[int]:
+        return frozenset([m.frame_id for m in self._positions + self._tactiles] + [STATUS_ID])
+
+    # -- host -> hand -----------------------------------------------------
+    def encode_setpoints(self, q_command, seq: int, mode: int = MODE_POSITION):
+        """The frames of one command: ``[(id, data), ...]``, setpoints then commit.
+
+        Args:
+            q_command: nu positions (rad) in ``actuated_joint_names`` order.
+            seq: command sequence number (taken modulo 2**16).
+        """
+        q = _checked(q_command, self.layout.nu, "q_command")
+        if np.any(np.abs(q) > self._q_limit):
+            raise ValueError(
+                f"q_command: |q| must be <= {self._q_limit} rad to fit a setpoint frame, "
+                f"got {q[np.abs(q) > self._q_limit].tolist()}"
+            )
+        frames = [(m.frame_id, bytes(m.encode(_slots(q, i, "SP")))) for i, m in
+                  enumerate(self._setpoints)]
+        frames.append((COMMIT_ID, bytes(self._commit.encode(
+            {"SEQ": int(seq) % 65536, "N_FRAMES": self.num_setpoint_frames, "MODE": int(mode)}))))
+        return frames
+
+    # -- hand -> host -----------------------------------------------------
+    def encode_feedback(self, q, tactile, seq_ack: int, counter: int, state: int,
+                        hand_time: float):
+        """One hand cycle's frames: positions, tactile, then STATUS.
+
+        ``q`` (nq, rad) and ``tactile`` (N) are saturated to the frame ranges.
+        ``hand_time`` (s) wraps at 2**32 microseconds.
+        """
+        q = np.clip(_checked(q, self.layout.nq, "q"), -self._q_limit, self._q_limit)
+        f = np.clip(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0, self._f_limit)
+        frames = [(m.frame_id, bytes(m.encode(_slots(q, i, "Q"))))
+                  for i, m in enumerate(self._positions)]
+        frames += [(m.frame_id, bytes(m.encode(_slots(f, i, "F"))))
+                   for i, m in enumerate(self._tactiles)]
+        time_us = int(round(hand_time * 1e6)) % (1 << 32)
+        frames.append((STATUS_ID, bytes(self._status.encode({
+            "SEQ_ACK": int(seq_ack) % 65536, "COUNTER": int(counter) % 256,
+            "STATE": int(state), "KIND": self.layout.kind_code, "TIME": time_us * 1e-6,
+        }))))
+        return frames
+
+    # -- decoding -----------------------------------------------------------
+    def decode(self, arbitration_id: int, data: bytes) -> Frame:
+        """Decodes one frame of this hand.
+
+        Raises:
+            ForeignFrameError: the id is not one of this hand's messages.
+            MalformedFrameError: the length differs from the DBC's or the
+                payload cannot be decoded (e.g. an unknown hand kind).
+        """
+        entry = self._by_id.get(arbitration_id)
+        if entry is None:
+            raise ForeignFrameError(
+                f"id 0x{arbitration_id:X} is not a {self.layout.kind} hand message")
+        kind, index, message = entry
+        data = bytes(data)
+        if len(data) != message.length:
+            raise MalformedFrameError(
+                f"{message.name}: expected {message.length} data bytes, got {len(data)}"
+            )
+        try:
+            fields = message.decode(data, decode_choices=False)
+        except Exception as error:  # cantools.DecodeError and friends
+            raise MalformedFrameError(f"{message.name}: {error}") from None
+        if kind in ("setpoint", "position", "tactile"):
+            return Frame(kind, index, tuple(float(fields[s.name]) for s in message.signals))
+        if kind == "status":
+            fields = {k: (float(v) if k == "TIME" else int(v)) for k, v in fields.items()}
+            if fields["KIND"] != self.layout.kind_code:
+                names = {v: k for k, v in HAND_KIND_CODES.items()}
+                raise MalformedFrameError(
+                    f"STATUS: hand kind {names.get(fields['KIND'], fields['KIND'])!r}, "
+                    f"expected {self.layout.kind!r}"
+                )
+        else:
+            fields = {k: int(v) for k, v in fields.items()}
+        return Frame(kind, index, fields)
+
+
+def _checked(value, size: int, name: str) -> np.ndarray:
+    array = np.asarray(value, dtype=float)
+    if array.shape != (size,):
+        raise ValueError(f"{name}: expected {size} values, got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name}: expected finite values, got {array.tolist()}")
+    return array
+
+
+def _slots(values: np.ndarray, frame: int, prefix: str) -> dict:
+    chunk = values[frame * SLOTS_PER_FRAME:(frame + 1) * SLOTS_PER_FRAME]
+    return {f"{prefix}{k}": float(chunk[k]) if k < len(chunk) else 0.0
+            for k in range(SLOTS_PER_FRAME)}
+
+
+class FeedbackAssembler:
+    """Collects POSITION/TACTILE frames until STATUS closes a complete cycle.
+
+    :meth:`push` returns a :class:`FeedbackSnapshot` when a STATUS arrives and
+    every position frame of this cycle has been seen (tactile frames keep their
+    last value when missing); otherwise None. ``incomplete`` counts STATUS
+    frames dropped because positions were missing.
+    """
+
+    def __init__(self, codec: HandCodec):
+        self._codec = codec
+        layout = codec.layout
+        self._q = np.zeros(codec.num_position_frames * SLOTS_PER_FRAME)
+        self._f = np.zeros(codec.num_tactile_frames * SLOTS_PER_FRAME)
+        self._seen = np.zeros(codec.num_position_frames, dtype=bool)
+        self._nq, self._nt = layout.nq, layout.num_tactile
+        self.incomplete = 0
+
+    def push(self, frame: Frame) -> FeedbackSnapshot | None:
+        k = SLOTS_PER_FRAME
+        if frame.kind == "position":
+            self._q[frame.index * k:(frame.index + 1) * k] = frame.values
+            self._seen[frame.index] = True
+        elif frame.kind == "tactile":
+            self._f[frame.index * k:(frame.index + 1) * k] = frame.values
+        elif frame.kind == "status":
+            complete = bool(self._seen.all())
+            self._seen[:] = False
+            if not complete:
+                self.incomplete += 1
+                return None
+            v = frame.values
+            return FeedbackSnapshot(
+                q=self._q[:self._nq].copy(), tactile=self._f[:self._nt].copy(),
+                seq_ack=v["SEQ_ACK"], counter=v["COUNTER"], state=v["STATE"],
+                hand_time=v["TIME"],
+            )
+        return None
+
+
+class SetpointAssembler:
+    """The hand's side: stages SETPOINT frames and applies them on COMMIT.
+
+    :meth:`push` returns ``(seq, q_command)`` when a commit arrives whose
+    N_FRAMES matches and all setpoint frames were received since the previous
+    commit; otherwise None (``rejected_commits`` counts those).
+    """
+
+    def __init__(self, codec: HandCodec):
+        self._codec = codec
+        self._q = np.zeros(codec.num_setpoint_frames * SLOTS_PER_FRAME)
+        self._seen = np.zeros(codec.num_setpoint_frames, dtype=bool)
+        self._nu = codec.layout.nu
+        self.rejected_commits = 0
+
+    def push(self, frame: Frame):
+        k = SLOTS_PER_FRAME
+        if frame.kind == "setpoint":
+            self._q[frame.index * k:(frame.index + 1) * k] = frame.values
+            self._seen[frame.index] = True
+        elif frame.kind == "commit":
+            complete = bool(self._seen.all())
+            self._seen[:] = False
+            if not complete or frame.values["N_FRAMES"] != self._codec.num_setpoint_frames:
+                self.rejected_commits += 1
+                return None
+            return frame.values["SEQ"], self._q[:self._nu].copy()
+        return None

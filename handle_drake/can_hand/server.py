@@ -1,0 +1,519 @@
+"""The CAN bus server: TCP clients on one side, the CAN-bus hand on the other.
+
+Two threads:
+
+- the bus thread receives frames, accepts only the hand's feedback ids
+  (foreign ids and malformed frames are dropped and counted; our own
+  setpoint frames echoed by a multicast bus are ignored), assembles one
+  snapshot per hand cycle, estimates joint velocities and wakes the I/O thread;
+- the I/O thread (one ``selectors`` loop) accepts clients, reads their
+  commands (:mod:`~handle_drake.can_hand.protocol`), sends setpoints to the
+  bus and streams each new hand state to every client.
+
+Setpoint policy (what a command becomes on the bus):
+
+1. clamp the command to the joint limits (counted as ``commands_clamped``);
+2. at most ``max_setpoint_rate`` commits per second: a command arriving
+   sooner waits, and a newer command replaces it (``commands_coalesced``);
+3. each commit moves every joint at most ``max_step`` towards the command
+   (the first step starts from the measured position);
+4. watchdog: without a command for ``watchdog`` seconds the target freezes at
+   the last sent setpoint, so the hand holds there instead of finishing a
+   stale motion (``watchdog_holds``); the next command resumes.
+
+Holding at the last setpoint rather than at the measured position keeps a
+grasp closed: a finger stopped by an object keeps pressing.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import selectors
+import socket
+import threading
+import time
+
+import can
+import numpy as np
+
+from handle_drake.can_hand import protocol as P
+from handle_drake.can_hand.bus import open_bus
+from handle_drake.can_hand.config import CanServerConfig
+from handle_drake.can_hand.layout import HandLayout, hand_layout
+from handle_drake.can_hand.messages import (
+    FeedbackAssembler,
+    ForeignFrameError,
+    HandCodec,
+    MalformedFrameError,
+)
+
+__all__ = ["CanBusServer", "VelocityEstimator", "clamp_command", "limit_setpoint"]
+
+log = logging.getLogger(__name__)
+
+_TIME_WRAP = float(1 << 32) * 1e-6  # s, the STATUS TIME field wraps here
+_MAX_CLIENT_BACKLOG = 256 * 1024  # bytes queued for a slow client before states are dropped
+
+
+def clamp_command(q, lower, upper) -> tuple[np.ndarray, bool]:
+    """``(clip(q, lower, upper), whether anything was clipped)``."""
+    q = np.asarray(q, dtype=float)
+    clamped = np.clip(q, lower, upper)
+    return clamped, bool(np.any(clamped != q))
+
+
+def limit_setpoint(previous, target, max_step: float, lower, upper) -> np.ndarray:
+    """The next setpoint: at most ``max_step`` per joint from ``previous`` towards ``target``."""
+    previous = np.asarray(previous, dtype=float)
+    step = np.clip(np.asarray(target, dtype=float) - previous, -max_step, max_step)
+    return np.clip(previous + step, lower, upper)
+
+
+class VelocityEstimator:
+    """Finite-difference joint velocity with a first-order low-pass (time constant ``tau``).
+
+    Uses the hand's own clock, so bus and scheduling jitter do not enter the
+    difference quotient. ``tau = 0`` gives the raw difference.
+    """
+
+    def __init__(self, n: int, tau: float):
+        self._n, self._tau = n, float(tau)
+        self._q = None
+        self._t = None
+        self.v = np.zeros(n)
+
+    def update(self, q, t: float) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if self._q is not None:
+            dt = (t - self._t) % _TIME_WRAP
+            if 0 < dt < 1.0:
+                raw = (q - self._q) / dt
+                alpha = dt / (self._tau + dt)
+                self.v = self.v + alpha * (raw - self.v)
+            else:  # a gap or a repeated stamp: restart the estimate
+                self.v = np.zeros(self._n)
+        self._q, self._t = q.copy(), t
+        return self.v.copy()
+
+
+class _Client:
+    __slots__ = ("sock", "address", "reader", "out", "greeted", "closing")
+
+    def __init__(self, sock, address):
+        self.sock, self.address = sock, address
+        self.reader = P.FrameReader()
+        self.out = bytearray()
+        self.greeted = False
+        self.closing = False
+
+
+class CanBusServer:
+    """Bridges TCP clients and the CAN-bus hand; see the module docstring.
+
+    Use as a context manager or call :meth:`start` / :meth:`stop`. ``bus``
+    may be given (e.g. a virtual bus shared with a test); otherwise it is
+    opened from ``config.bus`` and closed on stop.
+    """
+
+    def __init__(self, config: CanServerConfig, bus: can.BusABC | None = None,
+                 layout: HandLayout | None = None):
+        if not isinstance(config, CanServerConfig):
+            raise TypeError(f"config: expected a CanServerConfig, got {type(config).__name__}")
+        config.validate()
+        self.config = config
+        self.layout = layout or hand_layout(config.hand_kind, config.coupling_ratio)
+        if self.layout.kind != config.hand_kind:
+            raise ValueError(f"layout: expected a {config.hand_kind} hand, got {self.layout.kind}")
+        self.codec = HandCodec(self.layout)
+        self._info = P.HandInfo(self.layout.kind, self.layout.nq, self.layout.nu,
+                                self.layout.num_tactile)
+        self._bus = bus
+        self._owns_bus = bus is None
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._counters = collections.Counter()
+        self._listen = None
+        self._wake_r = self._wake_w = None
+        self._selector = None
+        self._clients: list[_Client] = []
+        # Written by the bus thread under the lock.
+        self._snapshot = None
+        self._velocity = None
+        self._snapshot_generation = 0
+        # Owned by the I/O thread.
+        self._sent_generation = 0
+        self._target = None
+        self._target_seq = 0
+        self._setpoint = None
+        self._unsent = False
+        self._holding = False
+        self._clamped = False
+        self._last_command_time = 0.0
+        self._last_commit_time = -np.inf
+        self._commit_seq = 1
+        self._commit_to_client = np.zeros(65536, dtype=np.int64)
+        self._assembler = FeedbackAssembler(self.codec)
+        self._velocities = VelocityEstimator(self.layout.nq, config.velocity_time_constant)
+
+    # -- life cycle ----------------------------------------------------------
+    def start(self) -> CanBusServer:
+        if self._threads:
+            raise RuntimeError("server already started")
+        listen = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        try:
+            listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            listen.bind((self.config.host, self.config.port))
+            listen.listen(8)
+            listen.setblocking(False)
+        except OSError as error:
+            listen.close()
+            raise OSError(error.errno, f"cannot listen on {self.config.host}:{self.config.port}: "
+                                       f"{error.strerror}") from None
+        if self._bus is None:
+            try:
+                self._bus = open_bus(self.config.bus)
+            except BaseException:
+                listen.close()
+                raise
+        self._listen = listen
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self._selector = selectors.DefaultSelector()
+        self._selector.register(listen, selectors.EVENT_READ, "listen")
+        self._selector.register(self._wake_r, selectors.EVENT_READ, "wake")
+        self._threads = [
+            threading.Thread(target=self._bus_loop, name="can-server-bus", daemon=True),
+            threading.Thread(target=self._io_loop, name="can-server-io", daemon=True),
+        ]
+        for thread in self._threads:
+            thread.start()
+        log.info("CAN bus server for the %s hand on %s:%d, bus %s %s", self.layout.kind,
+                 *self.address, self.config.bus.interface, self.config.bus.channel)
+        return self
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """The bound ``(host, port)`` (the real port when configured as 0)."""
+        if self._listen is None:
+            raise RuntimeError("server not started")
+        return self._listen.getsockname()[:2]
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        self._wake()
+        for thread in self._threads:
+            thread.join(timeout)
+        self._threads = []
+        for client in list(self._clients):
+            self._close_client(client)
+        for sock in (self._listen, self._wake_r, self._wake_w):
+            if sock is not None:
+                sock.close()
+        self._listen = self._wake_r = self._wake_w = None
+        if self._selector is not None:
+            self._selector.close()
+            self._selector = None
+        if self._owns_bus and self._bus is not None:
+            self._bus.shutdown()
+            self._bus = None
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def stats(self) -> dict:
+        """Counters: frames, rejected frames, commands, commits, holds, clients."""
+        with self._lock:
+            counters = dict(self._counters)
+        counters["incomplete_cycles"] = self._assembler.incomplete
+        counters["clients"] = sum(1 for c in self._clients if c.greeted)
+        return counters
+
+    def _count(self, name: str, n: int = 1) -> None:
+        with self._lock:
+            self._counters[name] += n
+
+    def _wake(self) -> None:
+        if self._wake_w is not None:
+            try:
+                self._wake_w.send(b"\0")
+            except OSError:  # buffer full (already awake) or closed
+                pass
+
+    # -- bus side ----------------------------------------------------------------
+    def _bus_loop(self) -> None:
+        own_ids = self.codec.host_to_hand_ids
+        while not self._stop.is_set():
+            try:
+                message = self._bus.recv(timeout=0.05)
+            except (can.CanError, OSError, ValueError) as error:
+                self._count("bus_rx_errors")
+                log.warning("bus receive failed: %s", error)
+                self._stop.wait(0.01)
+                continue
+            if message is None:
+                continue
+            self._count("frames_rx")
+            if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
+                self._count("foreign_frames")
+                continue
+            if message.arbitration_id in own_ids:
+                self._count("echo_frames")
+                continue
+            try:
+                frame = self.codec.decode(message.arbitration_id, message.data)
+            except ForeignFrameError:
+                self._count("foreign_frames")
+                continue
+            except MalformedFrameError:
+                self._count("malformed_frames")
+                continue
+            snapshot = self._assembler.push(frame)
+            if snapshot is not None:
+                velocity = self._velocities.update(snapshot.q, snapshot.hand_time)
+                with self._lock:
+                    self._snapshot, self._velocity = snapshot, velocity
+                    self._snapshot_generation += 1
+                    self._counters["hand_cycles"] += 1
+                self._wake()
+
+    def _send_frames(self, frames) -> bool:
+        try:
+            for arbitration_id, data in frames:
+                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
+                                           is_extended_id=False), timeout=0.01)
+        except (can.CanError, OSError) as error:
+            self._count("bus_tx_errors")
+            log.warning("bus send failed: %s", error)
+            return False
+        self._count("frames_tx", len(frames))
+        return True
+
+    # -- TCP side ------------------------------------------------------------------
+    def _io_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                events = self._selector.select(self._select_timeout(time.monotonic()))
+            except (OSError, ValueError):
+                if self._stop.is_set():
+                    return
+                raise
+            for key, mask in events:
+                if key.data == "listen":
+                    self._accept()
+                elif key.data == "wake":
+                    try:
+                        while self._wake_r.recv(4096):
+                            pass
+                    except OSError:
+                        pass
+                else:
+                    client = key.data
+                    if mask & selectors.EVENT_READ:
+                        self._read(client)
+                    if mask & selectors.EVENT_WRITE and not client.closing:
+                        self._flush(client)
+            now = time.monotonic()
+            self._service_setpoint(now)
+            self._broadcast_state()
+
+    def _select_timeout(self, now: float) -> float:
+        timeout = 0.05
+        if self._target is not None and not self._holding:
+            timeout = min(timeout, max(0.0, self._last_command_time + self.config.watchdog - now))
+            if self._unsent or not np.array_equal(self._setpoint, self._target):
+                next_commit = self._last_commit_time + 1.0 / self.config.max_setpoint_rate
+                timeout = min(timeout, max(0.0, next_commit - now))
+        return timeout
+
+    def _accept(self) -> None:
+        try:
+            sock, address = self._listen.accept()
+        except (BlockingIOError, InterruptedError):
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client = _Client(sock, address)
+        self._clients.append(client)
+        self._selector.register(sock, selectors.EVENT_READ, client)
+        self._count("connections")
+
+    def _close_client(self, client: _Client) -> None:
+        if client in self._clients:
+            self._clients.remove(client)
+        try:
+            self._selector.unregister(client.sock)
+        except (KeyError, ValueError, AttributeError):
+            pass
+        client.sock.close()
+
+    def _read(self, client: _Client) -> None:
+        try:
+            data = client.sock.recv(65536)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._close_client(client)
+            return
+        try:
+            messages = client.reader.feed(data)
+        except P.ProtocolError as error:
+            self._count("malformed_messages")
+            self._reject(client, f"protocol error: {error}")
+            return
+        for message_type, payload in messages:
+            if client.closing:
+                return
+            self._handle(client, message_type, payload)
+
+    def _reject(self, client: _Client, text: str) -> None:
+        """Sends ERROR and closes once it is written."""
+        client.out += P.pack(P.ERROR, text.encode()[:P.MAX_PAYLOAD])
+        client.closing = True
+        self._flush(client)
+        if client in self._clients:
+            self._close_client(client)
+
+    def _handle(self, client: _Client, message_type: int, payload: bytes) -> None:
+        if message_type == P.HELLO:
+            try:
+                info = P.unpack_hello(payload)
+            except P.PayloadError as error:
+                self._count("malformed_messages")
+                self._reject(client, str(error))
+                return
+            if info != self._info:
+                self._count("rejected_clients")
+                self._reject(client, f"this server drives a {self._info.kind} hand (nq "
+                                     f"{self._info.nq}, nu {self._info.nu}, tactile "
+                                     f"{self._info.nt}); client expected {info.kind} (nq "
+                                     f"{info.nq}, nu {info.nu}, tactile {info.nt})")
+                return
+            client.greeted = True
+            client.out += P.pack_hello(self._info, P.WELCOME)
+            self._flush(client)
+        elif not client.greeted:
+            self._count("malformed_messages")
+            self._reject(client, "expected HELLO first")
+        elif message_type == P.COMMAND:
+            try:
+                seq, q = P.unpack_command(payload, self.layout.nu)
+            except P.PayloadError as error:
+                self._count("commands_rejected")
+                client.out += P.pack(P.ERROR, str(error).encode())
+                self._flush(client)
+                return
+            self._on_command(seq, q, time.monotonic())
+        elif message_type == P.STATS_REQ:
+            client.out += P.pack_stats(self.stats())
+            self._flush(client)
+        else:
+            self._count("malformed_messages")
+            client.out += P.pack(P.ERROR, f"unexpected message type {message_type}".encode())
+            self._flush(client)
+
+    def _flush(self, client: _Client) -> None:
+        if client.out:
+            try:
+                sent = client.sock.send(client.out)
+                del client.out[:sent]
+            except (BlockingIOError, InterruptedError):
+                pass
+            except OSError:
+                self._close_client(client)
+                return
+        if client in self._clients:
+            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if client.out else 0)
+            self._selector.modify(client.sock, events, client)
+
+    # -- setpoints ---------------------------------------------------------------------
+    def _on_command(self, seq: int, q: np.ndarray, now: float) -> None:
+        q, clamped = clamp_command(q, self.layout.command_lower, self.layout.command_upper)
+        self._count("commands_rx")
+        if clamped:
+            self._count("commands_clamped")
+        if self._unsent:
+            self._count("commands_coalesced")
+        self._clamped = clamped
+        self._target, self._target_seq = q, seq
+        self._unsent = True
+        self._holding = False
+        self._last_command_time = now
+        self._service_setpoint(now)
+
+    def _measured_command(self):
+        with self._lock:
+            snapshot = self._snapshot
+        return None if snapshot is None else self.layout.actuated_positions(snapshot.q)
+
+    def _service_setpoint(self, now: float) -> None:
+        if self._target is None or self._holding:
+            return
+        if now - self._last_command_time > self.config.watchdog:
+            self._holding = True
+            self._count("watchdog_holds")
+            self._unsent = False
+            if self._setpoint is None:
+                self._target = None
+            else:
+                self._target = self._setpoint.copy()
+            return
+        base = self._setpoint if self._setpoint is not None else self._measured_command()
+        if base is None:  # no hand state yet: the first step needs the measured position
+            return
+        if not self._unsent and np.array_equal(base, self._target):
+            return
+        if now - self._last_commit_time < 1.0 / self.config.max_setpoint_rate:
+            return
+        setpoint = limit_setpoint(base, self._target, self.config.max_step,
+                                  self.layout.command_lower, self.layout.command_upper)
+        if not self._send_frames(self.codec.encode_setpoints(setpoint, self._commit_seq)):
+            return
+        self._commit_to_client[self._commit_seq] = self._target_seq
+        self._commit_seq = (self._commit_seq + 1) % 65536
+        self._setpoint = setpoint
+        self._unsent = False
+        self._last_commit_time = now
+        self._count("commits_tx")
+
+    def _broadcast_state(self) -> None:
+        with self._lock:
+            generation = self._snapshot_generation
+            snapshot, velocity = self._snapshot, self._velocity
+        if generation == self._sent_generation or snapshot is None:
+            return
+        self._sent_generation = generation
+        setpoint = (self._setpoint if self._setpoint is not None
+                    else self.layout.actuated_positions(snapshot.q))
+        flags = ((P.FLAG_HOLDING if self._holding else 0)
+                 | (P.FLAG_CLAMPED if self._clamped else 0)
+                 | (P.FLAG_RATE_LIMITED if (self._target is not None and self._setpoint is not None
+                                            and not np.array_equal(self._setpoint, self._target))
+                    else 0))
+        message = P.pack_state(P.StateMessage(
+            seq_ack=int(self._commit_to_client[snapshot.seq_ack]), hand_state=snapshot.state,
+            flags=flags, hand_time=snapshot.hand_time, q=snapshot.q, v=velocity,
+            tactile=snapshot.tactile, setpoint=setpoint,
+        ))
+        for client in list(self._clients):
+            if not client.greeted or client.closing:
+                continue
+            if len(client.out) > _MAX_CLIENT_BACKLOG:
+                self._count("states_dropped")
+                continue
+            client.out += message
+            self._count("states_sent")
+            self._flush(client)
+
+    def serve_until(self, stop_event: threading.Event) -> None:
+        """Blocks until ``stop_event`` is set (the CLI's main loop)."""
+        while not stop_event.wait(0.2):
+            if not all(t.is_alive() for t in self._threads):
+                raise RuntimeError("a server thread died; see the log")
