@@ -1,0 +1,227 @@
+"""Contact models and the grasp map (report section 4.1.2 and 4.1.4, eqs. 4-14).
+
+Contacts are a point ``p_RC`` (m) and an *inward* normal ``n_R`` (the
+direction in which the finger pushes on the object, i.e. into the object),
+both expressed in one reference frame R chosen by the caller (usually the
+object frame O with its origin at the centre of mass). Each contact becomes a
+set of primitive wrenches ``[f; tau]`` in R, with unit normal force (eq. 10):
+
+* ``frictionless`` (eq. 4): one wrench, ``f = n``.
+* ``point_friction`` (eqs. 5-7): the Coulomb cone ``|f_t| <= mu f_n``
+  linearised into ``num_edges`` edges ``f = n + mu (sin(theta_k) x + cos(theta_k) y)``
+  with ``theta_k = 2 pi k / num_edges`` and ``(x, y, n)`` the contact frame.
+* ``soft_finger`` (eqs. 8-9, 11): every edge twice, with a torsional moment
+  ``+gamma n`` and ``-gamma n`` about the normal (eq. 9 reads ``f_4 >= gamma f_3``;
+  eq. 11 and the soft-finger model of Murray, Li & Sastry make it
+  ``|f_4| <= gamma f_3``). ``gamma`` is a length (m): the largest torsional
+  moment per newton of normal force.
+
+The moment is taken about R's origin, ``tau = p x f (+ torsion)``, and divided
+by ``characteristic_length`` (m) when given, so that forces and moments are
+comparable (a common choice is the object's radius of gyration or its largest
+radius). The grasp map ``G`` (eqs. 13-14) holds the primitive wrenches as columns.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "ContactModel",
+    "GraspContacts",
+    "contact_frames",
+    "contact_wrenches",
+    "grasp_map",
+    "validate_contacts",
+    "wrenches_per_contact",
+]
+
+
+class ContactModel(str, enum.Enum):
+    """The three contact models of section 4.1.2."""
+
+    FRICTIONLESS = "frictionless"
+    POINT_FRICTION = "point_friction"
+    SOFT_FINGER = "soft_finger"
+
+
+def _as_model(model) -> ContactModel:
+    try:
+        return ContactModel(model)
+    except ValueError:
+        names = ", ".join(m.value for m in ContactModel)
+        raise ValueError(f"contact model: expected one of {names}, got {model!r}") from None
+
+
+def wrenches_per_contact(model, num_edges: int) -> int:
+    """Number of primitive wrenches one contact contributes."""
+    model = _as_model(model)
+    if model is ContactModel.FRICTIONLESS:
+        return 1
+    return num_edges if model is ContactModel.POINT_FRICTION else 2 * num_edges
+
+
+def _check_stack(name: str, a, batch: bool) -> np.ndarray:
+    try:
+        arr = np.asarray(a, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(a).__name__}") from err
+    want = 3 if batch else 2
+    if arr.ndim != want or arr.shape[-1] != 3:
+        shape = "(B, n, 3)" if batch else "(n, 3)"
+        raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite values, got NaN or infinity")
+    return arr
+
+
+def validate_contacts(points, normals, *, batch: bool = False):
+    """Check contact arrays and return ``(points, unit_normals)`` as float arrays.
+
+    ``points`` and ``normals`` are ``(n, 3)`` (or ``(B, n, 3)`` with ``batch``),
+    finite. Normals are directions and are normalised; a normal shorter than
+    1e-9 is an error (it has no direction).
+    """
+    p = _check_stack("points", points, batch)
+    n = _check_stack("normals", normals, batch)
+    if p.shape != n.shape:
+        raise ValueError(f"normals: expected the shape of points {p.shape}, got {n.shape}")
+    if p.shape[-2] == 0:
+        raise ValueError("points: expected at least one contact, got 0")
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    if np.any(norm < 1e-9):
+        bad = np.argwhere(norm[..., 0] < 1e-9)[0].tolist()
+        raise ValueError(f"normals: expected non-zero directions, got a zero normal at {bad}")
+    return p, n / norm
+
+
+def _check_friction(mu, gamma, num_edges, model: ContactModel):
+    for name, v in (("mu", mu), ("gamma", gamma)):
+        if not isinstance(v, int | float | np.floating | np.integer) or isinstance(v, bool):
+            raise TypeError(f"{name}: expected a real number, got {type(v).__name__}")
+        if not np.isfinite(v) or v < 0:
+            raise ValueError(f"{name}: expected a finite value >= 0, got {v}")
+    if model is not ContactModel.FRICTIONLESS:
+        if not isinstance(num_edges, int | np.integer) or isinstance(num_edges, bool):
+            raise TypeError(f"num_edges: expected an int, got {type(num_edges).__name__}")
+        if num_edges < 3:
+            raise ValueError(f"num_edges: expected >= 3 cone edges, got {num_edges}")
+
+
+def contact_frames(normals, tangents=None) -> np.ndarray:
+    """Rotation matrices ``R_RC`` (..., 3, 3) whose z axis is the inward normal.
+
+    Without ``tangents`` the x axis is built from the normal alone (the axis of
+    R least aligned with it, projected), so it is deterministic but not
+    equivariant under a rotation of R; give ``tangents`` (any vector not parallel
+    to the normal, projected onto the tangent plane) to fix the contact frame's x
+    axis, e.g. when comparing a grasp expressed in two rotated frames.
+    """
+    n = np.asarray(normals, dtype=float)
+    if tangents is None:
+        helper = np.zeros_like(n)
+        idx = np.argmin(np.abs(n), axis=-1)
+        np.put_along_axis(helper, idx[..., None], 1.0, axis=-1)
+    else:
+        helper = np.asarray(tangents, dtype=float)
+        if helper.shape != n.shape:
+            raise ValueError(f"tangents: expected shape {n.shape}, got {helper.shape}")
+    x = helper - np.sum(helper * n, axis=-1, keepdims=True) * n
+    xn = np.linalg.norm(x, axis=-1, keepdims=True)
+    if np.any(xn < 1e-9):
+        raise ValueError("tangents: expected vectors not parallel to the normals")
+    x = x / xn
+    y = np.cross(n, x)
+    return np.stack([x, y, n], axis=-1)
+
+
+def contact_wrenches(
+    points,
+    normals,
+    model="soft_finger",
+    *,
+    mu: float = 0.5,
+    gamma: float = 0.0,
+    num_edges: int = 8,
+    characteristic_length: float = 1.0,
+    tangents=None,
+    batch: bool = False,
+) -> np.ndarray:
+    """Primitive wrenches of each contact, in the reference frame R.
+
+    Args:
+        points: ``p_RC`` (n, 3) in m (``(B, n, 3)`` with ``batch=True``).
+        normals: inward normals (n, 3) in R; normalised here.
+        model: ``"frictionless"``, ``"point_friction"`` or ``"soft_finger"``.
+        mu: Coulomb friction coefficient (>= 0).
+        gamma: torsional friction coefficient in m (>= 0), soft finger only.
+        num_edges: cone edges k (>= 3) for the friction models.
+        characteristic_length: moments are divided by it (m, > 0).
+        tangents: optional contact-frame x axes, see :func:`contact_frames`.
+
+    Returns:
+        ``(n, m_c, 6)`` (or ``(B, n, m_c, 6)``) wrenches ``[f; tau / L]`` with unit
+        normal force; ``m_c`` is :func:`wrenches_per_contact`.
+    """
+    model = _as_model(model)
+    p, n = validate_contacts(points, normals, batch=batch)
+    _check_friction(mu, gamma, num_edges, model)
+    L = characteristic_length
+    if not isinstance(L, int | float | np.floating | np.integer) or not np.isfinite(L) or L <= 0:
+        raise ValueError(f"characteristic_length: expected a finite value > 0, got {L!r}")
+    if model is ContactModel.FRICTIONLESS:
+        f = n[..., None, :]
+    else:
+        R = contact_frames(n, tangents)
+        theta = 2.0 * np.pi * np.arange(num_edges) / num_edges
+        # eq. 11: (mu sin, mu cos, 1) in the contact frame, rotated into R.
+        f_C = np.stack([mu * np.sin(theta), mu * np.cos(theta), np.ones(num_edges)], axis=-1)
+        f = np.einsum("...ij,kj->...ki", R, f_C)
+    tau = np.cross(p[..., None, :], f)
+    w = np.concatenate([f, tau], axis=-1)
+    if model is ContactModel.SOFT_FINGER:
+        torsion = np.zeros(n.shape[:-1] + (1, 6))
+        torsion[..., 0, 3:] = gamma * n
+        w = np.concatenate([w + torsion, w - torsion], axis=-2)
+    if L != 1.0:
+        w[..., 3:] /= L
+    return w
+
+
+def grasp_map(points, normals, model="soft_finger", **kwargs) -> np.ndarray:
+    """The grasp map ``G`` (6, n * m_c) of eqs. 13-14: primitive wrenches as columns."""
+    w = contact_wrenches(points, normals, model, **kwargs)
+    return w.reshape(-1, 6).T
+
+
+@dataclass(frozen=True)
+class GraspContacts:
+    """Contacts of one grasp in a reference frame R (usually the object frame).
+
+    ``points`` ``p_RC`` (n, 3) m, ``normals`` inward unit normals (n, 3),
+    ``forces`` optional measured contact forces on the object (n, 3) N,
+    ``names`` optional labels (fingertip names).
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    forces: np.ndarray | None = None
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        p, n = validate_contacts(self.points, self.normals)
+        object.__setattr__(self, "points", p)
+        object.__setattr__(self, "normals", n)
+        if self.forces is not None:
+            f = np.asarray(self.forces, dtype=float)
+            if f.shape != p.shape:
+                raise ValueError(f"forces: expected shape {p.shape}, got {f.shape}")
+            object.__setattr__(self, "forces", f)
+        if self.names and len(self.names) != len(p):
+            raise ValueError(f"names: expected {len(p)} names, got {len(self.names)}")
+
+    def __len__(self) -> int:
+        return len(self.points)
