@@ -1,0 +1,514 @@
+"""Bayesian optimisation and random search with an ask/tell interface (report section 4.2).
+
+Both optimisers *maximise* (the grasp metric). A caller asks for parameters,
+runs the trial (a simulation, or a person with a real hand), and tells the
+metric back::
+
+    opt = BayesianOptimizer(bounds=[(-0.05, 0.05), (0.0, 1.0)], seed=1)
+    for _ in range(30):
+        x = opt.ask()
+        if opt.converged:          # best expected improvement below threshold
+            break
+        opt.tell(x, run_trial(x))
+    print(opt.best)
+
+Determinism: the state of an optimiser is a function of ``seed`` and the
+ordered list of told observations only. Proposal number ``k`` (counting told
+and pending points) of the initial design is the ``k``-th point of a seeded
+scrambled Sobol sequence; model-based proposals depend on the observations and
+on ``seed`` (which seeds the restarts of the hyperparameter fit). Replaying the
+same ``tell`` calls into a fresh optimiser therefore rebuilds it exactly; the
+trial log relies on this to resume a run.
+
+Initial design: ``n_initial`` (default ``d + 1``) points of a scrambled Sobol
+sequence in the box. The report starts from one random point; a few
+space-filling points give the first marginal-likelihood fit something to work
+with and cost little compared with the trials that follow.
+
+Hyperparameter schedule: the kernel hyperparameters are refitted by maximum
+marginal likelihood after every observation up to ``refit_until``
+observations, and afterwards each time the data set has grown by a fraction
+``refit_growth`` (at n = 300, every ~30 trials); between refits the GP is only
+re-conditioned on all data (one Cholesky factorisation). A refit at checkpoint
+``c`` uses the first ``c`` observations and a restart seed derived from
+``(seed, c)``, so it does not depend on the history of previous fits.
+
+Failed trials: ``tell_failure(x)`` records a trial that produced no metric.
+The GP sees it as the worst metric observed so far (otherwise the same point
+would be proposed again); :attr:`best` never returns it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import qmc
+
+from handle_drake.learning.acquisition import (
+    default_xi,
+    expected_improvement,
+    expected_improvement_point,
+    maximize_acquisition,
+)
+from handle_drake.learning.gp import GaussianProcess, Hyperparameters
+
+__all__ = [
+    "BayesianOptimizer",
+    "RandomSearch",
+    "OptimizationResult",
+    "Best",
+    "maximize",
+    "check_bounds",
+    "make_optimizer",
+]
+
+
+def check_bounds(bounds) -> np.ndarray:
+    """``bounds`` as a float array (d, 2) of ``[lower, upper]`` rows, validated."""
+    try:
+        array = np.asarray(bounds, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise TypeError(f"bounds must be a sequence of (lower, upper) pairs: {error}") from None
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise ValueError(
+            f"bounds must have shape (d, 2) with one (lower, upper) row per dimension, "
+            f"got shape {array.shape}"
+        )
+    if array.shape[0] == 0:
+        raise ValueError("bounds must have at least one dimension, got 0")
+    if not np.all(np.isfinite(array)):
+        raise ValueError("bounds must be finite")
+    bad = np.flatnonzero(array[:, 0] >= array[:, 1])
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"bounds[{i}]: lower must be < upper, got lower={array[i, 0]}, upper={array[i, 1]}"
+        )
+    return array
+
+
+def _check_seed(seed) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise TypeError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def _derived_seed(*entropy: int) -> int:
+    """A 32-bit seed that depends only on ``entropy`` (for per-step random streams)."""
+    return int(np.random.SeedSequence(list(entropy)).generate_state(1)[0])
+
+
+@dataclass(frozen=True)
+class Best:
+    """The best observation so far: parameters ``x`` (d,) and metric ``y``."""
+
+    x: np.ndarray
+    y: float
+
+
+@dataclass
+class OptimizationResult:
+    """Outcome of :func:`maximize`: the best point and the full history."""
+
+    x: np.ndarray
+    y: float
+    X: np.ndarray  # (n, d) every evaluated point, in order
+    Y: np.ndarray  # (n,) metric, nan for failed trials
+    strategy: str
+    converged: bool
+    best_so_far: np.ndarray = field(repr=False, default=None)
+
+
+class _AskTellBase:
+    """Bookkeeping shared by the optimisers: bounds, observations, pending asks."""
+
+    strategy = ""
+
+    def __init__(self, bounds, seed):
+        self.bounds = check_bounds(bounds)
+        self.seed = _check_seed(seed)
+        self.dim = self.bounds.shape[0]
+        self._lower = self.bounds[:, 0]
+        self._width = self.bounds[:, 1] - self.bounds[:, 0]
+        self._U: list[np.ndarray] = []  # observed points in the unit cube
+        self._y: list[float] = []  # metric, nan for a failure
+        self._errors: list[str] = []
+        self._pending: list[np.ndarray] = []
+        self.converged = False
+
+    # ----------------------------------------------------------- coordinates
+    def to_unit(self, x) -> np.ndarray:
+        return (np.asarray(x, dtype=float) - self._lower) / self._width
+
+    def from_unit(self, u) -> np.ndarray:
+        return self._lower + np.asarray(u, dtype=float) * self._width
+
+    def _check_point(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if x.shape != (self.dim,):
+            raise ValueError(f"x must have shape ({self.dim},), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError(f"x must be finite, got {x}")
+        u = self.to_unit(x)
+        tolerance = 1e-9
+        outside = np.flatnonzero((u < -tolerance) | (u > 1 + tolerance))
+        if outside.size:
+            i = int(outside[0])
+            raise ValueError(
+                f"x[{i}] = {x[i]} is outside the bounds [{self.bounds[i, 0]}, {self.bounds[i, 1]}]"
+            )
+        return np.clip(u, 0.0, 1.0)
+
+    # ---------------------------------------------------------------- tell
+    def _take_pending(self, u):
+        for i, p in enumerate(self._pending):
+            if np.allclose(p, u, rtol=0.0, atol=1e-12):
+                del self._pending[i]
+                return
+
+    def tell(self, x, y) -> None:
+        """Record that the trial at ``x`` (d,) gave metric ``y`` (finite).
+
+        ``x`` need not come from :meth:`ask` (a person may add a trial of
+        their own choice). A missing metric is a failure: use
+        :meth:`tell_failure`.
+        """
+        u = self._check_point(x)
+        try:
+            y = float(y)
+        except (TypeError, ValueError):
+            raise TypeError(f"y must be a real number, got {y!r}") from None
+        if not math.isfinite(y):
+            raise ValueError(
+                f"y must be finite, got {y}; report a trial without a metric with tell_failure(x)"
+            )
+        self._take_pending(u)
+        self._U.append(u)
+        self._y.append(y)
+        self._errors.append("")
+        self._observations_changed()
+
+    def tell_failure(self, x, error: str = "") -> None:
+        """Record that the trial at ``x`` produced no metric (crash, NaN, lost object...)."""
+        u = self._check_point(x)
+        self._take_pending(u)
+        self._U.append(u)
+        self._y.append(math.nan)
+        self._errors.append(str(error))
+        self._observations_changed()
+
+    def _observations_changed(self):
+        pass
+
+    # ------------------------------------------------------------- queries
+    @property
+    def n_told(self) -> int:
+        return len(self._y)
+
+    @property
+    def n_pending(self) -> int:
+        return len(self._pending)
+
+    @property
+    def X(self) -> np.ndarray:
+        """(n, d) told points in order (failures included)."""
+        if not self._U:
+            return np.empty((0, self.dim))
+        return self.from_unit(np.array(self._U))
+
+    @property
+    def Y(self) -> np.ndarray:
+        """(n,) told metrics in order, nan for failures."""
+        return np.array(self._y, dtype=float)
+
+    @property
+    def best(self) -> Best | None:
+        """The best successful observation, or None before the first one."""
+        y = self.Y
+        if y.size == 0 or np.all(np.isnan(y)):
+            return None
+        i = int(np.nanargmax(y))
+        return Best(self.from_unit(self._U[i]), float(y[i]))
+
+    def _register(self, u) -> np.ndarray:
+        self._pending.append(np.asarray(u, dtype=float))
+        return self.from_unit(u)
+
+
+class RandomSearch(_AskTellBase):
+    """Uniform random search with the ask/tell interface of :class:`BayesianOptimizer`.
+
+    Point ``k`` (counting told and pending points) is drawn from a generator
+    seeded with ``(seed, k)``, so any number of asks may be outstanding
+    (parallel trials) and a replayed run proposes the same points.
+    """
+
+    strategy = "random"
+
+    def __init__(self, bounds, seed: int = 0):
+        super().__init__(bounds, seed)
+
+    def ask(self) -> np.ndarray:
+        k = self.n_told + self.n_pending
+        u = np.random.default_rng([self.seed, k]).random(self.dim)
+        return self._register(u)
+
+
+class BayesianOptimizer(_AskTellBase):
+    """Sequential Bayesian optimisation: GP (Matérn 3/2) + expected improvement + DIRECT.
+
+    Args:
+        bounds: (d, 2) box of ``[lower, upper]`` per parameter. The GP works in
+            the unit cube this box maps to.
+        seed: makes the run reproducible (initial design and fit restarts).
+        n_initial: Sobol points before the first model-based proposal
+            (default ``d + 1``).
+        xi: EI exploration parameter in metric units; ``None`` for the
+            report's ``sigma_f^2 / 100`` (see :func:`default_xi`).
+        ei_threshold: :attr:`converged` becomes True when the best EI found
+            is below ``ei_threshold`` times the RMS of the metric about the
+            prior mean (0 never stops).
+        mean: prior mean: ``"constant"``, ``"zero"``, a number, or a callable
+            ``m(X) -> (n,)`` of parameters in the original units.
+        n_restarts: extra starts of the marginal-likelihood fit.
+        direct_maxfun: DIRECT's evaluation budget per proposal (default
+            ``500 * d``, the per-dimension budget of Martinez-Cantin's BayesOpt
+            library). Tests lower it.
+        direct_locally_biased: use DIRECT-L instead of the original DIRECT.
+        refit_until, refit_growth: hyperparameter refit schedule (module doc).
+        length_scale_bounds: in unit-cube coordinates.
+        signal_variance_bounds, noise_variance_bounds: relative to the mean
+            square of the metric about the prior mean.
+    """
+
+    strategy = "bo"
+
+    def __init__(
+        self,
+        bounds,
+        seed: int = 0,
+        n_initial: int | None = None,
+        xi: float | None = None,
+        ei_threshold: float = 1e-6,
+        *,
+        mean="constant",
+        n_restarts: int = 2,
+        direct_maxfun: int | None = None,
+        direct_locally_biased: bool = False,
+        refit_until: int = 40,
+        refit_growth: float = 0.1,
+        length_scale_bounds=(1e-2, 1e1),
+        signal_variance_bounds=(1e-2, 1e2),
+        noise_variance_bounds=(1e-6, 1.0),
+    ):
+        super().__init__(bounds, seed)
+        if n_initial is None:
+            n_initial = self.dim + 1
+        if isinstance(n_initial, bool) or not isinstance(n_initial, int | np.integer):
+            raise TypeError(f"n_initial must be an integer, got {n_initial!r}")
+        if n_initial < 1:
+            raise ValueError(f"n_initial must be >= 1, got {n_initial}")
+        if xi is not None and not (math.isfinite(xi) and xi >= 0):
+            raise ValueError(f"xi must be >= 0 or None, got {xi}")
+        if not (math.isfinite(ei_threshold) and ei_threshold >= 0):
+            raise ValueError(f"ei_threshold must be >= 0, got {ei_threshold}")
+        if direct_maxfun is None:
+            direct_maxfun = 500 * self.dim
+        if direct_maxfun < 1:
+            raise ValueError(f"direct_maxfun must be >= 1, got {direct_maxfun}")
+        if refit_until < 1 or not refit_growth > 0:
+            raise ValueError(
+                f"refit_until must be >= 1 and refit_growth > 0, got {refit_until}, {refit_growth}"
+            )
+        self.n_initial = int(n_initial)
+        self.xi = xi
+        self.ei_threshold = float(ei_threshold)
+        self.direct_maxfun = int(direct_maxfun)
+        self.direct_locally_biased = bool(direct_locally_biased)
+        self.refit_until = int(refit_until)
+        self.refit_growth = float(refit_growth)
+        if callable(mean):
+            user_mean = mean
+
+            def mean_in_unit(U):
+                return user_mean(self.from_unit(U))
+
+            self._gp_mean = mean_in_unit
+        else:
+            self._gp_mean = mean
+        self._gp_options = dict(
+            n_restarts=n_restarts,
+            length_scale_bounds=length_scale_bounds,
+            signal_variance_bounds=signal_variance_bounds,
+            noise_variance_bounds=noise_variance_bounds,
+        )
+        GaussianProcess(mean=self._gp_mean, **self._gp_options)  # validates the options now
+        self._sobol = np.empty((0, self.dim))
+        self._hyper: tuple[int, Hyperparameters] | None = None  # (checkpoint, fitted values)
+        self._model: GaussianProcess | None = None
+        self.last_ei = math.nan  # best EI found by the last model-based ask
+        self.last_xi = math.nan
+
+    # ---------------------------------------------------------- initial design
+    def _sobol_point(self, k: int) -> np.ndarray:
+        if k >= self._sobol.shape[0]:
+            # Powers of two keep Sobol's balance (and scipy quiet); a fresh
+            # engine with the same seed always starts with the same points.
+            m = max(1, math.ceil(math.log2(k + 1)))
+            self._sobol = qmc.Sobol(self.dim, scramble=True, rng=self.seed).random_base2(m)
+        return self._sobol[k]
+
+    # ------------------------------------------------------------- the model
+    def _observations_changed(self):
+        self._model = None
+
+    def _checkpoint(self, n: int) -> int:
+        """The number of observations the hyperparameters in use were fitted on."""
+        if n <= self.refit_until:
+            return n
+        c = self.refit_until
+        while True:
+            nxt = max(c + 1, math.ceil(c * (1.0 + self.refit_growth)))
+            if nxt > n:
+                return c
+            c = nxt
+
+    def _training_data(self, n: int):
+        """First ``n`` observations as (U, y) with failures imputed by the worst metric."""
+        U = np.array(self._U[:n])
+        y = np.array(self._y[:n])
+        failed = np.isnan(y)
+        if np.all(failed):
+            return None
+        y[failed] = np.min(y[~failed])
+        return U, y
+
+    def _new_gp(self, seed):
+        return GaussianProcess(mean=self._gp_mean, seed=seed, **self._gp_options)
+
+    @property
+    def gp(self) -> GaussianProcess | None:
+        """The GP on all observations (unit-cube inputs), or None before any metric."""
+        if self._model is None:
+            n = self.n_told
+            data = self._training_data(n) if n else None
+            if data is None:
+                return None
+            c = self._checkpoint(n)
+            if self._hyper is None or self._hyper[0] != c:
+                fit_data = self._training_data(c)
+                if fit_data is None:  # only failures among the first c: fit on all data
+                    fit_data = data
+                gp = self._new_gp(_derived_seed(self.seed, c)).fit(*fit_data)
+                self._hyper = (c, gp.hyperparameters)
+            self._model = self._new_gp(None).fit(*data, hyperparameters=self._hyper[1])
+        return self._model
+
+    def _xi_and_best(self, gp):
+        best = float(np.nanmax(self.Y))
+        if self.xi is not None:
+            return self.xi, best
+        return default_xi(gp.hyperparameters.signal_variance, gp.y_scale), best
+
+    def predict(self, X):
+        """GP posterior mean and latent variance at parameters ``X`` (m, d), original units."""
+        gp = self.gp
+        if gp is None:
+            raise RuntimeError("no successful observation yet: nothing to predict")
+        return gp.predict(self.to_unit(np.atleast_2d(X)))
+
+    def acquisition(self, X) -> np.ndarray:
+        """Expected improvement at parameters ``X`` (m, d), vectorised."""
+        gp = self.gp
+        if gp is None:
+            raise RuntimeError("no successful observation yet: EI is undefined")
+        mean, var = gp.predict(self.to_unit(np.atleast_2d(X)))
+        xi, best = self._xi_and_best(gp)
+        return expected_improvement(mean, var, best, xi)
+
+    # ----------------------------------------------------------------- ask
+    def ask(self) -> np.ndarray:
+        """Parameters of the next trial (d,), in the units of ``bounds``.
+
+        During the initial design any number of asks may be outstanding;
+        afterwards the optimiser is sequential and raises if the previous
+        proposal was not told. Sets :attr:`converged` when the best EI is
+        below the threshold (the proposal is still returned).
+        """
+        k = self.n_told + self.n_pending
+        gp = self.gp if k >= self.n_initial else None
+        if gp is None:
+            return self._register(self._sobol_point(k))
+        if self._pending:
+            raise RuntimeError(
+                f"BayesianOptimizer is sequential: tell() the result of the pending point "
+                f"{self.from_unit(self._pending[0])} (or tell_failure()) before asking again"
+            )
+        xi, best = self._xi_and_best(gp)
+        predict_point = gp.point_predictor()
+
+        def ei(u):
+            mu, var = predict_point(u)
+            return expected_improvement_point(mu, var, best, xi)
+
+        u, value = maximize_acquisition(
+            ei, self.dim, maxfun=self.direct_maxfun, locally_biased=self.direct_locally_biased
+        )
+        self.last_ei, self.last_xi = value, xi
+        self.converged = value < self.ei_threshold * gp.y_scale
+        return self._register(u)
+
+
+def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
+    """``"bo"`` -> :class:`BayesianOptimizer`, ``"random"`` -> :class:`RandomSearch`."""
+    if strategy == "bo":
+        return BayesianOptimizer(bounds, seed, **options)
+    if strategy == "random":
+        if options:
+            raise TypeError(f"RandomSearch takes no options, got {sorted(options)}")
+        return RandomSearch(bounds, seed)
+    raise ValueError(f"strategy must be 'bo' or 'random', got {strategy!r}")
+
+
+def maximize(
+    f: Callable[[np.ndarray], float],
+    bounds,
+    n_trials: int,
+    seed: int = 0,
+    strategy: str = "bo",
+    stop_on_convergence: bool = True,
+    **options,
+) -> OptimizationResult:
+    """Maximise ``f(x)`` over the box in at most ``n_trials`` evaluations, in this process.
+
+    A non-finite value of ``f`` is told as a failure; exceptions propagate.
+    For logged, resumable or parallel runs use
+    :func:`handle_drake.learning.trials.run_experiment`.
+    """
+    if isinstance(n_trials, bool) or not isinstance(n_trials, int | np.integer) or n_trials < 1:
+        raise ValueError(f"n_trials must be a positive integer, got {n_trials!r}")
+    optimizer = make_optimizer(strategy, bounds, seed, **options)
+    for _ in range(int(n_trials)):
+        x = optimizer.ask()
+        if stop_on_convergence and optimizer.converged:
+            break
+        value = float(f(x))
+        if math.isfinite(value):
+            optimizer.tell(x, value)
+        else:
+            optimizer.tell_failure(x, f"non-finite metric {value}")
+    best = optimizer.best
+    Y = optimizer.Y
+    best_so_far = np.fmax.accumulate(np.where(np.isnan(Y), -np.inf, Y)) if Y.size else Y
+    return OptimizationResult(
+        x=None if best is None else best.x,
+        y=math.nan if best is None else best.y,
+        X=optimizer.X,
+        Y=Y,
+        strategy=strategy,
+        converged=optimizer.converged,
+        best_so_far=best_so_far,
+    )
