@@ -1,0 +1,268 @@
+#!/usr/bin/env python3
+"""Generate ``bh8_280.sdf``: the Barrett BH8-280 hand from primitive shapes.
+
+Run ``python models/barrett_hand/generate.py``; the generated file is committed
+beside this script (a test checks it equals :func:`make_sdf`'s output).
+
+Numbers: /work/shared/reference/hand_kinematics.md section 2 (public figures
+of barrett_model, GraspIt, OpenRAVE and libbarrett). The SDF writer is the
+one of ``models/shadow_hand/generate.py`` (loaded from the file beside ours).
+What is our own choice (effort and velocity limits, gains, inertias, link
+cross-sections, the 45 degree distal bend within the 42-50 degree range) is
+marked "ours" and listed in README.md.
+
+Finger frames. Every finger is built in a local frame whose +y points away
+from the palm centre (outward) and +z along the finger; flexion is about +x,
+so positive flexion swings the tip toward -y, the palmar side, as on the
+Shadow hand. F1 and F2 sit at x = +0.025 and -0.025 and face F3 at spread 0;
+spreading swings F1 toward +x and F2 toward -x (mirror axes), and at spread pi
+both stand beside F3.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+OUTPUT = HERE / "bh8_280.sdf"
+MODEL_NAME = "barrett_hand"
+
+
+def _load_writer():
+    path = HERE.parent / "shadow_hand" / "generate.py"
+    spec = importlib.util.spec_from_file_location("handle_drake_shadow_generate", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+W = _load_writer()
+Shape, Link, Joint = W.Shape, W.Link, W.Joint
+
+# group: (kp [N m/rad], kd [N m s/rad], joint damping [N m s/rad], armature [kg m^2]) (ours)
+GAINS = {
+    "spread": (5.0, 0.25, 0.05, 1.0e-3),
+    "prox": (5.0, 0.15, 0.05, 5.0e-4),
+}
+DISTAL_DAMPING = 0.01
+
+SPREAD_AXIS_X = 0.025  # |x| of the F1/F2 spread axes
+SPREAD_AXIS_Z = 0.0415
+FLEX_OUT = 0.05  # flexion axis, radially out from the spread axis
+FLEX_UP = 0.0339  # and up
+F3_FLEX = (0.0, 0.05, 0.0754)
+PROXIMAL_LENGTH = 0.070
+DISTAL_TIP = 0.055  # distal joint -> fingertip frame (sheet: 0.050-0.059)
+DISTAL_BEND = math.radians(45.0)  # fixed bend of the distal link (sheet: 42-50 deg)
+PROX_UPPER = 2.44
+DIST_UPPER = math.radians(48.0)  # covers PROX_UPPER / 3 = 0.813 rad
+
+FINGER_WIDTH = 0.022  # x extent of proximal and knuckle links (ours)
+DISTAL_RADIUS = 0.009
+PAD_SIZE = (0.014, 0.002, 0.030)
+
+BASE_COLOR = (0.55, 0.55, 0.58, 1.0)
+FINGER_COLOR = (0.3, 0.3, 0.32, 1.0)
+MU = 1.0
+PROXIMITY = W.proximity_xml(MU, 0.004)
+
+
+def finger_links(prefix: str):
+    """(proximal, distal) links of one finger in its local frame."""
+    proximal = Link(
+        f"{prefix}_proximal",
+        0.062,
+        (0, 0, PROXIMAL_LENGTH / 2),
+        W.solid_box_inertia(0.062, FINGER_WIDTH, 0.020, PROXIMAL_LENGTH),
+        [Shape("box", (FINGER_WIDTH, 0.020, 0.066), (0, 0, 0.037))],
+        FINGER_COLOR,
+    )
+    r = DISTAL_RADIUS
+    tip_end = 0.059  # rounded end, 4 mm past the tip frame
+    distal = Link(
+        f"{prefix}_distal",
+        0.041,
+        (0, 0, 0.025),
+        W.solid_cylinder_inertia(0.041, r, tip_end),
+        [
+            Shape("capsule", (r, tip_end - 2 * r), (0, 0, tip_end / 2)),
+            # tactile pad on the palmar (-y) face, 0.5 mm proud of the capsule (ours)
+            Shape(
+                "box",
+                PAD_SIZE,
+                (0, -(r + 0.0005) + PAD_SIZE[1] / 2, 0.030),
+                name=f"{prefix}_tip_pad",
+            ),
+        ],
+        FINGER_COLOR,
+    )
+    return proximal, distal
+
+
+def build():
+    links, joints, poses = [], [], {}
+
+    def add(link, joint):
+        links.append(link)
+        if joint is not None:
+            joints.append(joint)
+            poses[link.name] = (joint.parent, joint.xyz, joint.rpy)
+
+    # Base: motor housing (cylinder r 0.045, the sheet's 0.042 base plus the
+    # spacer up to the palm plate, ours), palm plate with its top at z 0.080, and
+    # F3's fixed knuckle, whose mass (knuckle 0.141) is added to the palm's 0.506.
+    base_mass = 0.506 + 0.141
+    add(
+        Link(
+            "bh_base",
+            base_mass,
+            (0, 0.005, 0.045),
+            W.solid_cylinder_inertia(base_mass, 0.045, 0.08),
+            [
+                Shape("cylinder", (0.045, 0.064), (0, 0, 0.032)),
+                Shape("box", (0.076, 0.046, 0.016), (0, 0, 0.072)),
+                Shape("box", (FINGER_WIDTH, 0.030, 0.024), (0, 0.040, 0.070)),
+            ],
+            BASE_COLOR,
+        ),
+        None,
+    )
+
+    def joint(name, parent, child, xyz, rpy, axis, lower, upper, effort, velocity, group):
+        return Joint(
+            name,
+            parent,
+            child,
+            xyz,
+            rpy,
+            axis,
+            lower,
+            upper,
+            effort,
+            velocity,
+            group,
+            gains=GAINS,
+            unactuated_damping=DISTAL_DAMPING,
+        )
+
+    for i, sign in ((1, 1.0), (2, -1.0)):
+        p = f"f{i}"
+        # Knuckle frame on the spread axis, turned so that local +y points to world -y.
+        add(
+            Link(
+                f"{p}_knuckle",
+                0.141,
+                (0, 0.03, 0.02),
+                W.solid_box_inertia(0.141, FINGER_WIDTH, 0.06, 0.03),
+                [Shape("box", (FINGER_WIDTH, 0.05, 0.026), (0, 0.032, 0.022))],
+                BASE_COLOR,
+            ),
+            joint(
+                f"{p}_spread",
+                "bh_base",
+                f"{p}_knuckle",
+                (sign * SPREAD_AXIS_X, 0, SPREAD_AXIS_Z),
+                (0, 0, math.pi),
+                (0, 0, sign),
+                0.0,
+                math.pi,
+                2.0,
+                3.0,
+                "spread" if i == 1 else None,
+            ),
+        )
+        proximal, distal = finger_links(p)
+        add(
+            proximal,
+            joint(
+                f"{p}_prox",
+                f"{p}_knuckle",
+                proximal.name,
+                (0, FLEX_OUT, FLEX_UP),
+                (0, 0, 0),
+                (1, 0, 0),
+                0.0,
+                PROX_UPPER,
+                2.5,
+                2.5,
+                "prox",
+            ),
+        )
+        add(
+            distal,
+            joint(
+                f"{p}_dist",
+                proximal.name,
+                distal.name,
+                (0, 0, PROXIMAL_LENGTH),
+                (DISTAL_BEND, 0, 0),
+                (1, 0, 0),
+                0.0,
+                DIST_UPPER,
+                2.5,
+                2.5,
+                None,
+            ),
+        )
+
+    proximal, distal = finger_links("f3")
+    add(
+        proximal,
+        joint(
+            "f3_prox",
+            "bh_base",
+            proximal.name,
+            F3_FLEX,
+            (0, 0, 0),
+            (1, 0, 0),
+            0.0,
+            PROX_UPPER,
+            2.5,
+            2.5,
+            "prox",
+        ),
+    )
+    add(
+        distal,
+        joint(
+            "f3_dist",
+            proximal.name,
+            distal.name,
+            (0, 0, PROXIMAL_LENGTH),
+            (DISTAL_BEND, 0, 0),
+            (1, 0, 0),
+            0.0,
+            DIST_UPPER,
+            2.5,
+            2.5,
+            None,
+        ),
+    )
+    return links, joints, poses
+
+
+# The flexion hinges sit beside the palm plate; the proximal links' ends touch
+# the housing by construction (ours: filtered, as the real hinge is).
+BASE_GROUP = ("bh_base", "f1_knuckle", "f2_knuckle", "f1_proximal", "f2_proximal", "f3_proximal")
+
+
+def make_sdf() -> str:
+    links, joints, poses = build()
+    extra = [W.frame_xml(f"f{i}_tip", f"f{i}_distal", (0, 0, DISTAL_TIP)) for i in (1, 2, 3)]
+    extra.append(W.filter_group_xml("base_and_hinges", BASE_GROUP))
+    return W.model_xml(
+        MODEL_NAME, "models/barrett_hand/generate.py", links, joints, poses, extra, PROXIMITY
+    )
+
+
+def main():
+    OUTPUT.write_text(make_sdf())
+    print(f"wrote {OUTPUT}")
+
+
+if __name__ == "__main__":
+    main()
