@@ -1,0 +1,299 @@
+"""The CAN bus server against the simulated firmware on an in-process virtual bus.
+
+Faults: foreign and malformed frames, a setpoint flood, out-of-limit
+setpoints, a silent client, malformed TCP messages and a client for another
+hand. Every loop is bounded; every server, firmware and bus is stopped.
+"""
+
+import socket
+import threading
+import time
+import uuid
+
+import can
+import numpy as np
+import pytest
+
+from handle_drake.can_hand import protocol as P
+from handle_drake.can_hand.client import DISCONNECTED, CanHandClient
+from handle_drake.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
+from handle_drake.can_hand.firmware import SimulatedHandFirmware
+from handle_drake.can_hand.layout import hand_layout
+from handle_drake.can_hand.messages import COMMIT_ID, POSITION_BASE_ID, STATUS_ID
+from handle_drake.can_hand.server import (
+    CanBusServer,
+    VelocityEstimator,
+    clamp_command,
+    limit_setpoint,
+)
+
+
+def wait_until(predicate, timeout=3.0, step=0.01):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(step)
+    return predicate()
+
+
+@pytest.fixture(scope="module")
+def layout():
+    return hand_layout("shadow")
+
+
+class Chain:
+    """Server + firmware on a fresh virtual bus, plus spare bus handles for a test."""
+
+    def __init__(self, layout, **server_options):
+        self.bus_config = BusConfig("virtual", f"test-{uuid.uuid4().hex}")
+        self.layout = layout
+        self.monitor = can.Bus(interface="virtual", channel=self.bus_config.channel)
+        self.inject = can.Bus(interface="virtual", channel=self.bus_config.channel)
+        self.server = CanBusServer(CanServerConfig(port=0, bus=self.bus_config, **server_options),
+                                   layout=layout).start()
+        self.firmware = SimulatedHandFirmware(
+            CanFirmwareConfig(bus=self.bus_config, rate=500.0), layout=layout).start()
+        self.port = self.server.address[1]
+        self.clients = []
+
+    def client(self, layout=None, **options):
+        client = CanHandClient(layout or self.layout, "127.0.0.1", self.port, **options).start()
+        self.clients.append(client)
+        return client
+
+    def close(self):
+        for client in self.clients:
+            client.close()
+        self.firmware.stop()
+        self.server.stop()
+        self.monitor.shutdown()
+        self.inject.shutdown()
+
+
+@pytest.fixture
+def chain(layout, request):
+    options = getattr(request, "param", {})
+    chain = Chain(layout, **options)
+    yield chain
+    chain.close()
+
+
+# -- pure policy functions -------------------------------------------------------
+
+def test_limit_setpoint_steps_at_most_max_step_and_stays_in_limits():
+    lower, upper = np.array([0.0, -1.0, 0.0]), np.array([1.0, 1.0, 0.5])
+    nxt = limit_setpoint([0.2, 0.0, 0.45], [0.9, -0.03, 0.9], 0.1, lower, upper)
+    assert np.allclose(nxt, [0.3, -0.03, 0.5])
+    q, clamped = clamp_command([2.0, -3.0, 0.2], lower, upper)
+    assert clamped and np.allclose(q, [1.0, -1.0, 0.2])
+    assert clamp_command([0.5, 0.5, 0.5], lower, upper)[1] is False
+
+
+def test_velocity_estimator_matches_a_first_order_filter_of_the_slope():
+    dt, tau, slope = 0.001, 0.01, 0.7
+    estimator = VelocityEstimator(1, tau)
+    estimator.update([0.0], 0.0)
+    alpha = dt / (tau + dt)
+    v = estimator.update([slope * dt], dt)
+    assert v[0] == pytest.approx(alpha * slope)  # first filtered sample
+    for k in range(2, 201):
+        v = estimator.update([slope * k * dt], k * dt)
+    assert v[0] == pytest.approx(slope * (1 - (1 - alpha) ** 200), rel=1e-9)
+    # The hand clock wraps at 2**32 us; the difference still uses dt.
+    wrap = float(1 << 32) * 1e-6
+    estimator = VelocityEstimator(1, 0.0)
+    estimator.update([0.0], wrap - 0.0005)
+    assert estimator.update([0.001], 0.0005)[0] == pytest.approx(1.0)
+
+
+# -- the running server ---------------------------------------------------------
+
+def test_chain_streams_the_true_hand_state(chain):
+    client = chain.client()
+    assert client.wait_for_state(3.0)
+    state, _ = client.latest()
+    truth = chain.layout.joint_positions(chain.firmware.model.q)
+    # 5 sigma of the firmware's sensor noise plus half a count of quantisation
+    assert np.max(np.abs(state.q - truth)) < 5 * 0.0005 + 0.5e-4
+
+
+def test_foreign_and_malformed_frames_are_rejected_and_counted(chain):
+    client = chain.client()
+    assert client.wait_for_state(3.0)
+    before = chain.server.stats()
+    for i in range(40):
+        chain.inject.send(can.Message(arbitration_id=0x7FF - i, data=bytes(8),
+                                      is_extended_id=False))
+    for _ in range(10):  # a hand id, but as an extended frame
+        chain.inject.send(can.Message(arbitration_id=POSITION_BASE_ID, data=bytes(8),
+                                      is_extended_id=True))
+    for _ in range(20):  # wrong length
+        chain.inject.send(can.Message(arbitration_id=POSITION_BASE_ID, data=bytes(3),
+                                      is_extended_id=False))
+    for _ in range(10):  # a Barrett's STATUS on a Shadow bus
+        chain.inject.send(can.Message(arbitration_id=STATUS_ID,
+                                      data=bytes([0, 0, 0, 0x21, 0, 0, 0, 0]),
+                                      is_extended_id=False))
+    assert wait_until(lambda: chain.server.stats().get("malformed_frames", 0)
+                      - before.get("malformed_frames", 0) >= 30)
+    after = chain.server.stats()
+    assert after.get("foreign_frames", 0) - before.get("foreign_frames", 0) == 50
+    assert after["malformed_frames"] - before.get("malformed_frames", 0) == 30
+    # Still streaming the true state.
+    cycles = after["hand_cycles"]
+    assert wait_until(lambda: chain.server.stats()["hand_cycles"] > cycles + 20)
+    state, _ = client.latest()
+    truth = chain.layout.joint_positions(chain.firmware.model.q)
+    assert np.max(np.abs(state.q - truth)) < 5 * 0.0005 + 0.5e-4
+
+
+@pytest.mark.parametrize("chain", [{"max_setpoint_rate": 100.0, "max_step": 0.5}],
+                         indirect=True)
+def test_setpoint_flood_is_rate_limited_and_the_last_command_wins(chain):
+    layout = chain.layout
+    commits = []
+    stop = threading.Event()
+
+    def watch():
+        while not stop.is_set():
+            message = chain.monitor.recv(0.05)
+            if message is not None and message.arbitration_id == COMMIT_ID:
+                commits.append(time.monotonic())
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    client = chain.client()
+    assert client.wait_for_state(3.0)
+    client.close()
+    sock = socket.create_connection(("127.0.0.1", chain.port), timeout=2.0)
+    try:
+        sock.sendall(P.pack_hello(P.HandInfo("shadow", layout.nq, layout.nu, layout.num_tactile)))
+        base = np.clip(np.zeros(layout.nu), layout.command_lower, layout.command_upper)
+        sent = 0
+        t_end = time.monotonic() + 0.6
+        while time.monotonic() < t_end:
+            batch = b""
+            for _ in range(50):
+                sent += 1
+                q = base + 0.2 * np.sin(sent / 200.0)
+                batch += P.pack_command(sent, q)
+            sock.sendall(batch)
+        final = np.clip(base + 0.2 * np.sin(sent / 200.0), layout.command_lower,
+                        layout.command_upper)
+        assert wait_until(lambda: chain.server.stats().get("commands_rx", 0) == sent, 5.0)
+        time.sleep(0.1)
+    finally:
+        sock.close()
+        stop.set()
+        watcher.join(1.0)
+    stats = chain.server.stats()
+    assert sent > 2000  # a flood: far more than 100 Hz
+    assert len(commits) >= 10
+    window = commits[-1] - commits[0]
+    # 100 Hz: at most one commit per 10 ms (+2 for jitter at the window's ends).
+    assert len(commits) <= 100.0 * window + 2
+    assert stats["commits_tx"] == len(commits)
+    assert stats["commands_coalesced"] >= sent - stats["commits_tx"] - 1
+    # No lost state: the last command is what the hand tracks.
+    assert np.allclose(chain.firmware.model.setpoint, final, atol=0.5e-4 + 1e-12)
+
+
+def test_out_of_limit_commands_are_clamped(chain):
+    layout = chain.layout
+    client = chain.client()
+    assert client.wait_for_state(3.0)
+    high = layout.command_upper + 1.0
+    high[::2] = layout.command_lower[::2] - 1.0  # every other joint below its lower limit
+    expected = np.where(np.arange(layout.nu) % 2 == 0, layout.command_lower, layout.command_upper)
+
+    def settled():
+        client.send_command(high)
+        state, _ = client.latest()
+        return np.allclose(state.setpoint, expected, atol=1e-12)
+
+    assert wait_until(settled, 5.0, step=0.005)
+    state, _ = client.latest()
+    assert state.flags & P.FLAG_CLAMPED
+    assert chain.server.stats()["commands_clamped"] >= 1
+    # The hand reaches the limits and never goes past them (noise aside).
+    assert wait_until(lambda: np.max(np.abs(chain.firmware.model.q - expected)) < 1e-3, 5.0)
+    assert np.all(chain.firmware.model.q <= layout.command_upper + 1e-12)
+    assert np.all(chain.firmware.model.q >= layout.command_lower - 1e-12)
+
+
+@pytest.mark.parametrize("chain", [{"max_setpoint_rate": 200.0, "max_step": 0.001,
+                                    "watchdog": 0.15}], indirect=True)
+def test_silent_client_makes_the_server_hold(chain):
+    layout = chain.layout
+    client = chain.client()
+    assert client.wait_for_state(3.0)
+    j = layout.actuated_joint_names.index("FFJ3")
+    start = chain.firmware.model.setpoint.copy()
+    target = start.copy()
+    target[j] = layout.command_upper[j]  # 1.57 rad away; 0.2 rad/s at most
+    client.send_command(target)  # ... and then silence
+    assert wait_until(lambda: chain.server.stats().get("watchdog_holds", 0) == 1, 2.0)
+    time.sleep(0.1)
+    held = chain.firmware.model.setpoint.copy()
+    time.sleep(0.3)
+    assert np.array_equal(chain.firmware.model.setpoint, held)  # frozen
+    moved = held[j] - start[j]
+    # 0.001 rad per commit at <= 200 commits/s during the 0.15 s watchdog (+50 ms slack).
+    assert 0.0 < moved <= 0.001 * 200 * 0.2 + 1e-4
+    assert target[j] - held[j] > 1.0  # nowhere near the stale target
+    state, _ = client.latest()
+    assert state.flags & P.FLAG_HOLDING
+    # A new command resumes.
+    client.send_command(target)
+    assert wait_until(lambda: chain.firmware.model.setpoint[j] > held[j] + 0.005, 2.0)
+
+
+def test_client_for_another_hand_is_refused(chain):
+    barrett = hand_layout("barrett")
+    client = chain.client(barrett, reconnect_interval=0.05)
+    assert wait_until(lambda: "shadow" in client.last_error, 3.0)
+    assert client.connection_state == DISCONNECTED
+    assert chain.server.stats()["rejected_clients"] >= 1
+
+
+def test_malformed_tcp_messages_are_rejected_and_counted(chain):
+    layout = chain.layout
+    info = P.HandInfo("shadow", layout.nq, layout.nu, layout.num_tactile)
+
+    def read_until(sock, reader, wanted, timeout=2.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            sock.settimeout(max(0.01, deadline - time.monotonic()))
+            data = sock.recv(65536)
+            if not data:
+                return None
+            for message_type, payload in reader.feed(data):
+                if message_type == wanted:
+                    return payload
+        return None
+
+    with socket.create_connection(("127.0.0.1", chain.port), timeout=2.0) as sock:
+        reader = P.FrameReader()
+        sock.sendall(P.pack_hello(info))
+        assert read_until(sock, reader, P.WELCOME) is not None
+        sock.sendall(P.pack_command(1, np.zeros(4)))  # Barrett-sized command
+        error = read_until(sock, reader, P.ERROR)
+        assert b"expected 20 joint values, got 4" in error
+        sock.sendall(P.pack(P.STATS_REQ))  # the connection survives a bad payload
+        stats = P.unpack_stats(read_until(sock, reader, P.STATS))
+        assert stats["commands_rejected"] == 1
+        sock.sendall(b"GARBAGE!" * 4)  # broken framing: ERROR, then closed
+        assert b"bad magic" in read_until(sock, reader, P.ERROR)
+        sock.settimeout(2.0)
+        assert wait_until(lambda: _closed(sock), 2.0)
+    assert chain.server.stats()["malformed_messages"] == 1
+    client = chain.client()
+    assert client.wait_for_state(3.0)  # others are still served
+
+
+def _closed(sock):
+    try:
+        return sock.recv(65536) == b""
+    except OSError:
+        return True
