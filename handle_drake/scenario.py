@@ -245,12 +245,12 @@ def validate_scenario(scenario: Scenario) -> None:
         if not math.isfinite(value):
             raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
     if scenario.object is not None:
-        from handle_drake.objects import OBJECT_KINDS
+        from handle_drake.objects import KINDS
 
-        if scenario.object.kind not in OBJECT_KINDS:
+        if scenario.object.kind not in KINDS:
             raise ScenarioError(
                 f"object.kind: unknown object {scenario.object.kind!r}; "
-                f"expected one of {sorted(OBJECT_KINDS)}"
+                f"expected one of {list(KINDS)}"
             )
         _check_positive("object.size", scenario.object.size)
         if scenario.object.mass is not None:

@@ -194,7 +194,7 @@ def AddPlantModels(plant, scenario: Scenario):
 
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.contact_model == "hydroelastic")
-        plant.SetDefaultFreeBodyPose(object_body(plant), object_initial_pose(scenario))
+        plant.SetDefaultFloatingBaseBodyPose(object_body(plant), object_initial_pose(scenario))
     return hand
 
 
@@ -210,7 +210,9 @@ def object_initial_pose(scenario: Scenario) -> RigidTransform:
     X_WO = scenario.object.X_WO.GetDeterministicValue()
     if scenario.object.on_table:
         top = scenario.table.top_height if scenario.table is not None else 0.0
-        height = object_spec(scenario).resting_height()
+        from handle_drake.objects import resting_height
+
+        height = resting_height(object_spec(scenario))
         p = X_WO.translation().copy()
         p[2] = top + height
         X_WO = RigidTransform(X_WO.rotation(), p)
@@ -298,7 +300,7 @@ def _add_visualization(builder, plant, scene_graph, meshcat, scenario) -> None:
     MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
     ContactVisualizer.AddToBuilder(
         builder, plant, meshcat,
-        ContactVisualizerParams(publish_period=scenario.visualization_period, newtons_per_meter=40),
+        ContactVisualizerParams(publish_period=scenario.visualization_period, newtons_per_meter=200),
     )
 
 
