@@ -29,6 +29,7 @@ __all__ = [
     "BoxSurface",
     "CylinderSurface",
     "MeshSurface",
+    "ObjectSurface",
     "disk_pattern",
     "contact_surface",
     "mean_contact",
@@ -159,42 +160,109 @@ class CylinderSurface(_Analytic):
         return np.stack(ts, axis=1), np.stack(ns, axis=1)
 
 
+class _BoxTree:
+    """The two calls trimesh's ray code makes on an rtree index, answered with numpy.
+
+    trimesh's ``RayMeshIntersector`` (no embree) asks an rtree for the triangles
+    whose bounding boxes meet each ray's box; rtree is not a dependency of this
+    project, and for the few dozen rays of a contact patch a vectorised box test
+    is as fast, so we hand trimesh this stand-in and reuse its intersection code.
+    """
+
+    def __init__(self, triangles: np.ndarray):
+        self.lo = triangles.min(axis=1)
+        self.hi = triangles.max(axis=1)
+        self.bounds = np.concatenate([self.lo.min(axis=0), self.hi.max(axis=0)])
+
+    def intersection(self, box):
+        box = np.asarray(box, dtype=float)
+        overlap = np.all(self.lo <= box[3:], axis=1) & np.all(self.hi >= box[:3], axis=1)
+        return np.flatnonzero(overlap)
+
+
 class MeshSurface:
     """A closed triangle mesh (``trimesh.Trimesh``) in the object frame.
 
-    Uses trimesh's pure-numpy ray engine (``RayMeshIntersector``), which works
-    without embree. For a union of convex pieces (as ``objects.surface_mesh``
-    builds) internal faces may be hit too; the segment logic keeps the hit
-    nearest ``p_m``, which for a ray from outside toward the object is the outer
-    surface when the cloud lies on it.
+    Ray hits come from trimesh's pure-numpy ray-triangle code
+    (``trimesh.ray.ray_triangle.ray_triangle_id``, no embree) with a numpy
+    broad phase (:class:`_BoxTree`). For a concatenation of convex pieces (as
+    ``objects.surface_mesh`` builds) internal faces are hit too; use
+    ``contact_surface(..., pick="first")`` to keep the outer surface.
     """
 
     def __init__(self, mesh):
         import trimesh  # local: only needed for meshes
-        from trimesh.ray.ray_triangle import RayMeshIntersector
 
         if not isinstance(mesh, trimesh.Trimesh):
             raise TypeError(f"mesh: expected a trimesh.Trimesh, got {type(mesh).__name__}")
         if len(mesh.faces) == 0:
             raise ValueError("mesh: expected a mesh with faces, got 0 faces")
+        from trimesh.ray.ray_triangle import ray_triangle_id
+
         self.mesh = mesh
-        self._rays = RayMeshIntersector(mesh)
+        self._triangles = np.asarray(mesh.triangles)
+        self._normals = np.asarray(mesh.face_normals)
+        self._tree = _BoxTree(self._triangles)
+        self._ray_triangle_id = ray_triangle_id
 
     def intersect(self, origins, directions):
         o = np.asarray(origins, float)
         d = np.asarray(directions, float)
-        locs, ray_idx, tri_idx = self._rays.intersects_location(o, d, multiple_hits=True)
+        tri_idx, ray_idx, locs = self._ray_triangle_id(
+            self._triangles, o, d, triangles_normal=self._normals, tree=self._tree,
+            multiple_hits=True,
+        )
         counts = np.bincount(ray_idx, minlength=len(o))
         K = max(1, int(counts.max()) if len(counts) else 1)
         t = np.full((len(o), K), np.nan)
         nrm = np.zeros((len(o), K, 3))
-        slot = np.zeros(len(o), dtype=int)
+        order = np.argsort(ray_idx, kind="stable")
+        ray_sorted = ray_idx[order]
+        starts = np.searchsorted(ray_sorted, ray_sorted)
+        slot = np.arange(len(order)) - starts
         dd = np.sum(d * d, axis=1)
-        for loc, r, f in zip(locs, ray_idx, tri_idx, strict=True):
-            k = slot[r]
-            t[r, k] = np.dot(loc - o[r], d[r]) / dd[r]
-            nrm[r, k] = self.mesh.face_normals[f]
-            slot[r] += 1
+        t[ray_sorted, slot] = np.einsum("ij,ij->i", locs[order] - o[ray_sorted],
+                                        d[ray_sorted]) / dd[ray_sorted]
+        nrm[ray_sorted, slot] = self._normals[tri_idx[order]]
+        return t, nrm
+
+
+class ObjectSurface:
+    """A catalogue object (``handle_drake.objects.ObjectSpec``), ray cast exactly.
+
+    Wraps ``objects.ray_cast`` (analytic spheres and cylinders, exact convex
+    pieces): one hit per ray, the point where the ray first enters the solid.
+    Rays that start inside the solid report no hit.
+    """
+
+    def __init__(self, spec):
+        from handle_drake import objects  # local: objects is another module's area
+
+        if not isinstance(spec, objects.ObjectSpec):
+            raise TypeError(f"spec: expected an ObjectSpec, got {type(spec).__name__}")
+        self.spec = spec
+        self._ray_cast = objects.ray_cast
+
+    def intersect(self, origins, directions):
+        o = np.asarray(origins, float)
+        d = np.asarray(directions, float)
+        try:
+            hits = [self._ray_cast(self.spec, o, d)]
+            rows = [np.arange(len(o))]
+        except ValueError:  # some origin inside the solid: cast one by one
+            hits, rows = [], []
+            for i in range(len(o)):
+                try:
+                    hits.append(self._ray_cast(self.spec, o[i : i + 1], d[i : i + 1]))
+                    rows.append(np.array([i]))
+                except ValueError:
+                    continue
+        t = np.full((len(o), 1), np.nan)
+        nrm = np.zeros((len(o), 1, 3))
+        for h, r in zip(hits, rows, strict=True):
+            ok = h.hit
+            t[r[ok], 0] = h.distance[ok] / np.linalg.norm(d[r[ok]], axis=1)
+            nrm[r[ok], 0] = h.n_O[ok]
         return t, nrm
 
 
@@ -243,6 +311,7 @@ def contact_surface(
     *,
     num_rings: int = 2,
     points_per_ring: int = 6,
+    pick: str = "nearest",
 ):
     """Contact surface model of one contact: ``(points (k, 3), inward_normals (k, 3))``.
 
@@ -254,11 +323,16 @@ def contact_surface(
             ``intersect`` method).
         radius: sphere radius r bounding the segments (m).
         num_rings, points_per_ring: the segment pattern (:func:`disk_pattern`).
+        pick: which hit of a segment to keep: ``"nearest"`` to ``p_m`` (the
+            report) or ``"first"`` along the segment from outside (use it for a
+            mesh that is a union of pieces with internal faces).
 
     Returns:
         Surface points and inward surface normals for every segment that hits
         the surface (segments that miss are dropped; none hit -> empty arrays).
     """
+    if pick not in ("nearest", "first"):
+        raise ValueError(f"pick: expected 'nearest' or 'first', got {pick!r}")
     p_m, n_m = mean_contact(cloud_points, cloud_normals)
     offsets = disk_pattern(radius, num_rings, points_per_ring)
     helper = np.eye(3)[np.argmin(np.abs(n_m))]
@@ -273,7 +347,10 @@ def contact_surface(
     # keep hits inside the segment [0, 2 half]; pick the one nearest p_m
     valid = np.isfinite(t) & (t >= -1e-12) & (t <= 2 * half[:, None] + 1e-12)
     hit_pts = origins[:, None, :] + np.where(valid, t, 0.0)[..., None] * dirs[:, None, :]
-    dist = np.where(valid, np.linalg.norm(hit_pts - p_m, axis=2), np.inf)
+    if pick == "nearest":
+        dist = np.where(valid, np.linalg.norm(hit_pts - p_m, axis=2), np.inf)
+    else:
+        dist = np.where(valid, t, np.inf)
     best = np.argmin(dist, axis=1)
     rows = np.arange(len(origins))
     hit = np.isfinite(dist[rows, best])
