@@ -45,8 +45,8 @@ Shape, Link, Joint = W.Shape, W.Link, W.Joint
 
 # group: (kp [N m/rad], kd [N m s/rad], joint damping [N m s/rad], armature [kg m^2]) (ours)
 GAINS = {
-    "spread": (5.0, 0.25, 0.05, 1.0e-3),
-    "prox": (5.0, 0.15, 0.05, 5.0e-4),
+    "spread": (20.0, 0.6, 0.05, 1.0e-3),
+    "prox": (20.0, 0.4, 0.05, 5.0e-4),
 }
 DISTAL_DAMPING = 0.01
 
