@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 
-class ContactModel(str, enum.Enum):
+class ContactModel(enum.StrEnum):
     """The three contact models of section 4.1.2."""
 
     FRICTIONLESS = "frictionless"

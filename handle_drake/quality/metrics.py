@@ -78,7 +78,8 @@ class ContactParams:
         object.__setattr__(self, "model", _as_model(self.model))
         _check_friction(self.mu, self.gamma, self.num_edges, ContactModel.POINT_FRICTION)
         L = self.characteristic_length
-        if not isinstance(L, int | float | np.floating | np.integer) or not np.isfinite(L) or L <= 0:
+        real = isinstance(L, int | float | np.floating | np.integer)
+        if not real or not np.isfinite(L) or L <= 0:
             raise ValueError(f"characteristic_length: expected a finite value > 0, got {L!r}")
 
     def wrenches(self, points, normals, *, tangents=None, batch: bool = False) -> np.ndarray:

@@ -113,7 +113,9 @@ class ObjectContacts(LeafSystem):
         if not isinstance(fingertips, Mapping) or not fingertips:
             raise ValueError("fingertips: expected a non-empty mapping name -> body")
         if pose_input not in ("body_poses", "object_pose"):
-            raise ValueError(f"pose_input: expected 'body_poses' or 'object_pose', got {pose_input!r}")
+            raise ValueError(
+                f"pose_input: expected 'body_poses' or 'object_pose', got {pose_input!r}"
+            )
         (self._object,) = _body_indices(plant, object_body, "object_body")
         self._names = tuple(str(k) for k in fingertips)
         self._tip_of_body: dict[BodyIndex, int] = {}
