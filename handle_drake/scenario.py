@@ -232,10 +232,14 @@ def validate_scenario(scenario: Scenario) -> None:
         raise ScenarioError(
             f"hand.kind: unknown hand {scenario.hand.kind!r}; expected one of {sorted(HAND_SPECS)}"
         )
+    spec = HAND_SPECS[scenario.hand.kind]
     if scenario.hand.coupling_ratio is not None:
         _check_positive("hand.coupling_ratio", scenario.hand.coupling_ratio)
+        try:
+            spec.coupling_ratios(scenario.hand.coupling_ratio)
+        except ValueError as error:
+            raise ScenarioError(f"hand.coupling_ratio: {error}") from None
     _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
-    spec = HAND_SPECS[scenario.hand.kind]
     for name, value in scenario.hand.initial_position.items():
         if name not in spec.actuated_joint_names:
             raise ScenarioError(
