@@ -1,0 +1,109 @@
+"""Station speed: real-time factor of a 2 s Shadow grasp trial and reset cost.
+
+Runs side by side in one process (ratios are what count on a noisy machine):
+
+- the demo grasp (``diagrams/shadow_sphere_grasp.yaml``, first 2 s) with point
+  and hydroelastic contact at 1 ms and 5 ms steps;
+- a trial reset (``ScenarioRunner.reset``: default context copied back)
+  against a full rebuild (``ScenarioRunner(scenario)``).
+
+Targets (issue 2): >= 4x real time at 1 ms with point contact; reset <= 5 ms.
+
+Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from handle_drake.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
+from handle_drake.run import ScenarioRunner  # noqa: E402
+from handle_drake.scenario import LoadScenario  # noqa: E402
+
+TRIAL_SECONDS = 2.0
+
+
+def _scenario(contact_model: str, time_step: float):
+    return LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO,
+                        data=f"contact_model: {contact_model}\ntime_step: {time_step}")
+
+
+def bench_realtime(repeats: int):
+    rows = []
+    for contact_model in ("point", "hydroelastic"):
+        for time_step in (0.001, 0.005):
+            runner = ScenarioRunner(_scenario(contact_model, time_step))
+            runs = [runner.run(TRIAL_SECONDS) for _ in range(repeats)]
+            walls = [r.wall_time for r in runs]
+            lift = runs[-1].object_position[-1, 2] - runs[-1].object_position[0, 2]
+            rows.append({
+                "contact_model": contact_model,
+                "time_step_ms": time_step * 1e3,
+                "wall_s_median": statistics.median(walls),
+                "realtime_factor": TRIAL_SECONDS / statistics.median(walls),
+                "object_lift_cm_at_2s": 100 * lift,
+            })
+    return rows
+
+
+def bench_reset(repeats: int):
+    scenario = _scenario("point", 0.001)
+    builds = []
+    for _ in range(max(3, repeats)):
+        start = time.perf_counter()
+        runner = ScenarioRunner(scenario)
+        builds.append(time.perf_counter() - start)
+    resets = []
+    for _ in range(50):
+        start = time.perf_counter()
+        runner.reset()
+        resets.append(time.perf_counter() - start)
+    return {
+        "rebuild_ms_median": 1e3 * statistics.median(builds),
+        "reset_ms_median": 1e3 * statistics.median(resets),
+        "reset_ms_max": 1e3 * max(resets),
+        "rebuild_over_reset": statistics.median(builds) / statistics.median(resets),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--quick", action="store_true", help="one repeat")
+    parser.add_argument("--out", type=Path,
+                        default=Path(__file__).parent / "results" / "station.json")
+    args = parser.parse_args(argv)
+    repeats = 1 if args.quick else args.repeats
+    rows = bench_realtime(repeats)
+    reset = bench_reset(repeats)
+    print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats}")
+    print(f"{'contact':<13}{'step':>7}{'wall (s)':>10}{'x real time':>13}{'lift@2s (cm)':>14}")
+    for r in rows:
+        print(f"{r['contact_model']:<13}{r['time_step_ms']:>5.0f}ms{r['wall_s_median']:>10.2f}"
+              f"{r['realtime_factor']:>13.2f}{r['object_lift_cm_at_2s']:>14.1f}")
+    point_1ms = rows[0]["realtime_factor"]
+    print(f"point/hydroelastic speed ratio at 1 ms: "
+          f"{point_1ms / rows[2]['realtime_factor']:.1f}x")
+    print(f"\nreset {reset['reset_ms_median']:.2f} ms (max {reset['reset_ms_max']:.2f}) vs "
+          f"rebuild {reset['rebuild_ms_median']:.0f} ms: "
+          f"{reset['rebuild_over_reset']:.0f}x faster")
+    print(f"targets: >= 4x real time at 1 ms point contact: "
+          f"{'met' if point_1ms >= 4 else 'NOT met'} ({point_1ms:.1f}x); reset <= 5 ms: "
+          f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"realtime": rows, "reset": reset,
+                                    "cpu_count": os.cpu_count(),
+                                    "load_average": os.getloadavg()}, indent=2))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
