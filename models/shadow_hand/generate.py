@@ -255,7 +255,11 @@ def build():
             3.0,
             (0, 0, 0.09),
             solid_cylinder_inertia(3.0, 0.045, 0.18),
-            [Shape("cylinder", (0.045, 0.18), (0, 0, 0.09))],
+            # (ours) the housing up to z 0.18 and a neck under the wrist
+            [
+                Shape("cylinder", (0.045, 0.18), (0, 0, 0.09)),
+                Shape("cylinder", (0.02, 0.035), (0, -0.005, 0.1975)),
+            ],
             SKIN,
         ),
         None,
