@@ -84,7 +84,7 @@ def register(subparsers) -> None:
 
 
 def _add_firmware_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--rate", type=float, default=1000.0, help="Hz, control and publish rate")
+    p.add_argument("--rate", type=float, default=500.0, help="Hz, control and publish rate")
     p.add_argument("--natural-frequency", type=float, default=5.0, help="Hz, joint loops")
     p.add_argument("--max-velocity", type=float, default=4.0, help="rad/s")
     p.add_argument("--noise", type=float, default=0.0005, help="rad, position noise (std)")
@@ -101,7 +101,7 @@ def _bus(args) -> BusConfig:
 def _firmware_config(args, bus: BusConfig) -> CanFirmwareConfig:
     return CanFirmwareConfig(
         hand_kind=args.hand, coupling_ratio=args.coupling_ratio, bus=bus,
-        rate=getattr(args, "rate", 1000.0),
+        rate=getattr(args, "rate", 500.0),
         natural_frequency=getattr(args, "natural_frequency", 5.0),
         max_velocity=getattr(args, "max_velocity", 4.0),
         position_noise=getattr(args, "noise", 0.0005),

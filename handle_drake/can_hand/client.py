@@ -60,6 +60,7 @@ class CanHandClient:
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
         self._thread = None
+        self._sock = None
         self._connected = False
         self._state: P.StateMessage | None = None
         self._state_time = -np.inf
@@ -82,6 +83,12 @@ class CanHandClient:
     def close(self, timeout: float = 2.0) -> None:
         self._stop.set()
         self._wake()
+        sock = self._sock
+        if sock is not None:  # interrupts a handshake waiting on a silent server
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None
@@ -164,6 +171,7 @@ class CanHandClient:
             except (OSError, P.ProtocolError, P.PayloadError, ConnectionError) as error:
                 self.last_error = f"{type(error).__name__}: {error}"
             finally:
+                self._sock = None
                 if sock is not None:
                     sock.close()
                 with self._lock:
@@ -178,6 +186,10 @@ class CanHandClient:
     def _connect(self) -> socket.socket:
         self.counters["connect_attempts"] += 1
         sock = socket.create_connection((self.host, self.port), timeout=self.connect_timeout)
+        self._sock = sock
+        if self._stop.is_set():
+            sock.close()
+            raise ConnectionError("client closed")
         try:
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             sock.sendall(P.pack_hello(self._info))
@@ -201,6 +213,7 @@ class CanHandClient:
             for message_type, payload in messages[1:]:
                 self._on_message(message_type, payload)
         except BaseException:
+            self._sock = None
             sock.close()
             raise
         with self._lock:
