@@ -409,6 +409,12 @@ def test_committed_models_are_up_to_date_and_table_top_is_at_zero(tmp_path):
             f"models/objects/{relative} is stale: run python -m handle_drake.objects export "
             "models/objects"
         )
+    objects_plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), DiagramBuilder())
+    for kind in KINDS:
+        (instance,) = Parser(objects_plant).AddModels(str(committed / kind / f"{kind}.sdf"))
+        body = objects_plant.GetBodyByName(BODY_NAME, instance)
+        expected = mass_properties(ObjectSpec.default(kind)).mass
+        assert body.default_mass() == pytest.approx(expected, rel=1e-8)
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), builder)
     (table,) = Parser(plant).AddModels(str(committed / "table.sdf"))
