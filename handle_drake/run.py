@@ -18,7 +18,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.hands import get_hand_spec
 from handle_drake.scenario import FloatingWrist, Scenario
-from handle_drake.station import GetPlant, MakeHandStation, actuated_limits, hand_initial_command
+from handle_drake.station import MakeHandStation, hand_initial_command
 from handle_drake.systems.hand_driver import rpy_pose6
 
 __all__ = ["ScenarioRunner", "RunResult", "script_trajectories"]
@@ -95,11 +95,7 @@ class ScenarioRunner:
         self.meshcat = meshcat
         builder = DiagramBuilder()
         self.station = builder.AddNamedSystem("station", MakeHandStation(scenario, meshcat))
-        plant = GetPlant(self.station)
-        spec = get_hand_spec(scenario.hand.kind)
-        hand = plant.GetModelInstanceByName("hand")
-        lower, upper = actuated_limits(plant, hand, spec, scenario.hand.coupling_ratio)
-        self.initial_command = hand_initial_command(scenario, lower, upper)
+        self.initial_command = hand_initial_command(scenario)
         hand_traj, wrist_traj = script_trajectories(scenario, self.initial_command)
         if hand_traj is not None:
             source = builder.AddNamedSystem("hand_script", TrajectorySource(hand_traj))

@@ -1,9 +1,8 @@
 """Typed scenarios: what a station simulates (or drives), loaded from YAML.
 
-The dataclasses use ``typing.Union``/``Optional``/``List`` because Drake 1.51's
-``yaml_load_typed`` does not understand ``X | Y`` or ``list[X]`` annotations, and
-this module must not use ``from __future__ import annotations`` (the schema
-reader needs real types, not strings).
+This module must not use ``from __future__ import annotations``: Drake's
+``yaml_load_typed`` reads the dataclass fields' types and needs real types, not
+strings.
 
 A scenario file names the hand and how it is mounted, the object, the table,
 the contact model and time step, the hand driver (a tagged variant: the
@@ -34,13 +33,11 @@ Units are SI (m, rad, kg, s). Poses are ``pydrake.common.schema.Transform``
 
 import dataclasses as dc
 import math
-import typing
 from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
-
 
 __all__ = [
     "CONTACT_MODELS",
@@ -96,10 +93,10 @@ class HandConfig:
     kind: str = "shadow"
     # Shadow: xFJ1 = coupling_ratio * xFJ2 (1.0 for the C6 hand, 1.1 for the C5
     # hand). None takes the hand's default; the Barrett distal ratio is fixed.
-    coupling_ratio: typing.Optional[float] = None
-    mount: typing.Union[FixedMount, FloatingWrist] = dc.field(default_factory=FixedMount)
+    coupling_ratio: float | None = None
+    mount: FixedMount | FloatingWrist = dc.field(default_factory=FixedMount)
     # Initial joint positions (rad) by actuated joint name; others start at 0.
-    initial_position: typing.Dict[str, float] = dc.field(default_factory=dict)
+    initial_position: dict[str, float] = dc.field(default_factory=dict)
 
 
 @dc.dataclass
@@ -108,7 +105,7 @@ class ObjectConfig:
 
     kind: str = "sphere"
     size: float = 0.06  # m, the kind's characteristic length
-    mass: typing.Optional[float] = None  # kg; None derives it from the kind's density
+    mass: float | None = None  # kg; None derives it from the kind's density
     mu: float = 0.8  # Coulomb friction coefficient (static = dynamic)
     X_WO: Transform = dc.field(default_factory=Transform)
     # If true, X_WO's z is replaced so that the object rests on the table top.
@@ -146,8 +143,8 @@ class Keyframe:
     """
 
     time: float = 0.0  # s
-    hand: typing.Dict[str, float] = dc.field(default_factory=dict)
-    wrist: typing.List[float] = dc.field(default_factory=list)
+    hand: dict[str, float] = dc.field(default_factory=dict)
+    wrist: list[float] = dc.field(default_factory=list)
 
 
 @dc.dataclass
@@ -161,16 +158,16 @@ class CanHandDriver:
 @dc.dataclass
 class Scenario:
     hand: HandConfig = dc.field(default_factory=HandConfig)
-    object: typing.Optional[ObjectConfig] = dc.field(default_factory=ObjectConfig)
-    table: typing.Optional[TableConfig] = dc.field(default_factory=TableConfig)
+    object: ObjectConfig | None = dc.field(default_factory=ObjectConfig)
+    table: TableConfig | None = dc.field(default_factory=TableConfig)
     contact_model: str = "point"  # point | hydroelastic
     time_step: float = 0.001  # s, MultibodyPlant discrete step (SAP solver)
-    driver: typing.Union[SimHandDriver, CanHandDriver] = dc.field(default_factory=SimHandDriver)
+    driver: SimHandDriver | CanHandDriver = dc.field(default_factory=SimHandDriver)
     simulation_duration: float = 2.0  # s
     random_seed: int = 0
     # An optional scripted command (hand joints and wrist pose over time), so a
     # scenario file alone describes a runnable experiment.
-    script: typing.List[Keyframe] = dc.field(default_factory=list)
+    script: list[Keyframe] = dc.field(default_factory=list)
     # Meshcat publish period (s) when a Meshcat is given.
     visualization_period: float = 1.0 / 32
 

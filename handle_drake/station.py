@@ -15,7 +15,7 @@ port                              dir    size                      units / frame
 ``hand.velocity_estimated``       out    nq                        rad/s
 ``hand.state_estimated``          out    2 nq                      positions then velocities
 ``hand.tactile``                  out    fingertips                N, normal force per fingertip
-``wrist.pose``                    in     6                         ``[x y z roll pitch yaw]`` (m, rad)
+``wrist.pose``                    in     6                         ``[x y z r p y]`` (m, rad)
 ``wrist.pose_measured``           out    6                         same (floating wrist only)
 ``object.pose``                   out    ``RigidTransform``        ``X_WO``
 ``object.spatial_velocity``       out    ``SpatialVelocity``       ``V_WO`` in world
@@ -45,7 +45,12 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.hands import AddHand, get_hand_spec
+from handle_drake.hands import (
+    AddHand,
+    actuated_position_limits,
+    actuated_to_joint_positions,
+    get_hand_spec,
+)
 from handle_drake.scenario import (
     CanHandDriver,
     FixedMount,
@@ -54,15 +59,14 @@ from handle_drake.scenario import (
     SimHandDriver,
     validate_scenario,
 )
-from handle_drake.systems.hand_driver import WRIST_JOINTS, SimHandDriver as SimHandDriverSystem
-from handle_drake.systems.hand_driver import WristDriver, rpy_pose6
+from handle_drake.systems.hand_driver import WRIST_JOINTS, WristDriver, rpy_pose6
+from handle_drake.systems.hand_driver import SimHandDriver as SimHandDriverSystem
 from handle_drake.systems.sensors import BodyPoseSelector, FingertipTactile
 
 __all__ = [
     "MakeHandStation",
     "GetPlant",
     "hand_initial_command",
-    "actuated_limits",
     "object_body",
     "object_initial_pose",
 ]
@@ -94,7 +98,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         return MakeHardwareStation(scenario, meshcat=meshcat)
     if not isinstance(scenario.driver, SimHandDriver):
         raise ValueError(
-            f"a simulated station needs a !SimHandDriver driver, got {type(scenario.driver).__name__}"
+            "a simulated station needs a !SimHandDriver driver, got "
+            f"{type(scenario.driver).__name__}"
             "; pass hardware=True to drive a CAN hand"
         )
 
@@ -112,8 +117,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     hand = AddPlantModels(plant, scenario)
     plant.Finalize()
 
-    lower, upper = actuated_limits(plant, hand, spec, scenario.hand.coupling_ratio)
-    initial = hand_initial_command(scenario, lower, upper)
+    lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
+    initial = hand_initial_command(scenario)
     _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
 
     driver = builder.AddNamedSystem(
@@ -254,39 +259,18 @@ def _add_floating_wrist(plant, base_frame, mount: FloatingWrist) -> None:
         plant.GetJointByName(name, wrist).set_default_positions([value])
 
 
-def actuated_limits(plant, hand, spec, coupling_ratio=None):
-    """Lower and upper command limits (rad) of the actuated joints.
-
-    A leader joint whose follower is coupled as ``follower = ratio * leader``
-    is limited so that the follower stays within its own limits.
-    """
-    lower, upper = [], []
-    ratios = spec.coupling_ratios(coupling_ratio)
-    for name in spec.actuated_joint_names:
-        joint = plant.GetJointByName(name, hand)
-        lo, hi = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
-        for follower, leader, ratio in ratios:
-            if leader == name and ratio > 0:
-                f = plant.GetJointByName(follower, hand)
-                lo = max(lo, float(f.position_lower_limits()[0]) / ratio)
-                hi = min(hi, float(f.position_upper_limits()[0]) / ratio)
-        lower.append(lo)
-        upper.append(hi)
-    return np.array(lower), np.array(upper)
-
-
-def hand_initial_command(scenario: Scenario, lower, upper) -> np.ndarray:
+def hand_initial_command(scenario: Scenario) -> np.ndarray:
+    """The first command: ``hand.initial_position`` (0 elsewhere), within limits."""
     spec = get_hand_spec(scenario.hand.kind)
+    lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
     command = np.array([scenario.hand.initial_position.get(name, 0.0)
                         for name in spec.actuated_joint_names])
     return np.clip(command, lower, upper)
 
 
 def _set_default_hand_positions(plant, hand, spec, command, coupling_ratio) -> None:
-    values = dict(zip(spec.actuated_joint_names, command, strict=True))
-    for follower, leader, ratio in spec.coupling_ratios(coupling_ratio):
-        values[follower] = ratio * values[leader]
-    for name, value in values.items():
+    q = actuated_to_joint_positions(spec, command, coupling_ratio)
+    for name, value in zip(spec.joint_names, q, strict=True):
         plant.GetJointByName(name, hand).set_default_positions([value])
 
 
@@ -300,7 +284,8 @@ def _add_visualization(builder, plant, scene_graph, meshcat, scenario) -> None:
     MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
     ContactVisualizer.AddToBuilder(
         builder, plant, meshcat,
-        ContactVisualizerParams(publish_period=scenario.visualization_period, newtons_per_meter=200),
+        ContactVisualizerParams(publish_period=scenario.visualization_period,
+                                newtons_per_meter=200),
     )
 
 

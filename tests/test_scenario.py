@@ -51,7 +51,8 @@ driver: !CanHandDriver {host: 127.0.0.1, port: 5000}
 
 
 def test_dump_round_trips():
-    scenario = LoadScenario(data="object: {kind: mug, size: 0.08}\nscript: [{time: 0.5, hand: {FFJ3: 1.0}}]")
+    scenario = LoadScenario(
+        data="object: {kind: mug, size: 0.08}\nscript: [{time: 0.5, hand: {FFJ3: 1.0}}]")
     again = LoadScenario(data=DumpScenario(scenario))
     assert again.object.kind == "mug" and again.object.size == 0.08
     assert again.script[0].hand == {"FFJ3": 1.0}

@@ -166,11 +166,15 @@ def test_tactile_is_zero_in_free_air():
 @pytest.mark.parametrize("contact_model", ["point", "hydroelastic_with_fallback"])
 def test_tactile_reads_the_weight_of_a_body_at_rest(contact_model):
     """A 0.2 kg "fingertip" resting on a table presses with m g = 1.962 N."""
-    from pydrake.geometry import AddCompliantHydroelasticProperties, ProximityProperties
-    from pydrake.geometry import Box, Sphere
+    from pydrake.geometry import (
+        AddCompliantHydroelasticProperties,
+        Box,
+        ProximityProperties,
+        Sphere,
+    )
+    from pydrake.math import RigidTransform
     from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
     from pydrake.multibody.tree import SpatialInertia, UnitInertia
-    from pydrake.math import RigidTransform
 
     from handle_drake.systems.sensors import FingertipTactile
 
