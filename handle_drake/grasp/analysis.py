@@ -1,0 +1,87 @@
+"""Analyses of grasp data: synergies from recordings, and Table 1 re-derived.
+
+:func:`rederive_table1` repeats the report's section 3.2.1 analysis on any
+:class:`~handle_drake.grasp.recordings.GraspRecords`: forward kinematics of
+each posture, the grasp centre between the class's finger contacts, and per
+class a linear least-squares fit of the centre against the object size, in
+the report's units and frame (mm, origin at WRJ1; see
+:mod:`~handle_drake.grasp.taxonomy`), so the result can be read side by side
+with Table 1.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from handle_drake.grasp.kinematics import GraspKinematics
+from handle_drake.grasp.recordings import GraspRecords
+from handle_drake.grasp.synergies import Coupling, Synergies, fit_synergies
+from handle_drake.grasp.taxonomy import GRASP_CLASSES, GraspClass, palm_to_report_mm
+from handle_drake.hands import get_hand_spec
+
+__all__ = ["grasp_centres", "rederive_table1", "fit_record_synergies", "table1_markdown"]
+
+
+def grasp_centres(records: GraspRecords, kinematics: GraspKinematics | None = None) -> np.ndarray:
+    """(N, 3) grasp centres ``p_PC`` (m, palm frame) of recorded postures."""
+    kin = kinematics or GraspKinematics()
+    return np.array([kin.grasp_centre(q, c) for q, c in zip(records.q, records.grasp_classes,
+                                                             strict=True)])
+
+
+def rederive_table1(records: GraspRecords, kinematics: GraspKinematics | None = None,
+                    min_sizes: int = 2) -> dict[GraspClass, dict]:
+    """Per class: Table-1 style coefficients fitted to the data.
+
+    Returns ``{class: {"table1": (x0, dx, y0, dy, z0, dz), "n": count,
+    "rms_mm": residual per axis}}`` (mm and mm/mm, report frame). Classes with
+    fewer than ``min_sizes`` distinct sizes are left out (no slope).
+    """
+    centres_mm = palm_to_report_mm(grasp_centres(records, kinematics))
+    sizes_mm = records.sizes * 1e3
+    out = {}
+    for cls in GRASP_CLASSES:
+        mask = np.array([c is cls for c in records.grasp_classes])
+        if len(np.unique(sizes_mm[mask])) < min_sizes:
+            continue
+        design = np.column_stack([np.ones(mask.sum()), sizes_mm[mask]])
+        coef, *_ = np.linalg.lstsq(design, centres_mm[mask], rcond=None)
+        resid = centres_mm[mask] - design @ coef
+        out[cls] = {
+            "table1": tuple(float(v) for pair in zip(coef[0], coef[1], strict=True) for v in pair),
+            "n": int(mask.sum()),
+            "rms_mm": np.sqrt(np.mean(resid**2, axis=0)),
+        }
+    return out
+
+
+def table1_markdown(derived: dict[GraspClass, dict]) -> str:
+    """Side-by-side table: report Table 1 vs. the re-derived coefficients."""
+    lines = ["| class | n | x0 | dx | y0 | dy | z0 | dz |", "|---|---|---|---|---|---|---|---|"]
+    for cls, info in GRASP_CLASSES.items():
+        rep = " | ".join(f"{v:.2f}" for v in info.table1)
+        lines.append(f"| {cls.value} (report) | | {rep} |")
+        if cls in derived:
+            d = derived[cls]
+            got = " | ".join(f"{v:.2f}" for v in d["table1"])
+            lines.append(f"| {cls.value} (data) | {d['n']} | {got} |")
+    return "\n".join(lines)
+
+
+def fit_record_synergies(records: GraspRecords, k: int | None = None, variance: float = 0.95,
+                         grasp_class=None, coupling_ratio: float | None = None) -> Synergies:
+    """PCA synergies of recorded Shadow postures over the 20 command joints.
+
+    grasp_class: fit only that class's grasps (per-class synergies).
+    coupling_ratio: J1/J2 ratio used when mapping back (default 1.0, C6 hand).
+    """
+    spec = get_hand_spec("shadow")
+    if grasp_class is not None:
+        records = records.of_class(grasp_class)
+    ratio = 1.0 if coupling_ratio is None else float(coupling_ratio)
+    couplings = tuple(Coupling(f, l, ratio) for f, l, _ in spec.couplings)
+    return fit_synergies(
+        records.q, spec.joint_names, spec.joint_lower_limits, spec.joint_upper_limits,
+        synergy_joint_names=spec.actuated_joint_names, couplings=couplings, k=k,
+        variance=variance,
+    )  # fmt: skip

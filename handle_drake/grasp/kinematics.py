@@ -1,0 +1,426 @@
+"""Forward and inverse kinematics of grasps on simple objects (Shadow hand).
+
+:class:`GraspKinematics` holds a continuous MultibodyPlant of the Shadow hand
+(forearm welded to the world, wrist joints held at zero so that the palm
+frame P is fixed) plus a free "object" body O. It provides
+
+- forward kinematics of the finger contact points in the palm frame and the
+  grasp centre of a posture (report section 3.2.1: the geometric centre of the
+  contacts of the class's fingers), and
+- :meth:`GraspKinematics.solve_grasp`: a Drake ``InverseKinematics`` problem
+  that puts the class's finger contact points on the surface of a sphere,
+  cylinder or box *symmetrically about the object centre*, with the finger
+  pads facing the object, within joint limits and the J1 = ratio * J2
+  coupling, at least cost from a class posture prior.
+
+Grasp frame G (the frame the contact layout is written in): z_G is the
+opposition axis (the thumb, or for the adduction grip the first finger, on
++z_G), y_G the direction along which the opposing fingers line up, x_G the
+third axis. The IK object body's frame *is* G. A box of dims (w, d, h) spans
+z_G: w (the width between the opposing fingers), y_G: d, x_G: h; a cylinder
+(diameter, length) has its axis along y_G.
+
+Finger contact points (in the distal link frame, from the model's collision
+geometry: capsule radius 8.5 mm, pad boxes 9 mm / 10.5 mm below the axis):
+``pad`` faces -y, ``tip`` is the rounded end, ``side`` the radial (thumb-side,
++x) face and ``ulnar_side`` the -x face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import Box, Cylinder, ProximityProperties, Sphere
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+from pydrake.multibody.tree import SpatialInertia
+from pydrake.solvers import SnoptSolver, Solve, SolverOptions
+from pydrake.systems.framework import DiagramBuilder
+
+from handle_drake.grasp.taxonomy import OBJECT_SHAPES, GraspClass, grasp_centre_palm, grasp_info
+from handle_drake.hands import get_hand_spec
+from handle_drake.models import add_package, model_path
+
+__all__ = [
+    "CONTACT_POINTS",
+    "ContactTarget",
+    "GraspKinematics",
+    "GraspSolution",
+    "contact_layout",
+    "object_dims_for",
+]
+
+FINGER_SPACING = 0.022  # m, between neighbouring finger knuckles (2 x 11 mm)
+_DISTAL = {"th": "thdistal", "ff": "ffdistal", "mf": "mfdistal", "rf": "rfdistal", "lf": "lfdistal"}
+
+# (point in the distal frame, outward surface normal in the distal frame).
+CONTACT_POINTS: dict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = {}
+for _f in ("ff", "mf", "rf", "lf"):
+    CONTACT_POINTS[(_f, "pad")] = (np.array([0.0, -0.009, 0.019]), np.array([0.0, -1.0, 0.0]))
+    CONTACT_POINTS[(_f, "tip")] = (np.array([0.0, -0.006, 0.029]), np.array([0.0, -0.6, 0.8]))
+    CONTACT_POINTS[(_f, "side")] = (np.array([0.0085, 0.0, 0.019]), np.array([1.0, 0.0, 0.0]))
+    CONTACT_POINTS[(_f, "ulnar_side")] = (np.array([-0.0085, 0.0, 0.019]),
+                                          np.array([-1.0, 0.0, 0.0]))
+CONTACT_POINTS[("th", "pad")] = (np.array([0.0, -0.0105, 0.020]), np.array([0.0, -1.0, 0.0]))
+CONTACT_POINTS[("th", "tip")] = (np.array([0.0, -0.007, 0.031]), np.array([0.0, -0.6, 0.8]))
+
+
+@dataclass(frozen=True)
+class ContactTarget:
+    """Where one finger contact goes on the object, in the grasp frame G.
+
+    normal: outward surface normal direction of the face touched (a G axis,
+      e.g. +z for the thumb), the finger's contact normal opposes it.
+    spread: nominal offset (m) along y_G (fingers side by side).
+    """
+
+    finger: str
+    part: str
+    normal: tuple[float, float, float]
+    spread: float = 0.0
+
+
+def contact_layout(name) -> tuple[ContactTarget, ...]:
+    """The contact layout of a grasp class in the grasp frame G (symmetric about O)."""
+    info = grasp_info(name)
+    cls = info.grasp_class
+    w = FINGER_SPACING
+    up, down, below = (0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (-1.0, 0.0, 0.0)
+    c = {(k.finger): k.part for k in info.contacts}
+    if cls in (GraspClass.PALMAR_PINCH, GraspClass.TIP_PINCH, GraspClass.LATERAL):
+        return (ContactTarget("th", c["th"], up), ContactTarget("ff", c["ff"], down))
+    if cls is GraspClass.TRIPOD:
+        return (ContactTarget("th", "pad", up), ContactTarget("ff", "pad", down, 0.5 * w),
+                ContactTarget("mf", "pad", down, -0.5 * w))
+    if cls in (GraspClass.WRITING_TRIPOD, GraspClass.LATERAL_TRIPOD):
+        return (ContactTarget("th", c["th"], up), ContactTarget("ff", c["ff"], down),
+                ContactTarget("mf", c["mf"], below))
+    if cls is GraspClass.ADDUCTION_GRIP:
+        return (ContactTarget("ff", "ulnar_side", up), ContactTarget("mf", "side", down))
+    if cls is GraspClass.PARALLEL_EXTENSION:
+        return (ContactTarget("th", "pad", up),) + tuple(
+            ContactTarget(f, "pad", down, s * w)
+            for f, s in zip(("ff", "mf", "rf", "lf"), (1.5, 0.5, -0.5, -1.5), strict=True)
+        )
+    raise AssertionError(cls)  # pragma: no cover - every class is handled above
+
+
+def object_dims_for(shape: str, size: float, name=None) -> tuple[float, ...]:
+    """Default dims (m) of a test object of grasp size ``size`` for a class.
+
+    sphere (diameter,); cylinder (diameter, length); box (width, depth, height).
+    The depth (along the finger row) fits the class's fingers.
+    """
+    if shape not in OBJECT_SHAPES:
+        raise ValueError(f"shape must be one of {OBJECT_SHAPES}, got {shape!r}")
+    size = float(size)
+    if not np.isfinite(size) or size <= 0:
+        raise ValueError(f"size must be positive and finite, got {size}")
+    n_row = 1
+    if name is not None:
+        n_row = sum(1 for t in contact_layout(name) if t.normal[2] < 0)
+    depth = max(0.05, (n_row + 1) * FINGER_SPACING)
+    if shape == "sphere":
+        return (size,)
+    if shape == "cylinder":
+        return (size, max(0.10, depth + 0.02))
+    return (size, depth, 0.05)
+
+
+def _check_dims(shape: str, dims) -> tuple[float, ...]:
+    if shape not in OBJECT_SHAPES:
+        raise ValueError(f"shape must be one of {OBJECT_SHAPES}, got {shape!r}")
+    dims = tuple(float(d) for d in np.atleast_1d(dims))
+    expected = {"sphere": 1, "cylinder": 2, "box": 3}[shape]
+    if len(dims) != expected or not all(np.isfinite(d) and d > 0 for d in dims):
+        raise ValueError(f"dims: a {shape} needs {expected} positive sizes (m), got {dims}")
+    return dims
+
+
+def _object_geometry(shape: str, dims):
+    """(X_GS, shape) of the object in the grasp frame G (see the module doc)."""
+    if shape == "sphere":
+        return RigidTransform(), Sphere(0.5 * dims[0])
+    if shape == "cylinder":  # Drake's cylinder axis is its z; G's cylinder axis is y_G
+        return RigidTransform(RotationMatrix.MakeXRotation(np.pi / 2)), Cylinder(
+            0.5 * dims[0], dims[1])
+    w, d, h = dims
+    return RigidTransform(), Box(h, d, w)
+
+
+@dataclass
+class GraspSolution:
+    """A solved grasp: all joints (rad), the object pose in the palm frame, success."""
+
+    q: np.ndarray
+    X_PO: RigidTransform
+    success: bool
+    contact_error: float  # m, worst distance of a contact point from its surface
+
+
+class GraspKinematics:
+    """Kinematics of the Shadow hand for grasp synthesis and analysis (see module doc)."""
+
+    def __init__(self, coupling_ratio: float = 1.0, shape: str | None = None, dims=None):
+        """shape, dims: register the object's collision geometry (frame G), so
+        that :meth:`solve_grasp` can keep the hand out of the object and out of
+        itself (``min_distance``); without them only kinematics is available."""
+        self.spec = get_hand_spec("shadow")
+        self.coupling_ratio = float(coupling_ratio)
+        if not np.isfinite(self.coupling_ratio) or self.coupling_ratio <= 0:
+            raise ValueError(f"coupling_ratio must be > 0, got {coupling_ratio}")
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        parser = Parser(plant)
+        add_package(parser)
+        self.hand = parser.AddModels(model_path(self.spec.model_relative_path))[0]
+        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(self.spec.base_body, self.hand))
+        self.object_body = plant.AddRigidBody(
+            "grasp_object", plant.AddModelInstance("grasp_object"),
+            SpatialInertia.SolidSphereWithMass(0.05, 0.02),
+        )
+        self.shape, self.dims = shape, None
+        if shape is not None:
+            self.dims = _check_dims(shape, dims)
+            X, geometry = _object_geometry(shape, self.dims)
+            plant.RegisterCollisionGeometry(
+                self.object_body, X, geometry, "grasp_object", ProximityProperties()
+            )
+        plant.Finalize()
+        self.plant = plant
+        self.diagram = builder.Build()
+        self.diagram_context = self.diagram.CreateDefaultContext()
+        self.context = plant.GetMyMutableContextFromRoot(self.diagram_context)
+        self.palm = plant.GetFrameByName("palm", self.hand)
+        self.object_frame = self.object_body.body_frame()
+        self.q_index = np.array(
+            [plant.GetJointByName(n, self.hand).position_start() for n in self.spec.joint_names]
+        )
+        self.lower = self.spec.joint_lower_limits
+        self.upper = self.spec.joint_upper_limits
+        self.distal = {
+            f: plant.GetBodyByName(b, self.hand).body_frame() for f, b in _DISTAL.items()
+        }
+        self._wrist = [self.spec.joint_names.index(n) for n in ("WRJ2", "WRJ1")]
+
+    # ---- forward kinematics --------------------------------------------------
+    def _check_q(self, q) -> np.ndarray:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self.spec.num_joints,):
+            raise ValueError(f"q: expected shape ({self.spec.num_joints},), got {q.shape}")
+        return q
+
+    def _set(self, q) -> None:
+        full = self.plant.GetPositions(self.context)
+        full[self.q_index] = q
+        full[self._wrist_indices()] = 0.0  # the palm frame is the reference: wrist at rest
+        self.plant.SetPositions(self.context, full)
+
+    def _wrist_indices(self):
+        return self.q_index[self._wrist]
+
+    def contact_points(self, q, name) -> dict[str, np.ndarray]:
+        """Contact points ``p_PC`` (m, palm frame) of the class's fingers at posture q."""
+        q = self._check_q(q)
+        self._set(q)
+        out = {}
+        for spec in grasp_info(name).contacts:
+            p_B, _ = CONTACT_POINTS[(spec.finger, spec.part)]
+            out[spec.finger] = self.plant.CalcPointsPositions(
+                self.context, self.distal[spec.finger], p_B, self.palm
+            ).ravel()
+        return out
+
+    def grasp_centre(self, q, name) -> np.ndarray:
+        """Report section 3.2.1: geometric centre of the class's finger contacts, palm frame (m).
+
+        For a thumb-vs-fingers grasp the centre lies between the thumb and the
+        mean of the opposing fingers (so a four-finger row does not outweigh the
+        thumb); supporting side contacts (writing / lateral tripod) do not move it.
+        """
+        pts = self.contact_points(q, name)
+        layout = contact_layout(name)
+        plus = [pts[t.finger] for t in layout if t.normal[2] > 0]
+        minus = [pts[t.finger] for t in layout if t.normal[2] < 0]
+        return 0.5 * (np.mean(plus, axis=0) + np.mean(minus, axis=0))
+
+    def fingertip_positions(self, q) -> dict[str, np.ndarray]:
+        """Fingertip frames (spec.fingertip_frames) in the palm frame, m."""
+        q = self._check_q(q)
+        self._set(q)
+        return {
+            n: self.plant.GetFrameByName(n, self.hand)
+            .CalcPose(self.context, self.palm)
+            .translation()
+            for n in self.spec.fingertip_frames
+        }
+
+    # ---- inverse kinematics --------------------------------------------------
+    def solve_grasp(
+        self,
+        name,
+        shape: str,
+        dims,
+        q_prior,
+        rng: np.random.Generator | None = None,
+        target_jitter: float = 0.0,
+        tolerance: float = 0.004,
+        max_pad_angle: float = np.deg2rad(40.0),
+        p_PO_guess=None,
+        fix_p_PO=None,
+        centre_prior_weight: float = 0.0,
+        min_distance: float | None = -0.002,
+    ) -> GraspSolution:
+        """Postures of class ``name`` holding a (shape, dims) object (see module doc).
+
+        q_prior: (24,) posture prior (cost ``|q - q_prior|^2`` on the finger joints).
+        target_jitter: std (m) of a random offset of the contact targets along
+          the surface (experimenter variation). tolerance: half-width (m) of the
+          region around each target the contact may use.
+        fix_p_PO: if given, the object centre is held at this palm-frame point
+          (used by the planner to grasp at a Table-1 grasp centre).
+        centre_prior_weight: weight (1/m^2) of a cost pulling the object centre
+          towards ``p_PO_guess`` (default: the Table 1 grasp centre).
+        min_distance: lower bound (m) on the signed distance between any two
+          geometries (hand-object and hand-hand); needs the object geometry
+          (``shape``/``dims`` in the constructor, the same as here). None: off.
+        """
+        info = grasp_info(name)
+        dims = _check_dims(shape, dims)
+        q_prior = self._check_q(q_prior)
+        rng = rng or np.random.default_rng(0)
+        r = 0.5 * dims[0]
+        plant = self.plant
+        layout = contact_layout(info.grasp_class)
+        jitters = [target_jitter * rng.normal(size=3) if target_jitter > 0 else np.zeros(3)
+                   for _ in layout]
+        if p_PO_guess is None:
+            p_PO_guess = grasp_centre_palm(info.grasp_class, dims[0])
+        p_PO0 = np.asarray(p_PO_guess, dtype=float)
+        if p_PO0.shape != (3,):
+            raise ValueError(f"p_PO_guess: expected shape (3,), got {p_PO0.shape}")
+        if fix_p_PO is not None:
+            fix_p_PO = np.asarray(fix_p_PO, dtype=float)
+            if fix_p_PO.shape != (3,):
+                raise ValueError(f"fix_p_PO: expected shape (3,), got {fix_p_PO.shape}")
+        check_collisions = min_distance is not None and self.shape is not None
+        if check_collisions and (self.shape, self.dims) != (shape, dims):
+            raise ValueError(
+                f"this GraspKinematics holds a {self.shape} {self.dims}, asked for a "
+                f"{shape} {dims}; build one per object to check collisions"
+            )
+
+        def build(with_collisions: bool):
+            ik = InverseKinematics(plant, self.context, with_joint_limits=True)
+            prog = ik.get_mutable_prog()
+            qv = ik.q()
+            for i in self._wrist_indices():
+                prog.AddBoundingBoxConstraint(0.0, 0.0, qv[i])
+            for follower, leader, _ in self.spec.couplings:
+                i = self.q_index[self.spec.joint_names.index(follower)]
+                j = self.q_index[self.spec.joint_names.index(leader)]
+                prog.AddLinearEqualityConstraint(
+                    np.array([[1.0, -self.coupling_ratio]]), np.zeros(1), [qv[i], qv[j]]
+                )
+            fingers = [k for k in range(len(self.q_index)) if k not in self._wrist]
+            prog.AddQuadraticErrorCost(
+                np.eye(len(fingers)), q_prior[fingers], qv[self.q_index[fingers]]
+            )
+            for t, jitter in zip(layout, jitters, strict=True):
+                p_B, n_B = CONTACT_POINTS[(t.finger, t.part)]
+                normal = np.asarray(t.normal, dtype=float)
+                self._add_surface_constraint(ik, t, p_B, normal, shape, dims, r, tolerance, jitter)
+                ik.AddAngleBetweenVectorsConstraint(
+                    self.distal[t.finger], n_B, self.object_frame, -normal, 0.0, max_pad_angle
+                )
+            if with_collisions:
+                ik.AddMinimumDistanceLowerBoundConstraint(min_distance, 0.01)
+            if centre_prior_weight > 0:
+                ik.AddPositionCost(self.palm, p_PO0, self.object_frame, np.zeros(3),
+                                   centre_prior_weight * np.eye(3))
+            if fix_p_PO is not None:
+                ik.AddPositionConstraint(self.object_frame, np.zeros(3), self.palm,
+                                         fix_p_PO - 1e-4, fix_p_PO + 1e-4)
+            return prog, qv
+
+        # Initial guess: the prior posture, the object at its expected centre.
+        q0 = plant.GetPositions(self.context).copy()
+        q0[self.q_index] = np.clip(q_prior, self.lower, self.upper)
+        self._set(q0[self.q_index])
+        X_WP = self.palm.CalcPoseInWorld(self.context)
+        plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ RigidTransform(
+            fix_p_PO if fix_p_PO is not None else p_PO0))
+        q0 = plant.GetPositions(self.context).copy()
+        # Stage 1 without collision constraints (smooth, fast); stage 2 adds
+        # them, starting from stage 1 (the distance constraint is hard to
+        # satisfy from a guess where the object overlaps the hand).
+        options = SolverOptions()
+        # Fail fast: a grasp that needs more iterations is almost always infeasible.
+        options.SetOption(SnoptSolver.id(), "Major iterations limit", 400)
+        prog, qv = build(False)
+        result = Solve(prog, q0, options)
+        if check_collisions and result.is_success():
+            q1 = result.GetSolution(qv)
+            prog, qv = build(True)
+            result = Solve(prog, q1, options)
+        q_sol = result.GetSolution(qv)
+        plant.SetPositions(self.context, q_sol)
+        q = q_sol[self.q_index]
+        X_PO = plant.CalcRelativeTransform(self.context, self.palm, self.object_frame)
+        err = self.surface_error(q, name, shape, dims, X_PO)
+        return GraspSolution(q, X_PO, bool(result.is_success()), err)
+
+    def _add_surface_constraint(self, ik, t, p_B, normal, shape, dims, r, tol, jitter):
+        frame = self.distal[t.finger]
+        O = self.object_frame
+        axis = int(np.argmax(np.abs(normal)))
+        sign = float(np.sign(normal[axis]))
+        centre = np.zeros(3)
+        centre[1] = t.spread
+        centre += jitter * (np.arange(3) != axis)  # jitter along the surface only
+        lo, hi = centre - tol, centre + tol
+        big = 1.0
+        if shape == "sphere":
+            # On the sphere, on the normal's side, near the nominal spread.
+            ik.AddPointToPointDistanceConstraint(frame, p_B, O, np.zeros(3), r, r)
+            lo[axis], hi[axis] = (0.2 * r, r) if sign > 0 else (-r, -0.2 * r)
+            ik.AddPositionConstraint(frame, p_B, O, lo, hi)
+        elif shape == "cylinder":
+            length = dims[1]
+            ik.AddPointToLineDistanceConstraint(frame, p_B, O, np.zeros(3), np.array([0, 1.0, 0]),
+                                                r, r)
+            half = 0.5 * length - 0.008
+            lo[1], hi[1] = max(lo[1], -half), min(hi[1], half)
+            lo[axis], hi[axis] = (0.2 * r, r) if sign > 0 else (-r, -0.2 * r)
+            ik.AddPositionConstraint(frame, p_B, O, lo, hi)
+        else:
+            w, d, h = dims
+            half = np.array([0.5 * h, 0.5 * d, 0.5 * w]) - 0.006
+            lo = np.maximum(lo, -half - 0.006)
+            hi = np.minimum(hi, half + 0.006)
+            lo, hi = np.maximum(lo, -big), np.minimum(hi, big)
+            face = 0.5 * np.array([h, d, w])[axis]
+            lo[axis] = hi[axis] = sign * face
+            ik.AddPositionConstraint(frame, p_B, O, lo, hi)
+
+    def surface_error(self, q, name, shape, dims, X_PO: RigidTransform) -> float:
+        """Largest distance (m) of a class contact point from the object surface."""
+        pts = self.contact_points(q, name)
+        X_OP = X_PO.inverse()
+        errs = []
+        r = 0.5 * dims[0]
+        for p in pts.values():
+            p_O = X_OP.multiply(p)
+            if shape == "sphere":
+                errs.append(abs(np.linalg.norm(p_O) - r))
+            elif shape == "cylinder":
+                errs.append(abs(np.hypot(p_O[0], p_O[2]) - r))
+            else:
+                half = 0.5 * np.array([dims[2], dims[1], dims[0]])
+                outside = np.maximum(np.abs(p_O) - half, 0.0)
+                inside = np.min(half - np.abs(p_O))
+                errs.append(np.linalg.norm(outside) if np.any(outside > 0) else inside)
+        return float(max(errs))
