@@ -110,6 +110,10 @@ class ObjectConfig:
     X_WO: Transform = dc.field(default_factory=Transform)
     # If true, X_WO's z is replaced so that the object rests on the table top.
     on_table: bool = True
+    # If true, the object is welded to the world at X_WO (kinematic grasp
+    # trials: the hand closes on an object that cannot move, as in the
+    # report's OpenRAVE experiments).
+    fixed: bool = False
 
 
 @dc.dataclass

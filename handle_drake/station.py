@@ -199,7 +199,12 @@ def AddPlantModels(plant, scenario: Scenario):
 
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.contact_model == "hydroelastic")
-        plant.SetDefaultFloatingBaseBodyPose(object_body(plant), object_initial_pose(scenario))
+        if scenario.object.fixed:
+            plant.WeldFrames(plant.world_frame(), object_body(plant).body_frame(),
+                             object_initial_pose(scenario))
+        else:
+            plant.SetDefaultFloatingBaseBodyPose(object_body(plant),
+                                                 object_initial_pose(scenario))
     return hand
 
 
