@@ -271,6 +271,12 @@ class BayesianOptimizer(_AskTellBase):
         ei_threshold: :attr:`converged` becomes True when the best EI found
             is below ``ei_threshold`` times the RMS of the metric about the
             prior mean (0 never stops).
+        min_trials_to_stop: the threshold is not checked before this many
+            observations (default ``max(10 * d, n_initial + 3)``, the "10 d"
+            rule of thumb of Jones et al. 1998 for a GP to be informative): a
+            marginal-likelihood fit to a few points may explain them as pure
+            noise, or a large ``xi`` may make EI ~0 while the model is still
+            poor, and either would stop the search far from the optimum.
         mean: prior mean: ``"constant"``, ``"zero"``, a number, or a callable
             ``m(X) -> (n,)`` of parameters in the original units.
         n_restarts: extra starts of the marginal-likelihood fit.
@@ -294,6 +300,7 @@ class BayesianOptimizer(_AskTellBase):
         xi: float | None = None,
         ei_threshold: float = 1e-6,
         *,
+        min_trials_to_stop: int | None = None,
         mean="constant",
         n_restarts: int = 2,
         direct_maxfun: int | None = None,
@@ -324,6 +331,9 @@ class BayesianOptimizer(_AskTellBase):
                 f"refit_until must be >= 1 and refit_growth > 0, got {refit_until}, {refit_growth}"
             )
         self.n_initial = int(n_initial)
+        if min_trials_to_stop is None:
+            min_trials_to_stop = max(10 * self.dim, self.n_initial + 3)
+        self.min_trials_to_stop = int(min_trials_to_stop)
         self.xi = xi
         self.ei_threshold = float(ei_threshold)
         self.direct_maxfun = int(direct_maxfun)
@@ -458,7 +468,9 @@ class BayesianOptimizer(_AskTellBase):
             ei, self.dim, maxfun=self.direct_maxfun, locally_biased=self.direct_locally_biased
         )
         self.last_ei, self.last_xi = value, xi
-        self.converged = value < self.ei_threshold * gp.y_scale
+        self.converged = (
+            self.n_told >= self.min_trials_to_stop and value < self.ei_threshold * gp.y_scale
+        )
         return self._register(u)
 
 
