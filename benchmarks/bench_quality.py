@@ -168,8 +168,8 @@ def main(argv=None):
                 if len(grasps) < 2:
                     row[mode] = None
                     continue
-                ours = per_call(lambda p, q: grasp_quality(p, q, params), grasps, repeat=3)
-                drake = per_call(lambda p, q: grasp_quality(p, q, params, method="drake"),
+                ours = per_call(lambda p, q, c=params: grasp_quality(p, q, c), grasps, repeat=3)
+                drake = per_call(lambda p, q, c=params: grasp_quality(p, q, c, method="drake"),
                                  grasps[:n_ref])
                 refs = grasps[:n_ref]
                 t0 = clock()

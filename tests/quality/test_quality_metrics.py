@@ -338,3 +338,29 @@ def test_all_subsets_of_a_closure_grasp_are_monotone():
         for sub in itertools.combinations(range(5), k):
             sub = list(sub)
             assert bw_metric(p, n, params) >= bw_metric(p[sub], n[sub], params) - 1e-12
+
+
+def test_epa_on_degenerate_symmetric_box_grasps():
+    """Contacts on a grid of a cube's faces give many coplanar and repeated wrenches (the
+    hard case for incremental hulls): EPA still matches a full qhull, both modes."""
+    rng = np.random.default_rng(17)
+    grid = np.array([-0.5, 0.0, 0.5])
+    n_closure = 0
+    for _ in range(pick(200, 60)):
+        model = ("frictionless", "point_friction", "soft_finger")[rng.integers(3)]
+        m = int(rng.integers(3, 9))
+        axes, signs = rng.integers(3, size=m), rng.choice([-1.0, 1.0], size=m)
+        P = rng.choice(grid, size=(m, 3))
+        P[np.arange(m), axes] = signs
+        N = np.zeros((m, 3))
+        N[np.arange(m), axes] = -signs
+        params = ContactParams(model=model, mu=0.5, gamma=0.1, num_edges=int(rng.choice([4, 8])))
+        W = params.wrenches(P, N).reshape(-1, 6)
+        q, r_ref = quality_from_wrenches(W), qhull_ball_radius(W)
+        if q.force_closure:
+            n_closure += 1
+            assert q.value == pytest.approx(r_ref, abs=1e-10)
+        else:
+            assert r_ref <= 1e-9
+            assert q.value == pytest.approx(-min_norm_point(W)[1], abs=1e-12)
+    assert n_closure >= 10
