@@ -168,7 +168,7 @@ class CanFirmwareConfig:
     hand_kind: str = "shadow"
     coupling_ratio: float | None = None
     bus: BusConfig = dc.field(default_factory=BusConfig)
-    rate: float = 500.0  # Hz, control loop and publish rate (a 1 Mbit/s bus fits ~500 Shadow cycles)
+    rate: float = 500.0  # Hz, control and publish rate (1 Mbit/s fits ~500 Shadow cycles)
     natural_frequency: float = 5.0
     damping_ratio: float = 1.0
     max_velocity: float = 4.0

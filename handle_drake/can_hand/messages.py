@@ -34,6 +34,7 @@ Everything here is pure: :class:`HandCodec` turns vectors into
 from __future__ import annotations
 
 import dataclasses as dc
+import struct
 from functools import cache
 from pathlib import Path
 
@@ -130,6 +131,45 @@ class FeedbackSnapshot:
     hand_time: float  # s, the hand's clock (wraps at 2**32 us)
 
 
+class _PackedMessage:
+    """A DBC message of byte-aligned little-endian integer signals, compiled to a struct.
+
+    cantools reads the declaration and stays the reference; its per-frame
+    encode costs ~4-20 us in Python, a struct pack about 1 us, and a Shadow
+    hand cycle is 15 frames at up to 1 kHz. The struct is built from the DBC's
+    own start bits, lengths, signedness and scales (checked here); the tests
+    compare both paths bit for bit.
+    """
+
+    _CODES = {(8, False): "B", (8, True): "b", (16, False): "H", (16, True): "h",
+              (32, False): "I", (32, True): "i"}
+
+    def __init__(self, message):
+        signals = sorted(message.signals, key=lambda sig: sig.start)
+        fmt, bit = "<", 0
+        for sig in signals:
+            code = self._CODES.get((sig.length, sig.is_signed))
+            if (sig.byte_order != "little_endian" or sig.start != bit or code is None
+                    or sig.offset != 0 or sig.is_float):
+                raise ValueError(f"{message.name}.{sig.name}: not a byte-aligned integer signal")
+            fmt += code
+            bit += sig.length
+        if bit != 8 * message.length:
+            raise ValueError(f"{message.name}: signals cover {bit} of {8 * message.length} bits")
+        self.name = message.name
+        self.frame_id = message.frame_id
+        self.length = message.length
+        self.names = tuple(sig.name for sig in signals)
+        self.scales = tuple(float(sig.scale) for sig in signals)
+        self._struct = struct.Struct(fmt)
+
+    def encode(self, values) -> bytes:
+        return self._struct.pack(*[round(v / k) for v, k in zip(values, self.scales, strict=True)])
+
+    def decode(self, data: bytes) -> tuple[float, ...]:
+        return tuple(raw * k for raw, k in zip(self._struct.unpack(data), self.scales, strict=True))
+
+
 def _frames_for(n: int) -> int:
     return (n + SLOTS_PER_FRAME - 1) // SLOTS_PER_FRAME
 
@@ -169,6 +209,8 @@ class HandCodec:
         self._by_id[STATUS_ID] = ("status", 0, self._status)
         self._q_limit = float(self._positions[0].signals[0].maximum)
         self._f_limit = float(self._tactiles[0].signals[0].maximum)
+        self._packed = {m.frame_id: _PackedMessage(m) for m in
+                        self._setpoints + self._positions + self._tactiles + [self._commit]}
 
     # -- ids -------------------------------------------------------------
     @property
@@ -193,10 +235,11 @@ class HandCodec:
                 f"q_command: |q| must be <= {self._q_limit} rad to fit a setpoint frame, "
                 f"got {q[np.abs(q) > self._q_limit].tolist()}"
             )
-        frames = [(m.frame_id, bytes(m.encode(_slots(q, i, "SP")))) for i, m in
-                  enumerate(self._setpoints)]
-        frames.append((COMMIT_ID, bytes(self._commit.encode(
-            {"SEQ": int(seq) % 65536, "N_FRAMES": self.num_setpoint_frames, "MODE": int(mode)}))))
+        packed = self._packed
+        frames = [(m.frame_id, packed[m.frame_id].encode(_slots(q, i)))
+                  for i, m in enumerate(self._setpoints)]
+        frames.append((COMMIT_ID, packed[COMMIT_ID].encode(
+            (int(seq) % 65536, self.num_setpoint_frames, int(mode)))))
         return frames
 
     # -- hand -> host -----------------------------------------------------
@@ -209,9 +252,10 @@ class HandCodec:
         """
         q = np.clip(_checked(q, self.layout.nq, "q"), -self._q_limit, self._q_limit)
         f = np.clip(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0, self._f_limit)
-        frames = [(m.frame_id, bytes(m.encode(_slots(q, i, "Q"))))
+        packed = self._packed
+        frames = [(m.frame_id, packed[m.frame_id].encode(_slots(q, i)))
                   for i, m in enumerate(self._positions)]
-        frames += [(m.frame_id, bytes(m.encode(_slots(f, i, "F"))))
+        frames += [(m.frame_id, packed[m.frame_id].encode(_slots(f, i)))
                    for i, m in enumerate(self._tactiles)]
         time_us = int(round(hand_time * 1e6)) % (1 << 32)
         frames.append((STATUS_ID, bytes(self._status.encode({
@@ -239,12 +283,16 @@ class HandCodec:
             raise MalformedFrameError(
                 f"{message.name}: expected {message.length} data bytes, got {len(data)}"
             )
+        packed = self._packed.get(arbitration_id)
+        if packed is not None:
+            values = packed.decode(data)
+            if kind == "commit":
+                return Frame(kind, index, dict(zip(packed.names, map(int, values), strict=True)))
+            return Frame(kind, index, values)
         try:
             fields = message.decode(data, decode_choices=False)
         except Exception as error:  # cantools.DecodeError and friends
             raise MalformedFrameError(f"{message.name}: {error}") from None
-        if kind in ("setpoint", "position", "tactile"):
-            return Frame(kind, index, tuple(float(fields[s.name]) for s in message.signals))
         if kind == "status":
             fields = {k: (float(v) if k == "TIME" else int(v)) for k, v in fields.items()}
             if fields["KIND"] != self.layout.kind_code:
@@ -253,8 +301,6 @@ class HandCodec:
                     f"STATUS: hand kind {names.get(fields['KIND'], fields['KIND'])!r}, "
                     f"expected {self.layout.kind!r}"
                 )
-        else:
-            fields = {k: int(v) for k, v in fields.items()}
         return Frame(kind, index, fields)
 
 
@@ -267,10 +313,9 @@ def _checked(value, size: int, name: str) -> np.ndarray:
     return array
 
 
-def _slots(values: np.ndarray, frame: int, prefix: str) -> dict:
-    chunk = values[frame * SLOTS_PER_FRAME:(frame + 1) * SLOTS_PER_FRAME]
-    return {f"{prefix}{k}": float(chunk[k]) if k < len(chunk) else 0.0
-            for k in range(SLOTS_PER_FRAME)}
+def _slots(values: np.ndarray, frame: int) -> list[float]:
+    chunk = values[frame * SLOTS_PER_FRAME:(frame + 1) * SLOTS_PER_FRAME].tolist()
+    return chunk + [0.0] * (SLOTS_PER_FRAME - len(chunk))
 
 
 class FeedbackAssembler:
