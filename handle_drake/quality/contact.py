@@ -127,30 +127,33 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def contact_frames(normals, tangents=None) -> np.ndarray:
     """Rotation matrices ``R_RC`` (..., 3, 3) whose z axis is the inward normal.
 
-    Without ``tangents`` the x axis is built from the normal alone (the axis of
-    R least aligned with it, projected), so it is deterministic but not
-    equivariant under a rotation of R; give ``tangents`` (any vector not parallel
-    to the normal, projected onto the tangent plane) to fix the contact frame's x
-    axis, e.g. when comparing a grasp expressed in two rotated frames.
+    Without ``tangents`` the tangent axes are a smooth function of the normal
+    alone (Duff et al. 2017, "Building an orthonormal basis, revisited"), so they
+    are deterministic but not equivariant under a rotation of R; give
+    ``tangents`` (any vectors not parallel to the normals; projected onto the
+    tangent plane) to fix the contact frames' x axes, e.g. when comparing a
+    grasp expressed in two rotated frames.
     """
     n = np.asarray(normals, dtype=float)
+    R = np.empty(n.shape + (3,))
+    R[..., 2] = n
     if tangents is None:
-        # world z unless the normal is close to it, then world x
-        helper = np.zeros_like(n)
-        near_z = np.abs(n[..., 2]) > 0.9
-        helper[..., 2] = ~near_z
-        helper[..., 0] = near_z
-    else:
-        helper = np.asarray(tangents, dtype=float)
-        if helper.shape != n.shape:
-            raise ValueError(f"tangents: expected shape {n.shape}, got {helper.shape}")
+        nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
+        sign = np.where(nz >= 0, 1.0, -1.0)
+        a = -1.0 / (sign + nz)
+        b = nx * ny * a
+        R[..., 0, 0], R[..., 1, 0], R[..., 2, 0] = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
+        R[..., 0, 1], R[..., 1, 1], R[..., 2, 1] = b, sign + ny * ny * a, -ny
+        return R
+    helper = np.asarray(tangents, dtype=float)
+    if helper.shape != n.shape:
+        raise ValueError(f"tangents: expected shape {n.shape}, got {helper.shape}")
     x = helper - np.sum(helper * n, axis=-1, keepdims=True) * n
     xn = np.linalg.norm(x, axis=-1, keepdims=True)
     if np.any(xn < 1e-9):
         raise ValueError("tangents: expected vectors not parallel to the normals")
     x = x / xn
-    R = np.empty(n.shape + (3,))
-    R[..., 0], R[..., 1], R[..., 2] = x, _cross(n, x), n
+    R[..., 0], R[..., 1] = x, _cross(n, x)
     return R
 
 

@@ -78,7 +78,10 @@ def min_norm_point(W) -> tuple[np.ndarray, float, np.ndarray]:
         ``(x, distance, weights)``: the point (6,), its norm, and convex weights
         (m,) with ``weights @ W == x``.
     """
-    W = _check_wrenches(W)
+    return _min_norm_point(_check_wrenches(W))
+
+
+def _min_norm_point(W: np.ndarray):
     m = W.shape[0]
     E = np.empty((DIM + 1, m))
     E[:DIM] = W.T

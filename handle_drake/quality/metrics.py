@@ -32,8 +32,8 @@ from .contact import ContactModel, _as_model, _check_friction, contact_wrenches
 from .drake_programs import DIM, ClosurePrograms, wrench_rank
 from .hull import (
     _check_wrenches,
+    _min_norm_point,
     largest_ball_radius,
-    min_norm_point,
     minkowski_support,
     qhull_ball_radius,
 )
@@ -127,9 +127,12 @@ def quality_from_wrenches(W, *, method: str = "fast") -> GraspQuality:
 
     ``method``: ``"fast"`` (NNLS + EPA) or ``"drake"`` (Drake QP and LP + EPA).
     """
-    W = _check_wrenches(W)
+    return _quality(_check_wrenches(W), method)
+
+
+def _quality(W: np.ndarray, method: str) -> GraspQuality:
     if method == "fast":
-        _, distance, _ = min_norm_point(W)
+        _, distance, _ = _min_norm_point(W)
         inside = distance <= INSIDE_TOL
     elif method == "drake":
         _, distance, _ = _programs().min_distance(W)
@@ -155,7 +158,7 @@ def grasp_quality(
     """BW analysis of contacts (points ``p_RC`` (n, 3) m, inward normals (n, 3))."""
     params = ContactParams() if params is None else params
     W = params.wrenches(points, normals, tangents=tangents).reshape(-1, DIM)
-    return quality_from_wrenches(W, method=method)
+    return _quality(W, method)
 
 
 def bw_metric(points, normals, params: ContactParams | None = None, **kwargs) -> float:
@@ -183,6 +186,8 @@ def bw_metric_batch(
     if regular:
         if points.ndim != 3:
             raise ValueError(f"points: expected shape (B, n, 3), got {points.shape}")
+        if len(points) == 0:
+            return (np.zeros(0), []) if details else np.zeros(0)
         Ws = params.wrenches(points, normals, batch=True).reshape(len(points), -1, DIM)
     else:
         if not isinstance(points, Sequence) or not isinstance(normals, Sequence):
@@ -195,7 +200,9 @@ def bw_metric_batch(
                 Ws.append(params.wrenches(p, n).reshape(-1, DIM))
             except ValueError as err:
                 raise ValueError(f"grasp {b}: {err}") from None
-    out = [quality_from_wrenches(W, method=method) for W in Ws]
+    if method not in ("fast", "drake"):
+        raise ValueError(f"method: expected 'fast' or 'drake', got {method!r}")
+    out = [_quality(W, method) for W in Ws]
     values = np.array([q.value for q in out])
     return (values, out) if details else values
 

@@ -324,6 +324,7 @@ def test_batch_equals_single_and_accepts_ragged():
     values = bw_metric_batch(P, N, params)
     single = [bw_metric(p, n, params) for p, n in zip(P, N, strict=True)]
     np.testing.assert_allclose(values, single, atol=1e-14)
+    assert bw_metric_batch(np.zeros((0, 4, 3)), np.zeros((0, 4, 3)), params).shape == (0,)
     ragged = [P[0], P[1][:2]]
     v2, details = bw_metric_batch(ragged, [N[0], N[1][:2]], params, details=True)
     assert v2[0] == pytest.approx(values[0]) and details[1].value == v2[1]
