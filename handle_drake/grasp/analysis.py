@@ -85,3 +85,41 @@ def fit_record_synergies(records: GraspRecords, k: int | None = None, variance: 
         synergy_joint_names=spec.actuated_joint_names, couplings=couplings, k=k,
         variance=variance,
     )  # fmt: skip
+
+
+def reconstruction_table(records: GraspRecords, k_max: int = 8) -> str:
+    """Markdown table of the reconstruction error (rad RMS) against k, global synergies."""
+    from handle_drake.grasp.synergies import reconstruction_error_vs_k
+
+    spec = get_hand_spec("shadow")
+    res = reconstruction_error_vs_k(records.q, spec.joint_names, spec.actuated_joint_names,
+                                    k_max=k_max)
+    lines = ["| k | explained variance | train RMS (rad) | 5-fold test RMS (rad) | max abs (rad) |",
+             "|---|---|---|---|---|"]
+    for k in res["k"]:
+        lines.append(f"| {k} | {res['explained'][k]:.3f} | {res['train_rms'][k]:.4f} | "
+                     f"{res['test_rms'][k]:.4f} | {res['max_abs'][k]:.3f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """``python -m handle_drake.grasp.analysis [FILE]``: tables for a recording file."""
+    import argparse
+
+    from handle_drake.grasp.recordings import load_grasps
+    from handle_drake.grasp.synthetic import DATA_FILE
+
+    parser = argparse.ArgumentParser(description="Synergy and grasp-centre tables of recordings")
+    parser.add_argument("file", nargs="?", default=str(DATA_FILE))
+    args = parser.parse_args(argv)
+    spec = get_hand_spec("shadow")
+    records = load_grasps(args.file, (spec.joint_lower_limits, spec.joint_upper_limits))
+    print(f"{len(records)} grasps from {args.file}\n")
+    print(reconstruction_table(records))
+    print()
+    print(table1_markdown(rederive_table1(records)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -17,7 +17,7 @@ Experimenter-like variation: each experimenter has a fixed style offset of
 the posture prior (std 0.06 rad per joint), each grasp adds 0.03 rad noise
 and a 2 mm random shift of the contact targets along the surface. A grasp is
 kept only if the solver succeeds and every contact lies within 1 mm of the
-surface; each attempt that fails is retried with a fresh draw (3 attempts).
+surface; a failed attempt is retried once with a fresh draw.
 
 Run ``python -m handle_drake.grasp.synthetic [--out FILE] [--seed N]``.
 """
@@ -93,7 +93,7 @@ def generate(
     seed: int = 0,
     classes=None,
     shapes=CLASS_SHAPES,
-    attempts: int = 3,
+    attempts: int = 2,
     coupling_ratio: float = 1.0,
     progress=None,
 ) -> tuple[GraspRecords, list[dict]]:
