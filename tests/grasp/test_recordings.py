@@ -130,3 +130,17 @@ def test_records_validate_in_memory():
                      ["a"], [datetime.now()] * 2)
     with pytest.raises(TypeError, match="records must be GraspRecords"):
         save_grasps("x.csv", {"q": np.zeros(24)})
+
+
+def test_shipped_synthetic_data_is_valid():
+    from handle_drake.grasp.synthetic import DATA_FILE
+
+    spec = get_hand_spec("shadow")
+    rec = load_grasps(DATA_FILE, (spec.joint_lower_limits, spec.joint_upper_limits),
+                      limit_tolerance=1e-6)
+    assert 50 <= len(rec) and DATA_FILE.stat().st_size < 1_000_000
+    names = spec.joint_names
+    for f in ("FF", "MF", "RF", "LF"):  # generated with J1 = 1.0 * J2
+        np.testing.assert_allclose(rec.q[:, names.index(f"{f}J1")],
+                                   rec.q[:, names.index(f"{f}J2")], atol=2e-6)
+    np.testing.assert_allclose(rec.q[:, :2], 0.0, atol=1e-6)  # wrist at rest
