@@ -39,6 +39,8 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
+from handle_drake.can_hand.config import CanHandDriverConfig
+
 __all__ = [
     "CONTACT_MODELS",
     "CanHandDriver",
@@ -152,11 +154,12 @@ class Keyframe:
 
 
 @dc.dataclass
-class CanHandDriver:
-    """A real (or simulated-firmware) CAN hand behind the CAN bus server."""
+class CanHandDriver(CanHandDriverConfig):
+    """A real (or simulated-firmware) CAN hand behind the CAN bus server.
 
-    host: str = "127.0.0.1"
-    port: int = 0
+    Fields (host, port, timeouts, rates) are those of
+    :class:`handle_drake.can_hand.config.CanHandDriverConfig`.
+    """
 
 
 @dc.dataclass
@@ -276,6 +279,11 @@ def validate_scenario(scenario: Scenario) -> None:
     _check_positive("simulation_duration", scenario.simulation_duration)
     _check_positive("visualization_period", scenario.visualization_period)
     _validate_script(scenario, spec)
+    if isinstance(scenario.driver, CanHandDriver):
+        try:
+            scenario.driver.validate()
+        except ValueError as error:
+            raise ScenarioError(f"driver: {error}") from None
     if isinstance(scenario.driver, SimHandDriver):
         if not (math.isfinite(scenario.driver.max_joint_velocity)
                 and scenario.driver.max_joint_velocity >= 0):

@@ -4,9 +4,11 @@
 (Drake YAML: plain fields with defaults). The server and firmware configs
 mirror the ``handle-drake can-server`` / ``can-sim`` command-line options.
 Units are SI (s, Hz, rad, rad/s, N).
-"""
 
-from __future__ import annotations
+No ``from __future__ import annotations`` here: ``CanHandDriverConfig`` is
+read by Drake's ``yaml_load_typed`` (as the scenario's ``!CanHandDriver``),
+which needs real types in the dataclass fields.
+"""
 
 import dataclasses as dc
 import ipaddress
