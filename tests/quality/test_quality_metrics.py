@@ -365,3 +365,17 @@ def test_epa_on_degenerate_symmetric_box_grasps():
             assert r_ref <= 1e-9
             assert q.value == pytest.approx(-min_norm_point(W)[1], abs=1e-12)
     assert n_closure >= 10
+
+
+def test_moving_the_reference_point_can_reorder_grasps():
+    """The report's advice (compare grasps in one reference frame) is needed: some pair
+    of closure grasps swaps order when moments are taken about another point."""
+    rng = np.random.default_rng(18)
+    params = ContactParams(mu=0.5, gamma=0.002, characteristic_length=R_SPHERE)
+    grasps = [g for g in random_grasps(rng, 40, n_range=(3, 4), spread=0.3)
+              if grasp_quality(*g, params).force_closure][:12]
+    shift = np.array([0.04, 0.0, 0.0])
+    a = np.array([bw_metric(p, n, params) for p, n in grasps])
+    b = np.array([bw_metric(p - shift, n, params) for p, n in grasps])
+    swapped = np.sign(a[:, None] - a[None, :]) * np.sign(b[:, None] - b[None, :]) < 0
+    assert len(grasps) >= 6 and swapped.any()
