@@ -104,3 +104,17 @@ def test_direct_rejects_bad_sizes():
         maximize_acquisition(lambda u: 0.0, 0)
     with pytest.raises(ValueError, match="maxfun"):
         maximize_acquisition(lambda u: 0.0, 2, maxfun=0)
+
+
+@pytest.mark.parametrize("dim, maxfun", [(1, 50), (2, 300), (6, 1000)])
+def test_direct_respects_its_evaluation_budget(dim, maxfun):
+    calls = []
+
+    def acquisition(u):
+        calls.append(u)
+        return -float(np.sum((u - 0.3) ** 2))
+
+    x, value = maximize_acquisition(acquisition, dim, maxfun=maxfun)
+    assert len(calls) == maxfun
+    assert value == max(acquisition(u) for u in calls[:maxfun])
+    assert np.all(np.abs(x - 0.3) < 0.2)
