@@ -496,14 +496,17 @@ def _to_plant_order(plant, hand, spec, q):
     return q_plant
 
 
-def test_barrett_fingertips_closed_form():
+@pytest.mark.parametrize("spread, prox", [(0.0, 0.0), (0.6, 0.4), (0.6, 2.0)])
+def test_barrett_fingertips_closed_form(spread, prox):
+    """Zero flexion is the open hand: fingers flat, pointing radially outward, the
+    distal bent up toward the palm normal (jhu-lcsr/barrett_model's convention:
+    ``med_joint`` at 0 along the knuckle's radial axis, ``dist_joint`` turned pi/4)."""
     plant = MultibodyPlant(time_step=0.0)
     hand = Parser(plant).AddModels(MODELS / "barrett_hand/bh8_280.sdf")[0]
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("bh_base", hand))
     plant.Finalize()
     context = plant.CreateDefaultContext()
     spec = get_hand_spec("barrett")
-    spread, prox = 0.6, 0.4
     q = dict(
         f1_spread=spread,
         f2_spread=spread,
@@ -519,11 +522,12 @@ def test_barrett_fingertips_closed_form():
     )
 
     def finger(outward_xy):
-        # In the finger's vertical plane: flexion tilts the finger from +z toward the
-        # palm centre (-outward), the distal adds its fixed bend plus its joint angle.
+        # In the finger's vertical plane, angles from the outward horizontal: flexion
+        # raises the finger toward +z (the palm normal) and past it over the palm; the
+        # distal adds its fixed bend plus its joint angle.
         a1, a2 = prox, prox + BEND + prox / 3
-        radial = -(0.070 * math.sin(a1) + BARRETT_TIP * math.sin(a2))
-        height = 0.070 * math.cos(a1) + BARRETT_TIP * math.cos(a2)
+        radial = 0.070 * math.cos(a1) + BARRETT_TIP * math.cos(a2)
+        height = 0.070 * math.sin(a1) + BARRETT_TIP * math.sin(a2)
         return np.array([outward_xy[0] * radial, outward_xy[1] * radial, height])
 
     z_flex = 0.0415 + 0.0339
@@ -534,6 +538,13 @@ def test_barrett_fingertips_closed_form():
         "f2_tip": np.array([-0.025 + 0.05 * out2[0], 0.05 * out2[1], z_flex]) + finger(out2),
         "f3_tip": np.array([0, 0.05, 0.0754]) + finger(np.array([0.0, 1.0])),
     }
+    if prox == 0.0:
+        # the open hand, written out: F3's tip 0.05 + 0.070 + 0.055 cos 45 deg out
+        # and 0.055 sin 45 deg above its flexion axis
+        s45 = math.sqrt(0.5)
+        np.testing.assert_allclose(
+            expected["f3_tip"], [0, 0.12 + 0.055 * s45, 0.0754 + 0.055 * s45]
+        )
     for name, p in expected.items():
         np.testing.assert_allclose(
             plant.GetFrameByName(name, hand).CalcPoseInWorld(context).translation(),

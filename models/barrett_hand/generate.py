@@ -12,11 +12,19 @@ cross-sections, the 45 degree distal bend within the 42-50 degree range) is
 marked "ours" and listed in README.md.
 
 Finger frames. Every finger is built in a local frame whose +y points away
-from the palm centre (outward) and +z along the finger; flexion is about +x,
-so positive flexion swings the tip toward -y, the palmar side, as on the
-Shadow hand. F1 and F2 sit at x = +0.025 and -0.025 and face F3 at spread 0;
-spreading swings F1 toward +x and F2 toward -x (mirror axes), and at spread pi
-both stand beside F3.
+from the palm centre (outward); the links run along their own +z, with their
+palmar face on -y, and flexion is about +x, as on the Shadow hand. Zero
+flexion is the real hand's fully open pose: the proximal joint frame is turned
+-90 degrees about x (``FLEX_ZERO_RPY``), so at 0 the proximal link lies flat,
+pointing radially outward at the height of the flexion axis, with its palmar
+face up (the palm normal, +z); the distal link is bent 45 degrees up from it.
+Positive flexion raises the finger toward the palm normal (vertical at pi/2)
+and then over the palm (2.44 rad = 140 degrees, 50 degrees past vertical).
+This is the convention of jhu-lcsr/barrett_model (``med_joint`` at zero along
+the knuckle's radial axis, ``dist_joint`` turned pi/4) and of the hand's
+firmware, whose "open" (HO) position is 0. F1 and F2 sit at x = +0.025 and
+-0.025 and face F3 at spread 0; spreading swings F1 toward +x and F2 toward -x
+(mirror axes), and at spread pi both stand beside F3.
 """
 
 from __future__ import annotations
@@ -58,6 +66,9 @@ F3_FLEX = (0.0, 0.05, 0.0754)
 PROXIMAL_LENGTH = 0.070
 DISTAL_TIP = 0.055  # distal joint -> fingertip frame (sheet: 0.050-0.059)
 DISTAL_BEND = math.radians(45.0)  # fixed bend of the distal link (sheet: 42-50 deg)
+# Proximal joint frame: the link's +z (along the finger) points outward (+y of the
+# finger frame) and its palmar -y points up (+z) at zero flexion: the hand open flat.
+FLEX_ZERO_RPY = (-math.pi / 2, 0.0, 0.0)
 PROX_UPPER = 2.44
 DIST_UPPER = math.radians(48.0)  # covers PROX_UPPER / 3 = 0.813 rad
 
@@ -183,7 +194,7 @@ def build():
                 f"{p}_knuckle",
                 proximal.name,
                 (0, FLEX_OUT, FLEX_UP),
-                (0, 0, 0),
+                FLEX_ZERO_RPY,
                 (1, 0, 0),
                 0.0,
                 PROX_UPPER,
@@ -217,7 +228,7 @@ def build():
             "bh_base",
             proximal.name,
             F3_FLEX,
-            (0, 0, 0),
+            FLEX_ZERO_RPY,
             (1, 0, 0),
             0.0,
             PROX_UPPER,
