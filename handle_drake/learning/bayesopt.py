@@ -200,6 +200,14 @@ class _AskTellBase:
         self._errors.append(str(error))
         self._observations_changed()
 
+    def resume_pending(self, x) -> None:
+        """Declare ``x`` as asked and not yet told (a trial log's unfinished trial on resume).
+
+        Keeps the proposal counter where it was when the trial was asked, so
+        the next :meth:`ask` returns what it would have returned then.
+        """
+        self._pending.append(self._check_point(x))
+
     def _observations_changed(self):
         pass
 

@@ -16,9 +16,11 @@ Resume semantics (no trial lost, none repeated):
    the run's seed and options (its state is a function of exactly that, see
    :mod:`handle_drake.learning.bayesopt`).
 3. ``pending``/``running`` rows (the process died during their evaluation)
-   are evaluated again with their stored parameters and seed, before any
-   new point is asked. A proposal that was asked but whose row was never
-   written is simply asked again, and the optimiser proposes the same point.
+   are evaluated again, first, with their stored parameters and seed; the
+   optimiser counts them as outstanding asks (``resume_pending``), so new
+   proposals continue the original sequence. A proposal that was asked but
+   whose row was never written is simply asked again, and the optimiser
+   proposes the same point.
 
 Failed trials: an objective that raises an ``Exception`` or returns a
 non-finite metric (NaN, inf) gives a ``failed`` row with the error text; the
@@ -535,6 +537,7 @@ class TrialRunner:
             elif record.status == "failed":
                 self.optimizer.tell_failure(record.parameters, record.error or "")
             else:
+                self.optimizer.resume_pending(record.parameters)
                 unfinished.append(record)
         return unfinished, len(records)
 
@@ -675,7 +678,14 @@ def run_experiment(
     name = objective_name or _objective_name(objective)
     run_id = run_id or f"{name}-{strategy}-seed{seed}"
     optimizer = make_optimizer(strategy, bounds, seed, **options)  # validates everything
-    config = json.loads(json.dumps(options))  # what the database will hold
+    try:
+        config = json.loads(json.dumps(options))  # what the database will hold
+    except TypeError as error:
+        raise TypeError(
+            f"optimizer_options must be JSON serialisable to be stored with the run ({error}); "
+            "a callable prior mean cannot be logged: use BayesianOptimizer and TrialRunner "
+            "directly"
+        ) from None
     with TrialLog(db_path) as log:
         info = log.get_run(run_id)
         if info is None:

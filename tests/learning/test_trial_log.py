@@ -335,3 +335,34 @@ def test_log_state_machine_and_bad_values(tmp_path):
             log.create_run("bad", "bo", [(1, 0)], 0, "f")
     with pytest.raises(ValueError, match="n_trials"):
         run(BRANIN, tmp_path / "n.sqlite", -1)
+
+
+def test_parallel_random_search_resumes_the_original_sequence(tmp_path):
+    """Several trials in flight when interrupted: none lost, none repeated, same points."""
+    n = 12
+    db = tmp_path / "parallel_resume.sqlite"
+    first = CountingObjective(stop_at=6)
+    with pytest.raises(KeyboardInterrupt):
+        run(first, db, n, strategy="random", executor=ThreadPoolExecutor(2), batch_size=3)
+    with TrialLog(db) as log:
+        before = log.trials("branin-random-seed3")
+    unfinished = [r for r in before if r.status == "running"]
+    assert unfinished, "the interruption should leave trials in flight"
+    second = CountingObjective()
+    run(second, db, n, strategy="random", executor=ThreadPoolExecutor(2), batch_size=3)
+    searcher = RandomSearch(BRANIN.bounds, seed=3)
+    expected = np.array([searcher.ask() for _ in range(n)])
+    with TrialLog(db) as log:
+        records = log.trials("branin-random-seed3")
+    assert [r.index for r in records] == list(range(n))
+    assert all(r.status == "done" for r in records)
+    np.testing.assert_array_equal([r.parameters for r in records], expected)
+    done_before = sum(r.status == "done" for r in before)
+    assert len(second.calls) == n - done_before  # each unfinished or new trial ran once
+    rerun = {tuple(r.parameters) for r in unfinished}
+    assert rerun <= {tuple(c) for c in second.calls}
+
+
+def test_unloggable_options_are_refused(tmp_path):
+    with pytest.raises(TypeError, match="JSON serialisable"):
+        run(BRANIN, tmp_path / "m.sqlite", 3, optimizer_options=dict(mean=lambda X: X[:, 0]))
