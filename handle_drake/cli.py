@@ -34,6 +34,8 @@ def _add_simulate(subparsers) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds (default: scenario's)")
     p.add_argument("--meshcat", action="store_true", help="show it live in Meshcat")
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
+    p.add_argument("--hardware", action="store_true",
+                   help="drive the CAN hand of the scenario's !CanHandDriver in real time")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -62,7 +64,7 @@ def _cmd_simulate(args) -> int:
 
     scenario = LoadScenario(filename=args.scenario, data=args.override)
     meshcat = _meshcat(args.meshcat or args.html is not None)
-    runner = ScenarioRunner(scenario, meshcat)
+    runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
           f"({result.realtime_factor:.1f}x real time)")

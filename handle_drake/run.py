@@ -86,15 +86,17 @@ class ScenarioRunner:
     Args:
         scenario: the scenario (its ``script`` drives the hand and wrist).
         meshcat: optional Meshcat for live view and recording.
-        hand_command_source / wrist_command_source: optional systems whose
-            output 0 replaces the scripted command (e.g. a controller).
+        hardware: drive the real (CAN) hand instead of the simulation, in
+            real time; ``reset`` then only restarts the script and the logs.
     """
 
-    def __init__(self, scenario: Scenario, meshcat=None):
+    def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False):
         self.scenario = scenario
         self.meshcat = meshcat
+        self.hardware = hardware
         builder = DiagramBuilder()
-        self.station = builder.AddNamedSystem("station", MakeHandStation(scenario, meshcat))
+        self.station = builder.AddNamedSystem(
+            "station", MakeHandStation(scenario, meshcat, hardware=hardware))
         self.initial_command = hand_initial_command(scenario)
         hand_traj, wrist_traj = script_trajectories(scenario, self.initial_command)
         if hand_traj is not None:
@@ -116,6 +118,9 @@ class ScenarioRunner:
                 self._loggers[port] = logger
         self.diagram = builder.Build()
         self.simulator = Simulator(self.diagram)
+        if hardware:
+            # A real hand runs in real time; the diagram must keep pace with it.
+            self.simulator.set_target_realtime_rate(1.0)
         self.context = self.simulator.get_mutable_context()
         self._default_context = self.diagram.CreateDefaultContext()
 

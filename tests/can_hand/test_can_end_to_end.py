@@ -266,3 +266,31 @@ def test_socketcan_chain_streams(processes):
 
     with CanHandClient(hand_layout("shadow"), "127.0.0.1", port) as client:
         assert client.wait_for_state(10.0)
+
+
+def test_same_scenario_runs_on_the_can_hand_and_in_simulation(processes):
+    """diagrams/shadow_can_hand.yaml: one file, two drivers, the same closed hand."""
+    from handle_drake.demo import diagrams_dir
+    from handle_drake.hands import get_hand_spec
+    from handle_drake.run import ScenarioRunner
+    from handle_drake.scenario import LoadScenario
+
+    group, bus_port = random_bus()
+    port = free_port()
+    start_sim(processes, group, bus_port)
+    start_server(processes, group, bus_port, port)
+    path = diagrams_dir() / "shadow_can_hand.yaml"
+    names = get_hand_spec("shadow").joint_names
+    closed = {"FFJ3": 1.2, "MFJ2": 1.0, "THJ4": 0.6}
+    duration = 2.6  # the script closes by 1.5 s and holds until 3 s
+
+    hardware = ScenarioRunner(LoadScenario(filename=path,
+                                           data=f"driver: !CanHandDriver {{port: {port}}}"),
+                              hardware=True).run(duration)
+    simulated = ScenarioRunner(LoadScenario(filename=path,
+                                            data="driver: !SimHandDriver {}")).run(duration)
+    assert hardware.wall_time >= 0.9 * duration  # real time, not faster
+    for joint, value in closed.items():
+        i = names.index(joint)
+        assert hardware.hand_position[-1, i] == pytest.approx(value, abs=0.03), joint
+        assert simulated.hand_position[-1, i] == pytest.approx(value, abs=0.03), joint
