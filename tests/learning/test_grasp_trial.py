@@ -1,0 +1,98 @@
+"""Simulated grasp trials score what physics and geometry say they should."""
+
+import pickle
+
+import numpy as np
+import pytest
+
+from handle_drake.learning.grasp_trial import NO_CONTACT, GraspTrial, GraspTrialConfig
+from handle_drake.objects import KINDS
+
+
+@pytest.fixture(scope="module")
+def barrett_sphere():
+    return GraspTrial(hand="barrett", object="sphere", space="offset")
+
+
+def test_centred_barrett_grasp_of_a_sphere_is_in_force_closure(barrett_sphere):
+    outcome = barrett_sphere.evaluate([0.0, 0.0])
+    assert outcome.force_closure and outcome.metric > 0
+    # All three fingers wrap the sphere.
+    fingers = {name[:2] for name in outcome.contacts}
+    assert {"f1", "f2", "f3"} <= fingers
+    # Every contact lies on the sphere's surface (radius 3.5 cm) within the
+    # penetration allowance, and its normal points to the centre.
+    for contact in outcome.contacts.values():
+        p, n = np.array(contact["p_O"]), np.array(contact["n_O"])
+        assert np.linalg.norm(p) == pytest.approx(0.035, abs=2e-3)
+        assert np.dot(n, -p / np.linalg.norm(p)) > 0.99
+
+
+def test_hand_beside_the_object_touches_nothing(barrett_sphere):
+    # 20 cm to the side, the closing fingers cannot reach a 7 cm sphere.
+    trial = GraspTrial(hand="barrett", object="sphere", space="offset", offset_range=0.3)
+    outcome = trial.evaluate([0.2, 0.2])
+    assert outcome.metric == NO_CONTACT and not outcome.contacts and not outcome.touched
+
+
+def test_trials_are_deterministic_and_reset_fully(barrett_sphere):
+    a = barrett_sphere.evaluate([0.01, -0.02]).metric
+    barrett_sphere.evaluate([0.03, 0.03])
+    b = barrett_sphere.evaluate([0.01, -0.02]).metric
+    assert a == b
+
+
+def test_noise_is_gaussian_with_the_configured_std_and_seeded():
+    trial = GraspTrial(hand="barrett", object="sphere", space="offset", noise=0.05)
+    outcomes = [trial.evaluate([0.0, 0.0], seed=s) for s in range(12)]
+    clean = outcomes[0].metric_noiseless
+    noise = np.array([o.metric - clean for o in outcomes])
+    assert all(o.metric_noiseless == clean for o in outcomes)
+    assert 0.02 < noise.std() < 0.09
+    assert trial.evaluate([0.0, 0.0], seed=3).metric == outcomes[3].metric
+
+
+def test_standoff_too_large_loses_the_grasp():
+    trial = GraspTrial(hand="barrett", object="sphere", space="standoff")
+    near, far = trial.evaluate([0.0]), trial.evaluate([0.11])
+    assert near.force_closure
+    assert not far.force_closure and far.metric < near.metric
+
+
+def test_trial_pickles_without_its_diagram(barrett_sphere):
+    barrett_sphere.evaluate([0.0, 0.0])
+    clone = pickle.loads(pickle.dumps(barrett_sphere))
+    assert clone.config == barrett_sphere.config
+    assert clone.evaluate([0.0, 0.0]).metric == barrett_sphere.evaluate([0.0, 0.0]).metric
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_every_object_gives_a_finite_metric(kind):
+    outcome = GraspTrial(hand="barrett", object=kind, space="offset").evaluate([0.0, 0.0])
+    assert np.isfinite(outcome.metric) and "object:" in outcome.scenario
+
+
+def test_shadow_synergy_space_runs():
+    trial = GraspTrial(hand="shadow", object="cuboid", space="synergy")
+    assert trial.dims == 2
+    assert np.isfinite(trial.evaluate([0.5, -0.5]).metric)
+
+
+@pytest.mark.parametrize("kwargs, word", [
+    (dict(hand="allegro"), "allegro"),
+    (dict(object="teapot"), "teapot"),
+    (dict(space="joint"), "space"),
+    (dict(space="synergy", hand="barrett"), "shadow"),
+    (dict(noise=-1.0), "noise"),
+    (dict(mu=float("nan")), "mu"),
+])
+def test_bad_configuration_is_named(kwargs, word):
+    with pytest.raises(ValueError, match=word):
+        GraspTrialConfig(**kwargs)
+
+
+def test_bad_parameters_are_named(barrett_sphere):
+    with pytest.raises(ValueError, match="expected 2 values"):
+        barrett_sphere.evaluate([0.0])
+    with pytest.raises(ValueError, match="finite"):
+        barrett_sphere.evaluate([np.nan, 0.0])
