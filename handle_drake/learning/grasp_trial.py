@@ -42,6 +42,8 @@ from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
 from handle_drake.systems.guarded_grasp import GuardedGrasp
 
+from .trials import TrialResult
+
 __all__ = [
     "GraspTrial",
     "GraspTrialConfig",
@@ -269,8 +271,13 @@ simulation_duration: 1.2
         return DumpScenario(self.base_scenario()) + (
             f"# trial parameters ({self.config.space}): {x.tolist()}\n")
 
-    def __call__(self, x, seed: int = 0) -> float:
-        return self.evaluate(x, seed=seed).metric
+    def __call__(self, x, seed: int = 0) -> TrialResult:
+        """The objective for ``run_experiment``: metric, contacts and scenario of one trial."""
+        outcome = self.evaluate(x, seed=seed)
+        return TrialResult(metric=outcome.metric, scenario=outcome.scenario, contacts={
+            "force_closure": outcome.force_closure, "touched": outcome.touched,
+            "metric_noiseless": outcome.metric_noiseless, "bodies": outcome.contacts,
+        })
 
     def evaluate(self, x, seed: int = 0) -> TrialOutcome:
         x = self._check(x)

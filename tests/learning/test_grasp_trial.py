@@ -59,6 +59,25 @@ def test_standoff_too_large_loses_the_grasp():
     assert not far.force_closure and far.metric < near.metric
 
 
+def test_trial_is_an_objective_for_the_trial_runner(tmp_path):
+    from handle_drake.learning.trials import InlineExecutor, TrialLog, run_experiment
+
+    trial = GraspTrial(hand="barrett", object="sphere", space="offset")
+    result = run_experiment(trial, trial.bounds, strategy="random", n_trials=3, seed=1,
+                            db_path=tmp_path / "t.sqlite", executor=InlineExecutor(),
+                            progress=False, objective_name=trial.name)
+    assert result.n_done == 3
+    with TrialLog(tmp_path / "t.sqlite") as log:
+        rows = log.trials(result.run_id)
+    assert len(rows) == 3
+    for row in rows:
+        # Every trial is stored with its full scenario and contacts, and its
+        # metric replays from the stored parameters.
+        assert "kind: sphere" in row.scenario and "fixed: true" in row.scenario
+        assert isinstance(row.contacts["force_closure"], bool)
+        assert trial.evaluate(row.parameters).metric == pytest.approx(row.metric, abs=1e-12)
+
+
 def test_trial_pickles_without_its_diagram(barrett_sphere):
     barrett_sphere.evaluate([0.0, 0.0])
     clone = pickle.loads(pickle.dumps(barrett_sphere))
