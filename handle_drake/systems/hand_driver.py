@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.math import RollPitchYaw
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import LeafSystem
 
 __all__ = ["SimHandDriver", "WristDriver", "actuated_order"]
 
@@ -82,17 +82,14 @@ class SimHandDriver(LeafSystem):
         self._plant_state_port = self.DeclareVectorInputPort(
             "plant_state", plant.num_positions() + plant.num_velocities()
         )
+        # Group 0: the rate-limited command; group 1: the plant's desired state
+        # [q_d; 0] in actuator order. Both change only in the periodic update,
+        # and the outputs read the state directly (no Python call per step).
         self._command_state = self.DeclareDiscreteState(self._initial)
+        self._desired_state = self.DeclareDiscreteState(self._desired(self._initial))
         self.DeclarePeriodicDiscreteUpdateEvent(control_period, 0.0, self._update_command)
-        self.DeclareVectorOutputPort(
-            "desired_state", 2 * nu, self._calc_desired_state,
-            prerequisites_of_calc={self.discrete_state_ticket(self._command_state)},
-        )
-        self.DeclareVectorOutputPort(
-            "position_commanded", nu,
-            lambda context, out: out.SetFromVector(context.get_discrete_state(0).value()),
-            prerequisites_of_calc={self.discrete_state_ticket(self._command_state)},
-        )
+        self.DeclareStateOutputPort("desired_state", self._desired_state)
+        self.DeclareStateOutputPort("position_commanded", self._command_state)
         self.DeclareVectorOutputPort(
             "position_measured", nq,
             lambda context, out: out.SetFromVector(self._state(context)[self._q_index]),
@@ -123,23 +120,24 @@ class SimHandDriver(LeafSystem):
         target = self._command_port.Eval(context)
         if not np.all(np.isfinite(target)):
             # A non-finite command is ignored (the hand holds), never sent to the PD loops.
-            return context.get_discrete_state(0).value()
+            return context.get_discrete_state(self._command_state).value()
         return np.clip(target, self._lower, self._upper)
 
-    def _update_command(self, context, discrete_state):
-        current = context.get_discrete_state(0).value()
-        step = np.clip(self.target(context) - current, -self._max_step, self._max_step)
-        discrete_state.set_value(0, current + step)
+    def _desired(self, command) -> np.ndarray:
+        return np.concatenate([command[self._actuator_order], np.zeros(len(command))])
 
-    def _calc_desired_state(self, context, out: BasicVector):
-        command = context.get_discrete_state(0).value()
-        out.SetFromVector(np.concatenate([command[self._actuator_order], np.zeros(len(command))]))
+    def _update_command(self, context, discrete_state):
+        current = context.get_discrete_state(self._command_state).value()
+        step = np.clip(self.target(context) - current, -self._max_step, self._max_step)
+        command = current + step
+        discrete_state.set_value(self._command_state, command)
+        discrete_state.set_value(self._desired_state, self._desired(command))
 
     def set_initial_command(self, context, command):
         """Sets the held command (for resets); clamped to the limits."""
-        context.get_mutable_discrete_state(0).SetFromVector(
-            np.clip(np.asarray(command, dtype=float), self._lower, self._upper)
-        )
+        command = np.clip(np.asarray(command, dtype=float), self._lower, self._upper)
+        context.SetDiscreteState(self._command_state, command)
+        context.SetDiscreteState(self._desired_state, self._desired(command))
 
 
 WRIST_JOINTS = ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw", "wrist_pitch", "wrist_roll")
@@ -154,28 +152,34 @@ def pose_to_wrist_joints(pose6: np.ndarray) -> np.ndarray:
 class WristDriver(LeafSystem):
     """Drives the floating wrist (6 PD-actuated joints) to a commanded base pose.
 
+    The command is sampled every ``control_period`` (a zero-order hold, like
+    an arm's controller) and kept in discrete state, so the plant reads it
+    without a Python call per time step.
+
     Ports:
 
     - input ``pose`` (6): ``[x y z roll pitch yaw]`` of the hand base in world,
-      m and rad, ``R_WB = Rz(yaw) Ry(pitch) Rx(roll)``. Unconnected: holds the
-      initial pose.
+      m and rad, ``R_WB = Rz(yaw) Ry(pitch) Rx(roll)``. Unconnected (or
+      non-finite): holds the previous command (initially ``initial_pose6``).
     - input ``plant_state`` (plant nq + nv).
     - output ``desired_state`` (12): for the wrist's actuators.
     - output ``pose_measured`` (6): same convention as ``pose``.
     """
 
-    def __init__(self, plant, model_instance, initial_pose6):
+    def __init__(self, plant, model_instance, initial_pose6, control_period=0.002):
         super().__init__()
-        self._initial = np.asarray(initial_pose6, dtype=float)
-        if self._initial.shape != (6,):
-            raise ValueError(f"initial pose: expected 6 values, got {self._initial.shape}")
+        initial = np.asarray(initial_pose6, dtype=float)
+        if initial.shape != (6,):
+            raise ValueError(f"initial pose: expected 6 values, got {initial.shape}")
         self._actuator_order = actuated_order(plant, model_instance, WRIST_JOINTS)
         self._q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
         self._pose_port = self.DeclareVectorInputPort("pose", 6)
         self._plant_state_port = self.DeclareVectorInputPort(
             "plant_state", plant.num_positions() + plant.num_velocities()
         )
-        self.DeclareVectorOutputPort("desired_state", 12, self._calc_desired_state)
+        self._desired_state = self.DeclareDiscreteState(self._desired(initial))
+        self.DeclarePeriodicDiscreteUpdateEvent(control_period, 0.0, self._update)
+        self.DeclareStateOutputPort("desired_state", self._desired_state)
         self.DeclareVectorOutputPort("pose_measured", 6, self._calc_pose_measured)
 
     def get_pose_input_port(self):
@@ -184,12 +188,15 @@ class WristDriver(LeafSystem):
     def get_plant_state_input_port(self):
         return self._plant_state_port
 
-    def _calc_desired_state(self, context, out):
-        pose = self._pose_port.Eval(context) if self._pose_port.HasValue(context) else self._initial
-        if not np.all(np.isfinite(pose)):
-            pose = self._initial
-        q = pose_to_wrist_joints(pose)
-        out.SetFromVector(np.concatenate([q[self._actuator_order], np.zeros(6)]))
+    def _desired(self, pose6) -> np.ndarray:
+        return np.concatenate([pose_to_wrist_joints(pose6)[self._actuator_order], np.zeros(6)])
+
+    def _update(self, context, discrete_state):
+        if not self._pose_port.HasValue(context):
+            return
+        pose = self._pose_port.Eval(context)
+        if np.all(np.isfinite(pose)):
+            discrete_state.set_value(self._desired_state, self._desired(pose))
 
     def _calc_pose_measured(self, context, out):
         x, y, z, yaw, pitch, roll = self._plant_state_port.Eval(context)[self._q_index]
