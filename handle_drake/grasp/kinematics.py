@@ -36,7 +36,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-from pydrake.multibody.tree import SpatialInertia
+from pydrake.multibody.tree import JacobianWrtVariable, SpatialInertia
 from pydrake.solvers import SnoptSolver, Solve, SolverOptions
 from pydrake.systems.framework import DiagramBuilder
 
@@ -95,9 +95,15 @@ def contact_layout(name) -> tuple[ContactTarget, ...]:
     if cls is GraspClass.TRIPOD:
         return (ContactTarget("th", "pad", up), ContactTarget("ff", "pad", down, 0.5 * w),
                 ContactTarget("mf", "pad", down, -0.5 * w))
-    if cls in (GraspClass.WRITING_TRIPOD, GraspClass.LATERAL_TRIPOD):
+    if cls is GraspClass.WRITING_TRIPOD:
         return (ContactTarget("th", c["th"], up), ContactTarget("ff", c["ff"], down),
                 ContactTarget("mf", c["mf"], below))
+    if cls is GraspClass.LATERAL_TRIPOD:
+        # The radial sides of the first and middle fingers side by side against
+        # the thumb pad. (The middle-finger pad from below, x_G, is unreachable
+        # with the thumb on the first finger's side: no IK solution on any shape.)
+        return (ContactTarget("th", "pad", up), ContactTarget("ff", "side", down, 0.5 * w),
+                ContactTarget("mf", "side", down, -0.5 * w))
     if cls is GraspClass.ADDUCTION_GRIP:
         return (ContactTarget("ff", "ulnar_side", up), ContactTarget("mf", "side", down))
     if cls is GraspClass.PARALLEL_EXTENSION:
@@ -164,10 +170,18 @@ class GraspSolution:
 class GraspKinematics:
     """Kinematics of the Shadow hand for grasp synthesis and analysis (see module doc)."""
 
-    def __init__(self, coupling_ratio: float = 1.0, shape: str | None = None, dims=None):
+    def __init__(self, coupling_ratio: float = 1.0, shape: str | None = None, dims=None,
+                 support=None):
         """shape, dims: register the object's collision geometry (frame G), so
         that :meth:`solve_grasp` can keep the hand out of the object and out of
-        itself (``min_distance``); without them only kinematics is available."""
+        itself (``min_distance``); without them only kinematics is available.
+
+        support: optional ``(up_G, height)``: the object rests on a table whose
+          top lies ``height`` (m) below the object centre along ``-up_G`` (a
+          vector in G). A frame ``up_frame`` (z = up) is fixed to the object,
+          so :meth:`solve_grasp` can keep the fingertips above the table with
+          smooth position bounds, whatever the hand's pose relative to it.
+        """
         self.spec = get_hand_spec("shadow")
         self.coupling_ratio = float(coupling_ratio)
         if not np.isfinite(self.coupling_ratio) or self.coupling_ratio <= 0:
@@ -182,6 +196,7 @@ class GraspKinematics:
             "grasp_object", plant.AddModelInstance("grasp_object"),
             SpatialInertia.SolidSphereWithMass(0.05, 0.02),
         )
+        self.object_frame = self.object_body.body_frame()
         self.shape, self.dims = shape, None
         if shape is not None:
             self.dims = _check_dims(shape, dims)
@@ -189,6 +204,27 @@ class GraspKinematics:
             plant.RegisterCollisionGeometry(
                 self.object_body, X, geometry, "grasp_object", ProximityProperties()
             )
+        self.support = None
+        if support is not None:
+            if shape is None:
+                raise ValueError("support needs the object shape and dims")
+            up, height = support
+            up = np.asarray(up, dtype=float)
+            if up.shape != (3,) or not np.isfinite(up).all() or np.linalg.norm(up) < 1e-9:
+                raise ValueError(f"support up_G: expected a non-zero 3-vector, got {up}")
+            height = float(height)
+            if not np.isfinite(height) or height <= 0:
+                raise ValueError(f"support height must be > 0 (m), got {height}")
+            up = up / np.linalg.norm(up)
+            self.support = (up, height)
+            # A frame on the object with z = up: "above the table" becomes a
+            # smooth bound on a point's z in it (a table geometry under the
+            # signed-distance constraint made SNOPT fail on most grasps).
+            from pydrake.multibody.tree import FixedOffsetFrame
+
+            self.up_frame = plant.AddFrame(FixedOffsetFrame(
+                "grasp_object_up", self.object_frame,
+                RigidTransform(RotationMatrix.MakeFromOneVector(up, 2))))
         plant.Finalize()
         self.plant = plant
         self.diagram = builder.Build()
@@ -204,6 +240,7 @@ class GraspKinematics:
         self.distal = {
             f: plant.GetBodyByName(b, self.hand).body_frame() for f, b in _DISTAL.items()
         }
+        self.tip_frames = [plant.GetFrameByName(n, self.hand) for n in self.spec.fingertip_frames]
         self._wrist = [self.spec.joint_names.index(n) for n in ("WRJ2", "WRJ1")]
 
     # ---- forward kinematics --------------------------------------------------
@@ -273,6 +310,11 @@ class GraspKinematics:
         fix_p_PO=None,
         centre_prior_weight: float = 0.0,
         min_distance: float | None = -0.002,
+        approach_P=None,
+        max_approach_angle: float = np.deg2rad(30.0),
+        table_clearance: float = 0.004,
+        contact_height: float = 0.0,
+        X_PO_guess: RigidTransform | None = None,
     ) -> GraspSolution:
         """Postures of class ``name`` holding a (shape, dims) object (see module doc).
 
@@ -287,6 +329,15 @@ class GraspKinematics:
         min_distance: lower bound (m) on the signed distance between any two
           geometries (hand-object and hand-hand); needs the object geometry
           (``shape``/``dims`` in the constructor, the same as here). None: off.
+        approach_P: with a ``support`` (constructor), the hand's approach
+          direction in the palm frame (Table 2); it is kept within
+          ``max_approach_angle`` of "down" (``-up_G``), so that the hand comes
+          in from above the table.
+        table_clearance: with a support, every fingertip stays this far (m)
+          above the table; contact_height: the class's contacts at least this
+          much (m) higher still.
+        X_PO_guess: initial guess of the object pose in the palm frame (e.g. a
+          solution without the table), instead of the centre guess.
         """
         info = grasp_info(name)
         dims = _check_dims(shape, dims)
@@ -306,12 +357,21 @@ class GraspKinematics:
             fix_p_PO = np.asarray(fix_p_PO, dtype=float)
             if fix_p_PO.shape != (3,):
                 raise ValueError(f"fix_p_PO: expected shape (3,), got {fix_p_PO.shape}")
+        approach = None
+        if approach_P is not None:
+            approach = np.asarray(approach_P, dtype=float)
+            if approach.shape != (3,) or not np.isfinite(approach).all():
+                raise ValueError(f"approach_P: expected a finite 3-vector, got {approach}")
+            if self.support is None:
+                raise ValueError("approach_P needs a support (table) in the constructor")
         check_collisions = min_distance is not None and self.shape is not None
         if check_collisions and (self.shape, self.dims) != (shape, dims):
             raise ValueError(
                 f"this GraspKinematics holds a {self.shape} {self.dims}, asked for a "
                 f"{shape} {dims}; build one per object to check collisions"
             )
+
+        big = 10.0
 
         def build(with_collisions: bool):
             ik = InverseKinematics(plant, self.context, with_joint_limits=True)
@@ -338,6 +398,23 @@ class GraspKinematics:
                 )
             if with_collisions:
                 ik.AddMinimumDistanceLowerBoundConstraint(min_distance, 0.01)
+            if self.support is not None:
+                # Fingertips (tip frame and the end of the distal capsule) and
+                # the finger contacts at least table_clearance above the table.
+                floor = -self.support[1] + table_clearance
+                for frame in self.tip_frames:
+                    for p_B in (np.zeros(3), np.array([0.0, 0.0, 0.006])):
+                        ik.AddPositionConstraint(frame, p_B, self.up_frame,
+                                                 [-big, -big, floor], [big, big, big])
+                for t in layout:
+                    p_B, _ = CONTACT_POINTS[(t.finger, t.part)]
+                    ik.AddPositionConstraint(self.distal[t.finger], p_B, self.up_frame,
+                                             [-big, -big, floor + contact_height],
+                                             [big, big, big])
+            if approach is not None:
+                ik.AddAngleBetweenVectorsConstraint(
+                    self.palm, approach, self.object_frame, -self.support[0], 0.0,
+                    float(max_approach_angle))
             if centre_prior_weight > 0:
                 ik.AddPositionCost(self.palm, p_PO0, self.object_frame, np.zeros(3),
                                    centre_prior_weight * np.eye(3))
@@ -351,8 +428,11 @@ class GraspKinematics:
         q0[self.q_index] = np.clip(q_prior, self.lower, self.upper)
         self._set(q0[self.q_index])
         X_WP = self.palm.CalcPoseInWorld(self.context)
-        plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ RigidTransform(
-            fix_p_PO if fix_p_PO is not None else p_PO0))
+        if X_PO_guess is not None:
+            X_PO0 = X_PO_guess
+        else:
+            X_PO0 = RigidTransform(fix_p_PO if fix_p_PO is not None else p_PO0)
+        plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ X_PO0)
         q0 = plant.GetPositions(self.context).copy()
         # Stage 1 without collision constraints (smooth, fast); stage 2 adds
         # them, starting from stage 1 (the distance constraint is hard to
@@ -405,6 +485,26 @@ class GraspKinematics:
             face = 0.5 * np.array([h, d, w])[axis]
             lo[axis] = hi[axis] = sign * face
             ik.AddPositionConstraint(frame, p_B, O, lo, hi)
+
+    def contact_jacobian(self, q, finger: str, part: str = "pad") -> tuple[np.ndarray, np.ndarray]:
+        """Position ``p_PC`` (3,) of a finger contact point and its Jacobian (3, 24).
+
+        The Jacobian is with respect to the 24 hand joints (``spec.joint_names``
+        order); the wrist columns are zero (the palm frame is the reference).
+        """
+        q = self._check_q(q)
+        if (finger, part) not in CONTACT_POINTS:
+            raise ValueError(f"unknown contact {(finger, part)}; expected one of "
+                             f"{sorted(CONTACT_POINTS)}")
+        self._set(q)
+        p_B, _ = CONTACT_POINTS[(finger, part)]
+        frame = self.distal[finger]
+        p = self.plant.CalcPointsPositions(self.context, frame, p_B, self.palm).ravel()
+        J = self.plant.CalcJacobianTranslationalVelocity(
+            self.context, JacobianWrtVariable.kQDot, frame, p_B, self.palm, self.palm)
+        J = J[:, self.q_index]
+        J[:, self._wrist] = 0.0
+        return p, J
 
     def surface_error(self, q, name, shape, dims, X_PO: RigidTransform) -> float:
         """Largest distance (m) of a class contact point from the object surface."""

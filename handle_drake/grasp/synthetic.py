@@ -17,7 +17,8 @@ Experimenter-like variation: each experimenter has a fixed style offset of
 the posture prior (std 0.06 rad per joint), each grasp adds 0.03 rad noise
 and a 2 mm random shift of the contact targets along the surface. A grasp is
 kept only if the solver succeeds and every contact lies within 1 mm of the
-surface; a failed attempt is retried once with a fresh draw.
+surface; a failed case is retried (up to ``attempts`` draws in all), each
+retry with a wider posture noise (0.03 + 0.05 * attempt rad).
 
 Run ``python -m handle_drake.grasp.synthetic [--out FILE] [--seed N]``.
 """
@@ -57,19 +58,22 @@ POSTURE_PRIORS: dict[GraspClass, dict[str, float]] = {
                                                    lf=(0.4, 0.3))},
     GraspClass.TIP_PINCH: {**_THUMB, "THJ1": 0.6, **_fingers(ff=(0.9, 0.9), mf=(0.5, 0.6),
                                                              rf=(0.5, 0.6), lf=(0.5, 0.6))},
-    GraspClass.TRIPOD: {**_THUMB, **_fingers(ff=(0.8, 0.5), mf=(0.8, 0.5), rf=(0.9, 0.9),
-                                             lf=(0.9, 0.9))},
+    # Ring and little fingers only slightly flexed: curled further they reach
+    # under the object (IK collision failures with 0.9 rad).
+    GraspClass.TRIPOD: {**_THUMB, **_fingers(ff=(0.8, 0.5), mf=(0.8, 0.5), rf=(0.3, 0.3),
+                                             lf=(0.3, 0.3))},
     GraspClass.WRITING_TRIPOD: {**_THUMB, **_fingers(ff=(0.7, 0.6), mf=(0.9, 0.9), rf=(1.2, 1.2),
                                                      lf=(1.2, 1.2))},
     GraspClass.LATERAL: {"THJ5": 0.0, "THJ4": 0.5, "THJ1": 0.3,
                          **_fingers(ff=(1.2, 1.2), mf=(1.3, 1.3), rf=(1.3, 1.3), lf=(1.3, 1.3))},
-    GraspClass.LATERAL_TRIPOD: {**_THUMB, **_fingers(ff=(1.0, 1.0), mf=(1.0, 0.9), rf=(1.2, 1.2),
-                                                     lf=(1.2, 1.2))},
+    GraspClass.LATERAL_TRIPOD: {"THJ5": 0.0, "THJ4": 0.6, "THJ1": 0.3,
+                                **_fingers(ff=(1.1, 1.1), mf=(0.8, 0.8), rf=(1.3, 1.3),
+                                           lf=(1.3, 1.3))},
     GraspClass.ADDUCTION_GRIP: {"THJ4": 0.3, **_fingers(ff=(0.2, 0.2), mf=(0.2, 0.2),
                                                         rf=(0.2, 0.2), lf=(0.2, 0.2))},
     GraspClass.PARALLEL_EXTENSION: {**_THUMB, "THJ1": 0.0,
-                                    **_fingers(ff=(1.0, 0.1), mf=(1.0, 0.1), rf=(1.0, 0.1),
-                                               lf=(1.0, 0.1))},
+                                    **_fingers(ff=(0.9, 0.3), mf=(0.9, 0.3), rf=(0.9, 0.3),
+                                               lf=(0.9, 0.3))},
 }
 
 CLASS_SHAPES = ("sphere", "cylinder", "box")
@@ -93,7 +97,7 @@ def generate(
     seed: int = 0,
     classes=None,
     shapes=CLASS_SHAPES,
-    attempts: int = 2,
+    attempts: int = 4,
     coupling_ratio: float = 1.0,
     progress=None,
 ) -> tuple[GraspRecords, list[dict]]:
@@ -115,7 +119,9 @@ def generate(
                 for who, style in styles.items():
                     kept = None
                     for _attempt in range(attempts):
-                        prior = prior0 + style + rng.normal(scale=0.03, size=prior0.size)
+                        # Retries widen the draw (0.03, 0.08, 0.13 ... rad) to leave a bad basin.
+                        prior = prior0 + style + rng.normal(scale=0.03 + 0.05 * _attempt,
+                                                            size=prior0.size)
                         sol = gk.solve_grasp(cls, shape, dims, prior, rng=rng, target_jitter=0.002,
                                              centre_prior_weight=100.0)
                         if sol.success and sol.contact_error < 1e-3:

@@ -181,7 +181,7 @@ GRASP_CLASSES: dict[GraspClass, GraspClassInfo] = {
         GraspClassInfo(
             GraspClass.LATERAL_TRIPOD, 24, "LATERAL_TRIPOD",
             (37.54, 0.14, -55.24, 0.40, 117.61, 0.03), (0.0, -1.0, 0.0),
-            _c("th:pad", "ff:side", "mf:pad"), (0.01, 0.04), "cylinder",
+            _c("th:pad", "ff:side", "mf:side"), (0.01, 0.04), "cylinder",
         ),
     )
 }
