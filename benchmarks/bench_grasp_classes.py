@@ -1,0 +1,101 @@
+"""Success rate of planned grasps per class over a range of object sizes.
+
+For each of the eight grasp classes and each object shape (cuboid grasped
+across its depth, sphere), five grasp widths spread over the class's size
+range (``taxonomy.GraspClassInfo.size_range_m``): plan (``plan_grasp``),
+simulate reach, close and a 13 cm lift on the floating-wrist station, and
+count a success when the object held through the lift
+(``demo.held_through_lift``: >= 10 cm higher and steady at the end). A plan
+that raises (no IK solution) counts as a failure of its own kind.
+
+Run: ``python benchmarks/bench_grasp_classes.py [--workers 2]``; prints a table
+and writes ``benchmarks/results/grasp_classes.json``. Under
+HANDLE_DRAKE_REDUCED=1 it runs two sizes of two classes on cuboids only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+RESULTS = Path(__file__).resolve().parent / "results" / "grasp_classes.json"
+
+
+def trial(args):
+    grasp_class, kind, width = args
+    from handle_drake.demo import held_through_lift
+    from handle_drake.grasp.planning import plan_grasp, resting_pose
+    from handle_drake.run import ScenarioRunner
+
+    size = width / 0.6 if kind == "cuboid" else width  # cuboid depth = 0.6 * size
+    start = time.perf_counter()
+    try:
+        plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
+    except ValueError as error:
+        return dict(grasp_class=grasp_class, kind=kind, width=width, size=size,
+                    planned=False, held=False, lift=0.0, error=str(error)[:120],
+                    plan_time=time.perf_counter() - start)
+    plan_time = time.perf_counter() - start
+    result = ScenarioRunner(plan.to_scenario()).run()
+    return dict(grasp_class=grasp_class, kind=kind, width=width, size=size, planned=True,
+                held=held_through_lift(result), lift=result.object_lift(),
+                centre_source=plan.centre_source, centre_offset_mm=plan.centre_offset * 1e3,
+                plan_time=plan_time, sim_wall_time=result.wall_time)
+
+
+def main(argv=None) -> int:
+    from handle_drake.grasp.taxonomy import GRASP_CLASSES
+    from handle_drake.testing import reduced
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--sizes", type=int, default=5)
+    args = parser.parse_args(argv)
+    small = reduced()
+    classes = list(GRASP_CLASSES.values())[:2] if small else list(GRASP_CLASSES.values())
+    kinds = ("cuboid",) if small else ("cuboid", "sphere")
+    n_sizes = 2 if small else args.sizes
+    jobs = []
+    for info in classes:
+        lo, hi = info.size_range_m
+        # Inset from the range ends, where the IK is least likely to succeed.
+        widths = np.linspace(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo), n_sizes)
+        jobs += [(info.name, kind, float(w)) for kind in kinds for w in widths]
+    start = time.perf_counter()
+    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
+        rows = list(pool.map(trial, jobs))
+    wall = time.perf_counter() - start
+
+    print(f"{len(rows)} trials in {wall:.0f} s\n")
+    print("| class | shape | widths (mm) | planned | held | success rate |")
+    print("|---|---|---|---|---|---|")
+    summary = {}
+    for info in classes:
+        for kind in kinds:
+            sub = [r for r in rows if r["grasp_class"] == info.name and r["kind"] == kind]
+            planned = sum(r["planned"] for r in sub)
+            held = sum(r["held"] for r in sub)
+            widths = ", ".join(f"{r['width'] * 1e3:.0f}{'*' if r['held'] else ''}" for r in sub)
+            summary[f"{info.name}/{kind}"] = dict(trials=len(sub), planned=planned, held=held,
+                                                  success_rate=held / len(sub))
+            print(f"| {info.name} | {kind} | {widths} | {planned}/{len(sub)} | {held}/{len(sub)} "
+                  f"| {held / len(sub):.0%} |")
+    total = sum(r["held"] for r in rows)
+    print(f"\noverall: {total}/{len(rows)} held ({total / len(rows):.0%}); * = held")
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(dict(reduced=small, wall_time_s=wall, summary=summary,
+                                       trials=rows), indent=1))
+    print(f"wrote {RESULTS}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

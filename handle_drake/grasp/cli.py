@@ -1,0 +1,159 @@
+"""``handle-drake grasp`` and ``handle-drake synergies``.
+
+- ``grasp --class tripod --object cuboid --size 0.04 [--meshcat] [--html F]``:
+  plans a grasp of the class on the object (resting on the table at the
+  origin), simulates reach, close and lift on the floating-wrist station and
+  prints whether the object held (exit code 0 held, 1 dropped).
+- ``synergies [FILE] [--k-max 8] [--plot F]``: fits PCA synergies to a
+  ``handle_drake-grasps`` recording file (default: the shipped synthetic data),
+  prints the reconstruction error against k and saves a plot.
+
+Register with ``register(subparsers)`` (``handle_drake.cli.AREA_COMMANDS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["register", "run_grasp", "write_class_scenarios"]
+
+#: The object each class's scenario in ``diagrams/`` grasps: (kind, catalogue size m).
+CLASS_OBJECTS = {
+    "palmar_pinch": ("cuboid", 0.05),
+    "tip_pinch": ("cuboid", 0.04),
+    "tripod": ("cylinder", 0.045),
+    "writing_tripod": ("cuboid", 0.03),
+    "lateral": ("cuboid", 0.028),
+    "lateral_tripod": ("cuboid", 0.04),
+    "adduction_grip": ("cuboid", 0.022),
+    "parallel_extension": ("cuboid", 0.058),
+}
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("grasp", help="plan a grasp of one class, simulate, lift, report")
+    p.add_argument("--class", dest="grasp_class", required=True,
+                   help="grasp class (palmar_pinch tip_pinch tripod writing_tripod lateral "
+                        "lateral_tripod adduction_grip parallel_extension)")
+    p.add_argument("--object", default="cuboid", help="sphere, cylinder or cuboid (box)")
+    p.add_argument("--size", type=float, required=True,
+                   help="catalogue size (m): diameter, or the cuboid's width")
+    p.add_argument("--meshcat", action="store_true", help="show it live in Meshcat")
+    p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
+    p.add_argument("--save-scenario", type=Path, default=None,
+                   help="write the planned scenario YAML here")
+    p.set_defaults(func=_cmd_grasp)
+
+    s = subparsers.add_parser("synergies", help="fit synergies to recorded grasps, error vs k")
+    s.add_argument("file", nargs="?", default=None,
+                   help="handle_drake-grasps CSV (default: the shipped synthetic data)")
+    s.add_argument("--k-max", type=int, default=8)
+    s.add_argument("--plot", type=Path, default=Path("out/synergies_error_vs_k.png"))
+    s.set_defaults(func=_cmd_synergies)
+
+
+def run_grasp(grasp_class: str, kind: str, size: float, meshcat=None, html=None,
+              save_scenario=None):
+    """Plan, simulate, lift; returns ``(plan, result, held)``."""
+    from handle_drake.demo import held_through_lift
+    from handle_drake.grasp.planning import plan_grasp, resting_pose
+    from handle_drake.run import ScenarioRunner
+
+    plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
+    scenario = plan.to_scenario()
+    if save_scenario is not None:
+        Path(save_scenario).parent.mkdir(parents=True, exist_ok=True)
+        Path(save_scenario).write_text(plan.to_scenario_override())
+    result = ScenarioRunner(scenario, meshcat).run(html=html if meshcat is not None else None)
+    return plan, result, held_through_lift(result)
+
+
+def _cmd_grasp(args) -> int:
+    from handle_drake.cli import _meshcat
+
+    meshcat = _meshcat(args.meshcat or args.html is not None)
+    plan, result, held = run_grasp(args.grasp_class, args.object, args.size, meshcat,
+                                   args.html, args.save_scenario)
+    print(plan.summary())
+    if plan.amplitudes is not None:
+        print(f"synergy pre-shape amplitudes: {[round(float(a), 3) for a in plan.amplitudes]}")
+    print(f"{'HELD' if held else 'DROPPED'}: object rose {result.object_lift() * 100:.1f} cm "
+          f"(simulated {result.sim_time:.1f} s in {result.wall_time:.1f} s)")
+    if args.html:
+        print(f"replay written to {args.html}")
+    return 0 if held else 1
+
+
+def _cmd_synergies(args) -> int:
+    from handle_drake.grasp.analysis import fit_record_synergies, reconstruction_table
+    from handle_drake.grasp.recordings import load_grasps
+    from handle_drake.grasp.synergies import reconstruction_error_vs_k
+    from handle_drake.grasp.synthetic import DATA_FILE
+    from handle_drake.hands import get_hand_spec
+
+    spec = get_hand_spec("shadow")
+    path = Path(args.file) if args.file else DATA_FILE
+    records = load_grasps(path, (spec.joint_lower_limits, spec.joint_upper_limits))
+    if not 1 <= args.k_max <= spec.num_actuated:
+        raise ValueError(f"--k-max must be in [1, {spec.num_actuated}], got {args.k_max}")
+    syn = fit_record_synergies(records)
+    print(f"{len(records)} grasps from {path}; k for 95% variance: {syn.k}\n")
+    print(reconstruction_table(records, k_max=args.k_max))
+    res = reconstruction_error_vs_k(records.q, spec.joint_names, spec.actuated_joint_names,
+                                    k_max=args.k_max)
+    _plot_error(res, args.plot)
+    print(f"\nplot: {args.plot}")
+    return 0
+
+
+def _plot_error(res, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
+    ax[0].plot(res["k"], res["train_rms"], "o-", label="train")
+    ax[0].plot(res["k"], res["test_rms"], "s-", label="5-fold test")
+    ax[0].set_xlabel("k (synergies)")
+    ax[0].set_ylabel("RMS joint error (rad)")
+    ax[0].legend()
+    ax[1].plot(res["k"], res["explained"], "o-")
+    ax[1].set_xlabel("k")
+    ax[1].set_ylabel("explained variance")
+    ax[1].set_ylim(0, 1.02)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def write_class_scenarios(directory: Path) -> list[Path]:
+    """Plan each class on its ``CLASS_OBJECTS`` object; write ``grasp_<class>.yaml``."""
+    from handle_drake.grasp.planning import plan_grasp, resting_pose
+
+    out = []
+    for name, (kind, size) in CLASS_OBJECTS.items():
+        plan = plan_grasp(name, (kind, size), resting_pose(kind, size))
+        path = Path(directory) / f"grasp_{name}.yaml"
+        header = (f"# Planned by handle_drake.grasp.planning (python -m handle_drake.grasp.cli "
+                  f"--write-scenarios diagrams):\n# {plan.summary()}\n"
+                  f"# Run: handle-drake simulate {path.name}\n")
+        path.write_text(header + plan.to_scenario_override())
+        out.append(path)
+    return out
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="grasp scenarios")
+    parser.add_argument("--write-scenarios", type=Path, required=True)
+    args = parser.parse_args(argv)
+    for path in write_class_scenarios(args.write_scenarios):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

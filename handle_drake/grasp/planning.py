@@ -1,0 +1,620 @@
+"""Grasp planning from a grasp class and an object (report section 3.2).
+
+:func:`plan_grasp` turns *(grasp class, object, object pose)* into everything a
+floating-wrist station needs to grasp and lift the object:
+
+1. **pre-shape from synergies.** The class's synergy amplitudes for the object
+   size (per-class linear regression of the amplitudes on size,
+   :class:`~handle_drake.grasp.synergies.SizeRegression`, fitted on the shipped
+   grasp data) give a posture that seeds the hand inverse kinematics.
+2. **grasp centre and approach (Tables 1-2).** The report's Table 1 centre
+   ``c(size)`` in the palm frame P is where the object centre should sit; the
+   Table 2 approach vector ``a_P`` is the direction the hand moves in. A Drake
+   ``InverseKinematics`` problem (:meth:`GraspKinematics.solve_grasp`) puts the
+   class's finger contacts on the object with the object centre held *at* the
+   Table 1 centre; the table under the object is part of the problem (the
+   hand and forearm stay above it) and ``a_P`` must point within 30 degrees of
+   straight down. **IK refinement:** Table 1 comes from the C5 hand and several
+   of its centres are out of our model's reach; when the fixed-centre problem
+   has no solution, the centre is freed and only pulled towards Table 1 (the
+   plan records ``centre_source = "refined"`` and the offset).
+3. **hand pose.** The grasp frame G of the solution is placed on the object in
+   the world (``x_G`` vertical, the finger row ``y_G`` along the object's long
+   horizontal axis), which fixes the palm pose ``X_WP = X_WG X_GP`` and the hand
+   base (``forearm``) pose ``X_WB = X_WP X_PB`` through the fixed forearm->palm
+   transform at zero wrist angles.
+4. **pre-grasp, close, lift.** The pre-grasp base pose backs off ``standoff``
+   along the approach; the pre-shape opens each contact finger 25 mm out
+   along its contact normal and the closing command pushes it 20 mm in (damped
+   least-squares steps on the contact Jacobian, so the position-controlled
+   fingers press with a force set by their PD gains).
+
+:meth:`GraspPlan.to_script` / :meth:`GraspPlan.to_scenario` write keyframes
+(reach from the stand-off, close, lift) for a ``!FloatingWrist`` scenario.
+
+Object conventions. Kinds ``sphere``, ``cylinder`` and ``cuboid`` of the
+catalogue (:mod:`handle_drake.objects`). The *grasp size* (Table 1's object
+size, the distance between the opposing fingers) is the diameter of a sphere
+or cylinder and the **depth** (``0.6 * size``, the thin horizontal edge) of a
+cuboid. The planner grasps a sphere anywhere, a cylinder lying on its side
+(axis horizontal) and a cuboid standing upright (its z axis vertical); use
+:func:`resting_pose`.
+
+Frames: W world, O object, G grasp frame of the IK (``x_G`` up, ``y_G`` finger
+row, ``z_G`` opposition axis, thumb on ``+z_G``), P palm, B hand base (forearm).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+from functools import lru_cache
+
+import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+
+from handle_drake.grasp.kinematics import GraspKinematics, contact_layout
+from handle_drake.grasp.synergies import SizeRegression, Synergies
+from handle_drake.grasp.taxonomy import (
+    GraspClass,
+    approach_palm,
+    check_size,
+    grasp_centre_palm,
+    grasp_info,
+)
+from handle_drake.hands import actuated_position_limits, get_hand_spec
+
+__all__ = [
+    "PLANNABLE_KINDS",
+    "GraspPlan",
+    "GraspPlanningError",
+    "ClassSynergies",
+    "default_synergies",
+    "grasp_dims",
+    "plan_grasp",
+    "resting_pose",
+]
+
+PLANNABLE_KINDS = ("sphere", "cylinder", "cuboid")
+_IK_SHAPE = {"sphere": "sphere", "cylinder": "cylinder", "cuboid": "box"}
+_KIND_ALIASES = {"box": "cuboid"}
+MAX_PENETRATION = 0.004  # m, hand-object and hand-hand overlap the plan may keep
+MAX_CONTACT_ERROR = 1.5e-3  # m, contact point off the object surface
+MAX_APPROACH_ANGLE = np.deg2rad(45.0)  # approach vector from straight down
+PRESHAPE_OPENING = 0.025  # m, contacts moved out along their normals for the pre-shape
+CLOSING_SQUEEZE = 0.020  # m, and pushed in for the closing command
+PRESHAPE_LIFT = 0.010  # m, contacts raised (world up) in the pre-shape
+WRIST_RANGE = 2.0  # m, travel of the floating wrist's prismatic joints (station.py)
+_SPEC = get_hand_spec("shadow")
+_NAMES = _SPEC.joint_names
+_ACT = _SPEC.actuated_joint_names
+# Joints that move each finger's contact point (the distal J1 follows J2).
+_FINGER_JOINTS = {
+    "ff": ("FFJ4", "FFJ3", "FFJ2"),
+    "mf": ("MFJ4", "MFJ3", "MFJ2"),
+    "rf": ("RFJ4", "RFJ3", "RFJ2"),
+    "lf": ("LFJ5", "LFJ4", "LFJ3", "LFJ2"),
+    "th": ("THJ5", "THJ4", "THJ3", "THJ2", "THJ1"),
+}
+
+
+class GraspPlanningError(ValueError):
+    """No grasp of the requested class was found (unreachable pose or object)."""
+
+
+# ---------------------------------------------------------------- synergies
+
+
+@dc.dataclass
+class ClassSynergies:
+    """Global synergies plus, per class, the amplitude-vs-size regression."""
+
+    synergies: Synergies
+    regressions: dict[GraspClass, SizeRegression]
+
+    def amplitudes(self, grasp_class, size: float) -> np.ndarray | None:
+        """Amplitudes (k,) of the class's pre-shape at ``size`` (m), or None without data."""
+        reg = self.regressions.get(grasp_info(grasp_class).grasp_class)
+        return None if reg is None else reg.amplitudes(size)
+
+    def posture(self, grasp_class, size: float) -> np.ndarray | None:
+        """All 24 joints (rad) of the class's synergy pre-shape at ``size``, or None."""
+        a = self.amplitudes(grasp_class, size)
+        return None if a is None else self.synergies.amplitudes_to_positions(a)
+
+    @classmethod
+    def fit(cls, records, k: int | None = None, variance: float = 0.95) -> ClassSynergies:
+        """Fit from :class:`~handle_drake.grasp.recordings.GraspRecords`."""
+        from handle_drake.grasp.analysis import fit_record_synergies
+
+        syn = fit_record_synergies(records, k=k, variance=variance)
+        regs = {}
+        for gc in GraspClass:
+            sub = records.of_class(gc)
+            if len(sub) >= 2 and np.ptp(sub.sizes) > 0:
+                regs[gc] = SizeRegression.fit(syn, sub.q, sub.sizes)
+        return cls(syn, regs)
+
+
+@lru_cache(maxsize=1)
+def default_synergies() -> ClassSynergies:
+    """Synergies and size regressions fitted on the shipped grasp data set."""
+    from handle_drake.grasp.recordings import load_grasps
+    from handle_drake.grasp.synthetic import DATA_FILE
+
+    return ClassSynergies.fit(load_grasps(DATA_FILE))
+
+
+# ---------------------------------------------------------------- objects
+
+
+def _object_spec(obj):
+    from handle_drake.objects import ObjectSpec
+
+    if isinstance(obj, ObjectSpec):
+        spec = obj
+    elif isinstance(obj, tuple | list) and len(obj) == 2:
+        kind, size = obj
+        if not isinstance(kind, str):
+            raise TypeError(f"object kind must be a str, got {type(kind).__name__}")
+        kind = _KIND_ALIASES.get(kind.strip().lower(), kind.strip().lower())
+        if kind not in PLANNABLE_KINDS:
+            raise ValueError(
+                f"cannot plan a grasp on a {kind!r}; expected one of {', '.join(PLANNABLE_KINDS)}"
+            )
+        spec = ObjectSpec(kind, size)
+    else:
+        raise TypeError(
+            f"object must be an ObjectSpec or a (kind, size) pair, got {type(obj).__name__}"
+        )
+    if spec.kind not in PLANNABLE_KINDS:
+        raise ValueError(
+            f"cannot plan a grasp on a {spec.kind!r}; expected one of {', '.join(PLANNABLE_KINDS)}"
+        )
+    return spec
+
+
+def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
+    """(IK shape, dims in the grasp frame G) of a catalogue object (see module doc)."""
+    from handle_drake.objects import dimensions
+
+    d = dimensions(spec)
+    if spec.kind == "sphere":
+        return "sphere", (d["diameter"],)
+    if spec.kind == "cylinder":
+        return "cylinder", (d["diameter"], d["height"])
+    # box dims (w along z_G, d along y_G, h along x_G) = (depth, width, height)
+    return "box", (d["depth"], d["width"], d["height"])
+
+
+def resting_pose(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
+                 table_height: float = 0.0) -> RigidTransform:
+    """``X_WO`` of a plannable object resting on a table top at ``table_height``.
+
+    sphere and cuboid stand upright; a cylinder lies on its side with its axis
+    along the world direction ``(-sin yaw, cos yaw, 0)``.
+    """
+    from handle_drake.objects import ObjectSpec, dimensions
+
+    spec = _object_spec((kind, size))
+    d = dimensions(ObjectSpec(spec.kind, spec.size))
+    xy = np.asarray(xy, dtype=float)
+    if xy.shape != (2,) or not np.isfinite(xy).all():
+        raise ValueError(f"xy: expected 2 finite values, got {xy}")
+    R = RotationMatrix.MakeZRotation(float(yaw))
+    if spec.kind == "sphere":
+        z = 0.5 * d["diameter"]
+    elif spec.kind == "cylinder":
+        R = R @ RotationMatrix.MakeXRotation(np.pi / 2)
+        z = 0.5 * d["diameter"]
+    else:
+        z = 0.5 * d["height"]
+    return RigidTransform(R, [xy[0], xy[1], table_height + z])
+
+
+# ---------------------------------------------------------------- the plan
+
+
+@dc.dataclass
+class GraspPlan:
+    """A planned grasp. Joint commands are in the 20-entry command order.
+
+    preshape_command / grasp_command / close_command: (20,) rad: fingers open
+      25 mm off the object, on it (the IK solution), and pushed 20 mm in.
+    q_grasp: (24,) the IK posture (all joints). amplitudes: (k,) synergy
+      amplitudes of the class at this size (the IK seed; None when the class
+      has no data), grasp_amplitudes: (k,) of the final grasp posture.
+    X_WB / X_WB_pregrasp: hand base (forearm) poses at the grasp and at the
+      stand-off. X_WP: palm pose. approach_W: unit approach vector in world.
+    p_PC_table1 / p_PC: the Table 1 grasp centre and the planned one, palm
+      frame (m); centre_source: "table1" (held there) or "refined".
+    """
+
+    grasp_class: GraspClass
+    object_spec: object
+    grasp_size: float
+    X_WO: RigidTransform
+    X_WG: RigidTransform
+    X_WP: RigidTransform
+    X_WB: RigidTransform
+    X_WB_pregrasp: RigidTransform
+    approach_W: np.ndarray
+    q_grasp: np.ndarray
+    preshape_command: np.ndarray
+    grasp_command: np.ndarray
+    close_command: np.ndarray
+    amplitudes: np.ndarray | None
+    grasp_amplitudes: np.ndarray
+    p_PC_table1: np.ndarray
+    p_PC: np.ndarray
+    centre_source: str
+    contact_error: float
+    table_height: float
+    lift_height: float = 0.13
+    coupling_ratio: float = 1.0
+
+    @property
+    def centre_offset(self) -> float:
+        """Distance (m) between the planned grasp centre and Table 1's."""
+        return float(np.linalg.norm(self.p_PC - self.p_PC_table1))
+
+    def command_dict(self, command) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(_ACT, command, strict=True)}
+
+    def wrist(self, X_WB: RigidTransform) -> list[float]:
+        """``[x y z roll pitch yaw]`` of a base pose (the ``wrist.pose`` port)."""
+        rpy = RollPitchYaw(X_WB.rotation()).vector()
+        return [float(v) for v in np.concatenate([X_WB.translation(), rpy])]
+
+    def lifted(self) -> RigidTransform:
+        return RigidTransform(self.X_WB.rotation(),
+                              self.X_WB.translation() + [0.0, 0.0, self.lift_height])
+
+    def to_script(self, reach: float = 0.5, close: float = 0.5, hold: float = 0.3,
+                  lift: float = 0.7):
+        """Keyframes (durations in s): reach from the stand-off, close, hold, lift."""
+        from handle_drake.scenario import Keyframe
+
+        for name, v in (("reach", reach), ("close", close), ("hold", hold), ("lift", lift)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a positive duration (s), got {v}")
+        t1 = reach
+        t2 = t1 + 0.1
+        t3 = t2 + close
+        t4 = t3 + hold
+        t5 = t4 + lift
+        return [
+            Keyframe(time=0.0, hand=self.command_dict(self.preshape_command),
+                     wrist=self.wrist(self.X_WB_pregrasp)),
+            Keyframe(time=t1, wrist=self.wrist(self.X_WB)),
+            Keyframe(time=t2),
+            Keyframe(time=t3, hand=self.command_dict(self.close_command)),
+            Keyframe(time=t4),
+            Keyframe(time=t5, wrist=self.wrist(self.lifted())),
+        ]
+
+    def to_scenario(self, settle: float = 0.5):
+        """A complete simulated ``Scenario`` (floating wrist, object, table, script)."""
+        from handle_drake.scenario import (
+            FloatingWrist,
+            HandConfig,
+            ObjectConfig,
+            Scenario,
+            SimHandDriver,
+            TableConfig,
+        )
+
+        script = self.to_script()
+        spec = self.object_spec
+        return Scenario(
+            hand=HandConfig(
+                kind="shadow", coupling_ratio=self.coupling_ratio,
+                mount=FloatingWrist(X_WB=Transform(self.X_WB_pregrasp)),
+                initial_position=self.command_dict(self.preshape_command),
+            ),
+            object=ObjectConfig(kind=spec.kind, size=spec.size, mu=spec.mu,
+                                X_WO=Transform(self.X_WO), on_table=False),
+            table=TableConfig(top_height=self.table_height),
+            contact_model="point",
+            time_step=0.001,
+            driver=SimHandDriver(max_joint_velocity=4.0),
+            simulation_duration=script[-1].time + settle,
+            script=script,
+        )
+
+    def to_scenario_override(self) -> str:
+        """The scenario as YAML text (``LoadScenario(data=...)`` or a file)."""
+        from handle_drake.scenario import DumpScenario
+
+        return DumpScenario(self.to_scenario())
+
+    def summary(self) -> str:
+        p = self.X_WB.translation()
+        return (f"{self.grasp_class.value} on a {self.object_spec.kind} "
+                f"(size {self.object_spec.size * 100:.1f} cm, grasp width "
+                f"{self.grasp_size * 100:.1f} cm): centre {self.centre_source} "
+                f"({self.centre_offset * 1000:.1f} mm from Table 1), hand base at "
+                f"[{p[0]:.3f} {p[1]:.3f} {p[2]:.3f}] m")
+
+
+# ---------------------------------------------------------------- planning
+
+
+@lru_cache(maxsize=64)
+def _kinematics(ratio: float, shape: str, dims: tuple, up, height):
+    support = None if up is None else (np.array(up), height)
+    return GraspKinematics(ratio, shape=shape, dims=dims, support=support)
+
+
+def _up_in_grasp_frame(kind: str, natural_up_G) -> np.ndarray:
+    """World "up" expressed in G, as close to ``natural_up_G`` as the object allows.
+
+    A sphere can rest in any orientation; a cylinder lies with its axis (y_G)
+    horizontal, so up is in the x_G-z_G plane; a cuboid stands with its
+    height axis x_G vertical.
+    """
+    u = np.asarray(natural_up_G, dtype=float)
+    if kind == "cylinder":
+        u = np.array([u[0], 0.0, u[2]])
+        if np.linalg.norm(u) < 1e-6:
+            u = np.array([1.0, 0.0, 0.0])
+    elif kind == "cuboid":
+        u = np.array([1.0 if u[0] >= 0 else -1.0, 0.0, 0.0])
+    return u / np.linalg.norm(u)
+
+
+def _acceptable(kin: GraspKinematics, sol) -> bool:
+    """Our own check of an IK result (SNOPT often reports failure a hair from
+    feasibility): contacts on the surface, little penetration, tips above the table."""
+    if sol.contact_error > MAX_CONTACT_ERROR:
+        return False
+    kin.plant.SetPositions(kin.context, kin.plant.GetPositions(kin.context))
+    query = kin.plant.get_geometry_query_input_port().Eval(kin.context)
+    pairs = query.ComputeSignedDistancePairwiseClosestPoints(0.01)
+    if pairs and min(p.distance for p in pairs) < -MAX_PENETRATION - 5e-4:
+        return False
+    up_height = [kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, f).translation()[2]
+                 for f in kin.tip_frames]
+    return min(up_height) + kin.support[1] > 0.002
+
+
+def _collapse(J: np.ndarray, joints: tuple[str, ...], ratio: float) -> np.ndarray:
+    """Columns of the command joints of one finger, the coupled J1 folded into J2."""
+    cols = []
+    for name in joints:
+        col = J[:, _NAMES.index(name)].copy()
+        if name.endswith("J2") and not name.startswith("TH"):
+            col += ratio * J[:, _NAMES.index(name[:-1] + "1")]
+        cols.append(col)
+    return np.column_stack(cols)
+
+
+def move_contacts(kin: GraspKinematics, q: np.ndarray, moves: dict, ratio: float = 1.0,
+                  steps: int = 5, damping: float = 0.01) -> np.ndarray:
+    """Move finger contact points by given palm-frame displacements.
+
+    moves: ``{finger: (part, dx_P (3,))}``. Each finger's joints take
+    ``steps`` damped least-squares steps ``dq = J^T (J J^T + damping^2 I)^-1 dx``
+    (Jacobian re-evaluated each step), clipped to the command limits; the
+    coupled J1 follows J2. Returns the new (24,) posture.
+    """
+    lower, upper = actuated_position_limits(_SPEC, ratio)
+    q = np.array(q, dtype=float)
+    for finger, (part, dx) in moves.items():
+        joints = _FINGER_JOINTS[finger]
+        idx = [_NAMES.index(j) for j in joints]
+        lo = np.array([lower[_ACT.index(j)] for j in joints])
+        hi = np.array([upper[_ACT.index(j)] for j in joints])
+        step = np.asarray(dx, dtype=float) / steps
+        for _ in range(steps):
+            _, J = kin.contact_jacobian(q, finger, part)
+            Jf = _collapse(J, joints, ratio)
+            dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + damping**2 * np.eye(3), step)
+            q[idx] = np.clip(q[idx] + dq, lo, hi)
+            for j in joints:
+                if j.endswith("J2") and finger != "th":
+                    q[_NAMES.index(j[:-1] + "1")] = ratio * q[_NAMES.index(j)]
+    return q
+
+
+def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None) -> np.ndarray:
+    """R_WG with ``R_WG up_G = z_W`` and the finger row y_G along the object's row axis.
+
+    Row axis: a cylinder's axis, a cuboid's width edge (x_O); a sphere has
+    none (any horizontal direction; the caller then turns the yaw). Raises
+    ValueError if the object is not in an orientation the planner supports.
+    """
+    R_WO = X_WO.rotation().matrix()
+    z_W = np.array([0.0, 0.0, 1.0])
+    if kind == "sphere":
+        row = np.array([0.0, 1.0, 0.0])
+    elif kind == "cylinder":
+        row = R_WO[:, 2]
+        if abs(row @ z_W) > np.sin(np.deg2rad(2.0)):
+            raise ValueError(
+                "the planner grasps a cylinder lying on its side (axis horizontal); "
+                f"its axis is {np.rad2deg(np.arcsin(min(1.0, abs(row @ z_W)))):.1f} deg from "
+                "horizontal (use planning.resting_pose)"
+            )
+    else:
+        if abs(abs(R_WO[:, 2] @ z_W) - 1.0) > 1e-3:
+            raise ValueError(
+                "the planner grasps a cuboid standing on a face with its z axis vertical "
+                "(use planning.resting_pose)"
+            )
+        row = R_WO[:, 0]
+    if up_G is None:
+        up_G = np.array([1.0, 0.0, 0.0])
+    e1 = np.asarray(up_G, dtype=float) / np.linalg.norm(up_G)
+    e2 = np.array([0.0, 1.0, 0.0]) - e1[1] * e1
+    if np.linalg.norm(e2) < 1e-6:  # only a sphere can have y_G vertical
+        e2 = np.array([0.0, 0.0, 1.0]) - e1[2] * e1
+    e2 /= np.linalg.norm(e2)
+    f2 = row - (row @ z_W) * z_W
+    f2 /= np.linalg.norm(f2)
+    E = np.column_stack([e1, e2, np.cross(e1, e2)])
+    F = np.column_stack([z_W, f2, np.cross(z_W, f2)])
+    return F @ E.T
+
+
+def _yaw(R: np.ndarray, psi: float) -> np.ndarray:
+    c, s = np.cos(psi), np.sin(psi)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
+
+
+def plan_grasp(
+    grasp_class,
+    obj,
+    X_WO: RigidTransform,
+    synergies: ClassSynergies | None = None,
+    table_height: float = 0.0,
+    standoff: float = 0.06,
+    reach_direction=(1.0, 0.0),
+    coupling_ratio: float = 1.0,
+    lift_height: float = 0.13,
+    vertical_standoff: bool = True,
+) -> GraspPlan:
+    """Plan a grasp of class ``grasp_class`` on ``obj`` at ``X_WO`` (see module doc).
+
+    obj: an ``ObjectSpec`` (sphere, cylinder, cuboid) or ``(kind, size)``.
+    synergies: :class:`ClassSynergies` (default: fitted on the shipped data).
+    table_height: world z (m) of the table top under the object.
+    reach_direction: preferred horizontal direction (world x, y) the hand
+      reaches in (the forearm trails behind it); used to pick the hand's yaw
+      among the object's symmetric grasps.
+
+    Raises:
+        ValueError: unknown class, object kind or size outside the class's
+            range ("too large"/"too small"), an object not resting on its
+            supported orientation, a target outside the wrist's travel.
+        GraspPlanningError (a ValueError): no collision-free posture puts the
+            class's contacts on the object from above the table.
+    """
+    info = grasp_info(grasp_class)
+    spec = _object_spec(obj)
+    if not isinstance(X_WO, RigidTransform):
+        raise TypeError(f"X_WO must be a RigidTransform, got {type(X_WO).__name__}")
+    shape, dims = grasp_dims(spec)
+    size = check_size(info.grasp_class, dims[0])
+    height = float(X_WO.translation()[2] - table_height)
+    if not np.isfinite(height) or height <= 0:
+        raise ValueError(
+            f"the object centre must be above the table top ({table_height} m), "
+            f"got z = {X_WO.translation()[2]:.4f} m"
+        )
+    for name, value, lo in (("standoff", standoff, 0.0), ("lift_height", lift_height, 0.0)):
+        if not (np.isfinite(value) and value > lo):
+            raise ValueError(f"{name} must be a positive distance (m), got {value}")
+    reach = np.asarray(reach_direction, dtype=float)
+    if reach.shape != (2,) or not np.isfinite(reach).all() or np.linalg.norm(reach) == 0:
+        raise ValueError(f"reach_direction: expected a non-zero (x, y), got {reach_direction}")
+    reach = np.r_[reach / np.linalg.norm(reach), 0.0]
+    _world_grasp_frame(spec.kind, X_WO)  # validates the resting orientation early
+
+    synergies = default_synergies() if synergies is None else synergies
+    if not isinstance(synergies, ClassSynergies):
+        raise TypeError(f"synergies must be ClassSynergies, got {type(synergies).__name__}")
+    amplitudes = synergies.amplitudes(info.grasp_class, size)
+    from handle_drake.grasp.synthetic import posture_prior
+
+    class_prior = posture_prior(info.grasp_class, coupling_ratio)
+    priors = []
+    if amplitudes is not None:
+        priors.append(synergies.synergies.amplitudes_to_positions(amplitudes))
+    priors.append(class_prior)
+    rng = np.random.default_rng(0)
+    priors_refine = priors + [class_prior + rng.normal(scale=0.1, size=class_prior.size)
+                              for _ in range(2)]
+    c_table1 = grasp_centre_palm(info.grasp_class, size)
+    a_P = approach_palm(info.grasp_class)
+
+    # Per attempt: (1) a free solve (no table) gives the hand's natural
+    # orientation about the object; (2) "up" is chosen in G from it (the
+    # reverse of its approach direction, restricted to what the object's
+    # resting pose allows) and the problem is solved again with the table and
+    # the approach cone.
+    solution = None
+    attempts = [(p, "table1") for p in priors] + [(p, "refined") for p in priors_refine]
+    free_kin = _kinematics(float(coupling_ratio), shape, tuple(dims), None, None)
+    for prior, source in attempts:
+        kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
+            centre_prior_weight=100.0, p_PO_guess=c_table1)
+        free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None, **kw)
+        if not (free.success and free.contact_error < 1.5e-3):
+            continue
+        up = _up_in_grasp_frame(spec.kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
+        kin = _kinematics(float(coupling_ratio), shape, tuple(dims), tuple(np.round(up, 6)),
+                          height)
+        sol = kin.solve_grasp(info.grasp_class, shape, dims, free.q, approach_P=a_P,
+                              X_PO_guess=free.X_PO, min_distance=-MAX_PENETRATION,
+                              max_approach_angle=MAX_APPROACH_ANGLE, **kw)
+        if _acceptable(kin, sol):
+            solution = (sol, up, source, kin)
+            break
+    if solution is None:
+        raise GraspPlanningError(
+            f"unreachable: no collision-free {info.name} grasp puts the "
+            f"{'/'.join(info.fingers)} contacts on this {spec.kind} (grasp width "
+            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
+        )
+    sol, up, source, kin = solution
+
+    # Hand pose in the world.
+    X_PG = sol.X_PO
+    R_GP = X_PG.rotation().inverse().matrix()
+    R_WG = _world_grasp_frame(spec.kind, X_WO, up)
+    forearm_W = R_WG @ R_GP @ np.array([0.0, 0.0, -1.0])  # palm -> forearm direction
+    if spec.kind == "sphere":
+        h = forearm_W[:2]
+        if np.linalg.norm(h) > 1e-6:
+            R_WG = _yaw(R_WG, np.arctan2(-reach[1], -reach[0]) - np.arctan2(h[1], h[0]))
+    elif forearm_W @ -reach < 0:  # the object's symmetric twin: half a turn about vertical
+        R_WG = _yaw(R_WG, np.pi)
+    X_WG = RigidTransform(RotationMatrix(R_WG), X_WO.translation())
+    X_WP = X_WG @ X_PG.inverse()
+    # The forearm is welded at the IK plant's world origin, wrist joints at 0.
+    kin.fingertip_positions(sol.q)
+    X_BP = kin.palm.CalcPoseInWorld(kin.context)
+    X_WB = X_WP @ X_BP.inverse()
+    approach_W = X_WP.rotation().multiply(a_P)
+    retreat = -approach_W if not vertical_standoff else np.array([0.0, 0.0, 1.0])
+    X_WB_pre = RigidTransform(X_WB.rotation(), X_WB.translation() + standoff * retreat)
+    for name, X in (("grasp", X_WB), ("pre-grasp", X_WB_pre)):
+        p = X.translation()
+        if np.any(np.abs(p) > WRIST_RANGE) or p[2] + lift_height > WRIST_RANGE:
+            raise ValueError(
+                f"unreachable pose: the hand base {name} target {np.round(p, 3).tolist()} m "
+                f"(and the lift) is outside the floating wrist's travel of +-{WRIST_RANGE} m"
+            )
+
+    # Pre-shape (open) and closing command along the contact normals.
+    # Opening and squeezing act in the horizontal plane (the outward contact
+    # normal with its vertical part removed), and the opening also lifts the
+    # contacts a little: a pre-shape that swings a fingertip down would hit the
+    # table the plan keeps it clear of.
+    R_PG = X_PG.rotation().matrix()
+    up_P = R_PG @ up
+    moves_open, moves_close = {}, {}
+    for t in contact_layout(info.grasp_class):
+        n = R_PG @ np.asarray(t.normal, dtype=float)
+        n_h = n - (n @ up_P) * up_P
+        n_h = n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2 else n
+        moves_open[t.finger] = (t.part, PRESHAPE_OPENING * n_h + PRESHAPE_LIFT * up_P)
+        moves_close[t.finger] = (t.part, -CLOSING_SQUEEZE * n_h)
+    q_pre = move_contacts(kin, sol.q, moves_open, coupling_ratio)
+    q_close = move_contacts(kin, sol.q, moves_close, coupling_ratio)
+
+    def command(q):
+        return np.array([q[_NAMES.index(n)] for n in _ACT])
+
+    grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
+    return GraspPlan(
+        grasp_class=info.grasp_class, object_spec=spec, grasp_size=size, X_WO=X_WO,
+        X_WG=X_WG, X_WP=X_WP, X_WB=X_WB, X_WB_pregrasp=X_WB_pre, approach_W=approach_W,
+        q_grasp=sol.q, preshape_command=command(q_pre), grasp_command=command(sol.q),
+        close_command=command(q_close), amplitudes=amplitudes,
+        grasp_amplitudes=grasp_amplitudes, p_PC_table1=c_table1,
+        p_PC=X_PG.translation().copy(), centre_source=source,
+        contact_error=sol.contact_error, table_height=float(table_height),
+        lift_height=float(lift_height), coupling_ratio=float(coupling_ratio),
+    )

@@ -1,0 +1,117 @@
+"""Grasp planning: the plan's frames checked on the station's own plant,
+simulated holds through a lift, and clear errors for bad input."""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RotationMatrix
+
+from handle_drake.demo import held_through_lift
+from handle_drake.grasp.kinematics import CONTACT_POINTS, contact_layout
+from handle_drake.grasp.planning import GraspPlanningError, plan_grasp, resting_pose
+from handle_drake.grasp.taxonomy import approach_palm
+from handle_drake.hands import actuated_to_joint_positions, get_hand_spec
+from handle_drake.run import ScenarioRunner
+from handle_drake.scenario import LoadScenario
+from handle_drake.station import GetPlant, MakeHandStation
+from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
+
+SPEC = get_hand_spec("shadow")
+DISTAL = {"th": "thdistal", "ff": "ffdistal", "mf": "mfdistal", "rf": "rfdistal", "lf": "lfdistal"}
+
+
+@pytest.fixture(scope="module")
+def lateral_plan():
+    # A cuboid of width 28 mm: depth (the grasp width) 16.8 mm, height 42 mm.
+    return plan_grasp("lateral", ("cuboid", 0.028), resting_pose("cuboid", 0.028))
+
+
+def _station_contacts(plan):
+    """Contact points in world, from the *station's* plant posed at X_WB, q_grasp."""
+    scenario = plan.to_scenario()
+    station = MakeHandStation(scenario)
+    plant = GetPlant(station)
+    context = plant.CreateDefaultContext()
+    hand = plant.GetModelInstanceByName("hand")
+    wrist = plant.GetModelInstanceByName("wrist")
+    q = actuated_to_joint_positions(SPEC, plan.grasp_command, 1.0)
+    for name, value in zip(SPEC.joint_names, q, strict=True):
+        plant.GetJointByName(name, hand).set_angle(context, value)
+    pose6 = np.array(plan.wrist(plan.X_WB))
+    # The wrist joints are (x y z yaw pitch roll) in that order in the wrist instance.
+    wrist_q = np.zeros(plant.num_positions(wrist))
+    for name, value in zip(WRIST_JOINTS, pose_to_wrist_joints(pose6), strict=True):
+        joint = plant.GetJointByName(name, wrist)
+        wrist_q[joint.position_start() - plant.GetJointByName(WRIST_JOINTS[0], wrist)
+                .position_start()] = value
+    plant.SetPositions(context, wrist, wrist_q)
+    out = {}
+    for t in contact_layout(plan.grasp_class):
+        p_B, _ = CONTACT_POINTS[(t.finger, t.part)]
+        frame = plant.GetBodyByName(DISTAL[t.finger], hand).body_frame()
+        out[t.finger] = plant.CalcPointsPositions(context, frame, p_B, plant.world_frame()).ravel()
+    X_WPalm = plant.GetFrameByName("palm", hand).CalcPoseInWorld(context)
+    return out, X_WPalm
+
+
+def test_planned_contacts_lie_on_the_box_faces_in_the_station(lateral_plan):
+    plan = lateral_plan
+    contacts, X_WP = _station_contacts(plan)
+    X_OW = plan.X_WO.inverse()
+    depth = 0.6 * 0.028
+    # Thumb pad and first-finger side on the two opposite depth faces (y_O = +-depth/2).
+    ys = sorted(X_OW.multiply(p)[1] for p in contacts.values())
+    assert ys[0] == pytest.approx(-depth / 2, abs=1.5e-3)
+    assert ys[1] == pytest.approx(depth / 2, abs=1.5e-3)
+    # The palm pose the plan reports is the station's palm pose (forearm -> palm chain).
+    np.testing.assert_allclose(X_WP.GetAsMatrix4(), plan.X_WP.GetAsMatrix4(), atol=1e-9)
+    # Table 2 approach in the world, and it points down within the 45 degree cone.
+    a_W = X_WP.rotation().multiply(approach_palm("lateral"))
+    np.testing.assert_allclose(a_W, plan.approach_W, atol=1e-12)
+    assert a_W[2] < -np.cos(np.deg2rad(45.0)) + 1e-6
+    # Every fingertip above the table top.
+    assert all(p[2] > 0.0 for p in contacts.values())
+
+
+def test_script_reaches_from_straight_above_then_lifts(lateral_plan):
+    script = lateral_plan.to_script()
+    pre, grasp, lift = (np.array(k.wrist) for k in (script[0], script[1], script[-1]))
+    np.testing.assert_allclose(pre[:2], grasp[:2], atol=1e-12)
+    assert pre[2] - grasp[2] == pytest.approx(0.06)
+    assert lift[2] - grasp[2] == pytest.approx(0.13)
+    # Scenario text round-trips through the loader.
+    scenario = LoadScenario(data=lateral_plan.to_scenario_override())
+    assert scenario.script[-1].wrist == pytest.approx(list(lift))
+
+
+def test_lateral_grasp_on_a_thin_box_holds_through_a_lift(lateral_plan):
+    result = ScenarioRunner(lateral_plan.to_scenario()).run()
+    assert held_through_lift(result), result.object_position[::25, 2]
+
+
+def test_tripod_grasp_on_a_cylinder_holds_through_a_lift():
+    plan = plan_grasp("tripod", ("cylinder", 0.045), resting_pose("cylinder", 0.045))
+    result = ScenarioRunner(plan.to_scenario()).run()
+    assert held_through_lift(result), result.object_position[::25, 2]
+
+
+def test_bad_input_raises_clear_errors():
+    X = resting_pose("sphere", 0.04)
+    with pytest.raises(ValueError, match="unknown grasp class 'power'"):
+        plan_grasp("power", ("sphere", 0.04), X)
+    with pytest.raises(ValueError, match="too large for a tripod"):
+        plan_grasp("tripod", ("sphere", 0.12), resting_pose("sphere", 0.12))
+    with pytest.raises(ValueError, match="too small for a lateral"):
+        plan_grasp("lateral", ("cuboid", 0.004), resting_pose("cuboid", 0.004))
+    with pytest.raises(ValueError, match="cannot plan a grasp on a 'mug'"):
+        plan_grasp("tripod", ("mug", 0.05), X)
+    with pytest.raises(TypeError, match="RigidTransform"):
+        plan_grasp("tripod", ("sphere", 0.04), [0, 0, 0.02])
+    with pytest.raises(ValueError, match="above the table top"):
+        plan_grasp("tripod", ("sphere", 0.04), RigidTransform([0, 0, -0.01]))
+    standing = RigidTransform(RotationMatrix(), [0, 0, 0.045])  # cylinder axis vertical
+    with pytest.raises(ValueError, match="lying on its side"):
+        plan_grasp("tripod", ("cylinder", 0.045), standing)
+    far = resting_pose("cylinder", 0.045, xy=(2.5, 0.0))  # beyond the wrist's 2 m travel
+    with pytest.raises(ValueError, match="unreachable pose"):
+        plan_grasp("tripod", ("cylinder", 0.045), far)
+    assert issubclass(GraspPlanningError, ValueError)
