@@ -20,14 +20,14 @@ __all__ = ["register", "run_grasp", "write_class_scenarios"]
 
 #: The object each class's scenario in ``diagrams/`` grasps: (kind, catalogue size m).
 CLASS_OBJECTS = {
-    "palmar_pinch": ("cuboid", 0.05),
-    "tip_pinch": ("cuboid", 0.04),
-    "tripod": ("cylinder", 0.045),
-    "writing_tripod": ("cuboid", 0.03),
-    "lateral": ("cuboid", 0.028),
-    "lateral_tripod": ("cuboid", 0.04),
-    "adduction_grip": ("cuboid", 0.022),
-    "parallel_extension": ("cuboid", 0.058),
+    "palmar_pinch": ("cuboid", 0.0667),  # grasp width (cuboid depth) 40 mm
+    "tip_pinch": ("cuboid", 0.0367),  # 22 mm
+    "tripod": ("cuboid", 0.075),  # 45 mm
+    "writing_tripod": ("sphere", 0.024),  # plans, but no writing-tripod plan held yet
+    "lateral": ("cuboid", 0.028),  # 16.8 mm, a thin box
+    "lateral_tripod": ("cuboid", 0.0417),  # 25 mm
+    "adduction_grip": ("sphere", 0.010),
+    "parallel_extension": ("cuboid", 0.075),  # 45 mm
 }
 
 
