@@ -1,0 +1,343 @@
+"""Grasp babbling experiments: dense-grid ground truth, batches of logged runs, sample efficiency.
+
+The pieces the ``handle-drake report`` figures, the ``babble`` command and
+``benchmarks/bench_babbling.py`` share (report section 4.3):
+
+- :func:`grid_values`: the noiseless metric of a :class:`GraspTrial` on a
+  dense grid of its parameter box, evaluated in a process pool and cached in
+  an ``.npz`` file (the "global maximum" of Table 3 is the grid's maximum).
+- :func:`run_batch`: many :func:`run_experiment` runs (objects x strategies x
+  seeds) in one SQLite trial log, a whole run per worker process (a run is
+  sequential; two runs in parallel use both cores). Re-running a batch
+  resumes it: finished runs cost nothing.
+- :func:`run_history`: a run's trials as arrays, with the *noiseless* metric
+  the grasp trial logs next to the (noisy) observed one.
+- :func:`trials_to_within`: the trial count of Table 3's 5 %, 10 %, 20 %
+  columns.
+- :func:`replay_optimizer`: a fresh optimiser told the first ``k`` trials of
+  a logged run, i.e. exactly the GP and EI that proposed trial ``k + 1``
+  (the optimiser's state is a function of its seed and the told data only).
+
+"Within p of the global maximum" (Table 3): the first trial whose noiseless
+metric ``f(x_t)`` satisfies ``f(x_t) >= f* - p |f*|`` with ``f*`` the grid
+maximum. Judging by the noiseless metric of the trial's parameters (not the
+noisy observation) measures how good the grasp that was found really is; a
+lucky noise draw does not count.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import hashlib
+import json
+import math
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+
+from handle_drake.learning.bayesopt import make_optimizer
+from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.learning.trials import InlineExecutor, TrialLog, run_experiment
+
+__all__ = [
+    "CachedTrial",
+    "RunSpec",
+    "RunHistory",
+    "grid_points",
+    "grid_values",
+    "run_batch",
+    "run_history",
+    "trials_to_within",
+    "replay_optimizer",
+    "best_so_far",
+    "FRACTIONS",
+]
+
+FRACTIONS = (0.05, 0.10, 0.20)  # Table 3's columns
+
+# --------------------------------------------------------------- worker side
+_TRIALS: dict = {}  # GraspTrialConfig -> GraspTrial, one diagram per worker process
+
+
+def _trial(config: GraspTrialConfig) -> GraspTrial:
+    trial = _TRIALS.get(config)
+    if trial is None:
+        trial = _TRIALS[config] = GraspTrial(config)
+        # The built diagram does not depend on the metric noise (it is added
+        # after scoring): share it between configs that differ only there.
+        for other_config, other in _TRIALS.items():
+            if other._built is not None and dc.replace(other_config, noise=0.0) == dc.replace(
+                    config, noise=0.0):
+                trial._built = other._built
+                break
+    return trial
+
+
+class CachedTrial:
+    """A picklable objective that evaluates the process's cached :class:`GraspTrial` of ``config``.
+
+    Shipping a ``GraspTrial`` to a process pool with every trial would rebuild
+    its diagram each time; this handle holds only the config, and each worker
+    builds the diagram once on its first trial.
+    """
+
+    def __init__(self, config: GraspTrialConfig):
+        self.config = config
+        self.name = GraspTrial(config).name
+
+    def __call__(self, x, seed: int = 0):
+        return _trial(self.config)(x, seed=seed)
+
+
+def _pin_blas_worker():
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
+
+
+def _pool(workers: int):
+    """A spawn process pool with one BLAS thread per worker, or None to run inline."""
+    if workers <= 1:
+        return None
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_pin_blas_worker)
+
+
+def _check_workers(workers) -> int:
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    return int(workers)
+
+
+# ---------------------------------------------------------------------- grid
+def grid_points(bounds, n: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """Axes (one ``linspace`` of ``n`` points per dimension) and the (n^d, d) grid, 'ij' order."""
+    bounds = np.asarray(bounds, dtype=float)
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 2:
+        raise ValueError(f"grid: expected an integer >= 2 points per dimension, got {n!r}")
+    axes = [np.linspace(lo, hi, int(n)) for lo, hi in bounds]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return axes, np.column_stack([m.ravel() for m in mesh])
+
+
+def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
+    trial = _trial(config)
+    return np.array([trial.evaluate(x).metric_noiseless for x in points])
+
+
+def _config_key(config: GraspTrialConfig) -> str:
+    text = json.dumps(dc.asdict(config), sort_keys=True)
+    return hashlib.sha1(text.encode()).hexdigest()[:10]
+
+
+def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int = 1,
+                progress: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
+    """Noiseless metric of the trial on an ``n``-per-dimension grid of its box.
+
+    Returns ``(axes, values)`` with ``values`` shaped ``(n,) * d`` ('ij'
+    indexing). With ``cache_dir`` the values are stored in
+    ``<cache_dir>/<hand>-<object>-<space>-n<n>-<config hash>.npz`` and read
+    back on the next call (the hash covers every field of the config, noise
+    included, so a changed trial is never served stale values).
+    """
+    workers = _check_workers(workers)
+    config = dc.replace(config, noise=0.0)
+    trial = GraspTrial(config)
+    axes, points = grid_points(trial.bounds, n)
+    cache = None
+    if cache_dir is not None:
+        cache = Path(cache_dir) / f"{trial.name}-n{n}-{_config_key(config)}.npz"
+        if cache.exists():
+            with np.load(cache) as data:
+                if data["points"].shape == points.shape and np.array_equal(data["points"], points):
+                    return axes, data["values"].reshape((n,) * len(axes))
+    chunks = np.array_split(points, max(1, min(len(points), 8 * workers)))
+    pool = _pool(workers)
+    try:
+        if pool is None:
+            values = [_grid_chunk(config, chunk) for chunk in chunks]
+        else:
+            futures = {pool.submit(_grid_chunk, config, chunk): i for i, chunk in enumerate(chunks)}
+            values = [None] * len(chunks)
+            bar = _bar(len(chunks), f"grid {trial.name} {n}^{len(axes)}", progress)
+            for future in as_completed(futures):
+                values[futures[future]] = future.result()
+                bar.update(1)
+            bar.close()
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    flat = np.concatenate(values)
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_suffix(".tmp.npz")
+        np.savez(tmp, points=points, values=flat)
+        os.replace(tmp, cache)  # a killed run never leaves a half-written cache
+    return axes, flat.reshape((n,) * len(axes))
+
+
+def _bar(total, description, enabled):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=description, disable=not enabled, unit="job")
+
+
+# ------------------------------------------------------------------- batches
+@dc.dataclass(frozen=True)
+class RunSpec:
+    """One logged run: a grasp trial, an optimiser, a seed and a trial budget."""
+
+    config: GraspTrialConfig
+    strategy: str = "bo"
+    seed: int = 0
+    n_trials: int = 100
+    options: tuple = ()  # optimiser options as sorted (name, value) pairs (hashable)
+
+    @property
+    def run_id(self) -> str:
+        trial = GraspTrial(self.config)
+        extra = "" if not self.options else "-" + _config_key_options(self.options)
+        noise = f"-noise{self.config.noise:g}" if self.config.noise else ""
+        return f"{trial.name}{noise}-{self.strategy}{extra}-seed{self.seed}"
+
+
+def _config_key_options(options) -> str:
+    return hashlib.sha1(json.dumps(list(options), sort_keys=True).encode()).hexdigest()[:8]
+
+
+def _run_one(spec: RunSpec, db_path: str):
+    trial = _trial(spec.config)
+    result = run_experiment(
+        trial, trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
+        executor=InlineExecutor(), progress=False, run_id=spec.run_id,
+        objective_name=trial.name, optimizer_options=dict(spec.options),
+    )
+    return spec.run_id, result.n_done, result.best_y
+
+
+def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
+    """Run (or resume) every run of ``specs`` into one trial log, ``workers`` runs at a time."""
+    workers = _check_workers(workers)
+    specs = list(specs)
+    ids = [s.run_id for s in specs]
+    if len(set(ids)) != len(ids):
+        raise ValueError("run_batch: two runs have the same run_id")
+    db_path = str(db_path)
+    Path(db_path).parent.mkdir(parents=True, exist_ok=True)
+    TrialLog(db_path).close()  # create (or validate) the file before workers open it
+    todo = [s for s in specs if not _complete(s, db_path)]
+    if not todo:
+        return
+    bar = _bar(len(todo), f"runs -> {Path(db_path).name}", progress)
+    pool = _pool(min(workers, len(todo)))
+    try:
+        if pool is None:
+            for spec in todo:
+                _run_one(spec, db_path)
+                bar.update(1)
+        else:
+            futures = [pool.submit(_run_one, spec, db_path) for spec in todo]
+            for future in as_completed(futures):
+                run_id, n_done, best = future.result()
+                bar.update(1)
+                bar.set_postfix_str(f"{run_id}: best {best:.3g}")
+    finally:
+        bar.close()
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _complete(spec: RunSpec, db_path) -> bool:
+    """True when the log holds a finished run for ``spec`` (budget used or BO converged)."""
+    with TrialLog(db_path) as log:
+        if log.get_run(spec.run_id) is None:
+            return False
+        records = log.trials(spec.run_id)
+    if any(r.status in ("pending", "running") for r in records):
+        return False
+    if len(records) >= spec.n_trials:
+        return True
+    if spec.strategy != "bo":
+        return False
+    # A BO run that stopped early converged: replaying its trials says so.
+    optimizer = replay_optimizer(spec, records)
+    optimizer.ask()
+    return bool(optimizer.converged)
+
+
+@dc.dataclass
+class RunHistory:
+    """A logged run as arrays, in trial order (failed trials carry nan metrics)."""
+
+    run_id: str
+    X: np.ndarray  # (n, d) parameters
+    observed: np.ndarray  # (n,) metric as the optimiser saw it (noise included)
+    noiseless: np.ndarray  # (n,) the trial's noiseless metric
+    wall_time: np.ndarray  # (n,) s per trial
+
+
+def run_history(db_path, spec_or_run_id) -> RunHistory:
+    run_id = spec_or_run_id if isinstance(spec_or_run_id, str) else spec_or_run_id.run_id
+    with TrialLog(db_path) as log:
+        if log.get_run(run_id) is None:
+            raise ValueError(f"run {run_id!r} is not in {db_path}")
+        records = log.trials(run_id)
+    X = np.array([r.parameters for r in records])
+    observed = np.array([np.nan if r.metric is None else r.metric for r in records])
+    noiseless = np.array([
+        r.contacts.get("metric_noiseless", np.nan) if isinstance(r.contacts, dict) else np.nan
+        for r in records])
+    noiseless = np.where(np.isnan(noiseless), observed, noiseless)
+    wall = np.array([np.nan if r.wall_time is None else r.wall_time for r in records])
+    return RunHistory(run_id, X, observed, noiseless, wall)
+
+
+def replay_optimizer(spec: RunSpec, records_or_history, k: int | None = None):
+    """A fresh optimiser of ``spec`` told the first ``k`` logged trials (all when None)."""
+    optimizer = make_optimizer(spec.strategy, GraspTrial(spec.config).bounds, spec.seed,
+                               **dict(spec.options))
+    if isinstance(records_or_history, RunHistory):
+        pairs = list(zip(records_or_history.X, records_or_history.observed, strict=True))
+    else:
+        pairs = [(r.parameters, math.nan if r.metric is None else r.metric)
+                 for r in records_or_history if r.status in ("done", "failed")]
+    for x, y in pairs[: len(pairs) if k is None else k]:
+        if math.isfinite(y):
+            optimizer.tell(x, y)
+        else:
+            optimizer.tell_failure(x)
+    return optimizer
+
+
+# ------------------------------------------------------------------ measures
+def best_so_far(values, length: int | None = None) -> np.ndarray:
+    """Running maximum of ``values`` (nan ignored), held flat up to ``length`` entries."""
+    values = np.asarray(values, dtype=float)
+    running = np.fmax.accumulate(np.where(np.isnan(values), -np.inf, values)) if values.size \
+        else values
+    if length is not None and length > running.size:
+        fill = running[-1] if running.size else -np.inf
+        running = np.concatenate([running, np.full(length - running.size, fill)])
+    return running
+
+
+def trials_to_within(values, global_max: float, fractions=FRACTIONS) -> list[float]:
+    """Per fraction p: the 1-based index of the first value >= ``global_max - p |global_max|``.
+
+    ``inf`` when no value gets there.
+    """
+    values = np.asarray(values, dtype=float)
+    if not math.isfinite(global_max):
+        raise ValueError(f"global_max: expected a finite value, got {global_max}")
+    out = []
+    for p in fractions:
+        if not 0 <= p < 1:
+            raise ValueError(f"fractions: expected values in [0, 1), got {p}")
+        hit = np.flatnonzero(values >= global_max - p * abs(global_max))
+        out.append(float(hit[0] + 1) if hit.size else math.inf)
+    return out

@@ -1,0 +1,230 @@
+"""``handle-drake babble`` and ``handle-drake report`` (report section 4.3).
+
+Examples::
+
+    handle-drake babble --hand barrett --object mug --dims 2 --strategy bo --trials 60 \\
+        --seed 1 --noise 0.01 --db out/babble.sqlite
+    handle-drake babble --hand shadow --object cuboid --space synergy --trials 100
+    handle-drake babble --object sphere --strategy random --trials 200 --workers 2
+    handle-drake report --out out/report            # full: ~30 min on 2 cores
+    handle-drake report --out /tmp/r --reduced      # seconds
+
+``babble`` logs every trial to the SQLite file ``--db`` and resumes the run
+(same hand, object, space, noise, strategy and seed) if it is already there:
+an interrupted run continues where it stopped, with no trial repeated or lost.
+Bad arguments print an error and exit with status 2.
+
+Also runnable as ``python -m handle_drake.learning.cli``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from pathlib import Path
+
+from handle_drake.objects import KINDS
+
+__all__ = ["register", "main", "build_parser", "SPACE_OF_DIMS"]
+
+SPACE_OF_DIMS = {1: "standoff", 2: "offset"}
+_PARAMETER_NAMES = {
+    "standoff": ("standoff_m",),
+    "offset": ("x_offset_m", "y_offset_m"),
+    "synergy": ("thumb_abduction", "index_middle_abduction"),
+}
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = _non_negative_float(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text}")
+    return value
+
+
+def register(subparsers) -> None:
+    """Adds ``babble`` and ``report`` to an argparse sub-parser collection."""
+    p = subparsers.add_parser(
+        "babble", help="learn a grasp by trial: BO or random search over grasp parameters",
+        description="Runs (or resumes) grasp trials chosen by Bayesian optimisation or random "
+                    "search and logs each one to an SQLite file.")
+    p.add_argument("--hand", choices=("barrett", "shadow"), default="barrett")
+    p.add_argument("--object", choices=KINDS, default="sphere")
+    p.add_argument("--dims", type=int, choices=(1, 2), default=None,
+                   help="1: standoff along the approach axis; 2: (x, y) offset (default 2)")
+    p.add_argument("--space", choices=("standoff", "offset", "synergy"), default=None,
+                   help="parameter space (synergy: Shadow anatomical synergies, 2-D)")
+    p.add_argument("--strategy", choices=("bo", "random"), default="bo")
+    p.add_argument("--trials", type=_positive_int, default=50,
+                   help="trials in the run (BO may stop earlier on its EI rule)")
+    p.add_argument("--seed", type=_non_negative_int, default=0)
+    p.add_argument("--noise", type=_non_negative_float, default=0.0,
+                   help="std of Gaussian noise added to the metric (seeded per trial)")
+    p.add_argument("--size", type=_positive_float, default=None,
+                   help="object size in m (default: the babbling catalogue's)")
+    p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
+                   help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
+    p.add_argument("--workers", type=_positive_int, default=1,
+                   help="parallel trials for random search (BO is sequential)")
+    p.add_argument("--run-id", default=None, help="name of the run in the log")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_babble)
+
+    p = subparsers.add_parser(
+        "report", help="reproduce the babbling figures and Table 3 of report section 4.3",
+        description="Runs every babbling experiment (cached: re-running is cheap) and writes "
+                    "PNG figures, table3.md/csv and summary.json.")
+    p.add_argument("--out", type=Path, default=Path("out/report"), help="output folder")
+    p.add_argument("--seeds", type=_positive_int, default=None, help="seeds per comparison")
+    p.add_argument("--trials", type=_positive_int, default=None, help="trials per 2-D run")
+    p.add_argument("--grid", type=int, default=None,
+                   help="points per dimension of the ground-truth grids (>= 2)")
+    p.add_argument("--noise", type=_non_negative_float, default=None,
+                   help="metric noise std of the 2-D runs")
+    p.add_argument("--workers", type=_positive_int, default=None, help="processes (default 2)")
+    p.add_argument("--reduced", action="store_true",
+                   help="tiny grids and few trials (also HANDLE_DRAKE_REDUCED=1)")
+    p.add_argument("--no-progress", action="store_true", help="no progress output")
+    p.set_defaults(func=_cmd_report)
+
+
+def _resolve_space(args) -> str:
+    if args.space is None:
+        return SPACE_OF_DIMS[args.dims or 2]
+    if args.dims is not None and SPACE_OF_DIMS.get(args.dims) != args.space and not (
+            args.space == "synergy" and args.dims == 2):
+        raise ValueError(f"--dims {args.dims} contradicts --space {args.space}")
+    return args.space
+
+
+def _cmd_babble(args) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+
+    from handle_drake.learning.babbling import CachedTrial, RunSpec, _pool
+    from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
+    from handle_drake.learning.trials import (
+        InlineExecutor,
+        TrialLog,
+        TrialLogError,
+        run_experiment,
+    )
+
+    space = _resolve_space(args)
+    if args.strategy == "bo" and args.workers > 1:
+        raise ValueError(f"--workers {args.workers}: Bayesian optimisation is sequential "
+                         "(one trial at a time); use --workers 1 or --strategy random")
+    config = GraspTrialConfig(hand=args.hand, object=args.object, space=space, noise=args.noise,
+                              size=args.size)
+    trial = GraspTrial(config)
+    run_id = args.run_id or RunSpec(config, args.strategy, args.seed).run_id
+    args.db.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
+    except TrialLogError as error:  # the lead's CLI maps ValueError to exit status 2
+        raise ValueError(f"--db: {error}") from None
+    if args.workers > 1:
+        objective, executor = CachedTrial(config), _pool(args.workers)
+    else:
+        objective, executor = trial, InlineExecutor()
+    print(f"babble: {trial.name}, {args.strategy}, seed {args.seed}, up to {args.trials} "
+          f"trials, run {run_id!r} in {args.db}", flush=True)
+    try:
+        result = run_experiment(
+            objective, trial.bounds, args.strategy, args.trials, args.seed, args.db,
+            executor=executor, progress=not args.no_progress, run_id=run_id,
+            objective_name=trial.name)
+    finally:
+        if isinstance(executor, ProcessPoolExecutor):
+            executor.shutdown(wait=True, cancel_futures=True)
+    print(f"trials: {result.n_done} done, {result.n_failed} failed"
+          + (" (BO stopped: expected improvement below threshold)" if result.converged else ""))
+    if result.best_x is None:
+        print("no successful trial")
+        return 1
+    names = _PARAMETER_NAMES[space]
+    params = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, result.best_x, strict=True))
+    best = max((r for r in result.trials if r.status == "done"), key=lambda r: r.metric)
+    clean = best.contacts.get("metric_noiseless") if isinstance(best.contacts, dict) else None
+    print(f"best metric {result.best_y:.6g} (trial {best.index}"
+          + (f", noiseless {clean:.6g}" if clean is not None and args.noise > 0 else "")
+          + f"): {params}")
+    return 0
+
+
+def _cmd_report(args) -> int:
+    from handle_drake.learning.report import make_report
+
+    if args.grid is not None and args.grid < 2:
+        raise ValueError(f"--grid: expected an integer >= 2, got {args.grid}")
+    reduced = True if args.reduced else None
+    summary = make_report(args.out, seeds=args.seeds, trials=args.trials, grid=args.grid,
+                          reduced=reduced, workers=args.workers, noise=args.noise,
+                          progress=not args.no_progress)
+    print((Path(args.out) / "table3.md").read_text())
+    for kind, entry in summary["bo_vs_random"].items():
+        marks = entry["bo"]["median_best_at"]
+        last = max(marks)
+        print(f"{kind}: median best after {last} trials: BO {marks[last]:.3f}, random "
+              f"{entry['random']['median_best_at'][last]:.3f} (grid max {entry['grid_max']:.3f})")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="handle-drake", description="Grasp babbling.")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The two sub-commands on their own (``handle_drake.cli`` registers them too)."""
+    from handle_drake.learning.trials import TrialLogError
+
+    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(variable, "1")
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
+        print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"handle-drake {args.command}: interrupted; run it again to resume",
+              file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,170 @@
+"""``handle-drake babble`` / ``report``: runs, resumes, refuses bad input, writes its files."""
+
+import csv
+import json
+import sqlite3
+
+import numpy as np
+import pytest
+
+from handle_drake.learning import grasp_trial
+from handle_drake.learning.cli import main
+from handle_drake.learning.grasp_trial import GraspTrial
+from handle_drake.learning.trials import TrialLog
+
+ARGS = ["babble", "--object", "sphere", "--dims", "2", "--trials", "5", "--seed", "3",
+        "--noise", "0.01", "--no-progress"]
+
+
+def _rows(db):
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        return log.trials(run.run_id)
+
+
+@pytest.fixture(scope="module")
+def reference_run(tmp_path_factory):
+    """An uninterrupted 5-trial BO run, the truth the resumed run must match."""
+    db = tmp_path_factory.mktemp("ref") / "ref.sqlite"
+    assert main([*ARGS, "--db", str(db)]) == 0
+    return db, _rows(db)
+
+
+def test_babble_logs_every_trial_and_prints_the_best(reference_run, capsys, tmp_path):
+    db, rows = reference_run
+    assert [r.index for r in rows] == list(range(5))
+    assert all(r.status == "done" for r in rows)
+    bounds = GraspTrial(hand="barrett", object="sphere", space="offset").bounds
+    X = np.array([r.parameters for r in rows])
+    assert np.all((X >= bounds[:, 0]) & (X <= bounds[:, 1]))
+    # Each logged noiseless metric is what the simulation gives at those
+    # parameters, and the noise is the configured size.
+    trial = GraspTrial(hand="barrett", object="sphere", space="offset")
+    best = max(rows, key=lambda r: r.metric)
+    clean = trial.evaluate(best.parameters).metric_noiseless
+    assert best.contacts["metric_noiseless"] == pytest.approx(clean, abs=1e-9)
+    assert all(abs(r.metric - r.contacts["metric_noiseless"]) < 0.06 for r in rows)
+    assert all("hand:" in r.scenario and "barrett" in r.scenario for r in rows)
+    # Same seed, new file: the same trials (determinism), and the best is printed.
+    capsys.readouterr()
+    assert main([*ARGS, "--db", str(tmp_path / "again.sqlite")]) == 0
+    out = capsys.readouterr().out
+    again = _rows(tmp_path / "again.sqlite")
+    assert [r.parameters.tolist() for r in again] == [r.parameters.tolist() for r in rows]
+    assert [r.metric for r in again] == [r.metric for r in rows]
+    assert f"best metric {best.metric:.6g}" in out
+    assert f"x_offset_m = {best.parameters[0]:.6g}" in out
+
+
+def test_babble_resumes_an_interrupted_run_without_repeating_trials(
+        reference_run, tmp_path, monkeypatch):
+    _, reference = reference_run
+    db = tmp_path / "resume.sqlite"
+    evaluate = GraspTrial.evaluate
+    calls = []
+
+    def interrupted_on_third(self, x, seed=0):
+        calls.append(np.array(x))
+        if len(calls) == 3:
+            raise KeyboardInterrupt  # Ctrl-C in the middle of trial 2
+        return evaluate(self, x, seed=seed)
+
+    monkeypatch.setattr(grasp_trial.GraspTrial, "evaluate", interrupted_on_third)
+    assert main([*ARGS, "--db", str(db)]) == 130
+    before = _rows(db)
+    assert [r.status for r in before] == ["done", "done", "running"]
+
+    calls.clear()
+    monkeypatch.setattr(grasp_trial.GraspTrial, "evaluate", evaluate)
+    counted = []
+
+    def counting(self, x, seed=0):
+        counted.append(np.array(x))
+        return evaluate(self, x, seed=seed)
+
+    monkeypatch.setattr(grasp_trial.GraspTrial, "evaluate", counting)
+    assert main([*ARGS, "--db", str(db)]) == 0
+    after = _rows(db)
+    # Only the interrupted trial and the two never started ran again.
+    assert len(counted) == 3
+    np.testing.assert_array_equal(counted[0], before[2].parameters)
+    # The finished trials were not touched.
+    for old, new in zip(before[:2], after[:2], strict=True):
+        assert (new.metric, new.finished_at) == (old.metric, old.finished_at)
+    # The resumed run is the run that was never interrupted.
+    assert [r.parameters.tolist() for r in after] == [r.parameters.tolist() for r in reference]
+    assert [r.metric for r in after] == [r.metric for r in reference]
+    # Asking for more trials later continues the same run.
+    assert main([*ARGS[:-1], "--trials", "6", "--db", str(db), "--no-progress"]) == 0
+    assert len(_rows(db)) == 6
+
+
+@pytest.mark.parametrize("bad, message", [
+    (["--trials", "0"], "positive integer"),
+    (["--trials", "ten"], "positive integer"),
+    (["--seed", "-1"], "integer >= 0"),
+    (["--noise", "nan"], "finite number"),
+    (["--object", "teapot"], "invalid choice"),
+    (["--dims", "3"], "invalid choice"),
+])
+def test_babble_bad_arguments_exit_2_with_a_message(bad, message, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["babble", *bad, "--db", str(tmp_path / "x.sqlite")])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "x.sqlite").exists()
+
+
+@pytest.mark.parametrize("bad, message", [
+    (["--space", "synergy"], "needs the shadow hand"),
+    (["--dims", "1", "--space", "offset"], "contradicts"),
+    (["--strategy", "bo", "--workers", "2"], "sequential"),
+])
+def test_babble_inconsistent_arguments_exit_2(bad, message, tmp_path, capsys):
+    assert main(["babble", *bad, "--db", str(tmp_path / "x.sqlite")]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_babble_refuses_a_corrupt_database_and_leaves_it_alone(tmp_path, capsys):
+    db = tmp_path / "broken.sqlite"
+    garbage = b"not a database at all\x00" * 50
+    db.write_bytes(garbage)
+    assert main(["babble", "--trials", "2", "--db", str(db), "--no-progress"]) == 2
+    assert "not an SQLite database" in capsys.readouterr().err
+    assert db.read_bytes() == garbage
+    # An SQLite file of something else is not touched either.
+    other = tmp_path / "other.sqlite"
+    with sqlite3.connect(other) as conn:
+        conn.execute("CREATE TABLE notes (text TEXT)")
+    size = other.stat().st_size
+    assert main(["babble", "--trials", "2", "--db", str(other), "--no-progress"]) == 2
+    assert "not a handle_drake trial log" in capsys.readouterr().err
+    assert other.stat().st_size == size
+
+
+def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["report", "--out", str(out), "--reduced", "--no-progress"]) == 0
+    for name in ("fig21_sphere_1d.png", "fig22_star_prism_1d.png", "fig23_wine_glass_2d.png",
+                 "fig24_mug_2d.png", "fig25_star_prism_2d.png", "fig23_25_all_objects_2d.png",
+                 "fig26_sphere_bo_vs_random.png", "fig27_mug_bo_vs_random.png",
+                 "fig28_synergy_gp_mean.png"):
+        data = (out / name).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000, name
+    with open(out / "table3.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["object"] for r in rows] == ["sphere", "wine_glass", "cylinder", "mug", "cuboid",
+                                           "rotated_cuboid", "star_prism"]
+    assert rows[3]["report total"] == "331" and rows[6]["report 5%"] == "105"
+    summary = json.loads((out / "summary.json").read_text())
+    # The grid is 3x3, so its centre is the centred grasp: the grid maximum
+    # can be no lower than an independent trial there.
+    centre = GraspTrial(hand="barrett", object="sphere", space="offset").evaluate([0.0, 0.0])
+    assert summary["table3"]["sphere"]["grid_max"] >= centre.metric_noiseless - 1e-12
+    assert "| sphere |" in (out / "table3.md").read_text()
+    # Everything is cached: a second report runs no trial.
+    with TrialLog(out / "babble.sqlite") as log:
+        count = sum(len(log.trials(r.run_id)) for r in log.runs())
+    assert main(["report", "--out", str(out), "--reduced", "--no-progress"]) == 0
+    with TrialLog(out / "babble.sqlite") as log:
+        assert sum(len(log.trials(r.run_id)) for r in log.runs()) == count

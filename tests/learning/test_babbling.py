@@ -1,0 +1,73 @@
+"""Babbling helpers: Table 3's counts, best-so-far curves, cached grids, replayed optimisers."""
+
+import math
+
+import numpy as np
+import pytest
+
+from handle_drake.learning.babbling import (
+    RunSpec,
+    best_so_far,
+    grid_points,
+    grid_values,
+    replay_optimizer,
+    run_batch,
+    run_history,
+    trials_to_within,
+)
+from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
+
+
+def test_trials_to_within_counts_the_first_trial_in_each_band():
+    # Maximum 1.0: 0.79 is 21 % short, 0.85 within 20 %, 0.91 within 10 %, 0.96 within 5 %.
+    values = [0.5, 0.79, 0.85, 0.7, 0.91, 0.96]
+    assert trials_to_within(values, 1.0) == [6.0, 5.0, 3.0]
+    assert trials_to_within([0.1, 0.2], 1.0) == [math.inf] * 3
+    # A negative maximum: "within 10 %" means at least -1.1.
+    assert trials_to_within([-1.2, -1.08, -1.0], -1.0, (0.1,)) == [2.0]
+    with pytest.raises(ValueError, match="global_max"):
+        trials_to_within([1.0], math.nan)
+    with pytest.raises(ValueError, match="fractions"):
+        trials_to_within([1.0], 1.0, (1.5,))
+
+
+def test_best_so_far_ignores_failures_and_holds_after_an_early_stop():
+    np.testing.assert_array_equal(best_so_far([0.2, np.nan, 0.1, 0.5], 6),
+                                  [0.2, 0.2, 0.2, 0.5, 0.5, 0.5])
+
+
+def test_grid_points_span_the_box_in_ij_order():
+    axes, points = grid_points([[0.0, 1.0], [-2.0, 2.0]], 3)
+    assert points.shape == (9, 2)
+    np.testing.assert_array_equal(points[:3], [[0, -2], [0, 0], [0, 2]])
+    with pytest.raises(ValueError, match="expected an integer >= 2"):
+        grid_points([[0.0, 1.0]], 1)
+
+
+def test_grid_values_are_the_trials_noiseless_metric_and_cached(tmp_path, monkeypatch):
+    config = GraspTrialConfig(hand="barrett", object="sphere", space="standoff", noise=0.3)
+    (axis,), values = grid_values(config, 3, cache_dir=tmp_path)
+    trial = GraspTrial(hand="barrett", object="sphere", space="standoff")
+    np.testing.assert_array_equal(axis, [0.0, 0.06, 0.12])
+    expected = [trial.evaluate([s]).metric for s in axis]  # noise is ignored for the grid
+    np.testing.assert_allclose(values, expected, atol=1e-12)
+    # The second call reads the cache and runs no simulation.
+    monkeypatch.setattr(GraspTrial, "evaluate", lambda *a, **k: pytest.fail("not cached"))
+    _, again = grid_values(config, 3, cache_dir=tmp_path)
+    np.testing.assert_array_equal(again, values)
+
+
+def test_replayed_optimizer_proposes_the_logged_next_trial(tmp_path):
+    config = GraspTrialConfig(hand="barrett", object="mug", space="offset", noise=0.01)
+    spec = RunSpec(config, "bo", seed=2, n_trials=6)
+    db = tmp_path / "t.sqlite"
+    run_batch([spec], db, workers=1, progress=False)
+    history = run_history(db, spec)
+    assert len(history.X) == 6
+    # The optimiser rebuilt from the first 4 trials asks exactly for trial 5.
+    optimizer = replay_optimizer(spec, history, 4)
+    np.testing.assert_allclose(optimizer.ask(), history.X[4], rtol=0, atol=1e-12)
+    # Noise is in the observed metric, not in the noiseless one.
+    assert 0 < np.max(np.abs(history.observed - history.noiseless)) < 0.05
+    with pytest.raises(ValueError, match="two runs have the same run_id"):
+        run_batch([spec, spec], db)
