@@ -18,7 +18,10 @@ import sys
 from pathlib import Path
 
 # Modules that add their own sub-commands with ``register(subparsers)``.
-AREA_COMMANDS: tuple[str, ...] = ("handle_drake.can_hand.cli",)
+AREA_COMMANDS: tuple[str, ...] = (
+    "handle_drake.grasp.cli",
+    "handle_drake.can_hand.cli",
+)
 
 
 def _pin_blas() -> None:

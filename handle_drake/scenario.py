@@ -107,6 +107,9 @@ class ObjectConfig:
 
     kind: str = "sphere"
     size: float = 0.06  # m, the kind's characteristic length
+    # Optional overrides (m) of the kind's other dimensions, e.g. {depth: 0.01}
+    # for a thin box; see handle_drake.objects.PROPORTIONS.
+    dimensions: dict[str, float] = dc.field(default_factory=dict)
     mass: float | None = None  # kg; None derives it from the kind's density
     mu: float = 0.8  # Coulomb friction coefficient (static = dynamic)
     X_WO: Transform = dc.field(default_factory=Transform)
@@ -261,6 +264,13 @@ def validate_scenario(scenario: Scenario) -> None:
                 f"expected one of {list(KINDS)}"
             )
         _check_positive("object.size", scenario.object.size)
+        from handle_drake.objects import ObjectSpec
+
+        try:
+            ObjectSpec(kind=scenario.object.kind, size=scenario.object.size,
+                       dimensions=scenario.object.dimensions or None)
+        except ValueError as error:
+            raise ScenarioError(f"object: {error}") from None
         if scenario.object.mass is not None:
             _check_positive("object.mass", scenario.object.mass)
         if not (math.isfinite(scenario.object.mu) and scenario.object.mu >= 0):

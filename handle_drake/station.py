@@ -212,7 +212,8 @@ def object_spec(scenario: Scenario):
     from handle_drake.objects import ObjectSpec
 
     o = scenario.object
-    return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu)
+    return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu,
+                      dimensions=o.dimensions or None)
 
 
 def object_initial_pose(scenario: Scenario) -> RigidTransform:

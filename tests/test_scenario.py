@@ -75,6 +75,8 @@ def test_dump_round_trips():
         ("time_step: -0.001", ["time_step"]),
         ("driver: !TeleportDriver {}", ["TeleportDriver"]),
         ("hand: {initial_position: {XXJ9: 1.0}}", ["XXJ9"]),
+        ("object: {kind: cuboid, dimensions: {wingspan: 0.1}}", ["wingspan"]),
+        ("object: {kind: cuboid, dimensions: {depth: -0.01}}", ["depth"]),
         ("script: [{time: 1.0}, {time: 0.5}]", ["script[1].time"]),
         ("script: [{time: 0.1, wrist: [0, 0, 0.2, 0, 0, 0]}]", ["FloatingWrist"]),
         ("hand: {mount: !FloatingWrist {}}\nscript: [{time: 0.1, wrist: [0, 0]}]",
