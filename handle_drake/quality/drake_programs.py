@@ -27,6 +27,8 @@ from pydrake.solvers import (
 
 __all__ = ["ClosurePrograms", "wrench_rank"]
 
+from .hull import _check_wrenches
+
 DIM = 6
 
 
@@ -35,17 +37,6 @@ def wrench_rank(W, tol: float = 1e-9) -> int:
     W = np.asarray(W, dtype=float)
     s = np.linalg.svd(W, compute_uv=False)
     return int(np.sum(s > tol * max(1.0, s[0] if len(s) else 0.0)))
-
-
-def _check(W) -> np.ndarray:
-    W = np.asarray(W, dtype=float)
-    if W.ndim != 2 or W.shape[1] != DIM:
-        raise ValueError(f"wrenches: expected shape (m, 6), got {W.shape}")
-    if W.shape[0] == 0:
-        raise ValueError("wrenches: expected at least one wrench, got 0")
-    if not np.all(np.isfinite(W)):
-        raise ValueError("wrenches: expected finite values, got NaN or infinity")
-    return W
 
 
 class _Qp:
@@ -108,7 +99,7 @@ class ClosurePrograms:
 
     def min_distance(self, W) -> tuple[np.ndarray, float, np.ndarray]:
         """Solve the min-distance QP; returns ``(x, |x|, lambda)``."""
-        W = _check(W)
+        W = _check_wrenches(W)
         m = len(W)
         qp = self._qps.get(m)
         if qp is None:
@@ -125,7 +116,7 @@ class ClosurePrograms:
 
     def closure_lp(self, W) -> float:
         """Optimal ``s`` of the closure LP (``> 0``: origin in the relative interior)."""
-        W = _check(W)
+        W = _check_wrenches(W)
         m = len(W)
         lp = self._lps.get(m)
         if lp is None:
@@ -139,7 +130,7 @@ class ClosurePrograms:
 
     def is_force_closure(self, W, tol: float = 1e-9) -> bool:
         """Force closure (eq. 18): full rank and the origin strictly inside."""
-        W = _check(W)
+        W = _check_wrenches(W)
         if wrench_rank(W) < DIM:
             return False
         return self.closure_lp(W) > tol
