@@ -53,6 +53,43 @@ def bench_realtime(repeats: int):
     return rows
 
 
+def bench_plant_only(repeats: int):
+    """The same models and contact with constant PD targets and no Python systems:
+    the floor that the station's drivers, sensors and loggers add to."""
+    import numpy as np
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    from handle_drake.station import AddPlantModels
+
+    scenario = _scenario("point", 0.001)
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=0.001, discrete_contact_approximation="sap", contact_model="point"), builder)
+    hand = AddPlantModels(plant, scenario)
+    plant.Finalize()
+    wrist = plant.GetModelInstanceByName("wrist")
+    grasp_pose = np.array([-0.335, 0, 0.095, np.pi / 2, 0, np.pi / 2])  # x y z yaw pitch roll
+    for instance, target in ((hand, np.zeros(2 * plant.num_actuated_dofs(hand))),
+                             (wrist, np.concatenate([grasp_pose, np.zeros(6)]))):
+        source = builder.AddSystem(ConstantVectorSource(target))
+        builder.Connect(source.get_output_port(), plant.get_desired_state_input_port(instance))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    default = diagram.CreateDefaultContext()
+    walls = []
+    for _ in range(repeats):
+        simulator.get_mutable_context().SetTimeStateAndParametersFrom(default)
+        simulator.Initialize()
+        start = time.perf_counter()
+        simulator.AdvanceTo(TRIAL_SECONDS)
+        walls.append(time.perf_counter() - start)
+    return {"wall_s_median": statistics.median(walls),
+            "realtime_factor": TRIAL_SECONDS / statistics.median(walls)}
+
+
 def bench_reset(repeats: int):
     scenario = _scenario("point", 0.001)
     builds = []
@@ -82,12 +119,15 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     rows = bench_realtime(repeats)
+    floor = bench_plant_only(repeats)
     reset = bench_reset(repeats)
     print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats}")
     print(f"{'contact':<13}{'step':>7}{'wall (s)':>10}{'x real time':>13}{'lift@2s (cm)':>14}")
     for r in rows:
         print(f"{r['contact_model']:<13}{r['time_step_ms']:>5.0f}ms{r['wall_s_median']:>10.2f}"
               f"{r['realtime_factor']:>13.2f}{r['object_lift_cm_at_2s']:>14.1f}")
+    print(f"{'plant only':<13}{1:>5.0f}ms{floor['wall_s_median']:>10.2f}"
+          f"{floor['realtime_factor']:>13.2f}{'-':>14}   (no Python systems, reference)")
     point_1ms = rows[0]["realtime_factor"]
     print(f"point/hydroelastic speed ratio at 1 ms: "
           f"{point_1ms / rows[2]['realtime_factor']:.1f}x")
@@ -98,7 +138,7 @@ def main(argv=None) -> int:
           f"{'met' if point_1ms >= 4 else 'NOT met'} ({point_1ms:.1f}x); reset <= 5 ms: "
           f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"realtime": rows, "reset": reset,
+    args.out.write_text(json.dumps({"realtime": rows, "plant_only": floor, "reset": reset,
                                     "cpu_count": os.cpu_count(),
                                     "load_average": os.getloadavg()}, indent=2))
     print(f"wrote {args.out}")
