@@ -1,6 +1,5 @@
 """Every notebook in notebooks/ runs top to bottom in reduced mode."""
 
-import os
 from pathlib import Path
 
 import nbformat
@@ -15,9 +14,8 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     monkeypatch.setenv("HANDLE_DRAKE_REDUCED", "1")
     monkeypatch.setenv("HANDLE_DRAKE_OUT", str(tmp_path))
     notebook = nbformat.read(path, as_version=4)
-    client = NotebookClient(
-        notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}}
-    )
+    client = NotebookClient(notebook, timeout=600, kernel_name="python3",
+                            resources={"metadata": {"path": str(tmp_path)}})
     client.execute()
 
 
