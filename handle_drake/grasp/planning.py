@@ -84,6 +84,15 @@ MAX_APPROACH_ANGLE = np.deg2rad(45.0)  # approach vector from straight down
 PRESHAPE_OPENING = 0.025  # m, contacts moved out along their normals for the pre-shape
 CLOSING_SQUEEZE = 0.020  # m, and pushed in for the closing command
 PRESHAPE_LIFT = 0.010  # m, contacts raised (world up) in the pre-shape
+CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
+# Joints the planner sets in every posture prior of a class: the fingers a
+# class does not use are kept out of the way (report section 3.3: during the
+# reach only the class's fingers may meet the object). Tripod: ring and
+# little fingers extended (curled, they pass a few mm from a small sphere and
+# hit it in the reach), the thumb abducted to oppose the first and middle finger.
+PLANNER_POSTURES: dict[GraspClass, dict[str, float]] = {
+    GraspClass.TRIPOD: {"RFJ3": 0.0, "RFJ2": 0.0, "LFJ3": 0.0, "LFJ2": 0.0, "THJ4": 1.1},
+}
 WRIST_RANGE = 2.0  # m, travel of the floating wrist's prismatic joints (station.py)
 _SPEC = get_hand_spec("shadow")
 _NAMES = _SPEC.joint_names
@@ -462,6 +471,28 @@ def _yaw(R: np.ndarray, psi: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
 
 
+def _canonical_R_PG(a_P) -> RotationMatrix:
+    """Grasp frame G in the palm: ``x_G = -a_P`` (world up when the hand comes
+    in along its approach), the opposition axis ``z_G`` the proximal direction
+    ``-z_P`` made orthogonal to it, ``y_G = z_G x x_G`` (the finger row)."""
+    x = -np.asarray(a_P, dtype=float) / np.linalg.norm(a_P)
+    z = np.array([0.0, 0.0, -1.0]) - (x @ [0.0, 0.0, -1.0]) * x
+    if np.linalg.norm(z) < 1e-6:
+        z = np.array([0.0, 1.0, 0.0]) - x[1] * x
+    z /= np.linalg.norm(z)
+    return RotationMatrix(np.column_stack([x, np.cross(z, x), z]))
+
+
+def _with_joints(q, joints: dict, ratio: float) -> np.ndarray:
+    """A copy of posture q (24,) with some joints set (J1 follows a set J2)."""
+    q = np.array(q, dtype=float)
+    for name, value in joints.items():
+        q[_NAMES.index(name)] = value
+        if name.endswith("J2") and not name.startswith("TH"):
+            q[_NAMES.index(name[:-1] + "1")] = ratio * value
+    return q
+
+
 def plan_grasp(
     grasp_class,
     obj,
@@ -527,6 +558,9 @@ def plan_grasp(
                               for _ in range(2)]
     c_table1 = grasp_centre_palm(info.grasp_class, size)
     a_P = approach_palm(info.grasp_class)
+    override = PLANNER_POSTURES.get(info.grasp_class, {})
+    priors = [_with_joints(p, override, coupling_ratio) for p in priors]
+    priors_refine = [_with_joints(p, override, coupling_ratio) for p in priors_refine]
 
     # Per attempt: (1) a free solve (no table) gives the hand's natural
     # orientation about the object; (2) "up" is chosen in G from it (the
@@ -534,7 +568,29 @@ def plan_grasp(
     # resting pose allows) and the problem is solved again with the table and
     # the approach cone.
     solution = None
+    # Canonical attempts first: the hand comes in along its Table 2 approach
+    # within a narrow cone, with the grasp frame guessed from the palm
+    # (x_G = up = -a_P, the thumb on the proximal side, z_G ~ -z_P). Seeded
+    # from an identity orientation instead, SNOPT settles in a basin with the
+    # thumb flat in the palm plane (THJ4 = 0) and the hand tilted to the edge of
+    # the cone; such grasps do not hold (the thumb never meets the object).
+    up_canonical = np.array([1.0, 0.0, 0.0])
+    kin_canonical = _kinematics(float(coupling_ratio), shape, tuple(dims),
+                                tuple(up_canonical), height)
+    X_PG_guess = RigidTransform(_canonical_R_PG(a_P), c_table1)
+    for prior in priors:
+        sol = kin_canonical.solve_grasp(
+            info.grasp_class, shape, dims, prior, approach_P=a_P, X_PO_guess=X_PG_guess,
+            min_distance=-MAX_PENETRATION, max_approach_angle=CANONICAL_APPROACH_ANGLE,
+            centre_prior_weight=100.0, p_PO_guess=c_table1)
+        if _acceptable(kin_canonical, sol):
+            source = "table1" if np.linalg.norm(sol.X_PO.translation() - c_table1) < 1e-3 \
+                else "refined"
+            solution = (sol, up_canonical, source, kin_canonical)
+            break
     attempts = [(p, "table1") for p in priors] + [(p, "refined") for p in priors_refine]
+    if solution is not None:
+        attempts = []
     free_kin = _kinematics(float(coupling_ratio), shape, tuple(dims), None, None)
     for prior, source in attempts:
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(

@@ -88,10 +88,34 @@ def test_lateral_grasp_on_a_thin_box_holds_through_a_lift(lateral_plan):
     assert held_through_lift(result), result.object_position[::25, 2]
 
 
-def test_tripod_grasp_on_a_cylinder_holds_through_a_lift():
-    plan = plan_grasp("tripod", ("cylinder", 0.045), resting_pose("cylinder", 0.045))
-    result = ScenarioRunner(plan.to_scenario()).run()
+@pytest.fixture(scope="module")
+def tripod_sphere_plan():
+    return plan_grasp("tripod", ("sphere", 0.04), resting_pose("sphere", 0.04))
+
+
+def test_tripod_plan_on_a_sphere_opposes_the_thumb_from_above(tripod_sphere_plan):
+    plan = tripod_sphere_plan
+    contacts, _ = _station_contacts(plan)
+    p_WO = plan.X_WO.translation()
+    # The thumb is opposed: its pad and the first/middle finger pads lie on the
+    # sphere on opposite sides of its centre (their directions from the centre
+    # point apart, more than 120 degrees).
+    u = {f: (p - p_WO) / np.linalg.norm(p - p_WO) for f, p in contacts.items()}
+    for f in ("ff", "mf"):
+        assert np.linalg.norm(contacts[f] - p_WO) == pytest.approx(0.02, abs=1.5e-3)
+        assert u["th"] @ u[f] < np.cos(np.deg2rad(120.0))
+    # The hand comes in from above: approach within 15 degrees of straight down.
+    assert plan.approach_W[2] < -np.cos(np.deg2rad(15.0)) + 1e-6
+
+
+def test_tripod_grasp_on_a_4cm_sphere_holds_through_a_lift(tripod_sphere_plan):
+    result = ScenarioRunner(tripod_sphere_plan.to_scenario()).run()
     assert held_through_lift(result), result.object_position[::25, 2]
+    # Held by the class's three fingers: thumb, first and middle finger press on
+    # it at the end; ring and little fingers stay off.
+    final = result.tactile[-1]  # FF MF RF LF TH (N)
+    assert final[[0, 1, 4]].min() > 0.5, final
+    assert final[[2, 3]].max() == 0.0, final
 
 
 def test_bad_input_raises_clear_errors():
