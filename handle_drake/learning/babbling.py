@@ -282,11 +282,15 @@ class RunHistory:
 
 
 def run_history(db_path, spec_or_run_id) -> RunHistory:
+    """A run's trials as arrays; given a :class:`RunSpec`, at most its first ``n_trials``."""
     run_id = spec_or_run_id if isinstance(spec_or_run_id, str) else spec_or_run_id.run_id
     with TrialLog(db_path) as log:
         if log.get_run(run_id) is None:
             raise ValueError(f"run {run_id!r} is not in {db_path}")
         records = log.trials(run_id)
+    if isinstance(spec_or_run_id, RunSpec):
+        # The same run continued to a larger budget holds more trials.
+        records = records[: spec_or_run_id.n_trials]
     X = np.array([r.parameters for r in records])
     observed = np.array([np.nan if r.metric is None else r.metric for r in records])
     noiseless = np.array([
