@@ -1,0 +1,408 @@
+"""ReactiveGrasp: the reactive approach and tactile grasp of report section 3.3.
+
+The report's two-level scheme: during the approach, while the fingers are
+still in the pre-shape, any fingertip contact is *unexpected*; the hand is
+slowed down and shifted sideways to compensate for an error in the estimated
+object position or size, and stopped completely when several fingers touch
+(an undetected obstacle). Then the fingers close towards the object, each one
+stopping at its own first tactile contact, until every finger of the grasp
+class touches; finally all of them close a further increment (the squeeze)
+and the hand lifts.
+
+Ports (``n`` tactile channels, one per finger; ``nu`` hand commands):
+
+=========================  =====  ===========================  ====================================
+port                       dir    size                         units / frame
+=========================  =====  ===========================  ====================================
+``tactile``                in     n                            N, fingertip normal forces (the
+                                                               station's ``hand.tactile``)
+``wrist_pose_measured``    in     6                            ``[x y z roll pitch yaw]`` of the
+                                                               hand base in world, m and rad
+``contact_results``        in     abstract ``ContactResults``  optional (with ``hand_bodies``):
+                                                               the side-shift direction; counts
+                                                               non-fingertip hand contacts
+``wrist_pose``             out    6                            same convention, the commanded base
+                                                               pose (station's ``wrist.pose``)
+``hand_position``          out    nu                           rad, hand command (``hand.position``)
+``mode``                   out    1                            :class:`ReactiveGraspMode` value
+``closing``                out    n                            closing fraction of each finger
+=========================  =====  ===========================  ====================================
+
+All outputs are read from the discrete/abstract state (no direct feedthrough),
+so the measured pose may be fed back from the station without an algebraic loop.
+
+Modes (abstract state, :class:`ReactiveGraspMode`):
+
+- ``APPROACH``: the commanded wrist position moves from ``start_pose6`` to
+  ``goal_pose6`` along the straight line at ``approach_speed`` (orientation
+  interpolated in roll/pitch/yaw with the travel), fingers in the pre-shape.
+- ``SLOW_APPROACH``: entered at the first unexpected contact (one finger over
+  ``contact_threshold``). The approach speed is multiplied by ``slow_factor``;
+  while a contact persists the approach line is shifted sideways (normal to
+  the approach) at ``shift_speed`` up to ``max_shift``, in the direction that
+  separates the hand from the contact: the contact normal into the hand
+  (from ``contact_results``) or, without it, the finger's outward direction
+  ``finger_directions_B[i]`` (hand base frame). No direction known: no shift.
+- ``STOPPED`` (terminal): ``multiple_contacts`` or more fingers (or, with
+  ``contact_results``, hand bodies) touch during the approach; the wrist is
+  held at its measured position along the approach, the fingers in the pre-shape.
+- ``CLOSE``: the approach has arrived (travel complete and the measured
+  position within ``arrival_tolerance`` of the command, or ``arrival_timeout``
+  later). Finger ``i``'s command is ``preshape + s_i (closed - preshape)`` on
+  its joints; ``s_i`` grows at ``close_rate`` (1/s) until its fingertip force
+  exceeds ``contact_threshold`` (it then stays where it was) or it reaches
+  ``max_closing``.
+- ``SQUEEZE``: every grasp finger touches (or is at ``max_closing``): each
+  grasp finger's ``s_i`` ramps by ``squeeze`` over ``squeeze_time``.
+- ``LIFT``: ``hold_time`` after the squeeze, the wrist rises ``lift_height``
+  at ``lift_speed`` and holds there.
+
+The closing fraction is the position-control analogue of a grip force: with
+PD-controlled joints, the squeeze past the contact sets how hard a finger presses.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import enum
+
+import numpy as np
+from pydrake.common.value import AbstractValue, Value
+from pydrake.math import RollPitchYaw
+from pydrake.multibody.plant import ContactResults
+from pydrake.systems.framework import LeafSystem
+
+__all__ = ["ReactiveGrasp", "ReactiveGraspMode", "ReactiveGraspParams", "finger_command_groups"]
+
+
+class ReactiveGraspMode(enum.IntEnum):
+    APPROACH = 0
+    SLOW_APPROACH = 1
+    STOPPED = 2
+    CLOSE = 3
+    SQUEEZE = 4
+    LIFT = 5
+
+
+@dc.dataclass
+class ReactiveGraspParams:
+    """Numeric parameters of :class:`ReactiveGrasp` (SI units)."""
+
+    approach_speed: float = 0.12  # m/s, wrist speed along the approach
+    slow_factor: float = 0.25  # approach speed multiplier after an unexpected contact
+    shift_speed: float = 0.05  # m/s, sideways shift while an unexpected contact persists
+    max_shift: float = 0.015  # m, largest sideways shift
+    multiple_contacts: int = 2  # this many touching fingers/bodies in the approach: stop
+    contact_threshold: float = 0.2  # N, fingertip force that counts as contact
+    close_rate: float = 1.0  # 1/s, closing fraction per second
+    max_closing: float = 1.0  # closing fraction at which a finger without contact stops
+    squeeze: float = 0.45  # closing fraction added after all grasp fingers touch
+    squeeze_time: float = 0.2  # s
+    hold_time: float = 0.2  # s, after the squeeze, before the lift
+    lift_height: float = 0.13  # m
+    lift_speed: float = 0.2  # m/s
+    arrival_tolerance: float = 0.004  # m, measured vs commanded wrist position on arrival
+    arrival_timeout: float = 0.3  # s, close anyway this long after the travel is complete
+
+    def validate(self) -> None:
+        for f in dc.fields(self):
+            value = getattr(self, f.name)
+            if not np.isfinite(value):
+                raise ValueError(f"ReactiveGraspParams.{f.name} must be finite, got {value}")
+        positive = ("approach_speed", "slow_factor", "close_rate", "max_closing",
+                    "squeeze_time", "lift_speed", "arrival_tolerance")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise ValueError(f"ReactiveGraspParams.{name} must be > 0, "
+                                 f"got {getattr(self, name)}")
+        for name in ("shift_speed", "max_shift", "contact_threshold", "squeeze", "hold_time",
+                     "lift_height", "arrival_timeout"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"ReactiveGraspParams.{name} must be >= 0, "
+                                 f"got {getattr(self, name)}")
+        if self.slow_factor > 1:
+            raise ValueError("ReactiveGraspParams.slow_factor must be in (0, 1], "
+                             f"got {self.slow_factor}")
+        if int(self.multiple_contacts) != self.multiple_contacts or self.multiple_contacts < 1:
+            raise ValueError("ReactiveGraspParams.multiple_contacts must be an integer >= 1, "
+                             f"got {self.multiple_contacts}")
+
+
+def finger_command_groups(hand_kind: str) -> list[list[int]]:
+    """Indices into the hand command of the joints each tactile channel's finger closes.
+
+    shadow (20 commands, tactile FF MF RF LF TH): the J4..J2 (and LFJ5, THJ5..THJ1)
+    of each finger; barrett (4 commands, tactile F1 F2 F3): each finger's
+    proximal flexion (the spread is shared and stays at the pre-shape).
+    """
+    from handle_drake.hands import get_hand_spec
+
+    spec = get_hand_spec(hand_kind)
+    names = list(spec.actuated_joint_names)
+    if spec.name == "shadow":
+        prefixes = ("FF", "MF", "RF", "LF", "TH")
+        return [[i for i, n in enumerate(names) if n.startswith(p)] for p in prefixes]
+    return [[names.index(n)] for n in names if n != "spread"]
+
+
+class ReactiveGrasp(LeafSystem):
+    """Reactive approach, per-finger tactile closing, squeeze and lift (see module doc).
+
+    Args:
+        start_pose6, goal_pose6: wrist poses ``[x y z roll pitch yaw]`` at the
+            start and at the end of the approach (the planned grasp pose).
+        preshape, closed: (nu,) hand commands: open, and fully closed (the
+            closing fraction 1).
+        finger_groups: per tactile channel, the command indices its finger
+            closes (:func:`finger_command_groups`). Commands in no group stay
+            at the pre-shape.
+        grasp_fingers: (n,) bool, the fingers that must touch before the
+            squeeze (default: those whose ``closed`` differs from ``preshape``).
+            The other fingers keep the pre-shape.
+        params: :class:`ReactiveGraspParams`.
+        finger_directions_B: optional (n, 3) outward direction of each finger
+            in the hand base frame (used for the shift without contact results).
+        hand_bodies, fingertip_bodies: optional ``BodyIndex`` collections; with
+            them the system has a ``contact_results`` input (fingertip_bodies in
+            tactile order).
+        period: control period (s).
+    """
+
+    def __init__(self, start_pose6, goal_pose6, preshape, closed, finger_groups,
+                 grasp_fingers=None, params: ReactiveGraspParams | None = None,
+                 finger_directions_B=None, hand_bodies=None, fingertip_bodies=None,
+                 period: float = 0.004):
+        super().__init__()
+        start = np.asarray(start_pose6, dtype=float)
+        goal = np.asarray(goal_pose6, dtype=float)
+        for name, v in (("start_pose6", start), ("goal_pose6", goal)):
+            if v.shape != (6,) or not np.isfinite(v).all():
+                raise ValueError(f"{name}: expected 6 finite values, got shape {v.shape}")
+        preshape = np.asarray(preshape, dtype=float)
+        closed = np.asarray(closed, dtype=float)
+        if preshape.ndim != 1 or preshape.shape != closed.shape:
+            raise ValueError(f"preshape and closed: expected equal 1-D sizes, got "
+                             f"{preshape.shape} and {closed.shape}")
+        if not (np.isfinite(preshape).all() and np.isfinite(closed).all()):
+            raise ValueError("preshape and closed must be finite")
+        nu = preshape.size
+        groups = [np.asarray(g, dtype=int) for g in finger_groups]
+        if not groups:
+            raise ValueError("finger_groups: expected at least one finger")
+        seen = np.concatenate(groups)
+        if np.any(seen < 0) or np.any(seen >= nu) or len(set(seen.tolist())) != seen.size:
+            raise ValueError(f"finger_groups: expected disjoint indices in [0, {nu}), got "
+                             f"{[g.tolist() for g in groups]}")
+        n = len(groups)
+        if grasp_fingers is None:
+            grasp = np.array([np.any(closed[g] != preshape[g]) for g in groups])
+        else:
+            grasp = np.asarray(grasp_fingers, dtype=bool)
+            if grasp.shape != (n,):
+                raise ValueError(f"grasp_fingers: expected {n} flags, got shape {grasp.shape}")
+        if not grasp.any():
+            raise ValueError("no grasp finger: closed equals preshape on every finger")
+        self.params = params if params is not None else ReactiveGraspParams()
+        if not isinstance(self.params, ReactiveGraspParams):
+            raise TypeError(f"params must be ReactiveGraspParams, got {type(self.params).__name__}")
+        self.params.validate()
+        if finger_directions_B is not None:
+            finger_directions_B = np.asarray(finger_directions_B, dtype=float)
+            if finger_directions_B.shape != (n, 3) or not np.isfinite(finger_directions_B).all():
+                raise ValueError(f"finger_directions_B: expected ({n}, 3) finite values, got "
+                                 f"shape {finger_directions_B.shape}")
+        if (hand_bodies is None) != (fingertip_bodies is None):
+            raise ValueError("hand_bodies and fingertip_bodies go together (both or neither)")
+        if fingertip_bodies is not None and len(fingertip_bodies) != n:
+            raise ValueError(f"fingertip_bodies: expected {n} (one per tactile channel), "
+                             f"got {len(fingertip_bodies)}")
+        if not (np.isfinite(period) and period > 0):
+            raise ValueError(f"period must be > 0 (s), got {period}")
+
+        self._start, self._goal = start, goal
+        path = goal[:3] - start[:3]
+        self._length = float(np.linalg.norm(path))
+        self._direction = path / self._length if self._length > 0 else np.zeros(3)
+        self._preshape, self._closed = preshape, closed
+        self._groups, self._grasp, self._n = groups, grasp, n
+        self._finger_directions_B = finger_directions_B
+        self._period = float(period)
+        self._hand_bodies = None if hand_bodies is None else {int(b) for b in hand_bodies}
+        self._tip_channel = (None if fingertip_bodies is None
+                             else {int(b): i for i, b in enumerate(fingertip_bodies)})
+
+        self._tactile = self.DeclareVectorInputPort("tactile", n)
+        self._pose_measured = self.DeclareVectorInputPort("wrist_pose_measured", 6)
+        self._contacts = None
+        if hand_bodies is not None:
+            self._contacts = self.DeclareAbstractInputPort(
+                "contact_results", AbstractValue.Make(ContactResults()))
+
+        self._mode = self.DeclareAbstractState(Value(ReactiveGraspMode.APPROACH))
+        self._wrist = self.DeclareDiscreteState(start)
+        self._hand = self.DeclareDiscreteState(preshape)
+        self._s = self.DeclareDiscreteState(np.zeros(n))
+        self._touched = self.DeclareDiscreteState(np.zeros(n))  # 1 once a finger stopped on contact
+        self._squeeze_from = self.DeclareDiscreteState(np.zeros(n))
+        # [travel (m), shift x y z (m), lift (m), mode entry time (s), travel-complete time (s)]
+        self._internal = self.DeclareDiscreteState(np.array([0.0, 0, 0, 0, 0, 0, np.inf]))
+        self._mode_value = self.DeclareDiscreteState(np.array([float(ReactiveGraspMode.APPROACH)]))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self._period, 0.0, self._update)
+
+        self.DeclareStateOutputPort("wrist_pose", self._wrist)
+        self.DeclareStateOutputPort("hand_position", self._hand)
+        self.DeclareStateOutputPort("mode", self._mode_value)
+        self.DeclareStateOutputPort("closing", self._s)
+
+    # ---- accessors -------------------------------------------------------------
+    def get_tactile_input_port(self):
+        return self._tactile
+
+    def get_wrist_pose_measured_input_port(self):
+        return self._pose_measured
+
+    def get_contact_results_input_port(self):
+        if self._contacts is None:
+            raise RuntimeError("this ReactiveGrasp was built without hand_bodies: "
+                               "it has no contact_results input")
+        return self._contacts
+
+    def get_mode(self, context) -> ReactiveGraspMode:
+        return context.get_abstract_state(int(self._mode)).get_value()
+
+    def lift_complete(self, context) -> bool:
+        """True once the lift has reached ``lift_height``."""
+        lift = context.get_discrete_state(self._internal).value()[4]
+        return (self.get_mode(context) is ReactiveGraspMode.LIFT
+                and lift >= self.params.lift_height - 1e-12)
+
+    def nominal_duration(self) -> float:
+        """Time (s) of an undisturbed run: approach, close to max, squeeze, hold, lift."""
+        p = self.params
+        return (self._length / p.approach_speed + p.max_closing / p.close_rate + p.squeeze_time
+                + p.hold_time + p.lift_height / p.lift_speed + 4 * self._period)
+
+    # ---- helpers ---------------------------------------------------------------
+    def _hand_command(self, s) -> np.ndarray:
+        command = self._preshape.copy()
+        for i, g in enumerate(self._groups):
+            if self._grasp[i]:
+                command[g] = self._preshape[g] + s[i] * (self._closed[g] - self._preshape[g])
+        return command
+
+    def _wrist_command(self, travel, shift, lift) -> np.ndarray:
+        pose = np.empty(6)
+        fraction = travel / self._length if self._length > 0 else 1.0
+        pose[:3] = self._start[:3] + travel * self._direction + shift
+        pose[2] += lift
+        pose[3:] = self._start[3:] + fraction * (self._goal[3:] - self._start[3:])
+        return pose
+
+    def _touching(self, context) -> tuple[np.ndarray, int, np.ndarray]:
+        """(tactile contact flags (n,), number of touching fingers/bodies,
+        separating direction in world (zeros if unknown))."""
+        forces = self._tactile.Eval(context)
+        touching = np.asarray(forces) > self.params.contact_threshold
+        keys = {("tip", int(i)) for i in np.flatnonzero(touching)}
+        direction = np.zeros(3)
+        if self._contacts is not None and self._contacts.HasValue(context):
+            results = self._contacts.Eval(context)
+            for k in range(results.num_point_pair_contacts()):
+                info = results.point_pair_contact_info(k)
+                a, b = int(info.bodyA_index()), int(info.bodyB_index())
+                a_hand, b_hand = a in self._hand_bodies, b in self._hand_bodies
+                if a_hand == b_hand:
+                    continue  # self contact or no hand body
+                force = info.contact_force()  # on body B, in world
+                nhat = info.point_pair().nhat_BA_W  # from B into A
+                into_hand = nhat if a_hand else -nhat
+                magnitude = abs(float(force @ nhat))
+                direction += magnitude * into_hand
+                body = a if a_hand else b
+                if magnitude > self.params.contact_threshold:
+                    channel = self._tip_channel.get(body)
+                    keys.add(("tip", channel) if channel is not None else ("body", body))
+        return touching, len(keys), direction
+
+    def _shift_direction(self, context, touching, direction_W) -> np.ndarray:
+        d = direction_W
+        if np.linalg.norm(d) == 0 and self._finger_directions_B is not None:
+            rpy = context.get_discrete_state(self._wrist).value()[3:]
+            R_WB = RollPitchYaw(rpy).ToRotationMatrix().matrix()
+            d = R_WB @ self._finger_directions_B[touching].sum(axis=0)
+        d = d - (d @ self._direction) * self._direction  # sideways only
+        norm = np.linalg.norm(d)
+        return d / norm if norm > 1e-9 else np.zeros(3)
+
+    # ---- update ----------------------------------------------------------------
+    def _update(self, context, state):
+        p, h, now = self.params, self._period, context.get_time()
+        mode = self.get_mode(context)
+        travel, sx, sy, sz, lift, t_mode, t_arrived = (
+            context.get_discrete_state(self._internal).value())
+        shift = np.array([sx, sy, sz])
+        s = context.get_discrete_state(self._s).value().copy()
+        touched = context.get_discrete_state(self._touched).value().copy()
+        squeeze_from = context.get_discrete_state(self._squeeze_from).value().copy()
+        new_mode = mode
+
+        if mode in (ReactiveGraspMode.APPROACH, ReactiveGraspMode.SLOW_APPROACH):
+            touching, count, direction_W = self._touching(context)
+            if count >= p.multiple_contacts:
+                new_mode = ReactiveGraspMode.STOPPED
+                # Hold where the hand is, not where the command had run ahead to.
+                measured = self._pose_measured.Eval(context)[:3]
+                along = float((measured - self._start[:3] - shift) @ self._direction)
+                travel = float(np.clip(along, 0.0, travel))
+            else:
+                if count >= 1:
+                    new_mode = ReactiveGraspMode.SLOW_APPROACH
+                    d = self._shift_direction(context, touching, direction_W)
+                    shift = shift + p.shift_speed * h * d
+                    norm = np.linalg.norm(shift)
+                    if norm > p.max_shift:
+                        shift *= p.max_shift / norm
+                slow = new_mode is ReactiveGraspMode.SLOW_APPROACH
+                speed = p.approach_speed * (p.slow_factor if slow else 1.0)
+                travel = min(travel + speed * h, self._length)
+                if travel >= self._length:
+                    t_arrived = min(t_arrived, now)
+                    measured = self._pose_measured.Eval(context)[:3]
+                    target = self._wrist_command(travel, shift, 0.0)[:3]
+                    if (np.linalg.norm(measured - target) <= p.arrival_tolerance
+                            or now - t_arrived >= p.arrival_timeout):
+                        new_mode = ReactiveGraspMode.CLOSE
+        elif mode is ReactiveGraspMode.CLOSE:
+            forces = self._tactile.Eval(context)
+            for i in np.flatnonzero(self._grasp):
+                if touched[i]:
+                    continue
+                if forces[i] > p.contact_threshold:
+                    touched[i] = 1.0  # this finger stops where it is
+                else:
+                    s[i] = min(s[i] + p.close_rate * h, p.max_closing)
+            done = (touched > 0) | (s >= p.max_closing)
+            if np.all(done[self._grasp]):
+                new_mode = ReactiveGraspMode.SQUEEZE
+                squeeze_from = s.copy()
+        elif mode is ReactiveGraspMode.SQUEEZE:
+            elapsed = now - t_mode
+            ramp = min(1.0, elapsed / p.squeeze_time)
+            s = np.where(self._grasp, squeeze_from + ramp * p.squeeze, s)
+            if elapsed >= p.squeeze_time + p.hold_time - 1e-9:
+                new_mode = ReactiveGraspMode.LIFT
+        elif mode is ReactiveGraspMode.LIFT:
+            lift = min(lift + p.lift_speed * h, p.lift_height)
+
+        if new_mode is not mode:
+            t_mode = now
+        state.get_mutable_abstract_state(int(self._mode)).set_value(new_mode)
+        state.get_mutable_discrete_state(self._mode_value).set_value([float(new_mode)])
+        state.get_mutable_discrete_state(self._internal).set_value(
+            np.r_[travel, shift, lift, t_mode, t_arrived])
+        state.get_mutable_discrete_state(self._s).set_value(s)
+        state.get_mutable_discrete_state(self._touched).set_value(touched)
+        state.get_mutable_discrete_state(self._squeeze_from).set_value(squeeze_from)
+        state.get_mutable_discrete_state(self._wrist).set_value(
+            self._wrist_command(travel, shift, lift))
+        state.get_mutable_discrete_state(self._hand).set_value(self._hand_command(s))

@@ -1,0 +1,232 @@
+"""ReactiveGrasp against closed-form behaviour with scripted fingertip forces.
+
+The tactile input is a zero-order-hold script (finger i's force steps from 0 to
+1 N at its own time), the measured wrist pose is the controller's own command
+fed back (perfect tracking) unless a test says otherwise. With control period
+h, a quantity that grows by r per update for every update at a time t_k = k h
+before an event at t_c has grown by r (ceil(t_c / h) - 1) at the event (the
+update at t = 0 counts for the approach, not for the closing, which starts on
+the update after the arrival).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from handle_drake.systems.reactive_grasp import (
+    ReactiveGrasp,
+    ReactiveGraspMode,
+    ReactiveGraspParams,
+    finger_command_groups,
+)
+
+H = 0.01  # s, control period of these tests
+GROUPS = finger_command_groups("shadow")  # FF MF RF LF TH
+FF, MF, RF, LF, TH = range(5)
+
+
+def _hand(closing_fingers=(FF, MF, TH)):
+    preshape = np.linspace(-0.1, 0.1, 20)
+    closed = preshape.copy()
+    for i in closing_fingers:
+        closed[GROUPS[i]] += 0.8
+    return preshape, closed
+
+
+def _force_script(step_times, t_end=10.0):
+    """(5,) fingertip forces: finger i is 0 N before step_times[i], 1 N after (None: never)."""
+    times = sorted({0.0, t_end} | {t for t in step_times if t is not None})
+    values = np.array([[1.0 if (s is not None and t >= s) else 0.0 for s in step_times]
+                       for t in times]).T
+    return PiecewisePolynomial.ZeroOrderHold(times, values)
+
+
+def _simulate(controller, forces, measured=None):
+    builder = DiagramBuilder()
+    grasp = builder.AddSystem(controller)
+    tactile = builder.AddSystem(TrajectorySource(forces))
+    builder.Connect(tactile.get_output_port(), grasp.get_tactile_input_port())
+    if measured is None:  # perfect tracking: the command is the measurement
+        builder.Connect(grasp.GetOutputPort("wrist_pose"),
+                        grasp.get_wrist_pose_measured_input_port())
+    else:
+        source = builder.AddSystem(ConstantVectorSource(measured))
+        builder.Connect(source.get_output_port(), grasp.get_wrist_pose_measured_input_port())
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.Initialize()
+    context = grasp.GetMyContextFromRoot(simulator.get_context())
+
+    def at(t):
+        """Outputs after every update at times <= t (t is taken between two updates)."""
+        simulator.AdvanceTo(t)
+        return dict(
+            wrist=grasp.GetOutputPort("wrist_pose").Eval(context).copy(),
+            hand=grasp.GetOutputPort("hand_position").Eval(context).copy(),
+            closing=grasp.GetOutputPort("closing").Eval(context).copy(),
+            mode=ReactiveGraspMode(int(grasp.GetOutputPort("mode").Eval(context)[0])),
+        )
+
+    return at, context
+
+
+def _updates_before(t_c):
+    return math.ceil(t_c / H - 1e-9) - 1
+
+
+def test_each_finger_stops_at_its_own_contact_then_squeezes_and_lifts():
+    preshape, closed = _hand()
+    p = ReactiveGraspParams(close_rate=2.0, max_closing=1.0, squeeze=0.3, squeeze_time=0.1,
+                            hold_time=0.1, lift_height=0.05, lift_speed=0.5)
+    pose = [0.1, -0.2, 0.3, 0.0, 0.5, 1.0]
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params=p, period=H)
+    # FF touches at 0.155 s, MF at 0.255 s, TH at 0.3549 s; RF gets a force at
+    # 0.1 s but is no grasp finger (closed == preshape), so it is ignored.
+    contact = {FF: 0.155, MF: 0.255, TH: 0.3549}
+    at, context = _simulate(grasp, _force_script([0.155, 0.255, 0.1, None, 0.3549]))
+    out = at(0.2049)
+    assert out["mode"] is ReactiveGraspMode.CLOSE
+    # FF stopped at its contact, MF and TH still closing at close_rate per second.
+    assert out["closing"][FF] == pytest.approx(p.close_rate * H * _updates_before(0.155))
+    assert out["closing"][MF] == pytest.approx(p.close_rate * H * math.floor(0.2049 / H))
+    out = at(0.3605)
+    s_contact = {i: p.close_rate * H * _updates_before(t) for i, t in contact.items()}
+    for i, s in s_contact.items():
+        assert out["closing"][i] == pytest.approx(s, abs=1e-12)
+        assert out["closing"][i] == pytest.approx(p.close_rate * contact[i], abs=p.close_rate * H)
+    assert out["mode"] is ReactiveGraspMode.SQUEEZE
+    # After the squeeze every grasp finger is `squeeze` further, the command
+    # is preshape + s (closed - preshape) on its joints; RF and LF untouched.
+    out = at(0.36 + p.squeeze_time + 0.5 * H)
+    for i, s in s_contact.items():
+        assert out["closing"][i] == pytest.approx(s + p.squeeze, abs=1e-12)
+        g = GROUPS[i]
+        np.testing.assert_allclose(out["hand"][g], preshape[g] + (s + p.squeeze)
+                                   * (closed[g] - preshape[g]), atol=1e-12)
+    for i in (RF, LF):
+        np.testing.assert_allclose(out["hand"][GROUPS[i]], preshape[GROUPS[i]])
+    # Lift: after the hold the wrist rises at lift_speed up to lift_height.
+    lift_start = 0.36 + p.squeeze_time + p.hold_time
+    out = at(lift_start + 0.05 + 0.5 * H)
+    assert out["mode"] is ReactiveGraspMode.LIFT
+    assert out["wrist"][2] - pose[2] == pytest.approx(p.lift_speed * 0.05, abs=p.lift_speed * H)
+    out = at(lift_start + 0.5)
+    np.testing.assert_allclose(out["wrist"], np.add(pose, [0, 0, p.lift_height, 0, 0, 0]))
+    assert grasp.lift_complete(context)
+
+
+def test_a_finger_without_contact_stops_at_max_closing():
+    preshape, closed = _hand()
+    p = ReactiveGraspParams(close_rate=2.0, max_closing=0.6, squeeze=0.2, squeeze_time=0.1)
+    pose = np.zeros(6)
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params=p, period=H)
+    at, _ = _simulate(grasp, _force_script([0.105, 0.105, None, None, None]))
+    out = at(0.3 + 0.5 * H)  # 0.6 / 2.0 = 0.3 s to reach max_closing
+    assert out["closing"][TH] == pytest.approx(p.max_closing)
+    assert out["mode"] is ReactiveGraspMode.SQUEEZE
+    out = at(0.6)
+    assert out["closing"][TH] == pytest.approx(p.max_closing + p.squeeze)
+    assert out["closing"][FF] == pytest.approx(p.close_rate * H * _updates_before(0.105)
+                                               + p.squeeze)
+
+
+def test_an_early_contact_slows_and_shifts_the_approach():
+    preshape, closed = _hand()
+    p = ReactiveGraspParams(approach_speed=0.1, slow_factor=0.25, shift_speed=0.02,
+                            max_shift=0.004)
+    start, goal = [0.0, 0.0, 0.3, 0, 0, 0], [0.0, 0.0, 0.1, 0, 0, 0]
+    outward = np.zeros((5, 3))
+    outward[FF] = [0.0, 1.0, 0.5]  # the sideways part (the approach is along z) is +y
+    grasp = ReactiveGrasp(start, goal, preshape, closed, GROUPS, params=p,
+                          finger_directions_B=outward, period=H)
+    t_c = 0.505
+    at, _ = _simulate(grasp, _force_script([t_c, None, None, None, None]))
+    a = at(0.305)
+    b = at(0.405)
+    assert a["mode"] is ReactiveGraspMode.APPROACH
+    assert (a["wrist"][2] - b["wrist"][2]) / 0.1 == pytest.approx(p.approach_speed)
+    shifted = at(0.615)  # updates at 0.51 ... 0.61 s saw the contact
+    n_touching = math.floor(0.615 / H) - math.floor(t_c / H)
+    assert shifted["wrist"][1] == pytest.approx(p.shift_speed * H * n_touching, abs=1e-12)
+    a = at(0.705)
+    b = at(0.905)
+    assert b["mode"] is ReactiveGraspMode.SLOW_APPROACH
+    assert (a["wrist"][2] - b["wrist"][2]) / 0.2 == pytest.approx(
+        p.slow_factor * p.approach_speed)
+    # Travel so far: full speed on the updates before t_c, slowed after.
+    n_fast = _updates_before(t_c) + 1  # the update at t = 0 moves too
+    n_slow = round(0.905 / H) + 1 - n_fast
+    travel = H * p.approach_speed * (n_fast + p.slow_factor * n_slow)
+    assert start[2] - b["wrist"][2] == pytest.approx(travel)
+    # Sideways shift along +y at shift_speed while touching, capped at max_shift.
+    assert a["wrist"][0] == pytest.approx(0.0)
+    assert a["wrist"][1] == pytest.approx(p.max_shift)  # 0.2 s * 0.02 m/s > 4 mm
+    np.testing.assert_allclose(b["hand"], preshape)  # fingers stay in the pre-shape
+
+
+def test_multiple_unexpected_contacts_stop_the_approach():
+    preshape, closed = _hand()
+    p = ReactiveGraspParams(approach_speed=0.1, slow_factor=0.5)
+    start, goal = [0.0, 0.0, 0.3, 0, 0, 0], [0.0, 0.0, 0.1, 0, 0, 0]
+    grasp = ReactiveGrasp(start, goal, preshape, closed, GROUPS, params=p, period=H)
+    at, _ = _simulate(grasp, _force_script([0.205, 0.3051, None, None, None]))
+    stop = at(0.3149)
+    assert stop["mode"] is ReactiveGraspMode.STOPPED
+    n_fast = _updates_before(0.205) + 1
+    n_slow = _updates_before(0.3051) + 1 - n_fast
+    travel = H * p.approach_speed * (n_fast + p.slow_factor * n_slow)
+    # Held where the (perfectly tracked) wrist was: the travel up to the stop.
+    assert start[2] - stop["wrist"][2] == pytest.approx(travel, abs=1e-12)
+    later = at(2.0)
+    assert later["mode"] is ReactiveGraspMode.STOPPED
+    np.testing.assert_allclose(later["wrist"], stop["wrist"])
+    np.testing.assert_allclose(later["hand"], preshape)
+
+
+def test_closing_waits_for_the_measured_wrist_to_arrive():
+    preshape, closed = _hand()
+    p = ReactiveGraspParams(approach_speed=1.0, arrival_tolerance=0.002, arrival_timeout=0.3)
+    start, goal = [0.0, 0.0, 0.15, 0, 0, 0], [0.0, 0.0, 0.1, 0, 0, 0]
+    grasp = ReactiveGrasp(start, goal, preshape, closed, GROUPS, params=p, period=H)
+    # The measured wrist never leaves the start (a blocked arm): the command
+    # completes its travel after 0.05 s, the closing begins arrival_timeout later.
+    at, _ = _simulate(grasp, _force_script([None] * 5), measured=np.array(start))
+    assert at(0.3349)["mode"] is ReactiveGraspMode.APPROACH
+    out = at(0.3651)
+    assert out["mode"] is ReactiveGraspMode.CLOSE
+    # A tracked wrist closes right on arrival instead.
+    grasp = ReactiveGrasp(start, goal, preshape, closed, GROUPS, params=p, period=H)
+    at, _ = _simulate(grasp, _force_script([None] * 5))
+    assert at(0.0651)["mode"] is ReactiveGraspMode.CLOSE
+
+
+def test_bad_input_raises_clear_errors():
+    preshape, closed = _hand()
+    pose = np.zeros(6)
+    with pytest.raises(ValueError, match="start_pose6: expected 6"):
+        ReactiveGrasp(np.zeros(5), pose, preshape, closed, GROUPS)
+    with pytest.raises(ValueError, match="expected equal 1-D sizes"):
+        ReactiveGrasp(pose, pose, preshape, closed[:19], GROUPS)
+    with pytest.raises(ValueError, match="disjoint indices"):
+        ReactiveGrasp(pose, pose, preshape, closed, [[0, 1], [1, 2]])
+    with pytest.raises(ValueError, match="no grasp finger"):
+        ReactiveGrasp(pose, pose, preshape, preshape, GROUPS)
+    with pytest.raises(ValueError, match="grasp_fingers: expected 5"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS, grasp_fingers=[True, False])
+    with pytest.raises(ValueError, match="slow_factor must be in"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS,
+                      params=ReactiveGraspParams(slow_factor=2.0))
+    with pytest.raises(ValueError, match="close_rate must be > 0"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS,
+                      params=ReactiveGraspParams(close_rate=0.0))
+    with pytest.raises(ValueError, match=r"finger_directions_B: expected \(5, 3\)"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS, finger_directions_B=np.zeros(3))
+    with pytest.raises(TypeError, match="ReactiveGraspParams"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params={"squeeze": 0.1})
+    with pytest.raises(RuntimeError, match="no contact_results|has no contact_results"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS).get_contact_results_input_port()
