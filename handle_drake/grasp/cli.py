@@ -1,9 +1,14 @@
 """``handle-drake grasp`` and ``handle-drake synergies``.
 
-- ``grasp --class tripod --object cuboid --size 0.04 [--meshcat] [--html F]``:
-  plans a grasp of the class on the object (resting on the table at the
-  origin), simulates reach, close and lift on the floating-wrist station and
-  prints whether the object held (exit code 0 held, 1 dropped).
+- ``grasp --class tripod --object cuboid --size 0.04 [--reactive | --open-loop]
+  [--meshcat] [--html F]``: plans a grasp of the class on the object (resting
+  on the table at the origin), simulates reach, close and lift on the
+  floating-wrist station and prints whether the object held (exit code 0
+  held, 1 dropped). ``--reactive`` executes the plan with the tactile
+  :class:`~handle_drake.systems.reactive_grasp.ReactiveGrasp` controller
+  (report section 3.3; see :mod:`handle_drake.grasp.execution`),
+  ``--open-loop`` with the plan's keyframe script; the default is
+  :data:`DEFAULT_REACTIVE`.
 - ``synergies [FILE] [--k-max 8] [--plot F]``: fits PCA synergies to a
   ``handle_drake-grasps`` recording file (default: the shipped synthetic data),
   prints the reconstruction error against k and saves a plot.
@@ -16,7 +21,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-__all__ = ["register", "run_grasp", "write_class_scenarios"]
+__all__ = ["DEFAULT_REACTIVE", "register", "run_grasp", "write_class_scenarios"]
+
+#: Execution used when neither --reactive nor --open-loop is given (the
+#: reactive controller held more grasps in benchmarks/bench_grasp_classes.py).
+DEFAULT_REACTIVE = True
 
 #: The object each class's scenario in ``diagrams/`` grasps: (kind, catalogue size m).
 CLASS_OBJECTS = {
@@ -39,6 +48,11 @@ def register(subparsers) -> None:
     p.add_argument("--object", default="cuboid", help="sphere, cylinder or cuboid (box)")
     p.add_argument("--size", type=float, required=True,
                    help="catalogue size (m): diameter, or the cuboid's width")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--reactive", dest="reactive", action="store_true", default=None,
+                      help="tactile reactive approach and closing (ReactiveGrasp)")
+    mode.add_argument("--open-loop", dest="reactive", action="store_false",
+                      help="the plan's keyframe script, no feedback")
     p.add_argument("--meshcat", action="store_true", help="show it live in Meshcat")
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
     p.add_argument("--save-scenario", type=Path, default=None,
@@ -54,18 +68,23 @@ def register(subparsers) -> None:
 
 
 def run_grasp(grasp_class: str, kind: str, size: float, meshcat=None, html=None,
-              save_scenario=None):
-    """Plan, simulate, lift; returns ``(plan, result, held)``."""
+              save_scenario=None, reactive: bool | None = None):
+    """Plan, simulate, lift; returns ``(plan, result, held)``.
+
+    reactive: execute with :class:`ReactiveGrasp` (True) or the plan's
+    keyframes (False); None: :data:`DEFAULT_REACTIVE`.
+    """
     from handle_drake.demo import held_through_lift
+    from handle_drake.grasp.execution import run_plan
     from handle_drake.grasp.planning import plan_grasp, resting_pose
-    from handle_drake.run import ScenarioRunner
 
     plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
-    scenario = plan.to_scenario()
     if save_scenario is not None:
         Path(save_scenario).parent.mkdir(parents=True, exist_ok=True)
         Path(save_scenario).write_text(plan.to_scenario_override())
-    result = ScenarioRunner(scenario, meshcat).run(html=html if meshcat is not None else None)
+    reactive = DEFAULT_REACTIVE if reactive is None else bool(reactive)
+    result = run_plan(plan, reactive=reactive, meshcat=meshcat,
+                      html=html if meshcat is not None else None)
     return plan, result, held_through_lift(result)
 
 
@@ -74,8 +93,10 @@ def _cmd_grasp(args) -> int:
 
     meshcat = _meshcat(args.meshcat or args.html is not None)
     plan, result, held = run_grasp(args.grasp_class, args.object, args.size, meshcat,
-                                   args.html, args.save_scenario)
+                                   args.html, args.save_scenario, args.reactive)
     print(plan.summary())
+    reactive = DEFAULT_REACTIVE if args.reactive is None else args.reactive
+    print(f"execution: {'reactive (tactile)' if reactive else 'open loop (keyframes)'}")
     if plan.amplitudes is not None:
         print(f"synergy pre-shape amplitudes: {[round(float(a), 3) for a in plan.amplitudes]}")
     print(f"{'HELD' if held else 'DROPPED'}: object rose {result.object_lift() * 100:.1f} cm "

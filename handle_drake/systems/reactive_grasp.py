@@ -270,6 +270,14 @@ class ReactiveGrasp(LeafSystem):
     def get_mode(self, context) -> ReactiveGraspMode:
         return context.get_abstract_state(int(self._mode)).get_value()
 
+    def fingers_touched(self, context) -> np.ndarray:
+        """(n,) bool: the fingers that stopped closing on a tactile contact."""
+        return context.get_discrete_state(self._touched).value() > 0
+
+    def closing_at_squeeze(self, context) -> np.ndarray:
+        """(n,) closing fractions when the squeeze began (zeros before it)."""
+        return context.get_discrete_state(self._squeeze_from).value().copy()
+
     def lift_complete(self, context) -> bool:
         """True once the lift has reached ``lift_height``."""
         lift = context.get_discrete_state(self._internal).value()[4]
@@ -299,30 +307,38 @@ class ReactiveGrasp(LeafSystem):
         return pose
 
     def _touching(self, context) -> tuple[np.ndarray, int, np.ndarray]:
-        """(tactile contact flags (n,), number of touching fingers/bodies,
-        separating direction in world (zeros if unknown))."""
+        """(fingertip contact flags (n,), number of touching fingers/bodies,
+        separating direction in world (zeros if unknown)).
+
+        With ``contact_results`` a fingertip counts only if it touches
+        something other than the hand (the simulated pad also feels a finger
+        pressed against it), and other hand bodies touching the world count too.
+        """
         forces = self._tactile.Eval(context)
         touching = np.asarray(forces) > self.params.contact_threshold
-        keys = {("tip", int(i)) for i in np.flatnonzero(touching)}
         direction = np.zeros(3)
-        if self._contacts is not None and self._contacts.HasValue(context):
-            results = self._contacts.Eval(context)
-            for k in range(results.num_point_pair_contacts()):
-                info = results.point_pair_contact_info(k)
-                a, b = int(info.bodyA_index()), int(info.bodyB_index())
-                a_hand, b_hand = a in self._hand_bodies, b in self._hand_bodies
-                if a_hand == b_hand:
-                    continue  # self contact or no hand body
-                force = info.contact_force()  # on body B, in world
-                nhat = info.point_pair().nhat_BA_W  # from B into A
-                into_hand = nhat if a_hand else -nhat
-                magnitude = abs(float(force @ nhat))
-                direction += magnitude * into_hand
-                body = a if a_hand else b
-                if magnitude > self.params.contact_threshold:
-                    channel = self._tip_channel.get(body)
-                    keys.add(("tip", channel) if channel is not None else ("body", body))
-        return touching, len(keys), direction
+        if self._contacts is None or not self._contacts.HasValue(context):
+            return touching, int(touching.sum()), direction
+        results = self._contacts.Eval(context)
+        external = np.zeros(self._n, dtype=bool)
+        others = set()
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            a, b = int(info.bodyA_index()), int(info.bodyB_index())
+            a_hand, b_hand = a in self._hand_bodies, b in self._hand_bodies
+            if a_hand == b_hand:
+                continue  # self contact, or no hand body
+            nhat = info.point_pair().nhat_BA_W  # from B into A
+            magnitude = abs(float(info.contact_force() @ nhat))
+            direction += magnitude * (nhat if a_hand else -nhat)  # into the hand
+            body = a if a_hand else b
+            channel = self._tip_channel.get(body)
+            if channel is not None:
+                external[channel] = True
+            elif magnitude > self.params.contact_threshold:
+                others.add(body)
+        touching &= external
+        return touching, int(touching.sum()) + len(others), direction
 
     def _shift_direction(self, context, touching, direction_W) -> np.ndarray:
         d = direction_W
@@ -373,11 +389,11 @@ class ReactiveGrasp(LeafSystem):
                             or now - t_arrived >= p.arrival_timeout):
                         new_mode = ReactiveGraspMode.CLOSE
         elif mode is ReactiveGraspMode.CLOSE:
-            forces = self._tactile.Eval(context)
+            tips, _, _ = self._touching(context)
             for i in np.flatnonzero(self._grasp):
                 if touched[i]:
                     continue
-                if forces[i] > p.contact_threshold:
+                if tips[i]:
                     touched[i] = 1.0  # this finger stops where it is
                 else:
                     s[i] = min(s[i] + p.close_rate * h, p.max_closing)

@@ -1,0 +1,68 @@
+"""plan -> ReactiveGrasp -> station: a planned tripod grasp executed with
+tactile feedback holds a 4 cm sphere through a lift, the controller passes
+through its modes in order, and each grasp finger closes until its own contact."""
+
+import pytest
+
+from handle_drake.demo import held_through_lift
+from handle_drake.grasp.execution import ReactiveGraspRunner, plan_params, run_plan
+from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, plan_grasp, resting_pose
+from handle_drake.systems.reactive_grasp import ReactiveGraspMode
+
+FF, MF, RF, LF, TH = range(5)
+
+
+@pytest.fixture(scope="module")
+def tripod_plan():
+    return plan_grasp("tripod", ("sphere", 0.04), resting_pose("sphere", 0.04))
+
+
+@pytest.fixture(scope="module")
+def reactive_run(tripod_plan):
+    runner = ReactiveGraspRunner(tripod_plan)
+    result = runner.run()
+    return runner, result
+
+
+def test_reactive_tripod_grasp_on_a_4cm_sphere_holds_through_a_lift(reactive_run):
+    runner, result = reactive_run
+    assert held_through_lift(result), result.object_position[::25, 2]
+    assert result.object_lift() > 0.10
+    # Modes in the order of report section 3.3, no unexpected contact on the way.
+    order = [m for i, m in enumerate(runner.modes) if i == 0 or m != runner.modes[i - 1]]
+    assert order == [ReactiveGraspMode.APPROACH, ReactiveGraspMode.CLOSE,
+                     ReactiveGraspMode.SQUEEZE, ReactiveGraspMode.LIFT]
+    # The run ends SETTLE s after the lift (not at a fixed horizon).
+    assert result.sim_time < runner.max_duration
+
+
+def test_each_grasp_finger_stops_on_its_own_contact(reactive_run):
+    runner, result = reactive_run
+    p = runner.controller.params
+    # Thumb, first and middle finger each stopped closing on a tactile contact
+    # with the sphere, short of the full closing stroke, at different fractions
+    # (each at its own contact); ring and little fingers are not closed.
+    touched = runner.fingers_touched()
+    assert touched[[FF, MF, TH]].all() and not touched[[RF, LF]].any()
+    s = runner.closing_at_squeeze()
+    assert (s[[FF, MF, TH]] > 0.05).all() and (s[[FF, MF, TH]] < p.max_closing).all(), s
+    assert len({round(float(v), 3) for v in s[[FF, MF, TH]]}) > 1, s
+    assert s[RF] == s[LF] == 0.0
+    # Ring and little fingers never touch anything.
+    assert result.tactile[:, [RF, LF]].max() == 0.0
+    # The three pads press on the sphere while it is held up (last sample).
+    assert result.tactile[-1, [FF, MF, TH]].min() > p.contact_threshold
+
+
+def test_plan_params_use_the_plans_squeeze_and_lift(tripod_plan):
+    p = plan_params(tripod_plan)
+    assert p.squeeze == pytest.approx(CLOSING_SQUEEZE / (PRESHAPE_OPENING + CLOSING_SQUEEZE))
+    assert p.lift_height == tripod_plan.lift_height
+    assert plan_params(tripod_plan, squeeze=0.1).squeeze == 0.1
+
+
+def test_bad_input(tripod_plan):
+    with pytest.raises(TypeError, match="GraspPlan"):
+        ReactiveGraspRunner("tripod")
+    with pytest.raises(ValueError, match="reactive execution only"):
+        run_plan(tripod_plan, reactive=False, params=plan_params(tripod_plan))
