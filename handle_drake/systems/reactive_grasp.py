@@ -19,8 +19,8 @@ port                       dir    size                         units / frame
 ``wrist_pose_measured``    in     6                            ``[x y z roll pitch yaw]`` of the
                                                                hand base in world, m and rad
 ``contact_results``        in     abstract ``ContactResults``  optional (with ``hand_bodies``):
-                                                               the side-shift direction; counts
-                                                               non-fingertip hand contacts
+                                                               the side-shift direction; other
+                                                               hand bodies' contacts slow down
 ``wrist_pose``             out    6                            same convention, the commanded base
                                                                pose (station's ``wrist.pose``)
 ``hand_position``          out    nu                           rad, hand command (``hand.position``)
@@ -36,15 +36,17 @@ Modes (abstract state, :class:`ReactiveGraspMode`):
 - ``APPROACH``: the commanded wrist position moves from ``start_pose6`` to
   ``goal_pose6`` along the straight line at ``approach_speed`` (orientation
   interpolated in roll/pitch/yaw with the travel), fingers in the pre-shape.
-- ``SLOW_APPROACH``: entered at the first unexpected contact (one finger over
-  ``contact_threshold``). The approach speed is multiplied by ``slow_factor``;
+- ``SLOW_APPROACH``: entered at the first unexpected contact (one fingertip
+  over ``contact_threshold`` or, with ``contact_results``, any other hand
+  body touching something other than the hand). The approach speed is multiplied by ``slow_factor``;
   while a contact persists the approach line is shifted sideways (normal to
   the approach) at ``shift_speed`` up to ``max_shift``, in the direction that
   separates the hand from the contact: the contact normal into the hand
   (from ``contact_results``) or, without it, the finger's outward direction
   ``finger_directions_B[i]`` (hand base frame). No direction known: no shift.
-- ``STOPPED`` (terminal): ``multiple_contacts`` or more fingers (or, with
-  ``contact_results``, hand bodies) touch during the approach; the wrist is
+- ``STOPPED`` (terminal): ``multiple_contacts`` or more fingertips touch
+  during the approach (the report: "multiple unexpected fingertip contacts";
+  other hand bodies only slow the approach down); the wrist is
   held at its measured position along the approach, the fingers in the pre-shape.
 - ``CLOSE``: the approach has arrived (travel complete and the measured
   position within ``arrival_tolerance`` of the command, or ``arrival_timeout``
@@ -92,7 +94,7 @@ class ReactiveGraspParams:
     slow_factor: float = 0.25  # approach speed multiplier after an unexpected contact
     shift_speed: float = 0.05  # m/s, sideways shift while an unexpected contact persists
     max_shift: float = 0.015  # m, largest sideways shift
-    multiple_contacts: int = 2  # this many touching fingers/bodies in the approach: stop
+    multiple_contacts: int = 2  # this many touching fingertips in the approach: stop
     contact_threshold: float = 0.2  # N, fingertip force that counts as contact
     close_rate: float = 1.0  # 1/s, closing fraction per second
     max_closing: float = 1.0  # closing fraction at which a finger without contact stops
@@ -307,18 +309,18 @@ class ReactiveGrasp(LeafSystem):
         return pose
 
     def _touching(self, context) -> tuple[np.ndarray, int, np.ndarray]:
-        """(fingertip contact flags (n,), number of touching fingers/bodies,
+        """(fingertip contact flags (n,), number of other hand bodies touching,
         separating direction in world (zeros if unknown)).
 
         With ``contact_results`` a fingertip counts only if it touches
         something other than the hand (the simulated pad also feels a finger
-        pressed against it), and other hand bodies touching the world count too.
+        pressed against it).
         """
         forces = self._tactile.Eval(context)
         touching = np.asarray(forces) > self.params.contact_threshold
         direction = np.zeros(3)
         if self._contacts is None or not self._contacts.HasValue(context):
-            return touching, int(touching.sum()), direction
+            return touching, 0, direction
         results = self._contacts.Eval(context)
         external = np.zeros(self._n, dtype=bool)
         others = set()
@@ -338,7 +340,7 @@ class ReactiveGrasp(LeafSystem):
             elif magnitude > self.params.contact_threshold:
                 others.add(body)
         touching &= external
-        return touching, int(touching.sum()) + len(others), direction
+        return touching, len(others), direction
 
     def _shift_direction(self, context, touching, direction_W) -> np.ndarray:
         d = direction_W
@@ -363,15 +365,15 @@ class ReactiveGrasp(LeafSystem):
         new_mode = mode
 
         if mode in (ReactiveGraspMode.APPROACH, ReactiveGraspMode.SLOW_APPROACH):
-            touching, count, direction_W = self._touching(context)
-            if count >= p.multiple_contacts:
+            touching, others, direction_W = self._touching(context)
+            if touching.sum() >= p.multiple_contacts:
                 new_mode = ReactiveGraspMode.STOPPED
                 # Hold where the hand is, not where the command had run ahead to.
                 measured = self._pose_measured.Eval(context)[:3]
                 along = float((measured - self._start[:3] - shift) @ self._direction)
                 travel = float(np.clip(along, 0.0, travel))
             else:
-                if count >= 1:
+                if touching.any() or others:
                     new_mode = ReactiveGraspMode.SLOW_APPROACH
                     d = self._shift_direction(context, touching, direction_W)
                     shift = shift + p.shift_speed * h * d
