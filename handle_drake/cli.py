@@ -20,6 +20,7 @@ from pathlib import Path
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.grasp.cli",
+    "handle_drake.learning.cli",
     "handle_drake.can_hand.cli",
 )
 
