@@ -2,11 +2,17 @@
 
 For each of the eight grasp classes and each object shape (cuboid grasped
 across its depth, sphere), five grasp widths spread over the class's size
-range (``taxonomy.GraspClassInfo.size_range_m``): plan (``plan_grasp``),
-simulate reach, close and a 13 cm lift on the floating-wrist station, and
-count a success when the object held through the lift
-(``demo.held_through_lift``: >= 10 cm higher and steady at the end). A plan
-that raises (no IK solution) counts as a failure of its own kind.
+range (``taxonomy.GraspClassInfo.size_range_m``): plan (``plan_grasp``) once,
+then execute the same plan twice, side by side:
+
+- open loop: the plan's keyframe script (reach, close, hold, lift),
+- reactive: :class:`~handle_drake.systems.reactive_grasp.ReactiveGrasp`
+  (report section 3.3: approach slowed/shifted on contact, each finger closes
+  until its own tactile contact, squeeze, lift; ``grasp.execution``),
+
+on the floating-wrist station, and count a success when the object held
+through the 13 cm lift (``demo.held_through_lift``: >= 10 cm higher and
+steady at the end). A plan that raises (no IK solution) fails both.
 
 Run: ``python benchmarks/bench_grasp_classes.py [--workers 2]``; prints a table
 and writes ``benchmarks/results/grasp_classes.json``. Under
@@ -32,6 +38,7 @@ RESULTS = Path(__file__).resolve().parent / "results" / "grasp_classes.json"
 def trial(args):
     grasp_class, kind, width = args
     from handle_drake.demo import held_through_lift
+    from handle_drake.grasp.execution import ReactiveGraspRunner
     from handle_drake.grasp.planning import plan_grasp, resting_pose
     from handle_drake.run import ScenarioRunner
 
@@ -41,14 +48,20 @@ def trial(args):
         plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
     except ValueError as error:
         return dict(grasp_class=grasp_class, kind=kind, width=width, size=size,
-                    planned=False, held=False, lift=0.0, error=str(error)[:120],
+                    planned=False, held=False, lift=0.0, held_reactive=False,
+                    lift_reactive=0.0, error=str(error)[:120],
                     plan_time=time.perf_counter() - start)
     plan_time = time.perf_counter() - start
-    result = ScenarioRunner(plan.to_scenario()).run()
+    open_loop = ScenarioRunner(plan.to_scenario()).run()
+    runner = ReactiveGraspRunner(plan)
+    reactive = runner.run()
     return dict(grasp_class=grasp_class, kind=kind, width=width, size=size, planned=True,
-                held=held_through_lift(result), lift=result.object_lift(),
+                held=held_through_lift(open_loop), lift=open_loop.object_lift(),
+                held_reactive=held_through_lift(reactive), lift_reactive=reactive.object_lift(),
+                reactive_final_mode=runner.final_mode().name,
                 centre_source=plan.centre_source, centre_offset_mm=plan.centre_offset * 1e3,
-                plan_time=plan_time, sim_wall_time=result.wall_time)
+                plan_time=plan_time, sim_wall_time=open_loop.wall_time,
+                sim_wall_time_reactive=reactive.wall_time)
 
 
 def main(argv=None) -> int:
@@ -75,23 +88,36 @@ def main(argv=None) -> int:
     wall = time.perf_counter() - start
 
     print(f"{len(rows)} trials in {wall:.0f} s\n")
-    print("| class | shape | widths (mm) | planned | held | success rate |")
+    print("| class | shape | planned | open loop held | reactive held | widths (mm): "
+          "open loop / reactive |")
     print("|---|---|---|---|---|---|")
     summary = {}
     for info in classes:
         for kind in kinds:
             sub = [r for r in rows if r["grasp_class"] == info.name and r["kind"] == kind]
+            n = len(sub)
             planned = sum(r["planned"] for r in sub)
             held = sum(r["held"] for r in sub)
-            widths = ", ".join(f"{r['width'] * 1e3:.0f}{'*' if r['held'] else ''}" for r in sub)
-            summary[f"{info.name}/{kind}"] = dict(trials=len(sub), planned=planned, held=held,
-                                                  success_rate=held / len(sub))
-            print(f"| {info.name} | {kind} | {widths} | {planned}/{len(sub)} | {held}/{len(sub)} "
-                  f"| {held / len(sub):.0%} |")
+            held_r = sum(r["held_reactive"] for r in sub)
+
+            def marks(key, sub=sub):
+                return ", ".join(f"{r['width'] * 1e3:.0f}{'*' if r[key] else ''}" for r in sub)
+
+            summary[f"{info.name}/{kind}"] = dict(
+                trials=n, planned=planned, held_open_loop=held, held_reactive=held_r,
+                success_rate_open_loop=held / n, success_rate_reactive=held_r / n)
+            print(f"| {info.name} | {kind} | {planned}/{n} | {held}/{n} ({held / n:.0%}) "
+                  f"| {held_r}/{n} ({held_r / n:.0%}) | {marks('held')} / "
+                  f"{marks('held_reactive')} |")
     total = sum(r["held"] for r in rows)
-    print(f"\noverall: {total}/{len(rows)} held ({total / len(rows):.0%}); * = held")
+    total_r = sum(r["held_reactive"] for r in rows)
+    n = len(rows)
+    print(f"\noverall: open loop {total}/{n} held ({total / n:.0%}), reactive {total_r}/{n} "
+          f"({total_r / n:.0%}); ratio reactive/open loop {total_r / max(total, 1):.2f}; "
+          "* = held")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(dict(reduced=small, wall_time_s=wall, summary=summary,
+                                       held_open_loop=total, held_reactive=total_r,
                                        trials=rows), indent=1))
     print(f"wrote {RESULTS}")
     return 0
