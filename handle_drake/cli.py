@@ -40,6 +40,8 @@ def _add_simulate(subparsers) -> None:
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
     p.add_argument("--hardware", action="store_true",
                    help="drive the CAN hand of the scenario's !CanHandDriver in real time")
+    p.add_argument("--quality", action="store_true",
+                   help="score the final grasp: Bimodal Wrench Space metric of the contacts")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -75,6 +77,11 @@ def _cmd_simulate(args) -> int:
     if result.object_position is not None:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
+    if args.quality:
+        value, closure, contacts = runner.grasp_quality()
+        print(f"grasp quality (BW metric, soft finger): {value:+.4f} "
+              f"({'force closure' if closure else 'not in force closure'}); "
+              f"touching: {', '.join(sorted(contacts)) or 'nothing'}")
     if args.html:
         print(f"replay written to {args.html}")
     return 0

@@ -36,6 +36,8 @@ DEMO_SCENARIO = "shadow_sphere_grasp.yaml"
 class DemoReport:
     held: bool
     lift: float  # m, final height gain of the object
+    quality: float  # BW metric of the final grasp (soft finger)
+    force_closure: bool
     result: RunResult
     html: Path | None
     plot: Path | None
@@ -45,6 +47,8 @@ class DemoReport:
         lines = [
             f"Shadow hand sphere grasp: {verdict} (object rose {self.lift * 100:.1f} cm; "
             f"required {REQUIRED_LIFT * 100:.0f} cm)",
+            f"final grasp: BW metric {self.quality:+.3f}, "
+            f"{'in force closure' if self.force_closure else 'not in force closure'}",
             f"simulated {self.result.sim_time:.1f} s in {self.result.wall_time:.1f} s "
             f"({self.result.realtime_factor:.1f}x real time)",
             "object height (m) over time:",
@@ -78,9 +82,12 @@ def run_demo(meshcat=None, html: str | Path | None = None,
         plot = Path(html).with_suffix(".png")
     if plot is not None:
         _plot_height(result, Path(plot))
+    quality, closure, _ = runner.grasp_quality()
     return DemoReport(
         held=held_through_lift(result),
         lift=result.object_lift(),
+        quality=quality,
+        force_closure=closure,
         result=result,
         html=Path(html) if (html is not None and meshcat is not None) else None,
         plot=Path(plot) if plot is not None else None,

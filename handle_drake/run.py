@@ -116,6 +116,20 @@ class ScenarioRunner:
                 logger = builder.AddSystem(VectorLogSink(output.size(), LOG_PERIOD))
                 builder.Connect(output, logger.get_input_port())
                 self._loggers[port] = logger
+        self._object_contacts = None
+        if scenario.object is not None and not hardware:
+            from handle_drake.quality import ObjectContacts
+            from handle_drake.station import GetPlant, object_body
+
+            plant = GetPlant(self.station)
+            hand = plant.GetModelInstanceByName("hand")
+            bodies = [plant.get_body(i) for i in plant.GetBodyIndices(hand)]
+            self._object_contacts = builder.AddNamedSystem("object_contacts", ObjectContacts(
+                plant, object_body(plant), {b.name(): b for b in bodies}))
+            builder.Connect(self.station.GetOutputPort("contact_results"),
+                            self._object_contacts.GetInputPort("contact_results"))
+            builder.Connect(self.station.GetOutputPort("body_poses"),
+                            self._object_contacts.GetInputPort("body_poses"))
         self.diagram = builder.Build()
         self.simulator = Simulator(self.diagram)
         if hardware:
@@ -155,6 +169,26 @@ class ScenarioRunner:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(self.meshcat.StaticHtml())
         return self._result(duration, wall)
+
+    def grasp_quality(self, surface_radius: float = 0.004, gamma: float = 0.002):
+        """BW metric of the hand's contacts on the object now (after :meth:`run`).
+
+        Soft-finger contacts with the object's friction, the contact surface
+        model of radius ``surface_radius`` (m), moments scaled by half the
+        object size. Returns ``(value, force_closure, contacts by body)``.
+        """
+        if self._object_contacts is None:
+            raise ValueError("grasp_quality needs a simulated scenario with an object")
+        from handle_drake.quality import ContactParams, score_contacts
+        from handle_drake.quality.surface import ObjectSurface
+        from handle_drake.station import object_spec
+
+        spec = object_spec(self.scenario)
+        contacts = self._object_contacts.get_output_port().Eval(
+            self._object_contacts.GetMyContextFromRoot(self.context))
+        params = ContactParams(model="soft_finger", mu=spec.mu, gamma=gamma,
+                               characteristic_length=spec.size / 2)
+        return score_contacts(contacts, params, ObjectSurface(spec), surface_radius)
 
     def _result(self, duration, wall) -> RunResult:
         logs = {port: logger.FindLog(self.context) for port, logger in self._loggers.items()}

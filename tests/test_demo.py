@@ -16,6 +16,8 @@ def test_demo_grasp_holds_the_sphere_through_a_10cm_lift(tmp_path):
     report = run_demo(plot=tmp_path / "height.png")
     assert report.held, report.summary()
     assert report.lift >= REQUIRED_LIFT
+    # The held grasp is in force closure (BW metric > 0).
+    assert report.force_closure and report.quality > 0
     # The hand, not a glitch, carried it: the fingertips press on it at the end.
     assert np.count_nonzero(report.result.tactile[-1] > 0.5) >= 2
     assert (tmp_path / "height.png").stat().st_size > 10_000
@@ -24,8 +26,11 @@ def test_demo_grasp_holds_the_sphere_through_a_10cm_lift(tmp_path):
 def test_dropped_object_is_reported_as_not_held():
     scenario = LoadScenario(filename=diagrams_dir() / "shadow_sphere_grasp.yaml",
                             data="script: [{time: 0.0}]\nsimulation_duration: 0.5")
-    result = ScenarioRunner(scenario).run()
+    runner = ScenarioRunner(scenario)
+    result = runner.run()
     assert not held_through_lift(result)
+    value, closure, _ = runner.grasp_quality()
+    assert not closure and value < 0
 
 
 def test_barrett_hand_holds_a_cylinder_through_a_lift():

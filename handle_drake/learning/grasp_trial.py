@@ -35,7 +35,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.objects import KINDS, ObjectSpec, total_height
-from handle_drake.quality import ContactParams, contact_surface, grasp_quality
+from handle_drake.quality import NO_CONTACT, ContactParams, score_contacts
 from handle_drake.quality.object_contacts import ObjectContacts
 from handle_drake.quality.surface import ObjectSurface
 from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
@@ -53,7 +53,6 @@ __all__ = [
     "PARAMETER_SPACES",
 ]
 
-NO_CONTACT = -1.0  # the BW value of a single frictionless unit contact: no grasp at all
 PARAMETER_SPACES = ("standoff", "offset", "synergy")
 
 # Object sizes (m) used by the babbling experiments, within the hands' reach.
@@ -329,31 +328,8 @@ simulation_duration: 1.2
         )
 
     def _score(self, contacts, built):
-        idx = np.flatnonzero(contacts.in_contact)
-        if len(idx) == 0:
-            return NO_CONTACT, False, {}
-        points, normals, detail = [], [], {}
-        for i in idx:
-            name = contacts.names[i]
-            detail[name] = {"p_O": contacts.p_OC[i].tolist(), "n_O": contacts.n_O[i].tolist(),
-                            "f_O": contacts.f_O[i].tolist()}
-            cloud = contacts.clouds.get(name)
-            modelled = None
-            if self.config.surface_radius > 0 and cloud is not None:
-                try:
-                    modelled = contact_surface(cloud[0], cloud[1], built["surface"],
-                                               self.config.surface_radius, num_rings=1,
-                                               points_per_ring=4)
-                except ValueError:
-                    modelled = None  # no segment hit the surface: keep the raw contact
-            if modelled is None or len(modelled[0]) == 0:
-                points.append(contacts.p_OC[i][None])
-                normals.append(contacts.n_O[i][None])
-            else:
-                points.append(modelled[0])
-                normals.append(modelled[1])
-        quality = grasp_quality(np.vstack(points), np.vstack(normals), built["params"])
-        return float(quality.value), bool(quality.force_closure), detail
+        return score_contacts(contacts, built["params"], built["surface"],
+                              self.config.surface_radius)
 
 
 def _set_joint_positions(plant, plant_context, instance, names, values) -> None:

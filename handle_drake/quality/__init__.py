@@ -32,7 +32,7 @@ from .metrics import (
     is_force_closure,
     quality_from_wrenches,
 )
-from .object_contacts import FingertipContacts, ObjectContacts
+from .object_contacts import NO_CONTACT, FingertipContacts, ObjectContacts, score_contacts
 from .surface import (
     BoxSurface,
     CylinderSurface,
@@ -78,6 +78,8 @@ __all__ = [
     "largest_ball_radius",
     "qhull_ball_radius",
     "ferrari_canny",
+    "NO_CONTACT",
+    "score_contacts",
     "ferrari_canny_linf_qhull",
     "hull_volume",
     # simulation

@@ -20,7 +20,7 @@ from pydrake.systems.framework import LeafSystem
 
 from .contact import GraspContacts
 
-__all__ = ["FingertipContacts", "ObjectContacts"]
+__all__ = ["FingertipContacts", "ObjectContacts", "NO_CONTACT", "score_contacts"]
 
 
 @dataclass
@@ -230,3 +230,47 @@ class ObjectContacts(LeafSystem):
             value.f_O[i] = F.sum(axis=0)
             value.clouds[self._names[i]] = (P, N)
         output.set_value(value)
+
+
+#: BW value reported when nothing touches the object: that of a single
+#: frictionless unit contact, worse than any grasp with contact on a sphere.
+NO_CONTACT = -1.0
+
+
+def score_contacts(contacts: FingertipContacts, params, surface=None,
+                   surface_radius: float = 0.0, num_rings: int = 1, points_per_ring: int = 4):
+    """BW metric of simulated contacts: ``(value, force_closure, detail)``.
+
+    Each touching body's raw contact cloud goes through the contact surface
+    model (report 4.1.3) on ``surface`` when ``surface_radius > 0``; where no
+    segment hits the surface, the body's force-weighted mean contact is used.
+    ``detail`` maps body name -> ``{"p_O", "n_O", "f_O"}`` lists (JSON-ready).
+    Nothing touching scores :data:`NO_CONTACT`.
+    """
+    from .metrics import grasp_quality
+    from .surface import contact_surface
+
+    idx = np.flatnonzero(contacts.in_contact)
+    if len(idx) == 0:
+        return NO_CONTACT, False, {}
+    points, normals, detail = [], [], {}
+    for i in idx:
+        name = contacts.names[i]
+        detail[name] = {"p_O": contacts.p_OC[i].tolist(), "n_O": contacts.n_O[i].tolist(),
+                        "f_O": contacts.f_O[i].tolist()}
+        cloud = contacts.clouds.get(name)
+        modelled = None
+        if surface is not None and surface_radius > 0 and cloud is not None:
+            try:
+                modelled = contact_surface(cloud[0], cloud[1], surface, surface_radius,
+                                           num_rings=num_rings, points_per_ring=points_per_ring)
+            except ValueError:
+                modelled = None  # no segment hit the surface: keep the raw contact
+        if modelled is None or len(modelled[0]) == 0:
+            points.append(contacts.p_OC[i][None])
+            normals.append(contacts.n_O[i][None])
+        else:
+            points.append(modelled[0])
+            normals.append(modelled[1])
+    quality = grasp_quality(np.vstack(points), np.vstack(normals), params)
+    return float(quality.value), bool(quality.force_closure), detail
