@@ -1,10 +1,15 @@
 """The proxy's TCP client: a background thread that keeps a connection to the server.
 
 The simulator never waits on the network: :meth:`CanHandClient.send_command`
-stores the newest command and wakes the thread; :meth:`CanHandClient.latest`
-returns the newest hand state. Both only take a lock. The thread connects,
-says HELLO, streams STATE messages in, sends commands out, and on any error
-closes the socket and tries again every ``reconnect_interval`` seconds.
+writes the command straight to the (non-blocking) socket when it takes the
+whole message, and otherwise stores it as the newest command for the thread
+(a newer one replaces it); :meth:`CanHandClient.latest` returns the newest
+hand state. Both only take locks. Writing from the caller's thread saves a
+thread wake-up per command on the latency path. The thread connects, says
+HELLO, streams STATE messages in, writes what the socket could not take at
+once, and on any error (or a server that stops reading for
+``connect_timeout``) closes the socket and tries again every
+``reconnect_interval`` seconds.
 """
 
 from __future__ import annotations
@@ -55,6 +60,12 @@ class CanHandClient:
         self.status_timeout = float(status_timeout)
         self._info = P.HandInfo(layout.kind, layout.nq, layout.nu, layout.num_tactile)
         self._lock = threading.Lock()
+        # Socket writes (caller and thread): the session socket, its unsent bytes.
+        self._send_lock = threading.Lock()
+        self._session_sock = None
+        self._out = bytearray()
+        self._out_since = 0.0
+        self._stats_pending = False
         self._stop = threading.Event()
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
@@ -116,8 +127,44 @@ class CanHandClient:
             self._seq += 1
             self._command = (self._seq, q.copy())
             seq = self._seq
-        self._wake()
+        if not self._send_now():
+            self._wake()
         return seq
+
+    def _send_now(self) -> bool:
+        """Writes the pending command from the caller's thread; False: the thread must."""
+        with self._send_lock:
+            sock = self._session_sock
+            if sock is None or self._out:
+                return False
+            with self._lock:
+                command, self._command = self._command, None
+            if command is None:
+                return True
+            data = P.pack_command(*command)
+            try:
+                sent = sock.send(data)  # non-blocking during a session
+            except OSError:  # full (BlockingIOError) or broken: the thread deals with it
+                sent = 0
+            if sent == 0:
+                with self._lock:
+                    if self._command is None:  # unless a newer command replaced it
+                        self._command = command
+                return False
+            if sent < len(data):
+                self._out += data[sent:]
+                self._out_since = time.monotonic()
+            self._note_sent(command[0])
+            return sent == len(data)
+
+    def _note_sent(self, seq: int) -> None:
+        """Counts a command written to the socket (called under _send_lock)."""
+        self.counters["commands_sent"] += 1
+        if self.record_latency:
+            with self._lock:
+                self._sent_times[seq] = time.perf_counter()
+                while len(self._sent_times) > 10_000:
+                    self._sent_times.popitem(last=False)
 
     def latest(self) -> tuple[P.StateMessage | None, float]:
         """The newest STATE (None before the first) and its receive time (monotonic s)."""
@@ -222,37 +269,59 @@ class CanHandClient:
         return sock
 
     def _session(self, sock: socket.socket) -> None:
-        while not self._stop.is_set():
-            readable, _, _ = select.select([sock, self._wake_r], [], [], 0.05)
-            if self._wake_r in readable:
-                try:
-                    while self._wake_r.recv(4096):
+        sock.setblocking(False)
+        with self._send_lock:
+            self._out.clear()
+            self._stats_pending = False
+            self._session_sock = sock
+        try:
+            while not self._stop.is_set():
+                writing = [sock] if self._out else []
+                readable, _, _ = select.select([sock, self._wake_r], writing, [], 0.05)
+                if self._wake_r in readable:
+                    try:
+                        while self._wake_r.recv(4096):
+                            pass
+                    except OSError:
                         pass
-                except OSError:
-                    pass
-            if sock in readable:
-                data = sock.recv(65536)
-                if not data:
-                    raise ConnectionError("server closed the connection")
-                for message_type, payload in self._reader.feed(data):
-                    self._on_message(message_type, payload)
-            with self._lock:
-                command, self._command = self._command, None
-                want_stats = bool(self._stats_waiters)
-            out = b""
-            if command is not None:
-                seq, q = command
-                out += P.pack_command(seq, q)
-            if want_stats:
-                out += P.pack(P.STATS_REQ)
-            if out:
-                sock.sendall(out)
+                if sock in readable:
+                    try:
+                        data = sock.recv(65536)
+                    except (BlockingIOError, InterruptedError):
+                        data = None
+                    if data == b"":
+                        raise ConnectionError("server closed the connection")
+                    if data:
+                        for message_type, payload in self._reader.feed(data):
+                            self._on_message(message_type, payload)
+                self._flush(sock)
+        finally:
+            with self._send_lock:
+                self._session_sock = None
+                self._out.clear()
+
+    def _flush(self, sock: socket.socket) -> None:
+        """Queues the pending command and a STATS request, writes what the socket takes."""
+        with self._send_lock:
+            if not self._out:
+                with self._lock:
+                    command, self._command = self._command, None
+                    want_stats = bool(self._stats_waiters) and not self._stats_pending
                 if command is not None:
-                    self.counters["commands_sent"] += 1
-                    if self.record_latency:
-                        self._sent_times[command[0]] = time.perf_counter()
-                        while len(self._sent_times) > 10_000:
-                            self._sent_times.popitem(last=False)
+                    self._out += P.pack_command(*command)
+                    self._note_sent(command[0])
+                if want_stats:
+                    self._out += P.pack(P.STATS_REQ)
+                    self._stats_pending = True
+                self._out_since = time.monotonic()
+            if self._out:
+                try:
+                    del self._out[:sock.send(self._out)]
+                except (BlockingIOError, InterruptedError):
+                    pass
+            if self._out and time.monotonic() - self._out_since > self.connect_timeout:
+                raise ConnectionError(
+                    f"server stopped reading for {self.connect_timeout} s")
 
     def _on_message(self, message_type: int, payload: bytes) -> None:
         if message_type == P.STATE:
@@ -263,15 +332,17 @@ class CanHandClient:
             self.counters["states_received"] += 1
             if self.record_latency and self._sent_times:
                 t = time.perf_counter()
-                while self._sent_times:
-                    seq = next(iter(self._sent_times))
-                    if seq > state.seq_ack:
-                        break
-                    self.latencies.append(t - self._sent_times.pop(seq))
+                with self._lock:
+                    while self._sent_times:
+                        seq = next(iter(self._sent_times))
+                        if seq > state.seq_ack:
+                            break
+                        self.latencies.append(t - self._sent_times.pop(seq))
         elif message_type == P.STATS:
             value = P.unpack_stats(payload)
             with self._lock:
                 waiters, self._stats_waiters = self._stats_waiters, []
+            self._stats_pending = False
             for waiter in waiters:
                 waiter["value"] = value
                 waiter["event"].set()

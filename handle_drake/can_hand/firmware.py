@@ -64,9 +64,13 @@ class HandJointModel:
         self._rng = np.random.default_rng(config.seed)
         index = {n: i for i, n in enumerate(layout.actuated_joint_names)}
         self._pads = [np.array([index[n] for n in pad], dtype=int) for pad in layout.closing_joints]
-        closing = np.zeros(nu, dtype=bool)
-        for pad in self._pads:
-            closing[pad] = True
+        # Per-cycle work as matrix products: pad sums (nt x nu, 0/1) and the
+        # coupling map of layout.joint_positions (nq x nu, linear: its columns).
+        self._pad_matrix = np.zeros((len(self._pads), nu))
+        for k, pad in enumerate(self._pads):
+            self._pad_matrix[k, pad] = 1.0
+        self._joint_map = np.stack([layout.joint_positions(e) for e in np.eye(nu)], axis=1)
+        closing = self._pad_matrix.any(axis=0)
         if config.object_closure is None:
             self.stop = np.full(nu, np.inf)
         else:
@@ -95,7 +99,7 @@ class HandJointModel:
 
     def measured_positions(self) -> np.ndarray:
         """All joints (nq) with sensor noise."""
-        q = self.layout.joint_positions(self.q)
+        q = self._joint_map @ self.q
         if self.config.position_noise > 0:
             q = q + self._rng.normal(0.0, self.config.position_noise, q.shape)
         return q
@@ -104,7 +108,7 @@ class HandJointModel:
         """Normal force (N) on each fingertip: stiffness times setpoint past the object."""
         press = np.maximum(0.0, self.setpoint - self.stop)
         press[~np.isfinite(press)] = 0.0
-        force = np.array([self.config.contact_stiffness * press[pad].sum() for pad in self._pads])
+        force = self.config.contact_stiffness * (self._pad_matrix @ press)
         if self.config.tactile_noise > 0:
             force = force + self._rng.normal(0.0, self.config.tactile_noise, force.shape)
         return np.maximum(force, 0.0)

@@ -170,6 +170,74 @@ class _PackedMessage:
         return tuple(raw * k for raw, k in zip(self._struct.unpack(data), self.scales, strict=True))
 
 
+class _SlotFrames:
+    """A run of DBC messages (``<NAME>_0``, ``<NAME>_1``, ...) of 4 equal 16-bit slots each.
+
+    Encodes a whole vector in one numpy pass (one rounding, one cast, one
+    ``tobytes``) instead of a struct pack per frame: a Shadow cycle has 6
+    position frames, and a 1 kHz hand cycle leaves little room per frame.
+    Built from the messages' own declarations (checked equal across the run,
+    and by :class:`_PackedMessage`); rounds half to even like Python's
+    ``round``, so the bytes equal the per-frame path's.
+    """
+
+    def __init__(self, messages):
+        packed = [_PackedMessage(m) for m in messages]
+        first = messages[0].signals[0]
+        layout = [(s.length, s.is_signed, float(s.scale)) for m in messages for s in m.signals]
+        if any(entry != (16, first.is_signed, float(first.scale)) for entry in layout) or any(
+                len(m.signals) != SLOTS_PER_FRAME for m in messages):
+            raise ValueError(f"{messages[0].name}...: expected {SLOTS_PER_FRAME} equal 16-bit "
+                             "signals per frame")
+        self.ids = tuple(m.frame_id for m in messages)
+        self.scale = float(first.scale)
+        self._dtype = np.dtype("<i2" if first.is_signed else "<u2")
+        info = np.iinfo(self._dtype)
+        self._raw_range = (info.min, info.max)
+        self._size = len(messages) * SLOTS_PER_FRAME
+        self._packed = packed
+
+    def encode(self, values: np.ndarray) -> list[tuple[int, bytes]]:
+        """``[(id, 8 bytes), ...]`` of ``values`` (at most 4 per frame, zero-padded)."""
+        raw = np.round(values / self.scale)
+        low, high = self._raw_range
+        if raw.size and (raw.min() < low or raw.max() > high):  # callers clip or check first
+            raise ValueError(f"values out of the frame range {low * self.scale}.."
+                             f"{high * self.scale}, got {values.tolist()}")
+        data = raw.astype(self._dtype).tobytes() + bytes(2 * (self._size - raw.size))
+        return [(frame_id, data[8 * i:8 * i + 8]) for i, frame_id in enumerate(self.ids)]
+
+
+class _StatusStruct:
+    """STATUS (SEQ_ACK u16, COUNTER u8, STATE u4, KIND u4, TIME u32 us) as one struct.
+
+    The two nibbles are not byte-aligned, so :class:`_PackedMessage` does not
+    apply; the layout is checked against the DBC here, and the tests compare
+    both directions with cantools bit for bit.
+    """
+
+    _LAYOUT = (("SEQ_ACK", 0, 16), ("COUNTER", 16, 8), ("STATE", 24, 4), ("KIND", 28, 4),
+               ("TIME", 32, 32))
+
+    def __init__(self, message):
+        found = tuple((s.name, s.start, s.length) for s in sorted(message.signals,
+                                                                   key=lambda s: s.start))
+        if found != self._LAYOUT or message.length != 8 or any(
+                s.is_signed or s.offset != 0 or s.byte_order != "little_endian"
+                for s in message.signals):
+            raise ValueError(f"STATUS: expected the layout {self._LAYOUT}, got {found}")
+        self.time_scale = float(message.get_signal_by_name("TIME").scale)
+        self._struct = struct.Struct("<HBBI")
+
+    def encode(self, seq_ack: int, counter: int, state: int, kind: int, time_raw: int) -> bytes:
+        return self._struct.pack(seq_ack, counter, (kind << 4) | state, time_raw)
+
+    def decode(self, data: bytes) -> dict:
+        seq_ack, counter, nibbles, time_raw = self._struct.unpack(data)
+        return {"SEQ_ACK": seq_ack, "COUNTER": counter, "STATE": nibbles & 0xF,
+                "KIND": nibbles >> 4, "TIME": time_raw * self.time_scale}
+
+
 def _frames_for(n: int) -> int:
     return (n + SLOTS_PER_FRAME - 1) // SLOTS_PER_FRAME
 
@@ -211,15 +279,22 @@ class HandCodec:
         self._f_limit = float(self._tactiles[0].signals[0].maximum)
         self._packed = {m.frame_id: _PackedMessage(m) for m in
                         self._setpoints + self._positions + self._tactiles + [self._commit]}
+        self._setpoint_frames = _SlotFrames(self._setpoints)
+        self._position_frames = _SlotFrames(self._positions)
+        self._tactile_frames = _SlotFrames(self._tactiles)
+        self._status_struct = _StatusStruct(self._status)
+        self._host_to_hand_ids = frozenset([m.frame_id for m in self._setpoints] + [COMMIT_ID])
+        self._hand_to_host_ids = frozenset(
+            [m.frame_id for m in self._positions + self._tactiles] + [STATUS_ID])
 
     # -- ids -------------------------------------------------------------
     @property
     def host_to_hand_ids(self) -> frozenset[int]:
-        return frozenset([m.frame_id for m in self._setpoints] + [COMMIT_ID])
+        return self._host_to_hand_ids
 
     @property
     def hand_to_host_ids(self) -> frozenset[int]:
-        return frozenset([m.frame_id for m in self._positions + self._tactiles] + [STATUS_ID])
+        return self._hand_to_host_ids
 
     # -- host -> hand -----------------------------------------------------
     def encode_setpoints(self, q_command, seq: int, mode: int = MODE_POSITION):
@@ -235,10 +310,8 @@ class HandCodec:
                 f"q_command: |q| must be <= {self._q_limit} rad to fit a setpoint frame, "
                 f"got {q[np.abs(q) > self._q_limit].tolist()}"
             )
-        packed = self._packed
-        frames = [(m.frame_id, packed[m.frame_id].encode(_slots(q, i)))
-                  for i, m in enumerate(self._setpoints)]
-        frames.append((COMMIT_ID, packed[COMMIT_ID].encode(
+        frames = self._setpoint_frames.encode(q)
+        frames.append((COMMIT_ID, self._packed[COMMIT_ID].encode(
             (int(seq) % 65536, self.num_setpoint_frames, int(mode)))))
         return frames
 
@@ -252,16 +325,13 @@ class HandCodec:
         """
         q = np.clip(_checked(q, self.layout.nq, "q"), -self._q_limit, self._q_limit)
         f = np.clip(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0, self._f_limit)
-        packed = self._packed
-        frames = [(m.frame_id, packed[m.frame_id].encode(_slots(q, i)))
-                  for i, m in enumerate(self._positions)]
-        frames += [(m.frame_id, packed[m.frame_id].encode(_slots(f, i)))
-                   for i, m in enumerate(self._tactiles)]
-        time_us = int(round(hand_time * 1e6)) % (1 << 32)
-        frames.append((STATUS_ID, bytes(self._status.encode({
-            "SEQ_ACK": int(seq_ack) % 65536, "COUNTER": int(counter) % 256,
-            "STATE": int(state), "KIND": self.layout.kind_code, "TIME": time_us * 1e-6,
-        }))))
+        frames = self._position_frames.encode(q) + self._tactile_frames.encode(f)
+        status = self._status_struct
+        if not 0 <= int(state) <= 15:
+            raise ValueError(f"state: expected 0..15, got {state}")
+        time_raw = int(round(hand_time / status.time_scale)) % (1 << 32)
+        frames.append((STATUS_ID, status.encode(int(seq_ack) % 65536, int(counter) % 256,
+                                                int(state), self.layout.kind_code, time_raw)))
         return frames
 
     # -- decoding -----------------------------------------------------------
@@ -289,18 +359,13 @@ class HandCodec:
             if kind == "commit":
                 return Frame(kind, index, dict(zip(packed.names, map(int, values), strict=True)))
             return Frame(kind, index, values)
-        try:
-            fields = message.decode(data, decode_choices=False)
-        except Exception as error:  # cantools.DecodeError and friends
-            raise MalformedFrameError(f"{message.name}: {error}") from None
-        if kind == "status":
-            fields = {k: (float(v) if k == "TIME" else int(v)) for k, v in fields.items()}
-            if fields["KIND"] != self.layout.kind_code:
-                names = {v: k for k, v in HAND_KIND_CODES.items()}
-                raise MalformedFrameError(
-                    f"STATUS: hand kind {names.get(fields['KIND'], fields['KIND'])!r}, "
-                    f"expected {self.layout.kind!r}"
-                )
+        fields = self._status_struct.decode(data)  # the only message without a packed form
+        if fields["KIND"] != self.layout.kind_code:
+            names = {v: k for k, v in HAND_KIND_CODES.items()}
+            raise MalformedFrameError(
+                f"STATUS: hand kind {names.get(fields['KIND'], fields['KIND'])!r}, "
+                f"expected {self.layout.kind!r}"
+            )
         return Frame(kind, index, fields)
 
 
@@ -311,11 +376,6 @@ def _checked(value, size: int, name: str) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name}: expected finite values, got {array.tolist()}")
     return array
-
-
-def _slots(values: np.ndarray, frame: int) -> list[float]:
-    chunk = values[frame * SLOTS_PER_FRAME:(frame + 1) * SLOTS_PER_FRAME].tolist()
-    return chunk + [0.0] * (SLOTS_PER_FRAME - len(chunk))
 
 
 class FeedbackAssembler:

@@ -5,16 +5,27 @@ Two threads:
 - the bus thread receives frames, accepts only the hand's feedback ids
   (foreign ids and malformed frames are dropped and counted; our own
   setpoint frames echoed by a multicast bus are ignored), assembles one
-  snapshot per hand cycle, estimates joint velocities and wakes the I/O thread;
+  snapshot per hand cycle, estimates joint velocities and sends the new
+  hand state to every client itself (no hand-off to the other thread on the
+  way back: one wake-up less per cycle on the latency path);
 - the I/O thread (one ``selectors`` loop) accepts clients, reads their
   commands (:mod:`~handle_drake.can_hand.protocol`), sends setpoints to the
-  bus and streams each new hand state to every client.
+  bus and writes what a slow client could not take at once.
+
+The clients' sockets and output buffers are shared under ``_io_lock``
+(never held while waiting on the selector or sending on the bus).
 
 Setpoint policy (what a command becomes on the bus):
 
 1. clamp the command to the joint limits (counted as ``commands_clamped``);
-2. at most ``max_setpoint_rate`` commits per second: a command arriving
-   sooner waits, and a newer command replaces it (``commands_coalesced``);
+2. at most ``max_setpoint_rate`` commits per second, on a schedule of one
+   slot per ``1 / max_setpoint_rate`` s that tolerates half a slot of jitter
+   (GCRA, the ATM cell-rate rule): any window of ``T`` seconds holds at most
+   ``1.5 + rate * T`` commits, yet a client sending at exactly the limit is
+   not delayed by its own timing jitter (a strict minimum interval would
+   let every late command push all later ones back). A command arriving
+   before its slot waits, and a newer command replaces it
+   (``commands_coalesced``);
 3. each commit moves every joint at most ``max_step`` towards the command
    (the first step starts from the measured position);
 4. watchdog: without a command for ``watchdog`` seconds the target freezes at
@@ -98,7 +109,7 @@ class VelocityEstimator:
 
 
 class _Client:
-    __slots__ = ("sock", "address", "reader", "out", "greeted", "closing")
+    __slots__ = ("sock", "address", "reader", "out", "greeted", "closing", "writing")
 
     def __init__(self, sock, address):
         self.sock, self.address = sock, address
@@ -106,6 +117,7 @@ class _Client:
         self.out = bytearray()
         self.greeted = False
         self.closing = False
+        self.writing = False  # registered for EVENT_WRITE (output is pending)
 
 
 class CanBusServer:
@@ -130,7 +142,8 @@ class CanBusServer:
                                 self.layout.num_tactile)
         self._bus = bus
         self._owns_bus = bus is None
-        self._lock = threading.Lock()
+        self._lock = threading.Lock()  # counters and the newest snapshot
+        self._io_lock = threading.Lock()  # clients, their output, selector registrations
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._counters = collections.Counter()
@@ -140,10 +153,7 @@ class CanBusServer:
         self._clients: list[_Client] = []
         # Written by the bus thread under the lock.
         self._snapshot = None
-        self._velocity = None
-        self._snapshot_generation = 0
-        # Owned by the I/O thread.
-        self._sent_generation = 0
+        # Owned by the I/O thread (the bus thread reads them for STATE flags).
         self._target = None
         self._target_seq = 0
         self._setpoint = None
@@ -151,7 +161,9 @@ class CanBusServer:
         self._holding = False
         self._clamped = False
         self._last_command_time = 0.0
-        self._last_commit_time = -np.inf
+        self._next_slot = -np.inf  # GCRA: theoretical time of the next commit
+        self._slot = 1.0 / config.max_setpoint_rate
+        self._slot_tolerance = 0.5 * self._slot
         self._commit_seq = 1
         self._commit_to_client = np.zeros(65536, dtype=np.int64)
         self._assembler = FeedbackAssembler(self.codec)
@@ -207,8 +219,9 @@ class CanBusServer:
         for thread in self._threads:
             thread.join(timeout)
         self._threads = []
-        for client in list(self._clients):
-            self._close_client(client)
+        with self._io_lock:
+            for client in list(self._clients):
+                self._close_client(client)
         for sock in (self._listen, self._wake_r, self._wake_w):
             if sock is not None:
                 sock.close()
@@ -231,7 +244,7 @@ class CanBusServer:
         with self._lock:
             counters = dict(self._counters)
         counters["incomplete_cycles"] = self._assembler.incomplete
-        counters["clients"] = sum(1 for c in self._clients if c.greeted)
+        counters["clients"] = sum(1 for c in list(self._clients) if c.greeted)
         return counters
 
     def _count(self, name: str, n: int = 1) -> None:
@@ -248,39 +261,57 @@ class CanBusServer:
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
         own_ids = self.codec.host_to_hand_ids
+        decode, push = self.codec.decode, self._assembler.push
+        # Frame counts are kept here and merged under the lock once per hand
+        # cycle or idle wait, not per frame (a Shadow cycle is 9 frames).
+        pending = collections.Counter()
         while not self._stop.is_set():
             try:
                 message = self._bus.recv(timeout=0.05)
             except (can.CanError, OSError, ValueError) as error:
-                self._count("bus_rx_errors")
+                pending["bus_rx_errors"] += 1
+                self._merge_counts(pending)
                 log.warning("bus receive failed: %s", error)
                 self._stop.wait(0.01)
                 continue
             if message is None:
+                self._merge_counts(pending)
                 continue
-            self._count("frames_rx")
+            pending["frames_rx"] += 1
             if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
-                self._count("foreign_frames")
+                pending["foreign_frames"] += 1
                 continue
             if message.arbitration_id in own_ids:
-                self._count("echo_frames")
+                pending["echo_frames"] += 1
                 continue
             try:
-                frame = self.codec.decode(message.arbitration_id, message.data)
+                frame = decode(message.arbitration_id, message.data)
             except ForeignFrameError:
-                self._count("foreign_frames")
+                pending["foreign_frames"] += 1
                 continue
             except MalformedFrameError:
-                self._count("malformed_frames")
+                pending["malformed_frames"] += 1
                 continue
-            snapshot = self._assembler.push(frame)
-            if snapshot is not None:
-                velocity = self._velocities.update(snapshot.q, snapshot.hand_time)
-                with self._lock:
-                    self._snapshot, self._velocity = snapshot, velocity
-                    self._snapshot_generation += 1
-                    self._counters["hand_cycles"] += 1
-                self._wake()
+            snapshot = push(frame)
+            if snapshot is None:
+                if len(pending) and pending["frames_rx"] >= 64:
+                    self._merge_counts(pending)
+                continue
+            velocity = self._velocities.update(snapshot.q, snapshot.hand_time)
+            pending["hand_cycles"] += 1
+            with self._lock:
+                self._snapshot = snapshot
+                self._counters.update(pending)
+            pending.clear()
+            self._broadcast_state(snapshot, velocity)
+            if self._setpoint is None and self._target is not None:
+                self._wake()  # a first command waits for the measured position
+
+    def _merge_counts(self, pending: collections.Counter) -> None:
+        if pending:
+            with self._lock:
+                self._counters.update(pending)
+            pending.clear()
 
     def _send_frames(self, frames) -> bool:
         try:
@@ -303,31 +334,33 @@ class CanBusServer:
                 if self._stop.is_set():
                     return
                 raise
-            for key, mask in events:
-                if key.data == "listen":
-                    self._accept()
-                elif key.data == "wake":
-                    try:
-                        while self._wake_r.recv(4096):
+            with self._io_lock:
+                for key, mask in events:
+                    if key.data == "listen":
+                        self._accept()
+                    elif key.data == "wake":
+                        try:
+                            while self._wake_r.recv(4096):
+                                pass
+                        except OSError:
                             pass
-                    except OSError:
-                        pass
-                else:
-                    client = key.data
-                    if mask & selectors.EVENT_READ:
-                        self._read(client)
-                    if mask & selectors.EVENT_WRITE and not client.closing:
-                        self._flush(client)
-            now = time.monotonic()
-            self._service_setpoint(now)
-            self._broadcast_state()
+                    else:
+                        client = key.data
+                        if client not in self._clients:  # closed by the bus thread meanwhile
+                            continue
+                        if mask & selectors.EVENT_READ:
+                            self._read(client)
+                        if mask & selectors.EVENT_WRITE and not client.closing:
+                            self._flush(client)
+            # Outside the I/O lock: the bus thread streams states meanwhile.
+            self._service_setpoint(time.monotonic())
 
     def _select_timeout(self, now: float) -> float:
         timeout = 0.05
         if self._target is not None and not self._holding:
             timeout = min(timeout, max(0.0, self._last_command_time + self.config.watchdog - now))
             if self._unsent or not np.array_equal(self._setpoint, self._target):
-                next_commit = self._last_commit_time + 1.0 / self.config.max_setpoint_rate
+                next_commit = self._next_slot - self._slot_tolerance
                 timeout = min(timeout, max(0.0, next_commit - now))
         return timeout
 
@@ -420,6 +453,7 @@ class CanBusServer:
             self._flush(client)
 
     def _flush(self, client: _Client) -> None:
+        """Writes what the socket takes now; the rest waits for EVENT_WRITE (under _io_lock)."""
         if client.out:
             try:
                 sent = client.sock.send(client.out)
@@ -429,8 +463,10 @@ class CanBusServer:
             except OSError:
                 self._close_client(client)
                 return
-        if client in self._clients:
-            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if client.out else 0)
+        writing = bool(client.out)
+        if writing != client.writing and client in self._clients:
+            client.writing = writing
+            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if writing else 0)
             self._selector.modify(client.sock, events, client)
 
     # -- setpoints ---------------------------------------------------------------------
@@ -446,7 +482,6 @@ class CanBusServer:
         self._unsent = True
         self._holding = False
         self._last_command_time = now
-        self._service_setpoint(now)
 
     def _measured_command(self):
         with self._lock:
@@ -470,47 +505,52 @@ class CanBusServer:
             return
         if not self._unsent and np.array_equal(base, self._target):
             return
-        if now - self._last_commit_time < 1.0 / self.config.max_setpoint_rate:
-            return
+        if now < self._next_slot - self._slot_tolerance:
+            return  # too early for the next slot; the selector wakes us then
         setpoint = limit_setpoint(base, self._target, self.config.max_step,
                                   self.layout.command_lower, self.layout.command_upper)
+        # Mapped before sending: the hand may acknowledge before send returns.
+        self._commit_to_client[self._commit_seq] = self._target_seq
         if not self._send_frames(self.codec.encode_setpoints(setpoint, self._commit_seq)):
             return
-        self._commit_to_client[self._commit_seq] = self._target_seq
         self._commit_seq = (self._commit_seq + 1) % 65536
         self._setpoint = setpoint
         self._unsent = False
-        self._last_commit_time = now
+        self._next_slot = max(self._next_slot, now) + self._slot
         self._count("commits_tx")
 
-    def _broadcast_state(self) -> None:
-        with self._lock:
-            generation = self._snapshot_generation
-            snapshot, velocity = self._snapshot, self._velocity
-        if generation == self._sent_generation or snapshot is None:
-            return
-        self._sent_generation = generation
-        setpoint = (self._setpoint if self._setpoint is not None
-                    else self.layout.actuated_positions(snapshot.q))
+    def _broadcast_state(self, snapshot, velocity) -> None:
+        """Sends one hand cycle to every greeted client (bus thread)."""
+        # The I/O thread replaces (never mutates) these arrays: read each once.
+        setpoint, target = self._setpoint, self._target
+        if setpoint is None:
+            setpoint = self.layout.actuated_positions(snapshot.q)
+            rate_limited = False
+        else:
+            rate_limited = target is not None and not np.array_equal(setpoint, target)
         flags = ((P.FLAG_HOLDING if self._holding else 0)
                  | (P.FLAG_CLAMPED if self._clamped else 0)
-                 | (P.FLAG_RATE_LIMITED if (self._target is not None and self._setpoint is not None
-                                            and not np.array_equal(self._setpoint, self._target))
-                    else 0))
+                 | (P.FLAG_RATE_LIMITED if rate_limited else 0))
         message = P.pack_state(P.StateMessage(
             seq_ack=int(self._commit_to_client[snapshot.seq_ack]), hand_state=snapshot.state,
             flags=flags, hand_time=snapshot.hand_time, q=snapshot.q, v=velocity,
             tactile=snapshot.tactile, setpoint=setpoint,
         ))
-        for client in list(self._clients):
-            if not client.greeted or client.closing:
-                continue
-            if len(client.out) > _MAX_CLIENT_BACKLOG:
-                self._count("states_dropped")
-                continue
-            client.out += message
-            self._count("states_sent")
-            self._flush(client)
+        sent = dropped = 0
+        with self._io_lock:
+            for client in list(self._clients):
+                if not client.greeted or client.closing:
+                    continue
+                if len(client.out) > _MAX_CLIENT_BACKLOG:
+                    dropped += 1
+                    continue
+                client.out += message
+                sent += 1
+                self._flush(client)
+        with self._lock:
+            self._counters["states_sent"] += sent
+            if dropped:
+                self._counters["states_dropped"] += dropped
 
     def serve_until(self, stop_event: threading.Event) -> None:
         """Blocks until ``stop_event`` is set (the CLI's main loop)."""
