@@ -22,8 +22,8 @@ Setpoint policy (what a command becomes on the bus):
    slot per ``1 / max_setpoint_rate`` s that tolerates half a slot of jitter
    (GCRA, the ATM cell-rate rule): any window of ``T`` seconds holds at most
    ``1.5 + rate * T`` commits, yet a client sending at exactly the limit is
-   not delayed by its own timing jitter (a strict minimum interval would
-   let every late command push all later ones back). A command arriving
+   not delayed when its commands arrive up to half a slot late (a strict
+   minimum interval lets every late command push all later ones back). A command arriving
    before its slot waits, and a newer command replaces it
    (``commands_coalesced``);
 3. each commit moves every joint at most ``max_step`` towards the command
@@ -59,7 +59,8 @@ from handle_drake.can_hand.messages import (
     MalformedFrameError,
 )
 
-__all__ = ["CanBusServer", "VelocityEstimator", "clamp_command", "limit_setpoint"]
+__all__ = ["CanBusServer", "CommitSchedule", "VelocityEstimator", "clamp_command",
+           "limit_setpoint"]
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +80,28 @@ def limit_setpoint(previous, target, max_step: float, lower, upper) -> np.ndarra
     previous = np.asarray(previous, dtype=float)
     step = np.clip(np.asarray(target, dtype=float) - previous, -max_step, max_step)
     return np.clip(previous + step, lower, upper)
+
+
+class CommitSchedule:
+    """GCRA rate limit: one slot per ``1 / rate`` s, ``tolerance`` slots of jitter allowed.
+
+    :meth:`earliest` is when the next commit may go; :meth:`commit` books a
+    slot. A commit that comes late does not push the schedule back beyond
+    ``now``; one that comes early (within the tolerance) uses its slot ahead
+    of time. Any window of ``T`` s therefore holds at most
+    ``1 + tolerance + rate * T`` commits.
+    """
+
+    def __init__(self, rate: float, tolerance: float = 0.5):
+        self.slot = 1.0 / rate
+        self._tolerance = tolerance * self.slot
+        self._next = -np.inf  # theoretical time of the next commit
+
+    def earliest(self) -> float:
+        return self._next - self._tolerance
+
+    def commit(self, now: float) -> None:
+        self._next = max(self._next, now) + self.slot
 
 
 class VelocityEstimator:
@@ -161,9 +184,7 @@ class CanBusServer:
         self._holding = False
         self._clamped = False
         self._last_command_time = 0.0
-        self._next_slot = -np.inf  # GCRA: theoretical time of the next commit
-        self._slot = 1.0 / config.max_setpoint_rate
-        self._slot_tolerance = 0.5 * self._slot
+        self._schedule = CommitSchedule(config.max_setpoint_rate)
         self._commit_seq = 1
         self._commit_to_client = np.zeros(65536, dtype=np.int64)
         self._assembler = FeedbackAssembler(self.codec)
@@ -360,7 +381,7 @@ class CanBusServer:
         if self._target is not None and not self._holding:
             timeout = min(timeout, max(0.0, self._last_command_time + self.config.watchdog - now))
             if self._unsent or not np.array_equal(self._setpoint, self._target):
-                next_commit = self._next_slot - self._slot_tolerance
+                next_commit = self._schedule.earliest()
                 timeout = min(timeout, max(0.0, next_commit - now))
         return timeout
 
@@ -505,7 +526,7 @@ class CanBusServer:
             return
         if not self._unsent and np.array_equal(base, self._target):
             return
-        if now < self._next_slot - self._slot_tolerance:
+        if now < self._schedule.earliest():
             return  # too early for the next slot; the selector wakes us then
         setpoint = limit_setpoint(base, self._target, self.config.max_step,
                                   self.layout.command_lower, self.layout.command_upper)
@@ -516,7 +537,7 @@ class CanBusServer:
         self._commit_seq = (self._commit_seq + 1) % 65536
         self._setpoint = setpoint
         self._unsent = False
-        self._next_slot = max(self._next_slot, now) + self._slot
+        self._schedule.commit(now)
         self._count("commits_tx")
 
     def _broadcast_state(self, snapshot, velocity) -> None:

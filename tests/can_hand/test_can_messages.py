@@ -100,6 +100,17 @@ def test_compiled_codec_matches_cantools_bit_for_bit(shadow):
             chunk = shadow.decode(fid, data).values
             assert message.encode(dict(zip([s.name for s in message.signals], chunk,
                                            strict=True))) == data
+        # STATUS (struct with two nibbles) against cantools, both directions.
+        seq_ack, counter = int(rng.integers(0, 65536)), int(rng.integers(0, 256))
+        state, hand_time = int(rng.integers(0, 3)), float(rng.uniform(0, 4000))
+        fid, data = shadow.encode_feedback(np.zeros(layout.nq), np.zeros(layout.num_tactile),
+                                           seq_ack, counter, state, hand_time)[-1]
+        status = db.get_message_by_frame_id(fid)
+        fields = status.decode(data, decode_choices=False)
+        assert fields == {"SEQ_ACK": seq_ack, "COUNTER": counter, "STATE": state,
+                          "KIND": 1, "TIME": pytest.approx(hand_time, abs=0.5e-6)}
+        assert status.encode(fields) == data
+        assert shadow.decode(fid, data).values == pytest.approx(fields, abs=0)
 
 
 def test_status_fields_decode_from_hand_built_bytes(shadow):

@@ -22,6 +22,7 @@ from handle_drake.can_hand.layout import hand_layout
 from handle_drake.can_hand.messages import COMMIT_ID, POSITION_BASE_ID, STATUS_ID
 from handle_drake.can_hand.server import (
     CanBusServer,
+    CommitSchedule,
     VelocityEstimator,
     clamp_command,
     limit_setpoint,
@@ -88,6 +89,36 @@ def test_limit_setpoint_steps_at_most_max_step_and_stays_in_limits():
     q, clamped = clamp_command([2.0, -3.0, 0.2], lower, upper)
     assert clamped and np.allclose(q, [1.0, -1.0, 0.2])
     assert clamp_command([0.5, 0.5, 0.5], lower, upper)[1] is False
+
+
+def test_commit_schedule_passes_jittered_commands_at_the_limit_and_bounds_any_window():
+    rate = 1000.0
+    slot = 1.0 / rate
+    rng = np.random.default_rng(3)
+    # A client at exactly the limit whose commands arrive up to half a slot late
+    # (a sleeping sender wakes late, never early) never waits.
+    schedule = CommitSchedule(rate)
+    for k in range(2000):
+        now = k * slot + rng.uniform(0.0, 0.5) * slot
+        assert now >= schedule.earliest()
+        schedule.commit(now)
+    # A flood: commit whenever allowed, with arrivals every 0.05 slot.
+    schedule, commits = CommitSchedule(rate), []
+    for now in np.arange(0.0, 0.5, 0.05 * slot):
+        if now >= schedule.earliest():
+            schedule.commit(now)
+            commits.append(now)
+    commits = np.array(commits)
+    # GCRA bound: any window of T seconds holds at most 1.5 + rate * T commits.
+    for width in (0.0, 0.5 * slot, 3 * slot, 100 * slot):
+        counts = np.searchsorted(commits, commits + width, side="right") - np.arange(commits.size)
+        assert counts.max() <= 1.5 + rate * width + 1e-9, (width, counts.max())
+    assert len(commits) == pytest.approx(rate * 0.5, abs=2)  # and the long-run rate is the limit
+    # A late commit does not push the next slot back beyond now + slot.
+    schedule = CommitSchedule(rate)
+    schedule.commit(0.0)
+    schedule.commit(0.01)  # 9 slots late
+    assert schedule.earliest() == pytest.approx(0.01 + 0.5 * slot)
 
 
 def test_velocity_estimator_matches_a_first_order_filter_of_the_slope():
