@@ -110,11 +110,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from handle_drake.learning.trials import TrialLogError
+
     _pin_blas()
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, TypeError) as error:
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
