@@ -1,0 +1,51 @@
+"""`pip install .` (not only -e) carries the models, scenarios and data."""
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+from handle_drake.models import add_package, model_path, models_dir, package_url
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_models_are_found_from_the_checkout():
+    assert models_dir() == ROOT / "models"
+    assert model_path("shadow_hand/shadow_hand_right.sdf").is_file()
+    assert package_url("barrett_hand/bh8_280.sdf") == (
+        "package://handle_drake_models/barrett_hand/bh8_280.sdf")
+
+
+def test_package_url_of_a_missing_model_is_a_clear_error():
+    import pytest
+
+    with pytest.raises(FileNotFoundError, match="no model file"):
+        package_url("shadow_hand/nope.sdf")
+
+
+def test_parser_resolves_the_package():
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    parser = Parser(MultibodyPlant(0.001))
+    add_package(parser)
+    add_package(parser)  # idempotent
+    assert parser.package_map().GetPath("handle_drake_models") == str(models_dir())
+
+
+def test_wheel_contains_models_scenarios_and_data(tmp_path):
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
+         "-w", str(tmp_path), str(ROOT)],
+        check=True, capture_output=True, timeout=300,
+    )
+    (wheel,) = tmp_path.glob("handle_drake-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    for required in ("handle_drake/_models/package.xml",
+                     "handle_drake/_models/shadow_hand/shadow_hand_right.sdf",
+                     "handle_drake/_models/barrett_hand/bh8_280.sdf",
+                     "handle_drake/_diagrams/shadow_sphere_grasp.yaml",
+                     "handle_drake/can_hand/hand.dbc",
+                     "handle_drake/grasp/data/synthetic_grasps.csv"):
+        assert required in names, required
