@@ -137,8 +137,10 @@ class SimHandDriver:
     """
 
     max_joint_velocity: float = 4.0
-    # Period (s) of the command rate limiter.
-    control_period: float = 0.002
+    # Period (s) at which the hand and wrist commands are sampled and rate
+    # limited (200 Hz, a hand controller's command rate); the PD loops
+    # themselves run inside the plant at every time step.
+    control_period: float = 0.005
 
 
 @dc.dataclass

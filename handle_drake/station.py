@@ -146,7 +146,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
         wrist_driver = builder.AddNamedSystem(
             "wrist_driver",
-            WristDriver(plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue())),
+            WristDriver(plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue()),
+                        control_period=scenario.driver.control_period),
         )
         builder.Connect(plant.get_state_output_port(), wrist_driver.get_plant_state_input_port())
         builder.Connect(wrist_driver.GetOutputPort("desired_state"),
