@@ -4,8 +4,11 @@ For each of the seven objects (Barrett hand, 2-D offset space, metric noise
 std 0.01): trials until a trial's noiseless BW metric is within 5 %, 10 %,
 20 % of the maximum of a dense grid, median over seeds, for
 
-- ``bo``: our BayesianOptimizer with its defaults (report's xi, EI stop rule),
-  capped at ``--trials`` -- the runs of ``handle-drake report``'s Table 3;
+- ``bo``: our BayesianOptimizer with its defaults (report's xi, 10 Sobol
+  points, no stop rule: the whole ``--trials`` budget) -- the runs of
+  ``handle-drake report``'s Table 3;
+- ``bo_v1``: the optimiser's first defaults (``v1_options``: d + 1 Sobol
+  points, EI stop rule at 1e-6), in the same run (``--no-v1`` leaves it out);
 - ``random``: uniform random search, same budget;
 - ``gp_minimize``: scikit-optimize's ``gp_minimize`` (its defaults: 10
   initial points, gp_hedge, Gaussian noise) minimising ``-metric`` on the
@@ -52,7 +55,7 @@ from handle_drake.learning.babbling import (  # noqa: E402
     run_history,
     trials_to_within,
 )
-from handle_drake.learning.bayesopt import _derived_seed  # noqa: E402
+from handle_drake.learning.bayesopt import _derived_seed, v1_options  # noqa: E402
 from handle_drake.learning.report import (  # noqa: E402
     OBJECT_ORDER,
     REPORT_TABLE3,
@@ -132,6 +135,13 @@ def main(argv=None) -> int:
     parser.add_argument("--skopt-seeds", type=int, default=None,
                         help="seeds for gp_minimize (default 5: ~0.3 s overhead per iteration)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--no-v1", action="store_true",
+                        help="leave out the BO runs with the first defaults (bo_v1)")
+    parser.add_argument("--seed-offset", type=int, default=0,
+                        help="first seed (tuning used seeds 100-109 on three objects)")
+    parser.add_argument("--objects", default=None,
+                        help="comma-separated subset of the seven objects")
+    parser.add_argument("--no-skopt", action="store_true", help="leave out gp_minimize")
     args = parser.parse_args(argv)
 
     if args.quick:
@@ -142,6 +152,11 @@ def main(argv=None) -> int:
     else:
         settings = ReportSettings(workers=args.workers)
         objects = OBJECT_ORDER
+    if args.objects:
+        objects = tuple(args.objects.split(","))
+        unknown = sorted(set(objects) - set(OBJECT_ORDER))
+        if unknown:
+            parser.error(f"--objects: unknown {unknown}, expected some of {OBJECT_ORDER}")
         out = args.out or Path("out/report")
         skopt_seeds = args.skopt_seeds or 5
     if args.seeds:
@@ -154,15 +169,22 @@ def main(argv=None) -> int:
                                settings.workers, progress=True) for kind in objects}
     timings["grids_s"] = time.perf_counter() - start
 
-    bo = {k: [_table3_spec(k, s, settings) for s in range(settings.seeds)] for k in objects}
-    rnd = {k: [_random_spec(k, s, settings) for s in range(settings.seeds)] for k in objects}
+    seeds = range(args.seed_offset, args.seed_offset + settings.seeds)
+    bo = {k: [_table3_spec(k, s, settings) for s in seeds] for k in objects}
+    rnd = {k: [_random_spec(k, s, settings) for s in seeds] for k in objects}
+    v1 = {} if args.no_v1 else {k: [dc.replace(spec, options=tuple(sorted(
+        v1_options(2).items()))) for spec in bo[k]] for k in objects}
     start = time.perf_counter()
-    run_batch([s for k in objects for s in bo[k] + rnd[k]], db, settings.workers)
+    # Old defaults first (they stop early, so are cheap), then the new ones.
+    run_batch([s for k in objects for s in v1.get(k, []) + bo[k] + rnd[k]], db,
+              settings.workers)
     timings["bo_and_random_runs_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
-    skopt = {k: [None] * skopt_seeds for k in objects}
-    jobs = [(k, s) for k in objects for s in range(skopt_seeds)]
+    jobs = [] if args.no_skopt else [(k, s) for k in objects
+                                     for s in range(args.seed_offset,
+                                                    args.seed_offset + skopt_seeds)]
+    skopt = {k: [] for k in objects}
     pool = ProcessPoolExecutor(settings.workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_pin_blas_worker)
     with pool:
@@ -172,67 +194,92 @@ def main(argv=None) -> int:
                    (k, s) for k, s in jobs}
         for i, future in enumerate(as_completed(futures), 1):
             k, s = futures[future]
-            skopt[k][s] = future.result()
+            skopt[k].append(future.result())
             print(f"gp_minimize {i}/{len(jobs)}: {k} seed {s}", flush=True)
     timings["gp_minimize_runs_s"] = time.perf_counter() - start
 
+    budget = settings.trials
+
+    def cells(summary):
+        return [_fmt(m, budget) + ("" if r == len(summary["per_seed"]) or not math.isfinite(m)
+                                   else f"({r})")
+                for m, r in zip(summary["median"], summary["reached"], strict=True)]
+
+    methods = [("bo", bo)] + ([("bo_v1", v1)] if v1 else [])
     rows, per_object = [], {}
     for kind in objects:
         f_star = float(np.max(truth[kind][1]))
-        bo_hist = [run_history(db, spec) for spec in bo[kind]]
         entry = dict(grid_max=f_star, report=list(REPORT_TABLE3[kind]))
-        entry["bo"] = _summary([trials_to_within(h.noiseless, f_star) for h in bo_hist])
-        entry["bo"]["total_median"] = float(np.median([len(h.X) for h in bo_hist]))
-        entry["bo"]["best_median"] = float(np.median([np.nanmax(h.noiseless) for h in bo_hist]))
-        entry["bo"]["overhead_per_trial_s"] = float(np.nanmean(
-            [_overhead_per_trial(db, spec) for spec in bo[kind]]))
-        entry["bo"]["sim_per_trial_s"] = float(np.nanmean(
-            np.concatenate([h.wall_time for h in bo_hist])))
+        for name, specs in methods:
+            hist = [run_history(db, spec) for spec in specs[kind]]
+            entry[name] = _summary([trials_to_within(h.noiseless, f_star) for h in hist])
+            entry[name]["total_median"] = float(np.median([len(h.X) for h in hist]))
+            entry[name]["best_median"] = float(np.median([np.nanmax(h.noiseless)
+                                                          for h in hist]))
+            entry[name]["overhead_per_trial_s"] = float(np.nanmean(
+                [_overhead_per_trial(db, spec) for spec in specs[kind]]))
+            entry[name]["sim_per_trial_s"] = float(np.nanmean(
+                np.concatenate([h.wall_time for h in hist])))
         rnd_hist = [run_history(db, spec) for spec in rnd[kind]]
         entry["random"] = _summary([trials_to_within(h.noiseless, f_star) for h in rnd_hist])
         entry["random"]["best_median"] = float(np.median([np.max(h.noiseless)
                                                           for h in rnd_hist]))
-        entry["gp_minimize"] = _summary([trials_to_within(r["noiseless"], f_star)
-                                         for r in skopt[kind]])
-        entry["gp_minimize"]["best_median"] = float(np.median([np.max(r["noiseless"])
-                                                               for r in skopt[kind]]))
-        entry["gp_minimize"]["overhead_per_trial_s"] = float(np.mean(
-            [(r["wall_time_s"] - r["sim_time_s"]) / len(r["noiseless"]) for r in skopt[kind]]))
+        if skopt[kind]:
+            entry["gp_minimize"] = _summary([trials_to_within(r["noiseless"], f_star)
+                                             for r in skopt[kind]])
+            entry["gp_minimize"]["best_median"] = float(np.median([np.max(r["noiseless"])
+                                                                   for r in skopt[kind]]))
+            entry["gp_minimize"]["overhead_per_trial_s"] = float(np.mean(
+                [(r["wall_time_s"] - r["sim_time_s"]) / len(r["noiseless"])
+                 for r in skopt[kind]]))
         report_5 = REPORT_TABLE3[kind][1]
         ours_5 = entry["bo"]["median"][0]
         entry["bo_5pct_over_report"] = ours_5 / report_5
         entry["target_met"] = bool(ours_5 <= report_5 / 2)
         per_object[kind] = entry
-        budget = settings.trials
-        rows.append((kind, f"{f_star:.3f}",
-                     *[_fmt(v, budget) for v in entry["bo"]["median"]],
-                     *[_fmt(v, budget) for v in entry["random"]["median"]],
-                     *[_fmt(v, budget) for v in entry["gp_minimize"]["median"]],
-                     *map(str, REPORT_TABLE3[kind][1:]),
-                     f"{entry['bo_5pct_over_report']:.2f}", "yes" if entry["target_met"] else "NO"))
+        row = [kind, f"{f_star:.3f}", *cells(entry["bo"])]
+        if v1:
+            row += cells(entry["bo_v1"])
+        row += cells(entry["random"])
+        if "gp_minimize" in entry:
+            row += cells(entry["gp_minimize"])
+        row += [*map(str, REPORT_TABLE3[kind][1:]), f"{entry['bo_5pct_over_report']:.2f}",
+                "yes" if entry["target_met"] else "NO"]
+        rows.append(row)
 
-    header = ("object", "f*", "BO 5%", "10%", "20%", "rand 5%", "10%", "20%", "gp_min 5%",
-              "10%", "20%", "rep 5%", "10%", "20%", "BO/rep 5%", "<=1/2")
+    header = ["object", "f*", "BO 5%", "10%", "20%"]
+    if v1:
+        header += ["BOv1 5%", "10%", "20%"]
+    header += ["rand 5%", "10%", "20%"]
+    if any(skopt.values()):
+        header += ["gp_min 5%", "10%", "20%"]
+    header += ["rep 5%", "10%", "20%", "BO/rep 5%", "<=1/2"]
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     print(f"\nTrials to within 5/10/20 % of the grid maximum ({settings.grid}x{settings.grid}), "
-          f"median of {settings.seeds} seeds (gp_minimize: {skopt_seeds}), budget "
-          f"{settings.trials}, noise std {settings.noise}")
+          f"median of {settings.seeds} seeds from {args.seed_offset} (gp_minimize: "
+          f"{0 if args.no_skopt else skopt_seeds}), budget {settings.trials}, noise std "
+          f"{settings.noise}; \"(k)\": only k seeds got there")
     print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
     for row in rows:
         print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
     print("\nbest noiseless metric found (median): " + ", ".join(
-        f"{k}: BO {e['bo']['best_median']:.3f} / random {e['random']['best_median']:.3f} / "
-        f"gp_minimize {e['gp_minimize']['best_median']:.3f} (f* {e['grid_max']:.3f})"
+        f"{k}: " + " / ".join(f"{m} {e[m]['best_median']:.3f}"
+                             for m in ("bo", "bo_v1", "random", "gp_minimize") if m in e)
+        + f" (f* {e['grid_max']:.3f})" for k, e in per_object.items()))
+    print("trials per run (median): " + ", ".join(
+        f"{k}: " + " / ".join(f"{m} {e[m]['total_median']:g}" for m, _ in methods)
         for k, e in per_object.items()))
     print("optimiser overhead per trial (s): " + ", ".join(
-        f"{k}: BO {e['bo']['overhead_per_trial_s']:.3f}, gp_minimize "
-        f"{e['gp_minimize']['overhead_per_trial_s']:.3f}" for k, e in per_object.items()))
+        f"{k}: BO {e['bo']['overhead_per_trial_s']:.3f}"
+        + (f", gp_minimize {e['gp_minimize']['overhead_per_trial_s']:.3f}"
+           if "gp_minimize" in e else "") for k, e in per_object.items()))
     print(f"simulated trial wall time (s, BO runs): "
           f"{np.mean([e['bo']['sim_per_trial_s'] for e in per_object.values()]):.3f}")
 
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(dict(
         quick=args.quick, settings=dc.asdict(settings), skopt_seeds=skopt_seeds,
+        seed_offset=args.seed_offset, bo_v1_options=v1_options(2) if v1 else None,
         fractions=FRACTIONS, objects=per_object, timings=timings,
         python=sys.version.split()[0], machine=platform.machine(), cpu_count=os.cpu_count(),
         load_average=os.getloadavg()), indent=1,

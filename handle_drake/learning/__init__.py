@@ -4,6 +4,14 @@ Models (:mod:`.gp`), acquisition (:mod:`.acquisition`), optimisers
 (:mod:`.bayesopt`), trial storage and running (:mod:`.trials`) and synthetic
 test problems (:mod:`.test_functions`) are separate modules; the names below
 are the public surface.
+
+Defaults of :class:`BayesianOptimizer` (version 2, ``BO_DEFAULTS_VERSION``):
+10 scrambled Sobol points before the first GP proposal (``max(10, d + 1)``),
+EI with the report's ``xi = sigma_f^2 / 100`` (eq. 40), and no stop rule (a
+run uses its whole budget; the report's EI rule is ``ei_threshold=1e-6``,
+``handle-drake babble --ei-stop``). ``v1_options(d)`` restores the first
+defaults (``d + 1`` points, EI stop at 1e-6) for comparisons;
+``benchmarks/bench_babbling.py`` runs both side by side.
 """
 
 from handle_drake.learning.acquisition import (
@@ -20,6 +28,7 @@ from handle_drake.learning.bayesopt import (
     check_bounds,
     make_optimizer,
     maximize,
+    v1_options,
 )
 from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern32
 from handle_drake.learning.trials import (
@@ -36,6 +45,7 @@ from handle_drake.learning.trials import (
 
 __all__ = [
     "BayesianOptimizer",
+    "v1_options",
     "Best",
     "ExperimentResult",
     "GaussianProcess",

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handle_drake.learning.bayesopt import make_optimizer
+from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
 from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
 from handle_drake.learning.trials import InlineExecutor, TrialLog, run_experiment
 
@@ -203,7 +203,12 @@ class RunSpec:
         trial = GraspTrial(self.config)
         extra = "" if not self.options else "-" + _config_key_options(self.options)
         noise = f"-noise{self.config.noise:g}" if self.config.noise else ""
-        return f"{trial.name}{noise}-{self.strategy}{extra}-seed{self.seed}"
+        # A BO run depends on the optimiser's defaults as well as on its
+        # options: runs logged under earlier defaults keep their old ids and
+        # are never read back as runs of the current ones.
+        version = (f"-d{BO_DEFAULTS_VERSION}" if self.strategy == "bo" and BO_DEFAULTS_VERSION > 1
+                   else "")
+        return f"{trial.name}{noise}-{self.strategy}{version}{extra}-seed{self.seed}"
 
 
 def _config_key_options(options) -> str:

@@ -90,6 +90,10 @@ def register(subparsers) -> None:
     p.add_argument("--trials", type=_positive_int, default=50,
                    help="trials in the run (BO may stop earlier on its EI rule)")
     p.add_argument("--seed", type=_non_negative_int, default=0)
+    p.add_argument("--ei-stop", type=_non_negative_float, default=0.0, metavar="THRESHOLD",
+                   help="BO only: stop when the best expected improvement falls below "
+                        "THRESHOLD x the RMS of the metric (the report's stop rule, e.g. 1e-6; "
+                        "default 0: use the whole --trials budget)")
     p.add_argument("--noise", type=_non_negative_float, default=0.0,
                    help="std of Gaussian noise added to the metric (seeded per trial)")
     p.add_argument("--size", type=_positive_float, default=None,
@@ -113,6 +117,9 @@ def register(subparsers) -> None:
                    help="points per dimension of the ground-truth grids (>= 2)")
     p.add_argument("--noise", type=_non_negative_float, default=None,
                    help="metric noise std of the 2-D runs")
+    p.add_argument("--ei-stop", type=_non_negative_float, default=None, metavar="THRESHOLD",
+                   help="stop the Table 3 BO runs on the EI rule with this threshold "
+                        "(e.g. 1e-6; default 0: every run uses the whole --trials budget)")
     p.add_argument("--workers", type=_positive_int, default=None, help="processes (default 2)")
     p.add_argument("--reduced", action="store_true",
                    help="tiny grids and few trials (also HANDLE_DRAKE_REDUCED=1)")
@@ -148,7 +155,11 @@ def _cmd_babble(args) -> int:
     config = GraspTrialConfig(hand=args.hand, object=args.object, space=space, noise=args.noise,
                               size=args.size)
     trial = GraspTrial(config)
-    run_id = args.run_id or RunSpec(config, args.strategy, args.seed).run_id
+    if args.ei_stop and args.strategy != "bo":
+        raise ValueError(f"--ei-stop {args.ei_stop}: only Bayesian optimisation has a stop rule")
+    options = {"ei_threshold": args.ei_stop} if args.ei_stop else {}
+    run_id = args.run_id or RunSpec(config, args.strategy, args.seed,
+                                    options=tuple(sorted(options.items()))).run_id
     args.db.parent.mkdir(parents=True, exist_ok=True)
     try:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
@@ -164,7 +175,7 @@ def _cmd_babble(args) -> int:
         result = run_experiment(
             objective, trial.bounds, args.strategy, args.trials, args.seed, args.db,
             executor=executor, progress=not args.no_progress, run_id=run_id,
-            objective_name=trial.name)
+            objective_name=trial.name, optimizer_options=options)
     finally:
         if isinstance(executor, ProcessPoolExecutor):
             executor.shutdown(wait=True, cancel_futures=True)
@@ -191,6 +202,7 @@ def _cmd_report(args) -> int:
     reduced = True if args.reduced else None
     summary = make_report(args.out, seeds=args.seeds, trials=args.trials, grid=args.grid,
                           reduced=reduced, workers=args.workers, noise=args.noise,
+                          ei_stop=args.ei_stop,
                           progress=not args.no_progress)
     print((Path(args.out) / "table3.md").read_text())
     for kind, entry in summary["bo_vs_random"].items():

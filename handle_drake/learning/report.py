@@ -86,6 +86,7 @@ class ReportSettings:
     synergy_grid: int = 21
     noise: float = 0.01  # std of the metric noise in the 2-D runs
     workers: int = 2
+    ei_stop: float = 0.0  # EI stop threshold of the Table 3 runs (0: whole budget)
 
     def __post_init__(self):
         for name in ("seeds", "trials", "trials_1d", "workers"):
@@ -98,6 +99,8 @@ class ReportSettings:
                 raise ValueError(f"{name}: expected an integer >= 2, got {value!r}")
         if not (math.isfinite(self.noise) and self.noise >= 0):
             raise ValueError(f"noise: expected a finite value >= 0, got {self.noise}")
+        if not (math.isfinite(self.ei_stop) and self.ei_stop >= 0):
+            raise ValueError(f"ei_stop: expected a finite value >= 0, got {self.ei_stop}")
 
     @classmethod
     def small(cls, workers: int = 1) -> ReportSettings:
@@ -112,7 +115,8 @@ def _offset_config(kind: str, noise: float) -> GraspTrialConfig:
 
 
 def _table3_spec(kind, seed, s: ReportSettings) -> RunSpec:
-    return RunSpec(_offset_config(kind, s.noise), "bo", seed, s.trials)
+    options = (("ei_threshold", s.ei_stop),) if s.ei_stop else ()
+    return RunSpec(_offset_config(kind, s.noise), "bo", seed, s.trials, options=options)
 
 
 def _random_spec(kind, seed, s: ReportSettings) -> RunSpec:
@@ -126,7 +130,8 @@ def _synergy_config(noise=0.0) -> GraspTrialConfig:
 # ------------------------------------------------------------------ report
 def make_report(out_dir="out/report", seeds: int | None = None, trials: int | None = None,
                 grid: int | None = None, reduced: bool | None = None, workers: int | None = None,
-                noise: float | None = None, progress: bool = True) -> dict:
+                noise: float | None = None, ei_stop: float | None = None,
+                progress: bool = True) -> dict:
     """Run (or resume) every experiment and write the figures and tables; returns the summary.
 
     ``reduced`` (default: ``handle_drake.testing.reduced()``) starts from
@@ -136,7 +141,8 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
         reduced = reduced_mode()
     base = ReportSettings.small() if reduced else ReportSettings()
     overrides = {k: v for k, v in dict(seeds=seeds, trials=trials, grid=grid, workers=workers,
-                                       noise=noise).items() if v is not None}
+                                       noise=noise, ei_stop=ei_stop).items()
+                 if v is not None}
     settings = dc.replace(base, **overrides)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -307,8 +313,9 @@ def _table3(out, db, truth, specs, s: ReportSettings) -> dict:
     lines = [
         "# Table 3: trials taken by Bayesian optimisation per object (Barrett hand, 2-D offset)",
         "",
-        f"Ours: median over {s.seeds} seeds; total = trials until the EI stop rule, capped at "
-        f"{s.trials}; 5/10/20 % = trials until a trial's noiseless metric is within that "
+        f"Ours: median over {s.seeds} seeds; total = trials until the EI stop rule "
+        f"(threshold {s.ei_stop:g}; 0: never), capped at {s.trials}; "
+        "5/10/20 % = trials until a trial's noiseless metric is within that "
         f"fraction of the maximum of a {s.grid}x{s.grid} grid (\"(k/n)\": only k of n seeds "
         f"got there; \">{s.trials}\": the median seed did not). Metric noise std {s.noise}. "
         "Report: OpenRave, one run per object, stopped by its own EI rule.",

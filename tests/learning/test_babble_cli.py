@@ -104,6 +104,7 @@ def test_babble_resumes_an_interrupted_run_without_repeating_trials(
     (["--trials", "ten"], "positive integer"),
     (["--seed", "-1"], "integer >= 0"),
     (["--noise", "nan"], "finite number"),
+    (["--ei-stop", "-1"], "finite number"),
     (["--object", "teapot"], "invalid choice"),
     (["--dims", "3"], "invalid choice"),
 ])
@@ -119,6 +120,7 @@ def test_babble_bad_arguments_exit_2_with_a_message(bad, message, tmp_path, caps
     (["--space", "synergy"], "needs the shadow hand"),
     (["--dims", "1", "--space", "offset"], "contradicts"),
     (["--strategy", "bo", "--workers", "2"], "sequential"),
+    (["--strategy", "random", "--ei-stop", "1e-6"], "only Bayesian optimisation"),
 ])
 def test_babble_inconsistent_arguments_exit_2(bad, message, tmp_path, capsys):
     assert main(["babble", *bad, "--db", str(tmp_path / "x.sqlite")]) == 2

@@ -42,7 +42,7 @@ def test_1d_argmax_within_1e3_in_25_trials(seed):
 
 def test_1d_default_xi_finds_global_basin_and_stops_on_ei_threshold():
     f = SineSum1D()
-    result = maximize(f, f.bounds, 25, seed=0, **FAST)
+    result = maximize(f, f.bounds, 25, seed=0, ei_threshold=1e-6, n_initial=2, **FAST)
     assert result.converged, "EI should fall below the threshold within 25 trials"
     assert len(result.Y) < 25
     assert f.normalized_regret(result.y) < 0.01  # the global of three local maxima
@@ -66,7 +66,10 @@ def test_bo_beats_random_search_on_branin():
     """
     f = Branin()
     budget = 20
-    bo = [maximize(f, f.bounds, budget, seed=s, xi=0.0, **FAST).y for s in range(3)]
+    # 3 Sobol points (d + 1): the default 10 would spend half of this small
+    # budget on the space-filling design.
+    bo = [maximize(f, f.bounds, budget, seed=s, xi=0.0, n_initial=3, **FAST).y
+          for s in range(3)]
     rs = [maximize(f, f.bounds, budget, seed=s, strategy="random").y for s in range(3)]
     # the median BO regret is at least 5x smaller than random search's
     assert np.median(f.maximum - np.array(bo)) * 5 < np.median(f.maximum - np.array(rs))
@@ -188,3 +191,21 @@ def test_bad_tell_and_options():
         maximize(lambda x: 0.0, [(0, 1)], 5, strategy="grid")
     with pytest.raises(ValueError, match="n_trials"):
         maximize(lambda x: 0.0, [(0, 1)], 0)
+
+
+def test_default_runs_the_whole_budget_and_the_ei_stop_rule_is_an_option():
+    """A flat objective: nothing to improve, EI is ~1e-3 after two points.
+
+    By default (ei_threshold 0) the run still uses its whole budget; with a
+    stop threshold above that EI it stops as soon as min_trials_to_stop
+    trials are in.
+    """
+
+    def flat(x):
+        return 0.5
+
+    full = maximize(flat, [(0.0, 1.0)], 14, seed=0, **FAST)
+    assert len(full.Y) == 14 and not full.converged
+    stopped = maximize(flat, [(0.0, 1.0)], 14, seed=0, ei_threshold=1e-2, n_initial=2,
+                       min_trials_to_stop=5, **FAST)
+    assert stopped.converged and len(stopped.Y) == 5
