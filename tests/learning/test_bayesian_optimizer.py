@@ -209,3 +209,34 @@ def test_default_runs_the_whole_budget_and_the_ei_stop_rule_is_an_option():
     stopped = maximize(flat, [(0.0, 1.0)], 14, seed=0, ei_threshold=1e-2, n_initial=2,
                        min_trials_to_stop=5, **FAST)
     assert stopped.converged and len(stopped.Y) == 5
+
+
+def test_rank_transform_is_invariant_to_a_monotone_change_of_the_metric():
+    """Ranks do not change under a strictly increasing map of the metric, so
+    neither do the proposals; ``predict`` answers in the metric's own units."""
+
+    def f(x):
+        return float(np.sin(6.0 * x[0]) + 0.3 * x[0])
+
+    def g(x):  # strictly increasing in f, very different scale and shape
+        return float(np.exp(4.0 * f(x)))
+
+    options = dict(output_transform="rank", n_initial=3, **FAST)
+    a = maximize(f, [(0.0, 1.0)], 10, seed=3, **options)
+    b = maximize(g, [(0.0, 1.0)], 10, seed=3, **options)
+    np.testing.assert_allclose(a.X, b.X, atol=1e-9)
+    plain = maximize(f, [(0.0, 1.0)], 10, seed=3, n_initial=3, **FAST)
+    assert not np.allclose(plain.X[3:], a.X[3:])  # the transform does change the model
+
+    opt = BayesianOptimizer([(0.0, 1.0)], seed=3, **options)
+    for x, y in zip(b.X, b.Y, strict=True):
+        opt.tell(x, y)
+    mean, var = opt.predict(b.X)
+    # back in units of g (which spans 0.1 .. 75): same order and range as the data
+    from scipy.stats import spearmanr
+
+    assert spearmanr(mean, b.Y).statistic > 0.9
+    assert np.all(np.abs(mean - b.Y) < 0.2 * np.ptp(b.Y))
+    assert np.all(var >= 0)
+    with pytest.raises(ValueError, match="output_transform"):
+        BayesianOptimizer([(0.0, 1.0)], output_transform="log")
