@@ -152,13 +152,13 @@ def main(argv=None) -> int:
     else:
         settings = ReportSettings(workers=args.workers)
         objects = OBJECT_ORDER
+        out = args.out or Path("out/report")
+        skopt_seeds = args.skopt_seeds or 5
     if args.objects:
         objects = tuple(args.objects.split(","))
         unknown = sorted(set(objects) - set(OBJECT_ORDER))
         if unknown:
             parser.error(f"--objects: unknown {unknown}, expected some of {OBJECT_ORDER}")
-        out = args.out or Path("out/report")
-        skopt_seeds = args.skopt_seeds or 5
     if args.seeds:
         settings = dc.replace(settings, seeds=args.seeds)
     db = out / "babble.sqlite"
