@@ -130,8 +130,29 @@ def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
     return np.array([trial.evaluate(x).metric_noiseless for x in points])
 
 
+def simulation_fingerprint() -> str:
+    """Hash of everything a grasp trial's metric depends on besides its config:
+    the source of the trial, station, drivers, controllers, objects, hands and
+    grasp quality, and the hand model files. A cached grid computed by other
+    code is never read back as if it were current."""
+    root = Path(__file__).resolve().parents[1]
+    from handle_drake.models import models_dir
+
+    files = sorted([
+        *(root / "learning").glob("grasp_trial.py"),
+        root / "station.py", root / "scenario.py", root / "objects.py", root / "hands.py",
+        *(root / "systems").glob("*.py"), *(root / "quality").glob("*.py"),
+        *models_dir().glob("*/*.sdf"),
+    ])
+    digest = hashlib.sha1()
+    for path in files:
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:10]
+
+
 def _config_key(config: GraspTrialConfig) -> str:
-    text = json.dumps(dc.asdict(config), sort_keys=True)
+    text = json.dumps(dc.asdict(config), sort_keys=True) + simulation_fingerprint()
     return hashlib.sha1(text.encode()).hexdigest()[:10]
 
 

@@ -71,3 +71,15 @@ def test_replayed_optimizer_proposes_the_logged_next_trial(tmp_path):
     assert 0 < np.max(np.abs(history.observed - history.noiseless)) < 0.05
     with pytest.raises(ValueError, match="two runs have the same run_id"):
         run_batch([spec, spec], db)
+
+
+def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
+    """A grid cached by other simulation code must not be read back as current."""
+    from handle_drake.learning import babbling
+    from handle_drake.learning.grasp_trial import GraspTrialConfig
+
+    config = GraspTrialConfig(hand="barrett", object="sphere")
+    key = babbling._config_key(config)
+    assert babbling._config_key(config) == key  # stable for the same code
+    monkeypatch.setattr(babbling, "simulation_fingerprint", lambda: "other-code")
+    assert babbling._config_key(config) != key
