@@ -109,18 +109,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
+def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
+    """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
+    error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
     from handle_drake.learning.trials import TrialLogError
 
     _pin_blas()
-    args = build_parser().parse_args(argv)
+    args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        resume = f"; run it again to resume from {args.db}" if getattr(args, "db", None) else ""
+        print(f"handle-drake {args.command}: interrupted{resume}", file=sys.stderr)
         return 130
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_command(build_parser(), argv)
 
 
 if __name__ == "__main__":

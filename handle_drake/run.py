@@ -21,7 +21,7 @@ from handle_drake.scenario import FloatingWrist, Scenario
 from handle_drake.station import MakeHandStation, hand_initial_command
 from handle_drake.systems.hand_driver import rpy_pose6
 
-__all__ = ["ScenarioRunner", "RunResult", "script_trajectories"]
+__all__ = ["ScenarioRunner", "RunResult", "script_trajectories", "advance_recording"]
 
 LOG_PERIOD = 0.01  # s
 
@@ -46,6 +46,29 @@ class RunResult:
         if self.object_position is None:
             raise ValueError("this scenario has no object")
         return float(self.object_position[-1, 2] - self.object_position[0, 2])
+
+
+def advance_recording(simulator, t_final: float, station, meshcat=None,
+                      html: str | Path | None = None) -> float:
+    """``simulator.AdvanceTo(t_final)``; with a Meshcat and ``html``, records the
+    run with the station's MeshcatVisualizer and saves it as a self-contained
+    page. Returns the wall time (s) of the simulation alone."""
+    visualizer = None
+    if html is not None and meshcat is not None:
+        from pydrake.geometry import MeshcatVisualizer
+
+        visualizer = next(s for s in station.GetSystems() if isinstance(s, MeshcatVisualizer))
+        visualizer.StartRecording(False)
+    start = time.perf_counter()
+    simulator.AdvanceTo(t_final)
+    wall = time.perf_counter() - start
+    if visualizer is not None:
+        visualizer.StopRecording()
+        visualizer.PublishRecording()
+        path = Path(html)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(meshcat.StaticHtml())
+    return wall
 
 
 def script_trajectories(scenario: Scenario, initial_command: np.ndarray):
@@ -151,23 +174,7 @@ class ScenarioRunner:
         if not (np.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be finite and > 0, got {duration}")
         self.reset()
-        recording = html is not None and self.meshcat is not None
-        visualizer = None
-        if recording:
-            from pydrake.geometry import MeshcatVisualizer
-
-            visualizer = next(s for s in self.station.GetSystems()
-                              if isinstance(s, MeshcatVisualizer))
-            visualizer.StartRecording(False)
-        start = time.perf_counter()
-        self.simulator.AdvanceTo(duration)
-        wall = time.perf_counter() - start
-        if recording:
-            visualizer.StopRecording()
-            visualizer.PublishRecording()
-            path = Path(html)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(self.meshcat.StaticHtml())
+        wall = advance_recording(self.simulator, duration, self.station, self.meshcat, html)
         return self._result(duration, wall)
 
     def grasp_quality(self, surface_radius: float = 0.004, gamma: float = 0.002):

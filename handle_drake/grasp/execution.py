@@ -21,8 +21,6 @@ judges either.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus
@@ -30,7 +28,7 @@ from pydrake.systems.primitives import VectorLogSink
 
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, GraspPlan
 from handle_drake.hands import get_hand_spec
-from handle_drake.run import LOG_PERIOD, RunResult
+from handle_drake.run import LOG_PERIOD, RunResult, advance_recording
 from handle_drake.station import GetPlant, MakeHandStation
 from handle_drake.systems.reactive_grasp import (
     ReactiveGrasp,
@@ -134,23 +132,7 @@ class ReactiveGraspRunner:
             logger.FindMutableLog(self.context).Clear()
         self._done_at = None
         self.simulator.Initialize()
-        visualizer = None
-        if html is not None and self.meshcat is not None:
-            from pydrake.geometry import MeshcatVisualizer
-
-            visualizer = next(x for x in self.station.GetSystems()
-                              if isinstance(x, MeshcatVisualizer))
-            visualizer.StartRecording(False)
-        start = time.perf_counter()
-        self.simulator.AdvanceTo(duration)
-        wall = time.perf_counter() - start
-        if visualizer is not None:
-            from pathlib import Path
-
-            visualizer.StopRecording()
-            visualizer.PublishRecording()
-            Path(html).parent.mkdir(parents=True, exist_ok=True)
-            Path(html).write_text(self.meshcat.StaticHtml())
+        wall = advance_recording(self.simulator, duration, self.station, self.meshcat, html)
         logs = {k: v.FindLog(self.context) for k, v in self._loggers.items()}
         result = RunResult(
             times=logs["hand.position_measured"].sample_times().copy(),
