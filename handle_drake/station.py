@@ -107,7 +107,11 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(
             time_step=scenario.time_step,
-            discrete_contact_approximation="sap",
+            discrete_contact_approximation=scenario.contact_approximation,
+            # Outputs computed from the current state on demand: the contact
+            # results are then only built when a sensor asks (every control
+            # period), not stored in the state at every step (~10% faster).
+            use_sampled_output_ports=False,
             contact_model="point" if scenario.contact_model == "point"
             else "hydroelastic_with_fallback",
         ),

@@ -72,6 +72,8 @@ def test_dump_round_trips():
         ("object: {X_WO: {translation: [.nan, 0, 0]}}", ["object.X_WO", "finite"]),
         ("hand: {mount: !FixedMount {X_WB: {translation: [.inf, 0, 0]}}}", ["X_WB"]),
         ("contact_model: soft", ["contact_model", "soft"]),
+        ("contact_approximation: convex", ["contact_approximation", "convex"]),
+        ("contact_approximation: tamsi", ["contact_approximation", "PD actuators"]),
         ("time_step: -0.001", ["time_step"]),
         ("driver: !TeleportDriver {}", ["TeleportDriver"]),
         ("hand: {initial_position: {XXJ9: 1.0}}", ["XXJ9"]),

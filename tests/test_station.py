@@ -160,6 +160,21 @@ script: [{{time: 0.0}}, {{time: 0.3, wrist: {target}}}]
     np.testing.assert_allclose(RollPitchYaw(X_WB.rotation()).vector(), target[3:], atol=2e-3)
 
 
+@pytest.mark.parametrize("approximation", ["sap", "similar", "lagged"])
+def test_station_uses_the_scenario_contact_approximation(approximation):
+    """The field reaches the plant, and every SAP-family approximation drives
+    the PD actuators (under TAMSI the joints would silently never move)."""
+    scenario = LoadScenario(data=f"contact_approximation: {approximation}\nobject: null\n"
+                                 "table: null\nscript: [{time: 0.3, hand: {FFJ3: 1.0}}]")
+    runner = ScenarioRunner(scenario)
+    plant = GetPlant(runner.station)
+    assert plant.get_discrete_contact_approximation().name == "k" + approximation.capitalize()
+    result = runner.run(0.5)
+    spec = get_hand_spec("shadow")
+    ffj3 = spec.joint_names.index("FFJ3")
+    assert result.hand_position[-1, ffj3] == pytest.approx(1.0, abs=0.05)
+
+
 def test_tactile_is_zero_in_free_air():
     free = LoadScenario(data="object: null\ntable: null\nsimulation_duration: 0.2")
     assert np.all(ScenarioRunner(free).run().tactile[-1] == 0.0)
