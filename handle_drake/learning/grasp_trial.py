@@ -74,6 +74,13 @@ class GraspTrialConfig:
     standoff: float = 0.01  # m, for the "offset" and "synergy" spaces
     offset_range: float | None = None  # m, half-width of the offset box; None: 0.6 * size
     surface_radius: float = 0.004  # m, contact surface model radius (0: raw mean contacts)
+    # The metric is the mean over ``hold_samples`` instants spread over the
+    # last ``hold_window`` seconds of the hold. One instant is not enough: a
+    # flat pad on a flat face is a single point contact that hops between the
+    # patch's corners from step to step, so a snapshot of a static cuboid
+    # grasp reads 0.40, 0.47 or 0.55 depending on the step it falls on.
+    hold_samples: int = 8
+    hold_window: float = 0.1  # s
 
     def __post_init__(self):
         get_hand_spec(self.hand)
@@ -87,10 +94,21 @@ class GraspTrialConfig:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name}: expected a finite value >= 0, got {value}")
-        for name in ("mu", "time_step"):
+        for name in ("mu", "time_step", "hold_window"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value}")
+        if isinstance(self.hold_samples, bool) or not isinstance(self.hold_samples, int) \
+                or self.hold_samples < 1:
+            raise ValueError(f"hold_samples: expected an integer >= 1, got {self.hold_samples!r}")
+        if self.hold_window >= self.settle_time - 0.3:
+            raise ValueError(f"hold_window: expected < {self.settle_time - 0.3:.2f} s (the hold "
+                             f"starts at the earliest 0.3 s), got {self.hold_window}")
+
+    @property
+    def settle_time(self) -> float:
+        """s, when the trial ends: the approach has met the object and the hand has closed."""
+        return 0.9 if self.space != "synergy" else 0.7
 
     @property
     def object_size(self) -> float:
@@ -102,7 +120,8 @@ class TrialOutcome:
     """What one trial produced (JSON-friendly through :meth:`as_dict`)."""
 
     metric: float  # BW value, noise included
-    metric_noiseless: float
+    metric_noiseless: float  # mean of metric_samples
+    metric_samples: list  # BW value at each hold instant (no noise)
     force_closure: bool
     contacts: dict  # body name -> {"p_O": [...], "n_O": [...], "f_O": [...]}
     touched: bool  # the approach met the object
@@ -312,17 +331,25 @@ simulation_duration: 1.2
         driver.set_initial_command(driver.GetMyMutableContextFromRoot(context), preshape)
         simulator = built["simulator"]
         simulator.Initialize()
-        # Approach until contact, then let the hand close and settle.
-        simulator.AdvanceTo(0.9 if c.space != "synergy" else 0.7)
+        # Approach until contact, let the hand close and settle, then score
+        # the hold at hold_samples instants (the last one at settle_time).
+        samples = []
+        contacts_port = built["contacts"].get_output_port()
+        contacts_context = built["contacts"].GetMyContextFromRoot(context)
+        hold_times = (c.settle_time - c.hold_window * np.linspace(1.0, 0.0, c.hold_samples)
+                      if c.hold_samples > 1 else [c.settle_time])
+        for t in hold_times:
+            simulator.AdvanceTo(float(t))
+            value, closure, detail = self._score(contacts_port.Eval(contacts_context), built)
+            samples.append(float(value))
         touched = np.isfinite(controller.GetOutputPort("contact_time").Eval(
             controller.GetMyContextFromRoot(context))[0])
-        contacts = built["contacts"].get_output_port().Eval(
-            built["contacts"].GetMyContextFromRoot(context))
-        value, closure, detail = self._score(contacts, built)
+        value = float(np.mean(samples))
         rng = np.random.default_rng(seed)
         noisy = value + (c.noise * rng.standard_normal() if c.noise > 0 else 0.0)
         return TrialOutcome(
-            metric=float(noisy), metric_noiseless=float(value), force_closure=bool(closure),
+            metric=float(noisy), metric_noiseless=value, metric_samples=samples,
+            force_closure=bool(closure),
             contacts=detail, touched=bool(touched or detail),
             scenario=self.scenario_for(x), wall_time=time.perf_counter() - start_wall,
         )

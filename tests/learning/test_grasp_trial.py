@@ -52,6 +52,22 @@ def test_noise_is_gaussian_with_the_configured_std_and_seeded():
     assert trial.evaluate([0.0, 0.0], seed=3).metric == outcomes[3].metric
 
 
+def test_metric_is_the_mean_over_the_hold_and_ends_at_the_settle_time():
+    """The hold samples are instants of one simulation: its last one is exactly
+    the single-snapshot metric at settle time, and the metric is their mean."""
+    x = [0.005, -0.009]
+    held = GraspTrial(hand="barrett", object="cuboid", space="offset", hold_samples=5)
+    snapshot = GraspTrial(hand="barrett", object="cuboid", space="offset", hold_samples=1)
+    outcome = held.evaluate(x)
+    assert len(outcome.metric_samples) == 5
+    assert outcome.metric_noiseless == pytest.approx(np.mean(outcome.metric_samples), abs=1e-12)
+    assert outcome.metric_samples[-1] == snapshot.evaluate(x).metric_noiseless
+    # A settled cuboid grasp: every instant in closure, values within the
+    # spread of a pad's point contact hopping between patch corners.
+    assert min(outcome.metric_samples) > 0
+    assert np.ptp(outcome.metric_samples) < 0.25
+
+
 def test_standoff_too_large_loses_the_grasp():
     trial = GraspTrial(hand="barrett", object="sphere", space="standoff")
     near, far = trial.evaluate([0.0]), trial.evaluate([0.11])
@@ -104,6 +120,10 @@ def test_shadow_synergy_space_runs():
     (dict(space="synergy", hand="barrett"), "shadow"),
     (dict(noise=-1.0), "noise"),
     (dict(mu=float("nan")), "mu"),
+    (dict(hold_samples=0), "hold_samples"),
+    (dict(hold_samples=2.5), "hold_samples"),
+    (dict(hold_window=0.0), "hold_window"),
+    (dict(hold_window=0.7), "hold_window"),
 ])
 def test_bad_configuration_is_named(kwargs, word):
     with pytest.raises(ValueError, match=word):
