@@ -48,6 +48,7 @@ import numpy as np  # noqa: E402
 
 from handle_drake.learning.babbling import (  # noqa: E402
     FRACTIONS,
+    _config_key,
     _pin_blas_worker,
     _trial,
     grid_values,
@@ -190,7 +191,9 @@ def main(argv=None) -> int:
     with pool:
         futures = {pool.submit(gp_minimize_run, _offset_config(k, settings.noise), s,
                                settings.trials,
-                               out / "gp_minimize" / f"{k}-noise{settings.noise:g}-seed{s}.json"):
+                               out / "gp_minimize" / (f"{k}-noise{settings.noise:g}-seed{s}"
+                                                        f"-sim{_config_key(_offset_config(k, 0.0))}"
+                                                        ".json")):
                    (k, s) for k, s in jobs}
         for i, future in enumerate(as_completed(futures), 1):
             k, s = futures[future]

@@ -229,7 +229,11 @@ class RunSpec:
         # are never read back as runs of the current ones.
         version = (f"-d{BO_DEFAULTS_VERSION}" if self.strategy == "bo" and BO_DEFAULTS_VERSION > 1
                    else "")
-        return f"{trial.name}{noise}-{self.strategy}{version}{extra}-seed{self.seed}"
+        # The trial's whole config and the simulation code it ran on: a run
+        # logged by other code or settings (e.g. another hold_samples) starts
+        # afresh under a new id instead of being resumed or read back.
+        sim = _config_key(dc.replace(self.config, noise=0.0))
+        return f"{trial.name}{noise}-{self.strategy}{version}{extra}-seed{self.seed}-sim{sim}"
 
 
 def _config_key_options(options) -> str:

@@ -83,3 +83,20 @@ def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
     assert babbling._config_key(config) == key  # stable for the same code
     monkeypatch.setattr(babbling, "simulation_fingerprint", lambda: "other-code")
     assert babbling._config_key(config) != key
+
+
+def test_run_id_changes_with_the_trial_settings_and_simulation_code(monkeypatch):
+    """A logged run is resumed or read back only by the same trial on the same code."""
+    from handle_drake.learning import babbling
+
+    config = GraspTrialConfig(hand="barrett", object="sphere", noise=0.01)
+    spec = RunSpec(config, "bo", 3, 10)
+    assert RunSpec(config, "bo", 3, 10).run_id == spec.run_id  # stable
+    # The budget is not part of the run: a longer budget continues it.
+    assert RunSpec(config, "bo", 3, 50).run_id == spec.run_id
+    other_hold = GraspTrialConfig(hand="barrett", object="sphere", noise=0.01, hold_samples=1)
+    assert RunSpec(other_hold, "bo", 3, 10).run_id != spec.run_id
+    assert RunSpec(config, "bo", 4, 10).run_id != spec.run_id
+    run_id = spec.run_id
+    monkeypatch.setattr(babbling, "simulation_fingerprint", lambda: "other-code")
+    assert RunSpec(config, "bo", 3, 10).run_id != run_id
