@@ -11,22 +11,29 @@ back. Side by side in one run, each case in its own child process:
   processes on a udp_multicast bus (the deployment shape), the client in a
   third process;
 
-for the Shadow hand (20 commands, 24 joints: 6 setpoint + 9 feedback frames
-per cycle) and the Barrett hand (2 + 4 frames). With ``--baseline REV`` the
-same cases also run on ``handle_drake/can_hand`` as of git revision REV
+for the Shadow hand (20 commands, 24 joints) and the Barrett hand (4, 8), and
+for both frame formats: ``classic`` (8-byte CAN 2.0 frames: Shadow 6 setpoint
++ 9 feedback frames per cycle, Barrett 2 + 4) and ``fd`` (CAN FD: one setpoint
+frame, one feedback frame). The table also gives the bus time one cycle
+would take on a real bus (classic 1 Mbit/s; FD 1 Mbit/s arbitration, 5 Mbit/s
+data; unstuffed .. worst-case stuffing). With ``--baseline REV`` the classic
+cases also run on ``handle_drake/can_hand`` as of git revision REV
 ("before"), interleaved with the working tree ("after").
 
 The floor, with no project code, measured in the same run:
 
 - ``floor-udp-1``: python-can udp_multicast ping-pong of one frame between
   two processes at 1 kHz;
-- ``floor-udp-shadow``: the same with a Shadow cycle's frame counts (7 frames
-  out, 9 back, the reply sent as soon as the 7th arrives);
+- ``floor-udp-shadow``: the same with a classic Shadow cycle's frame counts (7
+  frames out, 9 back, the reply sent as soon as the 7th arrives);
+- ``floor-udp-fd``: one 48-byte CAN FD frame out, one 64-byte frame back (the
+  FD Shadow cycle);
 - ``floor-tcp``: a bare TCP_NODELAY ping-pong of a COMMAND-sized message.
 
-The chain's round trip cannot beat ``floor-tcp + floor-udp-shadow`` plus the
-wait for the hand's next cycle (uniform in 0..1 ms at 1 kHz). The command
-clock runs one hand period per run faster than 1 kHz, so the phase between
+The chain's round trip cannot beat ``floor-tcp + floor-udp-shadow`` (classic)
+or ``floor-tcp + floor-udp-fd`` (fd) plus the wait for the hand's next cycle
+(uniform in 0..1 ms at 1 kHz). The command clock runs one hand period per
+run faster than 1 kHz, so the phase between
 command and hand cycle sweeps once through the cycle, as between two
 independent clocks (otherwise a run's latency depends on its start phase).
 
@@ -67,8 +74,9 @@ RATE = 1000.0  # Hz: command rate, server commit limit and firmware cycle
 DURATION = pick(4.0, 1.0)  # s per case
 WARMUP = 0.3  # s
 KINDS = ("shadow", "barrett")
+FORMATS = ("classic", "fd")
 CHAIN_CASES = ("inproc-virtual", "procs-udp")
-FLOOR_CASES = ("floor-udp-1", "floor-udp-shadow", "floor-tcp")
+FLOOR_CASES = ("floor-udp-1", "floor-udp-shadow", "floor-udp-fd", "floor-tcp")
 
 
 def free_port() -> int:
@@ -154,7 +162,12 @@ def drive(client, layout, duration: float, pids=()) -> dict:
     }
 
 
-def case_inproc(kind: str) -> dict:
+def _bus_kwargs(frame_format: str | None) -> dict:
+    """BusConfig fields for a format (None: the code under test predates frame formats)."""
+    return {} if frame_format is None else {"frame_format": frame_format}
+
+
+def case_inproc(kind: str, frame_format: str | None) -> dict:
     from handle_drake.can_hand.client import CanHandClient
     from handle_drake.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
     from handle_drake.can_hand.firmware import SimulatedHandFirmware
@@ -162,7 +175,7 @@ def case_inproc(kind: str) -> dict:
     from handle_drake.can_hand.server import CanBusServer
 
     layout = hand_layout(kind)
-    bus = BusConfig("virtual", f"bench-{uuid.uuid4().hex}")
+    bus = BusConfig("virtual", f"bench-{uuid.uuid4().hex}", **_bus_kwargs(frame_format))
     server = CanBusServer(CanServerConfig(port=0, hand_kind=kind, bus=bus,
                                           max_setpoint_rate=RATE, max_step=0.5),
                           layout=layout).start()
@@ -212,7 +225,7 @@ def _stop(processes) -> None:
             process.wait(5)
 
 
-def case_procs(kind: str) -> dict:
+def case_procs(kind: str, frame_format: str | None) -> dict:
     from handle_drake.can_hand.client import CanHandClient
     from handle_drake.can_hand.layout import hand_layout
 
@@ -220,6 +233,8 @@ def case_procs(kind: str) -> dict:
     group, bus_port = random_group()
     bus = ["--bus", "udp_multicast", "--channel", group, "--bus-port", str(bus_port),
            "--hand", kind]
+    if frame_format is not None:
+        bus += ["--frame-format", frame_format]
     port = free_port()
     processes = []
     try:
@@ -236,13 +251,20 @@ def case_procs(kind: str) -> dict:
 def _udp_bus(group: str, port: int):
     import can
 
-    return can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=1, fd=False)
+    return can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=1, fd=True)
 
 
-def echo_udp(group: str, port: int, n_in: int, n_out: int) -> None:
-    """Replies ``n_out`` frames (id 0x200+) each time frame ``n_in - 1`` (id 0x100+) arrives."""
+def _frame(arbitration_id: int, data: bytes, size: int):
+    """A CAN 2.0 frame of ``data`` (size 8) or a CAN FD frame padded to ``size`` bytes."""
     import can
 
+    fd = size > 8
+    return can.Message(arbitration_id=arbitration_id, data=data.ljust(size, b"\0"),
+                       is_extended_id=False, is_fd=fd, bitrate_switch=fd)
+
+
+def echo_udp(group: str, port: int, n_in: int, n_out: int, size_out: int = 8) -> None:
+    """Replies ``n_out`` frames (id 0x200+) each time frame ``n_in - 1`` (id 0x100+) arrives."""
     bus = _udp_bus(group, port)
     stop = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
@@ -252,16 +274,14 @@ def echo_udp(group: str, port: int, n_in: int, n_out: int) -> None:
         if message is None or message.arbitration_id != 0x100 + n_in - 1:
             continue  # our own replies, earlier frames of the burst
         for i in range(n_out):
-            bus.send(can.Message(arbitration_id=0x200 + i, data=message.data,
-                                 is_extended_id=False))
+            bus.send(_frame(0x200 + i, bytes(message.data[:8]), size_out))
     bus.shutdown()
 
 
-def case_floor_udp(n_in: int, n_out: int) -> dict:
-    import can
-
+def case_floor_udp(n_in: int, n_out: int, size_in: int = 8, size_out: int = 8) -> dict:
     group, port = random_group()
-    echo = _spawn(["--child-echo-udp", group, str(port), str(n_in), str(n_out)], module=False)
+    echo = _spawn(["--child-echo-udp", group, str(port), str(n_in), str(n_out), str(size_out)],
+                  module=False)
     bus = _udp_bus(group, port)
     try:
         latencies, start_times = [], {}
@@ -276,14 +296,13 @@ def case_floor_udp(n_in: int, n_out: int) -> dict:
                 data = seq.to_bytes(8, "little")
                 start_times[seq] = time.perf_counter()
                 for i in range(n_in):
-                    bus.send(can.Message(arbitration_id=0x100 + i, data=data,
-                                         is_extended_id=False))
+                    bus.send(_frame(0x100 + i, data, size_in))
                 next_time += 1.0 / RATE
                 # Receive until the next send is due.
                 while (timeout := next_time - time.perf_counter()) > 0:
                     message = bus.recv(timeout)
                     if message is not None and message.arbitration_id == 0x200 + n_out - 1:
-                        sent = start_times.pop(int.from_bytes(message.data, "little"), None)
+                        sent = start_times.pop(int.from_bytes(message.data[:8], "little"), None)
                         if sent is not None:
                             latencies.append(time.perf_counter() - sent)
             elapsed = time.perf_counter() - start
@@ -336,15 +355,27 @@ def case_floor_tcp() -> dict:
         _stop([echo])
 
 
-def run_case(case: str, kind: str) -> dict:
+def bus_time_us(kind: str, frame_format: str) -> tuple[float, float]:
+    """Bus time (us) of one command + one hand cycle: unstuffed, worst-case stuffing."""
+    from handle_drake.can_hand.layout import hand_layout
+    from handle_drake.can_hand.messages import cycle_bus_time, make_codec
+
+    codec = make_codec(hand_layout(kind), frame_format)
+    return (1e6 * cycle_bus_time(codec), 1e6 * cycle_bus_time(codec, worst_case_stuffing=True))
+
+
+def run_case(case: str, kind: str, frame_format: str) -> dict:
+    frame_format = None if frame_format == "-" else frame_format
     if case == "inproc-virtual":
-        return case_inproc(kind)
+        return case_inproc(kind, frame_format)
     if case == "procs-udp":
-        return case_procs(kind)
+        return case_procs(kind, frame_format)
     if case == "floor-udp-1":
         return case_floor_udp(1, 1)
     if case == "floor-udp-shadow":
         return case_floor_udp(7, 9)
+    if case == "floor-udp-fd":
+        return case_floor_udp(1, 1, 48, 64)
     if case == "floor-tcp":
         return case_floor_tcp()
     raise ValueError(f"case: expected one of {CHAIN_CASES + FLOOR_CASES}, got {case!r}")
@@ -363,10 +394,11 @@ def baseline_tree(revision: str, directory: Path) -> Path:
     return tree
 
 
-def child(code: Path, case: str, kind: str) -> dict:
+def child(code: Path, case: str, kind: str, frame_format: str = "-") -> dict:
     env = dict(os.environ, BENCH_CAN_CODE=str(code), PYTHONPATH=str(code),
                OPENBLAS_NUM_THREADS="1")
-    result = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", case, kind],
+    result = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", case, kind,
+                             frame_format],
                             capture_output=True, text=True, env=env, cwd=code, timeout=120)
     if result.returncode != 0:
         raise RuntimeError(f"{case}/{kind} failed:\n{result.stderr[-3000:]}")
@@ -379,16 +411,19 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--baseline", default=None,
                         help="git revision whose can_hand runs as 'before' (side by side)")
-    parser.add_argument("--child", nargs=2, metavar=("CASE", "KIND"), help=argparse.SUPPRESS)
-    parser.add_argument("--child-echo-udp", nargs=4, help=argparse.SUPPRESS)
+    parser.add_argument("--child", nargs=3, metavar=("CASE", "KIND", "FORMAT"),
+                        help=argparse.SUPPRESS)
+    parser.add_argument("--only", default=None,
+                        help="run only the chain cases whose name contains this text")
+    parser.add_argument("--child-echo-udp", nargs=5, help=argparse.SUPPRESS)
     parser.add_argument("--child-echo-tcp", nargs=1, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         print(json.dumps(run_case(*args.child)), flush=True)
         return
     if args.child_echo_udp:
-        group, port, n_in, n_out = args.child_echo_udp
-        echo_udp(group, int(port), int(n_in), int(n_out))
+        group, port, n_in, n_out, size_out = args.child_echo_udp
+        echo_udp(group, int(port), int(n_in), int(n_out), int(size_out))
         return
     if args.child_echo_tcp:
         echo_tcp(args.child_echo_tcp[0])
@@ -402,36 +437,54 @@ def main() -> None:
         cases = {}
         for kind in KINDS:
             for case in CHAIN_CASES:
-                for version, code in versions.items():  # interleaved: same load for both
-                    name = f"{case}/{kind}" + (f"/{version}" if args.baseline else "")
-                    cases[name] = child(code, case, kind)
-                    print(f"  {name}: p99 {cases[name]['latency_ms_p99']:.2f} ms", flush=True)
+                for frame_format in FORMATS:  # interleaved: same load for both
+                    for version, code in versions.items():
+                        if version == "before" and frame_format != "classic":
+                            continue  # the baseline may predate the fd layout
+                        name = (f"{case}/{kind}/{frame_format}"
+                                + (f"/{version}" if args.baseline else ""))
+                        if args.only and args.only not in name:
+                            continue
+                        cases[name] = child(code, case, kind,
+                                            "-" if version == "before" else frame_format)
+                        cases[name]["bus_us_per_cycle"] = bus_time_us(kind, frame_format)
+                        print(f"  {name}: p50 {cases[name]['latency_ms_p50']:.2f} ms, "
+                              f"p99 {cases[name]['latency_ms_p99']:.2f} ms", flush=True)
         for case in FLOOR_CASES:
-            cases[case] = child(ROOT, case, "-")
+            if not args.only:
+                cases[case] = child(ROOT, case, "-")
         load_end = os.getloadavg()
 
     print(f"\nfull-hand setpoint round trip, {RATE:.0f} Hz, {DURATION:.0f} s per case, "
           f"{os.cpu_count()} cores; load average at start {load_start[0]:.1f}, "
           f"at end {load_end[0]:.1f}")
-    print(f"{'case':<31}{'cmd/s':>6}{'commit/s':>9}{'state/s':>8}{'p50':>6}{'p90':>6}"
-          f"{'p99':>7}{'max':>7}  {'CPU % self/sim/server':<22}{'load':>5}  targets")
+    print(f"{'case':<36}{'cmd/s':>6}{'commit/s':>9}{'state/s':>8}{'frame/s':>8}{'p50':>6}"
+          f"{'p90':>6}{'p99':>7}{'max':>7}  {'CPU % self/sim/server':<22}{'bus us/cyc':>11}"
+          f"{'load':>5}  targets")
     for name, r in cases.items():
         ok = r["states_per_s"] >= 0.95 * RATE and r["latency_ms_p99"] <= 2.0
         commits = f"{r['commits_per_s']:9.0f}" if "commits_per_s" in r else f"{'-':>9}"
-        print(f"{name:<31}{r['commands_per_s']:6.0f}{commits}{r['states_per_s']:8.0f}"
+        frames = f"{r['can_frames_per_s']:8.0f}" if "can_frames_per_s" in r else f"{'-':>8}"
+        bus = "{:.0f}-{:.0f}".format(*r["bus_us_per_cycle"]) if "bus_us_per_cycle" in r else "-"
+        print(f"{name:<36}{r['commands_per_s']:6.0f}{commits}{r['states_per_s']:8.0f}{frames}"
               f"{r['latency_ms_p50']:6.2f}{r['latency_ms_p90']:6.2f}{r['latency_ms_p99']:7.2f}"
               f"{r['latency_ms_max']:7.1f}  {'/'.join(f'{c:.0f}' for c in r['cpu_percent']):<22}"
-              f"{r['load_average'][0]:5.1f}  {'met' if ok else 'MISSED'}")
-    print("latencies in ms; a chain case meets the targets with state/s >= 950 and p99 <= 2 ms")
-    floor = cases["floor-tcp"]["latency_ms_p99"] + cases["floor-udp-shadow"]["latency_ms_p99"]
-    print(f"floor p99 without the hand's cycle wait (tcp + udp shadow burst): {floor:.2f} ms")
+              f"{bus:>11}{r['load_average'][0]:5.1f}  {'met' if ok else 'MISSED'}")
+    print("latencies in ms; a chain case meets the targets with state/s >= 950 and p99 <= 2 ms; "
+          "bus us/cyc: one command + one hand cycle on a real bus (unstuffed-worst stuffing), "
+          "> 1000 cannot run at 1 kHz")
+    floor = {}
+    if "floor-tcp" in cases:
+        for fmt, udp in (("classic", "floor-udp-shadow"), ("fd", "floor-udp-fd")):
+            floor[fmt] = cases["floor-tcp"]["latency_ms_p99"] + cases[udp]["latency_ms_p99"]
+            print(f"floor p99 without the hand's cycle wait (tcp + {udp}): {floor[fmt]:.2f} ms")
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
     (out / "can.json").write_text(json.dumps(
         {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(),
          "baseline": args.baseline, "load_average_start": load_start,
          "load_average_end": load_end, "cases": cases,
-         "floor_p99_ms_tcp_plus_udp_shadow": floor}, indent=2))
+         "floor_p99_ms_tcp_plus_udp": floor}, indent=2))
     print(f"wrote {out / 'can.json'}")
 
 

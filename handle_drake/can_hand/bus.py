@@ -5,7 +5,12 @@
   one host (loopback, TTL 1). A socket also receives its own frames, so every
   node ignores the ids it sends itself.
 - ``socketcan``: a Linux CAN interface (``can0``, or ``vcan0`` for a virtual
-  kernel bus); needs the interface to exist.
+  kernel bus); needs the interface to exist, and for the fd frame format an
+  FD-capable one (MTU 72).
+
+The bus is opened able to receive CAN FD frames whenever the interface can,
+also for the classic layout: a frame of the wrong format then reaches the
+node and is rejected and counted instead of vanishing inside python-can.
 """
 
 from __future__ import annotations
@@ -16,7 +21,9 @@ import can
 
 from handle_drake.can_hand.config import BusConfig
 
-__all__ = ["open_bus", "socketcan_available"]
+__all__ = ["open_bus", "socketcan_available", "socketcan_fd_capable"]
+
+_CANFD_MTU = 72  # struct canfd_frame; a CAN 2.0 interface has MTU 16
 
 
 def socketcan_available(channel: str) -> bool:
@@ -24,19 +31,36 @@ def socketcan_available(channel: str) -> bool:
     return os.path.exists(f"/sys/class/net/{channel}")
 
 
+def socketcan_fd_capable(channel: str) -> bool:
+    """True when the SocketCAN interface ``channel`` carries CAN FD frames (MTU 72)."""
+    try:
+        with open(f"/sys/class/net/{channel}/mtu") as f:
+            return int(f.read()) >= _CANFD_MTU
+    except (OSError, ValueError):
+        return False
+
+
 def open_bus(config: BusConfig) -> can.BusABC:
     """A python-can bus for ``config``; ValueError naming the problem otherwise."""
     config.validate()
     if config.interface == "virtual":
-        return can.Bus(interface="virtual", channel=config.channel, receive_own_messages=False)
+        # The virtual bus carries any frame; ``protocol`` only labels it.
+        protocol = can.CanProtocol.CAN_FD if config.frame_format == "fd" else can.CanProtocol.CAN_20
+        return can.Bus(interface="virtual", channel=config.channel, receive_own_messages=False,
+                       protocol=protocol)
     if config.interface == "udp_multicast":
-        # CAN 2.0 frames only: the hand's messages are 8 bytes.
         return can.Bus(interface="udp_multicast", channel=config.channel, port=config.port,
-                       hop_limit=1, fd=False)
+                       hop_limit=1, fd=True)
     if not socketcan_available(config.channel):
         raise ValueError(
             f"socketcan: no network interface {config.channel!r}; create it first "
             f"(e.g. `ip link add dev {config.channel} type vcan && "
-            f"ip link set up {config.channel}`)"
+            f"ip link set {config.channel} mtu 72 && ip link set up {config.channel}`)"
         )
-    return can.Bus(interface="socketcan", channel=config.channel)
+    fd = socketcan_fd_capable(config.channel)
+    if config.frame_format == "fd" and not fd:
+        raise ValueError(
+            f"socketcan: {config.channel!r} is not CAN FD capable (MTU < 72); use "
+            f"--frame-format classic, or `ip link set {config.channel} mtu 72` (vcan) / "
+            f"`ip link set {config.channel} type can bitrate 1000000 dbitrate 5000000 fd on`")
+    return can.Bus(interface="socketcan", channel=config.channel, fd=fd)

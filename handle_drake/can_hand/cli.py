@@ -5,6 +5,8 @@ Examples (two shells, one multicast CAN bus on this host)::
     handle-drake can-sim --hand shadow --bus udp_multicast --channel 239.74.163.2
     handle-drake can-server --listen 127.0.0.1:47800 --bus udp_multicast --channel 239.74.163.2
 
+``--frame-format fd|classic`` (default fd) picks the hand's message layout
+(``hand_fd.dbc`` or ``hand.dbc``); the server and the hand must use the same.
 Both print one ``ready`` line on stdout once running (the server's line holds
 the bound address, useful with port 0) and stop cleanly on SIGINT or
 SIGTERM. Also runnable as ``python -m handle_drake.can_hand.cli``.
@@ -24,6 +26,7 @@ from handle_drake.can_hand.config import (
     DEFAULT_MULTICAST_GROUP,
     DEFAULT_MULTICAST_PORT,
     DEFAULT_SERVER_PORT,
+    FRAME_FORMATS,
     BusConfig,
     CanFirmwareConfig,
     CanServerConfig,
@@ -60,6 +63,9 @@ def _add_bus_arguments(p: argparse.ArgumentParser) -> None:
                         f"(defaults: {_DEFAULT_CHANNEL})")
     p.add_argument("--bus-port", type=int, default=DEFAULT_MULTICAST_PORT,
                    help="UDP port of the udp_multicast bus")
+    p.add_argument("--frame-format", choices=FRAME_FORMATS, default="fd",
+                   help="the hand's message layout: fd (CAN FD, one frame per command and "
+                        "per hand cycle) or classic (8-byte CAN 2.0 frames)")
     p.add_argument("--log-level", default="WARNING")
 
 
@@ -95,7 +101,8 @@ def _add_firmware_arguments(p: argparse.ArgumentParser) -> None:
 
 def _bus(args) -> BusConfig:
     channel = args.channel or _DEFAULT_CHANNEL[args.bus]
-    return BusConfig(interface=args.bus, channel=channel, port=args.bus_port)
+    return BusConfig(interface=args.bus, channel=channel, port=args.bus_port,
+                     frame_format=args.frame_format)
 
 
 def _firmware_config(args, bus: BusConfig) -> CanFirmwareConfig:
@@ -145,7 +152,7 @@ def _cmd_server(args) -> int:
         try:
             bound_host, bound_port = server.address
             print(f"can-server ready {bound_host}:{bound_port} hand={args.hand} "
-                  f"bus={bus.interface}:{bus.channel}", flush=True)
+                  f"bus={bus.interface}:{bus.channel} frames={bus.frame_format}", flush=True)
             server.serve_until(stop)
         finally:
             if firmware is not None:
@@ -160,7 +167,8 @@ def _cmd_sim(args) -> int:
     bus = _bus(args)
     stop = _stop_event()
     with SimulatedHandFirmware(_firmware_config(args, bus)) as firmware:
-        print(f"can-sim ready hand={args.hand} bus={bus.interface}:{bus.channel}", flush=True)
+        print(f"can-sim ready hand={args.hand} bus={bus.interface}:{bus.channel} "
+              f"frames={bus.frame_format}", flush=True)
         while not stop.wait(0.2):
             if not firmware.is_alive():
                 raise RuntimeError("the firmware thread died; see the log")

@@ -1,9 +1,12 @@
 """A simulated CAN-bus hand: joint position loops, noisy sensors, a virtual object.
 
-It speaks the hand's side of ``hand.dbc``: it applies SETPOINT frames on each
-SETPOINT_COMMIT and, ``rate`` times a second, publishes POSITION, TACTILE and
-then STATUS (which acknowledges the last applied commit). With the bus
-server it lets the whole chain run without hardware (``handle-drake can-sim``).
+It speaks the hand's side of the configured layout (``config.bus.frame_format``).
+FD (``hand_fd.dbc``): it applies each ``<HAND>_SETPOINT`` frame on receipt
+and, ``rate`` times a second, publishes one ``<HAND>_FEEDBACK`` frame (which
+acknowledges the last applied setpoint). Classic (``hand.dbc``): it applies
+SETPOINT frames on each SETPOINT_COMMIT and publishes POSITION, TACTILE and
+then STATUS. With the bus server it lets the whole chain run without hardware
+(``handle-drake can-sim``).
 
 Joint model (each actuated joint, see :class:`CanFirmwareConfig`): a
 second-order position loop ``q'' = wn^2 (q_sp - q) - 2 zeta wn q'`` with
@@ -30,9 +33,9 @@ from handle_drake.can_hand.layout import HandLayout, hand_layout
 from handle_drake.can_hand.messages import (
     STATE_OK,
     ForeignFrameError,
-    HandCodec,
+    FrameFormatError,
     MalformedFrameError,
-    SetpointAssembler,
+    make_codec,
 )
 
 __all__ = ["HandJointModel", "SimulatedHandFirmware"]
@@ -124,9 +127,9 @@ class SimulatedHandFirmware:
         config.validate()
         self.config = config
         self.layout = layout or hand_layout(config.hand_kind, config.coupling_ratio)
-        self.codec = HandCodec(self.layout)
+        self.codec = make_codec(self.layout, config.bus.frame_format)
         self.model = HandJointModel(self.layout, config, initial_position)
-        self._assembler = SetpointAssembler(self.codec)
+        self._assembler = self.codec.setpoint_receiver()
         self._bus = bus
         self._owns_bus = bus is None
         self._stop = threading.Event()
@@ -174,14 +177,16 @@ class SimulatedHandFirmware:
             self.counters["foreign_frames"] += 1
             return
         try:
-            frame = self.codec.decode(message.arbitration_id, message.data)
+            applied = self._assembler.feed(message.arbitration_id, message.data, message.is_fd)
         except ForeignFrameError:
             self.counters["foreign_frames"] += 1
+            return
+        except FrameFormatError:
+            self.counters["wrong_format_frames"] += 1
             return
         except MalformedFrameError:
             self.counters["malformed_frames"] += 1
             return
-        applied = self._assembler.push(frame)
         if applied is not None:
             seq, setpoint = applied
             with self._lock:
@@ -223,10 +228,12 @@ class SimulatedHandFirmware:
             frames = self.codec.encode_feedback(q, tactile, seq_ack, self._counter, STATE_OK,
                                                 now - self._t0)
             self._counter = (self._counter + 1) % 256
+            fd = self.codec.is_fd
             try:
                 for arbitration_id, data in frames:
                     self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                               is_extended_id=False), timeout=0.01)
+                                               is_extended_id=False, is_fd=fd,
+                                               bitrate_switch=fd), timeout=0.01)
                 self.counters["cycles"] += 1
             except (can.CanError, OSError) as error:
                 self.counters["bus_tx_errors"] += 1

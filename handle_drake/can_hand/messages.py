@@ -1,6 +1,28 @@
 """The hand's CAN messages and pure encode/decode functions (no bus, no I/O).
 
-The messages are declared once, in ``hand.dbc`` (read with cantools):
+Two layouts (``frame_format``), each declared once in a DBC read with cantools.
+
+**fd** (``hand_fd.dbc``, the default): CAN FD frames (64-byte data field;
+1 Mbit/s arbitration, 5 Mbit/s data with bit-rate switching), one frame per
+direction per hand cycle, one pair of messages per hand:
+
+========  ====================  =====  ==========  ===================================
+id        name                  DLC    direction   signals (little-endian)
+========  ====================  =====  ==========  ===================================
+0x140     ``SHADOW_SETPOINT``   48     host->hand  SEQ u16, MODE u8, (reserved u8),
+0x141     ``BARRETT_SETPOINT``  12                 ``SP_<joint>`` int16 1e-4 rad x nu
+0x240     ``SHADOW_FEEDBACK``   64     hand->host  SEQ_ACK u16, STATE u4, KIND u4,
+0x241     ``BARRETT_FEEDBACK``  32                 TIME u24 (1e-6 s), ``Q_<joint>`` int16
+                                                   1e-4 rad x nq, ``F<k>`` u16 1e-3 N x nt
+========  ====================  =====  ==========  ===================================
+
+A setpoint frame carries the whole command and its sequence number, so it is
+applied atomically on receipt (no commit frame); a feedback frame is the
+whole hand cycle, acknowledgement included. Unused bytes up to the next valid
+FD length are zero. The signal names carry the joint names; the codec checks
+them against the hand model's order.
+
+**classic** (``hand.dbc``): 8-byte CAN 2.0 frames, four 16-bit values each:
 
 ========  ==================  ====  =========  ==================================
 id        name                DLC   direction  signals (little-endian)
@@ -20,14 +42,24 @@ tactile pads in fingertip order (2 / 1 frames); unused slots are zero. A
 command is all setpoint frames followed by one commit, which the hand applies
 atomically. Each hand cycle ends with STATUS, which closes a feedback set.
 
-Bandwidth: an 8-byte standard frame is 111 bits plus stuffing (about 130), so
-a 1 Mbit/s bus carries about 7,500 frames/s; a full Shadow cycle (9 feedback +
-6 command frames) therefore fits about 500 times per second on real CAN. The
-simulated buses here have no such limit.
+Bus time (:func:`frame_time`, :func:`cycle_bus_time`): a classic 8-byte
+standard frame is 111 bits unstuffed and up to 135 with bit stuffing, about
+125 us at 1 Mbit/s. A classic Shadow cycle (6 command + 9 feedback frames)
+needs 1.6-2.0 ms of bus time, so a real 1 Mbit/s classic bus carries at most
+about 500-600 Shadow cycles per second: a 1 kHz Shadow loop is physically
+impossible there (the Barrett's 6 frames take 0.6-0.8 ms, 60-80 % of the bus
+at 1 kHz). In CAN FD at 1/5 Mbit/s the Shadow cycle (48 + 64 bytes) takes
+about 0.25-0.31 ms and the Barrett's (12 + 32 bytes) about 0.14-0.17 ms. The
+simulated buses (virtual, udp_multicast) have no such limit.
 
-Everything here is pure: :class:`HandCodec` turns vectors into
-``(arbitration_id, bytes)`` pairs and back, raising
-:class:`ForeignFrameError` for ids that are not the hand's and
+Everything here is pure: :func:`make_codec` gives a :class:`HandCodec`
+(classic) or :class:`FdHandCodec` (fd); both turn vectors into
+``[(arbitration_id, bytes), ...]`` and, through the receivers of
+:meth:`HandCodec.feedback_receiver` / :meth:`HandCodec.setpoint_receiver`,
+raw frames back into hand cycles and commands, raising
+:class:`ForeignFrameError` for ids that are not the hand's,
+:class:`FrameFormatError` for a frame of the other layout or format (a CAN FD
+frame on the classic layout, a classic frame on the FD layout) and
 :class:`MalformedFrameError` for a wrong length or an undecodable payload.
 """
 
@@ -45,6 +77,9 @@ from handle_drake.can_hand.layout import HAND_KIND_CODES, HandLayout
 
 __all__ = [
     "DBC_PATH",
+    "DBC_PATHS",
+    "FRAME_FORMATS",
+    "FD_LENGTHS",
     "SETPOINT_BASE_ID",
     "COMMIT_ID",
     "POSITION_BASE_ID",
@@ -59,15 +94,26 @@ __all__ = [
     "CanFrameError",
     "ForeignFrameError",
     "MalformedFrameError",
+    "FrameFormatError",
     "Frame",
     "FeedbackSnapshot",
     "HandCodec",
     "FeedbackAssembler",
     "SetpointAssembler",
+    "FdHandCodec",
+    "FdFeedbackDecoder",
+    "FdSetpointDecoder",
+    "make_codec",
     "load_database",
+    "frame_time",
+    "cycle_bus_time",
 ]
 
 DBC_PATH = Path(__file__).with_name("hand.dbc")
+FRAME_FORMATS = ("classic", "fd")
+DBC_PATHS = {"classic": DBC_PATH, "fd": Path(__file__).with_name("hand_fd.dbc")}
+#: The data lengths a CAN FD frame can have (DLC codes 0..15).
+FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 
 SETPOINT_BASE_ID = 0x100
 COMMIT_ID = 0x10F
@@ -91,10 +137,26 @@ class MalformedFrameError(CanFrameError):
     """A hand message id with a wrong length or an undecodable payload."""
 
 
+class FrameFormatError(MalformedFrameError):
+    """A frame of the other layout or format: CAN FD on the classic layout, or vice versa."""
+
+
+def _check_format(frame_format: str) -> str:
+    if frame_format not in FRAME_FORMATS:
+        raise ValueError(f"frame_format: expected one of {list(FRAME_FORMATS)}, "
+                         f"got {frame_format!r}")
+    return frame_format
+
+
 @cache
-def load_database() -> cantools.database.can.Database:
-    """The message database read from ``hand.dbc`` (cached)."""
-    return cantools.database.load_file(str(DBC_PATH))
+def load_database(frame_format: str = "classic") -> cantools.database.can.Database:
+    """The message database of a layout: ``hand.dbc`` (classic) or ``hand_fd.dbc`` (cached)."""
+    return cantools.database.load_file(str(DBC_PATHS[_check_format(frame_format)]))
+
+
+@cache
+def _database_ids(frame_format: str) -> frozenset[int]:
+    return frozenset(m.frame_id for m in load_database(frame_format).messages)
 
 
 def _scale(message_name: str) -> float:
@@ -121,14 +183,19 @@ class Frame:
 
 @dc.dataclass(frozen=True)
 class FeedbackSnapshot:
-    """One complete hand cycle: positions (nq, rad), tactile (N), status fields."""
+    """One complete hand cycle: positions (nq, rad), tactile (N), status fields.
+
+    ``counter`` is the classic STATUS cycle counter (None on the FD layout,
+    whose frame has none: TIME shows lost cycles); ``hand_time`` is the hand's
+    clock, wrapping at the codec's ``time_wrap``.
+    """
 
     q: np.ndarray
     tactile: np.ndarray
     seq_ack: int
-    counter: int
+    counter: int | None
     state: int
-    hand_time: float  # s, the hand's clock (wraps at 2**32 us)
+    hand_time: float  # s
 
 
 class _PackedMessage:
@@ -243,12 +310,18 @@ def _frames_for(n: int) -> int:
 
 
 class HandCodec:
-    """Encodes and decodes one hand's frames (pure; the layout fixes the sizes).
+    """Encodes and decodes one hand's frames on the classic layout (pure).
 
-    Values outside a signal's range (|q| > 3.2767 rad, force outside
-    0..65.535 N) raise ``ValueError`` when encoding setpoints; measured values
-    are saturated to the representable range, as a sensor would.
+    The layout fixes the sizes. Values outside a signal's range
+    (|q| > 3.2767 rad, force outside 0..65.535 N) raise ``ValueError`` when
+    encoding setpoints; measured values are saturated to the representable
+    range, as a sensor would.
     """
+
+    frame_format = "classic"
+    is_fd = False
+    #: s, the STATUS TIME field wraps here (2**32 us).
+    time_wrap = float(1 << 32) * 1e-6
 
     def __init__(self, layout: HandLayout):
         if not isinstance(layout, HandLayout):
@@ -295,6 +368,21 @@ class HandCodec:
     @property
     def hand_to_host_ids(self) -> frozenset[int]:
         return self._hand_to_host_ids
+
+    @property
+    def cycle_frame_lengths(self) -> tuple[tuple[int, ...], tuple[int, ...]]:
+        """Data bytes of the frames of one command and of one hand cycle."""
+        out = [m.length for m in self._setpoints] + [self._commit.length]
+        back = [m.length for m in self._positions + self._tactiles] + [self._status.length]
+        return tuple(out), tuple(back)
+
+    def feedback_receiver(self) -> FeedbackAssembler:
+        """The host's side: raw frames in, one :class:`FeedbackSnapshot` per complete cycle."""
+        return FeedbackAssembler(self)
+
+    def setpoint_receiver(self) -> SetpointAssembler:
+        """The hand's side: raw frames in, ``(seq, q_command)`` per applied commit."""
+        return SetpointAssembler(self)
 
     # -- host -> hand -----------------------------------------------------
     def encode_setpoints(self, q_command, seq: int, mode: int = MODE_POSITION):
@@ -345,6 +433,9 @@ class HandCodec:
         """
         entry = self._by_id.get(arbitration_id)
         if entry is None:
+            if arbitration_id in _database_ids("fd"):
+                raise FrameFormatError(f"id 0x{arbitration_id:X} is a CAN FD layout message; "
+                                       "this bus runs the classic layout")
             raise ForeignFrameError(
                 f"id 0x{arbitration_id:X} is not a {self.layout.kind} hand message")
         kind, index, message = entry
@@ -389,12 +480,25 @@ class FeedbackAssembler:
 
     def __init__(self, codec: HandCodec):
         self._codec = codec
+        self._decode = codec.decode
+        self._classic_ids = codec.hand_to_host_ids | codec.host_to_hand_ids
         layout = codec.layout
         self._q = np.zeros(codec.num_position_frames * SLOTS_PER_FRAME)
         self._f = np.zeros(codec.num_tactile_frames * SLOTS_PER_FRAME)
         self._seen = np.zeros(codec.num_position_frames, dtype=bool)
         self._nq, self._nt = layout.nq, layout.num_tactile
         self.incomplete = 0
+
+    def feed(self, arbitration_id: int, data: bytes, is_fd: bool = False):
+        """Decodes and pushes one raw frame (see :meth:`HandCodec.decode` for the errors).
+
+        Raises:
+            FrameFormatError: a CAN FD frame with one of the classic ids.
+        """
+        if is_fd and arbitration_id in self._classic_ids:
+            raise FrameFormatError(f"id 0x{arbitration_id:X}: a CAN FD frame; the classic "
+                                   "layout sends CAN 2.0 frames")
+        return self.push(self._decode(arbitration_id, data))
 
     def push(self, frame: Frame) -> FeedbackSnapshot | None:
         k = SLOTS_PER_FRAME
@@ -428,10 +532,19 @@ class SetpointAssembler:
 
     def __init__(self, codec: HandCodec):
         self._codec = codec
+        self._decode = codec.decode
+        self._classic_ids = codec.hand_to_host_ids | codec.host_to_hand_ids
         self._q = np.zeros(codec.num_setpoint_frames * SLOTS_PER_FRAME)
         self._seen = np.zeros(codec.num_setpoint_frames, dtype=bool)
         self._nu = codec.layout.nu
         self.rejected_commits = 0
+
+    def feed(self, arbitration_id: int, data: bytes, is_fd: bool = False):
+        """Decodes and pushes one raw frame (errors as :meth:`FeedbackAssembler.feed`)."""
+        if is_fd and arbitration_id in self._classic_ids:
+            raise FrameFormatError(f"id 0x{arbitration_id:X}: a CAN FD frame; the classic "
+                                   "layout sends CAN 2.0 frames")
+        return self.push(self._decode(arbitration_id, data))
 
     def push(self, frame: Frame):
         k = SLOTS_PER_FRAME
@@ -446,3 +559,270 @@ class SetpointAssembler:
                 return None
             return frame.values["SEQ"], self._q[:self._nu].copy()
         return None
+
+
+# -- CAN FD layout -------------------------------------------------------------------------
+
+def _expect_signals(message, expected) -> None:
+    """ValueError unless ``message`` holds exactly ``expected`` (name, start, length, signed)."""
+    found = [(s.name, s.start, s.length, s.is_signed)
+             for s in sorted(message.signals, key=lambda s: s.start)]
+    if found != list(expected):
+        diff = next(((f, e) for f, e in zip(found, expected, strict=False) if f != e),
+                    (len(found), len(expected)))
+        raise ValueError(f"{message.name}: the DBC's signals do not match the hand layout "
+                         f"(found, expected): {diff}")
+    for s in message.signals:
+        if s.byte_order != "little_endian" or s.offset != 0 or s.is_float:
+            raise ValueError(f"{message.name}.{s.name}: expected a little-endian integer")
+    if not message.is_fd or message.length not in FD_LENGTHS:
+        raise ValueError(f"{message.name}: expected a CAN FD message of a valid FD length")
+    if expected[-1][1] + expected[-1][2] > 8 * message.length:
+        raise ValueError(f"{message.name}: signals do not fit {message.length} bytes")
+
+
+def _common_scale(message, prefix: str) -> float:
+    scales = {float(s.scale) for s in message.signals if s.name.startswith(prefix)}
+    if len(scales) != 1:
+        raise ValueError(f"{message.name}: expected one scale for {prefix}*, got {scales}")
+    return scales.pop()
+
+
+class FdHandCodec:
+    """Encodes and decodes one hand's frames on the CAN FD layout (pure).
+
+    One ``<HAND>_SETPOINT`` frame per command, one ``<HAND>_FEEDBACK`` frame
+    per hand cycle (``hand_fd.dbc``). Same units, limits and saturation as
+    :class:`HandCodec`, and the same :meth:`encode_setpoints` /
+    :meth:`encode_feedback` / receiver interface, so the server and the
+    firmware do not depend on the layout. The frames are packed with
+    ``struct`` and numpy from offsets read and checked from the DBC (cantools'
+    per-frame encode is the reference in the tests, bit for bit).
+    """
+
+    frame_format = "fd"
+    is_fd = True
+
+    def __init__(self, layout: HandLayout):
+        if not isinstance(layout, HandLayout):
+            raise TypeError(f"layout: expected a HandLayout, got {type(layout).__name__}")
+        self.layout = layout
+        db = load_database("fd")
+        name = layout.kind.upper()
+        sp = db.get_message_by_name(f"{name}_SETPOINT")
+        fb = db.get_message_by_name(f"{name}_FEEDBACK")
+        nq, nu, nt = layout.nq, layout.nu, layout.num_tactile
+        _expect_signals(sp, [("SEQ", 0, 16, False), ("MODE", 16, 8, False)]
+                        + [(f"SP_{j}", 32 + 16 * i, 16, True)
+                           for i, j in enumerate(layout.actuated_joint_names)])
+        _expect_signals(fb, [("SEQ_ACK", 0, 16, False), ("STATE", 16, 4, False),
+                             ("KIND", 20, 4, False), ("TIME", 24, 24, False)]
+                        + [(f"Q_{j}", 48 + 16 * i, 16, True)
+                           for i, j in enumerate(layout.joint_names)]
+                        + [(f"F{k}", 48 + 16 * (nq + k), 16, False) for k in range(nt)])
+        self.setpoint_message, self.feedback_message = sp, fb
+        self.setpoint_id, self.feedback_id = sp.frame_id, fb.frame_id
+        self.position_scale = _common_scale(sp, "SP_")
+        if _common_scale(fb, "Q_") != self.position_scale:
+            raise ValueError(f"{fb.name}: positions and setpoints must share one scale")
+        self.tactile_scale = _common_scale(fb, "F")
+        self.time_scale = float(fb.get_signal_by_name("TIME").scale)
+        self.time_wrap = float(1 << 24) * self.time_scale
+        self._q_limit = float(fb.get_signal_by_name(f"Q_{layout.joint_names[0]}").maximum)
+        self._f_limit = float(fb.get_signal_by_name("F0").maximum) if nt else 0.0
+        self._sp_head = struct.Struct("<HBx")  # SEQ, MODE, reserved byte
+        self._fb_head = struct.Struct("<HB")  # SEQ_ACK, STATE | KIND << 4; TIME follows
+        self._sp_pad = bytes(sp.length - 4 - 2 * nu)
+        self._fb_pad = bytes(fb.length - 6 - 2 * nq - 2 * nt)
+        self._host_to_hand_ids = frozenset([self.setpoint_id])
+        self._hand_to_host_ids = frozenset([self.feedback_id])
+        self._classic_ids = _database_ids("classic")
+
+    @property
+    def host_to_hand_ids(self) -> frozenset[int]:
+        return self._host_to_hand_ids
+
+    @property
+    def hand_to_host_ids(self) -> frozenset[int]:
+        return self._hand_to_host_ids
+
+    @property
+    def cycle_frame_lengths(self) -> tuple[tuple[int, ...], tuple[int, ...]]:
+        """Data bytes of the frames of one command and of one hand cycle."""
+        return (self.setpoint_message.length,), (self.feedback_message.length,)
+
+    def feedback_receiver(self) -> FdFeedbackDecoder:
+        return FdFeedbackDecoder(self)
+
+    def setpoint_receiver(self) -> FdSetpointDecoder:
+        return FdSetpointDecoder(self)
+
+    def check_id(self, arbitration_id: int) -> None:
+        """Nothing for this hand's ids; FrameFormatError or ForeignFrameError otherwise."""
+        if arbitration_id in self._host_to_hand_ids or arbitration_id in self._hand_to_host_ids:
+            return
+        if arbitration_id in self._classic_ids:
+            raise FrameFormatError(f"id 0x{arbitration_id:X} is a classic layout message; "
+                                   "this bus runs the fd layout")
+        raise ForeignFrameError(
+            f"id 0x{arbitration_id:X} is not a {self.layout.kind} hand message")
+
+    # -- host -> hand -----------------------------------------------------
+    def encode_setpoints(self, q_command, seq: int, mode: int = MODE_POSITION):
+        """``[(id, data)]``: one frame with the whole command (rad, command order) and ``seq``."""
+        q = _checked(q_command, self.layout.nu, "q_command")
+        if np.any(np.abs(q) > self._q_limit):
+            raise ValueError(
+                f"q_command: |q| must be <= {self._q_limit} rad to fit a setpoint frame, "
+                f"got {q[np.abs(q) > self._q_limit].tolist()}"
+            )
+        raw = np.round(q / self.position_scale).astype("<i2")
+        return [(self.setpoint_id, self._sp_head.pack(int(seq) % 65536, int(mode))
+                 + raw.tobytes() + self._sp_pad)]
+
+    # -- hand -> host -----------------------------------------------------
+    def encode_feedback(self, q, tactile, seq_ack: int, counter: int, state: int,
+                        hand_time: float):
+        """``[(id, data)]``: one frame with the whole hand cycle.
+
+        Same arguments as :meth:`HandCodec.encode_feedback`; ``counter`` has no
+        field here (the TIME stamps show lost cycles). ``hand_time`` (s) wraps
+        at 2**24 microseconds (16.8 s).
+        """
+        q = np.clip(_checked(q, self.layout.nq, "q"), -self._q_limit, self._q_limit)
+        f = np.clip(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0, self._f_limit)
+        if not 0 <= int(state) <= 15:
+            raise ValueError(f"state: expected 0..15, got {state}")
+        time_raw = int(round(hand_time / self.time_scale)) % (1 << 24)
+        data = (self._fb_head.pack(int(seq_ack) % 65536, (self.layout.kind_code << 4) | int(state))
+                + time_raw.to_bytes(3, "little")
+                + np.round(q / self.position_scale).astype("<i2").tobytes()
+                + np.round(f / self.tactile_scale).astype("<u2").tobytes() + self._fb_pad)
+        return [(self.feedback_id, data)]
+
+
+class FdFeedbackDecoder:
+    """The host's side of the FD layout: one feedback frame is one :class:`FeedbackSnapshot`.
+
+    :meth:`feed` returns the snapshot, None for the hand's other (host-to-hand)
+    ids, and raises :class:`ForeignFrameError`, :class:`FrameFormatError` (a
+    classic frame, or a classic layout id) or :class:`MalformedFrameError`
+    (length, hand kind). ``incomplete`` is always 0 (a cycle is one frame).
+    """
+
+    incomplete = 0
+
+    def __init__(self, codec: FdHandCodec):
+        self._codec = codec
+        self._id = codec.feedback_id
+        self._name = codec.feedback_message.name
+        self._length = codec.feedback_message.length
+        self._nq, self._nt = codec.layout.nq, codec.layout.num_tactile
+        self._f_offset = 6 + 2 * self._nq
+        self._kind = codec.layout.kind_code
+        self._head = codec._fb_head
+        self._scales = codec.position_scale, codec.tactile_scale, codec.time_scale
+
+    def feed(self, arbitration_id: int, data: bytes, is_fd: bool = True):
+        if arbitration_id != self._id:
+            self._codec.check_id(arbitration_id)
+            return None
+        if not is_fd:
+            raise FrameFormatError(f"{self._name}: a CAN 2.0 frame; the fd layout sends CAN FD "
+                                   "frames")
+        if len(data) != self._length:
+            raise MalformedFrameError(
+                f"{self._name}: expected {self._length} data bytes, got {len(data)}")
+        seq_ack, nibbles = self._head.unpack_from(data)
+        if nibbles >> 4 != self._kind:
+            names = {v: k for k, v in HAND_KIND_CODES.items()}
+            raise MalformedFrameError(f"{self._name}: hand kind "
+                                      f"{names.get(nibbles >> 4, nibbles >> 4)!r}, expected "
+                                      f"{self._codec.layout.kind!r}")
+        q_scale, f_scale, t_scale = self._scales
+        return FeedbackSnapshot(
+            q=np.frombuffer(data, "<i2", self._nq, 6) * q_scale,
+            tactile=np.frombuffer(data, "<u2", self._nt, self._f_offset) * f_scale,
+            seq_ack=seq_ack, counter=None, state=nibbles & 0xF,
+            hand_time=int.from_bytes(data[3:6], "little") * t_scale)
+
+
+class FdSetpointDecoder:
+    """The hand's side of the FD layout: one setpoint frame is one applied command.
+
+    :meth:`feed` returns ``(seq, q_command)``, None for the hand's own
+    (hand-to-host) ids, and raises like :meth:`FdFeedbackDecoder.feed`.
+    ``rejected_commits`` is always 0 (a command cannot arrive half).
+    """
+
+    rejected_commits = 0
+
+    def __init__(self, codec: FdHandCodec):
+        self._codec = codec
+        self._id = codec.setpoint_id
+        self._name = codec.setpoint_message.name
+        self._length = codec.setpoint_message.length
+        self._nu = codec.layout.nu
+        self._head = codec._sp_head
+        self._scale = codec.position_scale
+
+    def feed(self, arbitration_id: int, data: bytes, is_fd: bool = True):
+        if arbitration_id != self._id:
+            self._codec.check_id(arbitration_id)
+            return None
+        if not is_fd:
+            raise FrameFormatError(f"{self._name}: a CAN 2.0 frame; the fd layout sends CAN FD "
+                                   "frames")
+        if len(data) != self._length:
+            raise MalformedFrameError(
+                f"{self._name}: expected {self._length} data bytes, got {len(data)}")
+        seq, _mode = self._head.unpack_from(data)
+        return seq, np.frombuffer(data, "<i2", self._nu, 4) * self._scale
+
+
+def make_codec(layout: HandLayout, frame_format: str = "fd") -> HandCodec | FdHandCodec:
+    """The codec of ``frame_format`` ("classic": :class:`HandCodec`, "fd": :class:`FdHandCodec`)."""
+    if _check_format(frame_format) == "fd":
+        return FdHandCodec(layout)
+    return HandCodec(layout)
+
+
+# -- bus time ---------------------------------------------------------------------------------
+
+def frame_time(data_bytes: int, fd: bool, nominal_bitrate: float = 1e6,
+               data_bitrate: float = 5e6, worst_case_stuffing: bool = False) -> float:
+    """Seconds one standard-id data frame occupies the bus, interframe space included.
+
+    Classic CAN 2.0A: ``47 + 8 s`` bits, plus up to ``floor((33 + 8 s) / 4)``
+    stuff bits (Davis, Burns, Bril, Lukkien 2007: 111 / 135 bits for 8 bytes).
+    CAN FD with bit-rate switching (ISO 11898-1:2015 field lengths): 30 bits
+    at the nominal rate (SOF, id, RRS, IDE, FDF, res, BRS; CRC delimiter,
+    ACK, ACK delimiter, EOF, IFS) and at the data rate ESI, DLC, the data,
+    the 4-bit stuff count, the CRC (17 bits up to 16 data bytes, 21 above) and
+    its fixed stuff bits (6 or 7). ``worst_case_stuffing`` adds one bit per
+    four of the dynamically stuffed fields (an upper bound).
+    """
+    if fd:
+        if data_bytes not in FD_LENGTHS:
+            raise ValueError(f"data_bytes: expected a CAN FD length {FD_LENGTHS}, "
+                             f"got {data_bytes}")
+        crc, fixed = (17, 6) if data_bytes <= 16 else (21, 7)
+        nominal, data = 30, 1 + 4 + 8 * data_bytes + 4 + crc + fixed
+        if worst_case_stuffing:
+            nominal += 4  # SOF..BRS: 17 bits
+            data += (5 + 8 * data_bytes) // 4
+        return nominal / nominal_bitrate + data / data_bitrate
+    if not 0 <= data_bytes <= 8:
+        raise ValueError(f"data_bytes: expected 0..8 for a classic frame, got {data_bytes}")
+    bits = 47 + 8 * data_bytes
+    if worst_case_stuffing:
+        bits += (33 + 8 * data_bytes) // 4
+    return bits / nominal_bitrate
+
+
+def cycle_bus_time(codec, nominal_bitrate: float = 1e6, data_bitrate: float = 5e6,
+                   worst_case_stuffing: bool = False) -> float:
+    """Seconds of bus time of one command plus one hand cycle of ``codec``'s layout."""
+    out, back = codec.cycle_frame_lengths
+    return sum(frame_time(n, codec.is_fd, nominal_bitrate, data_bitrate, worst_case_stuffing)
+               for n in (*out, *back))

@@ -53,10 +53,10 @@ from handle_drake.can_hand.bus import open_bus
 from handle_drake.can_hand.config import CanServerConfig
 from handle_drake.can_hand.layout import HandLayout, hand_layout
 from handle_drake.can_hand.messages import (
-    FeedbackAssembler,
     ForeignFrameError,
-    HandCodec,
+    FrameFormatError,
     MalformedFrameError,
+    make_codec,
 )
 
 __all__ = ["CanBusServer", "CommitSchedule", "VelocityEstimator", "clamp_command",
@@ -64,7 +64,6 @@ __all__ = ["CanBusServer", "CommitSchedule", "VelocityEstimator", "clamp_command
 
 log = logging.getLogger(__name__)
 
-_TIME_WRAP = float(1 << 32) * 1e-6  # s, the STATUS TIME field wraps here
 _MAX_CLIENT_BACKLOG = 256 * 1024  # bytes queued for a slow client before states are dropped
 
 
@@ -107,12 +106,13 @@ class CommitSchedule:
 class VelocityEstimator:
     """Finite-difference joint velocity with a first-order low-pass (time constant ``tau``).
 
-    Uses the hand's own clock, so bus and scheduling jitter do not enter the
-    difference quotient. ``tau = 0`` gives the raw difference.
+    Uses the hand's own clock (which wraps at ``wrap`` seconds: 2**32 us on
+    the classic layout, 2**24 us on the FD one), so bus and scheduling jitter
+    do not enter the difference quotient. ``tau = 0`` gives the raw difference.
     """
 
-    def __init__(self, n: int, tau: float):
-        self._n, self._tau = n, float(tau)
+    def __init__(self, n: int, tau: float, wrap: float = float(1 << 32) * 1e-6):
+        self._n, self._tau, self._wrap = n, float(tau), float(wrap)
         self._q = None
         self._t = None
         self.v = np.zeros(n)
@@ -120,7 +120,7 @@ class VelocityEstimator:
     def update(self, q, t: float) -> np.ndarray:
         q = np.asarray(q, dtype=float)
         if self._q is not None:
-            dt = (t - self._t) % _TIME_WRAP
+            dt = (t - self._t) % self._wrap
             if 0 < dt < 1.0:
                 raw = (q - self._q) / dt
                 alpha = dt / (self._tau + dt)
@@ -160,7 +160,7 @@ class CanBusServer:
         self.layout = layout or hand_layout(config.hand_kind, config.coupling_ratio)
         if self.layout.kind != config.hand_kind:
             raise ValueError(f"layout: expected a {config.hand_kind} hand, got {self.layout.kind}")
-        self.codec = HandCodec(self.layout)
+        self.codec = make_codec(self.layout, config.bus.frame_format)
         self._info = P.HandInfo(self.layout.kind, self.layout.nq, self.layout.nu,
                                 self.layout.num_tactile)
         self._bus = bus
@@ -187,8 +187,9 @@ class CanBusServer:
         self._schedule = CommitSchedule(config.max_setpoint_rate)
         self._commit_seq = 1
         self._commit_to_client = np.zeros(65536, dtype=np.int64)
-        self._assembler = FeedbackAssembler(self.codec)
-        self._velocities = VelocityEstimator(self.layout.nq, config.velocity_time_constant)
+        self._assembler = self.codec.feedback_receiver()
+        self._velocities = VelocityEstimator(self.layout.nq, config.velocity_time_constant,
+                                             self.codec.time_wrap)
 
     # -- life cycle ----------------------------------------------------------
     def start(self) -> CanBusServer:
@@ -282,9 +283,9 @@ class CanBusServer:
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
         own_ids = self.codec.host_to_hand_ids
-        decode, push = self.codec.decode, self._assembler.push
+        feed = self._assembler.feed
         # Frame counts are kept here and merged under the lock once per hand
-        # cycle or idle wait, not per frame (a Shadow cycle is 9 frames).
+        # cycle, idle wait or 64 frames, not per frame.
         pending = collections.Counter()
         while not self._stop.is_set():
             try:
@@ -299,23 +300,23 @@ class CanBusServer:
                 self._merge_counts(pending)
                 continue
             pending["frames_rx"] += 1
+            snapshot = None
             if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
                 pending["foreign_frames"] += 1
-                continue
-            if message.arbitration_id in own_ids:
+            elif message.arbitration_id in own_ids:
                 pending["echo_frames"] += 1
-                continue
-            try:
-                frame = decode(message.arbitration_id, message.data)
-            except ForeignFrameError:
-                pending["foreign_frames"] += 1
-                continue
-            except MalformedFrameError:
-                pending["malformed_frames"] += 1
-                continue
-            snapshot = push(frame)
+            else:
+                try:
+                    snapshot = feed(message.arbitration_id, message.data, message.is_fd)
+                except ForeignFrameError:
+                    pending["foreign_frames"] += 1
+                except FrameFormatError:
+                    pending["wrong_format_frames"] += 1
+                except MalformedFrameError:
+                    pending["malformed_frames"] += 1
             if snapshot is None:
-                if len(pending) and pending["frames_rx"] >= 64:
+                # Also while only rejected frames arrive: the counts must show.
+                if pending["frames_rx"] >= 64:
                     self._merge_counts(pending)
                 continue
             velocity = self._velocities.update(snapshot.q, snapshot.hand_time)
@@ -335,10 +336,12 @@ class CanBusServer:
             pending.clear()
 
     def _send_frames(self, frames) -> bool:
+        fd = self.codec.is_fd
         try:
             for arbitration_id, data in frames:
                 self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                           is_extended_id=False), timeout=0.01)
+                                           is_extended_id=False, is_fd=fd, bitrate_switch=fd),
+                               timeout=0.01)
         except (can.CanError, OSError) as error:
             self._count("bus_tx_errors")
             log.warning("bus send failed: %s", error)

@@ -2,8 +2,9 @@
 
 ``handle-drake can-sim`` and ``handle-drake can-server`` run as subprocesses
 on a udp_multicast CAN bus (a random group and port per test, TTL 1); a Drake
-diagram drives the hand through the proxy driver over TCP on 127.0.0.1.
-Every subprocess is terminated (then killed) in teardown.
+diagram drives the hand through the proxy driver over TCP on 127.0.0.1. The
+tracking and server-restart tests run on both frame formats (``--frame-format
+classic|fd``). Every subprocess is terminated (then killed) in teardown.
 """
 
 import os
@@ -32,10 +33,10 @@ from handle_drake.can_hand.layout import hand_layout
 ROOT = Path(__file__).resolve().parents[2]
 NATURAL_FREQUENCY = 5.0  # Hz, the simulated firmware's joint loops (critically damped)
 NOISE = 0.0005  # rad
-# Hand cycle rate of the simulated firmware. Each cycle is 9 Shadow frames, and a
-# multicast socket also receives its own frames, so 1 kHz costs each Python
-# process ~20k datagrams/s; 250 Hz keeps the test honest on a shared 2-core box
-# (the benchmark measures 1 kHz).
+# Hand cycle rate of the simulated firmware. On the classic layout each cycle is 9
+# Shadow frames, and a multicast socket also receives its own frames, so 1 kHz costs
+# each Python process ~20k datagrams/s; 250 Hz keeps the test honest on a shared
+# 2-core box for both formats (the benchmark measures 1 kHz).
 SIM_RATE = 250.0
 TRANSPORT_DELAY = 0.1  # s
 
@@ -91,8 +92,9 @@ class Process:
         return self.popen.returncode
 
 
-def bus_args(group, bus_port):
-    return ["--bus", "udp_multicast", "--channel", group, "--bus-port", str(bus_port)]
+def bus_args(group, bus_port, frame_format="fd"):
+    return ["--bus", "udp_multicast", "--channel", group, "--bus-port", str(bus_port),
+            "--frame-format", frame_format]
 
 
 @pytest.fixture
@@ -103,21 +105,23 @@ def processes():
         process.stop(signal.SIGKILL if process.popen.poll() is None else signal.SIGTERM)
 
 
-def start_sim(processes, group, bus_port, hand="shadow"):
+def start_sim(processes, group, bus_port, hand="shadow", frame_format="fd"):
     p = Process("can-sim", "--hand", hand, "--natural-frequency", str(NATURAL_FREQUENCY),
-                "--noise", str(NOISE), "--rate", str(SIM_RATE), *bus_args(group, bus_port))
+                "--noise", str(NOISE), "--rate", str(SIM_RATE),
+                *bus_args(group, bus_port, frame_format))
     processes.append(p)
     return p
 
 
-def start_server(processes, group, bus_port, port, hand="shadow"):
+def start_server(processes, group, bus_port, port, hand="shadow", frame_format="fd"):
     p = Process("can-server", "--hand", hand, "--listen", f"127.0.0.1:{port}",
-                *bus_args(group, bus_port))
+                *bus_args(group, bus_port, frame_format))
     processes.append(p)
     return p
 
 
-def test_udp_multicast_chain_tracks_a_closing_trajectory(processes):
+@pytest.mark.parametrize("frame_format", ["classic", "fd"])
+def test_udp_multicast_chain_tracks_a_closing_trajectory(processes, frame_format):
     """Measured follows the command: at rest within 0.005 rad (10 sigma of the sensor
     noise); on the ramp with the closed-form lag 2 / wn = 63.7 ms of a critically
     damped loop plus a transport delay of at most TRANSPORT_DELAY (never less than
@@ -125,8 +129,9 @@ def test_udp_multicast_chain_tracks_a_closing_trajectory(processes):
     the bound is wide because the 2-core test machine is shared."""
     group, bus_port = random_bus()
     port = free_port()
-    start_sim(processes, group, bus_port)
-    start_server(processes, group, bus_port, port)
+    sim = start_sim(processes, group, bus_port, frame_format=frame_format)
+    start_server(processes, group, bus_port, port, frame_format=frame_format)
+    assert f"frames={frame_format}" in sim.ready_line
     layout = hand_layout("shadow")
 
     builder = DiagramBuilder()
@@ -170,13 +175,15 @@ def test_udp_multicast_chain_tracks_a_closing_trajectory(processes):
     assert np.allclose(v_mean, slope[moving], rtol=0.15, atol=0.05), (v_mean, slope[moving])
 
 
-def test_server_killed_mid_run_then_back(processes):
+@pytest.mark.parametrize("frame_format", ["classic", "fd"])
+def test_server_killed_mid_run_then_back(processes, frame_format):
     """Disconnected -> holds the last measurement; server back -> reconnects, and
     the command changed during the outage reaches the hand."""
     group, bus_port = random_bus()
     port = free_port()
-    start_sim(processes, group, bus_port, hand="barrett")
-    server = start_server(processes, group, bus_port, port, hand="barrett")
+    start_sim(processes, group, bus_port, hand="barrett", frame_format=frame_format)
+    server = start_server(processes, group, bus_port, port, hand="barrett",
+                          frame_format=frame_format)
     layout = hand_layout("barrett")
     builder = DiagramBuilder()
     driver = AddCanHandDriver(builder, CanHandDriverConfig(port=port, reconnect_interval=0.1),
@@ -217,7 +224,7 @@ def test_server_killed_mid_run_then_back(processes):
         command.get_mutable_source_value(
             command.GetMyContextFromRoot(simulator.get_context())).set_value(second)
         simulator.AdvanceTo(simulator.get_context().get_time() + 0.1)
-        start_server(processes, group, bus_port, port, hand="barrett")
+        start_server(processes, group, bus_port, port, hand="barrett", frame_format=frame_format)
         assert advance_until(lambda: out("connection_state")[0] == STREAMING, 10.0)
         assert advance_until(lambda: np.allclose(layout.actuated_positions(
             out("position_measured")), second, atol=0.005), 5.0)
@@ -251,6 +258,10 @@ def test_cli_reports_bad_arguments(processes):
         [sys.executable, "-m", "handle_drake.can_hand.cli", "can-sim", "--bus", "socketcan",
          "--channel", "nosuchcan7"], capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "no network interface 'nosuchcan7'" in result.stderr
+    result = subprocess.run(
+        [sys.executable, "-m", "handle_drake.can_hand.cli", "can-sim", "--frame-format", "canfd"],
+        capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
+    assert result.returncode == 2 and "invalid choice: 'canfd'" in result.stderr
 
 
 @pytest.mark.skipif(not socketcan_available("vcan0"),

@@ -1,8 +1,10 @@
 """The CAN bus server against the simulated firmware on an in-process virtual bus.
 
-Faults: foreign and malformed frames, a setpoint flood, out-of-limit
-setpoints, a silent client, malformed TCP messages and a client for another
-hand. Every loop is bounded; every server, firmware and bus is stopped.
+Every running-chain test runs on both frame formats (classic CAN 2.0 and CAN
+FD). Faults: foreign, malformed and wrong-format frames, a server and a hand
+on different formats, a setpoint flood, out-of-limit setpoints, a silent
+client, malformed TCP messages and a client for another hand. Every loop is
+bounded; every server, firmware and bus is stopped.
 """
 
 import socket
@@ -19,7 +21,11 @@ from handle_drake.can_hand.client import DISCONNECTED, CanHandClient
 from handle_drake.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
 from handle_drake.can_hand.firmware import SimulatedHandFirmware
 from handle_drake.can_hand.layout import hand_layout
-from handle_drake.can_hand.messages import COMMIT_ID, POSITION_BASE_ID, STATUS_ID
+from handle_drake.can_hand.messages import (
+    COMMIT_ID,
+    POSITION_BASE_ID,
+    STATUS_ID,
+)
 from handle_drake.can_hand.server import (
     CanBusServer,
     CommitSchedule,
@@ -46,15 +52,21 @@ def layout():
 class Chain:
     """Server + firmware on a fresh virtual bus, plus spare bus handles for a test."""
 
-    def __init__(self, layout, **server_options):
-        self.bus_config = BusConfig("virtual", f"test-{uuid.uuid4().hex}")
+    def __init__(self, layout, frame_format, firmware_format=None, **server_options):
+        self.bus_config = BusConfig("virtual", f"test-{uuid.uuid4().hex}",
+                                    frame_format=frame_format)
         self.layout = layout
         self.monitor = can.Bus(interface="virtual", channel=self.bus_config.channel)
         self.inject = can.Bus(interface="virtual", channel=self.bus_config.channel)
         self.server = CanBusServer(CanServerConfig(port=0, bus=self.bus_config, **server_options),
                                    layout=layout).start()
+        firmware_bus = BusConfig("virtual", self.bus_config.channel,
+                                 frame_format=firmware_format or frame_format)
         self.firmware = SimulatedHandFirmware(
-            CanFirmwareConfig(bus=self.bus_config, rate=500.0), layout=layout).start()
+            CanFirmwareConfig(bus=firmware_bus, rate=500.0), layout=layout).start()
+        # The frame that applies a command: the classic commit, or the FD setpoint.
+        codec = self.server.codec
+        self.commit_id = COMMIT_ID if frame_format == "classic" else codec.setpoint_id
         self.port = self.server.address[1]
         self.clients = []
 
@@ -72,10 +84,15 @@ class Chain:
         self.inject.shutdown()
 
 
+@pytest.fixture(params=["classic", "fd"])
+def frame_format(request):
+    return request.param
+
+
 @pytest.fixture
-def chain(layout, request):
+def chain(layout, frame_format, request):
     options = getattr(request, "param", {})
-    chain = Chain(layout, **options)
+    chain = Chain(layout, frame_format, **options)
     yield chain
     chain.close()
 
@@ -149,34 +166,84 @@ def test_chain_streams_the_true_hand_state(chain):
     assert np.max(np.abs(state.q - truth)) < 5 * 0.0005 + 0.5e-4
 
 
-def test_foreign_and_malformed_frames_are_rejected_and_counted(chain):
+def _frame(arbitration_id, data, fd=False, extended=False):
+    return can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=extended,
+                       is_fd=fd, bitrate_switch=fd)
+
+
+def test_foreign_malformed_and_wrong_format_frames_are_rejected_and_counted(chain, frame_format):
     client = chain.client()
     assert client.wait_for_state(3.0)
     before = chain.server.stats()
-    for i in range(40):
-        chain.inject.send(can.Message(arbitration_id=0x7FF - i, data=bytes(8),
-                                      is_extended_id=False))
-    for _ in range(10):  # a hand id, but as an extended frame
-        chain.inject.send(can.Message(arbitration_id=POSITION_BASE_ID, data=bytes(8),
-                                      is_extended_id=True))
-    for _ in range(20):  # wrong length
-        chain.inject.send(can.Message(arbitration_id=POSITION_BASE_ID, data=bytes(3),
-                                      is_extended_id=False))
-    for _ in range(10):  # a Barrett's STATUS on a Shadow bus
-        chain.inject.send(can.Message(arbitration_id=STATUS_ID,
-                                      data=bytes([0, 0, 0, 0x21, 0, 0, 0, 0]),
-                                      is_extended_id=False))
-    assert wait_until(lambda: chain.server.stats().get("malformed_frames", 0)
-                      - before.get("malformed_frames", 0) >= 30)
+    fd = frame_format == "fd"
+    feedback_id = chain.server.codec.feedback_id if fd else POSITION_BASE_ID
+    length = 64 if fd else 8
+    injected = {"foreign_frames": [], "malformed_frames": [], "wrong_format_frames": []}
+    injected["foreign_frames"] += [_frame(0x7FF - i, bytes(8)) for i in range(20)]
+    injected["foreign_frames"] += [_frame(0x7FF - i, bytes(64), fd=True) for i in range(20)]
+    # A hand id, but as an extended frame.
+    injected["foreign_frames"] += [_frame(feedback_id, bytes(length), fd, True)] * 10
+    # Wrong length.
+    injected["malformed_frames"] += [_frame(feedback_id, bytes(3), fd)] * 20
+    if fd:  # the other hand's kind in the Shadow feedback frame
+        wrong_kind = bytes([0, 0, 0x21]) + bytes(61)
+        injected["malformed_frames"] += [_frame(feedback_id, wrong_kind, True)] * 10
+        injected["foreign_frames"] += [_frame(0x241, bytes(32), True)] * 5  # Barrett's
+        # The right id sent as a CAN 2.0 frame; the classic layout's ids.
+        injected["wrong_format_frames"] += [_frame(feedback_id, bytes(8), False)] * 10
+        injected["wrong_format_frames"] += [_frame(STATUS_ID, bytes(8), False)] * 10
+    else:  # a Barrett's STATUS on a Shadow bus
+        injected["malformed_frames"] += [_frame(STATUS_ID, bytes([0, 0, 0, 0x21, 0, 0, 0, 0]))] * 10
+        # A classic id sent as a CAN FD frame; the FD layout's ids.
+        injected["wrong_format_frames"] += [_frame(POSITION_BASE_ID, bytes(8), True)] * 10
+        injected["wrong_format_frames"] += [_frame(0x240, bytes(64), True)] * 10
+    frames = [f for group in injected.values() for f in group]
+    for i in np.random.default_rng(0).permutation(len(frames)):
+        chain.inject.send(frames[i])
+    expected = {k: before.get(k, 0) + len(v) for k, v in injected.items()}
+
+    def counted():
+        stats = chain.server.stats()
+        return all(stats.get(k, 0) >= n for k, n in expected.items())
+
+    assert wait_until(counted), (chain.server.stats(), expected)
     after = chain.server.stats()
-    assert after.get("foreign_frames", 0) - before.get("foreign_frames", 0) == 50
-    assert after["malformed_frames"] - before.get("malformed_frames", 0) == 30
+    assert {k: after.get(k, 0) for k in expected} == expected  # each counted once, as its kind
     # Still streaming the true state.
     cycles = after["hand_cycles"]
     assert wait_until(lambda: chain.server.stats()["hand_cycles"] > cycles + 20)
     state, _ = client.latest()
     truth = chain.layout.joint_positions(chain.firmware.model.q)
     assert np.max(np.abs(state.q - truth)) < 5 * 0.0005 + 0.5e-4
+
+
+def test_server_and_hand_on_different_frame_formats_count_and_never_stream(layout,
+                                                                          frame_format):
+    """A mis-configured pair: every frame of the other format is counted, nothing crashes,
+    no hand state reaches the client, and no setpoint moves the hand."""
+    other = "classic" if frame_format == "fd" else "fd"
+    chain = Chain(layout, frame_format, firmware_format=other)
+    try:
+        client = chain.client()
+        assert client.wait_for_state(3.0, state=1)  # connected ...
+        start = chain.firmware.model.setpoint.copy()
+        client.send_command(np.clip(start + 0.1, layout.command_lower, layout.command_upper))
+        assert wait_until(lambda: chain.server.stats().get("wrong_format_frames", 0) > 50)
+        time.sleep(0.1)
+        assert client.latest()[0] is None  # ... but never streaming
+        assert chain.server.stats().get("hand_cycles", 0) == 0
+        # The hand rejects and counts the server's command frames (injected: the server
+        # itself sends none before it has seen the hand's position).
+        target = np.clip(start + 0.1, layout.command_lower, layout.command_upper)
+        frames = chain.server.codec.encode_setpoints(target, seq=5)
+        for arbitration_id, data in frames:
+            chain.inject.send(_frame(arbitration_id, data, fd=frame_format == "fd"))
+        assert wait_until(lambda: chain.firmware.counters["wrong_format_frames"] >= len(frames))
+        assert chain.firmware.counters["commits_applied"] == 0
+        assert np.array_equal(chain.firmware.model.setpoint, start)
+        assert chain.firmware.is_alive() and all(t.is_alive() for t in chain.server._threads)
+    finally:
+        chain.close()
 
 
 @pytest.mark.parametrize("chain", [{"max_setpoint_rate": 100.0, "max_step": 0.5}],
@@ -189,7 +256,7 @@ def test_setpoint_flood_is_rate_limited_and_the_last_command_wins(chain):
     def watch():
         while not stop.is_set():
             message = chain.monitor.recv(0.05)
-            if message is not None and message.arbitration_id == COMMIT_ID:
+            if message is not None and message.arbitration_id == chain.commit_id:
                 commits.append(time.monotonic())
 
     watcher = threading.Thread(target=watch, daemon=True)
