@@ -10,6 +10,9 @@ back. Side by side in one run, each case in its own child process:
 - ``procs-udp``: ``handle-drake can-sim`` and ``can-server`` as separate
   processes on a udp_multicast bus (the deployment shape), the client in a
   third process;
+- ``procs-udp-rt``: the same with ``--rt-priority 50`` (the bus threads of
+  the firmware and the server, and the client's receive thread, under
+  SCHED_FIFO), as a control loop on a shared machine would run;
 
 for the Shadow hand (20 commands, 24 joints) and the Barrett hand (4, 8), and
 for both frame formats: ``classic`` (8-byte CAN 2.0 frames: Shadow 6 setpoint
@@ -48,6 +51,7 @@ Targets: >= 1 kHz updates (state/s), p99 <= 2 ms. Writes
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import random
@@ -75,7 +79,8 @@ DURATION = pick(4.0, 1.0)  # s per case
 WARMUP = 0.3  # s
 KINDS = ("shadow", "barrett")
 FORMATS = ("classic", "fd")
-CHAIN_CASES = ("inproc-virtual", "procs-udp")
+CHAIN_CASES = ("inproc-virtual", "procs-udp", "procs-udp-rt")
+RT_PRIORITY = 50  # SCHED_FIFO priority of the bus threads in the -rt case
 FLOOR_CASES = ("floor-udp-1", "floor-udp-shadow", "floor-udp-fd", "floor-tcp")
 
 
@@ -124,6 +129,10 @@ def sleep_until(deadline: float) -> None:
 def drive(client, layout, duration: float, pids=()) -> dict:
     """Sends commands at ~RATE for ``duration`` s; rates, latencies, CPU per process."""
     assert client.wait_for_state(15.0), client.last_error
+    # As the CLI processes do: the start-up heap (numpy, cantools, hand models) leaves
+    # the garbage collector's reach, or a full collection stalls every thread 30-50 ms.
+    gc.collect()
+    gc.freeze()
     base = np.clip(np.zeros(layout.nu), layout.command_lower, layout.command_upper)
     span = 0.2 * (layout.command_upper - layout.command_lower)
     for seconds in (WARMUP, duration):
@@ -225,7 +234,7 @@ def _stop(processes) -> None:
             process.wait(5)
 
 
-def case_procs(kind: str, frame_format: str | None) -> dict:
+def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0) -> dict:
     from handle_drake.can_hand.client import CanHandClient
     from handle_drake.can_hand.layout import hand_layout
 
@@ -235,13 +244,20 @@ def case_procs(kind: str, frame_format: str | None) -> dict:
            "--hand", kind]
     if frame_format is not None:
         bus += ["--frame-format", frame_format]
+    if rt_priority:
+        bus += ["--rt-priority", str(rt_priority)]
     port = free_port()
     processes = []
     try:
         processes.append(_spawn(["can-sim", *bus, "--rate", str(RATE)]))
         processes.append(_spawn(["can-server", *bus, "--listen", f"127.0.0.1:{port}",
                                  "--max-rate", str(RATE), "--max-step", "0.5"]))
-        with CanHandClient(layout, "127.0.0.1", port, record_latency=True) as client:
+        rt = {"realtime_priority": rt_priority} if rt_priority else {}
+        if rt_priority:  # the commanding thread too: it holds the GIL the client thread needs
+            from handle_drake.can_hand.bus import use_realtime_priority
+
+            use_realtime_priority(rt_priority)
+        with CanHandClient(layout, "127.0.0.1", port, record_latency=True, **rt) as client:
             return drive(client, layout, DURATION, pids=[p.pid for p in processes])
     finally:
         _stop(processes)
@@ -370,6 +386,8 @@ def run_case(case: str, kind: str, frame_format: str) -> dict:
         return case_inproc(kind, frame_format)
     if case == "procs-udp":
         return case_procs(kind, frame_format)
+    if case == "procs-udp-rt":
+        return case_procs(kind, frame_format, RT_PRIORITY)
     if case == "floor-udp-1":
         return case_floor_udp(1, 1)
     if case == "floor-udp-shadow":
@@ -439,8 +457,9 @@ def main() -> None:
             for case in CHAIN_CASES:
                 for frame_format in FORMATS:  # interleaved: same load for both
                     for version, code in versions.items():
-                        if version == "before" and frame_format != "classic":
-                            continue  # the baseline may predate the fd layout
+                        if version == "before" and (frame_format != "classic"
+                                                    or case.endswith("-rt")):
+                            continue  # the baseline may predate the fd layout and rt
                         name = (f"{case}/{kind}/{frame_format}"
                                 + (f"/{version}" if args.baseline else ""))
                         if args.only and args.only not in name:

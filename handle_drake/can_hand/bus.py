@@ -15,13 +15,16 @@ node and is rejected and counted instead of vanishing inside python-can.
 
 from __future__ import annotations
 
+import logging
 import os
 
 import can
 
 from handle_drake.can_hand.config import BusConfig
 
-__all__ = ["open_bus", "socketcan_available", "socketcan_fd_capable"]
+__all__ = ["open_bus", "socketcan_available", "socketcan_fd_capable", "use_realtime_priority"]
+
+log = logging.getLogger(__name__)
 
 _CANFD_MTU = 72  # struct canfd_frame; a CAN 2.0 interface has MTU 16
 
@@ -38,6 +41,27 @@ def socketcan_fd_capable(channel: str) -> bool:
             return int(f.read()) >= _CANFD_MTU
     except (OSError, ValueError):
         return False
+
+
+def use_realtime_priority(priority: int) -> bool:
+    """Runs the calling thread under ``SCHED_FIFO`` at ``priority`` (1..99); 0 does nothing.
+
+    A 1 kHz loop on a shared machine waits for the CPU behind every runnable
+    normal-priority process; a real-time thread preempts them (the kernel's
+    RT throttling still leaves them 5 % of each second). Needs CAP_SYS_NICE
+    or an ``rtprio`` limit (``ulimit -r``); returns False with a warning when
+    the OS refuses, and the thread carries on at normal priority.
+    """
+    if priority == 0:
+        return False
+    try:
+        # On Linux, pid 0 is the calling thread, not the whole process.
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError, AttributeError) as error:
+        log.warning("cannot use real-time priority %d (%s); running at normal priority",
+                    priority, error)
+        return False
+    return True
 
 
 def open_bus(config: BusConfig) -> can.BusABC:

@@ -46,11 +46,14 @@ class CanHandClient:
             counts as CONNECTED (no hand data) rather than STREAMING.
         record_latency: keep round-trip times (command sent -> STATE with
             ``seq_ack`` >= its seq) in :attr:`latencies`.
+        realtime_priority: 0 or 1..99: the I/O thread runs under SCHED_FIFO
+            (:func:`~handle_drake.can_hand.bus.use_realtime_priority`).
     """
 
     def __init__(self, layout: HandLayout, host: str = "127.0.0.1", port: int = 47800, *,
                  connect_timeout: float = 0.5, reconnect_interval: float = 0.2,
-                 status_timeout: float = 0.1, record_latency: bool = False):
+                 status_timeout: float = 0.1, record_latency: bool = False,
+                 realtime_priority: int = 0):
         if not isinstance(layout, HandLayout):
             raise TypeError(f"layout: expected a HandLayout, got {type(layout).__name__}")
         self.layout = layout
@@ -81,6 +84,7 @@ class CanHandClient:
         self.counters = collections.Counter()
         self.last_error = ""
         self.record_latency = record_latency
+        self.realtime_priority = int(realtime_priority)
         self._sent_times: collections.OrderedDict[int, float] = collections.OrderedDict()
         self.latencies: collections.deque[float] = collections.deque(maxlen=200_000)
 
@@ -210,6 +214,9 @@ class CanHandClient:
 
     # -- the I/O thread --------------------------------------------------------------
     def _loop(self) -> None:
+        from handle_drake.can_hand.bus import use_realtime_priority  # python-can on first use
+
+        use_realtime_priority(self.realtime_priority)
         while not self._stop.is_set():
             sock = None
             try:

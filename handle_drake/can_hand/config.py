@@ -45,6 +45,12 @@ def _nonnegative(name: str, value) -> None:
         raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
 
 
+def _priority(value) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 99:
+        raise ValueError(f"realtime_priority: expected an integer in 0..99 (0: normal "
+                         f"scheduling), got {value!r}")
+
+
 def _port(name: str, value, allow_zero: bool = True) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or not (
             (0 if allow_zero else 1) <= value <= 65535):
@@ -63,6 +69,9 @@ class CanHandDriverConfig:
         reconnect_interval: s, wait between attempts while disconnected.
         status_timeout: s, a connection without STATE for this long counts as
             "connected, no hand data".
+        realtime_priority: 0 (normal scheduling) or 1..99: the client's
+            receive thread runs under SCHED_FIFO at this priority (see
+            :func:`handle_drake.can_hand.bus.use_realtime_priority`).
     """
 
     host: str = "127.0.0.1"
@@ -72,10 +81,12 @@ class CanHandDriverConfig:
     connect_timeout: float = 0.5
     reconnect_interval: float = 0.2
     status_timeout: float = 0.1
+    realtime_priority: int = 0
 
     def validate(self) -> None:
         if not isinstance(self.host, str) or not self.host:
             raise ValueError(f"host: expected a host name or address, got {self.host!r}")
+        _priority(self.realtime_priority)
         _port("port", self.port, allow_zero=False)
         if self.hand_kind not in ("", "shadow", "barrett"):
             raise ValueError(
@@ -145,6 +156,8 @@ class CanServerConfig:
         watchdog: s, without a command for this long the setpoint freezes
             (the hand holds where its setpoint is).
         velocity_time_constant: s, low-pass of the finite-difference velocity.
+        realtime_priority: 0 (normal scheduling) or 1..99: the bus and I/O
+            threads run under SCHED_FIFO at this priority.
     """
 
     host: str = "127.0.0.1"
@@ -156,6 +169,7 @@ class CanServerConfig:
     max_step: float = 0.02
     watchdog: float = 0.25
     velocity_time_constant: float = 0.01
+    realtime_priority: int = 0
 
     def validate(self) -> None:
         if not isinstance(self.host, str) or not self.host:
@@ -167,6 +181,7 @@ class CanServerConfig:
         for name in ("max_setpoint_rate", "max_step", "watchdog"):
             _positive(name, getattr(self, name))
         _nonnegative("velocity_time_constant", self.velocity_time_constant)
+        _priority(self.realtime_priority)
 
 
 @dc.dataclass
@@ -183,6 +198,9 @@ class CanFirmwareConfig:
     stops at ``lower + object_closure * (upper - lower)`` and its fingertip
     reports ``contact_stiffness`` (N/rad) times how far the setpoint presses
     past that stop. None: no object.
+
+    ``realtime_priority`` 1..99 runs the firmware thread under SCHED_FIFO (0:
+    normal scheduling).
     """
 
     hand_kind: str = "shadow"
@@ -197,6 +215,7 @@ class CanFirmwareConfig:
     object_closure: float | None = None
     contact_stiffness: float = 20.0
     seed: int = 0
+    realtime_priority: int = 0
 
     def validate(self) -> None:
         if self.hand_kind not in ("shadow", "barrett"):
@@ -207,6 +226,7 @@ class CanFirmwareConfig:
             _positive(name, getattr(self, name))
         _nonnegative("position_noise", self.position_noise)
         _nonnegative("tactile_noise", self.tactile_noise)
+        _priority(self.realtime_priority)
         if self.object_closure is not None and not (0 < self.object_closure <= 1):
             raise ValueError(
                 f"object_closure: expected a value in (0, 1], got {self.object_closure}")

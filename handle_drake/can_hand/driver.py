@@ -90,7 +90,8 @@ class CanHandProxy(LeafSystem):
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         self._client = client or CanHandClient(
             layout, config.host, config.port, connect_timeout=config.connect_timeout,
-            reconnect_interval=config.reconnect_interval, status_timeout=config.status_timeout)
+            reconnect_interval=config.reconnect_interval, status_timeout=config.status_timeout,
+            realtime_priority=config.realtime_priority)
         self._client.start()
 
     # -- accessors -----------------------------------------------------------

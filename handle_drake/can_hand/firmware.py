@@ -1,6 +1,8 @@
 """A simulated CAN-bus hand: joint position loops, noisy sensors, a virtual object.
 
-It speaks the hand's side of the configured layout (``config.bus.frame_format``).
+It speaks the hand's side of the configured layout (``config.bus.frame_format``),
+reading the bus once per cycle (at the cycle's start, like a firmware reading
+its receive FIFO).
 FD (``hand_fd.dbc``): it applies each ``<HAND>_SETPOINT`` frame on receipt
 and, ``rate`` times a second, publishes one ``<HAND>_FEEDBACK`` frame (which
 acknowledges the last applied setpoint). Classic (``hand.dbc``): it applies
@@ -27,7 +29,7 @@ import time
 import can
 import numpy as np
 
-from handle_drake.can_hand.bus import open_bus
+from handle_drake.can_hand.bus import open_bus, use_realtime_priority
 from handle_drake.can_hand.config import CanFirmwareConfig
 from handle_drake.can_hand.layout import HandLayout, hand_layout
 from handle_drake.can_hand.messages import (
@@ -196,24 +198,30 @@ class SimulatedHandFirmware:
         self.counters["rejected_commits"] = self._assembler.rejected_commits
 
     def _loop(self) -> None:
+        use_realtime_priority(self.config.realtime_priority)
         period = 1.0 / self.config.rate
         last = time.monotonic()
         deadline = last + period
+        recv = self._bus.recv
         while not self._stop.is_set():
-            # Receive until the next cycle is due (this is also the loop's sleep).
+            # One wake-up per cycle, like a firmware that reads its CAN receive FIFO at
+            # the start of each control cycle: sleep to the deadline, then take every
+            # frame that arrived meanwhile. (Waking for each frame as well would double
+            # the context switches per cycle and gain nothing: the acknowledgement goes
+            # out with this cycle's feedback either way.)
+            remaining = deadline - time.monotonic()
+            if remaining > 0 and self._stop.wait(remaining):
+                break
             while True:
-                remaining = deadline - time.monotonic()
-                if remaining <= 0 or self._stop.is_set():
-                    break
                 try:
-                    message = self._bus.recv(timeout=remaining)
+                    message = recv(0.0)
                 except (can.CanError, OSError, ValueError) as error:
                     self.counters["bus_rx_errors"] += 1
                     log.warning("firmware bus receive failed: %s", error)
-                    self._stop.wait(min(remaining, 0.01))
-                    continue
-                if message is not None:
-                    self._handle(message)
+                    break
+                if message is None:
+                    break
+                self._handle(message)
             now = time.monotonic()
             with self._lock:
                 self.model.step(min(now - last, 0.05))

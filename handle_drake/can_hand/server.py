@@ -49,7 +49,7 @@ import can
 import numpy as np
 
 from handle_drake.can_hand import protocol as P
-from handle_drake.can_hand.bus import open_bus
+from handle_drake.can_hand.bus import open_bus, use_realtime_priority
 from handle_drake.can_hand.config import CanServerConfig
 from handle_drake.can_hand.layout import HandLayout, hand_layout
 from handle_drake.can_hand.messages import (
@@ -282,6 +282,7 @@ class CanBusServer:
 
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
+        use_realtime_priority(self.config.realtime_priority)
         own_ids = self.codec.host_to_hand_ids
         feed = self._assembler.feed
         # Frame counts are kept here and merged under the lock once per hand
@@ -351,6 +352,7 @@ class CanBusServer:
 
     # -- TCP side ------------------------------------------------------------------
     def _io_loop(self) -> None:
+        use_realtime_priority(self.config.realtime_priority)
         while not self._stop.is_set():
             try:
                 events = self._selector.select(self._select_timeout(time.monotonic()))

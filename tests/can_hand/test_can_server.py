@@ -155,6 +155,38 @@ def test_velocity_estimator_matches_a_first_order_filter_of_the_slope():
     assert estimator.update([0.001], 0.0005)[0] == pytest.approx(1.0)
 
 
+def test_configs_reject_unknown_frame_formats_and_priorities():
+    with pytest.raises(ValueError, match="frame_format: expected one of"):
+        BusConfig(frame_format="canfd").validate()
+    for bad in (-1, 100, 2.5, True):
+        with pytest.raises(ValueError, match="realtime_priority: expected an integer in 0..99"):
+            CanServerConfig(realtime_priority=bad).validate()
+    with pytest.raises(ValueError, match="realtime_priority"):
+        CanFirmwareConfig(realtime_priority=-3).validate()
+    assert BusConfig().frame_format == "fd"
+
+
+def test_realtime_priority_applies_to_the_calling_thread_only():
+    import os
+
+    from handle_drake.can_hand.bus import use_realtime_priority
+
+    assert use_realtime_priority(0) is False
+    result = {}
+
+    def worker():
+        result["applied"] = use_realtime_priority(10)
+        result["policy"] = os.sched_getscheduler(0)
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join(5.0)
+    if not result["applied"]:
+        pytest.skip("this process may not use SCHED_FIFO (no CAP_SYS_NICE or rtprio limit)")
+    assert result["policy"] == os.SCHED_FIFO
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the test's own thread is untouched
+
+
 # -- the running server ---------------------------------------------------------
 
 def test_chain_streams_the_true_hand_state(chain):
