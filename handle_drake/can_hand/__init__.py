@@ -5,7 +5,10 @@ The chain (seed report, section 2.1: MuscleHandProxy -> TCP -> CANbusServer):
     Drake diagram -- CanHandProxy (LeafSystem) --TCP--> CanBusServer --CAN--> hand
                                                                        (or SimulatedHandFirmware)
 
-- :mod:`~handle_drake.can_hand.messages`: ``hand.dbc`` and pure encode/decode;
+- :mod:`~handle_drake.can_hand.messages`: the message layouts (``hand_fd.dbc``: CAN FD,
+  one frame per command and per hand cycle, the default; ``hand.dbc``: classic
+  8-byte CAN 2.0 frames; ``BusConfig.frame_format`` picks one) and pure
+  encode/decode;
 - :mod:`~handle_drake.can_hand.protocol`: the framed TCP protocol (pure);
 - :mod:`~handle_drake.can_hand.server`: the bus server (rate limits, clamps, watchdog);
 - :mod:`~handle_drake.can_hand.firmware`: a simulated hand on the bus;
@@ -30,10 +33,12 @@ __all__ = [
     "CanHandDriverConfig",
     "CanHandProxy",
     "CanServerConfig",
+    "FdHandCodec",
     "HandCodec",
     "HandLayout",
     "SimulatedHandFirmware",
     "hand_layout",
+    "make_codec",
 ]
 
 
@@ -41,7 +46,8 @@ def __getattr__(name):
     # Heavier modules (pydrake systems, sockets, threads) load on first use.
     lazy = {
         "AddCanHandDriver": "driver", "CanHandProxy": "driver", "CanBusServer": "server",
-        "CanHandClient": "client", "HandCodec": "messages",
+        "CanHandClient": "client", "HandCodec": "messages", "FdHandCodec": "messages",
+        "make_codec": "messages",
         "SimulatedHandFirmware": "firmware",
     }
     if name in lazy:
