@@ -330,6 +330,8 @@ class BayesianOptimizer(_AskTellBase):
             observations' mid-ranks (monotone, so the best observation is
             unchanged; steps and plateaus become evenly spaced). EI and its
             ``xi`` are then in those units; :meth:`predict` maps back.
+        nu: smoothness of the Matérn kernel: 1.5 (the report's eq. 25,
+            default) or 2.5.
     """
 
     strategy = "bo"
@@ -353,6 +355,7 @@ class BayesianOptimizer(_AskTellBase):
         signal_variance_bounds=(1e-2, 1e2),
         noise_variance_bounds=(1e-6, 1.0),
         output_transform: str = "none",
+        nu: float = 1.5,
     ):
         super().__init__(bounds, seed)
         if output_transform not in OUTPUT_TRANSFORMS:
@@ -402,6 +405,7 @@ class BayesianOptimizer(_AskTellBase):
             length_scale_bounds=length_scale_bounds,
             signal_variance_bounds=signal_variance_bounds,
             noise_variance_bounds=noise_variance_bounds,
+            nu=nu,
         )
         GaussianProcess(mean=self._gp_mean, **self._gp_options)  # validates the options now
         self._sobol = np.empty((0, self.dim))

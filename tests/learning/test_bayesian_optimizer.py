@@ -30,11 +30,11 @@ def test_known_optima_of_the_test_functions():
         assert np.linalg.norm(minimize(lambda z: -b(z), x).x - x) < 1e-4
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_1d_argmax_within_1e3_in_25_trials(seed):
+@pytest.mark.parametrize("seed, nu", [(0, 1.5), (1, 1.5), (0, 2.5)])
+def test_1d_argmax_within_1e3_in_25_trials(seed, nu):
     """xi = 0: EI keeps refining the best basin (xi > 0 stops once gains < xi)."""
     f = SineSum1D()
-    result = maximize(f, f.bounds, 25, seed=seed, xi=0.0, **FAST)
+    result = maximize(f, f.bounds, 25, seed=seed, xi=0.0, nu=nu, **FAST)
     assert len(result.Y) <= 25
     assert abs(result.x[0] - f.argmax[0, 0]) < 1e-3
     assert result.y == pytest.approx(f(result.x))
@@ -187,6 +187,13 @@ def test_bad_tell_and_options():
         BayesianOptimizer([(0, 1)], n_initial=0)
     with pytest.raises(ValueError, match="xi"):
         BayesianOptimizer([(0, 1)], xi=-1.0)
+    with pytest.raises(ValueError, match="nu must be one of"):
+        BayesianOptimizer([(0, 1)], nu=0.5)
+    smooth = BayesianOptimizer([(0, 1)], seed=0, nu=2.5, n_initial=2)
+    for _ in range(3):
+        x = smooth.ask()
+        smooth.tell(x, float(np.sin(6 * x[0])))
+    assert smooth.gp.nu == 2.5
     with pytest.raises(ValueError, match="strategy"):
         maximize(lambda x: 0.0, [(0, 1)], 5, strategy="grid")
     with pytest.raises(ValueError, match="n_trials"):

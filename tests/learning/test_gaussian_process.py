@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern32
+from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern, matern32
 
 
 def matern32_by_hand(a, b, length_scale, signal_variance):
@@ -14,11 +14,18 @@ def matern32_by_hand(a, b, length_scale, signal_variance):
     return signal_variance * (1 + math.sqrt(3) * r) * math.exp(-math.sqrt(3) * r)
 
 
-def posterior_by_hand(X, y, Xs, ls, sf2, sn2, prior):
+def matern52_by_hand(a, b, length_scale, signal_variance):
+    """The Matérn 5/2 covariance (Rasmussen & Williams eq. 4.17) with ARD, one pair."""
+    r = math.sqrt(sum(((ai - bi) / li) ** 2 for ai, bi, li in zip(a, b, length_scale, strict=True)))
+    s5r = math.sqrt(5) * r
+    return signal_variance * (1 + s5r + 5 * r * r / 3) * math.exp(-s5r)
+
+
+def posterior_by_hand(X, y, Xs, ls, sf2, sn2, prior, kernel=matern32_by_hand):
     """Eqs. (31)-(32) with explicit matrix inverse, no shared code with the module."""
-    K = np.array([[matern32_by_hand(a, b, ls, sf2) for b in X] for a in X])
-    Ks = np.array([[matern32_by_hand(a, b, ls, sf2) for b in X] for a in Xs])
-    Kss = np.array([matern32_by_hand(a, a, ls, sf2) for a in Xs])
+    K = np.array([[kernel(a, b, ls, sf2) for b in X] for a in X])
+    Ks = np.array([[kernel(a, b, ls, sf2) for b in X] for a in Xs])
+    Kss = np.array([kernel(a, a, ls, sf2) for a in Xs])
     inverse = np.linalg.inv(K + sn2 * np.eye(len(X)))
     mean = np.array([prior(p) for p in Xs]) + Ks @ inverse @ (y - np.array([prior(p) for p in X]))
     var = Kss - np.einsum("ij,jk,ik->i", Ks, inverse, Ks)
@@ -60,6 +67,27 @@ def test_posterior_equals_closed_form(mean, prior):
         assert pv == pytest.approx(ev, rel=1e-7, abs=1e-9)
 
 
+def test_matern52_matrix_and_posterior_equal_closed_form():
+    K = matern(X, QUERY, HYPER.length_scale, 1.7, nu=2.5)
+    for i, a in enumerate(X):
+        for j, b in enumerate(QUERY):
+            assert K[i, j] == pytest.approx(matern52_by_hand(a, b, HYPER.length_scale, 1.7), 1e-13)
+    gp = GaussianProcess(mean="zero", nu=2.5).fit(X, Y, hyperparameters=HYPER)
+    expected_mean, expected_var = posterior_by_hand(
+        X, Y, QUERY, [0.3, 0.7], 1.7, 0.01, lambda p: 0.0, kernel=matern52_by_hand)
+    m, v = gp.predict(QUERY)
+    np.testing.assert_allclose(m, expected_mean, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(v, expected_var, rtol=1e-7, atol=1e-9)
+    predict_point = gp.point_predictor()
+    for q, em, ev in zip(QUERY, expected_mean, expected_var, strict=True):
+        pm, pv = predict_point(q)
+        assert pm == pytest.approx(em, rel=1e-8, abs=1e-9)
+        assert pv == pytest.approx(ev, rel=1e-7, abs=1e-9)
+    # The two kernels differ (same hyperparameters): the option is not ignored.
+    assert not np.allclose(m, GaussianProcess(mean="zero").fit(X, Y, hyperparameters=HYPER)
+                           .predict(QUERY)[0])
+
+
 def test_constant_mean_is_the_sample_mean():
     gp = GaussianProcess(mean="constant").fit(X, Y, hyperparameters=HYPER)
     m, v = gp.predict(QUERY)
@@ -80,11 +108,13 @@ def test_noise_free_gp_interpolates():
     np.testing.assert_allclose(v, 0.0, atol=1e-8)
 
 
-def test_fast_path_matches_sklearn_predict():
+@pytest.mark.parametrize("nu", [1.5, 2.5])
+def test_fast_path_matches_sklearn_predict(nu):
     rng = np.random.default_rng(3)
     Xt = rng.random((30, 3))
     yt = np.sin(4 * Xt[:, 0]) + Xt[:, 1] ** 2 - Xt[:, 2] + 0.05 * rng.standard_normal(30)
-    gp = GaussianProcess(mean="constant", seed=0).fit(Xt, yt)
+    gp = GaussianProcess(mean="constant", seed=0, nu=nu).fit(Xt, yt)
+    assert gp.sklearn_model.kernel_.k1.k2.nu == nu
     Xq = rng.random((7, 3))
     mean, var = gp.predict(Xq)
     sk_mean, sk_std = gp.sklearn_model.predict(Xq, return_std=True)
@@ -149,6 +179,10 @@ def test_bad_options_and_unfitted_use():
         GaussianProcess(mean="linear")
     with pytest.raises(ValueError, match="noise_variance_bounds"):
         GaussianProcess(noise_variance_bounds=(1.0, 0.1))
+    with pytest.raises(ValueError, match="nu must be one of"):
+        GaussianProcess(nu=0.5)
+    with pytest.raises(ValueError, match="nu must be one of"):
+        matern(X, X, [0.3, 0.7], nu=3.5)
     with pytest.raises(ValueError, match="length_scale must be positive"):
         Hyperparameters([0.1, -1.0], 1.0, 0.1)
     with pytest.raises(RuntimeError, match="not fitted"):
