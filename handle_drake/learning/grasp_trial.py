@@ -107,8 +107,14 @@ class GraspTrialConfig:
 
     @property
     def settle_time(self) -> float:
-        """s, when the trial ends: the approach has met the object and the hand has closed."""
-        return 0.9 if self.space != "synergy" else 0.7
+        """s, when the trial ends: the approach has met the object and the hand has closed.
+
+        Measured: Barrett offset trials settle by 0.75 s. The Shadow hand,
+        opening fully and closing from the synergy pre-shape, settles between
+        0.65 and 1.1 s (9 synergy points on the cuboid); at 0.7 s a grasp
+        that ends at 0.23 still read 0.04.
+        """
+        return 0.9 if self.space != "synergy" else 1.2
 
     @property
     def object_size(self) -> float:

@@ -113,6 +113,17 @@ def test_shadow_synergy_space_runs():
     assert np.isfinite(trial.evaluate([0.5, -0.5]).metric)
 
 
+def test_shadow_synergy_trial_is_scored_after_the_hand_has_settled():
+    """Full thumb and index/middle abduction is the slowest closing seen (the
+    grasp completes at about 1.1 s): over the scored hold the metric only
+    flickers (pad contacts on the cuboid's faces), and it is a force-closure
+    grasp, not the half-closed hand a 0.7 s snapshot saw (0.04)."""
+    trial = GraspTrial(hand="shadow", object="cuboid", space="synergy")
+    outcome = trial.evaluate([1.0, 1.0])
+    assert np.ptp(outcome.metric_samples) < 0.05
+    assert outcome.force_closure and outcome.metric > 0.15
+
+
 @pytest.mark.parametrize("kwargs, word", [
     (dict(hand="allegro"), "allegro"),
     (dict(object="teapot"), "teapot"),
