@@ -111,7 +111,7 @@ class GraspTrialConfig:
 
         Measured: Barrett offset trials settle by 0.75 s. The Shadow hand,
         opening fully and closing from the synergy pre-shape, settles between
-        0.65 and 1.1 s (9 synergy points on the cuboid); at 0.7 s a grasp
+        0.65 and 1.1 s (11 synergy points on the cuboid); at 0.7 s a grasp
         that ends at 0.23 still read 0.04.
         """
         return 0.9 if self.space != "synergy" else 1.2
