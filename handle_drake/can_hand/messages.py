@@ -309,7 +309,22 @@ def _frames_for(n: int) -> int:
     return (n + SLOTS_PER_FRAME - 1) // SLOTS_PER_FRAME
 
 
-class HandCodec:
+class _CodecIds:
+    """The ids a codec accepts in each direction (both layouts)."""
+
+    _host_to_hand_ids: frozenset[int]
+    _hand_to_host_ids: frozenset[int]
+
+    @property
+    def host_to_hand_ids(self) -> frozenset[int]:
+        return self._host_to_hand_ids
+
+    @property
+    def hand_to_host_ids(self) -> frozenset[int]:
+        return self._hand_to_host_ids
+
+
+class HandCodec(_CodecIds):
     """Encodes and decodes one hand's frames on the classic layout (pure).
 
     The layout fixes the sizes. Values outside a signal's range
@@ -361,14 +376,6 @@ class HandCodec:
             [m.frame_id for m in self._positions + self._tactiles] + [STATUS_ID])
 
     # -- ids -------------------------------------------------------------
-    @property
-    def host_to_hand_ids(self) -> frozenset[int]:
-        return self._host_to_hand_ids
-
-    @property
-    def hand_to_host_ids(self) -> frozenset[int]:
-        return self._hand_to_host_ids
-
     @property
     def cycle_frame_lengths(self) -> tuple[tuple[int, ...], tuple[int, ...]]:
         """Data bytes of the frames of one command and of one hand cycle."""
@@ -588,7 +595,7 @@ def _common_scale(message, prefix: str) -> float:
     return scales.pop()
 
 
-class FdHandCodec:
+class FdHandCodec(_CodecIds):
     """Encodes and decodes one hand's frames on the CAN FD layout (pure).
 
     One ``<HAND>_SETPOINT`` frame per command, one ``<HAND>_FEEDBACK`` frame
@@ -637,14 +644,6 @@ class FdHandCodec:
         self._host_to_hand_ids = frozenset([self.setpoint_id])
         self._hand_to_host_ids = frozenset([self.feedback_id])
         self._classic_ids = _database_ids("classic")
-
-    @property
-    def host_to_hand_ids(self) -> frozenset[int]:
-        return self._host_to_hand_ids
-
-    @property
-    def hand_to_host_ids(self) -> frozenset[int]:
-        return self._hand_to_host_ids
 
     @property
     def cycle_frame_lengths(self) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -701,7 +700,32 @@ class FdHandCodec:
         return [(self.feedback_id, data)]
 
 
-class FdFeedbackDecoder:
+class _FdDecoder:
+    """One direction of the FD layout: the id, name and length of its message."""
+
+    def __init__(self, codec, message):
+        self._codec = codec
+        self._id = message.frame_id
+        self._name = message.name
+        self._length = message.length
+
+    def _is_mine(self, arbitration_id: int, data: bytes, is_fd: bool) -> bool:
+        """True for a well-formed frame of this message; False for the layout's
+        other direction; raises for foreign ids, CAN 2.0 frames and wrong
+        lengths (the receiver counts each kind)."""
+        if arbitration_id != self._id:
+            self._codec.check_id(arbitration_id)
+            return False
+        if not is_fd:
+            raise FrameFormatError(f"{self._name}: a CAN 2.0 frame; the fd layout sends CAN "
+                                   "FD frames")
+        if len(data) != self._length:
+            raise MalformedFrameError(
+                f"{self._name}: expected {self._length} data bytes, got {len(data)}")
+        return True
+
+
+class FdFeedbackDecoder(_FdDecoder):
     """The host's side of the FD layout: one feedback frame is one :class:`FeedbackSnapshot`.
 
     :meth:`feed` returns the snapshot, None for the hand's other (host-to-hand)
@@ -713,10 +737,7 @@ class FdFeedbackDecoder:
     incomplete = 0
 
     def __init__(self, codec: FdHandCodec):
-        self._codec = codec
-        self._id = codec.feedback_id
-        self._name = codec.feedback_message.name
-        self._length = codec.feedback_message.length
+        super().__init__(codec, codec.feedback_message)
         self._nq, self._nt = codec.layout.nq, codec.layout.num_tactile
         self._f_offset = 6 + 2 * self._nq
         self._kind = codec.layout.kind_code
@@ -724,15 +745,8 @@ class FdFeedbackDecoder:
         self._scales = codec.position_scale, codec.tactile_scale, codec.time_scale
 
     def feed(self, arbitration_id: int, data: bytes, is_fd: bool = True):
-        if arbitration_id != self._id:
-            self._codec.check_id(arbitration_id)
+        if not self._is_mine(arbitration_id, data, is_fd):
             return None
-        if not is_fd:
-            raise FrameFormatError(f"{self._name}: a CAN 2.0 frame; the fd layout sends CAN FD "
-                                   "frames")
-        if len(data) != self._length:
-            raise MalformedFrameError(
-                f"{self._name}: expected {self._length} data bytes, got {len(data)}")
         seq_ack, nibbles = self._head.unpack_from(data)
         if nibbles >> 4 != self._kind:
             names = {v: k for k, v in HAND_KIND_CODES.items()}
@@ -747,7 +761,7 @@ class FdFeedbackDecoder:
             hand_time=int.from_bytes(data[3:6], "little") * t_scale)
 
 
-class FdSetpointDecoder:
+class FdSetpointDecoder(_FdDecoder):
     """The hand's side of the FD layout: one setpoint frame is one applied command.
 
     :meth:`feed` returns ``(seq, q_command)``, None for the hand's own
@@ -758,24 +772,14 @@ class FdSetpointDecoder:
     rejected_commits = 0
 
     def __init__(self, codec: FdHandCodec):
-        self._codec = codec
-        self._id = codec.setpoint_id
-        self._name = codec.setpoint_message.name
-        self._length = codec.setpoint_message.length
+        super().__init__(codec, codec.setpoint_message)
         self._nu = codec.layout.nu
         self._head = codec._sp_head
         self._scale = codec.position_scale
 
     def feed(self, arbitration_id: int, data: bytes, is_fd: bool = True):
-        if arbitration_id != self._id:
-            self._codec.check_id(arbitration_id)
+        if not self._is_mine(arbitration_id, data, is_fd):
             return None
-        if not is_fd:
-            raise FrameFormatError(f"{self._name}: a CAN 2.0 frame; the fd layout sends CAN FD "
-                                   "frames")
-        if len(data) != self._length:
-            raise MalformedFrameError(
-                f"{self._name}: expected {self._length} data bytes, got {len(data)}")
         seq, _mode = self._head.unpack_from(data)
         return seq, np.frombuffer(data, "<i2", self._nu, 4) * self._scale
 

@@ -45,6 +45,18 @@ def test_matern32_matrix_matches_formula():
             assert K[i, j] == pytest.approx(matern32_by_hand(a, b, HYPER.length_scale, 1.7), 1e-13)
 
 
+def assert_posterior(gp, expected_mean, expected_var):
+    """Both prediction paths (batch and one point) equal the expected posterior."""
+    m, v = gp.predict(QUERY)
+    np.testing.assert_allclose(m, expected_mean, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(v, expected_var, rtol=1e-7, atol=1e-9)
+    predict_point = gp.point_predictor()
+    for q, em, ev in zip(QUERY, expected_mean, expected_var, strict=True):
+        pm, pv = predict_point(q)
+        assert pm == pytest.approx(em, rel=1e-8, abs=1e-9)
+        assert pv == pytest.approx(ev, rel=1e-7, abs=1e-9)
+
+
 @pytest.mark.parametrize(
     "mean, prior",
     [
@@ -56,15 +68,7 @@ def test_matern32_matrix_matches_formula():
 )
 def test_posterior_equals_closed_form(mean, prior):
     gp = GaussianProcess(mean=mean).fit(X, Y, hyperparameters=HYPER)
-    expected_mean, expected_var = posterior_by_hand(X, Y, QUERY, [0.3, 0.7], 1.7, 0.01, prior)
-    m, v = gp.predict(QUERY)
-    np.testing.assert_allclose(m, expected_mean, rtol=1e-8, atol=1e-9)
-    np.testing.assert_allclose(v, expected_var, rtol=1e-7, atol=1e-9)
-    predict_point = gp.point_predictor()
-    for q, em, ev in zip(QUERY, expected_mean, expected_var, strict=True):
-        pm, pv = predict_point(q)
-        assert pm == pytest.approx(em, rel=1e-8, abs=1e-9)
-        assert pv == pytest.approx(ev, rel=1e-7, abs=1e-9)
+    assert_posterior(gp, *posterior_by_hand(X, Y, QUERY, [0.3, 0.7], 1.7, 0.01, prior))
 
 
 def test_matern52_matrix_and_posterior_equal_closed_form():
@@ -73,19 +77,11 @@ def test_matern52_matrix_and_posterior_equal_closed_form():
         for j, b in enumerate(QUERY):
             assert K[i, j] == pytest.approx(matern52_by_hand(a, b, HYPER.length_scale, 1.7), 1e-13)
     gp = GaussianProcess(mean="zero", nu=2.5).fit(X, Y, hyperparameters=HYPER)
-    expected_mean, expected_var = posterior_by_hand(
-        X, Y, QUERY, [0.3, 0.7], 1.7, 0.01, lambda p: 0.0, kernel=matern52_by_hand)
-    m, v = gp.predict(QUERY)
-    np.testing.assert_allclose(m, expected_mean, rtol=1e-8, atol=1e-9)
-    np.testing.assert_allclose(v, expected_var, rtol=1e-7, atol=1e-9)
-    predict_point = gp.point_predictor()
-    for q, em, ev in zip(QUERY, expected_mean, expected_var, strict=True):
-        pm, pv = predict_point(q)
-        assert pm == pytest.approx(em, rel=1e-8, abs=1e-9)
-        assert pv == pytest.approx(ev, rel=1e-7, abs=1e-9)
+    assert_posterior(gp, *posterior_by_hand(X, Y, QUERY, [0.3, 0.7], 1.7, 0.01, lambda p: 0.0,
+                                            kernel=matern52_by_hand))
     # The two kernels differ (same hyperparameters): the option is not ignored.
-    assert not np.allclose(m, GaussianProcess(mean="zero").fit(X, Y, hyperparameters=HYPER)
-                           .predict(QUERY)[0])
+    assert not np.allclose(gp.predict(QUERY)[0], GaussianProcess(mean="zero").fit(
+        X, Y, hyperparameters=HYPER).predict(QUERY)[0])
 
 
 def test_constant_mean_is_the_sample_mean():
