@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -116,6 +117,7 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
 
     _pin_blas()
     args = parser.parse_args(argv)
+    previous = _terminate_like_ctrl_c()
     try:
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
@@ -125,6 +127,27 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
         resume = f"; run it again to resume from {args.db}" if getattr(args, "db", None) else ""
         print(f"handle-drake {args.command}: interrupted{resume}", file=sys.stderr)
         return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _raise_keyboard_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _terminate_like_ctrl_c():
+    """SIGTERM (``kill``, a job scheduler) takes the Ctrl-C path: the trial log
+    marks the run resumable and worker pools are shut down, instead of the
+    process vanishing and leaving its workers running. Only in the main
+    thread (signal handlers cannot be set elsewhere); returns the previous
+    handler, or None when nothing was changed. Commands with their own stop
+    logic (can-server, can-sim) install their handlers over this one."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
 def main(argv: list[str] | None = None) -> int:

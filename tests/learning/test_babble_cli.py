@@ -170,3 +170,60 @@ def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
     assert main(["report", "--out", str(out), "--reduced", "--no-progress"]) == 0
     with TrialLog(out / "babble.sqlite") as log:
         assert sum(len(log.trials(r.run_id)) for r in log.runs()) == count
+
+
+def test_sigterm_stops_a_parallel_run_like_ctrl_c_and_leaves_no_workers(tmp_path):
+    """``kill`` (SIGTERM) on a run with worker processes: exit code 130, the
+    log is resumable (nothing lost: every row done, running or pending), and
+    no worker process outlives the command."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    db = tmp_path / "killed.sqlite"
+    log_path = tmp_path / "stderr.txt"
+    children = []
+    with open(log_path, "w") as stderr:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "handle_drake.cli", "babble", "--object", "sphere", "--dims",
+             "2", "--strategy", "random", "--trials", "400", "--workers", "2", "--seed", "1",
+             "--db", str(db), "--no-progress"],
+            stdout=subprocess.DEVNULL, stderr=stderr,
+            env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    try:
+        deadline = time.monotonic() + 120
+        done = 0
+        while time.monotonic() < deadline and process.poll() is None and done < 4:
+            time.sleep(0.5)
+            if db.exists():
+                try:
+                    with sqlite3.connect(db) as connection:
+                        done = connection.execute(
+                            "SELECT COUNT(*) FROM trials WHERE status = 'done'").fetchone()[0]
+                except sqlite3.OperationalError:  # tables not created yet
+                    pass
+        assert done >= 4, "the run did not get going"
+        children = [int(pid) for pid in subprocess.run(
+            ["pgrep", "-P", str(process.pid)], capture_output=True, text=True).stdout.split()]
+        assert children, "expected worker processes"
+        process.send_signal(signal.SIGTERM)
+        process.wait(timeout=60)
+        time.sleep(1.0)
+        alive = [pid for pid in children if os.path.exists(f"/proc/{pid}")
+                 and "zombie" not in open(f"/proc/{pid}/status").read()]
+    finally:
+        for pid in [process.pid, *children]:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+    assert process.returncode == 130
+    err = log_path.read_text()
+    assert "interrupted" in err and "resume" in err
+    assert not alive, f"worker processes still running after the command ended: {alive}"
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        statuses = {r.status for r in log.trials(run.run_id)}
+    assert statuses <= {"done", "running", "pending"} and "done" in statuses
