@@ -28,6 +28,7 @@ lucky noise draw does not count.
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 import hashlib
 import json
 import math
@@ -130,11 +131,15 @@ def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
     return np.array([trial.evaluate(x).metric_noiseless for x in points])
 
 
+@functools.cache
 def simulation_fingerprint() -> str:
     """Hash of everything a grasp trial's metric depends on besides its config:
     the source of the trial, station, drivers, controllers, objects, hands and
     grasp quality, and the hand model files. A cached grid computed by other
-    code is never read back as if it were current."""
+    code is never read back as if it were current.
+
+    Computed once per process (every run id and cache key needs it): the
+    files as they were when first asked, i.e. the code this process runs."""
     root = Path(__file__).resolve().parents[1]
     from handle_drake.models import models_dir
 
