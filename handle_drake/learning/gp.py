@@ -60,24 +60,19 @@ _ROOT = {1.5: _SQRT3, 2.5: _SQRT5}
 
 def matern32(XA, XB, length_scale, signal_variance=1.0):
     """Matérn 3/2 covariance matrix between the rows of ``XA`` (n, d) and ``XB`` (m, d)."""
-    XA = np.atleast_2d(np.asarray(XA, dtype=float))
-    XB = np.atleast_2d(np.asarray(XB, dtype=float))
-    length_scale = np.broadcast_to(np.asarray(length_scale, dtype=float), (XA.shape[1],))
-    r = _SQRT3 * cdist(XA / length_scale, XB / length_scale)
-    return signal_variance * (1.0 + r) * np.exp(-r)
+    return matern(XA, XB, length_scale, signal_variance, nu=1.5)
 
 
 def matern(XA, XB, length_scale, signal_variance=1.0, nu: float = 1.5):
     """Matérn covariance (``nu`` 1.5 or 2.5) between the rows of ``XA`` and ``XB``."""
-    if nu == 1.5:
-        return matern32(XA, XB, length_scale, signal_variance)
-    if nu != 2.5:
+    if isinstance(nu, bool) or nu not in MATERN_NUS:
         raise ValueError(f"nu must be one of {MATERN_NUS}, got {nu!r}")
     XA = np.atleast_2d(np.asarray(XA, dtype=float))
     XB = np.atleast_2d(np.asarray(XB, dtype=float))
     length_scale = np.broadcast_to(np.asarray(length_scale, dtype=float), (XA.shape[1],))
-    r = _SQRT5 * cdist(XA / length_scale, XB / length_scale)
-    return signal_variance * (1.0 + r + r * r / 3.0) * np.exp(-r)
+    r = _ROOT[nu] * cdist(XA / length_scale, XB / length_scale)
+    polynomial = 1.0 + r + r * r / 3.0 if nu == 2.5 else 1.0 + r
+    return signal_variance * polynomial * np.exp(-r)
 
 
 @dataclass(frozen=True)
