@@ -4,6 +4,9 @@ Runs side by side in one process (ratios are what count on a noisy machine):
 
 - the demo grasp (``diagrams/shadow_sphere_grasp.yaml``, first 2 s) with point
   and hydroelastic contact at 1 ms and 5 ms steps;
+- the plant alone under the same script (no drivers, sensors or loggers), as
+  modelled, without hand self-collision, and without any contact: the floors
+  that bound what the station can reach on this machine;
 - a trial reset (``ScenarioRunner.reset``: default context copied back)
   against a full rebuild (``ScenarioRunner(scenario)``).
 
@@ -36,32 +39,54 @@ def _scenario(contact_model: str, time_step: float, approximation: str = "sap"):
                              f"contact_approximation: {approximation}")
 
 
-def bench_realtime(repeats: int):
-    rows = []
-    cases = [(c, t, "sap") for c in ("point", "hydroelastic") for t in (0.001, 0.005)]
-    cases += [("point", t, a) for a in ("similar", "lagged") for t in (0.001, 0.005)]
-    for contact_model, time_step, approximation in cases:
-        runner = ScenarioRunner(_scenario(contact_model, time_step, approximation))
-        runs = [runner.run(TRIAL_SECONDS) for _ in range(repeats)]
-        walls = [r.wall_time for r in runs]
-        lift = runs[-1].object_position[-1, 2] - runs[-1].object_position[0, 2]
-        rows.append({
-            "contact_model": contact_model,
-            "approximation": approximation,
-            "time_step_ms": time_step * 1e3,
-            "wall_s_median": statistics.median(walls),
-            "realtime_factor": TRIAL_SECONDS / statistics.median(walls),
-            "object_lift_cm_at_2s": 100 * lift,
-        })
-    return rows
+class _Case:
+    """One simulation to time: a simulator, its initial context and a label."""
+
+    def __init__(self, simulator, default_context, lift):
+        self.simulator, self.default_context, self._lift = simulator, default_context, lift
+        self.walls: list[float] = []
+        self.lift_cm = float("nan")
+
+    def run_once(self) -> None:
+        self.simulator.get_mutable_context().SetTimeStateAndParametersFrom(self.default_context)
+        self.simulator.Initialize()
+        z0 = self._lift()
+        start = time.perf_counter()
+        self.simulator.AdvanceTo(TRIAL_SECONDS)
+        self.walls.append(time.perf_counter() - start)
+        self.lift_cm = 100 * (self._lift() - z0)
+
+    def row(self, **labels) -> dict:
+        wall = statistics.median(self.walls)
+        return {**labels, "wall_s_median": wall, "realtime_factor": TRIAL_SECONDS / wall,
+                "realtime_factor_range": [TRIAL_SECONDS / max(self.walls),
+                                          TRIAL_SECONDS / min(self.walls)],
+                "object_lift_cm_at_2s": self.lift_cm}
 
 
-def bench_plant_only(repeats: int):
+def _station_case(contact_model, time_step, approximation) -> _Case:
+    from handle_drake.station import GetPlant, object_body
+
+    runner = ScenarioRunner(_scenario(contact_model, time_step, approximation))
+    plant = GetPlant(runner.station)
+    body = object_body(plant)
+    return _Case(runner.simulator, runner._default_context,
+                 lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
+                     runner.simulator.get_context())).translation()[2])
+
+
+def _plant_case(variant: str) -> _Case:
     """The same models, contact and scripted motion with no Python systems: the
     keyframe trajectories drive the plant's PD targets through ``MatrixGain``
-    (no rate limiting, no sensors, no loggers). The floor that the station's
-    drivers, sensors and loggers add to."""
+    (no rate limiting, no sensors, no loggers). ``variant``:
+
+    - ``"model"``: the station's plant as it is (the floor that the station's
+      drivers, sensors and loggers add to);
+    - ``"no_self_collision"``: every hand-hand collision pair filtered;
+    - ``"no_contact"``: no object and no table (the hand moves in free space).
+    """
     import numpy as np
+    from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
     from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
@@ -69,15 +94,22 @@ def bench_plant_only(repeats: int):
 
     from handle_drake.hands import get_hand_spec
     from handle_drake.run import script_trajectories
-    from handle_drake.station import AddPlantModels, hand_initial_command
+    from handle_drake.station import AddPlantModels, hand_initial_command, object_body
     from handle_drake.systems.hand_driver import WRIST_JOINTS, actuated_order
 
     scenario = _scenario("point", 0.001)
+    if variant == "no_contact":
+        scenario.object, scenario.table = None, None
     builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
         time_step=0.001, discrete_contact_approximation="sap", contact_model="point",
         use_sampled_output_ports=False), builder)
     hand = AddPlantModels(plant, scenario)
+    if variant == "no_self_collision":
+        geometries = [g for i in plant.GetBodyIndices(hand)
+                      for g in plant.GetCollisionGeometriesForBody(plant.get_body(i))]
+        scene_graph.collision_filter_manager().Apply(
+            CollisionFilterDeclaration().ExcludeWithin(GeometrySet(geometries)))
     plant.Finalize()
     wrist = plant.GetModelInstanceByName("wrist")
     hand_traj, wrist_traj = script_trajectories(scenario, hand_initial_command(scenario))
@@ -98,23 +130,32 @@ def bench_plant_only(repeats: int):
         builder.Connect(matrix.get_output_port(), plant.get_desired_state_input_port(instance))
     diagram = builder.Build()
     simulator = Simulator(diagram)
-    default = diagram.CreateDefaultContext()
-    walls, lift = [], 0.0
-    from handle_drake.station import object_body
-
+    if scenario.object is None:
+        return _Case(simulator, diagram.CreateDefaultContext(), lambda: 0.0)
     body = object_body(plant)
+    return _Case(simulator, diagram.CreateDefaultContext(),
+                 lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
+                     simulator.get_context())).translation()[2])
+
+
+STATION_CASES = [(c, t, "sap") for c in ("point", "hydroelastic") for t in (0.001, 0.005)]
+STATION_CASES += [("point", t, a) for a in ("similar", "lagged") for t in (0.001, 0.005)]
+PLANT_VARIANTS = ("model", "no_self_collision", "no_contact")
+
+
+def bench_realtime(repeats: int):
+    """Every case once per round, ``repeats`` rounds: the cases see the same
+    machine conditions, so their ratios hold even when the machine's speed
+    drifts (it does here, by up to 40 % over minutes)."""
+    station = {case: _station_case(*case) for case in STATION_CASES}
+    plant = {variant: _plant_case(variant) for variant in PLANT_VARIANTS}
     for _ in range(repeats):
-        simulator.get_mutable_context().SetTimeStateAndParametersFrom(default)
-        simulator.Initialize()
-        context = plant.GetMyContextFromRoot(simulator.get_context())
-        z0 = body.EvalPoseInWorld(context).translation()[2]
-        start = time.perf_counter()
-        simulator.AdvanceTo(TRIAL_SECONDS)
-        walls.append(time.perf_counter() - start)
-        lift = body.EvalPoseInWorld(context).translation()[2] - z0
-    return {"wall_s_median": statistics.median(walls),
-            "realtime_factor": TRIAL_SECONDS / statistics.median(walls),
-            "object_lift_cm_at_2s": 100 * lift}
+        for case in [*station.values(), *plant.values()]:
+            case.run_once()
+    rows = [station[(c, t, a)].row(contact_model=c, approximation=a, time_step_ms=t * 1e3)
+            for c, t, a in STATION_CASES]
+    floors = [plant[v].row(variant=v) for v in PLANT_VARIANTS]
+    return rows, floors
 
 
 def bench_reset(repeats: int):
@@ -145,8 +186,7 @@ def main(argv=None) -> int:
                         default=Path(__file__).parent / "results" / "station.json")
     args = parser.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
-    rows = bench_realtime(repeats)
-    floor = bench_plant_only(repeats)
+    rows, floors = bench_realtime(repeats)
     reset = bench_reset(repeats)
     print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats}")
     print(f"{'contact':<13}{'approx.':<9}{'step':>5}{'wall (s)':>10}{'x real time':>13}"
@@ -155,9 +195,12 @@ def main(argv=None) -> int:
         print(f"{r['contact_model']:<13}{r['approximation']:<9}{r['time_step_ms']:>3.0f}ms"
               f"{r['wall_s_median']:>10.2f}"
               f"{r['realtime_factor']:>13.2f}{r['object_lift_cm_at_2s']:>14.1f}")
-    print(f"{'plant only':<13}{'sap':<9}{1:>3.0f}ms{floor['wall_s_median']:>10.2f}"
-          f"{floor['realtime_factor']:>13.2f}{floor['object_lift_cm_at_2s']:>14.1f}"
-          "   (same script, no Python systems)")
+    print("\nthe plant alone (same script, no Python systems, no loggers), 1 ms, point, sap:")
+    for f in floors:
+        print(f"  {f['variant']:<20}{f['wall_s_median']:>8.2f} s{f['realtime_factor']:>8.2f}x"
+              f"  (range {f['realtime_factor_range'][0]:.2f}-{f['realtime_factor_range'][1]:.2f})"
+              f"  lift {f['object_lift_cm_at_2s']:.1f} cm")
+    floor = floors[0]
     print(f"station overhead at 1 ms, point: "
           f"{floor['realtime_factor'] / rows[0]['realtime_factor']:.2f}x slower than the plant")
     point_1ms = rows[0]["realtime_factor"]
@@ -170,7 +213,7 @@ def main(argv=None) -> int:
           f"{'met' if point_1ms >= 4 else 'NOT met'} ({point_1ms:.1f}x); reset <= 5 ms: "
           f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"realtime": rows, "plant_only": floor, "reset": reset,
+    args.out.write_text(json.dumps({"realtime": rows, "plant_only": floors, "reset": reset,
                                     "cpu_count": os.cpu_count(),
                                     "load_average": os.getloadavg()}, indent=2))
     print(f"wrote {args.out}")
