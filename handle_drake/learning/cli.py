@@ -12,6 +12,7 @@ Examples::
 ``babble`` logs every trial to the SQLite file ``--db`` and resumes the run
 (same hand, object, space, noise, strategy and seed) if it is already there:
 an interrupted run continues where it stopped, with no trial repeated or lost.
+It then draws the run (``--plot``, default ``<db folder>/<run id>.png``).
 Bad arguments print an error and exit with status 2.
 
 Also runnable as ``python -m handle_drake.learning.cli``.
@@ -101,6 +102,10 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=_positive_int, default=1,
                    help="parallel trials for random search (BO is sequential)")
     p.add_argument("--run-id", default=None, help="name of the run in the log")
+    p.add_argument("--plot", type=Path, default=None, metavar="PNG",
+                   help="figure of the run: metric per trial with the best so far, and the "
+                        "GP's map of the parameter space (default: <db folder>/<run id>.png)")
+    p.add_argument("--no-plot", action="store_true", help="write no figure")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_babble)
 
@@ -155,9 +160,14 @@ def _cmd_babble(args) -> int:
     trial = GraspTrial(config)
     if args.ei_stop and args.strategy != "bo":
         raise ValueError(f"--ei-stop {args.ei_stop}: only Bayesian optimisation has a stop rule")
+    if args.plot is not None and args.no_plot:
+        raise ValueError("--plot and --no-plot contradict each other")
+    if args.plot is not None and args.plot.suffix.lower() != ".png":
+        raise ValueError(f"--plot: expected a .png file name, got {str(args.plot)!r}")
     options = {"ei_threshold": args.ei_stop} if args.ei_stop else {}
-    run_id = args.run_id or RunSpec(config, args.strategy, args.seed,
-                                    options=tuple(sorted(options.items()))).run_id
+    spec = RunSpec(config, args.strategy, args.seed, n_trials=args.trials,
+                   options=tuple(sorted(options.items())))
+    run_id = args.run_id or spec.run_id
     args.db.parent.mkdir(parents=True, exist_ok=True)
     try:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
@@ -189,6 +199,12 @@ def _cmd_babble(args) -> int:
     print(f"best metric {result.best_y:.6g} (trial {best.index}"
           + (f", noiseless {clean:.6g}" if clean is not None and args.noise > 0 else "")
           + f"): {params}")
+    if not args.no_plot:
+        from handle_drake.learning.babbling import run_history
+        from handle_drake.learning.plots import plot_run
+
+        path = args.plot or args.db.parent / f"{run_id}.png"
+        print(f"figure: {plot_run(spec, run_history(args.db, run_id), path, names)}")
     return 0
 
 

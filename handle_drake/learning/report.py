@@ -46,7 +46,6 @@ from handle_drake.learning.babbling import (
     FRACTIONS,
     RunSpec,
     best_so_far,
-    grid_points,
     grid_values,
     replay_optimizer,
     run_batch,
@@ -55,6 +54,7 @@ from handle_drake.learning.babbling import (
 )
 from handle_drake.learning.bayesopt import BayesianOptimizer
 from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.learning.plots import figure, gp_mean_map, panel
 from handle_drake.objects import KINDS
 from handle_drake.testing import reduced as reduced_mode
 
@@ -201,14 +201,6 @@ def _jsonable(value):
     return value
 
 
-def _figure(rows, cols, size):
-    from matplotlib.figure import Figure  # no pyplot: works under any backend
-
-    fig = Figure(figsize=size, layout="constrained")
-    axes = fig.subplots(rows, cols, squeeze=False)
-    return fig, axes
-
-
 # ------------------------------------------------------------------- 1-D
 def _one_d(out, db, grids, s: ReportSettings, progress) -> dict:
     result = {}
@@ -229,7 +221,7 @@ def _one_d(out, db, grids, s: ReportSettings, progress) -> dict:
         n = len(history.X)
         snapshots = sorted({1, min(n - 1, 3), min(n - 1, max(4, n // 2)), n})
         snapshots = [k for k in snapshots if 1 <= k <= n]
-        fig, axes = _figure(2, 2, (10, 6.5))
+        fig, axes = figure(2, 2, (10, 6.5))
         dense = axis[:, None]
         for ax, k in zip(axes.ravel(), snapshots[:4], strict=False):
             optimizer = replay_optimizer(spec, history, k)
@@ -330,47 +322,26 @@ def _table3(out, db, truth, specs, s: ReportSettings) -> dict:
     return result
 
 
-def _gp_mean_map(spec, history, axes):
-    optimizer = replay_optimizer(spec, history)
-    _, points = grid_points([[a[0], a[-1]] for a in axes], 61)
-    return optimizer.predict(points)[0].reshape(61, 61)
-
-
-def _panel(ax, axes, values, title, history=None, vmin=None, vmax=None, scale=1e3,
-           unit="mm"):
-    extent = [axes[0][0] * scale, axes[0][-1] * scale, axes[1][0] * scale, axes[1][-1] * scale]
-    image = ax.imshow(values.T, origin="lower", extent=extent, aspect="auto", cmap="viridis",
-                      vmin=vmin, vmax=vmax, interpolation="nearest")
-    if history is not None:
-        ax.plot(history.X[:, 0] * scale, history.X[:, 1] * scale, "w.", ms=3)
-        i = int(np.nanargmax(history.noiseless))
-        ax.plot(history.X[i, 0] * scale, history.X[i, 1] * scale, "r*", ms=10)
-    ax.set_title(title, fontsize=9)
-    ax.set_xlabel(f"x offset ({unit})" if unit else "")
-    ax.set_ylabel(f"y offset ({unit})" if unit else "")
-    return image
-
-
 def _figures_2d(out, db, truth, specs, s):
     for kind, name in (("wine_glass", "fig23_wine_glass_2d.png"), ("mug", "fig24_mug_2d.png"),
                        ("star_prism", "fig25_star_prism_2d.png")):
         axes_xy, values = truth[kind]
         spec = specs[kind][0]
         history = run_history(db, spec)
-        fig, axs = _figure(1, 2, (10, 4.2))
+        fig, axs = figure(1, 2, (10, 4.2))
         vmin, vmax = float(np.min(values)), float(np.max(values))
-        image = _panel(axs[0, 0], axes_xy, values, f"dense grid {s.grid}x{s.grid} (noiseless)",
+        image = panel(axs[0, 0], axes_xy, values, f"dense grid {s.grid}x{s.grid} (noiseless)",
                        vmin=vmin, vmax=vmax)
-        mean = _gp_mean_map(spec, history, axes_xy)
-        _panel(axs[0, 1], axes_xy, mean, f"GP mean after {len(history.X)} BO trials "
+        mean = gp_mean_map(spec, history, axes_xy)
+        panel(axs[0, 1], axes_xy, mean, f"GP mean after {len(history.X)} BO trials "
                f"(seed {spec.seed}; dots: trials, star: best)", history, vmin, vmax)
         fig.colorbar(image, ax=axs[0, :].tolist(), label="BW metric")
         fig.suptitle(f"Barrett hand, {kind.replace('_', ' ')}: metric over the hand's offset")
         fig.savefig(out / name, dpi=110)
-    fig, axs = _figure(2, 4, (15, 7))
+    fig, axs = figure(2, 4, (15, 7))
     for ax, kind in zip(axs.ravel(), OBJECT_ORDER, strict=False):
         axes_xy, values = truth[kind]
-        _panel(ax, axes_xy, values, kind.replace("_", " "), run_history(db, specs[kind][0]))
+        panel(ax, axes_xy, values, kind.replace("_", " "), run_history(db, specs[kind][0]))
     axs[1, 3].set_visible(False)
     fig.suptitle(f"Grid ground truth of all objects with the trials of BO seed 0 "
                  f"({s.grid}x{s.grid} grid)")
@@ -383,7 +354,7 @@ def _bo_vs_random(out, db, truth, bo_specs, random_specs, s) -> dict:
     for kind, name, number in (("sphere", "fig26_sphere_bo_vs_random.png", 26),
                                ("mug", "fig27_mug_bo_vs_random.png", 27)):
         f_star = float(np.max(truth[kind][1]))
-        fig, axs = _figure(1, 1, (7, 4.5))
+        fig, axs = figure(1, 1, (7, 4.5))
         ax = axs[0, 0]
         entry = {"grid_max": f_star}
         trials = np.arange(1, s.trials + 1)
@@ -420,13 +391,13 @@ def _synergy(out, db, grids, spec, s, progress) -> dict:
     history = run_history(db, spec)
     axes_xy, truth = grid_values(_synergy_config(), s.synergy_grid, grids, s.workers, progress)
     dense_axes = [np.linspace(-1, 1, 61)] * 2
-    mean = _gp_mean_map(spec, history, dense_axes)
-    fig, axs = _figure(1, 2, (10, 4.2))
+    mean = gp_mean_map(spec, history, dense_axes)
+    fig, axs = figure(1, 2, (10, 4.2))
     vmin, vmax = float(min(truth.min(), mean.min())), float(max(truth.max(), mean.max()))
-    image = _panel(axs[0, 0], dense_axes, mean,
+    image = panel(axs[0, 0], dense_axes, mean,
                    f"GP mean after {len(history.X)} BO trials (dots: trials, star: best)",
                    history, vmin, vmax, scale=1.0, unit="")
-    _panel(axs[0, 1], axes_xy, truth, f"grid scan {s.synergy_grid}x{s.synergy_grid} (check)",
+    panel(axs[0, 1], axes_xy, truth, f"grid scan {s.synergy_grid}x{s.synergy_grid} (check)",
            vmin=vmin, vmax=vmax, scale=1.0, unit="")
     for ax in axs[0]:
         ax.set_xlabel("thumb abduction synergy amplitude")

@@ -121,10 +121,30 @@ def test_babble_bad_arguments_exit_2_with_a_message(bad, message, tmp_path, caps
     (["--dims", "1", "--space", "offset"], "contradicts"),
     (["--strategy", "bo", "--workers", "2"], "sequential"),
     (["--strategy", "random", "--ei-stop", "1e-6"], "only Bayesian optimisation"),
+    (["--plot", "run.jpg"], "expected a .png file name"),
+    (["--plot", "run.png", "--no-plot"], "contradict"),
 ])
 def test_babble_inconsistent_arguments_exit_2(bad, message, tmp_path, capsys):
     assert main(["babble", *bad, "--db", str(tmp_path / "x.sqlite")]) == 2
     assert message in capsys.readouterr().err
+    assert not (tmp_path / "x.sqlite").exists()
+
+
+def test_babble_writes_its_figure_next_to_the_log_unless_told_not_to(
+        reference_run, tmp_path, capsys):
+    db, _ = reference_run
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+    assert (db.parent / f"{run.run_id}.png").stat().st_size > 10_000
+    capsys.readouterr()
+    # Resuming a finished run still draws it, where asked; --no-plot draws nothing.
+    assert main([*ARGS, "--db", str(db), "--plot", str(tmp_path / "fig" / "a.png")]) == 0
+    assert f"figure: {tmp_path / 'fig' / 'a.png'}" in capsys.readouterr().out
+    assert (tmp_path / "fig" / "a.png").stat().st_size > 10_000
+    other = tmp_path / "other.sqlite"
+    assert main([*ARGS[:-3], "--trials", "2", "--db", str(other), "--no-plot",
+                 "--no-progress"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig", "other.sqlite"]
 
 
 def test_babble_refuses_a_corrupt_database_and_leaves_it_alone(tmp_path, capsys):
