@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.ticker import MaxNLocator
 
 from handle_drake.learning.babbling import (
     RunHistory,
@@ -103,6 +104,7 @@ def plot_run(spec: RunSpec, history: RunHistory, path, parameter_names) -> Path:
                 label="failed trial")
     ax.plot(trials, best_so_far(history.noiseless), "k-", label="best so far (noiseless)")
     ax.set_xlabel("trial")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("BW metric")
     ax.legend(fontsize=8)
     ax.set_title(f"{n} trials, {spec.strategy}, seed {spec.seed}", fontsize=9)
