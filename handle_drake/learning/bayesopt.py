@@ -332,6 +332,14 @@ class BayesianOptimizer(_AskTellBase):
             ``xi`` are then in those units; :meth:`predict` maps back.
         nu: smoothness of the Matérn kernel: 1.5 (the report's eq. 25,
             default) or 2.5.
+        batch_size: how many proposals may be outstanding (trials run in
+            parallel). 1 (default) is the report's sequential method. With
+            ``q > 1``, a proposal asked while others are pending maximises EI
+            under the "kriging believer" (Ginsbourger et al. 2010): the GP is
+            conditioned on the pending points as if they had returned its own
+            posterior mean there, with the hyperparameters unchanged, so the
+            next proposal goes elsewhere. The first proposal of a batch is the
+            sequential one.
     """
 
     strategy = "bo"
@@ -356,8 +364,13 @@ class BayesianOptimizer(_AskTellBase):
         noise_variance_bounds=(1e-6, 1.0),
         output_transform: str = "none",
         nu: float = 1.5,
+        batch_size: int = 1,
     ):
         super().__init__(bounds, seed)
+        if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) \
+                or batch_size < 1:
+            raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        self.batch_size = int(batch_size)
         if output_transform not in OUTPUT_TRANSFORMS:
             raise ValueError(
                 f"output_transform must be one of {OUTPUT_TRANSFORMS}, got {output_transform!r}"
@@ -525,21 +538,29 @@ class BayesianOptimizer(_AskTellBase):
         """Parameters of the next trial (d,), in the units of ``bounds``.
 
         During the initial design any number of asks may be outstanding;
-        afterwards the optimiser is sequential and raises if the previous
-        proposal was not told. Sets :attr:`converged` when the best EI is
-        below the threshold (the proposal is still returned).
+        afterwards at most ``batch_size`` (1: sequential), and asking for more
+        raises. Sets :attr:`converged` when the best EI is below the threshold
+        (the proposal is still returned).
         """
         k = self.n_told + self.n_pending
         gp = self.gp if k >= self.n_initial else None
         if gp is None:
             return self._register(self._sobol_point(k))
-        if self._pending:
+        if self.n_pending >= self.batch_size:
             raise RuntimeError(
-                f"BayesianOptimizer is sequential: tell() the result of the pending point "
-                f"{self.from_unit(self._pending[0])} (or tell_failure()) before asking again"
+                f"BayesianOptimizer with batch_size {self.batch_size}: {self.n_pending} "
+                f"proposal(s) pending, e.g. {self.from_unit(self._pending[0])}; tell() their "
+                "results (or tell_failure()) before asking again"
             )
+        # xi comes from the real observations. The pending points enter as
+        # data at the GP's own mean there, and as such also count for the
+        # incumbent: near a pending point whose mean beats the best trial,
+        # EI would otherwise stay high and the batch would crowd one spot.
         xi, best = self._xi_and_best(gp)
-        predict_point = gp.point_predictor()
+        model, believed = self._believer(gp)
+        if believed.size:
+            best = max(best, float(np.max(believed)))
+        predict_point = model.point_predictor()
 
         def ei(u):
             mu, var = predict_point(u)
@@ -550,9 +571,22 @@ class BayesianOptimizer(_AskTellBase):
         )
         self.last_ei, self.last_xi = value, xi
         self.converged = (
-            self.n_told >= self.min_trials_to_stop and value < self.ei_threshold * gp.y_scale
+            self.n_pending == 0 and self.n_told >= self.min_trials_to_stop
+            and value < self.ei_threshold * gp.y_scale
         )
         return self._register(u)
+
+    def _believer(self, gp: GaussianProcess) -> tuple[GaussianProcess, np.ndarray]:
+        """``gp`` conditioned on the pending points at its own posterior mean,
+        and those believed values (in the GP's units)."""
+        if not self._pending:
+            return gp, np.empty(0)
+        pending = np.array(self._pending)
+        U, y = self._training_data(self.n_told)
+        believed = gp.predict(pending, return_variance=False)
+        model = self._new_gp(None).fit(np.vstack([U, pending]), np.concatenate([y, believed]),
+                                       hyperparameters=self._hyper[1])
+        return model, believed
 
 
 def v1_options(dim: int) -> dict:

@@ -100,7 +100,9 @@ def register(subparsers) -> None:
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
     p.add_argument("--workers", type=_positive_int, default=1,
-                   help="parallel trials for random search (BO is sequential)")
+                   help="trials run in parallel; BO then proposes batches of this size "
+                        "(kriging believer), a run of its own (default 1: the report's "
+                        "sequential BO)")
     p.add_argument("--run-id", default=None, help="name of the run in the log")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="figure of the run: metric per trial with the best so far, and the "
@@ -152,9 +154,6 @@ def _cmd_babble(args) -> int:
     )
 
     space = _resolve_space(args)
-    if args.strategy == "bo" and args.workers > 1:
-        raise ValueError(f"--workers {args.workers}: Bayesian optimisation is sequential "
-                         "(one trial at a time); use --workers 1 or --strategy random")
     config = GraspTrialConfig(hand=args.hand, object=args.object, space=space, noise=args.noise,
                               size=args.size)
     trial = GraspTrial(config)
@@ -165,6 +164,8 @@ def _cmd_babble(args) -> int:
     if args.plot is not None and args.plot.suffix.lower() != ".png":
         raise ValueError(f"--plot: expected a .png file name, got {str(args.plot)!r}")
     options = {"ei_threshold": args.ei_stop} if args.ei_stop else {}
+    if args.strategy == "bo" and args.workers > 1:
+        options["batch_size"] = args.workers  # batches of parallel trials (kriging believer)
     spec = RunSpec(config, args.strategy, args.seed, n_trials=args.trials,
                    options=tuple(sorted(options.items())))
     run_id = args.run_id or spec.run_id

@@ -33,8 +33,12 @@ Parallelism: trials run through a ``concurrent.futures.Executor``. By default
 a ``ProcessPoolExecutor`` (spawn start method, which is safe with Drake's
 threads) whose workers pin BLAS to one thread and receive the objective once
 (the objective may build its simulation diagram on its first call and reuse
-it). Bayesian optimisation is sequential (batch size 1); random search runs
-as many trials at once as there are workers.
+it). Random search runs as many trials at once as there are workers, each
+new trial as soon as one finishes. Bayesian optimisation runs in synchronous
+batches of its ``batch_size`` (1, sequential, by default): it proposes a batch,
+waits for all of it and tells the results in trial order, so a run depends
+only on its seed and options (not on which worker finished first) and a
+resumed run completes the interrupted batch before asking for the next.
 """
 
 from __future__ import annotations
@@ -472,7 +476,8 @@ class TrialRunner:
         log, run_id: where the trials go; the run must exist in the log.
         executor: any ``concurrent.futures.Executor``; None for the default
             process pool (1 worker for BO, ``os.cpu_count()`` for random search).
-        batch_size: trials in flight at once (must be 1 for BO).
+        batch_size: trials in flight at once; for BO it is the optimiser's
+            own ``batch_size`` (give the same or None).
     """
 
     def __init__(
@@ -490,17 +495,22 @@ class TrialRunner:
         info = log.get_run(run_id)
         if info is None:
             raise ValueError(f"run {run_id!r} does not exist in {log.path}")
-        sequential = optimizer.strategy == "bo"
+        synchronous = optimizer.strategy == "bo"
+        if synchronous:
+            q = getattr(optimizer, "batch_size", 1)
+            if batch_size is not None and batch_size != q:
+                raise ValueError(
+                    f"batch_size {batch_size} differs from the optimiser's batch_size {q}; "
+                    f"Bayesian optimisation proposes batches of its own size (make it with "
+                    f"batch_size={batch_size})"
+                )
+            batch_size = q
         if executor is None:
-            workers = 1 if sequential else max(1, os.cpu_count() or 1)
+            workers = batch_size if synchronous else max(1, os.cpu_count() or 1)
         else:
             workers = getattr(executor, "_max_workers", 1)
         if batch_size is None:
-            batch_size = 1 if sequential else workers
-        if sequential and batch_size != 1:
-            raise ValueError(
-                f"Bayesian optimisation is sequential: batch_size must be 1, got {batch_size}"
-            )
+            batch_size = workers
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.objective = objective
@@ -509,6 +519,7 @@ class TrialRunner:
         self.run_id = run_id
         self.run_seed = info.seed
         self.batch_size = int(batch_size)
+        self.synchronous = synchronous
         self.progress = progress
         self._executor = executor
         self._owns_executor = executor is None
@@ -548,13 +559,18 @@ class TrialRunner:
         queue, next_index = self._replay()
         finished = next_index - len(queue)
         in_flight: dict[Future, TrialRecord] = {}
+        untold: list = []  # (trial index, tell) of logged trials the optimiser has yet to see
         stop = False
         bar = _progress_bar(n_trials, finished, self.run_id, self.progress)
         try:
             while True:
-                while len(in_flight) < self.batch_size and (
-                    queue or (not stop and next_index < n_trials)
-                ):
+                # A synchronous (BO) batch starts only once the last one is in,
+                # and an interrupted batch is finished on its own first.
+                room = self.batch_size - len(in_flight)
+                if self.synchronous:
+                    room = 0 if in_flight else (len(queue) if queue else self.batch_size)
+                while room > 0 and (queue or (not stop and next_index < n_trials)):
+                    room -= 1
                     if queue:
                         record = queue.pop(0)
                     else:
@@ -573,8 +589,14 @@ class TrialRunner:
                 completed, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
                 for future in sorted(completed, key=lambda f: in_flight[f].index):
                     record = in_flight.pop(future)
-                    self._finish(record, future)
+                    # Logged at once (nothing is lost if the batch is killed);
+                    # a synchronous batch is told in trial order once complete.
+                    untold.append((record.index, self._finish(record, future)))
                     bar.update(1)
+                if not self.synchronous or not in_flight:
+                    for _, tell in sorted(untold, key=lambda item: item[0]):
+                        tell()
+                    untold.clear()
                     best = self.optimizer.best
                     if best is not None:
                         bar.set_postfix(best=f"{best.y:.4g}")
@@ -586,6 +608,7 @@ class TrialRunner:
         return self.result()
 
     def _finish(self, record: TrialRecord, future: Future):
+        """Logs the trial's outcome; returns the call that tells the optimiser."""
         try:
             outcome = future.result()
         except BrokenProcessPool as error:
@@ -608,16 +631,15 @@ class TrialRunner:
                 outcome["scenario"],
                 outcome["wall_time"],
             )
-            self.optimizer.tell(x, outcome["metric"])
-        else:
-            self.log.mark_failed(
-                self.run_id,
-                record.index,
-                outcome["error"],
-                outcome["wall_time"],
-                outcome["scenario"],
-            )
-            self.optimizer.tell_failure(x, outcome["error"])
+            return lambda: self.optimizer.tell(x, outcome["metric"])
+        self.log.mark_failed(
+            self.run_id,
+            record.index,
+            outcome["error"],
+            outcome["wall_time"],
+            outcome["scenario"],
+        )
+        return lambda: self.optimizer.tell_failure(x, outcome["error"])
 
     def result(self) -> ExperimentResult:
         records = self.log.trials(self.run_id)

@@ -119,7 +119,6 @@ def test_babble_bad_arguments_exit_2_with_a_message(bad, message, tmp_path, caps
 @pytest.mark.parametrize("bad, message", [
     (["--space", "synergy"], "needs the shadow hand"),
     (["--dims", "1", "--space", "offset"], "contradicts"),
-    (["--strategy", "bo", "--workers", "2"], "sequential"),
     (["--strategy", "random", "--ei-stop", "1e-6"], "only Bayesian optimisation"),
     (["--plot", "run.jpg"], "expected a .png file name"),
     (["--plot", "run.png", "--no-plot"], "contradict"),
@@ -247,3 +246,20 @@ def test_sigterm_stops_a_parallel_run_like_ctrl_c_and_leaves_no_workers(tmp_path
         (run,) = log.runs()
         statuses = {r.status for r in log.trials(run.run_id)}
     assert statuses <= {"done", "running", "pending"} and "done" in statuses
+
+
+def test_babble_bo_on_two_workers_runs_batches_as_a_run_of_its_own(reference_run, tmp_path):
+    """``--workers 2`` with BO: trials in pairs on two processes, logged under
+    their own run id (a batch run is not the sequential run)."""
+    db, rows = reference_run
+    batch_db = tmp_path / "batch.sqlite"
+    assert main([*ARGS, "--workers", "2", "--db", str(batch_db)]) == 0
+    with TrialLog(batch_db) as log:
+        (run,) = log.runs()
+        trials = log.trials(run.run_id)
+    with TrialLog(db) as log:
+        (sequential,) = log.runs()
+    assert run.run_id != sequential.run_id and run.config == {"batch_size": 2}
+    assert [t.status for t in trials] == ["done"] * 5
+    # The initial design does not depend on the batch size.
+    np.testing.assert_array_equal([t.parameters for t in trials], [r.parameters for r in rows])

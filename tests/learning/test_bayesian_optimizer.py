@@ -111,7 +111,7 @@ def test_initial_design_is_sobol_in_bounds_and_parallel():
         opt.tell(p, float(np.sum(p)))
     x = opt.ask()
     assert opt.gp is not None and np.all(x >= lower) and np.all(x <= upper)
-    with pytest.raises(RuntimeError, match="sequential"):
+    with pytest.raises(RuntimeError, match="batch_size 1: 1 proposal"):
         opt.ask()
 
 
@@ -189,6 +189,9 @@ def test_bad_tell_and_options():
         BayesianOptimizer([(0, 1)], xi=-1.0)
     with pytest.raises(ValueError, match="nu must be one of"):
         BayesianOptimizer([(0, 1)], nu=0.5)
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match="batch_size must be an integer >= 1"):
+            BayesianOptimizer([(0, 1)], batch_size=bad)
     smooth = BayesianOptimizer([(0, 1)], seed=0, nu=2.5, n_initial=2)
     for _ in range(3):
         x = smooth.ask()
@@ -247,3 +250,52 @@ def test_rank_transform_is_invariant_to_a_monotone_change_of_the_metric():
     assert np.all(var >= 0)
     with pytest.raises(ValueError, match="output_transform"):
         BayesianOptimizer([(0.0, 1.0)], output_transform="log")
+
+
+def _told(f, q, n=10, seed=0):
+    opt = BayesianOptimizer(f.bounds, seed=seed, batch_size=q, **FAST)
+    for _ in range(n):
+        x = opt.ask()
+        opt.tell(x, f(x))
+    return opt
+
+
+def test_batch_proposals_follow_the_kriging_believer():
+    """The first proposal of a batch is the sequential one; the GP each later
+    one maximises EI under has the pending points as data at its own mean:
+    the mean there is unchanged, the variance collapses to the noise, and
+    the next proposal goes elsewhere."""
+    f = Branin()
+    sequential, batch = _told(f, 1), _told(f, 3)
+    first = batch.ask()
+    np.testing.assert_array_equal(first, sequential.ask())
+    gp = batch.gp
+    believer, believed = batch._believer(gp)
+    u = batch.to_unit(first)[None]
+    mean, var = gp.predict(u)
+    b_mean, b_var = believer.predict(u)
+    assert b_mean[0] == pytest.approx(mean[0], abs=1e-3 * gp.y_scale)
+    assert believed == pytest.approx(mean)
+    assert b_var[0] < 1e-3 * var[0]
+    second = batch.ask()
+    third = batch.ask()
+    width = f.bounds[:, 1] - f.bounds[:, 0]
+    for a, b in ((first, second), (first, third), (second, third)):
+        assert np.linalg.norm((a - b) / width) > 0.02
+    with pytest.raises(RuntimeError, match="batch_size 3: 3 proposal"):
+        batch.ask()
+    # A told result frees a slot; the believer then holds only the others.
+    batch.tell(second, f(second))
+    assert batch.n_pending == 2
+    assert batch.ask().shape == (2,)
+
+
+@pytest.mark.parametrize("q", [2, 4])
+def test_batches_find_the_1d_maximum_within_the_same_budget(q):
+    f = SineSum1D()
+    opt = BayesianOptimizer(f.bounds, seed=0, xi=0.0, batch_size=q, **FAST)
+    while opt.n_told < 28:
+        batch = [opt.ask() for _ in range(q)]
+        for x in batch:
+            opt.tell(x, f(x))
+    assert abs(opt.best.x[0] - f.argmax[0, 0]) < 1e-3
