@@ -475,7 +475,8 @@ class TrialRunner:
             built with the run's seed and options.
         log, run_id: where the trials go; the run must exist in the log.
         executor: any ``concurrent.futures.Executor``; None for the default
-            process pool (1 worker for BO, ``os.cpu_count()`` for random search).
+            process pool (the optimiser's ``batch_size`` workers for BO,
+            ``os.cpu_count()`` for random search).
         batch_size: trials in flight at once; for BO it is the optimiser's
             own ``batch_size`` (give the same or None).
     """
