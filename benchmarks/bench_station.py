@@ -40,16 +40,15 @@ def _scenario(contact_model: str, time_step: float, approximation: str = "sap"):
 
 
 class _Case:
-    """One simulation to time: a simulator, its initial context and a label."""
+    """One simulation to time: a simulator, how to reset it, and the object's height."""
 
-    def __init__(self, simulator, default_context, lift):
-        self.simulator, self.default_context, self._lift = simulator, default_context, lift
+    def __init__(self, simulator, reset, lift):
+        self.simulator, self._reset, self._lift = simulator, reset, lift
         self.walls: list[float] = []
         self.lift_cm = float("nan")
 
     def run_once(self) -> None:
-        self.simulator.get_mutable_context().SetTimeStateAndParametersFrom(self.default_context)
-        self.simulator.Initialize()
+        self._reset()
         z0 = self._lift()
         start = time.perf_counter()
         self.simulator.AdvanceTo(TRIAL_SECONDS)
@@ -70,7 +69,7 @@ def _station_case(contact_model, time_step, approximation) -> _Case:
     runner = ScenarioRunner(_scenario(contact_model, time_step, approximation))
     plant = GetPlant(runner.station)
     body = object_body(plant)
-    return _Case(runner.simulator, runner._default_context,
+    return _Case(runner.simulator, runner.reset,  # what ScenarioRunner.run does first
                  lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
                      runner.simulator.get_context())).translation()[2])
 
@@ -130,10 +129,16 @@ def _plant_case(variant: str) -> _Case:
         builder.Connect(matrix.get_output_port(), plant.get_desired_state_input_port(instance))
     diagram = builder.Build()
     simulator = Simulator(diagram)
+    default = diagram.CreateDefaultContext()
+
+    def reset():
+        simulator.get_mutable_context().SetTimeStateAndParametersFrom(default)
+        simulator.Initialize()
+
     if scenario.object is None:
-        return _Case(simulator, diagram.CreateDefaultContext(), lambda: 0.0)
+        return _Case(simulator, reset, lambda: 0.0)
     body = object_body(plant)
-    return _Case(simulator, diagram.CreateDefaultContext(),
+    return _Case(simulator, reset,
                  lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
                      simulator.get_context())).translation()[2])
 
