@@ -7,6 +7,7 @@ backend, in worker processes and in headless CI.
 
 from __future__ import annotations
 
+import dataclasses as dc
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,6 @@ from handle_drake.learning.babbling import (
     grid_points,
     replay_optimizer,
 )
-from handle_drake.learning.bayesopt import BayesianOptimizer
 from handle_drake.learning.grasp_trial import GraspTrial
 
 __all__ = ["figure", "panel", "run_model", "gp_mean_map", "plot_run"]
@@ -57,15 +57,9 @@ def run_model(spec: RunSpec, history: RunHistory):
     """The GP of a run told all its trials: a BO run's own optimiser replayed;
     for random search, a default BO model of the same box (what a user asks
     of a random run: where does the data say the good grasps are?)."""
-    if spec.strategy == "bo":
-        return replay_optimizer(spec, history)
-    model = BayesianOptimizer(GraspTrial(spec.config).bounds, spec.seed)
-    for x, y in zip(history.X, history.observed, strict=True):
-        if np.isfinite(y):
-            model.tell(x, y)
-        else:
-            model.tell_failure(x)
-    return model
+    if spec.strategy != "bo":
+        spec = dc.replace(spec, strategy="bo", options=())
+    return replay_optimizer(spec, history)
 
 
 def gp_mean_map(spec: RunSpec, history: RunHistory, axes) -> np.ndarray:
