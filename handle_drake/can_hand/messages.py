@@ -476,25 +476,13 @@ def _checked(value, size: int, name: str) -> np.ndarray:
     return array
 
 
-class FeedbackAssembler:
-    """Collects POSITION/TACTILE frames until STATUS closes a complete cycle.
-
-    :meth:`push` returns a :class:`FeedbackSnapshot` when a STATUS arrives and
-    every position frame of this cycle has been seen (tactile frames keep their
-    last value when missing); otherwise None. ``incomplete`` counts STATUS
-    frames dropped because positions were missing.
-    """
+class _ClassicReceiver:
+    """Raw frames of the classic layout in: the checks both directions share."""
 
     def __init__(self, codec: HandCodec):
         self._codec = codec
         self._decode = codec.decode
         self._classic_ids = codec.hand_to_host_ids | codec.host_to_hand_ids
-        layout = codec.layout
-        self._q = np.zeros(codec.num_position_frames * SLOTS_PER_FRAME)
-        self._f = np.zeros(codec.num_tactile_frames * SLOTS_PER_FRAME)
-        self._seen = np.zeros(codec.num_position_frames, dtype=bool)
-        self._nq, self._nt = layout.nq, layout.num_tactile
-        self.incomplete = 0
 
     def feed(self, arbitration_id: int, data: bytes, is_fd: bool = False):
         """Decodes and pushes one raw frame (see :meth:`HandCodec.decode` for the errors).
@@ -506,6 +494,25 @@ class FeedbackAssembler:
             raise FrameFormatError(f"id 0x{arbitration_id:X}: a CAN FD frame; the classic "
                                    "layout sends CAN 2.0 frames")
         return self.push(self._decode(arbitration_id, data))
+
+
+class FeedbackAssembler(_ClassicReceiver):
+    """Collects POSITION/TACTILE frames until STATUS closes a complete cycle.
+
+    :meth:`push` returns a :class:`FeedbackSnapshot` when a STATUS arrives and
+    every position frame of this cycle has been seen (tactile frames keep their
+    last value when missing); otherwise None. ``incomplete`` counts STATUS
+    frames dropped because positions were missing.
+    """
+
+    def __init__(self, codec: HandCodec):
+        super().__init__(codec)
+        layout = codec.layout
+        self._q = np.zeros(codec.num_position_frames * SLOTS_PER_FRAME)
+        self._f = np.zeros(codec.num_tactile_frames * SLOTS_PER_FRAME)
+        self._seen = np.zeros(codec.num_position_frames, dtype=bool)
+        self._nq, self._nt = layout.nq, layout.num_tactile
+        self.incomplete = 0
 
     def push(self, frame: Frame) -> FeedbackSnapshot | None:
         k = SLOTS_PER_FRAME
@@ -529,7 +536,7 @@ class FeedbackAssembler:
         return None
 
 
-class SetpointAssembler:
+class SetpointAssembler(_ClassicReceiver):
     """The hand's side: stages SETPOINT frames and applies them on COMMIT.
 
     :meth:`push` returns ``(seq, q_command)`` when a commit arrives whose
@@ -538,20 +545,11 @@ class SetpointAssembler:
     """
 
     def __init__(self, codec: HandCodec):
-        self._codec = codec
-        self._decode = codec.decode
-        self._classic_ids = codec.hand_to_host_ids | codec.host_to_hand_ids
+        super().__init__(codec)
         self._q = np.zeros(codec.num_setpoint_frames * SLOTS_PER_FRAME)
         self._seen = np.zeros(codec.num_setpoint_frames, dtype=bool)
         self._nu = codec.layout.nu
         self.rejected_commits = 0
-
-    def feed(self, arbitration_id: int, data: bytes, is_fd: bool = False):
-        """Decodes and pushes one raw frame (errors as :meth:`FeedbackAssembler.feed`)."""
-        if is_fd and arbitration_id in self._classic_ids:
-            raise FrameFormatError(f"id 0x{arbitration_id:X}: a CAN FD frame; the classic "
-                                   "layout sends CAN 2.0 frames")
-        return self.push(self._decode(arbitration_id, data))
 
     def push(self, frame: Frame):
         k = SLOTS_PER_FRAME
