@@ -63,10 +63,15 @@ def matern32(XA, XB, length_scale, signal_variance=1.0):
     return matern(XA, XB, length_scale, signal_variance, nu=1.5)
 
 
-def matern(XA, XB, length_scale, signal_variance=1.0, nu: float = 1.5):
-    """Matérn covariance (``nu`` 1.5 or 2.5) between the rows of ``XA`` and ``XB``."""
+def _check_nu(nu) -> float:
     if isinstance(nu, bool) or nu not in MATERN_NUS:
         raise ValueError(f"nu must be one of {MATERN_NUS}, got {nu!r}")
+    return float(nu)
+
+
+def matern(XA, XB, length_scale, signal_variance=1.0, nu: float = 1.5):
+    """Matérn covariance (``nu`` 1.5 or 2.5) between the rows of ``XA`` and ``XB``."""
+    _check_nu(nu)
     XA = np.atleast_2d(np.asarray(XA, dtype=float))
     XB = np.atleast_2d(np.asarray(XB, dtype=float))
     length_scale = np.broadcast_to(np.asarray(length_scale, dtype=float), (XA.shape[1],))
@@ -140,9 +145,7 @@ class GaussianProcess:
         seed: int | None = 0,
         nu: float = 1.5,
     ):
-        if isinstance(nu, bool) or nu not in MATERN_NUS:
-            raise ValueError(f"nu must be one of {MATERN_NUS}, got {nu!r}")
-        self.nu = float(nu)
+        self.nu = _check_nu(nu)
         if not (isinstance(mean, str | float | int) or callable(mean)):
             raise TypeError(
                 f"mean must be 'constant', 'zero', a number or a callable, got {mean!r}"
