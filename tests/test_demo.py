@@ -21,6 +21,15 @@ def test_demo_grasp_holds_the_sphere_through_a_10cm_lift(tmp_path):
     # The hand, not a glitch, carried it: the fingertips press on it at the end.
     assert np.count_nonzero(report.result.tactile[-1] > 0.5) >= 2
     assert (tmp_path / "height.png").stat().st_size > 10_000
+    # A clean pre-grasp: nothing presses on the sphere while the hand reaches
+    # and pre-shapes (the fingers close from 0.5 s and meet it after 0.75 s),
+    # and the sphere is not pushed into the table (it rests on point contact,
+    # so pressing it sinks it: 17 N on the thumb sank it 2.7 mm).
+    result = report.result
+    reach = result.times < 0.75
+    assert result.tactile[reach].max() < 1.0, result.tactile[reach].max(axis=0)
+    z = result.object_position[:, 2]
+    assert z[result.times < 1.2].min() > z[0] - 0.0005
 
 
 def test_dropped_object_is_reported_as_not_held():
