@@ -116,6 +116,7 @@ def apply_depth_model(depth: np.ndarray, profile: CameraProfile,
     if z.ndim != 2:
         raise ValueError(f"depth must be an H x W image, got shape {z.shape}")
     valid = np.isfinite(z) & (z > 0)
+    z = np.where(valid, z, 1.0)  # placeholder: invalid pixels are marked at the end
     if profile.noise_k > 0:
         if rng is None:
             raise ValueError(f"profile {profile.name!r} is noisy: pass a seeded rng")
