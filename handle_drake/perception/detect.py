@@ -245,6 +245,13 @@ def _describe(cluster: np.ndarray, plane: TablePlane) -> Detection:
     # Box: the minimum-area footprint rectangle extruded to the height.
     c, s = math.cos(angle), math.sin(angle)
     R = np.array([[c, s], [-s, c]])
+    # The rectangle's axes come from the hull; its size and centre from the
+    # 0.5-99.5 % range along them, so a few noisy edge pixels (a Kinect's
+    # flying pixels) do not widen it.
+    along = (local[:, :2] - centre_xy) @ R.T
+    low, high = np.percentile(along, [0.5, 99.5], axis=0)
+    centre_xy = centre_xy + R.T @ ((low + high) / 2)
+    length, width = high - low
     b_res = _box_residual((local[:, :2] - centre_xy) @ R.T, local[:, 2],
                           np.array([length, width]) / 2, height)
     residuals = {"sphere": s_res, "cylinder": c_res, "box": b_res}
