@@ -90,7 +90,8 @@ DIST_UPPER = math.radians(48.0)  # covers PROX_UPPER / 3 = 0.8145 rad (barrett_m
 # knuckle of F1 and F2), link 2 (proximal), link 3 (distal). 1.188 kg in all;
 # Barrett weighed the hand at 664 g (base) + 3 x 179 g (fingers) = 1.201 kg.
 BASE_MASS = 0.59573
-BASE_COM = (0.0, 0.0050433, 0.036671)  # the page's, F3 on +y (|x| 5e-5 dropped)
+# The page's centre of mass of frame W, turned half a turn about z (F3 on +y here).
+BASE_COM = (-5.1098e-5, 0.0050433, 0.036671)
 KNUCKLE_MASS = 0.14109
 PROXIMAL_MASS = 0.062139
 DISTAL_MASS = 0.041377
