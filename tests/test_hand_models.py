@@ -169,6 +169,9 @@ SHADOW_MASS = (
 BARRETT_MASS = 0.59573 + 2 * 0.14109 + 3 * (0.062139 + 0.041377)
 BARRETT_WEIGHED = 0.664 + 3 * 0.179
 PROX_UPPER = math.radians(140.0)
+# Distal joint 69.94 mm along the proximal link and 3 mm to its palmar side (our link
+# frames: along +z, palmar face on -y).
+DISTAL_XYZ = (0, -0.003, 0.06994)
 
 
 def Rx(a):
@@ -332,9 +335,9 @@ def test_barrett_joints_match_sheet():
         "f1_prox": ("f1_knuckle", "f1_proximal", None, (1, 0, 0), 0, PROX_UPPER),
         "f2_prox": ("f2_knuckle", "f2_proximal", None, (1, 0, 0), 0, PROX_UPPER),
         "f3_prox": ("bh_base", "f3_proximal", (0, 0.05, 0.0754), (1, 0, 0), 0, PROX_UPPER),
-        "f1_dist": ("f1_proximal", "f1_distal", None, (1, 0, 0), 0, math.radians(48)),
-        "f2_dist": ("f2_proximal", "f2_distal", None, (1, 0, 0), 0, math.radians(48)),
-        "f3_dist": ("f3_proximal", "f3_distal", None, (1, 0, 0), 0, math.radians(48)),
+        "f1_dist": ("f1_proximal", "f1_distal", DISTAL_XYZ, (1, 0, 0), 0, math.radians(48)),
+        "f2_dist": ("f2_proximal", "f2_distal", DISTAL_XYZ, (1, 0, 0), 0, math.radians(48)),
+        "f3_dist": ("f3_proximal", "f3_distal", DISTAL_XYZ, (1, 0, 0), 0, math.radians(48)),
     }
     assert sorted(spec.joint_names) == sorted(expected)
     for name, (parent, child, xyz, axis, lower, upper) in expected.items():
