@@ -27,8 +27,8 @@ from handle_drake.can_hand.config import (
 )
 from handle_drake.can_hand.driver import AddCanHandDriver
 from handle_drake.can_hand.firmware import SimulatedHandFirmware
+from handle_drake.can_hand.frames import load_database
 from handle_drake.can_hand.layout import hand_layout
-from handle_drake.can_hand.messages import load_database
 from handle_drake.can_hand.server import CanBusServer
 from handle_drake.can_hand.station import HandJointsToPlantPositions
 from handle_drake.hands import AddHand, get_hand_spec
