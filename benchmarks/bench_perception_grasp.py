@@ -40,12 +40,18 @@ def trial(case):
     from handle_drake.scenario import ObjectConfig
 
     out = dict(grasp_class=grasp_class, kind=kind, size=size, x=x, y=y, yaw=yaw)
-    perceived = perceive_object(kind, size, xy=(x, y), yaw=yaw, seed=seed)
-    out["errors"] = perceived.errors()
-    truth = ObjectConfig(kind=kind, size=size, X_WO=Transform(perceived.true_X_WO),
-                         on_table=False)
-    for source, (plan_size, X_WO) in (("truth", (size, resting_pose(kind, size, (x, y), yaw))),
-                                      ("perceived", (perceived.size, perceived.X_WO))):
+    X_WO_true = resting_pose(kind, size, (x, y), yaw)
+    truth = ObjectConfig(kind=kind, size=size, X_WO=Transform(X_WO_true), on_table=False)
+    sources = {"truth": (size, X_WO_true)}
+    try:
+        perceived = perceive_object(kind, size, xy=(x, y), yaw=yaw, seed=seed)
+        out["errors"] = perceived.errors()
+        sources["perceived"] = (perceived.size, perceived.X_WO)
+    except ValueError as error:  # not seen: a failed grasp from perception
+        out["errors"] = None
+        out["perceived"] = {"planned": False, "error": str(error)[:120],
+                            "open_loop": False, "reactive": False}
+    for source, (plan_size, X_WO) in sources.items():
         try:
             plan = plan_grasp(grasp_class, (kind, plan_size), X_WO)
         except ValueError as error:
@@ -76,13 +82,17 @@ def main(argv=None) -> int:
             r, a = 0.10 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
             cases.append((grasp_class, kind, size, r * math.cos(a), r * math.sin(a),
                           float(rng.uniform(-math.pi, math.pi)), int(rng.integers(1 << 30))))
+    rows = []
     with ProcessPoolExecutor(args.workers) as pool:
-        rows = list(pool.map(trial, cases))
+        for i, row in enumerate(pool.map(trial, cases)):
+            rows.append(row)
+            print(f"[{i + 1}/{len(cases)}] {row['grasp_class']} done", flush=True)
     print(f"{'class':20s} {'kind':7s} {'xy mm':>6s} {'z mm':>6s} {'yaw deg':>7s} "
           f"{'size mm':>7s}  truth open/react  perceived open/react")
     counts = {(s, m): 0 for s in ("truth", "perceived") for m in ("open_loop", "reactive")}
     for row in rows:
-        e = row["errors"]
+        e = row["errors"] or {"xy_mm": float("nan"), "z_mm": float("nan"), "yaw_deg": None,
+                              "size_mm": float("nan")}
         yaw = "-" if e["yaw_deg"] is None else f"{e['yaw_deg']:+.1f}"
         flags = []
         for source in ("truth", "perceived"):
@@ -94,8 +104,12 @@ def main(argv=None) -> int:
               f"{yaw:>7s} {e['size_mm']:+7.1f}  {flags[0]:>5s}/{flags[1]:<6s} "
               f"{flags[2]:>9s}/{flags[3]}")
     n = len(rows)
-    xy = [r["errors"]["xy_mm"] for r in rows]
-    yaws = [abs(r["errors"]["yaw_deg"]) for r in rows if r["errors"]["yaw_deg"] is not None]
+    seen = [r["errors"] for r in rows if r["errors"] is not None]
+    missed = sorted({f"{r['grasp_class']} ({r['kind']} {r['size'] * 100:.1f} cm)"
+                     for r in rows if r["errors"] is None})
+    print(f"\nobjects detected: {len(seen)}/{n}; not seen: {', '.join(missed) or 'none'}")
+    xy = [e["xy_mm"] for e in seen]
+    yaws = [abs(e["yaw_deg"]) for e in seen if e["yaw_deg"] is not None]
     print(f"\npose error: xy median {np.median(xy):.1f} mm (max {np.max(xy):.1f}); "
           f"|yaw| median {np.median(yaws) if yaws else float('nan'):.1f} deg")
     for (source, mode), held in counts.items():
