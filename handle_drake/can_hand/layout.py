@@ -19,17 +19,6 @@ __all__ = ["HAND_KIND_CODES", "HandLayout", "hand_layout"]
 # The STATUS frame's KIND nibble (declared in hand.dbc).
 HAND_KIND_CODES = {"shadow": 1, "barrett": 2}
 
-# Joints that close a finger onto an object (used by the simulated firmware's
-# virtual object): Shadow J3/J2 of each finger and the thumb's THJ1, Barrett's
-# proximal flexions. Abduction and wrist joints never press on an object.
-_CLOSING_JOINTS = {
-    "shadow": (
-        ("FFJ3", "FFJ2"), ("MFJ3", "MFJ2"), ("RFJ3", "RFJ2"), ("LFJ3", "LFJ2"), ("THJ1",),
-    ),
-    "barrett": (("f1_prox",), ("f2_prox",), ("f3_prox",)),
-}
-
-
 def _vector(name: str, value, size: int) -> np.ndarray:
     array = np.asarray(value, dtype=float)
     if array.shape != (size,):
@@ -153,5 +142,5 @@ def hand_layout(kind_or_spec, coupling_ratio: float | None = None) -> HandLayout
         command_upper=upper,
         joint_lower=spec.joint_lower_limits,
         joint_upper=spec.joint_upper_limits,
-        closing_joints=_CLOSING_JOINTS[spec.name],
+        closing_joints=spec.closing_joints,
     )
