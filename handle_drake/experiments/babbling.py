@@ -74,7 +74,7 @@ def _trial(config: GraspTrialConfig) -> GraspTrial:
         for other_config, other in _TRIALS.items():
             if other._built is not None and dc.replace(other_config, noise=0.0) == dc.replace(
                     config, noise=0.0):
-                trial._built = other._built
+                trial._built, trial._base = other._built, other._base
                 break
     return trial
 

@@ -199,6 +199,7 @@ class GraspTrial:
     def __init__(self, config: GraspTrialConfig | None = None, **kwargs):
         self.config = config if config is not None else GraspTrialConfig(**kwargs)
         self._built = None
+        self._base = None
 
     def __getstate__(self):
         return {"config": self.config}
@@ -206,6 +207,7 @@ class GraspTrial:
     def __setstate__(self, state):
         self.config = state["config"]
         self._built = None
+        self._base = None
 
     @property
     def bounds(self) -> np.ndarray:
@@ -259,7 +261,9 @@ class GraspTrial:
 
     def _build(self) -> ScenarioRunner:
         """The runner of the base scenario, built once per process (per config)."""
-        self._built = ScenarioRunner(self.base_scenario())
+        if self._base is None:
+            self._base = self.base_scenario()
+        self._built = ScenarioRunner(self._base)
         return self._built
 
     def _check(self, x) -> np.ndarray:
@@ -274,7 +278,9 @@ class GraspTrial:
     def scenario(self, x) -> Scenario:
         """The trial of parameters ``x``: the base scenario with its controller overridden."""
         x = self._check(x)
-        base = self.base_scenario()
+        if self._base is None:
+            self._base = self.base_scenario()
+        base = self._base
         c, ctrl = self.config, base.controller
         start = np.array(ctrl.start_pose)
         names = list(ctrl.preshape)
@@ -293,11 +299,10 @@ class GraspTrial:
                     closed[names.index(joint)] += amplitude * delta
             preshape = np.clip(preshape, lower, upper)
             closed = np.clip(closed, lower, upper)
-        base.controller = dc.replace(
+        return dc.replace(base, controller=dc.replace(
             ctrl, start_pose=start.tolist(), standoff=standoff,
             preshape={n: float(v) for n, v in zip(names, preshape, strict=True)},
-            closed={n: float(v) for n, v in zip(names, closed, strict=True)})
-        return base
+            closed={n: float(v) for n, v in zip(names, closed, strict=True)}))
 
     def scenario_for(self, x) -> str:
         """The trial's full scenario (YAML): ``handle-drake simulate`` on it replays the trial
