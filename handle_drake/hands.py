@@ -202,6 +202,11 @@ def _barrett_spec() -> HandSpec:
             ("f2_distal", "f2_tip_pad"),
             ("f3_distal", "f3_tip_pad"),
         ),
+        # Named as on the BH8-280 (Barrett's D-H table, the hand's pucks F1 F2 F3
+        # spread, libbarrett, GraspIt, OpenRAVE): f1 is the finger on the palm's
+        # x < 0 side, f2 on x > 0, f3 the fixed one on +y (models/barrett_hand),
+        # so a setpoint for ``f1_prox`` moves the same physical finger on the CAN
+        # hand as in simulation (tests/can_hand/test_can_finger_sides.py).
         fingers=("f1", "f2", "f3"),
         # The spread turns F1 and F2 together: it belongs to no single finger.
         finger_joints=(("f1_prox",), ("f2_prox",), ("f3_prox",)),
