@@ -41,15 +41,15 @@ import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
 from handle_drake.experiments.babbling import (  # noqa: E402
     FRACTIONS,
     _config_key,
-    _pin_blas_worker,
     _trial,
     grid_values,
     run_batch,
@@ -187,7 +187,7 @@ def main(argv=None) -> int:
                                                     args.seed_offset + skopt_seeds)]
     skopt = {k: [] for k in objects}
     pool = ProcessPoolExecutor(settings.workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_pin_blas_worker)
+                               initializer=pin_blas)
     with pool:
         futures = {pool.submit(gp_minimize_run, _offset_config(k, settings.noise), s,
                                settings.trials,

@@ -36,8 +36,9 @@ import sys
 import time
 import warnings
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 from scipy.stats import norm, qmc  # noqa: E402

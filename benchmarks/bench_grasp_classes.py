@@ -31,14 +31,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
 
 RESULTS = Path(__file__).resolve().parent / "results" / "grasp_classes.json"
 

@@ -26,12 +26,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import time
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 from pydrake.solvers import ClarabelSolver, MathematicalProgram  # noqa: E402

@@ -24,7 +24,9 @@ import statistics
 import time
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
 
 from handle_drake.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
 from handle_drake.run import ScenarioRunner  # noqa: E402

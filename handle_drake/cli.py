@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
-import signal
 import sys
 from pathlib import Path
+
+from handle_drake.cli_support import run_command, start_meshcat
 
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
@@ -25,12 +25,6 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.can_hand.cli",
     "handle_drake.perception.perceive",
 )
-
-
-def _pin_blas() -> None:
-    # Threaded BLAS on small machines makes small solves far slower.
-    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(variable, "1")
 
 
 def _add_simulate(subparsers) -> None:
@@ -56,22 +50,12 @@ def _add_demo(subparsers) -> None:
     p.set_defaults(func=_cmd_demo)
 
 
-def _meshcat(wanted: bool):
-    if not wanted:
-        return None
-    from pydrake.geometry import StartMeshcat
-
-    meshcat = StartMeshcat()
-    print(f"Meshcat: {meshcat.web_url()}", flush=True)
-    return meshcat
-
-
 def _cmd_simulate(args) -> int:
     from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
 
     scenario = LoadScenario(filename=args.scenario, data=args.override)
-    meshcat = _meshcat(args.meshcat or args.html is not None)
+    meshcat = start_meshcat(args.meshcat or args.html is not None)
     runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
@@ -98,7 +82,7 @@ def _cmd_simulate(args) -> int:
 def _cmd_demo(args) -> int:
     from handle_drake.demo import run_demo
 
-    meshcat = _meshcat(args.meshcat or not args.no_html)
+    meshcat = start_meshcat(args.meshcat or not args.no_html)
     report = run_demo(meshcat=meshcat, html=None if args.no_html else args.html)
     print(report.summary())
     return 0 if report.held else 1
@@ -115,46 +99,6 @@ def build_parser() -> argparse.ArgumentParser:
     for module_name in AREA_COMMANDS:
         importlib.import_module(module_name).register(subparsers)
     return parser
-
-
-def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
-    """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
-    error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
-    from handle_drake.learning import TrialLogError
-
-    _pin_blas()
-    args = parser.parse_args(argv)
-    previous = _terminate_like_ctrl_c()
-    try:
-        return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
-        print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        resume = f"; run it again to resume from {args.db}" if getattr(args, "db", None) else ""
-        print(f"handle-drake {args.command}: interrupted{resume}", file=sys.stderr)
-        return 130
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
-
-
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
-def _terminate_like_ctrl_c():
-    """SIGTERM (``kill``, a job scheduler) takes the Ctrl-C path: the trial log
-    marks the run resumable and worker pools are shut down, instead of the
-    process vanishing and leaving its workers running. Only in the main
-    thread (signal handlers cannot be set elsewhere); returns the previous
-    handler, or None when nothing was changed. Commands with their own stop
-    logic (can-server, can-sim) install their handlers over this one."""
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -65,6 +65,12 @@ class HandSpec:
         fingertip_frames: one frame per finger at the fingertip.
         pad_geometries: ``(body, collision geometry)`` of the tactile pad of
             each finger, in the order of ``fingertip_frames``.
+        fingers: the fingers' names, in the order of ``fingertip_frames``.
+        finger_joints: per finger, the actuated joints that move it (command
+            order); a joint shared by fingers (the Barrett spread, the Shadow
+            wrist) belongs to none. The one finger -> joints map of the project.
+        closing_joints: per finger, those of its joints that press its
+            fingertip onto an object (flexion, not abduction).
     """
 
     name: str
@@ -77,6 +83,14 @@ class HandSpec:
     adjustable_couplings: tuple[str, ...]
     fingertip_frames: tuple[str, ...]
     pad_geometries: tuple[tuple[str, str], ...]
+    fingers: tuple[str, ...] = ()
+    finger_joints: tuple[tuple[str, ...], ...] = ()
+    closing_joints: tuple[tuple[str, ...], ...] = ()
+
+    def finger_command_indices(self) -> list[list[int]]:
+        """Per finger, the indices of its joints in the command vector."""
+        names = list(self.actuated_joint_names)
+        return [[names.index(j) for j in joints] for joints in self.finger_joints]
 
     @property
     def num_joints(self) -> int:
@@ -149,6 +163,12 @@ def _shadow_spec() -> HandSpec:
         adjustable_couplings=tuple(f"{f}J1" for f in fingers),
         fingertip_frames=("fftip", "mftip", "rftip", "lftip", "thtip"),
         pad_geometries=tuple((f"{f}distal", f"{f}tip_pad") for f in ("ff", "mf", "rf", "lf", "th")),
+        fingers=("ff", "mf", "rf", "lf", "th"),
+        # The distal J1 follows J2 (coupled): J4..J2 (LFJ5 too) move a finger.
+        finger_joints=tuple(tuple(n for n in actuated if n.startswith(f))
+                            for f in (*fingers, "TH")),
+        closing_joints=(("FFJ3", "FFJ2"), ("MFJ3", "MFJ2"), ("RFJ3", "RFJ2"), ("LFJ3", "LFJ2"),
+                        ("THJ1",)),
     )
 
 
@@ -182,6 +202,15 @@ def _barrett_spec() -> HandSpec:
             ("f2_distal", "f2_tip_pad"),
             ("f3_distal", "f3_tip_pad"),
         ),
+        # Named as on the BH8-280 (Barrett's D-H table, the hand's pucks F1 F2 F3
+        # spread, libbarrett, GraspIt, OpenRAVE): f1 is the finger on the palm's
+        # x < 0 side, f2 on x > 0, f3 the fixed one on +y (models/barrett_hand),
+        # so a setpoint for ``f1_prox`` moves the same physical finger on the CAN
+        # hand as in simulation (tests/can_hand/test_can_finger_sides.py).
+        fingers=("f1", "f2", "f3"),
+        # The spread turns F1 and F2 together: it belongs to no single finger.
+        finger_joints=(("f1_prox",), ("f2_prox",), ("f3_prox",)),
+        closing_joints=(("f1_prox",), ("f2_prox",), ("f3_prox",)),
     )
 
 

@@ -51,6 +51,7 @@ from handle_drake.hands import (
     actuated_to_joint_positions,
     get_hand_spec,
 )
+from handle_drake.ports import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
 from handle_drake.scenario import (
     CanHandDriver,
     FixedMount,
@@ -59,20 +60,20 @@ from handle_drake.scenario import (
     SimHandDriver,
     validate_scenario,
 )
-from handle_drake.systems.hand_driver import WRIST_JOINTS, WristDriver, rpy_pose6
-from handle_drake.systems.hand_driver import SimHandDriver as SimHandDriverSystem
+from handle_drake.systems.hand_driver import WRIST_JOINTS, PdHandDriver, WristDriver, rpy_pose6
 from handle_drake.systems.sensors import BodyPoseSelector, FingertipTactile
 
 __all__ = [
     "MakeHandStation",
+    "MakeHardwareStation",
     "GetPlant",
     "hand_initial_command",
     "object_body",
     "object_initial_pose",
 ]
 
-HAND_INSTANCE = "hand"
-WRIST_INSTANCE = "wrist"
+HAND_INSTANCE = HAND
+WRIST_INSTANCE = WRIST
 OBJECT_INSTANCE = "object"
 
 
@@ -88,8 +89,6 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     """
     validate_scenario(scenario)
     if hardware:
-        from handle_drake.can_hand.station import MakeHardwareStation
-
         if not isinstance(scenario.driver, CanHandDriver):
             raise ValueError(
                 "hardware=True needs a !CanHandDriver driver in the scenario, got "
@@ -127,7 +126,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
 
     driver = builder.AddNamedSystem(
         "hand_driver",
-        SimHandDriverSystem(
+        PdHandDriver(
             plant, hand, spec, initial, lower, upper,
             max_joint_velocity=scenario.driver.max_joint_velocity,
             control_period=scenario.driver.control_period,
@@ -135,16 +134,16 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     )
     builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
     builder.Connect(driver.GetOutputPort("desired_state"), plant.get_desired_state_input_port(hand))
-    builder.ExportInput(driver.get_command_input_port(), "hand.position")
-    for signal in ("position_commanded", "position_measured", "velocity_estimated",
-                   "state_estimated"):
-        builder.ExportOutput(driver.GetOutputPort(signal), f"hand.{signal}")
+    builder.ExportInput(driver.get_command_input_port(), f"{HAND}.{HAND_COMMAND}")
 
     tips = [plant.GetFrameByName(name, hand).body() for name in spec.fingertip_frames]
     tactile = builder.AddNamedSystem("tactile", FingertipTactile(plant, tips))
     builder.Connect(plant.get_contact_results_output_port(),
                     tactile.get_contact_results_input_port())
-    builder.ExportOutput(tactile.GetOutputPort("tactile"), "hand.tactile")
+    # The port contract (handle_drake.ports), as the hardware branch exports it.
+    for signal in HAND_SIGNALS:
+        source = tactile if signal == "tactile" else driver
+        builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
     if isinstance(scenario.hand.mount, FloatingWrist):
         wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
@@ -308,3 +307,72 @@ def _add_visualization(builder, plant, scene_graph, meshcat, scenario) -> None:
 def GetPlant(station):
     """The station's MultibodyPlant."""
     return station.GetSubsystemByName("plant")
+
+
+def MakeHardwareStation(scenario: Scenario, meshcat=None):
+    """The hardware station for ``scenario`` (its driver must be a ``!CanHandDriver``):
+    the CAN hand behind the bus server, with the simulated station's ``hand.*``
+    ports (:mod:`handle_drake.ports`; the simulation-only ports do not exist here).
+    With a Meshcat, a plant of the hand is built only to draw the measured joints.
+
+    The driver's TCP client starts connecting at once; the diagram's
+    ``hand_driver`` subsystem reports the link on ``connection_state``.
+    Only a fixed mount is supported: the CAN hand has no wrist actuator.
+    """
+    from handle_drake.can_hand.config import driver_config
+    from handle_drake.can_hand.driver import AddCanHandDriver
+    from handle_drake.can_hand.layout import hand_layout
+
+    if not isinstance(scenario.hand.mount, FixedMount):
+        raise ValueError(
+            "hardware station: the CAN hand has no wrist actuator; expected a FixedMount, "
+            f"got {type(scenario.hand.mount).__name__}"
+        )
+    config = driver_config(scenario.driver)
+    spec = get_hand_spec(scenario.hand.kind)
+    layout = hand_layout(spec, scenario.hand.coupling_ratio)
+    for name in scenario.hand.initial_position:
+        if name not in layout.actuated_joint_names:
+            raise ValueError(f"hand.initial_position: {name!r} is not an actuated joint")
+    initial = np.clip([scenario.hand.initial_position.get(n, 0.0)
+                       for n in layout.actuated_joint_names],
+                      layout.command_lower, layout.command_upper)
+
+    builder = DiagramBuilder()
+    driver = AddCanHandDriver(builder, config, layout, initial_position=initial)
+    if meshcat is not None:
+        _add_hardware_visualization(builder, driver, scenario, spec, meshcat)
+    diagram = builder.Build()
+    diagram.set_name("hand_station_hardware")
+    return diagram
+
+
+def _add_hardware_visualization(builder, driver, scenario, spec, meshcat) -> None:
+    from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role, SceneGraph
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
+    from pydrake.systems.rendering import MultibodyPositionToGeometryPose
+
+    scene_graph = builder.AddNamedSystem("scene_graph", SceneGraph())
+    # Not added to the diagram: it only converts positions to geometry poses.
+    plant = MultibodyPlant(time_step=scenario.time_step)
+    plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
+    plant.RegisterAsSourceForSceneGraph(scene_graph)
+    hand = AddHand(plant, scenario.hand.kind, coupling_ratio=scenario.hand.coupling_ratio,
+                   parser=Parser(plant), model_instance_name="hand")
+    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
+                     scenario.hand.mount.X_WB.GetDeterministicValue())
+    plant.Finalize()
+    from handle_drake.systems.sensors import HandJointsToPlantPositions
+
+    scatter = builder.AddNamedSystem(
+        "visualization_positions", HandJointsToPlantPositions(plant, hand, spec.joint_names))
+    to_pose = builder.AddNamedSystem("to_geometry_pose", MultibodyPositionToGeometryPose(plant))
+    builder.Connect(driver.GetOutputPort("position_measured"), scatter.get_input_port())
+    builder.Connect(scatter.get_output_port(), to_pose.get_input_port())
+    builder.Connect(to_pose.get_output_port(),
+                    scene_graph.get_source_pose_port(plant.get_source_id()))
+    MeshcatVisualizer.AddToBuilder(
+        builder, scene_graph, meshcat,
+        MeshcatVisualizerParams(publish_period=scenario.visualization_period,
+                                role=Role.kIllustration, prefix="illustration"))

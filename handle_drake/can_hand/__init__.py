@@ -13,7 +13,8 @@ The chain (seed report, section 2.1: MuscleHandProxy -> TCP -> CANbusServer):
 - :mod:`~handle_drake.can_hand.server`: the bus server (rate limits, clamps, watchdog);
 - :mod:`~handle_drake.can_hand.firmware`: a simulated hand on the bus;
 - :mod:`~handle_drake.can_hand.client` and :mod:`~handle_drake.can_hand.driver`: the proxy;
-- :mod:`~handle_drake.can_hand.station`: ``MakeHardwareStation``.
+- ``MakeHardwareStation`` (the hardware branch of the station) lives beside
+  ``MakeHandStation`` in :mod:`handle_drake.station`.
 """
 
 from handle_drake.can_hand.config import (

@@ -15,6 +15,7 @@ import ipaddress
 import math
 
 __all__ = [
+    "driver_config",
     "BUS_INTERFACES",
     "FRAME_FORMATS",
     "DEFAULT_SERVER_PORT",
@@ -230,3 +231,17 @@ class CanFirmwareConfig:
         if self.object_closure is not None and not (0 < self.object_closure <= 1):
             raise ValueError(
                 f"object_closure: expected a value in (0, 1], got {self.object_closure}")
+
+
+def driver_config(driver) -> CanHandDriverConfig:
+    """A :class:`CanHandDriverConfig` from a scenario's ``!CanHandDriver`` (same field names)."""
+    if isinstance(driver, CanHandDriverConfig):
+        values = dc.asdict(driver)
+    elif dc.is_dataclass(driver):
+        values = {f.name: getattr(driver, f.name) for f in dc.fields(driver)}
+    else:
+        raise TypeError(f"driver: expected a CanHandDriver dataclass, got {type(driver).__name__}")
+    known = {f.name for f in dc.fields(CanHandDriverConfig)}
+    config = CanHandDriverConfig(**{k: v for k, v in values.items() if k in known})
+    config.validate()
+    return config

@@ -14,8 +14,9 @@ from pathlib import Path
 import cantools
 import numpy as np
 
+from handle_drake.can_hand.config import FRAME_FORMATS
+
 DBC_PATH = Path(__file__).with_name("hand.dbc")
-FRAME_FORMATS = ("classic", "fd")
 DBC_PATHS = {"classic": DBC_PATH, "fd": Path(__file__).with_name("hand_fd.dbc")}
 #: The data lengths a CAN FD frame can have (DLC codes 0..15).
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)

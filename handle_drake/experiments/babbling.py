@@ -27,6 +27,7 @@ lucky noise draw does not count.
 
 from __future__ import annotations
 
+import ast
 import dataclasses as dc
 import functools
 import hashlib
@@ -39,8 +40,9 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.blas import pin_blas
 from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
-from handle_drake.learning import InlineExecutor, TrialLog, run_experiment
+from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
 
 __all__ = [
@@ -72,7 +74,7 @@ def _trial(config: GraspTrialConfig) -> GraspTrial:
         for other_config, other in _TRIALS.items():
             if other._built is not None and dc.replace(other_config, noise=0.0) == dc.replace(
                     config, noise=0.0):
-                trial._built = other._built
+                trial._built, trial._base = other._built, other._base
                 break
     return trial
 
@@ -93,20 +95,12 @@ class CachedTrial:
         return _trial(self.config)(x, seed=seed)
 
 
-def _pin_blas_worker():
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = "1"
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)
-
-
 def _pool(workers: int):
     """A spawn process pool with one BLAS thread per worker, or None to run inline."""
     if workers <= 1:
         return None
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_pin_blas_worker)
+                               initializer=pin_blas)
 
 
 def _check_workers(workers) -> int:
@@ -131,27 +125,50 @@ def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
     return np.array([trial.evaluate(x).metric_noiseless for x in points])
 
 
+def code_digest(source: str) -> bytes:
+    """What of a Python source can change results: its syntax tree without docstrings.
+
+    Comments, blank lines, formatting and docstrings drop out (``ast`` keeps
+    neither comments nor positions here), so editing a docstring does not
+    start a new run; any change to code does.
+    """
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                    and isinstance(body[0].value.value, str):
+                node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree, annotate_fields=False, include_attributes=False).encode()
+
+
 @functools.cache
 def simulation_fingerprint() -> str:
     """Hash of everything a grasp trial's metric depends on besides its config:
-    the source of the trial, station, drivers, controllers, objects, hands and
-    grasp quality, and the hand model files. A cached grid computed by other
-    code is never read back as if it were current.
+    the code of the trial, harness, scenario runner, station, drivers,
+    controllers, objects, hands and grasp quality (:func:`code_digest`: not
+    its comments or docstrings), the hand model files and Drake's version. A
+    run or cached grid computed by other code is never resumed or read back
+    as if it were current.
 
     Computed once per process (every run id and cache key needs it): the
     files as they were when first asked, i.e. the code this process runs."""
-    root = Path(__file__).resolve().parents[1]
+    from importlib.metadata import version
+
     from handle_drake.models import models_dir
 
-    files = sorted([
-        *(root / "experiments").glob("grasp_trial.py"),
-        root / "station.py", root / "scenario.py", *(root / "objects").glob("*.py"),
-        root / "hands.py",
-        *(root / "systems").glob("*.py"), *(root / "quality").glob("*.py"),
-        *models_dir().glob("*/*.sdf"),
+    root = Path(__file__).resolve().parents[1]
+    sources = sorted([
+        root / "experiments" / "grasp_trial.py", root / "harness.py", root / "run.py",
+        root / "station.py", root / "scenario.py", root / "hands.py",
+        *(root / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
+        *(root / "quality").glob("*.py"),
     ])
-    digest = hashlib.sha1()
-    for path in files:
+    digest = hashlib.sha1(f"drake {version('drake')}".encode())
+    for path in sources:
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(code_digest(path.read_text()))
+    for path in sorted(models_dir().glob("*/*.sdf")):
         digest.update(path.name.encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:10]
@@ -338,19 +355,18 @@ def run_history(db_path, spec_or_run_id) -> RunHistory:
 
 
 def replay_optimizer(spec: RunSpec, records_or_history, k: int | None = None):
-    """A fresh optimiser of ``spec`` told the first ``k`` logged trials (all when None)."""
+    """A fresh optimiser of ``spec`` told the first ``k`` logged trials (all when None);
+    :func:`handle_drake.learning.replay` tells them."""
     optimizer = make_optimizer(spec.strategy, GraspTrial(spec.config).bounds, spec.seed,
                                **dict(spec.options))
     if isinstance(records_or_history, RunHistory):
-        pairs = list(zip(records_or_history.X, records_or_history.observed, strict=True))
+        h = records_or_history
+        records = [TrialRecord(h.run_id, i, x, "done" if math.isfinite(y) else "failed", 0,
+                               metric=float(y) if math.isfinite(y) else None)
+                   for i, (x, y) in enumerate(zip(h.X, h.observed, strict=True))]
     else:
-        pairs = [(r.parameters, math.nan if r.metric is None else r.metric)
-                 for r in records_or_history if r.status in ("done", "failed")]
-    for x, y in pairs[: len(pairs) if k is None else k]:
-        if math.isfinite(y):
-            optimizer.tell(x, y)
-        else:
-            optimizer.tell_failure(x)
+        records = [r for r in records_or_history if r.status in ("done", "failed")]
+    replay(optimizer, records[: len(records) if k is None else k])
     return optimizer
 
 

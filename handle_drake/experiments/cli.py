@@ -184,7 +184,7 @@ def _cmd_babble(args) -> int:
         result = run_experiment(
             objective, trial.bounds, args.strategy, args.trials, args.seed, args.db,
             executor=executor, progress=not args.no_progress, run_id=run_id,
-            objective_name=trial.name, optimizer_options=options)
+            objective_name=trial.name, optimizer_options=options, workers=args.workers)
     finally:
         if isinstance(executor, ProcessPoolExecutor):
             executor.shutdown(wait=True, cancel_futures=True)
@@ -237,7 +237,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """The two sub-commands on their own (``handle_drake.cli`` registers them too)."""
-    from handle_drake.cli import run_command
+    from handle_drake.cli_support import run_command
 
     return run_command(build_parser(), argv)
 

@@ -114,11 +114,11 @@ def run_grasp(grasp_class: str, kind: str, size: float, meshcat=None, html=None,
 
 
 def _cmd_grasp(args) -> int:
-    from handle_drake.cli import _meshcat
-
-    meshcat = _meshcat(args.meshcat or args.html is not None)
     import math
 
+    from handle_drake.cli_support import start_meshcat
+
+    meshcat = start_meshcat(args.meshcat or args.html is not None)
     plan, result, held = run_grasp(args.grasp_class, args.object, args.size, meshcat,
                                    args.html, args.save_scenario, args.reactive,
                                    xy=tuple(args.xy), yaw=math.radians(args.yaw),

@@ -528,14 +528,6 @@ class GraspKinematics:
 
 
 # ------------------------------------------------------- moving contacts
-# Joints that move each finger's contact point (the distal J1 follows J2).
-_FINGER_JOINTS = {
-    "ff": ("FFJ4", "FFJ3", "FFJ2"),
-    "mf": ("MFJ4", "MFJ3", "MFJ2"),
-    "rf": ("RFJ4", "RFJ3", "RFJ2"),
-    "lf": ("LFJ5", "LFJ4", "LFJ3", "LFJ2"),
-    "th": ("THJ5", "THJ4", "THJ3", "THJ2", "THJ1"),
-}
 
 
 def _collapse(J: np.ndarray, joints: tuple[str, ...], ratio: float, names) -> np.ndarray:
@@ -562,7 +554,7 @@ def move_contacts(kin: GraspKinematics, q: np.ndarray, moves: dict, ratio: float
     lower, upper = actuated_position_limits(kin.spec, ratio)
     q = np.array(q, dtype=float)
     for finger, (part, dx) in moves.items():
-        joints = _FINGER_JOINTS[finger]
+        joints = kin.spec.finger_joints[kin.spec.fingers.index(finger)]
         idx = [names.index(j) for j in joints]
         lo = np.array([lower[act.index(j)] for j in joints])
         hi = np.array([upper[act.index(j)] for j in joints])

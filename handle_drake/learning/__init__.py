@@ -1,10 +1,12 @@
-"""Learning to grasp by trial: GP regression, expected improvement, DIRECT, BO, trial logs.
+"""The generic learning engine: GP regression, expected improvement, optimisers, trial logs.
 
 Models (:mod:`.gp`), acquisition (:mod:`.acquisition`), optimisers
-(:mod:`.bayesopt`), trial storage (:mod:`.log`), where trials run (:mod:`.executors`), the
-resumable runner (:mod:`.runner`) and synthetic
-test problems (:mod:`.test_functions`) are separate modules; the names below
-are the public surface.
+(:mod:`.optimizer`: the public ask/tell base class :class:`Optimizer`, which
+declares its batching; :mod:`.bayesopt`: BO, random search), trial storage
+(:mod:`.log`), where trials run (:mod:`.executors`), the resumable runner
+(:mod:`.runner`) and synthetic test problems (:mod:`.test_functions`) are
+separate modules; the names below are the public surface. Nothing here knows
+about grasps: the grasp experiments are :mod:`handle_drake.experiments`.
 
 Defaults of :class:`BayesianOptimizer` (version 2, ``BO_DEFAULTS_VERSION``):
 10 scrambled Sobol points before the first GP proposal (``max(10, d + 1)``),
@@ -34,7 +36,8 @@ from handle_drake.learning.bayesopt import (
 from handle_drake.learning.executors import InlineExecutor, TrialResult
 from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern32
 from handle_drake.learning.log import RunInfo, TrialLog, TrialLogError, TrialRecord
-from handle_drake.learning.runner import ExperimentResult, TrialRunner, run_experiment
+from handle_drake.learning.optimizer import Optimizer
+from handle_drake.learning.runner import ExperimentResult, TrialRunner, replay, run_experiment
 
 __all__ = [
     "BayesianOptimizer",
@@ -45,6 +48,7 @@ __all__ = [
     "Hyperparameters",
     "InlineExecutor",
     "OptimizationResult",
+    "Optimizer",
     "RandomSearch",
     "RunInfo",
     "TrialLog",
@@ -60,5 +64,6 @@ __all__ = [
     "matern32",
     "maximize",
     "maximize_acquisition",
+    "replay",
     "run_experiment",
 ]

@@ -15,12 +15,13 @@ import inspect
 import json
 import math
 import multiprocessing
-import os
 import time
 import traceback
 from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
+
+from handle_drake.blas import pin_blas
 
 
 @dataclass
@@ -55,13 +56,7 @@ _WORKER_OBJECTIVE = None
 def _init_worker(objective):
     """Process-pool initializer: one BLAS thread per worker, objective received once."""
     global _WORKER_OBJECTIVE
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = "1"  # for anything the worker starts later
-    # numpy is already imported (this module imports it), so the environment
-    # variables come too late for its BLAS; threadpoolctl changes it live.
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)
+    pin_blas()
     _WORKER_OBJECTIVE = objective
 
 

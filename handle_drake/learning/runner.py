@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handle_drake.learning.bayesopt import _derived_seed, check_bounds, make_optimizer
+from handle_drake.learning.bayesopt import make_optimizer
 from handle_drake.learning.executors import (
     _accepts_seed,
     _default_pool,
@@ -55,6 +55,7 @@ from handle_drake.learning.executors import (
     _evaluate_in_worker,
 )
 from handle_drake.learning.log import TrialLog, TrialLogError, TrialRecord
+from handle_drake.learning.optimizer import _derived_seed, check_bounds
 
 
 @dataclass
@@ -68,6 +69,26 @@ class ExperimentResult:
     trials: list[TrialRecord] = field(repr=False, default_factory=list)
 
 
+def replay(optimizer, records) -> list[TrialRecord]:
+    """Rebuilds an optimiser's state from logged trials, in trial order; the one place it
+    is done (resuming a run, and any later look at what the optimiser knew).
+
+    ``done`` records are told their metric, ``failed`` ones told as failures,
+    ``pending``/``running`` ones declared outstanding asks (``resume_pending``)
+    and returned, to be evaluated again.
+    """
+    unfinished = []
+    for record in records:
+        if record.status == "done":
+            optimizer.tell(record.parameters, record.metric)
+        elif record.status == "failed":
+            optimizer.tell_failure(record.parameters, record.error or "")
+        else:
+            optimizer.resume_pending(record.parameters)
+            unfinished.append(record)
+    return unfinished
+
+
 class TrialRunner:
     """Evaluates an objective where an optimiser asks, logging each trial to a :class:`TrialLog`.
 
@@ -76,14 +97,19 @@ class TrialRunner:
             has a ``seed`` parameter: each trial gets its own seed derived from
             the run seed and the trial index, so a noisy simulation replays).
             Must be picklable for the default process pool.
-        optimizer: a fresh :class:`BayesianOptimizer` / :class:`RandomSearch`
-            built with the run's seed and options.
+        optimizer: a fresh :class:`~handle_drake.learning.optimizer.Optimizer`
+            built with the run's seed and options; its ``synchronous`` and
+            ``batch_size`` say how trials may run in parallel.
         log, run_id: where the trials go; the run must exist in the log.
         executor: any ``concurrent.futures.Executor``; None for the default
-            process pool (the optimiser's ``batch_size`` workers for BO,
-            ``os.cpu_count()`` for random search).
-        batch_size: trials in flight at once; for BO it is the optimiser's
-            own ``batch_size`` (give the same or None).
+            process pool of ``workers`` processes.
+        workers: how many trials the executor runs at once. Default: the
+            batch size of a synchronous optimiser, else ``batch_size`` if
+            given, else ``os.cpu_count()`` for the default pool and 1 for a
+            given executor.
+        batch_size: trials in flight at once (default ``workers``); a
+            synchronous optimiser fixes it to its own ``batch_size`` (give the
+            same or None).
     """
 
     def __init__(
@@ -95,30 +121,34 @@ class TrialRunner:
         executor=None,
         batch_size=None,
         progress=True,
+        workers: int | None = None,
     ):
         if not callable(objective):
             raise TypeError(f"objective must be callable, got {objective!r}")
         info = log.get_run(run_id)
         if info is None:
             raise ValueError(f"run {run_id!r} does not exist in {log.path}")
-        synchronous = optimizer.strategy == "bo"
+        synchronous = bool(optimizer.synchronous)
         if synchronous:
-            q = getattr(optimizer, "batch_size", 1)
+            q = optimizer.batch_size
             if batch_size is not None and batch_size != q:
                 raise ValueError(
                     f"batch_size {batch_size} differs from the optimiser's batch_size {q}; "
-                    f"Bayesian optimisation proposes batches of its own size (make it with "
-                    f"batch_size={batch_size})"
+                    f"a {type(optimizer).__name__} proposes batches of its own size (make it "
+                    f"with batch_size={batch_size})"
                 )
             batch_size = q
-        if executor is None:
-            workers = batch_size if synchronous else max(1, os.cpu_count() or 1)
-        else:
-            workers = getattr(executor, "_max_workers", 1)
+        for name, value in (("workers", workers), ("batch_size", batch_size)):
+            if value is not None and (isinstance(value, bool) or not isinstance(
+                    value, int | np.integer) or value < 1):
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        if workers is None:
+            if batch_size is not None:
+                workers = batch_size
+            else:
+                workers = max(1, os.cpu_count() or 1) if executor is None else 1
         if batch_size is None:
             batch_size = workers
-        if batch_size < 1:
-            raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         self.objective = objective
         self.optimizer = optimizer
         self.log = log
@@ -147,16 +177,7 @@ class TrialRunner:
                 f"run {self.run_id!r}: trial indices are not 0..{len(records) - 1}"
                 f" (got {indices[:10]}...)"
             )
-        unfinished = []
-        for record in records:
-            if record.status == "done":
-                self.optimizer.tell(record.parameters, record.metric)
-            elif record.status == "failed":
-                self.optimizer.tell_failure(record.parameters, record.error or "")
-            else:
-                self.optimizer.resume_pending(record.parameters)
-                unfinished.append(record)
-        return unfinished, len(records)
+        return replay(self.optimizer, records), len(records)
 
     def run(self, n_trials: int) -> ExperimentResult:
         """Run until the run holds ``n_trials`` finished trials (or the optimiser converges)."""
@@ -290,6 +311,7 @@ def run_experiment(
     objective_name: str | None = None,
     optimizer_options: dict | None = None,
     batch_size: int | None = None,
+    workers: int | None = None,
 ) -> ExperimentResult:
     """Optimise ``objective`` over ``bounds``, logging every trial to ``db_path``; resumable.
 
@@ -342,5 +364,6 @@ def run_experiment(
             executor=executor,
             batch_size=batch_size,
             progress=progress,
+            workers=workers,
         )
         return runner.run(n_trials)

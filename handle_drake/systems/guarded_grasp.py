@@ -10,13 +10,19 @@ with physical contact in the simulation.
 from __future__ import annotations
 
 import numpy as np
+from pydrake.common.containers import namedview
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import ContactResults
 from pydrake.systems.framework import BasicVector, LeafSystem
 
-__all__ = ["GuardedGrasp", "APPROACH", "CLOSE", "touching_bodies"]
+__all__ = ["GuardedGrasp", "GuardedGraspState", "APPROACH", "CLOSE", "touching_bodies"]
 
 APPROACH, CLOSE = 0, 1
+
+#: The controller's discrete state: mode (APPROACH / CLOSE), travel along the
+#: approach (m), contact time (s, NaN until contact), closing start time (s).
+GuardedGraspState = namedview("GuardedGraspState",
+                              ["mode", "travel", "contact_time", "close_from"])
 
 
 def touching_bodies(contact_results: ContactResults, bodies_a, bodies_b) -> bool:
@@ -87,19 +93,22 @@ class GuardedGrasp(LeafSystem):
         self._p_preshape = self.DeclareNumericParameter(BasicVector(preshape))
         self._p_closed = self.DeclareNumericParameter(BasicVector(closed))
         self._p_standoff = self.DeclareNumericParameter(BasicVector([float(standoff)]))
-        # State: [mode, travel (m), contact time (s), close-from time (s)].
-        self.DeclareDiscreteState([APPROACH, 0.0, np.nan, np.inf])
+        self._state = self.DeclareDiscreteState(
+            GuardedGraspState(np.array([APPROACH, 0.0, np.nan, np.inf]))[:])
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort("wrist_pose", 6, self._calc_wrist)
         self.DeclareVectorOutputPort("hand_position", self._nu, self._calc_hand)
         self.DeclareVectorOutputPort(
-            "mode", 1, lambda c, out: out.SetAtIndex(0, c.get_discrete_state(0).GetAtIndex(0)))
+            "mode", 1, lambda c, out: out.SetAtIndex(0, self.get_state(c).mode))
         self.DeclareVectorOutputPort(
-            "contact_time", 1,
-            lambda c, out: out.SetAtIndex(0, c.get_discrete_state(0).GetAtIndex(2)))
+            "contact_time", 1, lambda c, out: out.SetAtIndex(0, self.get_state(c).contact_time))
 
     def get_contact_results_input_port(self):
         return self._contacts
+
+    def get_state(self, context) -> GuardedGraspState:
+        """The discrete state as a :data:`GuardedGraspState` (a copy)."""
+        return GuardedGraspState(context.get_discrete_state(self._state).value().copy())
 
     def set_trial(self, context, start_pose6=None, preshape=None, closed=None,
                   standoff=None) -> None:
@@ -116,30 +125,30 @@ class GuardedGrasp(LeafSystem):
             context.get_mutable_numeric_parameter(index).SetFromVector(value)
 
     def _update(self, context, discrete_state):
-        mode, travel, t_contact, t_close = context.get_discrete_state(0).value()
+        s = self.get_state(context)
         now = context.get_time()
-        if mode == APPROACH:
+        if s.mode == APPROACH:
             touching = touching_bodies(self._contacts.Eval(context), self._hand_bodies,
                                        self._object_bodies)
-            if touching or travel >= self._max_travel:
+            if touching or s.travel >= self._max_travel:
                 standoff = context.get_numeric_parameter(self._p_standoff).GetAtIndex(0)
-                back = min(standoff, travel) if touching else 0.0
-                travel -= back
-                mode, t_contact = CLOSE, (now if touching else np.nan)
+                back = min(standoff, s.travel) if touching else 0.0
+                s.travel -= back
+                s.mode, s.contact_time = CLOSE, (now if touching else np.nan)
                 # Close once the wrist has backed off (its PD needs ~0.1 s).
-                t_close = now + (0.1 if back > 0 else 0.0)
+                s.close_from = now + (0.1 if back > 0 else 0.0)
             else:
-                travel = min(travel + self._speed * self._period, self._max_travel)
-        discrete_state.set_value(0, [mode, travel, t_contact, t_close])
+                s.travel = min(s.travel + self._speed * self._period, self._max_travel)
+        discrete_state.set_value(self._state, s[:])
 
     def _calc_wrist(self, context, out: BasicVector):
-        travel = context.get_discrete_state(0).GetAtIndex(1)
+        travel = self.get_state(context).travel
         pose = context.get_numeric_parameter(self._p_start).CopyToVector()
         pose[:3] += travel * self._direction
         out.SetFromVector(pose)
 
     def _calc_hand(self, context, out: BasicVector):
-        state = context.get_discrete_state(0)
-        closing = state.GetAtIndex(0) == CLOSE and context.get_time() >= state.GetAtIndex(3)
+        s = self.get_state(context)
+        closing = s.mode == CLOSE and context.get_time() >= s.close_from
         parameter = self._p_closed if closing else self._p_preshape
         out.SetFromVector(context.get_numeric_parameter(parameter).value())

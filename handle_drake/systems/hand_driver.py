@@ -12,7 +12,7 @@ import numpy as np
 from pydrake.math import RollPitchYaw
 from pydrake.systems.framework import LeafSystem
 
-__all__ = ["SimHandDriver", "WristDriver", "actuated_order"]
+__all__ = ["PdHandDriver", "WristDriver", "actuated_order"]
 
 
 def actuated_order(plant, model_instance, joint_names) -> np.ndarray:
@@ -44,8 +44,11 @@ def _joint_state_indices(plant, model_instance, joint_names):
     return np.array(q_index), np.array(v_index)
 
 
-class SimHandDriver(LeafSystem):
+class PdHandDriver(LeafSystem):
     """Tracks a joint position command with the plant's PD actuators.
+
+    The system of the scenario's ``!SimHandDriver`` (its config, in
+    :mod:`handle_drake.scenario`).
 
     The command is rate limited to ``max_joint_velocity`` (rad/s, 0 = off) and
     clamped to the actuated joints' limits in a periodic update every

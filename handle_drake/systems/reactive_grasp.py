@@ -69,12 +69,21 @@ import dataclasses as dc
 import enum
 
 import numpy as np
-from pydrake.common.value import AbstractValue, Value
+from pydrake.common.containers import namedview
+from pydrake.common.value import AbstractValue
 from pydrake.math import RollPitchYaw
 from pydrake.multibody.plant import ContactResults
 from pydrake.systems.framework import LeafSystem
 
-__all__ = ["ReactiveGrasp", "ReactiveGraspMode", "ReactiveGraspParams", "finger_command_groups"]
+__all__ = ["ReactiveGrasp", "ReactiveGraspMode", "ReactiveGraspParams", "ReactiveGraspProgress",
+           "finger_command_groups"]
+
+
+#: The controller's progress (discrete state): travel along the approach (m),
+#: sideways shift x y z (m), lift (m), when the mode was entered and when the
+#: approach reached its full travel (s; inf before).
+ReactiveGraspProgress = namedview("ReactiveGraspProgress", [
+    "travel", "shift_x", "shift_y", "shift_z", "lift", "mode_entry_time", "arrival_time"])
 
 
 class ReactiveGraspMode(enum.IntEnum):
@@ -131,20 +140,12 @@ class ReactiveGraspParams:
 
 
 def finger_command_groups(hand_kind: str) -> list[list[int]]:
-    """Indices into the hand command of the joints each tactile channel's finger closes.
-
-    shadow (20 commands, tactile FF MF RF LF TH): the J4..J2 (and LFJ5, THJ5..THJ1)
-    of each finger; barrett (4 commands, tactile F1 F2 F3): each finger's
-    proximal flexion (the spread is shared and stays at the pre-shape).
-    """
+    """Indices into the hand command of the joints each tactile channel's finger closes:
+    ``HandSpec.finger_joints`` (shadow: the J4..J2, LFJ5, THJ5..THJ1 of each finger;
+    barrett: each finger's proximal flexion, the shared spread stays at the pre-shape)."""
     from handle_drake.hands import get_hand_spec
 
-    spec = get_hand_spec(hand_kind)
-    names = list(spec.actuated_joint_names)
-    if spec.name == "shadow":
-        prefixes = ("FF", "MF", "RF", "LF", "TH")
-        return [[i for i, n in enumerate(names) if n.startswith(p)] for p in prefixes]
-    return [[names.index(n)] for n in names if n != "spread"]
+    return get_hand_spec(hand_kind).finger_command_indices()
 
 
 class ReactiveGrasp(LeafSystem):
@@ -240,14 +241,14 @@ class ReactiveGrasp(LeafSystem):
             self._contacts = self.DeclareAbstractInputPort(
                 "contact_results", AbstractValue.Make(ContactResults()))
 
-        self._mode = self.DeclareAbstractState(Value(ReactiveGraspMode.APPROACH))
         self._wrist = self.DeclareDiscreteState(start)
         self._hand = self.DeclareDiscreteState(preshape)
         self._s = self.DeclareDiscreteState(np.zeros(n))
         self._touched = self.DeclareDiscreteState(np.zeros(n))  # 1 once a finger stopped on contact
         self._squeeze_from = self.DeclareDiscreteState(np.zeros(n))
-        # [travel (m), shift x y z (m), lift (m), mode entry time (s), travel-complete time (s)]
-        self._internal = self.DeclareDiscreteState(np.array([0.0, 0, 0, 0, 0, 0, np.inf]))
+        self._internal = self.DeclareDiscreteState(
+            ReactiveGraspProgress(np.array([0.0, 0, 0, 0, 0, 0, np.inf]))[:])
+        # The mode, once: as its number (the ``mode`` output reads it).
         self._mode_value = self.DeclareDiscreteState(np.array([float(ReactiveGraspMode.APPROACH)]))
         self.DeclarePeriodicUnrestrictedUpdateEvent(self._period, 0.0, self._update)
 
@@ -270,7 +271,11 @@ class ReactiveGrasp(LeafSystem):
         return self._contacts
 
     def get_mode(self, context) -> ReactiveGraspMode:
-        return context.get_abstract_state(int(self._mode)).get_value()
+        return ReactiveGraspMode(int(context.get_discrete_state(self._mode_value).GetAtIndex(0)))
+
+    def get_progress(self, context) -> ReactiveGraspProgress:
+        """Travel, sideways shift, lift and the mode's times, as a (copied) named view."""
+        return ReactiveGraspProgress(context.get_discrete_state(self._internal).value().copy())
 
     def fingers_touched(self, context) -> np.ndarray:
         """(n,) bool: the fingers that stopped closing on a tactile contact."""
@@ -282,9 +287,8 @@ class ReactiveGrasp(LeafSystem):
 
     def lift_complete(self, context) -> bool:
         """True once the lift has reached ``lift_height``."""
-        lift = context.get_discrete_state(self._internal).value()[4]
         return (self.get_mode(context) is ReactiveGraspMode.LIFT
-                and lift >= self.params.lift_height - 1e-12)
+                and self.get_progress(context).lift >= self.params.lift_height - 1e-12)
 
     def nominal_duration(self) -> float:
         """Time (s) of an undisturbed run: approach, close to max, squeeze, hold, lift."""
@@ -356,9 +360,10 @@ class ReactiveGrasp(LeafSystem):
     def _update(self, context, state):
         p, h, now = self.params, self._period, context.get_time()
         mode = self.get_mode(context)
-        travel, sx, sy, sz, lift, t_mode, t_arrived = (
-            context.get_discrete_state(self._internal).value())
-        shift = np.array([sx, sy, sz])
+        progress = self.get_progress(context)
+        travel, lift = progress.travel, progress.lift
+        t_mode, t_arrived = progress.mode_entry_time, progress.arrival_time
+        shift = np.array([progress.shift_x, progress.shift_y, progress.shift_z])
         s = context.get_discrete_state(self._s).value().copy()
         touched = context.get_discrete_state(self._touched).value().copy()
         squeeze_from = context.get_discrete_state(self._squeeze_from).value().copy()
@@ -414,7 +419,6 @@ class ReactiveGrasp(LeafSystem):
 
         if new_mode is not mode:
             t_mode = now
-        state.get_mutable_abstract_state(int(self._mode)).set_value(new_mode)
         state.get_mutable_discrete_state(self._mode_value).set_value([float(new_mode)])
         state.get_mutable_discrete_state(self._internal).set_value(
             np.r_[travel, shift, lift, t_mode, t_arrived])

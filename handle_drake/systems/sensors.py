@@ -12,9 +12,10 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.multibody.math import SpatialVelocity
 from pydrake.multibody.plant import ContactResults
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import BasicVector, LeafSystem
 
-__all__ = ["FingertipTactile", "BodyPoseSelector", "fingertip_normal_forces"]
+__all__ = ["FingertipTactile", "BodyPoseSelector", "HandJointsToPlantPositions",
+           "fingertip_normal_forces"]
 
 
 def fingertip_normal_forces(contact_results: ContactResults, fingertip_bodies,
@@ -120,3 +121,29 @@ class BodyPoseSelector(LeafSystem):
             lambda context, out: out.SetFromVector(
                 self._poses.Eval(context)[self._index].translation()),
         )
+
+
+class HandJointsToPlantPositions(LeafSystem):
+    """Scatters hand joint positions into a plant's position vector (for drawing).
+
+    Ports: input ``hand_positions`` (nq, rad, ``HandSpec.joint_names`` order);
+    output ``plant_positions`` (plant nq, rad; other entries at their defaults).
+    Holds the (non-owned by its consumer) plant so it lives as long as the diagram.
+    """
+
+    def __init__(self, plant, model_instance, joint_names):
+        super().__init__()
+        self._plant = plant
+        self._index = np.array([plant.GetJointByName(n, model_instance).position_start()
+                                for n in joint_names], dtype=int)
+        self._default = plant.GetPositions(plant.CreateDefaultContext())
+        self.DeclareVectorInputPort("hand_positions", len(joint_names))
+        self.DeclareVectorOutputPort("plant_positions", plant.num_positions(), self._calc)
+
+    def plant(self):
+        return self._plant
+
+    def _calc(self, context, output: BasicVector):
+        q = self._default.copy()
+        q[self._index] = self.get_input_port().Eval(context)
+        output.SetFromVector(q)

@@ -45,17 +45,17 @@ distal joint ``J1 = ratio * J2`` inside its own limits).
 from __future__ import annotations
 
 import enum
+import functools
 
 import numpy as np
-from pydrake.common.value import Value
-from pydrake.systems.framework import LeafSystem
+from pydrake.common.value import AbstractValue, Value
+from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from handle_drake.grasp.synergies import Synergies
 from handle_drake.hands import actuated_position_limits, actuated_to_joint_positions, get_hand_spec
 
 __all__ = ["ControlMode", "SynergyController"]
 
-_FINGERS = ("ff", "mf", "rf", "lf", "th")
 
 
 class ControlMode(enum.IntEnum):
@@ -78,6 +78,22 @@ def _mode(value) -> ControlMode:
         f"unknown control mode {value!r}; expected one of "
         f"{', '.join(m.name.lower() for m in ControlMode)}"
     )
+
+
+class _Scratch:
+    """Per-context scratch of the Cartesian mode (lives in the context's cache)."""
+
+    def __init__(self):
+        self.plant_context = None
+
+
+@functools.cache
+def _fingertip_kinematics(coupling_ratio: float):
+    """The Shadow model's fingertip kinematics (an immutable, finalized plant), built once
+    per process and ratio, on the first Cartesian use."""
+    from handle_drake.grasp.kinematics import GraspKinematics
+
+    return GraspKinematics(coupling_ratio)
 
 
 class SynergyController(LeafSystem):
@@ -125,7 +141,13 @@ class SynergyController(LeafSystem):
         if not np.isfinite(initial).all():
             raise ValueError("initial_command must be finite")
         initial = np.clip(initial, self._lower, self._upper)
-        self._kin = None  # the fingertip kinematics, built on first Cartesian use
+        # Scratch of the Cartesian mode, per context (Drake's cache, not the
+        # system): a context of the fingertip kinematics' plant, made on first use.
+        self._scratch = self.DeclareCacheEntry(
+            description="fingertip kinematics scratch",
+            value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(_Scratch()),
+                                         calc=lambda context, value: None),
+            prerequisites_of_calc={self.nothing_ticket()})
 
         self._amplitudes = self.DeclareVectorInputPort("amplitudes", synergies.k)
         self._joint_command = self.DeclareVectorInputPort("joint_command", nu)
@@ -185,30 +207,27 @@ class SynergyController(LeafSystem):
     # ---- kinematics ----------------------------------------------------------
     def fingertip_positions(self, command) -> np.ndarray:
         """(5, 3) positions (m) of the fingertip frames in the palm frame for a command."""
-        p, _ = self._fingertip_jacobians(np.asarray(command, dtype=float))
+        kin = _fingertip_kinematics(self._ratio)
+        p, _ = self._fingertip_jacobians(kin, kin.plant.CreateDefaultContext(),
+                                         np.asarray(command, dtype=float))
         return p
 
-    def _kinematics(self):
-        if self._kin is None:
-            from handle_drake.grasp.kinematics import GraspKinematics
-
-            self._kin = GraspKinematics(self._ratio)
-            kin = self._kin
-            self._tip_frames = [kin.plant.GetFrameByName(f"{f}tip", kin.hand) for f in _FINGERS]
-        return self._kin
-
-    def _fingertip_jacobians(self, command):
+    def _fingertip_jacobians(self, kin, plant_context, command):
         from pydrake.multibody.tree import JacobianWrtVariable
 
-        kin = self._kinematics()
         q = actuated_to_joint_positions(self._spec, command, self._ratio)
-        kin._set(q)
+        full = kin.plant.GetPositions(plant_context)
+        full[kin.q_index] = q
+        full[kin._wrist_indices()] = 0.0  # the palm frame is the reference: wrist at rest
+        kin.plant.SetPositions(plant_context, full)
         names = self._spec.joint_names
         positions, jacobians = [], []
-        for frame in self._tip_frames:
-            positions.append(frame.CalcPose(kin.context, kin.palm).translation())
+        for name in kin.spec.fingertip_frames:
+            frame = kin.plant.GetFrameByName(name, kin.hand)
+            positions.append(frame.CalcPose(plant_context, kin.palm).translation())
             J = kin.plant.CalcJacobianTranslationalVelocity(
-                kin.context, JacobianWrtVariable.kQDot, frame, np.zeros(3), kin.palm, kin.palm)
+                plant_context, JacobianWrtVariable.kQDot, frame, np.zeros(3), kin.palm,
+                kin.palm)
             J = J[:, kin.q_index]
             # Chain rule through the coupling q_J1 = ratio * q_J2: d/dJ2 += ratio * d/dJ1.
             Ja = np.zeros((3, self._spec.num_actuated))
@@ -223,7 +242,11 @@ class SynergyController(LeafSystem):
         targets = self._fingertips.Eval(context).reshape(5, 3)
         if not np.isfinite(targets).all():
             return current
-        positions, jacobians = self._fingertip_jacobians(current)
+        kin = _fingertip_kinematics(self._ratio)
+        scratch = self._scratch.get_mutable_cache_entry_value(context).GetMutableValueOrThrow()
+        if scratch.plant_context is None:
+            scratch.plant_context = kin.plant.CreateDefaultContext()
+        positions, jacobians = self._fingertip_jacobians(kin, scratch.plant_context, current)
         dq = np.zeros_like(current)
         lam2 = self._damping**2
         for p, J, target in zip(positions, jacobians, targets, strict=True):

@@ -158,9 +158,8 @@ driver: !CanHandDriver {port: %d}
 
 
 def test_hardware_station_exports_the_simulated_station_hand_ports():
-    from handle_drake.can_hand.station import MakeHardwareStation
     from handle_drake.scenario import LoadScenario
-    from handle_drake.station import MakeHandStation
+    from handle_drake.station import MakeHandStation, MakeHardwareStation
 
     scenario = LoadScenario(data=SCENARIO % free_port())
     hardware = MakeHardwareStation(scenario)
@@ -181,8 +180,8 @@ def test_hardware_station_exports_the_simulated_station_hand_ports():
 
 
 def test_hardware_station_refuses_a_floating_wrist():
-    from handle_drake.can_hand.station import MakeHardwareStation
     from handle_drake.scenario import LoadScenario
+    from handle_drake.station import MakeHardwareStation
 
     scenario = LoadScenario(data=SCENARIO.replace("!FixedMount {}", "!FloatingWrist {}")
                             % free_port())

@@ -85,6 +85,20 @@ def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
     assert babbling._config_key(config) != key
 
 
+def test_run_ids_follow_the_code_not_its_comments_or_docstrings():
+    """Editing a docstring or a comment keeps a run resumable; changing code does not."""
+    from handle_drake.experiments.babbling import code_digest
+
+    code = 'def f(x):\n    """Doubles x."""\n    return 2 * x\n'
+    reworded = ('"""A module doc."""\n\n\ndef f(x):  # the factor is 2\n'
+                '    """Twice x, reworded."""\n\n    return 2 * x\n')
+    changed = 'def f(x):\n    """Doubles x."""\n    return 3 * x\n'
+    only_doc = 'def f(x):\n    """Doubles x."""\n'
+    assert code_digest(code) == code_digest(reworded)
+    assert code_digest(code) != code_digest(changed)
+    assert code_digest(only_doc) != code_digest(code)
+
+
 def test_run_id_changes_with_the_trial_settings_and_simulation_code(monkeypatch):
     """A logged run is resumed or read back only by the same trial on the same code."""
     from handle_drake.experiments import babbling

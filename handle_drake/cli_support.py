@@ -1,0 +1,67 @@
+"""What every ``handle-drake`` sub-command shares: running one with clean errors, Meshcat.
+
+Here and not in :mod:`handle_drake.cli` so that the area modules that
+register sub-commands (``grasp/cli.py``, ``experiments/cli.py``,
+``can_hand/cli.py``) do not import the top-level command upwards.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+
+from handle_drake.blas import pin_blas
+
+__all__ = ["run_command", "start_meshcat"]
+
+
+def start_meshcat(wanted: bool):
+    """A Meshcat (its address printed) when ``wanted``, else None."""
+    if not wanted:
+        return None
+    from pydrake.geometry import StartMeshcat
+
+    meshcat = StartMeshcat()
+    print(f"Meshcat: {meshcat.web_url()}", flush=True)
+    return meshcat
+
+
+def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
+    """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
+    error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
+    from handle_drake.learning import TrialLogError
+
+    pin_blas(force=False)
+    args = parser.parse_args(argv)
+    previous = _terminate_like_ctrl_c()
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
+        print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        resume = f"; run it again to resume from {args.db}" if getattr(args, "db", None) else ""
+        print(f"handle-drake {args.command}: interrupted{resume}", file=sys.stderr)
+        return 130
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _raise_keyboard_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _terminate_like_ctrl_c():
+    """SIGTERM (``kill``, a job scheduler) takes the Ctrl-C path: the trial log
+    marks the run resumable and worker pools are shut down, instead of the
+    process vanishing and leaving its workers running. Only in the main
+    thread (signal handlers cannot be set elsewhere); returns the previous
+    handler, or None when nothing was changed. Commands with their own stop
+    logic (can-server, can-sim) install their handlers over this one."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
