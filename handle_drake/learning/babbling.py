@@ -34,12 +34,13 @@ import json
 import math
 import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
 
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
+from handle_drake.learning.cluster import executor_workers, pin_blas
 from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
 from handle_drake.learning.trials import InlineExecutor, TrialLog, run_experiment
 
@@ -93,12 +94,7 @@ class CachedTrial:
         return _trial(self.config)(x, seed=seed)
 
 
-def _pin_blas_worker():
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = "1"
-    from threadpoolctl import threadpool_limits
-
-    threadpool_limits(1)
+_pin_blas_worker = pin_blas  # the name the benchmarks import
 
 
 def _pool(workers: int):
@@ -162,7 +158,7 @@ def _config_key(config: GraspTrialConfig) -> str:
 
 
 def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int = 1,
-                progress: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
+                progress: bool = False, executor=None) -> tuple[list[np.ndarray], np.ndarray]:
     """Noiseless metric of the trial on an ``n``-per-dimension grid of its box.
 
     Returns ``(axes, values)`` with ``values`` shaped ``(n,) * d`` ('ij'
@@ -170,8 +166,14 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
     ``<cache_dir>/<hand>-<object>-<space>-n<n>-<config hash>.npz`` and read
     back on the next call (the hash covers every field of the config, noise
     included, so a changed trial is never served stale values).
+
+    ``executor`` (e.g. a :class:`~handle_drake.learning.cluster.DaskExecutor`)
+    evaluates the chunks instead of a pool of ``workers`` processes; it is
+    not shut down.
     """
     workers = _check_workers(workers)
+    if executor is not None:
+        workers = executor_workers(executor)
     config = dc.replace(config, noise=0.0)
     trial = GraspTrial(config)
     axes, points = grid_points(trial.bounds, n)
@@ -183,7 +185,7 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
                 if data["points"].shape == points.shape and np.array_equal(data["points"], points):
                     return axes, data["values"].reshape((n,) * len(axes))
     chunks = np.array_split(points, max(1, min(len(points), 8 * workers)))
-    pool = _pool(workers)
+    pool = _pool(workers) if executor is None else executor
     try:
         if pool is None:
             values = [_grid_chunk(config, chunk) for chunk in chunks]
@@ -196,7 +198,7 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
                 bar.update(1)
             bar.close()
     finally:
-        if pool is not None:
+        if pool is not None and executor is None:
             pool.shutdown(wait=True, cancel_futures=True)
     flat = np.concatenate(values)
     if cache is not None:
@@ -255,8 +257,23 @@ def _run_one(spec: RunSpec, db_path: str):
     return spec.run_id, result.n_done, result.best_y
 
 
-def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
-    """Run (or resume) every run of ``specs`` into one trial log, ``workers`` runs at a time."""
+def _run_on(executor, spec: RunSpec, db_path: str):
+    trial = GraspTrial(spec.config)
+    result = run_experiment(
+        CachedTrial(spec.config), trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
+        executor=executor, progress=False, run_id=spec.run_id, objective_name=trial.name,
+        optimizer_options=dict(spec.options))
+    return spec.run_id, result.n_done, result.best_y
+
+
+def run_batch(specs, db_path, workers: int = 1, progress: bool = True, executor=None) -> None:
+    """Run (or resume) every run of ``specs`` into one trial log, ``workers`` runs at a time.
+
+    With ``executor`` (e.g. a :class:`~handle_drake.learning.cluster.DaskExecutor`)
+    the runs' trials go to it instead, as many runs at once as it has
+    workers: each run is driven by a thread of this process, which writes
+    every row (workers on other machines never see the file).
+    """
     workers = _check_workers(workers)
     specs = list(specs)
     ids = [s.run_id for s in specs]
@@ -269,6 +286,12 @@ def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
     if not todo:
         return
     bar = _bar(len(todo), f"runs -> {Path(db_path).name}", progress)
+    if executor is not None:
+        try:
+            _run_threads(executor, todo, db_path, bar)
+        finally:
+            bar.close()
+        return
     pool = _pool(min(workers, len(todo)))
     try:
         if pool is None:
@@ -285,6 +308,21 @@ def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
         bar.close()
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_threads(executor, specs, db_path, bar) -> None:
+    threads = ThreadPoolExecutor(min(len(specs), executor_workers(executor)),
+                                 thread_name_prefix="run")
+    try:
+        futures = [threads.submit(_run_on, executor, spec, db_path) for spec in specs]
+        for future in as_completed(futures):
+            run_id, n_done, best = future.result()
+            bar.update(1)
+            bar.set_postfix_str(f"{run_id}: best {best:.3g}")
+    finally:
+        # On an error or Ctrl-C the runs not started are dropped; running
+        # ones end when their executor is closed (their rows stay resumable).
+        threads.shutdown(wait=False, cancel_futures=True)
 
 
 def _complete(spec: RunSpec, db_path) -> bool:

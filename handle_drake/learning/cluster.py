@@ -51,7 +51,8 @@ import math
 import multiprocessing
 import pickle
 import re
-from concurrent.futures import CancelledError, Executor, ProcessPoolExecutor
+import threading
+from concurrent.futures import CancelledError, Executor, Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -73,6 +74,7 @@ __all__ = [
 WORKER_DEATHS = 3  # worker deaths while running one trial before it is `failed`
 CONNECT_TIMEOUT = 10.0  # s, to reach a scheduler and to see its first worker
 DEFAULT_PORT = 8786  # the port `dask scheduler` listens on by default
+_LOG_LEVEL = logging.ERROR
 
 _ADDRESS = re.compile(r"^dask://(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+)(:(?P<port>[^/]*))?$")
 
@@ -242,7 +244,9 @@ class DaskExecutor(Executor):
     """A ``distributed.Client`` as the trial runner's executor.
 
     ``submit`` returns ``concurrent.futures`` futures (``pure=False``: two
-    trials with equal arguments are two tasks). :meth:`ship` sends an
+    trials with equal arguments are two tasks). Trials are best run on a
+    scheduler with ``distributed.scheduler.worker-saturation: 1.0`` (our
+    LocalCluster sets it; see the README for ``dask scheduler``). :meth:`ship` sends an
     objective once per worker; :meth:`trial_failure` turns Dask's errors
     into a failed trial (worker deaths) or :class:`ExecutorError` (lost
     scheduler).
@@ -250,7 +254,8 @@ class DaskExecutor(Executor):
 
     def __init__(self, client):
         self.client = client
-        self._executor = client.get_executor(pure=False)
+        self._tasks: set = set()  # Dask futures not yet settled (a dropped one is cancelled)
+        self._lock = threading.Lock()
 
     @property
     def address(self) -> str:
@@ -266,7 +271,29 @@ class DaskExecutor(Executor):
                                 f"{error}") from None
 
     def submit(self, fn, /, *args, **kwargs):
-        return self._executor.submit(fn, *args, **kwargs)
+        """``fn(*args, **kwargs)`` on a worker, as a ``concurrent.futures.Future``.
+
+        Bridged by hand rather than through ``client.get_executor()``: its
+        bridge never settles when a result is lost with a dying worker and
+        the gather fails (distributed 2026.8), which hangs the run.
+        """
+        task = self.client.submit(fn, *args, pure=False, **kwargs)
+        bridge = Future()
+        bridge.set_running_or_notify_cancel()
+        with self._lock:
+            self._tasks.add(task)
+        task.add_done_callback(lambda done: self._settle(done, bridge))  # in its own thread
+        return bridge
+
+    def _settle(self, task, bridge):
+        try:
+            # Blocks while Dask recomputes a result lost with its worker.
+            bridge.set_result(task.result())
+        except BaseException as error:  # noqa: BLE001 - handed to the runner
+            bridge.set_exception(error)
+        finally:
+            with self._lock:
+                self._tasks.discard(task)
 
     def ship(self, objective):
         return _ShippedOnce(objective)
@@ -292,7 +319,14 @@ class DaskExecutor(Executor):
         return None
 
     def shutdown(self, wait=True, *, cancel_futures=False):
-        self._executor.shutdown(wait=wait)
+        with self._lock:
+            tasks = list(self._tasks)
+        if cancel_futures and tasks:
+            self.client.cancel(tasks)
+        elif wait and tasks:
+            from distributed import wait as wait_for
+
+            wait_for(tasks)
 
 
 def as_executor(executor):
@@ -347,27 +381,38 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         return
-    client, cluster = _connect(spec, workers, connect_timeout, worker_deaths)
-    try:
-        yield DaskExecutor(client)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
-def _connect(spec: ExecutorSpec, workers, connect_timeout, worker_deaths):
     try:
         import dask
-        from distributed import Client, LocalCluster
     except ImportError as error:
         raise ExecutorError(f"executor {spec}: Dask is not installed ({error}); "
                             "pip install 'handle_drake[dask]'") from None
+    # For our LocalCluster (read while it runs, so set for its lifetime):
+    # worker-saturation 1: a worker holds only the trial it runs, so a dying
+    # worker makes no other trial "suspicious" (Dask counts a death against
+    # every task assigned to the worker). lost-worker-timeout: LocalCluster
+    # closes for good a worker away for longer (15 s by default), and a
+    # worker that imports Drake on a loaded machine can take that long to
+    # restart: the cluster would shrink to nothing and the run would wait.
+    local_config = {"distributed.scheduler.allowed-failures": worker_deaths - 1,
+                    "distributed.scheduler.worker-saturation": 1.0,
+                    "distributed.deploy.lost-worker-timeout": "1 day"}
+    with dask.config.set(local_config if spec.address is None else {}):
+        client, cluster = _connect(spec, workers, connect_timeout)
+        try:
+            yield DaskExecutor(client)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def _connect(spec: ExecutorSpec, workers, connect_timeout):
+    from distributed import Client, LocalCluster
+
     if spec.address is None:
-        with dask.config.set({"distributed.scheduler.allowed-failures": worker_deaths - 1}):
-            cluster = LocalCluster(
-                n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                scheduler_port=0, dashboard_address=None, silence_logs=logging.ERROR)
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+            scheduler_port=0, dashboard_address=None, silence_logs=_LOG_LEVEL)
         try:
             return Client(cluster), cluster
         except BaseException:
