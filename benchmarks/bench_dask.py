@@ -134,14 +134,15 @@ def main(argv=None) -> int:
                 _bare_noop(executor, 20)
         for r in range(rounds):
             for (kind, workers), (_, executor) in opened.items():
+                tag = f"{kind}{workers}-r{r}"
                 cases = {
-                    "random": lambda e=executor, w=workers, k=kind: _random_run(
-                        e, objective, bounds, n_random, f"{k}{w}-r{r}"),
-                    "pso": lambda e=executor: _pso_iterations(
+                    "random": lambda e=executor, t=tag: _random_run(
+                        e, objective, bounds, n_random, t),
+                    "pso": lambda e=executor, r=r: _pso_iterations(
                         e, objective, bounds, args.swarm, iterations, seed=r),
                     "noop_executor": lambda e=executor: _bare_noop(e, n_noop),
-                    "noop_runner": lambda e=executor, w=workers, k=kind: _random_run(
-                        e, noop, bounds, n_noop // 4, f"noop-{k}{w}-r{r}"),
+                    "noop_runner": lambda e=executor, t=tag: _random_run(
+                        e, noop, bounds, n_noop // 4, "noop-" + t),
                 }
                 for name, case in cases.items():
                     before = _load()
@@ -187,14 +188,15 @@ def main(argv=None) -> int:
         print(f"{row['workload']:14s} {row['executor']:8s} {row['tps_1']:10.2f} "
               f"{row['tps_2']:10.2f} {row['efficiency_2']:10.2f} {row['vs_local_1']:10.3f} "
               f"{row['vs_local_2']:10.3f}  {row['load']}")
-    print(f"\nDask overhead per task over the local pool (no-op): "
+    print("\nDask overhead per task over the local pool (no-op): "
           + ", ".join(f"{w} worker(s) {overhead[w] * 1e3:+.2f} ms" for w in WORKERS))
     print(f"Dask per-task cost (no-op, 2 workers): {per_task * 1e3:.2f} ms executor only, "
           f"{per_trial_runner * 1e3:.2f} ms per trial through the runner (ask, SQLite, tell)")
     for key, value in projection.items():
         print(f"100 workers, trials of {key.replace('_', ' ')}: need "
-              f"{value['tasks_per_s_needed']:.0f}/s, capacity {value['capacity_tasks_per_s']:.0f}/s,"
-              f" efficiency bound {value['efficiency_bound']:.2f}")
+              f"{value['tasks_per_s_needed']:.0f}/s, capacity "
+              f"{value['capacity_tasks_per_s']:.0f}/s, efficiency bound "
+              f"{value['efficiency_bound']:.2f}")
     result = dict(
         benchmark="dask", config=str(CONFIG), rounds=rounds, random_trials=n_random,
         pso=dict(swarm=args.swarm, iterations=iterations), noop_tasks=n_noop,
