@@ -224,3 +224,23 @@ def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
     resumed = _run(db, "random", 12, InlineExecutor())
     reference = _run(tmp_path / "ref.sqlite", "random", 12, InlineExecutor())
     assert _rows(resumed) == _rows(reference)
+
+
+def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path):
+    """The real grasp trial: ``babble --executor dask`` (2 worker processes) logs each
+    trial once, and each metric is what the same simulation gives in this process."""
+    from handle_drake.learning.cli import main
+    from handle_drake.learning.grasp_trial import GraspTrial
+
+    db = tmp_path / "babble.sqlite"
+    assert main(["babble", "--object", "sphere", "--dims", "2", "--strategy", "random",
+                 "--trials", "4", "--seed", "2", "--noise", "0.01", "--executor", "dask",
+                 "--workers", "2", "--db", str(db), "--no-progress", "--no-plot"]) == 0
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        rows = log.trials(run.run_id)
+    assert [r.index for r in rows] == [0, 1, 2, 3]
+    assert all(r.status == "done" for r in rows)
+    trial = GraspTrial(hand="barrett", object="sphere", space="offset", noise=0.01)
+    for row in rows[:2]:
+        assert row.metric == trial(row.parameters, seed=row.seed).metric
