@@ -47,10 +47,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from handle_drake.learning.babbling import CachedTrial  # noqa: E402
+from handle_drake.experiments.babbling import CachedTrial  # noqa: E402
+from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig  # noqa: E402
+from handle_drake.learning import run_experiment  # noqa: E402
 from handle_drake.learning.cluster import LocalPool, trial_executor  # noqa: E402
-from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig  # noqa: E402
-from handle_drake.learning.trials import _evaluate, run_experiment  # noqa: E402
+from handle_drake.learning.executors import _evaluate  # noqa: E402
 
 CONFIG = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
 EXECUTORS = ("local", "dask")

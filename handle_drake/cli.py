@@ -21,7 +21,7 @@ from pathlib import Path
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.grasp.cli",
-    "handle_drake.learning.cli",
+    "handle_drake.experiments.cli",
     "handle_drake.can_hand.cli",
 )
 
@@ -78,6 +78,12 @@ def _cmd_simulate(args) -> int:
     if result.object_position is not None:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
+    if result.score is not None:
+        m, score = scenario.metric, result.score
+        print(f"grasp metric (BW, soft finger, mean of {m.hold_samples} instants over the last "
+              f"{m.hold_window:g} s): {score.value!r} "
+              f"({'force closure' if score.force_closure else 'not in force closure'}); "
+              f"touching: {', '.join(sorted(score.contacts)) or 'nothing'}")
     if args.quality:
         value, closure, contacts = runner.grasp_quality()
         print(f"grasp quality (BW metric, soft finger): {value:+.4f} "
@@ -113,14 +119,15 @@ def build_parser() -> argparse.ArgumentParser:
 def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
-    from handle_drake.learning.trials import TrialLogError
+    from handle_drake.learning import TrialLogError
+    from handle_drake.learning.cluster import ExecutorError
 
     _pin_blas()
     args = parser.parse_args(argv)
     previous = _terminate_like_ctrl_c()
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

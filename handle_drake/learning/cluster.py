@@ -12,7 +12,7 @@ Every command that runs trials takes the same ``--executor`` option
 - ``dask://HOST:PORT``: an existing ``dask scheduler`` and the ``dask worker``
   processes that joined it, on any number of machines.
 
-In Python, :class:`TrialRunner <handle_drake.learning.trials.TrialRunner>` and
+In Python, :class:`TrialRunner <handle_drake.learning.runner.TrialRunner>` and
 ``run_experiment`` accept a ``distributed.Client`` or its ``get_executor()``
 wherever they accept an executor (:func:`as_executor` wraps it).
 
@@ -37,7 +37,7 @@ Failures:
   through the runner. Either way the client records the trial once.
 - A lost scheduler: :class:`ExecutorError` says so; the trials that were
   running stay ``running`` in the log and run again when the command is
-  repeated (the resume of :mod:`handle_drake.learning.trials`).
+  repeated (the resume of :mod:`handle_drake.learning.runner`).
 - An address where no scheduler answers, or a scheduler without workers:
   :class:`ExecutorError` within ``connect_timeout`` seconds.
 """
@@ -367,7 +367,7 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     scheduler answers at the address, or it has no worker, within
     ``connect_timeout`` s.
     """
-    from handle_drake.learning.trials import InlineExecutor
+    from handle_drake.learning.executors import InlineExecutor
 
     spec = ExecutorSpec.parse(executor)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:

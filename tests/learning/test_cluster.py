@@ -144,7 +144,7 @@ def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
 
 
 def test_a_wrong_scheduler_address_fails_fast_with_a_clear_message(tmp_path, capsys):
-    from handle_drake.learning.cli import main
+    from handle_drake.experiments.cli import main
 
     address = f"127.0.0.1:{_free_port()}"  # nothing listens there
     outcome = {}
@@ -181,8 +181,10 @@ class Slow:
 
 
 def _start(args):
+    # The same code as this process (a deployment installs the same checkout everywhere).
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
     return subprocess.Popen([sys.executable, "-m", *args], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+                            stderr=subprocess.DEVNULL, env=env)
 
 
 def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
@@ -229,8 +231,8 @@ def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
 def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path):
     """The real grasp trial: ``babble --executor dask`` (2 worker processes) logs each
     trial once, and each metric is what the same simulation gives in this process."""
-    from handle_drake.learning.cli import main
-    from handle_drake.learning.grasp_trial import GraspTrial
+    from handle_drake.experiments.cli import main
+    from handle_drake.experiments.grasp_trial import GraspTrial
 
     db = tmp_path / "babble.sqlite"
     assert main(["babble", "--object", "sphere", "--dims", "2", "--strategy", "random",
