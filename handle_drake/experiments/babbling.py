@@ -32,9 +32,8 @@ import functools
 import hashlib
 import json
 import math
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +41,7 @@ import numpy as np
 from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
 from handle_drake.learning import InlineExecutor, TrialLog, run_experiment
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
-from handle_drake.learning.cluster import executor_workers, pin_blas
+from handle_drake.learning.cluster import LocalPool, executor_workers, pin_blas
 
 __all__ = [
     "CachedTrial",
@@ -101,8 +100,7 @@ def _pool(workers: int):
     """A spawn process pool with one BLAS thread per worker, or None to run inline."""
     if workers <= 1:
         return None
-    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_pin_blas_worker)
+    return LocalPool(workers)
 
 
 def _check_workers(workers) -> int:
@@ -248,22 +246,15 @@ def _config_key_options(options) -> str:
     return hashlib.sha1(json.dumps(list(options), sort_keys=True).encode()).hexdigest()[:8]
 
 
-def _run_one(spec: RunSpec, db_path: str):
+def _run_one(spec: RunSpec, db_path: str, executor=None):
+    """One run: in this process, or with its trials on ``executor`` (driven from here)."""
     trial = _trial(spec.config)
+    objective = trial if executor is None else CachedTrial(spec.config)
     result = run_experiment(
-        trial, trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
-        executor=InlineExecutor(), progress=False, run_id=spec.run_id,
+        objective, trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
+        executor=executor or InlineExecutor(), progress=False, run_id=spec.run_id,
         objective_name=trial.name, optimizer_options=dict(spec.options),
     )
-    return spec.run_id, result.n_done, result.best_y
-
-
-def _run_on(executor, spec: RunSpec, db_path: str):
-    trial = GraspTrial(spec.config)
-    result = run_experiment(
-        CachedTrial(spec.config), trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
-        executor=executor, progress=False, run_id=spec.run_id, objective_name=trial.name,
-        optimizer_options=dict(spec.options))
     return spec.run_id, result.n_done, result.best_y
 
 
@@ -315,7 +306,7 @@ def _run_threads(executor, specs, db_path, bar) -> None:
     threads = ThreadPoolExecutor(min(len(specs), executor_workers(executor)),
                                  thread_name_prefix="run")
     try:
-        futures = [threads.submit(_run_on, executor, spec, db_path) for spec in specs]
+        futures = [threads.submit(_run_one, spec, db_path, executor) for spec in specs]
         for future in as_completed(futures):
             run_id, n_done, best = future.result()
             bar.update(1)
