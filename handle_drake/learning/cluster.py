@@ -410,9 +410,12 @@ def _connect(spec: ExecutorSpec, workers, connect_timeout):
     from distributed import Client, LocalCluster
 
     if spec.address is None:
+        # No dashboard; the scheduler's plain HTTP routes (health, metrics) still
+        # start, on port 8787 unless told otherwise: a random port instead.
         cluster = LocalCluster(
             n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-            scheduler_port=0, dashboard_address=None, silence_logs=_LOG_LEVEL)
+            scheduler_port=0, dashboard_address=None, silence_logs=_LOG_LEVEL,
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
         try:
             return Client(cluster), cluster
         except BaseException:

@@ -198,6 +198,7 @@ def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
     worker = _start(["distributed.cli.dask_worker", address, "--nthreads", "1",
                      "--no-dashboard", "--host", "127.0.0.1"])
     db = tmp_path / "lost.sqlite"
+    TrialLog(db).close()  # the schema exists before two connections look at the file
     try:
         with trial_executor(f"dask://127.0.0.1:{port}", connect_timeout=60) as executor:
             assert isinstance(executor, DaskExecutor)
