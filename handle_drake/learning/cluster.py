@@ -49,6 +49,7 @@ import hashlib
 import logging
 import math
 import multiprocessing
+import os
 import pickle
 import re
 import threading
@@ -158,8 +159,6 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
 # -------------------------------------------------------------- worker side
 def pin_blas() -> None:
     """One BLAS thread in this process (parallelism is across worker processes)."""
-    import os
-
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[name] = "1"  # for anything the process starts later
     # numpy is loaded already, so the variables come too late for its BLAS.
@@ -221,16 +220,14 @@ class LocalPool(Executor):
         self._pool = None
 
     def submit(self, fn, /, *args, **kwargs):
-        if self._pool is not None and getattr(self._pool, "_broken", False):
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
         if self._pool is None:
             self._pool = ProcessPoolExecutor(
                 max_workers=self.max_workers, mp_context=multiprocessing.get_context("spawn"),
                 initializer=self._initializer, initargs=self._initargs)
         try:
             return self._pool.submit(fn, *args, **kwargs)
-        except BrokenProcessPool:  # broke between the check and the submit
+        except BrokenProcessPool:  # a worker died: this pool takes no more work
+            self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
             return self.submit(fn, *args, **kwargs)
 
@@ -246,10 +243,10 @@ class DaskExecutor(Executor):
     ``submit`` returns ``concurrent.futures`` futures (``pure=False``: two
     trials with equal arguments are two tasks). Trials are best run on a
     scheduler with ``distributed.scheduler.worker-saturation: 1.0`` (our
-    LocalCluster sets it; see the README for ``dask scheduler``). :meth:`ship` sends an
-    objective once per worker; :meth:`trial_failure` turns Dask's errors
-    into a failed trial (worker deaths) or :class:`ExecutorError` (lost
-    scheduler).
+    LocalCluster sets it; see the README for ``dask scheduler``).
+    :meth:`ship` pickles an objective once, to be unpickled once per worker;
+    :meth:`trial_failure` turns Dask's errors into a failed trial (worker
+    deaths) or :class:`ExecutorError` (lost scheduler).
     """
 
     def __init__(self, client):
