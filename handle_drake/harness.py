@@ -44,7 +44,6 @@ from pydrake.systems.primitives import VectorLogSink
 
 from handle_drake.scenario import Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
-from handle_drake.viewing import frame_hand_and_object
 
 __all__ = ["TrialHarness", "RunResult", "HoldScore", "LOG_PERIOD", "DEFAULT_LOG",
            "advance_recording"]
@@ -100,6 +99,9 @@ def advance_recording(simulator, t_final, station, meshcat=None,
     if meshcat is not None and station.HasOutputPort("body_poses"):
         # Open the view framed on the hand and object (simulation only: the
         # hardware station has no plant to read poses from).
+        from handle_drake.station import GetPlant
+        from handle_drake.viewing import frame_hand_and_object
+
         plant = GetPlant(station)
         plant_context = plant.GetMyContextFromRoot(simulator.get_context())
         framed = frame_hand_and_object(meshcat, plant, plant_context)
