@@ -22,6 +22,9 @@ Trials and grids are shared with ``handle-drake report`` (``--out``, default
 ``out/report``): whatever the report already ran is read back, not re-run.
 gp_minimize runs are cached as JSON under ``<out>/gp_minimize/``.
 
+Grids and BO/random runs go to ``--executor`` (``local``, ``dask``,
+``dask://HOST:PORT``; the numbers do not depend on it).
+
 Run: ``python benchmarks/bench_babbling.py [--quick]``; writes
 ``benchmarks/results/babbling.json``.
 """
@@ -29,6 +32,7 @@ Run: ``python benchmarks/bench_babbling.py [--quick]``; writes
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses as dc
 import json
 import math
@@ -65,6 +69,7 @@ from handle_drake.experiments.report import (  # noqa: E402
     _table3_spec,
 )
 from handle_drake.learning.bayesopt import _derived_seed, v1_options  # noqa: E402
+from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "babbling.json"
 
@@ -143,6 +148,7 @@ def main(argv=None) -> int:
     parser.add_argument("--objects", default=None,
                         help="comma-separated subset of the seven objects")
     parser.add_argument("--no-skopt", action="store_true", help="leave out gp_minimize")
+    add_executor_arguments(parser)  # grids and BO/random runs; gp_minimize stays local
     args = parser.parse_args(argv)
 
     if args.quick:
@@ -164,22 +170,28 @@ def main(argv=None) -> int:
         settings = dc.replace(settings, seeds=args.seeds)
     db = out / "babble.sqlite"
     timings = {}
-
-    start = time.perf_counter()
-    truth = {kind: grid_values(_offset_config(kind, 0.0), settings.grid, out / "grids",
-                               settings.workers, progress=True) for kind in objects}
-    timings["grids_s"] = time.perf_counter() - start
-
     seeds = range(args.seed_offset, args.seed_offset + settings.seeds)
     bo = {k: [_table3_spec(k, s, settings) for s in seeds] for k in objects}
     rnd = {k: [_random_spec(k, s, settings) for s in seeds] for k in objects}
     v1 = {} if args.no_v1 else {k: [dc.replace(spec, options=tuple(sorted(
         v1_options(2).items()))) for spec in bo[k]] for k in objects}
-    start = time.perf_counter()
-    # Old defaults first (they stop early, so are cheap), then the new ones.
-    run_batch([s for k in objects for s in v1.get(k, []) + bo[k] + rnd[k]], db,
-              settings.workers)
-    timings["bo_and_random_runs_s"] = time.perf_counter() - start
+
+    # `local` keeps its pools of `workers` processes (a whole run per process).
+    cluster, executor = contextlib.ExitStack(), None
+    if args.executor.kind == "dask":
+        executor = cluster.enter_context(trial_executor(
+            args.executor, settings.workers, connect_timeout=args.connect_timeout))
+    with cluster:
+        start = time.perf_counter()
+        truth = {kind: grid_values(_offset_config(kind, 0.0), settings.grid, out / "grids",
+                                   settings.workers, progress=True, executor=executor)
+                 for kind in objects}
+        timings["grids_s"] = time.perf_counter() - start
+        start = time.perf_counter()
+        # Old defaults first (they stop early, so are cheap), then the new ones.
+        run_batch([s for k in objects for s in v1.get(k, []) + bo[k] + rnd[k]], db,
+                  settings.workers, executor=executor)
+        timings["bo_and_random_runs_s"] = time.perf_counter() - start
 
     start = time.perf_counter()
     jobs = [] if args.no_skopt else [(k, s) for k in objects

@@ -31,13 +31,14 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
     from handle_drake.learning import TrialLogError
+    from handle_drake.learning.cluster import ExecutorError
 
     pin_blas(force=False)
     args = parser.parse_args(argv)
     previous = _terminate_like_ctrl_c()
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

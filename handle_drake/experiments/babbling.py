@@ -33,17 +33,16 @@ import functools
 import hashlib
 import json
 import math
-import multiprocessing
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
 
-from handle_drake.blas import pin_blas
 from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
+from handle_drake.learning.cluster import LocalPool, executor_workers
 
 __all__ = [
     "CachedTrial",
@@ -99,8 +98,7 @@ def _pool(workers: int):
     """A spawn process pool with one BLAS thread per worker, or None to run inline."""
     if workers <= 1:
         return None
-    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=pin_blas)
+    return LocalPool(workers)
 
 
 def _check_workers(workers) -> int:
@@ -180,7 +178,7 @@ def _config_key(config: GraspTrialConfig) -> str:
 
 
 def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int = 1,
-                progress: bool = False) -> tuple[list[np.ndarray], np.ndarray]:
+                progress: bool = False, executor=None) -> tuple[list[np.ndarray], np.ndarray]:
     """Noiseless metric of the trial on an ``n``-per-dimension grid of its box.
 
     Returns ``(axes, values)`` with ``values`` shaped ``(n,) * d`` ('ij'
@@ -188,8 +186,14 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
     ``<cache_dir>/<hand>-<object>-<space>-n<n>-<config hash>.npz`` and read
     back on the next call (the hash covers every field of the config, noise
     included, so a changed trial is never served stale values).
+
+    ``executor`` (e.g. a :class:`~handle_drake.learning.cluster.DaskExecutor`)
+    evaluates the chunks instead of a pool of ``workers`` processes; it is
+    not shut down.
     """
     workers = _check_workers(workers)
+    if executor is not None:
+        workers = executor_workers(executor)
     config = dc.replace(config, noise=0.0)
     trial = GraspTrial(config)
     axes, points = grid_points(trial.bounds, n)
@@ -201,7 +205,7 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
                 if data["points"].shape == points.shape and np.array_equal(data["points"], points):
                     return axes, data["values"].reshape((n,) * len(axes))
     chunks = np.array_split(points, max(1, min(len(points), 8 * workers)))
-    pool = _pool(workers)
+    pool = _pool(workers) if executor is None else executor
     try:
         if pool is None:
             values = [_grid_chunk(config, chunk) for chunk in chunks]
@@ -214,7 +218,7 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
                 bar.update(1)
             bar.close()
     finally:
-        if pool is not None:
+        if pool is not None and executor is None:
             pool.shutdown(wait=True, cancel_futures=True)
     flat = np.concatenate(values)
     if cache is not None:
@@ -263,18 +267,26 @@ def _config_key_options(options) -> str:
     return hashlib.sha1(json.dumps(list(options), sort_keys=True).encode()).hexdigest()[:8]
 
 
-def _run_one(spec: RunSpec, db_path: str):
+def _run_one(spec: RunSpec, db_path: str, executor=None):
+    """One run: in this process, or with its trials on ``executor`` (driven from here)."""
     trial = _trial(spec.config)
+    objective = trial if executor is None else CachedTrial(spec.config)
     result = run_experiment(
-        trial, trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
-        executor=InlineExecutor(), progress=False, run_id=spec.run_id,
+        objective, trial.bounds, spec.strategy, spec.n_trials, spec.seed, db_path,
+        executor=executor or InlineExecutor(), progress=False, run_id=spec.run_id,
         objective_name=trial.name, optimizer_options=dict(spec.options),
     )
     return spec.run_id, result.n_done, result.best_y
 
 
-def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
-    """Run (or resume) every run of ``specs`` into one trial log, ``workers`` runs at a time."""
+def run_batch(specs, db_path, workers: int = 1, progress: bool = True, executor=None) -> None:
+    """Run (or resume) every run of ``specs`` into one trial log, ``workers`` runs at a time.
+
+    With ``executor`` (e.g. a :class:`~handle_drake.learning.cluster.DaskExecutor`)
+    the runs' trials go to it instead, as many runs at once as it has
+    workers: each run is driven by a thread of this process, which writes
+    every row (workers on other machines never see the file).
+    """
     workers = _check_workers(workers)
     specs = list(specs)
     ids = [s.run_id for s in specs]
@@ -287,6 +299,12 @@ def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
     if not todo:
         return
     bar = _bar(len(todo), f"runs -> {Path(db_path).name}", progress)
+    if executor is not None:
+        try:
+            _run_threads(executor, todo, db_path, bar)
+        finally:
+            bar.close()
+        return
     pool = _pool(min(workers, len(todo)))
     try:
         if pool is None:
@@ -303,6 +321,21 @@ def run_batch(specs, db_path, workers: int = 1, progress: bool = True) -> None:
         bar.close()
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _run_threads(executor, specs, db_path, bar) -> None:
+    threads = ThreadPoolExecutor(min(len(specs), executor_workers(executor)),
+                                 thread_name_prefix="run")
+    try:
+        futures = [threads.submit(_run_one, spec, db_path, executor) for spec in specs]
+        for future in as_completed(futures):
+            run_id, n_done, best = future.result()
+            bar.update(1)
+            bar.set_postfix_str(f"{run_id}: best {best:.3g}")
+    finally:
+        # On an error or Ctrl-C the runs not started are dropped; running
+        # ones end when their executor is closed (their rows stay resumable).
+        threads.shutdown(wait=False, cancel_futures=True)
 
 
 def _complete(spec: RunSpec, db_path) -> bool:

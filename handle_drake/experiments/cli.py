@@ -6,6 +6,7 @@ Examples::
         --seed 1 --noise 0.01 --db out/babble.sqlite
     handle-drake babble --hand shadow --object cuboid --space synergy --trials 100
     handle-drake babble --object sphere --strategy random --trials 200 --workers 2
+    handle-drake babble --object mug --strategy random --trials 500 --executor dask://head:8786
     handle-drake report --out out/report            # full: ~30 min on 2 cores
     handle-drake report --out /tmp/r --reduced      # seconds
 
@@ -25,6 +26,7 @@ import math
 import sys
 from pathlib import Path
 
+from handle_drake.learning.cluster import add_executor_arguments
 from handle_drake.objects import KINDS
 
 __all__ = ["register", "main", "build_parser", "SPACE_OF_DIMS"]
@@ -100,9 +102,11 @@ def register(subparsers) -> None:
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
     p.add_argument("--workers", type=_positive_int, default=1,
-                   help="trials run in parallel; BO then proposes batches of this size "
-                        "(kriging believer), a run of its own (default 1: the report's "
-                        "sequential BO)")
+                   help="trials run in parallel (worker processes of 'local' and 'dask'); BO "
+                        "then proposes batches of this size (kriging believer), a run of its "
+                        "own (default 1: the report's sequential BO). With dask://, random "
+                        "search runs as many trials at once as the cluster has workers")
+    add_executor_arguments(p)
     p.add_argument("--run-id", default=None, help="name of the run in the log")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="figure of the run: metric per trial with the best so far, and the "
@@ -125,7 +129,9 @@ def register(subparsers) -> None:
     p.add_argument("--ei-stop", type=_non_negative_float, default=None, metavar="THRESHOLD",
                    help="stop the Table 3 BO runs on the EI rule with this threshold "
                         "(e.g. 1e-6; default 0: every run uses the whole --trials budget)")
-    p.add_argument("--workers", type=_positive_int, default=None, help="processes (default 2)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="worker processes of 'local' and 'dask' (default 2)")
+    add_executor_arguments(p)
     p.add_argument("--reduced", action="store_true",
                    help="tiny grids and few trials (also HANDLE_DRAKE_REDUCED=1)")
     p.add_argument("--no-progress", action="store_true", help="no progress output")
@@ -142,16 +148,10 @@ def _resolve_space(args) -> str:
 
 
 def _cmd_babble(args) -> int:
-    from concurrent.futures import ProcessPoolExecutor
-
-    from handle_drake.experiments.babbling import CachedTrial, RunSpec, _pool
+    from handle_drake.experiments.babbling import CachedTrial, RunSpec
     from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
-    from handle_drake.learning import (
-        InlineExecutor,
-        TrialLog,
-        TrialLogError,
-        run_experiment,
-    )
+    from handle_drake.learning import TrialLog, TrialLogError, run_experiment
+    from handle_drake.learning.cluster import trial_executor
 
     space = _resolve_space(args)
     config = GraspTrialConfig(hand=args.hand, object=args.object, space=space, noise=args.noise,
@@ -174,20 +174,18 @@ def _cmd_babble(args) -> int:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
     except TrialLogError as error:  # the lead's CLI maps ValueError to exit status 2
         raise ValueError(f"--db: {error}") from None
-    if args.workers > 1:
-        objective, executor = CachedTrial(config), _pool(args.workers)
-    else:
-        objective, executor = trial, InlineExecutor()
-    print(f"babble: {trial.name}, {args.strategy}, seed {args.seed}, up to {args.trials} "
-          f"trials, run {run_id!r} in {args.db}", flush=True)
-    try:
+    # One local worker runs trials in this process; elsewhere each worker
+    # process builds the trial's diagram once (CachedTrial holds the config).
+    in_process = args.executor.kind == "local" and args.workers == 1
+    objective = trial if in_process else CachedTrial(config)
+    with trial_executor(args.executor, args.workers,
+                        connect_timeout=args.connect_timeout) as executor:
+        print(f"babble: {trial.name}, {args.strategy}, seed {args.seed}, up to {args.trials} "
+              f"trials, run {run_id!r} in {args.db} ({args.executor} executor)", flush=True)
         result = run_experiment(
             objective, trial.bounds, args.strategy, args.trials, args.seed, args.db,
             executor=executor, progress=not args.no_progress, run_id=run_id,
-            objective_name=trial.name, optimizer_options=options, workers=args.workers)
-    finally:
-        if isinstance(executor, ProcessPoolExecutor):
-            executor.shutdown(wait=True, cancel_futures=True)
+            objective_name=trial.name, optimizer_options=options)
     print(f"trials: {result.n_done} done, {result.n_failed} failed"
           + (" (BO stopped: expected improvement below threshold)" if result.converged else ""))
     if result.best_x is None:
@@ -217,8 +215,8 @@ def _cmd_report(args) -> int:
     reduced = True if args.reduced else None
     summary = make_report(args.out, seeds=args.seeds, trials=args.trials, grid=args.grid,
                           reduced=reduced, workers=args.workers, noise=args.noise,
-                          ei_stop=args.ei_stop,
-                          progress=not args.no_progress)
+                          ei_stop=args.ei_stop, progress=not args.no_progress,
+                          executor=args.executor, connect_timeout=args.connect_timeout)
     print((Path(args.out) / "table3.md").read_text())
     for kind, entry in summary["bo_vs_random"].items():
         marks = entry["bo"]["median_best_at"]

@@ -55,6 +55,12 @@ from handle_drake.experiments.babbling import (
 from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
 from handle_drake.experiments.plots import figure, gp_mean_map, panel
 from handle_drake.learning.bayesopt import BayesianOptimizer
+from handle_drake.learning.cluster import (
+    CONNECT_TIMEOUT,
+    ExecutorSpec,
+    as_executor,
+    trial_executor,
+)
 from handle_drake.objects import KINDS
 from handle_drake.testing import reduced as reduced_mode
 
@@ -131,12 +137,27 @@ def _synergy_config(noise=0.0) -> GraspTrialConfig:
 def make_report(out_dir="out/report", seeds: int | None = None, trials: int | None = None,
                 grid: int | None = None, reduced: bool | None = None, workers: int | None = None,
                 noise: float | None = None, ei_stop: float | None = None,
-                progress: bool = True) -> dict:
+                progress: bool = True, executor="local",
+                connect_timeout: float = CONNECT_TIMEOUT) -> dict:
     """Run (or resume) every experiment and write the figures and tables; returns the summary.
 
     ``reduced`` (default: ``handle_drake.testing.reduced()``) starts from
     :meth:`ReportSettings.small`; explicit arguments override either default.
+    ``executor``: ``"local"`` (pools of ``workers`` processes, a whole run
+    per process), ``"dask"`` (a LocalCluster of ``workers`` processes),
+    ``"dask://HOST:PORT"``, or an open executor (a ``distributed.Client``
+    too): grids and trials run there, the runs are driven and logged here.
+    The numbers do not depend on the choice.
     """
+    if isinstance(executor, str | ExecutorSpec):
+        spec = ExecutorSpec.parse(executor)
+        if spec.kind != "local":
+            workers_ = workers if workers is not None else ReportSettings.workers
+            with trial_executor(spec, workers_, connect_timeout=connect_timeout) as opened:
+                return make_report(out_dir, seeds, trials, grid, reduced, workers, noise,
+                                   ei_stop, progress, opened)
+        executor = None
+    executor = None if executor is None else as_executor(executor)
     if reduced is None:
         reduced = reduced_mode()
     base = ReportSettings.small() if reduced else ReportSettings()
@@ -160,10 +181,10 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
         return value
 
     summary["one_d"] = step("1-D scans (Figures 21-22)",
-                            lambda: _one_d(out, db, grids, settings, progress))
+                            lambda: _one_d(out, db, grids, settings, progress, executor))
     truth = step("2-D grids", lambda: {
         kind: grid_values(_offset_config(kind, 0.0), settings.grid, grids, settings.workers,
-                          progress) for kind in OBJECT_ORDER})
+                          progress, executor) for kind in OBJECT_ORDER})
     table3_specs = {kind: [_table3_spec(kind, s, settings) for s in range(settings.seeds)]
                     for kind in OBJECT_ORDER}
     random_specs = {kind: [_random_spec(kind, s, settings) for s in range(settings.seeds)]
@@ -172,13 +193,13 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
     all_specs = [s for specs in table3_specs.values() for s in specs] + [
         s for specs in random_specs.values() for s in specs] + [synergy_spec]
     step("BO, random and synergy runs",
-         lambda: run_batch(all_specs, db, settings.workers, progress))
+         lambda: run_batch(all_specs, db, settings.workers, progress, executor))
     summary["table3"] = step("Table 3 and Figures 23-25", lambda: _table3(
         out, db, truth, table3_specs, settings))
     summary["bo_vs_random"] = step("Figures 26-27", lambda: _bo_vs_random(
         out, db, truth, table3_specs, random_specs, settings))
     summary["synergy"] = step("Figure 28", lambda: _synergy(
-        out, db, grids, synergy_spec, settings, progress))
+        out, db, grids, synergy_spec, settings, progress, executor))
     summary["timings_s"] = timings
     (out / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1))
     if progress:
@@ -202,12 +223,12 @@ def _jsonable(value):
 
 
 # ------------------------------------------------------------------- 1-D
-def _one_d(out, db, grids, s: ReportSettings, progress) -> dict:
+def _one_d(out, db, grids, s: ReportSettings, progress, executor=None) -> dict:
     result = {}
     for kind, figure_name, pick in (("sphere", "fig21_sphere_1d.png", np.argmin),
                                     ("star_prism", "fig22_star_prism_1d.png", np.argmax)):
         config = GraspTrialConfig(hand="barrett", object=kind, space="standoff")
-        (axis,), scan = grid_values(config, s.scan, grids, s.workers, progress)
+        (axis,), scan = grid_values(config, s.scan, grids, s.workers, progress, executor)
         bounds = GraspTrial(config).bounds
         # The report starts from one random sample; pick the seed whose first
         # sample is the worst (sphere, Fig. 21) or best (star prism, Fig. 22).
@@ -216,7 +237,7 @@ def _one_d(out, db, grids, s: ReportSettings, progress) -> dict:
         first_values = np.interp(firsts, axis, scan)
         seed = int(pick(first_values))
         spec = RunSpec(config, "bo", seed, s.trials_1d, options=(("n_initial", 1),))
-        run_batch([spec], db, 1, progress=False)
+        run_batch([spec], db, 1, progress=False, executor=executor)
         history = run_history(db, spec)
         n = len(history.X)
         snapshots = sorted({1, min(n - 1, 3), min(n - 1, max(4, n // 2)), n})
@@ -387,9 +408,10 @@ def _bo_vs_random(out, db, truth, bo_specs, random_specs, s) -> dict:
 
 
 # ------------------------------------------------------------ synergy babbling
-def _synergy(out, db, grids, spec, s, progress) -> dict:
+def _synergy(out, db, grids, spec, s, progress, executor=None) -> dict:
     history = run_history(db, spec)
-    axes_xy, truth = grid_values(_synergy_config(), s.synergy_grid, grids, s.workers, progress)
+    axes_xy, truth = grid_values(_synergy_config(), s.synergy_grid, grids, s.workers, progress,
+                                 executor)
     dense_axes = [np.linspace(-1, 1, 61)] * 2
     mean = gp_mean_map(spec, history, dense_axes)
     fig, axs = figure(1, 2, (10, 4.2))

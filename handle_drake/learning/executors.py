@@ -6,7 +6,9 @@ The default pool is a ``ProcessPoolExecutor`` (spawn start method, which is
 safe with Drake's threads) whose workers pin BLAS to one thread and receive
 the objective once (the objective may build its simulation diagram on its
 first call and reuse it). ``KeyboardInterrupt`` and ``SystemExit`` are not
-caught; a worker process that dies fails the trials it was running.
+caught; a worker process that dies breaks the pool: :class:`LocalPool`
+replaces itself and the runner re-runs the trials (``WORKER_DEATHS``).
+Executors for more processes and machines (Dask): :mod:`.cluster`.
 """
 
 from __future__ import annotations
@@ -14,14 +16,14 @@ from __future__ import annotations
 import inspect
 import json
 import math
-import multiprocessing
 import time
 import traceback
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from typing import Any
 
 from handle_drake.blas import pin_blas
+from handle_drake.learning.cluster import LocalPool
 
 
 @dataclass
@@ -98,9 +100,4 @@ def _evaluate_in_worker(x, seed, pass_seed):
 
 
 def _default_pool(objective, max_workers):
-    return ProcessPoolExecutor(
-        max_workers=max_workers,
-        mp_context=multiprocessing.get_context("spawn"),
-        initializer=_init_worker,
-        initargs=(objective,),
-    )
+    return LocalPool(max_workers, initializer=_init_worker, initargs=(objective,))

@@ -20,15 +20,21 @@ Failed trials: an objective that raises an ``Exception`` or returns a
 non-finite metric (NaN, inf) gives a ``failed`` row with the error text; the
 optimiser is told ``tell_failure`` and the run goes on. ``KeyboardInterrupt``
 and ``SystemExit`` are not caught: the row stays ``running`` and is re-run on
-resume. A worker process that dies (e.g. a segfault in a simulator) fails the
-trials it was running.
+resume. A worker process that dies (e.g. a segfault in a simulator) while
+running a trial: the trial runs again (the runner re-runs it for a process
+pool, Dask's scheduler for a Dask cluster), and after
+:data:`~handle_drake.learning.cluster.WORKER_DEATHS` deaths it is ``failed``
+with the reason. A trial that saw a pool die runs alone from then on (a pool
+breaks for all the trials it runs at once), so its deaths are its own.
 
 Parallelism: trials run through a ``concurrent.futures.Executor``. By default
 a ``ProcessPoolExecutor`` (spawn start method, which is safe with Drake's
 threads) whose workers pin BLAS to one thread and receive the objective once
 (the objective may build its simulation diagram on its first call and reuse
 it). Random search runs as many trials at once as there are workers, each
-new trial as soon as one finishes. Bayesian optimisation runs in synchronous
+new trial as soon as one finishes. A ``distributed.Client`` (or its
+``get_executor()``) is accepted as the executor, see
+:mod:`handle_drake.learning.cluster`. Bayesian optimisation runs in synchronous
 batches of its ``batch_size`` (1, sequential, by default): it proposes a batch,
 waits for all of it and tells the results in trial order, so a run depends
 only on its seed and options (not on which worker finished first) and a
@@ -48,6 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from handle_drake.learning.bayesopt import make_optimizer
+from handle_drake.learning.cluster import WORKER_DEATHS, LocalPool
 from handle_drake.learning.executors import (
     _accepts_seed,
     _default_pool,
@@ -128,6 +135,9 @@ class TrialRunner:
         info = log.get_run(run_id)
         if info is None:
             raise ValueError(f"run {run_id!r} does not exist in {log.path}")
+        from handle_drake.learning.cluster import as_executor, executor_workers
+
+        executor = as_executor(executor)
         synchronous = bool(optimizer.synchronous)
         if synchronous:
             q = optimizer.batch_size
@@ -146,7 +156,8 @@ class TrialRunner:
             if batch_size is not None:
                 workers = batch_size
             else:
-                workers = max(1, os.cpu_count() or 1) if executor is None else 1
+                workers = (max(1, os.cpu_count() or 1) if executor is None
+                           else executor_workers(executor))
         if batch_size is None:
             batch_size = workers
         self.objective = objective
@@ -161,13 +172,16 @@ class TrialRunner:
         self._owns_executor = executor is None
         self._workers = workers
         self._pass_seed = _accepts_seed(objective)
+        ship = getattr(executor, "ship", None)  # e.g. Dask: the objective once per worker
+        self._shipped = objective if ship is None else ship(objective)
+        self._deaths: dict[int, int] = {}  # trial index -> worker deaths while running it
 
     def _submit(self, x, seed) -> Future:
         if self._executor is None:
             self._executor = _default_pool(self.objective, self._workers)
         if self._owns_executor:
             return self._executor.submit(_evaluate_in_worker, x, seed, self._pass_seed)
-        return self._executor.submit(_evaluate, self.objective, x, seed, self._pass_seed)
+        return self._executor.submit(_evaluate, self._shipped, x, seed, self._pass_seed)
 
     def _replay(self) -> tuple[list[TrialRecord], int]:
         records = self.log.trials(self.run_id)
@@ -197,6 +211,10 @@ class TrialRunner:
                 if self.synchronous:
                     room = 0 if in_flight else (len(queue) if queue else self.batch_size)
                 while room > 0 and (queue or (not stop and next_index < n_trials)):
+                    if queue and self._deaths.get(queue[0].index):
+                        if in_flight:  # it saw its pool die: it runs alone
+                            break
+                        room = 1
                     room -= 1
                     if queue:
                         record = queue.pop(0)
@@ -218,9 +236,13 @@ class TrialRunner:
                     record = in_flight.pop(future)
                     # Logged at once (nothing is lost if the batch is killed);
                     # a synchronous batch is told in trial order once complete.
-                    untold.append((record.index, self._finish(record, future)))
+                    tell = self._finish(record, future)
+                    if tell is None:  # its worker died: it runs again
+                        queue = sorted([*queue, record], key=lambda r: r.index)
+                        continue
+                    untold.append((record.index, tell))
                     bar.update(1)
-                if not self.synchronous or not in_flight:
+                if not self.synchronous or not (in_flight or queue):
                     for _, tell in sorted(untold, key=lambda item: item[0]):
                         tell()
                     untold.clear()
@@ -235,19 +257,23 @@ class TrialRunner:
         return self.result()
 
     def _finish(self, record: TrialRecord, future: Future):
-        """Logs the trial's outcome; returns the call that tells the optimiser."""
+        """Logs the trial's outcome; returns the call that tells the optimiser, or None
+        when the trial is to run again (its worker process died)."""
         try:
             outcome = future.result()
         except BrokenProcessPool as error:
-            outcome = {
-                "status": "failed",
-                "wall_time": None,
-                "scenario": None,
-                "error": f"worker process died while running the trial ({error})",
-            }
-            if self._owns_executor:
-                self._executor.shutdown(wait=False, cancel_futures=True)
-                self._executor = None  # a new pool is made at the next submit
+            deaths = self._deaths[record.index] = self._deaths.get(record.index, 0) + 1
+            if deaths < WORKER_DEATHS and isinstance(self._executor, LocalPool):
+                return None  # the pool replaces itself at the next submit
+            outcome = _failure(
+                f"worker process died while running the trial, {deaths} times ({error})"
+            )
+        except Exception as error:
+            explain = getattr(self._executor, "trial_failure", None)
+            text = None if explain is None else explain(error)  # may raise ExecutorError
+            if text is None:
+                raise
+            outcome = _failure(text)
         x = record.parameters
         if outcome["status"] == "done":
             self.log.mark_done(
@@ -281,6 +307,10 @@ class TrialRunner:
             converged=bool(self.optimizer.converged),
             trials=records,
         )
+
+
+def _failure(error: str) -> dict:
+    return {"status": "failed", "wall_time": None, "scenario": None, "error": error}
 
 
 def _progress_bar(total, initial, description, enabled):

@@ -1,0 +1,231 @@
+"""Trials per second on the local process pool and on Dask, 1 and 2 workers, side by side.
+
+Workloads (each case once per round, ``--rounds`` rounds, median; the
+executors are opened once and warmed up, so every worker has built its
+diagram before the clock starts):
+
+- ``random``: a random-search run of real grasp trials (Barrett hand,
+  sphere, 2-D offset: ``handle-drake babble --strategy random``) through
+  ``run_experiment``, SQLite log included;
+- ``pso``: a "PSO iteration" as the optimiser sees it, a batch of ``K``
+  independent grasp trials submitted together and waited for, ``--iterations``
+  times;
+- ``noop``: the floor, a trial that returns at once, through the bare
+  executor (submit + result) and through ``run_experiment`` (plus the ask,
+  the three SQLite transactions of a trial and the tell).
+
+Reported: trials/s per case, parallel efficiency = (trials/s at 2 workers /
+trials/s at 1) / 2 per executor, Dask / local per workload and worker count,
+Dask's per-task overhead against the local pool (no-op seconds per task),
+and what the scheduler's per-task cost implies for 100 workers with trials
+of 0.1 s and 3 s. The machine's load average is recorded with every case:
+other processes on a small machine depress the efficiency (two workers need
+two idle cores).
+
+Targets (issue 14): Dask within 10 % of the local pool; efficiency at 2
+workers >= 0.85 for random search and for a PSO iteration.
+
+Run: ``python benchmarks/bench_dask.py [--quick]``; prints the table and
+writes ``benchmarks/results/dask.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import wait
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from handle_drake.experiments.babbling import CachedTrial  # noqa: E402
+from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig  # noqa: E402
+from handle_drake.learning import run_experiment  # noqa: E402
+from handle_drake.learning.cluster import LocalPool, trial_executor  # noqa: E402
+from handle_drake.learning.executors import _evaluate  # noqa: E402
+
+CONFIG = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
+EXECUTORS = ("local", "dask")
+WORKERS = (1, 2)
+
+
+def noop(x, seed: int = 0) -> float:
+    """The floor: a trial that costs nothing."""
+    return 0.0
+
+
+def _load() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
+def _random_run(executor, objective, bounds, n_trials, tag) -> float:
+    with tempfile.TemporaryDirectory() as folder:
+        start = time.perf_counter()
+        run_experiment(objective, bounds, "random", n_trials, 0, Path(folder) / "t.sqlite",
+                       executor=executor, progress=False, run_id=tag)
+        return n_trials / (time.perf_counter() - start)
+
+
+def _pso_iterations(executor, objective, bounds, k, iterations, seed) -> float:
+    rng = np.random.default_rng(seed)
+    shipped = executor.ship(objective) if hasattr(executor, "ship") else objective
+    start = time.perf_counter()
+    for _ in range(iterations):
+        swarm = rng.uniform(bounds[:, 0], bounds[:, 1], size=(k, len(bounds)))
+        futures = [executor.submit(_evaluate, shipped, x, seed, True) for x in swarm]
+        wait(futures)
+        for future in futures:
+            assert future.result()["status"] == "done", future.result().get("error")
+    return k * iterations / (time.perf_counter() - start)
+
+
+def _bare_noop(executor, n_tasks) -> float:
+    shipped = executor.ship(noop) if hasattr(executor, "ship") else noop
+    x = np.zeros(2)
+    start = time.perf_counter()
+    futures = [executor.submit(_evaluate, shipped, x, 0, True) for _ in range(n_tasks)]
+    wait(futures)
+    return n_tasks / (time.perf_counter() - start)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="fewer trials and rounds")
+    parser.add_argument("--rounds", type=int, default=None, help="rounds (default 3, quick 1)")
+    parser.add_argument("--trials", type=int, default=None,
+                        help="grasp trials per random-search case (default 60, quick 16)")
+    parser.add_argument("--swarm", type=int, default=8, help="K: particles per PSO iteration")
+    parser.add_argument("--iterations", type=int, default=None,
+                        help="PSO iterations per case (default 6, quick 2)")
+    parser.add_argument("--out", type=Path,
+                        default=Path(__file__).parent / "results" / "dask.json")
+    args = parser.parse_args(argv)
+    rounds = args.rounds or (1 if args.quick else 3)
+    n_random = args.trials or (16 if args.quick else 60)
+    iterations = args.iterations or (2 if args.quick else 6)
+    n_noop = 200 if args.quick else 1000
+    objective = CachedTrial(CONFIG)
+    bounds = GraspTrial(CONFIG).bounds
+    print(f"bench_dask: {GraspTrial(CONFIG).name}, {rounds} round(s), {n_random} random trials, "
+          f"{iterations} PSO iterations of {args.swarm}, load average {_load()}", flush=True)
+
+    samples: dict[tuple, list] = {}
+    loads: dict[tuple, list] = {}
+    opened = {}
+    try:
+        for kind in EXECUTORS:
+            for workers in WORKERS:
+                # The local pool with 1 worker too (not the inline executor that
+                # `--executor local --workers 1` gives): the same costs as with 2.
+                context = (_closing(LocalPool(workers)) if kind == "local"
+                           else trial_executor("dask", workers))
+                executor = context.__enter__()
+                opened[(kind, workers)] = (context, executor)
+                # Warm-up: every worker builds its diagram (a few trials each).
+                _pso_iterations(executor, objective, bounds, 2 * workers, 2, seed=99)
+                _bare_noop(executor, 20)
+        for r in range(rounds):
+            for (kind, workers), (_, executor) in opened.items():
+                tag = f"{kind}{workers}-r{r}"
+                cases = {
+                    "random": lambda e=executor, t=tag: _random_run(
+                        e, objective, bounds, n_random, t),
+                    "pso": lambda e=executor, r=r: _pso_iterations(
+                        e, objective, bounds, args.swarm, iterations, seed=r),
+                    "noop_executor": lambda e=executor: _bare_noop(e, n_noop),
+                    "noop_runner": lambda e=executor, t=tag: _random_run(
+                        e, noop, bounds, n_noop // 4, "noop-" + t),
+                }
+                for name, case in cases.items():
+                    before = _load()
+                    value = case()
+                    samples.setdefault((name, kind, workers), []).append(value)
+                    loads.setdefault((name, kind, workers), []).append([before, _load()])
+                    print(f"  round {r + 1}: {name:14s} {kind:5s} x{workers}: {value:8.2f} "
+                          f"trials/s (load {before} -> {_load()})", flush=True)
+    finally:
+        for context, _ in opened.values():
+            context.__exit__(None, None, None)
+
+    median = {key: statistics.median(values) for key, values in samples.items()}
+    rows = []
+    for name in ("random", "pso", "noop_executor", "noop_runner"):
+        for kind in EXECUTORS:
+            one, two = median[(name, kind, 1)], median[(name, kind, 2)]
+            rows.append(dict(workload=name, executor=kind, tps_1=one, tps_2=two,
+                             efficiency_2=two / one / 2,
+                             vs_local_1=one / median[(name, "local", 1)],
+                             vs_local_2=two / median[(name, "local", 2)],
+                             load=loads[(name, kind, 2)]))
+    overhead = {w: 1 / median[("noop_executor", "dask", w)]
+                - 1 / median[("noop_executor", "local", w)] for w in WORKERS}
+    # The scheduler handles tasks one after another: its cost per task (the
+    # no-op seconds per task at 2 workers, an upper bound: it includes the
+    # client and the workers' share of two cores) caps the cluster's rate.
+    per_task = 1 / median[("noop_executor", "dask", 2)]
+    per_trial_runner = 1 / median[("noop_runner", "dask", 2)]
+    projection = {}
+    for trial_s in (0.1, 3.0):
+        demand = 100 / trial_s  # tasks/s that 100 busy workers need
+        for label, cost in (("scheduler", per_task), ("runner_and_scheduler", per_trial_runner)):
+            projection[f"{trial_s:g}s_{label}"] = dict(
+                tasks_per_s_needed=demand, capacity_tasks_per_s=1 / cost,
+                scheduler_utilisation=demand * cost,
+                efficiency_bound=min(1.0, 1 / (demand * cost)))
+
+    print()
+    print(f"{'workload':14s} {'executor':8s} {'1 worker':>10s} {'2 workers':>10s} "
+          f"{'efficiency':>10s} {'/local x1':>10s} {'/local x2':>10s}  load (x2 cases)")
+    for row in rows:
+        print(f"{row['workload']:14s} {row['executor']:8s} {row['tps_1']:10.2f} "
+              f"{row['tps_2']:10.2f} {row['efficiency_2']:10.2f} {row['vs_local_1']:10.3f} "
+              f"{row['vs_local_2']:10.3f}  {row['load']}")
+    print("\nDask overhead per task over the local pool (no-op): "
+          + ", ".join(f"{w} worker(s) {overhead[w] * 1e3:+.2f} ms" for w in WORKERS))
+    print(f"Dask per-task cost (no-op, 2 workers): {per_task * 1e3:.2f} ms executor only, "
+          f"{per_trial_runner * 1e3:.2f} ms per trial through the runner (ask, SQLite, tell)")
+    for key, value in projection.items():
+        print(f"100 workers, trials of {key.replace('_', ' ')}: need "
+              f"{value['tasks_per_s_needed']:.0f}/s, capacity "
+              f"{value['capacity_tasks_per_s']:.0f}/s, efficiency bound "
+              f"{value['efficiency_bound']:.2f}")
+    result = dict(
+        benchmark="dask", config=str(CONFIG), rounds=rounds, random_trials=n_random,
+        pso=dict(swarm=args.swarm, iterations=iterations), noop_tasks=n_noop,
+        samples={"|".join(map(str, k)): v for k, v in samples.items()},
+        loads={"|".join(map(str, k)): v for k, v in loads.items()},
+        table=rows, dask_overhead_per_task_s=overhead, dask_per_task_s=per_task,
+        runner_per_trial_s=per_trial_runner, projection_100_workers=projection,
+        targets=dict(dask_vs_local=">= 0.90", efficiency_2=">= 0.85 (random, pso)"),
+        machine=dict(cpus=os.cpu_count(), python=sys.version.split()[0],
+                     platform=platform.platform()))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1))
+    print(f"\nwritten to {args.out}")
+    return 0
+
+
+class _closing:
+    """A context manager that shuts an executor down (``trial_executor`` does the same)."""
+
+    def __init__(self, executor):
+        self.executor = executor
+
+    def __enter__(self):
+        return self.executor
+
+    def __exit__(self, *exc):
+        self.executor.shutdown(wait=True, cancel_futures=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,426 @@
+"""Trials on more than one process or machine: the executor choice, with Dask as the cluster engine.
+
+Every command that runs trials takes the same ``--executor`` option
+(:func:`add_executor_arguments`) and opens it with :func:`trial_executor`:
+
+- ``local`` (default): this machine's process pool, ``--workers N`` spawned
+  processes with one BLAS thread each (one worker: trials run in the
+  command's own process);
+- ``dask``: a ``distributed.LocalCluster`` of ``--workers N`` worker
+  processes with one thread each (BLAS pinned by Dask's nanny and again by
+  the first trial a worker runs), scheduler on loopback, no dashboard;
+- ``dask://HOST:PORT``: an existing ``dask scheduler`` and the ``dask worker``
+  processes that joined it, on any number of machines.
+
+In Python, :class:`TrialRunner <handle_drake.learning.runner.TrialRunner>` and
+``run_experiment`` accept a ``distributed.Client`` or its ``get_executor()``
+wherever they accept an executor (:func:`as_executor` wraps it).
+
+What crosses the wire (client -> worker, per trial): a reference to the
+trial function (module path), the objective pickled once on the client
+(its configuration, e.g. a ``GraspTrialConfig``: some hundred bytes), the
+trial's parameters (floats) and seed (int). The worker unpickles each
+objective once (:class:`_ShippedOnce`, keyed by a hash of its bytes) and
+keeps it, so an objective that builds its Drake diagram on its first call
+builds it once per worker. Worker -> client: a dict of plain values (status,
+metric, contacts as JSON text, scenario YAML text, wall time, error text).
+Plants, diagrams, contexts and the SQLite log never leave their process: the
+client writes every row.
+
+Failures:
+
+- A worker that dies while running a trial (segfault, OOM kill, lost
+  machine): Dask runs the trial again on another worker; when
+  :data:`WORKER_DEATHS` workers died running it (the scheduler's
+  ``distributed.scheduler.allowed-failures`` + 1; our ``LocalCluster`` sets
+  it), the trial is ``failed`` with the reason. The local pool does the same
+  through the runner. Either way the client records the trial once.
+- A lost scheduler: :class:`ExecutorError` says so; the trials that were
+  running stay ``running`` in the log and run again when the command is
+  repeated (the resume of :mod:`handle_drake.learning.runner`).
+- An address where no scheduler answers, or a scheduler without workers:
+  :class:`ExecutorError` within ``connect_timeout`` seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import logging
+import math
+import multiprocessing
+import pickle
+import re
+import threading
+from concurrent.futures import CancelledError, Executor, Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+from handle_drake.blas import pin_blas
+
+__all__ = [
+    "WORKER_DEATHS",
+    "CONNECT_TIMEOUT",
+    "ExecutorError",
+    "ExecutorSpec",
+    "DaskExecutor",
+    "LocalPool",
+    "add_executor_arguments",
+    "as_executor",
+    "executor_workers",
+    "trial_executor",
+]
+
+WORKER_DEATHS = 3  # worker deaths while running one trial before it is `failed`
+CONNECT_TIMEOUT = 10.0  # s, to reach a scheduler and to see its first worker
+DEFAULT_PORT = 8786  # the port `dask scheduler` listens on by default
+_LOG_LEVEL = logging.ERROR
+
+_ADDRESS = re.compile(r"^dask://(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+)(:(?P<port>[^/]*))?$")
+
+
+class ExecutorError(RuntimeError):
+    """The executor cannot run trials (no scheduler, no workers, lost scheduler).
+
+    The trial log is intact: the command resumes the run when repeated.
+    """
+
+
+# ----------------------------------------------------------------- choice
+@dataclass(frozen=True)
+class ExecutorSpec:
+    """Which engine runs the trials: ``local``, ``dask`` or ``dask://HOST:PORT``."""
+
+    kind: str  # "local" | "dask"
+    address: str | None = None  # "tcp://HOST:PORT" of an existing scheduler, else None
+
+    @classmethod
+    def parse(cls, text) -> ExecutorSpec:
+        if isinstance(text, ExecutorSpec):
+            return text
+        expected = "'local', 'dask' or 'dask://HOST:PORT'"
+        if not isinstance(text, str):
+            raise TypeError(f"executor: expected {expected}, got {text!r:.80}")
+        if text in ("local", "dask"):
+            return cls(text)
+        match = _ADDRESS.match(text)
+        if match is None:
+            raise ValueError(f"executor: expected {expected}, got {text!r:.80}")
+        port = match["port"]
+        if port is None:
+            port = DEFAULT_PORT
+        elif not port.isdigit() or not 1 <= int(port) <= 65535:
+            raise ValueError(f"executor: expected a port 1-65535 in {text!r:.80}, got {port!r}")
+        return cls("dask", f"tcp://{match['host']}:{int(port)}")
+
+    def __str__(self) -> str:
+        if self.address is None:
+            return self.kind
+        return "dask://" + self.address.removeprefix("tcp://")
+
+
+def _executor_type(text: str) -> ExecutorSpec:
+    try:
+        return ExecutorSpec.parse(text)
+    except (TypeError, ValueError) as error:
+        raise argparse.ArgumentTypeError(str(error).removeprefix("executor: ")) from None
+
+
+def _timeout_type(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text}")
+    return value
+
+
+def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
+    """Adds ``--executor`` and ``--connect-timeout`` to a command that runs trials.
+
+    Open the choice with ``trial_executor(args.executor, workers,
+    connect_timeout=args.connect_timeout)``; the command keeps its own
+    ``--workers``.
+    """
+    parser.add_argument(
+        "--executor", type=_executor_type, default=ExecutorSpec("local"),
+        metavar="{local,dask,dask://HOST:PORT}",
+        help="where trials run: 'local' (this machine's process pool, default), 'dask' (a "
+             "Dask LocalCluster of --workers processes) or 'dask://HOST:PORT' (the workers of "
+             "a running `dask scheduler`, on any machines)")
+    parser.add_argument(
+        "--connect-timeout", type=_timeout_type, default=CONNECT_TIMEOUT, metavar="SECONDS",
+        help=f"dask://: give up when no scheduler answers, or it has no worker, within SECONDS "
+             f"(default {CONNECT_TIMEOUT:g})")
+
+
+# -------------------------------------------------------------- worker side
+_SHIPPED: dict[str, object] = {}  # hash of the pickled objective -> the objective, per process
+
+
+def _receive(token: str, payload: bytes):
+    objective = _SHIPPED.get(token)
+    if objective is None:
+        if not _SHIPPED:
+            pin_blas()  # the first trial in this worker (a `dask worker --no-nanny` too)
+        objective = _SHIPPED[token] = pickle.loads(payload)
+    return objective
+
+
+class _ShippedOnce:
+    """An objective pickled once on the client and unpickled once per worker process.
+
+    Pickles as ``(hash, bytes)``; a worker that receives it returns the
+    objective it unpickled for the same hash before, so the objective's own
+    caches (a Drake diagram built on its first call) live for the worker's
+    lifetime instead of one trial. Dask has no per-worker object cache that
+    survives a worker restart without the client's help; this needs none.
+    """
+
+    def __init__(self, objective):
+        from distributed.protocol.pickle import dumps
+
+        self.objective = objective
+        self.payload = dumps(objective)  # cloudpickle for what plain pickle cannot
+        self.token = hashlib.sha1(self.payload).hexdigest()
+
+    def __reduce__(self):
+        return _receive, (self.token, self.payload)
+
+    def __call__(self, *args, **kwargs):
+        return self.objective(*args, **kwargs)
+
+
+# ------------------------------------------------------------------- pools
+class LocalPool(Executor):
+    """A spawn process pool (one BLAS thread per worker) that replaces itself once broken.
+
+    A worker that dies breaks a ``ProcessPoolExecutor`` for good; the runner
+    re-runs the trials it lost (:data:`WORKER_DEATHS`), so the next
+    :meth:`submit` starts a fresh pool.
+    """
+
+    def __init__(self, max_workers: int, initializer=pin_blas, initargs=()):
+        if isinstance(max_workers, bool) or not isinstance(max_workers, int) or max_workers < 1:
+            raise ValueError(f"workers: expected an integer >= 1, got {max_workers!r}")
+        self.max_workers = max_workers
+        self._initializer, self._initargs = initializer, initargs
+        self._pool = None
+
+    def submit(self, fn, /, *args, **kwargs):
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.max_workers, mp_context=multiprocessing.get_context("spawn"),
+                initializer=self._initializer, initargs=self._initargs)
+        try:
+            return self._pool.submit(fn, *args, **kwargs)
+        except BrokenProcessPool:  # a worker died: this pool takes no more work
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+            return self.submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        if self._pool is not None:
+            self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+            self._pool = None
+
+
+class DaskExecutor(Executor):
+    """A ``distributed.Client`` as the trial runner's executor.
+
+    ``submit`` returns ``concurrent.futures`` futures (``pure=False``: two
+    trials with equal arguments are two tasks). Trials are best run on a
+    scheduler with ``distributed.scheduler.worker-saturation: 1.0`` (our
+    LocalCluster sets it; see the README for ``dask scheduler``).
+    :meth:`ship` pickles an objective once, to be unpickled once per worker;
+    :meth:`trial_failure` turns Dask's errors into a failed trial (worker
+    deaths) or :class:`ExecutorError` (lost scheduler).
+    """
+
+    def __init__(self, client):
+        self.client = client
+        self._tasks: set = set()  # Dask futures not yet settled (a dropped one is cancelled)
+        self._lock = threading.Lock()
+
+    @property
+    def address(self) -> str:
+        return str(self.client.scheduler.address)
+
+    @property
+    def max_workers(self) -> int:
+        """Worker threads in the cluster now (at least 1)."""
+        try:
+            return max(1, sum(self.client.nthreads().values()))
+        except Exception as error:  # noqa: BLE001 - a closed client or lost scheduler
+            raise ExecutorError(f"cannot reach the Dask scheduler at {self.address}: "
+                                f"{error}") from None
+
+    def submit(self, fn, /, *args, **kwargs):
+        """``fn(*args, **kwargs)`` on a worker, as a ``concurrent.futures.Future``.
+
+        Bridged by hand rather than through ``client.get_executor()``: its
+        bridge never settles when a result is lost with a dying worker and
+        the gather fails (distributed 2026.8), which hangs the run.
+        """
+        task = self.client.submit(fn, *args, pure=False, **kwargs)
+        bridge = Future()
+        bridge.set_running_or_notify_cancel()
+        with self._lock:
+            self._tasks.add(task)
+        task.add_done_callback(lambda done: self._settle(done, bridge))  # in its own thread
+        return bridge
+
+    def _settle(self, task, bridge):
+        try:
+            # Blocks while Dask recomputes a result lost with its worker.
+            bridge.set_result(task.result())
+        except BaseException as error:  # noqa: BLE001 - handed to the runner
+            bridge.set_exception(error)
+        finally:
+            with self._lock:
+                self._tasks.discard(task)
+
+    def ship(self, objective):
+        return _ShippedOnce(objective)
+
+    def trial_failure(self, error: BaseException) -> str | None:
+        """The failure text of a trial whose future raised ``error``, or raise.
+
+        Worker deaths (Dask's ``KilledWorker``, after its own re-runs) fail
+        the trial; a cancelled task means the scheduler is gone.
+        """
+        from distributed.scheduler import KilledWorker
+
+        if isinstance(error, KilledWorker):
+            return (f"worker process died while running the trial, "
+                    f"{error.allowed_failures + 1} times (on {error.last_worker.address} last; "
+                    f"Dask re-ran it {error.allowed_failures} times, the scheduler's "
+                    "distributed.scheduler.allowed-failures)")
+        if isinstance(error, CancelledError | OSError):
+            raise ExecutorError(
+                f"lost the Dask scheduler at {self.address} ({type(error).__name__}: "
+                f"{error or 'task cancelled'}); the trial log is intact: the trials that were "
+                "running stay 'running' and run again when the command is repeated") from error
+        return None
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        with self._lock:
+            tasks = list(self._tasks)
+        if cancel_futures and tasks:
+            self.client.cancel(tasks)
+        elif wait and tasks:
+            from distributed import wait as wait_for
+
+            wait_for(tasks)
+
+
+def as_executor(executor):
+    """``executor``; a ``distributed.Client`` or its ``get_executor()`` made a DaskExecutor."""
+    module = type(executor).__module__ or ""
+    if not module.startswith("distributed"):
+        return executor
+    from distributed import Client
+    from distributed.cfexecutor import ClientExecutor
+
+    if isinstance(executor, Client):
+        return DaskExecutor(executor)
+    if isinstance(executor, ClientExecutor):
+        # distributed has no public accessor for an executor's client.
+        return DaskExecutor(executor._client)
+    return executor
+
+
+def executor_workers(executor) -> int:
+    """How many trials ``executor`` runs at once (1 if it does not say)."""
+    for name in ("max_workers", "_max_workers"):
+        value = getattr(executor, name, None)
+        if isinstance(value, int) and value >= 1:
+            return value
+    return 1
+
+
+# ---------------------------------------------------------------- factory
+@contextmanager
+def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float = CONNECT_TIMEOUT,
+                   worker_deaths: int = WORKER_DEATHS):
+    """Opens the executor ``executor`` names (see :class:`ExecutorSpec`) and closes it after.
+
+    Yields an ``InlineExecutor`` (``local``, one worker), a :class:`LocalPool`
+    (``local``, more) or a :class:`DaskExecutor` (``dask``: a LocalCluster
+    of ``workers`` processes, ``dask://HOST:PORT``: the scheduler's workers,
+    ``workers`` is then not used here). Raises :class:`ExecutorError` when no
+    scheduler answers at the address, or it has no worker, within
+    ``connect_timeout`` s.
+    """
+    from handle_drake.learning.executors import InlineExecutor
+
+    spec = ExecutorSpec.parse(executor)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if not (isinstance(worker_deaths, int) and worker_deaths >= 1):
+        raise ValueError(f"worker_deaths: expected an integer >= 1, got {worker_deaths!r}")
+    if spec.kind == "local":
+        pool = InlineExecutor() if workers == 1 else LocalPool(workers)
+        try:
+            yield pool
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+        return
+    try:
+        import dask
+    except ImportError as error:
+        raise ExecutorError(f"executor {spec}: Dask is not installed ({error}); "
+                            "pip install 'handle_drake[dask]'") from None
+    # For our LocalCluster (read while it runs, so set for its lifetime):
+    # worker-saturation 1: a worker holds only the trial it runs, so a dying
+    # worker makes no other trial "suspicious" (Dask counts a death against
+    # every task assigned to the worker). lost-worker-timeout: LocalCluster
+    # closes for good a worker away for longer (15 s by default), and a
+    # worker that imports Drake on a loaded machine can take that long to
+    # restart: the cluster would shrink to nothing and the run would wait.
+    local_config = {"distributed.scheduler.allowed-failures": worker_deaths - 1,
+                    "distributed.scheduler.worker-saturation": 1.0,
+                    "distributed.deploy.lost-worker-timeout": "1 day"}
+    with dask.config.set(local_config if spec.address is None else {}):
+        client, cluster = _connect(spec, workers, connect_timeout)
+        try:
+            yield DaskExecutor(client)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def _connect(spec: ExecutorSpec, workers, connect_timeout):
+    from distributed import Client, LocalCluster
+
+    if spec.address is None:
+        # No dashboard; the scheduler's plain HTTP routes (health, metrics) still
+        # start, on port 8787 unless told otherwise: a random port instead.
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+            scheduler_port=0, dashboard_address=None, silence_logs=_LOG_LEVEL,
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"})
+        try:
+            return Client(cluster), cluster
+        except BaseException:
+            cluster.close()
+            raise
+    try:
+        client = Client(spec.address, timeout=connect_timeout)
+    except (OSError, TimeoutError) as error:
+        raise ExecutorError(
+            f"executor {spec}: no Dask scheduler answered at {spec.address} within "
+            f"{connect_timeout:g} s ({error}); start one with `dask scheduler` and point "
+            "workers at it with `dask worker " + spec.address + "`") from None
+    try:
+        client.wait_for_workers(1, timeout=connect_timeout)
+    except (OSError, TimeoutError) as error:
+        client.close()
+        raise ExecutorError(
+            f"executor {spec}: the scheduler at {spec.address} has no worker after "
+            f"{connect_timeout:g} s ({error}); start some with `dask worker {spec.address}`"
+        ) from None
+    return client, None

@@ -1,0 +1,249 @@
+"""Trials on Dask: same runs as the local pool, worker deaths, lost and wrong schedulers.
+
+A ``LocalCluster`` of 2 worker processes on loopback (random ports, no
+dashboard) for the module; the objective is the Branin function (closed
+form), wrapped where a test needs a worker to die or a trial to take time.
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from handle_drake.learning import InlineExecutor, RandomSearch, TrialLog, run_experiment
+from handle_drake.learning.cluster import (
+    WORKER_DEATHS,
+    DaskExecutor,
+    ExecutorError,
+    ExecutorSpec,
+    LocalPool,
+    trial_executor,
+)
+from handle_drake.learning.test_functions import Branin
+
+BRANIN = Branin()
+BO = dict(direct_maxfun=200, n_restarts=1, batch_size=2)
+
+
+@pytest.fixture(scope="module")
+def dask_executor():
+    with trial_executor("dask", 2) as executor:
+        yield executor
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _run(db, strategy, n_trials, executor, objective=BRANIN, seed=4, **kwargs):
+    return run_experiment(
+        objective, BRANIN.bounds, strategy, n_trials, seed, db, executor=executor,
+        progress=False, objective_name="branin",
+        optimizer_options=BO if strategy == "bo" else None, **kwargs)
+
+
+def _rows(result):
+    return [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in result.trials]
+
+
+class DiesOnce:
+    """Branin that kills its worker process (SIGKILL, as a crashing simulator would) the
+    first time it runs a trial with ``x[0] > threshold``; a marker file remembers the death
+    across processes. With ``always`` it kills the worker every time."""
+
+    name = "branin"
+
+    def __init__(self, marker: Path, threshold=5.0, always=False):
+        self.marker, self.threshold, self.always = str(marker), threshold, always
+
+    def __call__(self, x):
+        if x[0] > self.threshold and (self.always or not os.path.exists(self.marker)):
+            with open(self.marker, "a") as f:
+                f.write(f"{os.getpid()}\n")
+            os.kill(os.getpid(), signal.SIGKILL)
+        return BRANIN(x)
+
+
+def test_executor_choice_is_parsed_or_refused_with_the_field_named():
+    assert ExecutorSpec.parse("local") == ExecutorSpec("local")
+    assert ExecutorSpec.parse("dask") == ExecutorSpec("dask", None)
+    assert ExecutorSpec.parse("dask://10.0.0.7:9000").address == "tcp://10.0.0.7:9000"
+    assert ExecutorSpec.parse("dask://head-node").address == "tcp://head-node:8786"
+    assert str(ExecutorSpec.parse("dask://h:1234")) == "dask://h:1234"
+    for bad in ("ray", "dask://", "dask://h:0", "dask://h:70000", "dask://h:x", "tcp://h:1"):
+        with pytest.raises(ValueError, match="executor"):
+            ExecutorSpec.parse(bad)
+    with pytest.raises(ValueError, match="workers"):
+        with trial_executor("dask", 0):
+            pass
+
+
+def test_bo_and_random_runs_on_dask_equal_the_local_pool(tmp_path, dask_executor):
+    """Same seed, same trials and metrics: the run does not depend on the executor. The
+    Dask runs get a bare ``distributed.Client`` and its ``get_executor()``."""
+    client = dask_executor.client
+    with LocalPool(2) as pool:
+        local_bo = _run(tmp_path / "local.sqlite", "bo", 20, pool)
+        local_random = _run(tmp_path / "local.sqlite", "random", 20, pool)
+    dask_bo = _run(tmp_path / "dask.sqlite", "bo", 20, client.get_executor())
+    dask_random = _run(tmp_path / "dask.sqlite", "random", 20, client)
+    assert _rows(dask_bo) == _rows(local_bo)
+    assert _rows(dask_random) == _rows(local_random)
+    assert len(dask_bo.trials) == 20 and dask_bo.n_done == 20
+    X = np.array([r.parameters for r in dask_random.trials])
+    searcher = RandomSearch(BRANIN.bounds, seed=4)
+    np.testing.assert_array_equal(X, [searcher.ask() for _ in range(20)])
+    np.testing.assert_array_equal([r.metric for r in dask_random.trials], BRANIN(X))
+
+
+@pytest.mark.parametrize("strategy", ["bo", "random"])
+def test_a_worker_killed_mid_trial_loses_and_repeats_nothing(tmp_path, dask_executor, strategy):
+    """One worker process dies in the middle of a trial; Dask runs the trial again on
+    another; the log holds each trial once, equal to an undisturbed local run."""
+    marker = tmp_path / "deaths"
+    killed = _run(tmp_path / "dask.sqlite", strategy, 6, dask_executor, DiesOnce(marker))
+    assert marker.exists(), "no trial had x[0] > 5: the worker was never killed"
+    reference = _run(tmp_path / "ref.sqlite", strategy, 6, InlineExecutor())
+    assert _rows(killed) == _rows(reference)
+    assert [r.status for r in killed.trials] == ["done"] * 6
+    with TrialLog(tmp_path / "dask.sqlite") as log:
+        count = log._conn.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    assert count == 6
+
+
+def test_a_trial_that_always_kills_its_worker_fails_after_the_stated_deaths(
+        tmp_path, dask_executor):
+    marker = tmp_path / "deaths"
+    result = _run(tmp_path / "dask.sqlite", "random", 4, dask_executor,
+                  DiesOnce(marker, threshold=8.0, always=True), seed=2)
+    dead = [r for r in result.trials if r.parameters[0] > 8.0]
+    assert len(dead) == 1, "seed 2 proposes one point with x[0] > 8 in 4 trials"
+    assert dead[0].status == "failed"
+    assert f"died while running the trial, {WORKER_DEATHS} times" in dead[0].error
+    assert len(marker.read_text().split()) == WORKER_DEATHS
+    assert all(r.status == "done" for r in result.trials if r.parameters[0] <= 8.0)
+    assert len(result.trials) == 4
+
+
+def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
+    marker = tmp_path / "deaths"
+    with LocalPool(2) as pool:
+        killed = _run(tmp_path / "local.sqlite", "random", 4, pool, DiesOnce(marker))
+    assert len(marker.read_text().split()) == 1  # one death, then the trial ran alone
+    reference = _run(tmp_path / "ref.sqlite", "random", 4, InlineExecutor())
+    assert _rows(killed) == _rows(reference)
+
+
+def test_a_wrong_scheduler_address_fails_fast_with_a_clear_message(tmp_path, capsys):
+    from handle_drake.experiments.cli import main
+
+    address = f"127.0.0.1:{_free_port()}"  # nothing listens there
+    outcome = {}
+
+    def connect():
+        try:
+            with trial_executor(f"dask://{address}", connect_timeout=1.0):
+                outcome["error"] = None
+        except ExecutorError as error:
+            outcome["error"] = error
+
+    thread = threading.Thread(target=connect, daemon=True)
+    thread.start()
+    thread.join(60)  # a guard against a hang, not a timing assertion
+    assert not thread.is_alive(), "connecting to a wrong address hangs"
+    assert "no Dask scheduler answered at tcp://" + address in str(outcome["error"])
+    db = tmp_path / "never.sqlite"
+    code = main(["babble", "--executor", f"dask://{address}", "--connect-timeout", "1",
+                 "--db", str(db), "--no-progress", "--no-plot"])
+    assert code == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_:
+        main(["babble", "--executor", "dask://h:99999", "--db", str(db)])
+    assert exit_.value.code == 2
+    assert "--executor: expected a port 1-65535" in capsys.readouterr().err
+
+
+class Slow:
+    name = "branin"
+
+    def __call__(self, x):
+        time.sleep(0.4)
+        return BRANIN(x)
+
+
+def _start(args):
+    # The same code as this process (a deployment installs the same checkout everywhere).
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    return subprocess.Popen([sys.executable, "-m", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env=env)
+
+
+def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
+    """A real ``dask scheduler`` and ``dask worker`` on loopback; the scheduler is killed
+    mid-run: ExecutorError, and the run resumes later (here on the local executor) into
+    the same trials as an undisturbed run."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    scheduler = _start(["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port",
+                        str(port), "--no-dashboard"])
+    worker = _start(["distributed.cli.dask_worker", address, "--nthreads", "1",
+                     "--no-dashboard", "--host", "127.0.0.1"])
+    db = tmp_path / "lost.sqlite"
+    TrialLog(db).close()  # the schema exists before two connections look at the file
+    try:
+        with trial_executor(f"dask://127.0.0.1:{port}", connect_timeout=60) as executor:
+            assert isinstance(executor, DaskExecutor)
+
+            def kill_when_a_trial_is_done():
+                while True:
+                    time.sleep(0.1)
+                    with TrialLog(db) as log:
+                        runs = log.runs()
+                        if runs and log.trials(runs[0].run_id, "done"):
+                            break
+                scheduler.kill()
+
+            killer = threading.Thread(target=kill_when_a_trial_is_done, daemon=True)
+            killer.start()
+            with pytest.raises(ExecutorError, match="lost the Dask scheduler"):
+                _run(db, "random", 12, executor, Slow())
+            killer.join(30)
+    finally:
+        for process in (scheduler, worker):
+            process.kill()
+            process.wait(30)
+    with TrialLog(db) as log:
+        statuses = [r.status for r in log.trials("branin-random-seed4")]
+    assert "done" in statuses and len(statuses) < 12
+    resumed = _run(db, "random", 12, InlineExecutor())
+    reference = _run(tmp_path / "ref.sqlite", "random", 12, InlineExecutor())
+    assert _rows(resumed) == _rows(reference)
+
+
+def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path):
+    """The real grasp trial: ``babble --executor dask`` (2 worker processes) logs each
+    trial once, and each metric is what the same simulation gives in this process."""
+    from handle_drake.experiments.cli import main
+    from handle_drake.experiments.grasp_trial import GraspTrial
+
+    db = tmp_path / "babble.sqlite"
+    assert main(["babble", "--object", "sphere", "--dims", "2", "--strategy", "random",
+                 "--trials", "4", "--seed", "2", "--noise", "0.01", "--executor", "dask",
+                 "--workers", "2", "--db", str(db), "--no-progress", "--no-plot"]) == 0
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        rows = log.trials(run.run_id)
+    assert [r.index for r in rows] == [0, 1, 2, 3]
+    assert all(r.status == "done" for r in rows)
+    trial = GraspTrial(hand="barrett", object="sphere", space="offset", noise=0.01)
+    for row in rows[:2]:
+        assert row.metric == trial(row.parameters, seed=row.seed).metric
