@@ -70,6 +70,10 @@ def _cmd_simulate(args) -> int:
     from handle_drake.scenario import LoadScenario
 
     scenario = LoadScenario(filename=args.scenario, data=args.override)
+    if args.duration is not None:
+        _check_duration(args.duration, scenario)
+    if args.hardware:
+        _check_hardware_server(scenario)
     meshcat = _meshcat(args.meshcat or args.html is not None)
     runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware)
     result = runner.run(args.duration, html=args.html)
@@ -86,6 +90,38 @@ def _cmd_simulate(args) -> int:
     if args.html:
         print(f"replay written to {args.html}")
     return 0
+
+
+def _check_duration(duration: float, scenario) -> None:
+    import dataclasses
+
+    from handle_drake.scenario import validate_scenario
+
+    try:
+        validate_scenario(dataclasses.replace(scenario, simulation_duration=duration))
+    except ValueError as error:
+        raise ValueError(f"--duration: {error}") from None
+
+
+def _check_hardware_server(scenario) -> None:
+    """``--hardware`` needs a !CanHandDriver and its server answering, before anything runs."""
+    import socket
+
+    from handle_drake.scenario import CanHandDriver
+
+    driver = scenario.driver
+    if not isinstance(driver, CanHandDriver):
+        raise ValueError(f"--hardware: expected a scenario with driver: !CanHandDriver, got "
+                         f"!{type(driver).__name__}")
+    try:
+        with socket.create_connection((driver.host, driver.port),
+                                      timeout=max(driver.connect_timeout, 1.0)):
+            pass
+    except OSError as error:
+        raise ValueError(
+            f"--hardware: expected a CAN bus server at {driver.host}:{driver.port} (driver.host, "
+            f"driver.port), got {error.strerror or error}; start `handle-drake can-server`"
+        ) from None
 
 
 def _cmd_demo(args) -> int:
@@ -114,14 +150,35 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
     from handle_drake.learning.trials import TrialLogError
+    from handle_drake.paths import check_outputs
 
     _pin_blas()
     args = parser.parse_args(argv)
     previous = _terminate_like_ctrl_c()
     try:
+        check_outputs(args)  # before minutes of work, not after
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, TypeError, TrialLogError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        from handle_drake.scenario_checks import short_path
+
+        where = f": {short_path(error.filename)}" if error.filename else ""
+        print(f"handle-drake {args.command}: error: {error.strerror or error}{where}",
+              file=sys.stderr)
+        return 2
+    except SystemExit as error:
+        if error.code is None or isinstance(error.code, int):
+            raise
+        # Last resort: a Drake ``Failure at ...`` (an input our checks let through).
+        print(f"handle-drake {args.command}: error: Drake refused the input: "
+              f"{str(error.code).strip()[:500]}", file=sys.stderr)
+        return 2
+    except (RuntimeError, MemoryError, RecursionError) as error:
+        # Last resort too: Drake's RuntimeErrors on inputs our checks let through.
+        print(f"handle-drake {args.command}: error: {type(error).__name__}: "
+              f"{str(error).strip()[:500]}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         resume = f"; run it again to resume from {args.db}" if getattr(args, "db", None) else ""
