@@ -32,6 +32,19 @@ from .hull import _check_wrenches
 DIM = 6
 
 
+#: Most wrenches the Drake programs take: the closure LP's constraint matrix is a
+#: dense m x (m + 1) (10,000 soft-finger contacts would be 160000 x 160000).
+MAX_PROGRAM_WRENCHES = 4000
+
+
+def _check_size(W) -> np.ndarray:
+    W = _check_wrenches(W)
+    if len(W) > MAX_PROGRAM_WRENCHES:
+        raise ValueError(f"wrenches: method='drake' takes at most {MAX_PROGRAM_WRENCHES} "
+                         f"wrenches (its LP is dense), got {len(W)}; use method='fast'")
+    return W
+
+
 def wrench_rank(W, tol: float = 1e-9) -> int:
     """Rank of the wrench set's linear span (closure needs 6)."""
     W = np.asarray(W, dtype=float)
@@ -99,7 +112,7 @@ class ClosurePrograms:
 
     def min_distance(self, W) -> tuple[np.ndarray, float, np.ndarray]:
         """Solve the min-distance QP; returns ``(x, |x|, lambda)``."""
-        W = _check_wrenches(W)
+        W = _check_size(W)
         m = len(W)
         qp = self._qps.get(m)
         if qp is None:
@@ -116,7 +129,7 @@ class ClosurePrograms:
 
     def closure_lp(self, W) -> float:
         """Optimal ``s`` of the closure LP (``> 0``: origin in the relative interior)."""
-        W = _check_wrenches(W)
+        W = _check_size(W)
         m = len(W)
         lp = self._lps.get(m)
         if lp is None:
@@ -130,7 +143,7 @@ class ClosurePrograms:
 
     def is_force_closure(self, W, tol: float = 1e-9) -> bool:
         """Force closure (eq. 18): full rank and the origin strictly inside."""
-        W = _check_wrenches(W)
+        W = _check_size(W)
         if wrench_rank(W) < DIM:
             return False
         return self.closure_lp(W) > tol

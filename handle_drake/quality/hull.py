@@ -58,13 +58,19 @@ EPA_STATS = {"calls": 0, "fallbacks": 0}
 
 
 def _check_wrenches(W) -> np.ndarray:
-    W = np.asarray(W, dtype=float)
+    from handle_drake.quality.contact import real_array
+
+    W = real_array("wrenches", W)
     if W.ndim != 2 or W.shape[1] != DIM:
         raise ValueError(f"wrenches: expected shape (m, 6), got {W.shape}")
     if W.shape[0] == 0:
         raise ValueError("wrenches: expected at least one wrench, got 0")
     if not np.all(np.isfinite(W)):
         raise ValueError("wrenches: expected finite values, got NaN or infinity")
+    scale = float(np.max(np.abs(W)))
+    if scale > 1e150 or (0 < scale < 1e-150):
+        raise ValueError(f"wrenches: expected magnitudes within 1e-150..1e150 (squares must "
+                         f"stay finite), got {scale:g}")
     return W
 
 
