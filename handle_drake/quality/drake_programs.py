@@ -45,6 +45,13 @@ def _check_size(W) -> np.ndarray:
     return W
 
 
+def _span(W: np.ndarray) -> str:
+    nonzero = np.abs(W[W != 0])
+    if nonzero.size == 0:
+        return "only zeros"
+    return f"{nonzero.min():.3g}..{nonzero.max():.3g}"
+
+
 def wrench_rank(W, tol: float = 1e-9) -> int:
     """Rank of the wrench set's linear span (closure needs 6)."""
     W = np.asarray(W, dtype=float)
@@ -111,7 +118,11 @@ class ClosurePrograms:
         self._lps: dict[int, _Lp] = {}
 
     def min_distance(self, W) -> tuple[np.ndarray, float, np.ndarray]:
-        """Solve the min-distance QP; returns ``(x, |x|, lambda)``."""
+        """Solve the min-distance QP; returns ``(x, |x|, lambda)``.
+
+        ValueError when Clarabel finds no solution (wrenches whose magnitudes span
+        many orders; the exact NNLS path of method="fast" has no such limit).
+        """
         W = _check_size(W)
         m = len(W)
         qp = self._qps.get(m)
@@ -121,7 +132,9 @@ class ClosurePrograms:
         qp.eq.evaluator().UpdateCoefficients(qp.A, np.zeros(DIM))
         result = self._qp_solver.Solve(qp.prog, None, self._qp_options)
         if not result.is_success():
-            raise RuntimeError(f"min-distance QP failed: {result.get_solution_result()}")
+            raise ValueError(f"wrenches: Drake's min-distance QP found no solution "
+                             f"({result.get_solution_result()}); their magnitudes span "
+                             f"{_span(W)}; method='fast' (exact NNLS) handles this set")
         lam = np.clip(result.GetSolution(qp.lam), 0.0, None)
         lam /= lam.sum()
         x = lam @ W  # recomputed from feasible weights: a point of the hull
