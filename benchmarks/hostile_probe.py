@@ -101,7 +101,8 @@ def probe_scenarios():
         "script: [{time: 0.5, wrist: [0, 0, 0, 0, 0, 0]}]": "wrist",
         "script: [{time: 1}, {time: 0.5}]": "time", "script: [{time: -1}]": "time",
         "script: [{time: 1e300}]": "time",
-        "time_step: 0.001\ntime_step: 0.002": "duplicate", "object: {size: 1, size: 2}": "duplicate",
+        "time_step: 0.001\ntime_step: 0.002": "duplicate",
+        "object: {size: 1, size: 2}": "duplicate",
         "driver: 5": "driver", "driver: !Foo {}": "driver", "!Foo {}": "!Foo",
         "driver: !CanHandDriver {port: 0}": "port", "driver: !CanHandDriver {port: 1e9}": "port",
         "driver: !CanHandDriver {period: 0}": "period",
@@ -148,7 +149,8 @@ def probe_cli(tmp):
         ["simulate", str(tmp / "bad.yaml")], ["simulate", str(tmp / "dir")],
         ["simulate", str(tmp / "fifo")], ["simulate", str(tmp / "missing.yaml")],
         ["simulate", ok, "--html", str(tmp)], ["simulate", ok, "--html", f"{tmp}/{long}.html"],
-        ["simulate", ok, "--html", f"{tmp}/ok.yaml/x.html"], ["simulate", ok, "--duration", "1e300"],
+        ["simulate", ok, "--html", f"{tmp}/ok.yaml/x.html"],
+        ["simulate", ok, "--duration", "1e300"],
         ["simulate", ok, "--duration", "nan"], ["simulate", ok, "--duration", "-1"],
         ["simulate", ok, "--hardware"], ["simulate", str(tmp / "can.yaml"), "--hardware"],
         ["simulate", ok, "--override", "driver: 5"], ["simulate", ok, "--override", "!Foo {}"],
@@ -375,7 +377,7 @@ def main():
             start = time.monotonic()
             function()
             print(f"{name}: {time.monotonic() - start:.1f} s", file=sys.stderr)
-    print(f"| part | tried | clean | traceback | hang | wrong |\n|---|---|---|---|---|---|")
+    print("| part | tried | clean | traceback | hang | wrong |\n|---|---|---|---|---|---|")
     for part, r in RESULTS.items():
         print(f"| {part} | {r['tried']} | {r['clean']} | {r['traceback']} | {r['hang']} | "
               f"{r['wrong']} |")
