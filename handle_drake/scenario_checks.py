@@ -58,9 +58,7 @@ _SEQ = "tag:yaml.org,2002:seq"
 
 def short(value, limit: int = 60) -> str:
     """``repr(value)`` cut to ``limit`` characters (with the full length)."""
-    text = value if isinstance(value, str) else repr(value)
-    if isinstance(value, str):
-        text = repr(value)
+    text = repr(value)
     return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
 
 
@@ -349,9 +347,9 @@ def check_ranges(scenario) -> None:
             "joint_velocity", " rad/s")
         _in("driver.control_period", scenario.driver.control_period, "control_period", " s")
     for i, keyframe in enumerate(scenario.script):
-        if keyframe.time > scenario.simulation_duration * 1000 + 3600:
-            raise ScenarioError(f"script[{i}].time: expected at most "
-                                f"{scenario.simulation_duration * 1000 + 3600:g} s, got "
+        longest = LIMITS["simulation_duration"][1]
+        if keyframe.time > longest:
+            raise ScenarioError(f"script[{i}].time: expected at most {longest:g} s, got "
                                 f"{keyframe.time:g}")
         for name, value in keyframe.hand.items():
             _in(f"script[{i}].hand[{name}]", value, "angle", " rad")
