@@ -48,6 +48,9 @@ LIMITS = {
     "control_period": (1e-4, 0.1),  # s
     "visualization_period": (1e-3, 10.0),  # s
     "angle": (-1e4, 1e4),  # rad or deg, any joint value or angle
+    "wrist_angle": (-2 * math.pi, 2 * math.pi),  # rad: every orientation, no wind-up
+    "wrist_speed": (0.0, 10.0),  # m/s between two keyframes of the wrist script
+    "wrist_rate": (0.0, 100.0),  # rad/s likewise (1e4 rad in 0.2 s makes SAP diverge)
 }
 _MAX_NODES = 100_000  # alias chains ("billion laughs") expand to more than this
 _SCALAR_TAGS = {"tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:str",
@@ -356,4 +359,12 @@ def check_ranges(scenario) -> None:
         for k, value in enumerate(keyframe.wrist[:3]):
             _in(f"script[{i}].wrist[{k}]", value, "position", " m (the wrist's workspace)")
         for k, value in enumerate(keyframe.wrist[3:6]):
-            _in(f"script[{i}].wrist[{k + 3}]", value, "angle", " rad")
+            _in(f"script[{i}].wrist[{k + 3}]", value, "wrist_angle", " rad")
+    wrist = [(k.time, k.wrist) for k in scenario.script if k.wrist]
+    for (t0, w0), (t1, w1) in zip(wrist, wrist[1:], strict=False):
+        dt = t1 - t0
+        speed = float(np.linalg.norm(np.subtract(w1[:3], w0[:3]))) / dt
+        rate = float(np.max(np.abs(np.subtract(w1[3:], w0[3:])))) / dt
+        where = f"script (wrist from t = {t0:g} s to {t1:g} s)"
+        _in(f"{where} speed", speed, "wrist_speed", " m/s")
+        _in(f"{where} angular rate", rate, "wrist_rate", " rad/s")

@@ -43,6 +43,11 @@ REFUSED = [
      "axis: [1e-320, 0, 0]}}}}", ["rotation.axis"]),
     (WRIST + "script: [{time: 0.5, wrist: [1e6, 0, 0, 0, 0, 0]}]",
      ["script[0].wrist[0]", "workspace"]),
+    # 1e4 rad of roll in 0.25 s made SAP's Hessian NaN (a RuntimeError from Drake)
+    (WRIST + "script: [{time: 0, wrist: [0, 0, 0.3, 0, 0, 0]}, "
+             "{time: 0.25, wrist: [0, 0, 0.3, 1e4, 0, 0]}]", ["script[1].wrist[3]", "rad"]),
+    (WRIST + "script: [{time: 0, wrist: [0, 0, 0.3, 0, 0, 0]}, "
+             "{time: 0.25, wrist: [0, 0, 9.9, 0, 0, 0]}]", ["speed", "m/s"]),
     ("time_step: 0.001\ntime_step: 0.002", ["time_step", "duplicate"]),
     ("object: {size: 0.05, size: 0.07}", ["object.size", "duplicate"]),
     ("driver: 5", ["driver", "!SimHandDriver", "!CanHandDriver"]),
