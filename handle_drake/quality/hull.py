@@ -91,13 +91,19 @@ def _min_norm_point(W: np.ndarray):
     m = W.shape[0]
     E = np.empty((DIM + 1, m))
     E[:DIM] = W.T
-    E[DIM] = 1.0
+    # The sum-to-one row carries weight s: min |W^T mu|^2 + s^2 (sum mu - 1)^2 has the
+    # min-norm point's weights (scaled) as its solution for any s > 0; s of the order
+    # of the wrenches keeps NNLS from rounding the weights to zero when |W| >> 1.
+    scale = float(np.max(np.abs(W)))
+    s = scale if scale > 1e3 else 1.0
+    E[DIM] = s
     e = np.zeros(DIM + 1)
-    e[DIM] = 1.0
+    e[DIM] = s
     mu, _ = nnls(E, e, maxiter=50 * (m + DIM))
     total = mu.sum()
-    if total <= 0:  # cannot happen for finite W (mu = e_i gives a residual < 1)
-        raise RuntimeError("min_norm_point: NNLS returned zero weights")
+    if total <= 0:
+        raise ValueError(f"wrenches: NNLS found no weights (magnitudes up to {scale:.3g}); "
+                         "rescale the wrenches")
     lam = mu / total
     x = lam @ W
     return x, float(np.linalg.norm(x)), lam

@@ -180,3 +180,18 @@ def test_drake_method_refuses_more_wrenches_than_its_dense_lp_holds():
     W = np.random.default_rng(0).normal(size=(160000, 6))
     with pytest.raises(ValueError, match="at most 4000 wrenches .* method='fast'"):
         quality_from_wrenches(W, method="drake")
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e8, 1e100])
+def test_the_metric_scales_with_the_wrenches(scale):
+    """Scaling every wrench by s scales the BW value by s (a homogeneous geometric
+    quantity); absolute tolerances used to call a closure set at s = 1e8 open, and a
+    single wrench of 4.5e15 made NNLS return zero weights."""
+    from handle_drake.quality import min_norm_point, quality_from_wrenches
+
+    W = np.random.default_rng(1).normal(size=(40, 6))
+    base = quality_from_wrenches(W)
+    scaled = quality_from_wrenches(W * scale)
+    assert base.force_closure and scaled.force_closure
+    assert scaled.value == pytest.approx(base.value * scale, rel=1e-9)
+    assert min_norm_point([[4503599627370496.0, 0, 0, 0, 0, 0]])[1] == 4503599627370496.0
