@@ -478,9 +478,9 @@ def _validate_cameras(scenario: Scenario) -> None:
         if not isinstance(camera.name, str) or not camera.name.strip() or any(
                 c in camera.name for c in "./ \t\n"):
             raise ScenarioError(f"{where}.name must be a non-empty name without '.', '/' or "
-                                f"spaces, got {camera.name!r}")
+                                f"spaces, got {short(camera.name)}")
         if camera.name in names:
-            raise ScenarioError(f"{where}.name: duplicate camera name {camera.name!r}")
+            raise ScenarioError(f"{where}.name: duplicate camera name {short(camera.name)}")
         names.add(camera.name)
         try:
             get_profile(camera.profile)
@@ -488,7 +488,7 @@ def _validate_cameras(scenario: Scenario) -> None:
             raise ScenarioError(f"{where}.profile: {error}") from None
         if camera.parent not in CAMERA_PARENTS:
             raise ScenarioError(f"{where}.parent: expected one of {list(CAMERA_PARENTS)}, "
-                                f"got {camera.parent!r}")
+                                f"got {short(camera.parent)}")
         _check_transform(f"{where}.X_PC", camera.X_PC)
         if camera.parent == "world" and scenario.table is not None:
             p = camera.X_PC.GetDeterministicValue().translation()

@@ -366,6 +366,10 @@ def check_ranges(scenario) -> None:
             _in(f"script[{i}].wrist[{k}]", value, "position", " m (the wrist's workspace)")
         for k, value in enumerate(keyframe.wrist[3:6]):
             _in(f"script[{i}].wrist[{k + 3}]", value, "wrist_angle", " rad")
+    for i, camera in enumerate(getattr(scenario, "cameras", [])):
+        _check_pose(f"cameras[{i}].X_PC", camera.X_PC)
+        for k, value in enumerate(camera.target):
+            _in(f"cameras[{i}].target[{k}]", value, "position", " m")
     wrist = [(k.time, k.wrist) for k in scenario.script if k.wrist]
     for (t0, w0), (t1, w1) in zip(wrist, wrist[1:], strict=False):
         dt = t1 - t0
