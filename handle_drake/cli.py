@@ -55,6 +55,10 @@ def _cmd_simulate(args) -> int:
     from handle_drake.scenario import LoadScenario
 
     scenario = LoadScenario(filename=args.scenario, data=args.override)
+    if args.duration is not None:
+        _check_duration(args.duration, scenario)
+    if args.hardware:
+        _check_hardware_server(scenario)
     meshcat = start_meshcat(args.meshcat or args.html is not None)
     runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware)
     result = runner.run(args.duration, html=args.html)
@@ -77,6 +81,38 @@ def _cmd_simulate(args) -> int:
     if args.html:
         print(f"replay written to {args.html}")
     return 0
+
+
+def _check_duration(duration: float, scenario) -> None:
+    import dataclasses
+
+    from handle_drake.scenario import validate_scenario
+
+    try:
+        validate_scenario(dataclasses.replace(scenario, simulation_duration=duration))
+    except ValueError as error:
+        raise ValueError(f"--duration: {error}") from None
+
+
+def _check_hardware_server(scenario) -> None:
+    """``--hardware`` needs a !CanHandDriver and its server answering, before anything runs."""
+    import socket
+
+    from handle_drake.scenario import CanHandDriver
+
+    driver = scenario.driver
+    if not isinstance(driver, CanHandDriver):
+        raise ValueError(f"--hardware: expected a scenario with driver: !CanHandDriver, got "
+                         f"!{type(driver).__name__}")
+    try:
+        with socket.create_connection((driver.host, driver.port),
+                                      timeout=max(driver.connect_timeout, 1.0)):
+            pass
+    except OSError as error:
+        raise ValueError(
+            f"--hardware: expected a CAN bus server at {driver.host}:{driver.port} (driver.host, "
+            f"driver.port), got {error.strerror or error}; start `handle-drake can-server`"
+        ) from None
 
 
 def _cmd_demo(args) -> int:

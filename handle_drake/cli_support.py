@@ -32,14 +32,35 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
     from handle_drake.learning import TrialLogError
     from handle_drake.learning.cluster import ExecutorError
+    from handle_drake.paths import check_outputs
 
     pin_blas(force=False)
     args = parser.parse_args(argv)
     previous = _terminate_like_ctrl_c()
     try:
+        check_outputs(args)  # before minutes of work, not after
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        from handle_drake.scenario_checks import short_path
+
+        where = f": {short_path(error.filename)}" if error.filename else ""
+        print(f"handle-drake {args.command}: error: {error.strerror or error}{where}",
+              file=sys.stderr)
+        return 2
+    except SystemExit as error:
+        if error.code is None or isinstance(error.code, int):
+            raise
+        # Last resort: a Drake ``Failure at ...`` (an input our checks let through).
+        print(f"handle-drake {args.command}: error: Drake refused the input: "
+              f"{str(error.code).strip()[:500]}", file=sys.stderr)
+        return 2
+    except (RuntimeError, MemoryError, RecursionError) as error:
+        # Last resort too: Drake's RuntimeErrors on inputs our checks let through.
+        print(f"handle-drake {args.command}: error: {type(error).__name__}: "
+              f"{str(error).strip()[:500]}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         resume = f"; run it again to resume from {args.db}" if getattr(args, "db", None) else ""

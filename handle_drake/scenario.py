@@ -40,6 +40,7 @@ from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from handle_drake.can_hand.config import CanHandDriverConfig
+from handle_drake.scenario_checks import check_ranges, check_yaml_text, short, short_path
 
 __all__ = [
     "CONTACT_MODELS",
@@ -272,14 +273,44 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
     """
     scenario = Scenario()
     if filename is not None:
-        path = Path(filename)
-        if not path.is_file():
-            raise FileNotFoundError(f"scenario file not found: {path}")
-        scenario = _load(path.read_text(), scenario, source=str(path))
+        scenario = _load(read_text_file(filename, "scenario"), scenario, source=str(filename))
     if data is not None:
         scenario = _load(data, scenario, source="override")
     validate_scenario(scenario)
     return scenario
+
+
+def read_text_file(filename, what: str, max_bytes: int = 16 << 20) -> str:
+    """The text of a regular file; FileNotFoundError only when it does not exist.
+
+    A directory, a FIFO or device (which would block), a file too big, unreadable
+    or not UTF-8 is a ValueError saying which.
+    """
+    import os
+    import stat
+
+    path = Path(filename)
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} file not found: {short_path(path)}") from None
+    except OSError as error:
+        raise ValueError(f"{what} file {short_path(path)}: {error.strerror}") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise ValueError(f"{what} file: expected a file, got the directory {short_path(path)}")
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{what} file: expected a regular file, got a FIFO, socket or device "
+                         f"{short_path(path)}")
+    if info.st_size > max_bytes:
+        raise ValueError(f"{what} file {short_path(path)}: expected at most {max_bytes} bytes, "
+                         f"got {info.st_size}")
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as error:
+        raise ValueError(f"{what} file {short_path(path)}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{what} file {short_path(path)}: expected UTF-8 text, got a byte "
+                         f"0x{error.object[error.start]:02x} at offset {error.start}") from None
 
 
 def DumpScenario(scenario: Scenario) -> str:
@@ -300,6 +331,7 @@ def DumpScenario(scenario: Scenario) -> str:
 def _load(text: str, defaults: Scenario, source: str) -> Scenario:
     if not text.strip():
         return defaults
+    check_yaml_text(text, Scenario, source)
     try:
         return yaml_load_typed(schema=Scenario, data=text, defaults=defaults)
     except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError
@@ -308,6 +340,8 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
 
 
 def _check_transform(name: str, transform: Transform) -> None:
+    if not transform.IsDeterministic():  # GetDeterministicValue would abort the process
+        raise ScenarioError(f"{name}: expected a deterministic pose, got a random one")
     try:
         X = transform.GetDeterministicValue()
     except Exception as error:
@@ -327,7 +361,8 @@ def validate_scenario(scenario: Scenario) -> None:
 
     if scenario.hand.kind not in HAND_SPECS:
         raise ScenarioError(
-            f"hand.kind: unknown hand {scenario.hand.kind!r}; expected one of {sorted(HAND_SPECS)}"
+            f"hand.kind: unknown hand {short(scenario.hand.kind)}; "
+            f"expected one of {sorted(HAND_SPECS)}"
         )
     spec = HAND_SPECS[scenario.hand.kind]
     if scenario.hand.coupling_ratio is not None:
@@ -340,7 +375,7 @@ def validate_scenario(scenario: Scenario) -> None:
     for name, value in scenario.hand.initial_position.items():
         if name not in spec.actuated_joint_names:
             raise ScenarioError(
-                f"hand.initial_position: {name!r} is not an actuated joint of the "
+                f"hand.initial_position: {short(name)} is not an actuated joint of the "
                 f"{spec.name} hand; expected one of {list(spec.actuated_joint_names)}"
             )
         if not math.isfinite(value):
@@ -350,7 +385,7 @@ def validate_scenario(scenario: Scenario) -> None:
 
         if scenario.object.kind not in KINDS:
             raise ScenarioError(
-                f"object.kind: unknown object {scenario.object.kind!r}; "
+                f"object.kind: unknown object {short(scenario.object.kind)}; "
                 f"expected one of {list(KINDS)}"
             )
         _check_positive("object.size", scenario.object.size)
@@ -373,14 +408,15 @@ def validate_scenario(scenario: Scenario) -> None:
         _check_positive("table.size_y", scenario.table.size_y)
     if scenario.contact_model not in CONTACT_MODELS:
         raise ScenarioError(
-            f"contact_model: expected one of {list(CONTACT_MODELS)}, got {scenario.contact_model!r}"
+            f"contact_model: expected one of {list(CONTACT_MODELS)}, "
+            f"got {short(scenario.contact_model)}"
         )
     if scenario.contact_approximation not in CONTACT_APPROXIMATIONS:
         hint = (" (TAMSI ignores the hand's PD actuators and couplers)"
                 if scenario.contact_approximation == "tamsi" else "")
         raise ScenarioError(
             f"contact_approximation: expected one of {list(CONTACT_APPROXIMATIONS)}, "
-            f"got {scenario.contact_approximation!r}{hint}"
+            f"got {short(scenario.contact_approximation)}{hint}"
         )
     _check_positive("time_step", scenario.time_step)
     _check_positive("simulation_duration", scenario.simulation_duration)
@@ -401,6 +437,7 @@ def validate_scenario(scenario: Scenario) -> None:
                 and scenario.driver.max_joint_velocity >= 0):
             raise ScenarioError("driver.max_joint_velocity must be finite and >= 0")
         _check_positive("driver.control_period", scenario.driver.control_period)
+    check_ranges(scenario)
 
 
 def _validate_script(scenario: Scenario, spec) -> None:
@@ -415,7 +452,7 @@ def _validate_script(scenario: Scenario, spec) -> None:
         for name, value in keyframe.hand.items():
             if name not in spec.actuated_joint_names:
                 raise ScenarioError(
-                    f"{where}.hand: {name!r} is not an actuated joint of the {spec.name} hand"
+                    f"{where}.hand: {short(name)} is not an actuated joint of the {spec.name} hand"
                 )
             if not math.isfinite(value):
                 raise ScenarioError(f"{where}.hand[{name}] must be finite, got {value}")
@@ -425,7 +462,7 @@ def _validate_script(scenario: Scenario, spec) -> None:
             if len(keyframe.wrist) != 6 or not all(math.isfinite(v) for v in keyframe.wrist):
                 raise ScenarioError(
                     f"{where}.wrist: expected 6 finite values [x y z roll pitch yaw], "
-                    f"got {keyframe.wrist}"
+                    f"got {short(keyframe.wrist)}"
                 )
 
 
@@ -441,9 +478,9 @@ def _validate_cameras(scenario: Scenario) -> None:
         if not isinstance(camera.name, str) or not camera.name.strip() or any(
                 c in camera.name for c in "./ \t\n"):
             raise ScenarioError(f"{where}.name must be a non-empty name without '.', '/' or "
-                                f"spaces, got {camera.name!r}")
+                                f"spaces, got {short(camera.name)}")
         if camera.name in names:
-            raise ScenarioError(f"{where}.name: duplicate camera name {camera.name!r}")
+            raise ScenarioError(f"{where}.name: duplicate camera name {short(camera.name)}")
         names.add(camera.name)
         try:
             get_profile(camera.profile)
@@ -451,7 +488,7 @@ def _validate_cameras(scenario: Scenario) -> None:
             raise ScenarioError(f"{where}.profile: {error}") from None
         if camera.parent not in CAMERA_PARENTS:
             raise ScenarioError(f"{where}.parent: expected one of {list(CAMERA_PARENTS)}, "
-                                f"got {camera.parent!r}")
+                                f"got {short(camera.parent)}")
         _check_transform(f"{where}.X_PC", camera.X_PC)
         if camera.parent == "world" and scenario.table is not None:
             p = camera.X_PC.GetDeterministicValue().translation()

@@ -64,6 +64,9 @@ def _add_bus_arguments(p: argparse.ArgumentParser) -> None:
                         f"(defaults: {_DEFAULT_CHANNEL})")
     p.add_argument("--bus-port", type=int, default=DEFAULT_MULTICAST_PORT,
                    help="UDP port of the udp_multicast bus")
+    p.add_argument("--multicast-interface", default="127.0.0.1",
+                   help="IPv4 address of the interface the udp_multicast bus joins and sends "
+                        "on (default loopback: the bus stays on this host); '' = any interface")
     p.add_argument("--frame-format", choices=FRAME_FORMATS, default="fd",
                    help="the hand's message layout: fd (CAN FD, one frame per command and "
                         "per hand cycle) or classic (8-byte CAN 2.0 frames)")
@@ -83,6 +86,13 @@ def register(subparsers) -> None:
     p.add_argument("--max-step", type=float, default=0.02, help="rad per joint per commit")
     p.add_argument("--watchdog", type=float, default=0.25,
                    help="s without a command before the setpoint freezes")
+    p.add_argument("--max-clients", type=int, default=32,
+                   help="connections beyond this many are refused ('server full')")
+    p.add_argument("--hello-timeout", type=float, default=5.0,
+                   help="s, a connection without a HELLO by then is closed")
+    p.add_argument("--max-client-backlog", type=int, default=256 * 1024,
+                   help="bytes of unread output per client; beyond it STATEs are dropped and a "
+                        "client that stays there for 2 s is disconnected")
     p.add_argument("--with-sim", action="store_true",
                    help="also run the simulated hand firmware in this process")
     p.set_defaults(func=_cmd_server)
@@ -106,7 +116,8 @@ def _add_firmware_arguments(p: argparse.ArgumentParser) -> None:
 def _bus(args) -> BusConfig:
     channel = args.channel or _DEFAULT_CHANNEL[args.bus]
     return BusConfig(interface=args.bus, channel=channel, port=args.bus_port,
-                     frame_format=args.frame_format)
+                     frame_format=args.frame_format,
+                     multicast_interface=args.multicast_interface)
 
 
 def _firmware_config(args, bus: BusConfig) -> CanFirmwareConfig:
@@ -160,7 +171,9 @@ def _cmd_server(args) -> int:
     config = CanServerConfig(host=host, port=port, hand_kind=args.hand,
                              coupling_ratio=args.coupling_ratio, bus=bus,
                              max_setpoint_rate=args.max_rate, max_step=args.max_step,
-                             watchdog=args.watchdog, realtime_priority=args.rt_priority)
+                             watchdog=args.watchdog, realtime_priority=args.rt_priority,
+                             max_clients=args.max_clients, hello_timeout=args.hello_timeout,
+                             max_client_backlog=args.max_client_backlog)
     stop = _stop_event()
     firmware = None
     with CanBusServer(config) as server:

@@ -115,12 +115,18 @@ class BusConfig:
     MTU (``ip link set can0 mtu 72``, and for a real controller
     ``type can bitrate 1000000 dbitrate 5000000 fd on``). Use "classic" for a
     hand or adapter that speaks only CAN 2.0.
+
+    ``multicast_interface``: the local IPv4 address of the interface a
+    udp_multicast bus joins and sends on (default 127.0.0.1: the bus stays on
+    this host); "" keeps python-can's socket, bound to every interface (see
+    :mod:`handle_drake.can_hand.bus`).
     """
 
     interface: str = "virtual"
     channel: str = "handle_drake"
     port: int = DEFAULT_MULTICAST_PORT
     frame_format: str = "fd"
+    multicast_interface: str = "127.0.0.1"
 
     def validate(self) -> None:
         if self.interface not in BUS_INTERFACES:
@@ -140,6 +146,16 @@ class BusConfig:
                 ) from None
             if not address.is_multicast:
                 raise ValueError(f"channel: {self.channel} is not a multicast address")
+            if not isinstance(self.multicast_interface, str):
+                raise ValueError(f"multicast_interface: expected an IPv4 address or '', got "
+                                 f"{self.multicast_interface!r}")
+            if self.multicast_interface:
+                try:
+                    ipaddress.IPv4Address(self.multicast_interface)
+                except ValueError:
+                    raise ValueError(f"multicast_interface: expected an IPv4 address of a "
+                                     f"local interface or '', got "
+                                     f"{self.multicast_interface[:60]!r}") from None
 
 
 @dc.dataclass
@@ -159,6 +175,16 @@ class CanServerConfig:
         velocity_time_constant: s, low-pass of the finite-difference velocity.
         realtime_priority: 0 (normal scheduling) or 1..99: the bus and I/O
             threads run under SCHED_FIFO at this priority.
+        max_clients: connections beyond this many are told "server full" and
+            closed at once.
+        hello_timeout: s, a connection that has not completed HELLO by then is
+            closed (idle or half-open connections cannot pile up).
+        max_client_backlog: bytes of unread output one client may hold; STATE
+            messages beyond it are dropped for that client, and a reply that
+            does not fit disconnects it.
+        slow_client_timeout: s, a client whose backlog stays full this long
+            (it stopped reading) is disconnected. A client that reads its
+            STATE stream is never idle, whether it sends commands or not.
     """
 
     host: str = "127.0.0.1"
@@ -171,10 +197,21 @@ class CanServerConfig:
     watchdog: float = 0.25
     velocity_time_constant: float = 0.01
     realtime_priority: int = 0
+    max_clients: int = 32
+    hello_timeout: float = 5.0
+    max_client_backlog: int = 256 * 1024
+    slow_client_timeout: float = 2.0
 
     def validate(self) -> None:
         if not isinstance(self.host, str) or not self.host:
             raise ValueError(f"host: expected a listen address, got {self.host!r}")
+        for name, low, high in (("max_clients", 1, 4096),
+                                ("max_client_backlog", 4096, 1 << 30)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+                raise ValueError(f"{name}: expected an integer in {low}..{high}, got {value!r}")
+        _positive("hello_timeout", self.hello_timeout)
+        _positive("slow_client_timeout", self.slow_client_timeout)
         _port("port", self.port)
         if self.hand_kind not in ("shadow", "barrett"):
             raise ValueError(f"hand: expected 'shadow' or 'barrett', got {self.hand_kind!r}")

@@ -29,7 +29,14 @@ import time
 import can
 import numpy as np
 
-from handle_drake.can_hand.bus import open_bus, use_realtime_priority
+from handle_drake.can_hand.bus import (
+    GARBAGE,
+    ErrorLog,
+    check_frame,
+    open_bus,
+    receive,
+    use_realtime_priority,
+)
 from handle_drake.can_hand.config import CanFirmwareConfig
 from handle_drake.can_hand.layout import HandLayout, hand_layout
 from handle_drake.can_hand.messages import (
@@ -45,6 +52,7 @@ __all__ = ["HandJointModel", "SimulatedHandFirmware"]
 log = logging.getLogger(__name__)
 
 _MAX_SUBSTEP = 0.001  # s; keeps the explicit integration stable for wn * dt << 1
+_MAX_FRAMES_PER_CYCLE = 4096  # a flood of frames cannot stop the cycle from publishing
 
 
 class HandJointModel:
@@ -142,6 +150,7 @@ class SimulatedHandFirmware:
         self._counter = 0
         self._t0 = time.monotonic()
         self.silent = threading.Event()  # set: stop publishing (a test's "hand unplugged")
+        self._errors = ErrorLog(log)
 
     def start(self) -> SimulatedHandFirmware:
         if self._thread is not None:
@@ -172,14 +181,19 @@ class SimulatedHandFirmware:
 
     def _handle(self, message: can.Message) -> None:
         self.counters["frames_rx"] += 1
-        if message.arbitration_id in self.codec.hand_to_host_ids:
+        try:
+            arbitration_id, data, is_fd = check_frame(message)
+        except MalformedFrameError:
+            self.counters["malformed_frames"] += 1
+            return
+        if arbitration_id in self.codec.hand_to_host_ids:
             self.counters["echo_frames"] += 1  # our own feedback looped back
             return
         if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
             self.counters["foreign_frames"] += 1
             return
         try:
-            applied = self._assembler.feed(message.arbitration_id, message.data, message.is_fd)
+            applied = self._assembler.feed(arbitration_id, data, is_fd)
         except ForeignFrameError:
             self.counters["foreign_frames"] += 1
             return
@@ -202,7 +216,7 @@ class SimulatedHandFirmware:
         period = 1.0 / self.config.rate
         last = time.monotonic()
         deadline = last + period
-        recv = self._bus.recv
+        bus = self._bus
         while not self._stop.is_set():
             # One wake-up per cycle, like a firmware that reads its CAN receive FIFO at
             # the start of each control cycle: sleep to the deadline, then take every
@@ -212,16 +226,23 @@ class SimulatedHandFirmware:
             remaining = deadline - time.monotonic()
             if remaining > 0 and self._stop.wait(remaining):
                 break
-            while True:
-                try:
-                    message = recv(0.0)
-                except (can.CanError, OSError, ValueError) as error:
-                    self.counters["bus_rx_errors"] += 1
-                    log.warning("firmware bus receive failed: %s", error)
+            for _ in range(_MAX_FRAMES_PER_CYCLE):
+                message, why = receive(bus, 0.0)
+                if why == GARBAGE:  # undecodable datagram: counted, next one at once
+                    self.counters["frames_rx"] += 1
+                    self.counters[GARBAGE] += 1
+                    continue
+                if why is not None:
+                    self.counters[why] += 1
+                    self._errors(why, RuntimeError("firmware bus receive failed"))
                     break
                 if message is None:
                     break
-                self._handle(message)
+                try:
+                    self._handle(message)
+                except Exception as error:  # one frame never stops the hand
+                    self.counters["frame_errors"] += 1
+                    self._errors("frame_errors", error)
             now = time.monotonic()
             with self._lock:
                 self.model.step(min(now - last, 0.05))

@@ -39,6 +39,7 @@ grasp closed: a finger stopped by an object keeps pressing.
 from __future__ import annotations
 
 import collections
+import errno
 import logging
 import selectors
 import socket
@@ -49,7 +50,14 @@ import can
 import numpy as np
 
 from handle_drake.can_hand import protocol as P
-from handle_drake.can_hand.bus import open_bus, use_realtime_priority
+from handle_drake.can_hand.bus import (
+    GARBAGE,
+    ErrorLog,
+    check_frame,
+    open_bus,
+    receive,
+    use_realtime_priority,
+)
 from handle_drake.can_hand.config import CanServerConfig
 from handle_drake.can_hand.layout import HandLayout, hand_layout
 from handle_drake.can_hand.messages import (
@@ -64,7 +72,11 @@ __all__ = ["CanBusServer", "CommitSchedule", "VelocityEstimator", "clamp_command
 
 log = logging.getLogger(__name__)
 
-_MAX_CLIENT_BACKLOG = 256 * 1024  # bytes queued for a slow client before states are dropped
+_READ_CHUNK = 4096  # bytes read from one client per round of the I/O loop
+# Kernel send buffer per client: small enough that a client that stops reading
+# shows up in its (capped) output backlog within ~0.1 s of STATE at 1 kHz, instead
+# of hiding megabytes in an autotuned loopback buffer.
+_CLIENT_SNDBUF = 64 * 1024
 
 
 def clamp_command(q, lower, upper) -> tuple[np.ndarray, bool]:
@@ -132,10 +144,13 @@ class VelocityEstimator:
 
 
 class _Client:
-    __slots__ = ("sock", "address", "reader", "out", "greeted", "closing", "writing")
+    __slots__ = ("sock", "address", "reader", "out", "greeted", "closing", "writing", "since",
+                 "stalled_since")
 
     def __init__(self, sock, address):
         self.sock, self.address = sock, address
+        self.since = time.monotonic()
+        self.stalled_since = None  # when its unread output first passed the cap
         self.reader = P.FrameReader()
         self.out = bytearray()
         self.greeted = False
@@ -190,6 +205,8 @@ class CanBusServer:
         self._assembler = self.codec.feedback_receiver()
         self._velocities = VelocityEstimator(self.layout.nq, config.velocity_time_constant,
                                              self.codec.time_wrap)
+        self._errors = ErrorLog(log)
+        self._accept_paused_until = 0.0  # out of file descriptors: accept again then
 
     # -- life cycle ----------------------------------------------------------
     def start(self) -> CanBusServer:
@@ -199,7 +216,7 @@ class CanBusServer:
         try:
             listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             listen.bind((self.config.host, self.config.port))
-            listen.listen(8)
+            listen.listen(64)
             listen.setblocking(False)
         except OSError as error:
             listen.close()
@@ -283,52 +300,71 @@ class CanBusServer:
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
-        own_ids = self.codec.host_to_hand_ids
-        feed = self._assembler.feed
         # Frame counts are kept here and merged under the lock once per hand
         # cycle, idle wait or 64 frames, not per frame.
         pending = collections.Counter()
+        failures = 0  # consecutive bus errors: the back-off grows with them
         while not self._stop.is_set():
-            try:
-                message = self._bus.recv(timeout=0.05)
-            except (can.CanError, OSError, ValueError) as error:
-                pending["bus_rx_errors"] += 1
-                self._merge_counts(pending)
-                log.warning("bus receive failed: %s", error)
-                self._stop.wait(0.01)
+            message, why = receive(self._bus, 0.05)
+            if why == GARBAGE:  # an undecodable datagram costs its decoding, no wait
+                pending["frames_rx"] += 1
+                pending[GARBAGE] += 1
+                if pending["frames_rx"] >= 64:
+                    self._merge_counts(pending)
                 continue
+            if why is not None:
+                failures += 1
+                pending[why] += 1
+                self._merge_counts(pending)
+                self._errors(why, RuntimeError("bus receive failed"))
+                self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
+                continue
+            failures = 0
             if message is None:
                 self._merge_counts(pending)
                 continue
             pending["frames_rx"] += 1
-            snapshot = None
-            if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
+            try:
+                self._on_frame(message, pending)
+            except Exception as error:  # one frame never takes the bus thread down
+                pending["frame_errors"] += 1
+                self._merge_counts(pending)
+                self._errors("frame_errors", error)
+
+    def _on_frame(self, message, pending: collections.Counter) -> None:
+        try:
+            arbitration_id, data, is_fd = check_frame(message)
+        except MalformedFrameError:
+            pending["malformed_frames"] += 1
+            return
+        snapshot = None
+        if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
+            pending["foreign_frames"] += 1
+        elif arbitration_id in self.codec.host_to_hand_ids:
+            pending["echo_frames"] += 1
+        else:
+            try:
+                snapshot = self._assembler.feed(arbitration_id, data, is_fd)
+            except ForeignFrameError:
                 pending["foreign_frames"] += 1
-            elif message.arbitration_id in own_ids:
-                pending["echo_frames"] += 1
-            else:
-                try:
-                    snapshot = feed(message.arbitration_id, message.data, message.is_fd)
-                except ForeignFrameError:
-                    pending["foreign_frames"] += 1
-                except FrameFormatError:
-                    pending["wrong_format_frames"] += 1
-                except MalformedFrameError:
-                    pending["malformed_frames"] += 1
-            if snapshot is None:
-                # Also while only rejected frames arrive: the counts must show.
-                if pending["frames_rx"] >= 64:
-                    self._merge_counts(pending)
-                continue
-            velocity = self._velocities.update(snapshot.q, snapshot.hand_time)
-            pending["hand_cycles"] += 1
-            with self._lock:
-                self._snapshot = snapshot
-                self._counters.update(pending)
-            pending.clear()
-            self._broadcast_state(snapshot, velocity)
-            if self._setpoint is None and self._target is not None:
-                self._wake()  # a first command waits for the measured position
+            except FrameFormatError:
+                pending["wrong_format_frames"] += 1
+            except MalformedFrameError:
+                pending["malformed_frames"] += 1
+        if snapshot is None:
+            # Also while only rejected frames arrive: the counts must show.
+            if pending["frames_rx"] >= 64:
+                self._merge_counts(pending)
+            return
+        velocity = self._velocities.update(snapshot.q, snapshot.hand_time)
+        pending["hand_cycles"] += 1
+        with self._lock:
+            self._snapshot = snapshot
+            self._counters.update(pending)
+        pending.clear()
+        self._broadcast_state(snapshot, velocity)
+        if self._setpoint is None and self._target is not None:
+            self._wake()  # a first command waits for the measured position
 
     def _merge_counts(self, pending: collections.Counter) -> None:
         if pending:
@@ -353,54 +389,109 @@ class CanBusServer:
     # -- TCP side ------------------------------------------------------------------
     def _io_loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
+        failures = 0
         while not self._stop.is_set():
             try:
                 events = self._selector.select(self._select_timeout(time.monotonic()))
-            except (OSError, ValueError):
+            except (OSError, ValueError) as error:
                 if self._stop.is_set():
                     return
-                raise
-            with self._io_lock:
-                for key, mask in events:
-                    if key.data == "listen":
-                        self._accept()
-                    elif key.data == "wake":
-                        try:
-                            while self._wake_r.recv(4096):
-                                pass
-                        except OSError:
-                            pass
-                    else:
-                        client = key.data
-                        if client not in self._clients:  # closed by the bus thread meanwhile
-                            continue
-                        if mask & selectors.EVENT_READ:
-                            self._read(client)
-                        if mask & selectors.EVENT_WRITE and not client.closing:
-                            self._flush(client)
-            # Outside the I/O lock: the bus thread streams states meanwhile.
-            self._service_setpoint(time.monotonic())
+                self._count("io_errors")
+                self._errors("io_errors", error)
+                self._stop.wait(0.01)
+                continue
+            try:
+                with self._io_lock:
+                    for key, mask in events:
+                        self._on_event(key, mask)
+                    self._housekeeping(time.monotonic())
+                # Outside the I/O lock: the bus thread streams states meanwhile.
+                self._service_setpoint(time.monotonic())
+                failures = 0
+            except Exception as error:  # the I/O thread outlives any bug a client triggers
+                failures += 1
+                self._count("io_errors")
+                self._errors("io_errors", error)
+                self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
 
-    def _select_timeout(self, now: float) -> float:
-        timeout = 0.05
-        if self._target is not None and not self._holding:
-            timeout = min(timeout, max(0.0, self._last_command_time + self.config.watchdog - now))
-            if self._unsent or not np.array_equal(self._setpoint, self._target):
-                next_commit = self._schedule.earliest()
-                timeout = min(timeout, max(0.0, next_commit - now))
-        return timeout
+    def _on_event(self, key, mask) -> None:
+        if key.data == "listen":
+            self._accept()
+        elif key.data == "wake":
+            try:
+                while self._wake_r.recv(4096):
+                    pass
+            except OSError:
+                pass
+        else:
+            client = key.data
+            if client not in self._clients:  # closed by the bus thread meanwhile
+                return
+            try:
+                if mask & selectors.EVENT_READ:
+                    self._read(client)
+                if mask & selectors.EVENT_WRITE and not client.closing and \
+                        client in self._clients:
+                    self._flush(client)
+            except Exception as error:  # one client's trouble is that client's alone
+                self._count("client_errors")
+                self._errors("client_errors", error)
+                if client in self._clients:
+                    self._close_client(client)
+
+    def _housekeeping(self, now: float) -> None:
+        """Closes clients that never said HELLO or stopped reading; resumes accepting."""
+        if self._accept_paused_until and now >= self._accept_paused_until:
+            self._accept_paused_until = 0.0
+            self._selector.register(self._listen, selectors.EVENT_READ, "listen")
+        config = self.config
+        for client in list(self._clients):
+            if not client.greeted and now - client.since > config.hello_timeout:
+                self._count("idle_clients_closed")
+                self._close_client(client)
+            elif client.stalled_since is not None and \
+                    now - client.stalled_since > config.slow_client_timeout:
+                self._count("slow_clients_closed")
+                self._close_client(client)
 
     def _accept(self) -> None:
-        try:
-            sock, address = self._listen.accept()
-        except (BlockingIOError, InterruptedError):
-            return
-        sock.setblocking(False)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        client = _Client(sock, address)
-        self._clients.append(client)
-        self._selector.register(sock, selectors.EVENT_READ, client)
-        self._count("connections")
+        for _ in range(16):  # a burst of connections waits for the next round
+            try:
+                sock, address = self._listen.accept()
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as error:
+                self._count("accept_errors")
+                self._errors("accept_errors", error)
+                if error.errno in (errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM):
+                    # Out of descriptors: stop polling the listen socket (it would stay
+                    # readable and spin) until the housekeeping has had a chance to free some.
+                    self._selector.unregister(self._listen)
+                    self._accept_paused_until = time.monotonic() + 0.2
+                return
+            if len(self._clients) >= self.config.max_clients:
+                self._count("clients_refused")
+                try:
+                    sock.setblocking(False)
+                    sock.send(P.pack(P.ERROR, f"server full: {self.config.max_clients} clients "
+                                              f"connected (max_clients)".encode()))
+                except OSError:
+                    pass
+                sock.close()
+                continue
+            try:
+                sock.setblocking(False)
+                sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, _CLIENT_SNDBUF)
+                client = _Client(sock, address)
+                self._selector.register(sock, selectors.EVENT_READ, client)
+            except (OSError, ValueError) as error:
+                self._count("accept_errors")
+                self._errors("accept_errors", error)
+                sock.close()
+                continue
+            self._clients.append(client)
+            self._count("connections")
 
     def _close_client(self, client: _Client) -> None:
         if client in self._clients:
@@ -413,7 +504,8 @@ class CanBusServer:
 
     def _read(self, client: _Client) -> None:
         try:
-            data = client.sock.recv(65536)
+            # A bounded read: a flooding client gets one slice of work per round.
+            data = client.sock.recv(_READ_CHUNK)
         except (BlockingIOError, InterruptedError):
             return
         except OSError:
@@ -427,10 +519,25 @@ class CanBusServer:
             self._count("malformed_messages")
             self._reject(client, f"protocol error: {error}")
             return
+        stats_wanted = False
         for message_type, payload in messages:
-            if client.closing:
+            if client.closing or client not in self._clients:
                 return
+            if message_type == P.STATS_REQ and client.greeted:
+                stats_wanted = True  # one reply answers every request of this read
+                continue
             self._handle(client, message_type, payload)
+        if stats_wanted and client in self._clients and not client.closing:
+            self._reply(client, P.pack_stats(self.stats()))
+
+    def _reply(self, client: _Client, data: bytes) -> None:
+        """Queues a reply; a client whose unread output passed the cap is disconnected."""
+        if len(client.out) + len(data) > self.config.max_client_backlog:
+            self._count("slow_clients_closed")
+            self._close_client(client)
+            return
+        client.out += data
+        self._flush(client)
 
     def _reject(self, client: _Client, text: str) -> None:
         """Sends ERROR and closes once it is written."""
@@ -456,8 +563,7 @@ class CanBusServer:
                                      f"{info.nq}, nu {info.nu}, tactile {info.nt})")
                 return
             client.greeted = True
-            client.out += P.pack_hello(self._info, P.WELCOME)
-            self._flush(client)
+            self._reply(client, P.pack_hello(self._info, P.WELCOME))
         elif not client.greeted:
             self._count("malformed_messages")
             self._reject(client, "expected HELLO first")
@@ -466,17 +572,12 @@ class CanBusServer:
                 seq, q = P.unpack_command(payload, self.layout.nu)
             except P.PayloadError as error:
                 self._count("commands_rejected")
-                client.out += P.pack(P.ERROR, str(error).encode())
-                self._flush(client)
+                self._reply(client, P.pack(P.ERROR, str(error).encode()[:1024]))
                 return
             self._on_command(seq, q, time.monotonic())
-        elif message_type == P.STATS_REQ:
-            client.out += P.pack_stats(self.stats())
-            self._flush(client)
         else:
             self._count("malformed_messages")
-            client.out += P.pack(P.ERROR, f"unexpected message type {message_type}".encode())
-            self._flush(client)
+            self._reply(client, P.pack(P.ERROR, f"unexpected message type {message_type}".encode()))
 
     def _flush(self, client: _Client) -> None:
         """Writes what the socket takes now; the rest waits for EVENT_WRITE (under _io_lock)."""
@@ -494,6 +595,15 @@ class CanBusServer:
             client.writing = writing
             events = selectors.EVENT_READ | (selectors.EVENT_WRITE if writing else 0)
             self._selector.modify(client.sock, events, client)
+
+    def _select_timeout(self, now: float) -> float:
+        timeout = 0.05
+        if self._target is not None and not self._holding:
+            timeout = min(timeout, max(0.0, self._last_command_time + self.config.watchdog - now))
+            if self._unsent or not np.array_equal(self._setpoint, self._target):
+                next_commit = self._schedule.earliest()
+                timeout = min(timeout, max(0.0, next_commit - now))
+        return timeout
 
     # -- setpoints ---------------------------------------------------------------------
     def _on_command(self, seq: int, q: np.ndarray, now: float) -> None:
@@ -563,13 +673,17 @@ class CanBusServer:
             tactile=snapshot.tactile, setpoint=setpoint,
         ))
         sent = dropped = 0
+        backlog = self.config.max_client_backlog
         with self._io_lock:
             for client in list(self._clients):
                 if not client.greeted or client.closing:
                     continue
-                if len(client.out) > _MAX_CLIENT_BACKLOG:
-                    dropped += 1
+                if len(client.out) + len(message) > backlog:
+                    dropped += 1  # the I/O thread closes it after slow_client_timeout
+                    if client.stalled_since is None:
+                        client.stalled_since = time.monotonic()
                     continue
+                client.stalled_since = None
                 client.out += message
                 sent += 1
                 self._flush(client)

@@ -11,13 +11,16 @@ objective name, optimiser options) are in a table of their own. A row goes
 
 from __future__ import annotations
 
+import functools
 import json
 import math
+import os
 import sqlite3
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 import numpy as np
 
@@ -93,6 +96,30 @@ def _parameters_json(x) -> str:
     return json.dumps([float(v) for v in np.asarray(x, dtype=float).reshape(-1)])
 
 
+def _guarded(method):
+    """SQLite failures inside a method become TrialLogError with the real reason:
+    a write to a read-only log says so, a record damaged after opening says that."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except sqlite3.IntegrityError:
+            raise
+        except sqlite3.OperationalError as error:
+            if self.read_only or "readonly" in str(error):
+                raise TrialLogError(f"{self.path} is read-only: cannot record trials in it "
+                                    f"({error}); copy it somewhere writable to resume") from None
+            raise TrialLogError(f"{self.path}: {error}") from None
+        except sqlite3.DatabaseError as error:
+            raise TrialLogError(f"{self.path} is damaged: {error}; it was not modified") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as error:
+            raise TrialLogError(f"{self.path} is damaged: a field does not decode "
+                                f"({str(error)[:200]})") from None
+
+    return wrapper
+
+
 class TrialLog:
     """The SQLite trial database. Opening an existing file never overwrites it.
 
@@ -104,10 +131,25 @@ class TrialLog:
     def __init__(self, path):
         self.path = Path(path)
         existing = self.path.exists() and self.path.stat().st_size > 0
+        #: A valid log on a file (or in a folder) this process cannot write opens read-only:
+        #: every read works, every write raises TrialLogError saying so.
+        self.read_only = existing and not (
+            os.access(self.path, os.W_OK) and os.access(self.path.parent, os.W_OK))
+        wal = Path(f"{self.path}-wal")
+        if self.read_only and wal.exists() and wal.stat().st_size > 0:
+            raise TrialLogError(f"{self.path} is read-only and its journal {wal.name} holds "
+                                "trials not yet merged into it; open it once where it is "
+                                "writable (it was not modified)")
         if existing:
             self._check_existing()
+        if self.read_only:
+            self._conn = sqlite3.connect(self._read_only_uri(), uri=True)
+            return
         # Autocommit (isolation_level=None): each write is its own durable transaction.
-        self._conn = sqlite3.connect(str(self.path), timeout=30.0, isolation_level=None)
+        try:
+            self._conn = sqlite3.connect(str(self.path), timeout=30.0, isolation_level=None)
+        except sqlite3.DatabaseError as error:
+            raise TrialLogError(f"{self.path}: cannot create a trial log there ({error})") from None
         try:
             self._conn.execute("PRAGMA journal_mode=WAL")
             self._conn.execute("PRAGMA synchronous=FULL")
@@ -138,7 +180,7 @@ class TrialLog:
                 f"{self.path} is not an SQLite database (bad header {header[:16]!r}); "
                 "refusing to open or overwrite it"
             )
-        uri = f"file:{self.path.resolve()}?mode=ro"
+        uri = self._read_only_uri()
         try:
             conn = sqlite3.connect(uri, uri=True)
             try:
@@ -162,12 +204,51 @@ class TrialLog:
                             f"{self.path}: trial log format {meta.get('format')!r} version "
                             f"{meta.get('version')!r}, expected {_FORMAT!r} version {_VERSION}"
                         )
+                    self._decode_every_row(conn)
             finally:
                 conn.close()
         except sqlite3.DatabaseError as error:
             raise TrialLogError(
-                f"{self.path} is corrupt or not a trial log ({error}); it was not modified"
+                f"{self.path} is damaged: SQLite cannot read it ({error}); it was not modified"
             ) from error
+
+    def _read_only_uri(self) -> str:
+        # immutable: a read-only folder cannot hold the WAL's -shm file, and nobody can be
+        # writing a file this process may not write either.
+        immutable = "&immutable=1" if self.read_only else ""
+        return f"file:{quote(str(self.path.resolve()))}?mode=ro{immutable}"
+
+    def _decode_every_row(self, conn) -> None:
+        """Reads and decodes every record, so a damaged one is found now, not mid-run.
+
+        SQLite's quick check verifies the b-trees, not the bytes inside a record: a few
+        scribbled bytes there pass it and fail later (a malformed-record error, a JSON
+        field that no longer parses, a status outside the four).
+        """
+        where = "runs"
+        try:
+            for n, row in enumerate(conn.execute("SELECT * FROM runs")):
+                where = f"runs row {n + 1}"
+                check_bounds(np.array(json.loads(row[2]), dtype=float))
+                int(row[3]), float(row[6])
+                if not isinstance(json.loads(row[5]), dict):
+                    raise ValueError("config is not a JSON object")
+            for n, row in enumerate(conn.execute(
+                    "SELECT run_id, trial_index, parameters, status, seed, contacts "
+                    "FROM trials")):
+                where = f"trials row {n + 1}"
+                np.array(json.loads(row[2]), dtype=float)
+                if row[3] not in STATUSES:
+                    raise ValueError(f"status {row[3]!r}")
+                int(row[1]), int(row[4])
+                if row[5] is not None:
+                    json.loads(row[5])
+        except sqlite3.DatabaseError as error:
+            raise TrialLogError(f"{self.path} is damaged at {where}: SQLite cannot read it "
+                                f"({error}); it was not modified") from None
+        except (ValueError, TypeError, UnicodeDecodeError) as error:
+            raise TrialLogError(f"{self.path} is damaged at {where}: a field does not decode "
+                                f"({str(error)[:200]}); it was not modified") from None
 
     def close(self):
         self._conn.close()
@@ -179,6 +260,7 @@ class TrialLog:
         self.close()
 
     # ------------------------------------------------------------------ runs
+    @_guarded
     def create_run(self, run_id, strategy, bounds, seed, objective, config=None) -> RunInfo:
         if not isinstance(run_id, str) or not run_id:
             raise ValueError(f"run_id must be a non-empty string, got {run_id!r}")
@@ -203,6 +285,7 @@ class TrialLog:
             raise ValueError(f"run {run_id!r} already exists in {self.path}") from None
         return info
 
+    @_guarded
     def get_run(self, run_id) -> RunInfo | None:
         row = self._conn.execute("SELECT * FROM runs WHERE run_id = ?", (run_id,)).fetchone()
         if row is None:
@@ -217,11 +300,13 @@ class TrialLog:
             float(row[6]),
         )
 
+    @_guarded
     def runs(self) -> list[RunInfo]:
         ids = [r for (r,) in self._conn.execute("SELECT run_id FROM runs ORDER BY created_at")]
         return [self.get_run(r) for r in ids]
 
     # ---------------------------------------------------------------- trials
+    @_guarded
     def add_pending(self, run_id, index, parameters, seed, scenario=None) -> None:
         """Write the row of a trial about to be evaluated (before evaluating it)."""
         try:
@@ -236,6 +321,7 @@ class TrialLog:
                 "(the trial exists already, or the run does not)"
             ) from None
 
+    @_guarded
     def _update(self, run_id, index, allowed_from, **values):
         columns = ", ".join(f"{k} = ?" for k in values)
         marks = ", ".join("?" * len(allowed_from))
@@ -278,6 +364,7 @@ class TrialLog:
             values["scenario"] = scenario
         self._update(run_id, index, ("pending", "running"), **values)
 
+    @_guarded
     def trials(self, run_id, status=None) -> list[TrialRecord]:
         """The run's trials in index order (optionally only those with ``status``)."""
         query = (

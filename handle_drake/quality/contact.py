@@ -64,11 +64,38 @@ def wrenches_per_contact(model, num_edges: int) -> int:
     return num_edges if model is ContactModel.POINT_FRICTION else 2 * num_edges
 
 
-def _check_stack(name: str, a, batch: bool) -> np.ndarray:
+#: Ranges beyond which the metric's arithmetic is no longer exact enough to trust:
+#: friction cone edges of length mu (and torsion gamma / L, lever arms |p| / L) beside
+#: a unit normal force lose the normal direction in double precision (mu = 1e9 reads a
+#: closure grasp as open), and the hull's cost grows with the edges (1000 edges take
+#: minutes). Real friction coefficients lie below ~2.
+MAX_MU = 1e4
+MAX_NUM_EDGES = 256
+MAX_RELATIVE_SIZE = 1e6  # |p| / characteristic_length and gamma / characteristic_length
+
+
+def real_array(name: str, a) -> np.ndarray:
+    """``a`` as a float array; TypeError for complex, text or object input (never a cast
+    that silently drops an imaginary part)."""
     try:
-        arr = np.asarray(a, dtype=float)
-    except (TypeError, ValueError) as err:
+        raw = np.asarray(a)
+    except (TypeError, ValueError, OverflowError) as err:
         raise TypeError(f"{name}: expected an array of numbers, got {type(a).__name__}") from err
+    if np.iscomplexobj(raw):
+        raise TypeError(f"{name}: expected real numbers, got complex values")
+    if raw.dtype.kind not in "biuf":
+        if raw.dtype.kind == "O" and any(isinstance(v, complex) for v in raw.ravel()[:10000]):
+            raise TypeError(f"{name}: expected real numbers, got complex values")
+        if raw.dtype.kind in "USVmM":
+            raise TypeError(f"{name}: expected an array of numbers, got {raw.dtype} data")
+    try:
+        return np.asarray(raw, dtype=float)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise TypeError(f"{name}: expected an array of numbers, got {type(a).__name__}") from err
+
+
+def _check_stack(name: str, a, batch: bool) -> np.ndarray:
+    arr = real_array(name, a)
     want = 3 if batch else 2
     if arr.ndim != want or arr.shape[-1] != 3:
         shape = "(B, n, 3)" if batch else "(n, 3)"
@@ -104,11 +131,15 @@ def _check_friction(mu, gamma, num_edges, model: ContactModel):
             raise TypeError(f"{name}: expected a real number, got {type(v).__name__}")
         if not np.isfinite(v) or v < 0:
             raise ValueError(f"{name}: expected a finite value >= 0, got {v}")
+    if mu > MAX_MU:
+        raise ValueError(f"mu: expected a value in [0, {MAX_MU:g}] (beyond it the cone edges "
+                         f"swamp the normal force in double precision), got {mu:g}")
     if model is not ContactModel.FRICTIONLESS:
         if not isinstance(num_edges, int | np.integer) or isinstance(num_edges, bool):
             raise TypeError(f"num_edges: expected an int, got {type(num_edges).__name__}")
-        if num_edges < 3:
-            raise ValueError(f"num_edges: expected >= 3 cone edges, got {num_edges}")
+        if not 3 <= num_edges <= MAX_NUM_EDGES:
+            raise ValueError(f"num_edges: expected 3..{MAX_NUM_EDGES} cone edges, got "
+                             f"{num_edges}")
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -145,7 +176,7 @@ def contact_frames(normals, tangents=None) -> np.ndarray:
         R[..., 0, 0], R[..., 1, 0], R[..., 2, 0] = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
         R[..., 0, 1], R[..., 1, 1], R[..., 2, 1] = b, sign + ny * ny * a, -ny
         return R
-    helper = np.asarray(tangents, dtype=float)
+    helper = real_array("tangents", tangents)
     if helper.shape != n.shape:
         raise ValueError(f"tangents: expected shape {n.shape}, got {helper.shape}")
     x = helper - np.sum(helper * n, axis=-1, keepdims=True) * n
@@ -191,6 +222,14 @@ def contact_wrenches(
     L = characteristic_length
     if not isinstance(L, int | float | np.floating | np.integer) or not np.isfinite(L) or L <= 0:
         raise ValueError(f"characteristic_length: expected a finite value > 0, got {L!r}")
+    reach = float(np.max(np.abs(p))) if p.size else 0.0
+    if reach > MAX_RELATIVE_SIZE * L:
+        raise ValueError(f"points: expected coordinates within {MAX_RELATIVE_SIZE:g} "
+                         f"characteristic lengths ({MAX_RELATIVE_SIZE * L:g} m), got "
+                         f"{reach:g} m; express them in the object's frame, in m")
+    if gamma > MAX_RELATIVE_SIZE * L:
+        raise ValueError(f"gamma: expected at most {MAX_RELATIVE_SIZE:g} characteristic "
+                         f"lengths ({MAX_RELATIVE_SIZE * L:g} m), got {gamma:g} m")
     if model is ContactModel.FRICTIONLESS:
         f = n[..., None, :]
         w = np.concatenate([f, _cross(p[..., None, :], f) / L], axis=-1)

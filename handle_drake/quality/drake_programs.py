@@ -32,6 +32,26 @@ from .hull import _check_wrenches
 DIM = 6
 
 
+#: Most wrenches the Drake programs take: the closure LP's constraint matrix is a
+#: dense m x (m + 1) (10,000 soft-finger contacts would be 160000 x 160000).
+MAX_PROGRAM_WRENCHES = 4000
+
+
+def _check_size(W) -> np.ndarray:
+    W = _check_wrenches(W)
+    if len(W) > MAX_PROGRAM_WRENCHES:
+        raise ValueError(f"wrenches: method='drake' takes at most {MAX_PROGRAM_WRENCHES} "
+                         f"wrenches (its LP is dense), got {len(W)}; use method='fast'")
+    return W
+
+
+def _span(W: np.ndarray) -> str:
+    nonzero = np.abs(W[W != 0])
+    if nonzero.size == 0:
+        return "only zeros"
+    return f"{nonzero.min():.3g}..{nonzero.max():.3g}"
+
+
 def wrench_rank(W, tol: float = 1e-9) -> int:
     """Rank of the wrench set's linear span (closure needs 6)."""
     W = np.asarray(W, dtype=float)
@@ -98,8 +118,12 @@ class ClosurePrograms:
         self._lps: dict[int, _Lp] = {}
 
     def min_distance(self, W) -> tuple[np.ndarray, float, np.ndarray]:
-        """Solve the min-distance QP; returns ``(x, |x|, lambda)``."""
-        W = _check_wrenches(W)
+        """Solve the min-distance QP; returns ``(x, |x|, lambda)``.
+
+        ValueError when Clarabel finds no solution (wrenches whose magnitudes span
+        many orders; the exact NNLS path of method="fast" has no such limit).
+        """
+        W = _check_size(W)
         m = len(W)
         qp = self._qps.get(m)
         if qp is None:
@@ -108,7 +132,9 @@ class ClosurePrograms:
         qp.eq.evaluator().UpdateCoefficients(qp.A, np.zeros(DIM))
         result = self._qp_solver.Solve(qp.prog, None, self._qp_options)
         if not result.is_success():
-            raise RuntimeError(f"min-distance QP failed: {result.get_solution_result()}")
+            raise ValueError(f"wrenches: Drake's min-distance QP found no solution "
+                             f"({result.get_solution_result()}); their magnitudes span "
+                             f"{_span(W)}; method='fast' (exact NNLS) handles this set")
         lam = np.clip(result.GetSolution(qp.lam), 0.0, None)
         lam /= lam.sum()
         x = lam @ W  # recomputed from feasible weights: a point of the hull
@@ -116,7 +142,7 @@ class ClosurePrograms:
 
     def closure_lp(self, W) -> float:
         """Optimal ``s`` of the closure LP (``> 0``: origin in the relative interior)."""
-        W = _check_wrenches(W)
+        W = _check_size(W)
         m = len(W)
         lp = self._lps.get(m)
         if lp is None:
@@ -130,7 +156,7 @@ class ClosurePrograms:
 
     def is_force_closure(self, W, tol: float = 1e-9) -> bool:
         """Force closure (eq. 18): full rank and the origin strictly inside."""
-        W = _check_wrenches(W)
+        W = _check_size(W)
         if wrench_rank(W) < DIM:
             return False
         return self.closure_lp(W) > tol

@@ -58,13 +58,19 @@ EPA_STATS = {"calls": 0, "fallbacks": 0}
 
 
 def _check_wrenches(W) -> np.ndarray:
-    W = np.asarray(W, dtype=float)
+    from handle_drake.quality.contact import real_array
+
+    W = real_array("wrenches", W)
     if W.ndim != 2 or W.shape[1] != DIM:
         raise ValueError(f"wrenches: expected shape (m, 6), got {W.shape}")
     if W.shape[0] == 0:
         raise ValueError("wrenches: expected at least one wrench, got 0")
     if not np.all(np.isfinite(W)):
         raise ValueError("wrenches: expected finite values, got NaN or infinity")
+    scale = float(np.max(np.abs(W)))
+    if scale > 1e150 or (0 < scale < 1e-150):
+        raise ValueError(f"wrenches: expected magnitudes within 1e-150..1e150 (squares must "
+                         f"stay finite), got {scale:g}")
     return W
 
 
@@ -85,13 +91,19 @@ def _min_norm_point(W: np.ndarray):
     m = W.shape[0]
     E = np.empty((DIM + 1, m))
     E[:DIM] = W.T
-    E[DIM] = 1.0
+    # The sum-to-one row carries weight s: min |W^T mu|^2 + s^2 (sum mu - 1)^2 has the
+    # min-norm point's weights (scaled) as its solution for any s > 0; s of the order
+    # of the wrenches keeps NNLS from rounding the weights to zero when |W| >> 1.
+    scale = float(np.max(np.abs(W)))
+    s = scale if scale > 1e3 else 1.0
+    E[DIM] = s
     e = np.zeros(DIM + 1)
-    e[DIM] = 1.0
+    e[DIM] = s
     mu, _ = nnls(E, e, maxiter=50 * (m + DIM))
     total = mu.sum()
-    if total <= 0:  # cannot happen for finite W (mu = e_i gives a residual < 1)
-        raise RuntimeError("min_norm_point: NNLS returned zero weights")
+    if total <= 0:
+        raise ValueError(f"wrenches: NNLS found no weights (magnitudes up to {scale:.3g}); "
+                         "rescale the wrenches")
     lam = mu / total
     x = lam @ W
     return x, float(np.linalg.norm(x)), lam

@@ -131,12 +131,15 @@ def quality_from_wrenches(W, *, method: str = "fast") -> GraspQuality:
 
 
 def _quality(W: np.ndarray, method: str) -> GraspQuality:
+    # Tolerances are relative to the wrenches' size beyond 1 (the NNLS distance of an
+    # inside origin is ~1e-16 |W|): W scaled by 1e8 must score 1e8 times the radius.
+    scale = max(1.0, float(np.max(np.abs(W))))
     if method == "fast":
         _, distance, _ = _min_norm_point(W)
-        inside = distance <= INSIDE_TOL
+        inside = distance <= INSIDE_TOL * scale
     elif method == "drake":
         _, distance, _ = _programs().min_distance(W)
-        inside = distance <= 1e3 * INSIDE_TOL  # Clarabel solves to ~1e-10
+        inside = distance <= 1e3 * INSIDE_TOL * scale  # Clarabel solves to ~1e-10
         if inside:
             inside = wrench_rank(W) == DIM and _programs().closure_lp(W) > CLOSURE_TOL
             if not inside:
@@ -146,7 +149,7 @@ def _quality(W: np.ndarray, method: str) -> GraspQuality:
     if not inside:
         return GraspQuality(-distance, False, distance, 0.0)
     radius, _ = largest_ball_radius(W)
-    if radius <= CLOSURE_TOL:  # origin on the boundary (or W_G flat): not closure
+    if radius <= CLOSURE_TOL * scale:  # origin on the boundary (or W_G flat): not closure
         value = radius if radius > 0 else -distance
         return GraspQuality(value, False, distance, 0.0)
     return GraspQuality(radius, True, 0.0, radius)

@@ -121,3 +121,77 @@ def test_huge_and_tiny_scales_do_not_break():
         q = grasp_quality(scale * d, -d, params)
         q_ref = grasp_quality(d, -d, ContactParams(gamma=0.02))
         assert q.value == pytest.approx(q_ref.value, rel=1e-6, abs=1e-12)
+
+
+# --- extreme ranges (issue 15): computed correctly up to the limits, refused beyond ---
+
+def _tetrahedron():
+    P = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) / np.sqrt(3) * 0.05
+    return P, -P / 0.05
+
+
+def test_closure_grasp_stays_in_closure_up_to_the_largest_accepted_mu():
+    """Four contacts of a regular tetrahedron are in closure for any mu > 0; for mu >> 1
+    the cone edges (length mu) dominate the unit normal, so the largest ball grows in
+    proportion to mu (mu = 1e9 used to read as not in closure, 1e6 raised LinAlgError)."""
+    from handle_drake.quality import ContactParams, grasp_quality
+    from handle_drake.quality.contact import MAX_MU
+
+    P, N = _tetrahedron()
+    values = {mu: grasp_quality(P, N, ContactParams(mu=mu, characteristic_length=0.05))
+              for mu in (0.5, 100.0, MAX_MU)}
+    assert all(q.force_closure for q in values.values())
+    assert values[MAX_MU].value / MAX_MU == pytest.approx(values[100.0].value / 100.0, rel=1e-3)
+
+
+@pytest.mark.parametrize("params,field", [
+    (dict(mu=1e9), "mu"), (dict(num_edges=10000), "num_edges"), (dict(gamma=1e6), "gamma")])
+def test_extreme_friction_parameters_are_refused_naming_the_field(params, field):
+    from handle_drake.quality import ContactParams, grasp_quality
+
+    P, N = _tetrahedron()
+    with pytest.raises(ValueError, match=field):
+        grasp_quality(P, N, ContactParams(characteristic_length=0.05, **params))
+
+
+def test_points_far_beyond_the_characteristic_length_are_refused():
+    from handle_drake.quality import ContactParams, grasp_quality
+
+    P, N = _tetrahedron()
+    with pytest.raises(ValueError, match="points: expected coordinates within"):
+        grasp_quality(P * 1e302, N, ContactParams(characteristic_length=0.05))
+
+
+def test_complex_input_is_refused_not_truncated():
+    from handle_drake.quality import ContactParams, grasp_quality, quality_from_wrenches
+
+    P, N = _tetrahedron()
+    with pytest.raises(TypeError, match="points: expected real numbers, got complex"):
+        grasp_quality(P * (1 + 1j), N, ContactParams(characteristic_length=0.05))
+    with pytest.raises(TypeError, match="wrenches: expected real numbers"):
+        quality_from_wrenches(np.ones((8, 6)) * 1j)
+    with pytest.raises(TypeError, match="mu"):
+        ContactParams(mu=0.5 + 0j)
+
+
+def test_drake_method_refuses_more_wrenches_than_its_dense_lp_holds():
+    from handle_drake.quality import quality_from_wrenches
+
+    W = np.random.default_rng(0).normal(size=(160000, 6))
+    with pytest.raises(ValueError, match="at most 4000 wrenches .* method='fast'"):
+        quality_from_wrenches(W, method="drake")
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e8, 1e100])
+def test_the_metric_scales_with_the_wrenches(scale):
+    """Scaling every wrench by s scales the BW value by s (a homogeneous geometric
+    quantity); absolute tolerances used to call a closure set at s = 1e8 open, and a
+    single wrench of 4.5e15 made NNLS return zero weights."""
+    from handle_drake.quality import min_norm_point, quality_from_wrenches
+
+    W = np.random.default_rng(1).normal(size=(40, 6))
+    base = quality_from_wrenches(W)
+    scaled = quality_from_wrenches(W * scale)
+    assert base.force_closure and scaled.force_closure
+    assert scaled.value == pytest.approx(base.value * scale, rel=1e-9)
+    assert min_norm_point([[4503599627370496.0, 0, 0, 0, 0, 0]])[1] == 4503599627370496.0

@@ -1,0 +1,403 @@
+"""Hostile-input probe set (issue 15): tries bad inputs on each part and tabulates outcomes.
+
+Run: ``PYTHONPATH=. python benchmarks/hostile_probe.py`` (about 2 minutes; it starts
+a CAN server and simulated hand as subprocesses on a random loopback multicast
+group). Outcomes per probe:
+
+- clean: refused with a ValueError/TypeError/FileNotFoundError (or the part's
+  documented subclass) naming the field, or CLI exit 2 with a one-line message;
+  for the CAN server: both processes alive and STATE still streaming;
+- traceback: any other exception / a traceback on stderr / a dead process;
+- hang: no answer within the probe's time limit;
+- wrong: accepted although it is nonsense, or a message without the field.
+
+Writes ``benchmarks/results/hostile_probe.json``.
+"""
+
+import contextlib
+import io
+import json
+import os
+import random
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = {}
+
+
+class Hang(Exception):
+    pass
+
+
+def _alarm(signum, frame):
+    raise Hang
+
+
+@contextlib.contextmanager
+def time_limit(seconds):
+    signal.signal(signal.SIGALRM, _alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+
+
+def record(part, outcome, probe):
+    RESULTS.setdefault(part, {"tried": 0, "clean": 0, "traceback": 0, "hang": 0, "wrong": 0,
+                              "failures": []})
+    RESULTS[part]["tried"] += 1
+    RESULTS[part][outcome] += 1
+    if outcome != "clean":
+        RESULTS[part]["failures"].append(f"{outcome}: {probe[:120]}")
+
+
+def probe_scenarios():
+    from handle_drake.scenario import LoadScenario
+
+    wrist = "hand: {mount: !FloatingWrist {}}\n"
+    cases = {  # text -> a word the refusal must name
+        "object: {size: 1e300}": "object.size", "object: {size: 1e-300}": "object.size",
+        "object: {size: -1}": "object.size", "object: {size: .nan}": "object.size",
+        "object: {size: big}": "object.size", "object: {mass: 1e-30}": "object.mass",
+        "object: {mass: 1e30}": "object.mass", "object: {mu: -1}": "object.mu",
+        "object: {mu: 1e9}": "object.mu", "object: {kind: blob}": "object.kind",
+        "object: {kind: cuboid, dimensions: {depth: 1e300}}": "depth",
+        "object: {kind: cuboid, dimensions: {depth: 0}}": "depth",
+        "object: {X_WO: {translation: [1e300, 0, 0]}}": "object.X_WO",
+        "object: {X_WO: {translation: [0, 0]}}": "translation",
+        "time_step: 1e300": "time_step", "time_step: 10": "time_step",
+        "time_step: 1e-9": "time_step", "time_step: 0": "time_step", "time_step: -1": "time_step",
+        "simulation_duration: 1e300": "simulation_duration",
+        "simulation_duration: .inf": "simulation_duration",
+        "time_step: 1e-5\nsimulation_duration: 3000": "steps",
+        "visualization_period: 1e-12": "visualization_period",
+        "hand: {mount: !FloatingWrist {translation_kp: -5}}": "translation_kp",
+        "hand: {mount: !FloatingWrist {translation_kd: .inf}}": "translation_kd",
+        "hand: {mount: !FloatingWrist {rotation_kp: .nan}}": "rotation_kp",
+        "hand: {mount: !FloatingWrist {rotation_kd: 1e300}}": "rotation_kd",
+        "hand: {mount: !FixedMount {X_WB: {rotation: !Uniform {}}}}": "rotation",
+        "hand: {mount: !FixedMount {X_WB: {rotation: !AngleAxis {angle_deg: 3, axis: [0, 0, 0]}}}}":
+            "axis",
+        "hand: {mount: !FixedMount {X_WB: {rotation: !AngleAxis {angle_deg: 3, "
+        "axis: [1e-320, 0, 0]}}}}": "axis",
+        "hand: {mount: !FixedMount {X_WB: {rotation: !Rpy {deg: [1e300, 0, 0]}}}}": "deg",
+        "hand: {mount: !FixedMount {X_WB: {base_frame: palm}}}": "base_frame",
+        "hand: {kind: octopus}": "hand.kind", "hand: {coupling_ratio: -1}": "coupling_ratio",
+        "hand: {initial_position: {nojoint: 1}}": "initial_position",
+        "hand: {initial_position: {FFJ3: 1e300}}": "FFJ3",
+        "hand: [1, 2]": "hand", "hand: 5": "hand",
+        wrist + "script: [{time: 0.5, wrist: [1e6, 0, 0, 0, 0, 0]}]": "wrist",
+        wrist + "script: [{time: 0.5, wrist: [0, 0]}]": "wrist",
+        "script: [{time: 0.5, wrist: [0, 0, 0, 0, 0, 0]}]": "wrist",
+        "script: [{time: 1}, {time: 0.5}]": "time", "script: [{time: -1}]": "time",
+        "script: [{time: 1e300}]": "time",
+        "time_step: 0.001\ntime_step: 0.002": "duplicate",
+        "object: {size: 1, size: 2}": "duplicate",
+        "driver: 5": "driver", "driver: !Foo {}": "driver", "!Foo {}": "!Foo",
+        "driver: !CanHandDriver {port: 0}": "port", "driver: !CanHandDriver {port: 1e9}": "port",
+        "driver: !CanHandDriver {period: 0}": "period",
+        "driver: !SimHandDriver {control_period: 1e300}": "control_period",
+        "contact_model: magic": "contact_model", "contact_approximation: tamsi": "tamsi",
+        "random_seed: -1": "random_seed", "random_seed: 1e300": "random_seed",
+        "colour: red": "colour", "object: {kind: " + "x" * 1_000_000 + "}": "object.kind",
+        "- 1\n- 2": "mapping", "5": "mapping", "{a: [": "YAML", "a: &a [*a]": "",
+        "table: {size_x: 0}": "size_x", "table: {top_height: .nan}": "top_height",
+    }
+    for text, word in cases.items():
+        try:
+            with time_limit(20):
+                LoadScenario(data=text)
+            record("scenario loader", "wrong", f"accepted {text!r}")
+        except Hang:
+            record("scenario loader", "hang", text)
+        except (ValueError, TypeError, FileNotFoundError) as error:
+            ok = word in str(error) and len(str(error)) < 1000
+            record("scenario loader", "clean" if ok else "wrong",
+                   f"{text[:60]!r} -> {str(error)[:80]}")
+        except BaseException as error:  # noqa: BLE001
+            record("scenario loader", "traceback", f"{text[:60]!r}: {type(error).__name__}")
+
+
+def probe_cli(tmp):
+    from handle_drake.cli import main
+
+    (tmp / "ok.yaml").write_text("simulation_duration: 0.01\n")
+    (tmp / "bad.yaml").write_text("time_step: 10\n")
+    (tmp / "dir").mkdir()
+    os.mkfifo(tmp / "fifo")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        free = s.getsockname()[1]
+    (tmp / "can.yaml").write_text(f"driver: !CanHandDriver {{port: {free}}}\n"
+                                  "simulation_duration: 0.01\n")
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    long = "a" * 300
+    ok = str(tmp / "ok.yaml")
+    argvs = [
+        ["simulate", str(tmp / "bad.yaml")], ["simulate", str(tmp / "dir")],
+        ["simulate", str(tmp / "fifo")], ["simulate", str(tmp / "missing.yaml")],
+        ["simulate", ok, "--html", str(tmp)], ["simulate", ok, "--html", f"{tmp}/{long}.html"],
+        ["simulate", ok, "--html", f"{tmp}/ok.yaml/x.html"],
+        ["simulate", ok, "--duration", "1e300"],
+        ["simulate", ok, "--duration", "nan"], ["simulate", ok, "--duration", "-1"],
+        ["simulate", ok, "--hardware"], ["simulate", str(tmp / "can.yaml"), "--hardware"],
+        ["simulate", ok, "--override", "driver: 5"], ["simulate", ok, "--override", "!Foo {}"],
+        ["simulate", ok, "--override", "time_step: 0.001\ntime_step: 0.002"],
+        ["babble", "--db", str(tmp)], ["babble", "--db", f"{tmp}/ok.yaml/x.sqlite"],
+        ["babble", "--db", f"{tmp}/{long}.sqlite"], ["babble", "--trials", "-5"],
+        ["babble", "--trials", "big"], ["babble", "--db", ok],
+        ["report", "--out", ok], ["report", "--out", f"{tmp}/{long}"],
+        ["grasp", "--save-scenario", str(tmp)], ["grasp", "--html", str(tmp)],
+        ["grasp", "--size", "1e300"], ["grasp", "--size", "-1"], ["grasp", "--class", "nope"],
+        ["synergies", str(tmp / "dir")], ["synergies", str(tmp / "fifo")],
+        ["synergies", ok, "--plot", str(tmp)], ["synergies", ok, "--k-max", "-3"],
+        ["can-server", "--listen", f"127.0.0.1:{busy.getsockname()[1]}", "--bus", "virtual"],
+        ["can-server", "--listen", "192.0.2.1:0", "--bus", "virtual"],
+        ["can-server", "--listen", "nope"], ["can-server", "--listen", "127.0.0.1:99999"],
+        ["can-server", "--max-clients", "0", "--bus", "virtual"],
+        ["can-server", "--multicast-interface", "eth0"],
+        ["can-sim", "--bus", "socketcan", "--channel", "nosuchcan9"],
+        ["can-sim", "--rate", "0", "--bus", "virtual"], ["can-sim", "--object-closure", "5",
+                                                         "--bus", "virtual"],
+        ["nosuchcommand"], ["simulate"],
+    ]
+    for argv in argvs:
+        err = io.StringIO()
+        try:
+            with time_limit(120), contextlib.redirect_stderr(err), \
+                    contextlib.redirect_stdout(io.StringIO()):
+                try:
+                    code = main(argv)
+                except SystemExit as exit_:
+                    code = exit_.code
+        except Hang:
+            record("command line", "hang", " ".join(argv))
+            continue
+        except BaseException as error:  # noqa: BLE001
+            record("command line", "traceback", f"{' '.join(argv)}: {type(error).__name__}")
+            continue
+        text = err.getvalue()
+        if "Traceback" in text:
+            record("command line", "traceback", " ".join(argv))
+        elif code == 2 and len(text) < 2000:
+            record("command line", "clean", " ".join(argv))
+        else:
+            record("command line", "wrong", f"{' '.join(argv)} -> exit {code} {text[:80]!r}")
+    busy.close()
+
+
+def probe_quality():
+    from handle_drake.quality import ContactParams, grasp_quality, quality_from_wrenches
+
+    P = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) / np.sqrt(3) * 0.05
+    N = -P / 0.05
+    L = 0.05
+    for mu in (1e5, 1e6, 1e9, 1e300, -1, float("nan"), 0.5 + 0j, "0.5", True):
+        _quality_probe(lambda mu=mu: grasp_quality(P, N, ContactParams(mu=mu,
+                                                   characteristic_length=L)), f"mu={mu!r}")
+    for k in (0, 2, 257, 1000, 10000, 2.5, -1):
+        _quality_probe(lambda k=k: grasp_quality(P, N, ContactParams(num_edges=k,
+                                                 characteristic_length=L)), f"num_edges={k}")
+    for scale in (1e302, 1e200, 1e-320):
+        _quality_probe(lambda s=scale: grasp_quality(P * s, N, ContactParams(
+            characteristic_length=L)), f"points*{scale}")
+    for name, (pts, nrm) in {
+        "complex points": (P * (1 + 1j), N), "complex normals": (P, N * 1j),
+        "nan": (P * np.nan, N), "zero normal": (P, N * 0), "shape": (P[:, :2], N),
+        "mismatch": (P, N[:2]), "empty": (P[:0], N[:0]), "text": ("abc", N),
+        "ragged": ([[1, 2, 3], [1, 2]], N), "object": (np.array([None] * 12).reshape(4, 3), N),
+    }.items():
+        _quality_probe(lambda p=pts, n=nrm: grasp_quality(p, n, ContactParams(
+            characteristic_length=L)), name)
+    rng = np.random.default_rng(0)
+    many = rng.normal(size=(10000, 3))
+    many /= np.linalg.norm(many, axis=1, keepdims=True)
+    _quality_probe(lambda: grasp_quality(many * L, -many, ContactParams(characteristic_length=L),
+                                         method="drake"), "10000 contacts drake")
+    for W in (np.ones((8, 6)) * 1j, np.full((8, 6), 1e300), np.full((8, 6), 1e-320),
+              np.zeros((0, 6)), np.ones((8, 5))):
+        _quality_probe(lambda W=W: quality_from_wrenches(W), f"wrenches {W.shape} {W.flat[:1]}")
+
+
+def _quality_probe(function, name):
+    try:
+        with time_limit(60):
+            q = function()
+        wrong = not np.isfinite(q.value)
+        if "mu=1e" in name or "num_edges" in name or "points*" in name:
+            wrong = wrong or not q.force_closure  # closure grasp must stay closure
+        record("grasp quality", "wrong" if wrong else "clean", f"{name} -> {q}")
+    except Hang:
+        record("grasp quality", "hang", name)
+    except (ValueError, TypeError) as error:
+        record("grasp quality", "clean", f"{name}: {error}")
+    except BaseException as error:  # noqa: BLE001
+        record("grasp quality", "traceback", f"{name}: {type(error).__name__}: {error}")
+
+
+def probe_trial_log(tmp):
+    from handle_drake.learning import TrialLogError
+    from handle_drake.learning.log import TrialLog
+
+    src = tmp / "log.sqlite"
+    with TrialLog(src) as log:
+        log.create_run("r", "random", [[0, 1], [0, 1]], 0, "objective")
+        for i in range(40):
+            log.add_pending("r", i, [0.5, 0.25], i, scenario="hand: {kind: shadow}\n" * 3)
+            log.mark_running("r", i)
+            log.mark_done("r", i, 0.1 * i, contacts={"thumb": [1, 2, 3]})
+    conn = sqlite3.connect(src)
+    conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    conn.close()
+    data = src.read_bytes()
+    rng = random.Random(1)
+    for k in range(150):
+        damaged = bytearray(data)
+        start = rng.randrange(100, len(damaged) - 8)
+        for i in range(rng.randint(1, 8)):
+            damaged[start + i] = rng.randrange(256)
+        path = tmp / f"d{k}.sqlite"
+        path.write_bytes(bytes(damaged))
+        try:
+            with time_limit(30), TrialLog(path) as log:
+                for run in log.runs():
+                    log.trials(run.run_id)
+            outcome = "clean"  # damage in free space or text: readable
+        except TrialLogError:
+            outcome = "clean"
+        except Hang:
+            outcome = "hang"
+        except BaseException as error:  # noqa: BLE001
+            outcome = f"traceback {type(error).__name__}"
+        if path.read_bytes() != bytes(damaged):
+            outcome = "wrong"
+        record("trial log", outcome.split()[0], f"scribble {k} at {start}: {outcome}")
+
+
+def probe_can(tmp):
+    import msgpack
+
+    from handle_drake.can_hand import protocol as P
+
+    group = f"239.255.{random.randint(0, 255)}.{random.randint(1, 254)}"
+    bus_port = random.randint(20000, 60000)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    bus = ["--bus", "udp_multicast", "--channel", group, "--bus-port", str(bus_port)]
+    sim = subprocess.Popen([sys.executable, "-m", "handle_drake.can_hand.cli", "can-sim",
+                            "--hand", "barrett", "--rate", "200", *bus],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    server = subprocess.Popen([sys.executable, "-m", "handle_drake.can_hand.cli", "can-server",
+                               "--hand", "barrett", "--listen", "127.0.0.1:0",
+                               "--hello-timeout", "1", *bus],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        sim.stdout.readline()
+        port = int(server.stdout.readline().split()[2].rsplit(":", 1)[1])
+        hello = P.pack_hello(P.HandInfo("barrett", 8, 4, 3))
+
+        def streaming():
+            with socket.create_connection(("127.0.0.1", port), timeout=3) as s:
+                s.sendall(hello)
+                reader, n, end = P.FrameReader(), 0, time.monotonic() + 0.5
+                while time.monotonic() < end:
+                    s.settimeout(max(0.01, end - time.monotonic()))
+                    try:
+                        data = s.recv(65536)
+                    except TimeoutError:
+                        break
+                    n += sum(t == P.STATE for t, _ in reader.feed(data))
+                return n > 20
+
+        base = dict(timestamp=0.0, arbitration_id=0x300, is_extended_id=False,
+                    is_remote_frame=False, is_error_frame=False, channel=None, dlc=0, data=b"",
+                    is_fd=False, bitrate_switch=False, error_state_indicator=False)
+        variants = [dict(arbitration_id=v) for v in (300.5, True, -1, 2**40, "x", None, [1])]
+        variants += [dict(is_fd=v) for v in ("yes", 2, None)] + [dict(data=v) for v in
+                                                                ("t", 5, [300], None)]
+        variants += [dict(dlc=v) for v in (99, -1, "x")] + [dict(is_error_frame=[]),
+                                                           dict(channel={"a": 1}),
+                                                           dict(timestamp="x"), dict(extra=1)]
+        datagrams = [msgpack.packb({**base, **v}, use_bin_type=True) for v in variants]
+        datagrams += [b"", b"\xff" * 4000, os.urandom(64), msgpack.packb([1, 2]),
+                      msgpack.packb({"arbitration_id": 1}), b"\x00garbage" * 10]
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, socket.inet_aton("127.0.0.1"))
+            for datagram in datagrams:
+                for _ in range(20):
+                    s.sendto(datagram, (group, bus_port))
+                record("CAN bus frames", _can_outcome(sim, server, streaming),
+                       repr(datagram[:40]))
+        tcp = [os.urandom(100), b"HC" + os.urandom(50), hello + os.urandom(200),
+               hello + P.pack(P.COMMAND, os.urandom(40)), hello + P.pack(P.STATS_REQ) * 5000,
+               P.pack(P.COMMAND, b"x"), hello + b"HC\x01\x07" + b"\xff" * 4,
+               P.pack_hello(P.HandInfo("\udcff".encode("utf-8", "surrogatepass").decode(
+                   "latin1"), 1, 1, 1)), P.pack(P.HELLO, b"\x01\x00\x01\x00\x01\x00\xff\xfe")]
+        for data in tcp:
+            with socket.create_connection(("127.0.0.1", port), timeout=3) as c:
+                with contextlib.suppress(OSError):
+                    c.sendall(data)
+                time.sleep(0.05)
+            record("CAN server clients", _can_outcome(sim, server, streaming), repr(data[:30]))
+        idle = [socket.create_connection(("127.0.0.1", port), timeout=3) for _ in range(60)]
+        time.sleep(1.5)
+        record("CAN server clients", "clean" if streaming() else "traceback", "60 idle clients")
+        for c in idle:
+            c.close()
+    finally:
+        for process in (server, sim):
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(5)
+            except subprocess.TimeoutExpired:
+                process.kill()
+
+
+def _can_outcome(sim, server, streaming):
+    """traceback: a process died; hang: alive but no STATE stream (retried once)."""
+    if sim.poll() is not None or server.poll() is not None:
+        return "traceback"
+    return "clean" if streaming() or streaming() else "hang"
+
+
+def main():
+    if sys.argv[1:] == ["can"]:  # only the CAN part (it needs the least time)
+        with tempfile.TemporaryDirectory() as tmp:
+            probe_can(Path(tmp))
+        print(json.dumps({k: {n: v for n, v in r.items() if n != "failures"} | {
+            "failures": r["failures"]} for k, r in RESULTS.items()}, indent=1))
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for name, function in (("scenario", probe_scenarios), ("cli", lambda: probe_cli(tmp)),
+                               ("quality", probe_quality),
+                               ("log", lambda: probe_trial_log(tmp)),
+                               ("can", lambda: probe_can(tmp))):
+            start = time.monotonic()
+            function()
+            print(f"{name}: {time.monotonic() - start:.1f} s", file=sys.stderr)
+    print("| part | tried | clean | traceback | hang | wrong |\n|---|---|---|---|---|---|")
+    for part, r in RESULTS.items():
+        print(f"| {part} | {r['tried']} | {r['clean']} | {r['traceback']} | {r['hang']} | "
+              f"{r['wrong']} |")
+    for part, r in RESULTS.items():
+        for failure in r["failures"][:20]:
+            print(f"  {part}: {failure}")
+    out = ROOT / "benchmarks" / "results"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "hostile_probe.json").write_text(json.dumps(RESULTS, indent=1))
+
+
+if __name__ == "__main__":
+    main()

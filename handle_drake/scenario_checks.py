@@ -1,0 +1,380 @@
+"""Checks of scenario text and values before anything reaches Drake.
+
+Two layers, both raising :class:`~handle_drake.scenario.ScenarioError` with a
+message that names the field, what was expected and what was got (shortened):
+
+- :func:`check_yaml_text` walks the YAML *node graph* (PyYAML ``compose``, no
+  construction) against the :class:`~handle_drake.scenario.Scenario` dataclass
+  types before Drake's ``yaml_load_typed`` reads it. Drake's reader lets
+  through what a user almost never means: a duplicate key (the last one wins),
+  a scalar where a tagged variant belongs (``driver: 5`` becomes the first
+  field of ``!SimHandDriver``), a document that is only an unknown tag
+  (``!Foo {}`` runs the default scenario), a ``base_frame`` name that is
+  ignored, and its own errors do not name the field (``could not convert
+  string to float: 'big'``). Stochastic schema values (``!Uniform``,
+  ``!Gaussian``...) are refused: a scenario is deterministic (Drake aborts the
+  process on ``GetDeterministicValue`` of one).
+- :func:`check_ranges` bounds every physical quantity to a range the station
+  can simulate: values outside pass Drake's own checks and then crash deep in
+  the plant (``RuntimeError`` or a ``Failure at ...`` that arrives as
+  ``SystemExit``) or ask for absurd work.
+
+Why by hand: no YAML library checks a node graph against Python dataclass
+annotations, and the ranges are this project's physical envelope.
+"""
+
+import dataclasses as dc
+import functools
+import math
+import types
+import typing
+
+import numpy as np
+import yaml
+
+__all__ = ["LIMITS", "check_yaml_text", "check_ranges", "short", "short_path"]
+
+#: (low, high) accepted for each bounded quantity, SI units.
+LIMITS = {
+    "length": (1e-3, 2.0),  # m: object sizes and dimensions
+    "mass": (1e-4, 1e3),  # kg
+    "mu": (0.0, 10.0),
+    "time_step": (1e-5, 0.01),  # s: SAP at point contact needs <= 10 ms
+    "simulation_duration": (1e-3, 3600.0),  # s
+    "steps": (1, 2_000_000),  # simulation_duration / time_step
+    "position": (-10.0, 10.0),  # m: any pose's translation, the wrist script
+    "table_size": (1e-2, 100.0),  # m
+    "gain": (1e-6, 1e8),  # wrist PD gains (N/m, N*s/m, N*m/rad, N*m*s/rad)
+    "joint_velocity": (0.0, 1e3),  # rad/s (0 disables the limit)
+    "control_period": (1e-4, 0.1),  # s
+    "visualization_period": (1e-3, 10.0),  # s
+    "angle": (-1e4, 1e4),  # rad or deg, any joint value or angle
+    "wrist_angle": (-2 * math.pi, 2 * math.pi),  # rad: every orientation, no wind-up
+    "wrist_speed": (0.0, 10.0),  # m/s between two keyframes of the wrist script
+    "wrist_rate": (0.0, 100.0),  # rad/s likewise (1e4 rad in 0.2 s makes SAP diverge)
+}
+_MAX_NODES = 100_000  # alias chains ("billion laughs") expand to more than this
+_SCALAR_TAGS = {"tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:str",
+                "tag:yaml.org,2002:bool", "tag:yaml.org,2002:null"}
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml: ~10x faster composing
+_MAP = "tag:yaml.org,2002:map"
+_SEQ = "tag:yaml.org,2002:seq"
+
+
+def short(value, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (with the full length)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def short_path(path, limit: int = 120) -> str:
+    """A path for a message: its end (the file name) kept when it is long."""
+    text = str(path)
+    return text if len(text) <= limit else f"...{text[-limit:]}"
+
+
+def _error(path: str, expected: str, got) -> Exception:
+    from handle_drake.scenario import ScenarioError
+
+    return ScenarioError(f"{path or 'scenario'}: expected {expected}, got {got}")
+
+
+def _describe(node) -> str:
+    if isinstance(node, yaml.ScalarNode):
+        tag = "" if node.tag in _SCALAR_TAGS else f"{node.tag} "
+        return f"{tag}{short(node.value)}"
+    if isinstance(node, yaml.SequenceNode):
+        return f"a list of {len(node.value)} items"
+    tag = "" if node.tag == _MAP else f"{node.tag} "
+    return f"{tag}a mapping".strip()
+
+
+class _Walker:
+    def __init__(self):
+        self.nodes = 0
+
+    def visit(self, node, kind, path: str) -> None:
+        self.nodes += 1
+        if self.nodes > _MAX_NODES:
+            raise _error(path, f"at most {_MAX_NODES} YAML nodes (aliases count each time)",
+                         "more")
+        origin = typing.get_origin(kind)
+        args = typing.get_args(kind)
+        if origin in (typing.Union, types.UnionType):
+            options = [a for a in args if a is not type(None)]
+            if type(None) in args and _is_null(node):
+                return
+            if len(options) == 1:
+                return self.visit(node, options[0], path)
+            return self._variant(node, options, path)
+        if kind is float or kind is int:
+            return self._number(node, kind, path)
+        if kind is bool:
+            if not (isinstance(node, yaml.ScalarNode) and node.tag.endswith(":bool")):
+                raise _error(path, "true or false", _describe(node))
+            return None
+        if kind is str:
+            if not isinstance(node, yaml.ScalarNode) or node.tag not in _SCALAR_TAGS:
+                raise _error(path, "a string", _describe(node))
+            return None
+        if origin is dict:
+            self._mapping(node, path)
+            seen = set()
+            for key, value in node.value:
+                name = self._key(key, path, seen)
+                self.visit(value, args[1], f"{path}[{name}]")
+            return None
+        if origin is list:
+            if not isinstance(node, yaml.SequenceNode) or node.tag != _SEQ:
+                raise _error(path, "a list", _describe(node))
+            for i, item in enumerate(node.value):
+                self.visit(item, args[0], f"{path}[{i}]")
+            return None
+        if _is_transform(kind):
+            return self._transform(node, path)
+        if dc.is_dataclass(kind):
+            return self._dataclass(node, kind, path, tagged=False)
+        return None  # a type this walker does not know: Drake's reader checks it
+
+    def _number(self, node, kind, path):
+        what = "an integer" if kind is int else "a number"
+        if not isinstance(node, yaml.ScalarNode) or node.tag not in _SCALAR_TAGS:
+            raise _error(path, what, _describe(node))
+        if node.tag.endswith(":int") or (kind is float and node.tag.endswith(":float")):
+            return
+        # PyYAML resolves YAML 1.1 (``1e-3`` without a dot is a string there); Drake's
+        # reader is YAML 1.2: a plain (unquoted) scalar that parses as a number is one.
+        if node.tag.endswith(":str") and not node.style:  # plain: None (PyYAML), "" (libyaml)
+            try:
+                int(node.value) if kind is int else float(node.value)
+                return
+            except ValueError:
+                pass
+        raise _error(path, what, _describe(node))
+
+    def _mapping(self, node, path):
+        if not isinstance(node, yaml.MappingNode):
+            raise _error(path, "a mapping", _describe(node))
+
+    def _key(self, key, path, seen):
+        if not isinstance(key, yaml.ScalarNode) or key.tag not in _SCALAR_TAGS:
+            raise _error(path, "plain keys", _describe(key))
+        if key.value in seen:
+            raise _error(f"{path}.{key.value}".lstrip("."), "each key once",
+                         "a duplicate key (YAML would keep only the last value)")
+        seen.add(key.value)
+        return key.value
+
+    def _dataclass(self, node, kind, path, tagged):
+        self._mapping(node, path)
+        if not tagged and node.tag != _MAP:
+            raise _error(path, f"a plain mapping of {kind.__name__} fields",
+                         f"the tag {short(node.tag)}")
+        fields, hints = _schema(kind)
+        seen = set()
+        for key, value in node.value:
+            name = self._key(key, path, seen)
+            where = f"{path}.{name}".lstrip(".")
+            if name not in fields:
+                raise _error(where, f"one of the {kind.__name__} fields {sorted(fields)}",
+                             f"unknown field {short(name)}")
+            self.visit(value, hints[name], where)
+
+    def _variant(self, node, options, path):
+        tags = {f"!{o.__name__}": o for o in options if dc.is_dataclass(o)}
+        if not tags:
+            return None
+        if isinstance(node, yaml.MappingNode) and node.tag == _MAP:  # Drake: the first one
+            return self._dataclass(node, options[0], path, tagged=True)
+        if not isinstance(node, yaml.MappingNode) or node.tag not in tags:
+            raise _error(path, f"one of {', '.join(f'{t} {{...}}' for t in tags)}",
+                         _describe(node))
+        return self._dataclass(node, tags[node.tag], path, tagged=True)
+
+    def _vector(self, node, n, path):
+        if not isinstance(node, yaml.SequenceNode) or node.tag != _SEQ or len(node.value) != n:
+            raise _error(path, f"a list of {n} numbers (deterministic)", _describe(node))
+        for i, item in enumerate(node.value):
+            self._number(item, float, f"{path}[{i}]")
+
+    def _transform(self, node, path):
+        self._mapping(node, path)
+        if node.tag != _MAP:
+            raise _error(path, "a plain mapping {translation, rotation}", _describe(node))
+        seen = set()
+        for key, value in node.value:
+            name = self._key(key, path, seen)
+            where = f"{path}.{name}"
+            if name == "base_frame":
+                if not (_is_null(value) or (isinstance(value, yaml.ScalarNode)
+                                            and value.value == "world")):
+                    raise _error(where, "'world' (poses are in the world frame)",
+                                 _describe(value))
+            elif name == "translation":
+                self._vector(value, 3, where)
+            elif name == "rotation":
+                self._rotation(value, where)
+            else:
+                raise _error(where, "one of ['base_frame', 'rotation', 'translation']",
+                             f"unknown field {short(name)}")
+
+    def _rotation(self, node, path):
+        expected = "!Rpy {deg: [r, p, y]}, !AngleAxis {angle_deg: a, axis: [x, y, z]} or " \
+                   "!Identity {}"
+        if not isinstance(node, yaml.MappingNode):
+            raise _error(path, expected, _describe(node))
+        fields = {"!Rpy": {"deg"}, "!AngleAxis": {"angle_deg", "axis"}, "!Identity": set(),
+                  _MAP: set()}  # untagged: Drake's first variant, Identity (``{}``)
+        if node.tag not in fields:
+            if node.tag == "!Uniform":
+                raise _error(path, expected + " (a scenario is deterministic)",
+                             "a random !Uniform rotation")
+            raise _error(path, expected, _describe(node))
+        seen = set()
+        for key, value in node.value:
+            name = self._key(key, path, seen)
+            if name not in fields[node.tag]:
+                raise _error(f"{path}.{name}", f"one of {sorted(fields[node.tag])}",
+                             f"unknown field {short(name)}")
+            if name == "angle_deg":
+                self._number(value, float, f"{path}.angle_deg")
+            else:
+                self._vector(value, 3, f"{path}.{name}")
+
+
+@functools.cache
+def _schema(kind):
+    return {f.name: f for f in dc.fields(kind)}, typing.get_type_hints(kind)
+
+
+def _is_null(node) -> bool:
+    return isinstance(node, yaml.ScalarNode) and node.tag.endswith(":null")
+
+
+def _is_transform(kind) -> bool:
+    return getattr(kind, "__name__", "") == "Transform" and "schema" in getattr(
+        kind, "__module__", "")
+
+
+def check_yaml_text(text: str, schema, source: str) -> None:
+    """Refuses scenario YAML the typed reader would misread; see the module docstring."""
+    from handle_drake.scenario import ScenarioError
+
+    try:
+        documents = list(yaml.compose_all(text, Loader=_LOADER))
+    except yaml.YAMLError as error:
+        raise ScenarioError(f"invalid scenario ({source}): not YAML: "
+                            f"{short(' '.join(str(error).split()), 300)}") from None
+    except RecursionError:
+        raise ScenarioError(f"invalid scenario ({source}): nested too deeply") from None
+    if len(documents) > 1:
+        raise ScenarioError(f"invalid scenario ({source}): expected one YAML document, got "
+                            f"{len(documents)}")
+    if not documents or documents[0] is None:
+        return
+    root = documents[0]
+    try:
+        _Walker()._dataclass(root, schema, "", tagged=False)
+    except ScenarioError as error:
+        raise ScenarioError(f"{error} ({source})") from None
+    except RecursionError:
+        raise ScenarioError(f"invalid scenario ({source}): nested too deeply") from None
+
+
+def _in(path: str, value, key: str, unit: str = "") -> None:
+    from handle_drake.scenario import ScenarioError
+
+    low, high = LIMITS[key]
+    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(
+        value, bool) and math.isfinite(value) and low <= value <= high
+    if not ok:
+        raise ScenarioError(f"{path}: expected a finite value in [{low:g}, {high:g}]{unit}, "
+                            f"got {short(value)}")
+
+
+def _check_pose(path: str, transform) -> None:
+    from handle_drake.scenario import ScenarioError
+
+    if not transform.IsDeterministic():
+        raise ScenarioError(f"{path}: expected a deterministic pose, got a random one")
+    rotation = transform.rotation.value
+    axis = getattr(rotation, "axis", None)
+    if axis is not None:
+        axis = np.asarray(axis, dtype=float)
+        norm = float(np.linalg.norm(axis)) if np.all(np.isfinite(axis)) else math.nan
+        if not (1e-6 <= norm < 1e150):
+            raise ScenarioError(f"{path}.rotation.axis: expected a non-zero finite axis "
+                                f"(norm >= 1e-6), got {short(axis.tolist())}")
+    for name in ("deg", "angle_deg"):
+        value = getattr(rotation, name, None)
+        if value is not None:
+            for v in np.atleast_1d(np.asarray(value, dtype=float)):
+                _in(f"{path}.rotation.{name}", float(v), "angle", " deg")
+    for i, v in enumerate(np.asarray(transform.translation, dtype=float).ravel()):
+        _in(f"{path}.translation[{i}]", float(v), "position", " m")
+
+
+def check_ranges(scenario) -> None:
+    """Bounds every physical quantity of ``scenario`` (see :data:`LIMITS`)."""
+    from handle_drake.scenario import CanHandDriver, FloatingWrist, ScenarioError
+
+    hand = scenario.hand
+    _check_pose("hand.mount.X_WB", hand.mount.X_WB)
+    if isinstance(hand.mount, FloatingWrist):
+        for name in ("translation_kp", "translation_kd", "rotation_kp", "rotation_kd"):
+            _in(f"hand.mount.{name}", getattr(hand.mount, name), "gain")
+    for name, value in hand.initial_position.items():
+        _in(f"hand.initial_position[{name}]", value, "angle", " rad")
+    obj = scenario.object
+    if obj is not None:
+        _in("object.size", obj.size, "length", " m")
+        for name, value in obj.dimensions.items():
+            _in(f"object.dimensions[{name}]", value, "length", " m")
+        if obj.mass is not None:
+            _in("object.mass", obj.mass, "mass", " kg")
+        _in("object.mu", obj.mu, "mu")
+        _check_pose("object.X_WO", obj.X_WO)
+    if scenario.table is not None:
+        _in("table.top_height", scenario.table.top_height, "position", " m")
+        _in("table.size_x", scenario.table.size_x, "table_size", " m")
+        _in("table.size_y", scenario.table.size_y, "table_size", " m")
+    _in("time_step", scenario.time_step, "time_step", " s")
+    _in("simulation_duration", scenario.simulation_duration, "simulation_duration", " s")
+    steps = scenario.simulation_duration / scenario.time_step
+    low, high = LIMITS["steps"]
+    if steps > high:
+        raise ScenarioError(
+            f"simulation_duration / time_step: expected at most {high:,} steps, got "
+            f"{steps:,.0f} ({scenario.simulation_duration:g} s / {scenario.time_step:g} s)")
+    _in("visualization_period", scenario.visualization_period, "visualization_period", " s")
+    if isinstance(scenario.random_seed, bool) or not isinstance(scenario.random_seed, int) or \
+            not 0 <= scenario.random_seed < 2**32:
+        raise ScenarioError(f"random_seed: expected an integer in [0, 2**32), got "
+                            f"{short(scenario.random_seed)}")
+    if not isinstance(scenario.driver, CanHandDriver):
+        _in("driver.max_joint_velocity", scenario.driver.max_joint_velocity,
+            "joint_velocity", " rad/s")
+        _in("driver.control_period", scenario.driver.control_period, "control_period", " s")
+    for i, keyframe in enumerate(scenario.script):
+        longest = LIMITS["simulation_duration"][1]
+        if keyframe.time > longest:
+            raise ScenarioError(f"script[{i}].time: expected at most {longest:g} s, got "
+                                f"{keyframe.time:g}")
+        for name, value in keyframe.hand.items():
+            _in(f"script[{i}].hand[{name}]", value, "angle", " rad")
+        for k, value in enumerate(keyframe.wrist[:3]):
+            _in(f"script[{i}].wrist[{k}]", value, "position", " m (the wrist's workspace)")
+        for k, value in enumerate(keyframe.wrist[3:6]):
+            _in(f"script[{i}].wrist[{k + 3}]", value, "wrist_angle", " rad")
+    for i, camera in enumerate(getattr(scenario, "cameras", [])):
+        _check_pose(f"cameras[{i}].X_PC", camera.X_PC)
+        for k, value in enumerate(camera.target):
+            _in(f"cameras[{i}].target[{k}]", value, "position", " m")
+    wrist = [(k.time, k.wrist) for k in scenario.script if k.wrist]
+    for (t0, w0), (t1, w1) in zip(wrist, wrist[1:], strict=False):
+        dt = t1 - t0
+        speed = float(np.linalg.norm(np.subtract(w1[:3], w0[:3]))) / dt
+        rate = float(np.max(np.abs(np.subtract(w1[3:], w0[3:])))) / dt
+        where = f"script (wrist from t = {t0:g} s to {t1:g} s)"
+        _in(f"{where} speed", speed, "wrist_speed", " m/s")
+        _in(f"{where} angular rate", rate, "wrist_rate", " rad/s")
