@@ -74,6 +74,8 @@ from pydrake.multibody.plant import CoulombFriction
 from pydrake.multibody.tree import CalcSpatialInertia, ModelInstanceIndex, SpatialInertia
 from scipy.spatial import ConvexHull
 
+from handle_drake.instruments.catalogue import DEVICE_OBJECTS
+
 __all__ = [
     "KINDS",
     "DEFAULT_SIZE",
@@ -101,7 +103,8 @@ __all__ = [
     "write_table_sdf",
 ]
 
-KINDS = ("sphere", "cylinder", "cuboid", "rotated_cuboid", "mug", "wine_glass", "star_prism")
+KINDS = ("sphere", "cylinder", "cuboid", "rotated_cuboid", "mug", "wine_glass", "star_prism",
+         *DEVICE_OBJECTS)  # + the instrumented objects (handle_drake.instruments.catalogue)
 
 #: Name of the object's rigid body inside its model instance (AddObject and write_sdf).
 BODY_NAME = "base_link"
@@ -183,6 +186,14 @@ _COLORS = {
 }
 
 _TABLE_COLOR = (0.55, 0.40, 0.25, 1.0)
+
+# The instrumented objects (report section 2.4): boxes with their published size and
+# mass; no dimension overrides (their shape is the device's).
+for _kind, _device in DEVICE_OBJECTS.items():
+    DEFAULT_SIZE[_kind] = _device.default_size
+    DENSITY[_kind] = _device.density
+    PROPORTIONS[_kind] = dict(_device.proportions)
+    _COLORS[_kind] = _device.color
 
 
 def _check_positive(name: str, value) -> float:
@@ -277,7 +288,7 @@ class ObjectSpec:
                 f"dimensions must be a mapping name -> metres, got {type(given).__name__}"
             ) from error
         names = list(PROPORTIONS[self.kind])
-        allowed = names[1:]
+        allowed = names[1:] if self.kind not in DEVICE_OBJECTS else []
         out = {}
         for name, value in pairs:
             if name not in allowed:
@@ -533,6 +544,9 @@ def pieces(spec: ObjectSpec) -> tuple[Piece, ...]:
         yaw = ROTATED_CUBOID_YAW if kind == "rotated_cuboid" else 0.0
         X = RigidTransform(RotationMatrix.MakeZRotation(yaw), [0, 0, 0])
         return (Piece("box", "box", (d["width"], d["depth"], d["height"]), X),)
+    if kind in DEVICE_OBJECTS:
+        return tuple(Piece(name, "box", edges, RigidTransform(list(centre)))
+                     for name, centre, edges in DEVICE_OBJECTS[kind].box_list(spec.size))
     if kind == "mug":
         return tuple(_mug_pieces(spec, d))
     if kind == "wine_glass":
@@ -673,6 +687,8 @@ def contact_feet(spec: ObjectSpec) -> np.ndarray:
         radius = d["diameter"] / 2 - 4 * r
         angles = 2 * math.pi * np.arange(5) / 5
         return np.column_stack([radius * np.cos(angles), radius * np.sin(angles), np.full(5, z)])
+    if spec.kind in DEVICE_OBJECTS:
+        return np.array(DEVICE_OBJECTS[spec.kind].feet(spec.size, r)).reshape(-1, 3)
     return np.zeros((0, 3))
 
 
