@@ -28,8 +28,9 @@ Sources (outer dimensions and mass):
 * ``nunchuk``: Nintendo RVL-004, 113 x 38 x 37 mm, 71 g. Modelled as a grip box
   and a head box; the accelerometer sits in the head under the stick.
 * ``sixaxis``: Sony Sixaxis (CECHZC1), about 157 x 95 x 55 mm overall, 137 g
-  (Wikipedia "Sixaxis"); modelled as a body box and two grip boxes below its
-  ends; the accelerometer is on the main board near the centre.
+  (Wikipedia "Sixaxis"; the outer size read off product drawings, approximate);
+  modelled as a body box and two grip boxes behind its ends; the accelerometer
+  is on the main board at the body's centre.
 """
 
 from __future__ import annotations
@@ -142,21 +143,22 @@ def _nunchuk() -> DeviceObject:
 
 def _sixaxis() -> DeviceObject:
     s = 0.157
-    # Body 157 x 55 x 30 mm on two grips 35 x 40 x 25 mm below its ends (y < 0 side).
-    body, grip = (0.157, 0.055, 0.030), (0.035, 0.040, 0.025)
-    h = body[2] + grip[2]
-    zb = h / 2 - body[2] / 2
-    yg = -body[1] / 2 + grip[1] / 2
-    zg = -h / 2 + grip[2] / 2
+    # Body 157 x 55 x 30 mm lying on the table; two grips 35 x 40 x 55 mm (the
+    # thickest part) behind its ends (y < 0), sharing the body's back face.
+    body, grip = (0.157, 0.055, 0.030), (0.035, 0.040, 0.055)
+    h = grip[2]
+    zb = -h / 2 + body[2] / 2
+    yb = grip[1] / 2  # body centre: the overall depth 95 mm is centred on O
+    yg = yb - body[1] / 2 - grip[1] / 2
     xg = s / 2 - grip[0] / 2
     return DeviceObject(
         kind="sixaxis", default_size=s,
-        proportions={"length": 1.0, "width": body[1] / s, "height": h / s},
+        proportions={"length": 1.0, "width": (body[1] + grip[1]) / s, "height": h / s},
         mass=0.137,
-        boxes=(_box("body", (0, 0, zb), body, s),
-               _box("grip_left", (-xg, yg, zg), grip, s),
-               _box("grip_right", (xg, yg, zg), grip, s)),
-        sensor_xyz=(0.0, 0.0, zb / s), sensor_rpy_deg=(0.0, 0.0, 0.0),
+        boxes=(_box("body", (0, yb, zb), body, s),
+               _box("grip_left", (-xg, yg, 0), grip, s),
+               _box("grip_right", (xg, yg, 0), grip, s)),
+        sensor_xyz=(0.0, yb / s, zb / s), sensor_rpy_deg=(0.0, 0.0, 0.0),
         device="sixaxis", color=(0.15, 0.15, 0.15, 1.0),
         description="Sony Sixaxis (about 157 x 95 x 55 mm, 137 g)",
     )
