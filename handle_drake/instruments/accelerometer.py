@@ -71,37 +71,81 @@ def device_reading(f_S, profile: DeviceProfile, seed: int = 0, index: int = 0) -
 
 
 class DeviceAccelerometer(LeafSystem):
-    """A consumer accelerometer: input ``specific_force`` (3, m/s^2, ideal, sensor
-    frame); outputs ``counts`` (3) and ``acceleration`` (3, m/s^2 = counts * lsb).
-
-    Samples every ``1 / profile.rate_hz`` s from t = 0 (sample k at t = k / rate
-    uses noise sample k) and holds the reading between samples; zero before
+    """A consumer accelerometer: outputs ``counts`` (3) and ``acceleration`` (3, m/s^2
+    = counts * lsb), sampled every ``1 / profile.rate_hz`` s from t = 0 and held
+    between samples (sample k at t = k / rate uses noise sample k); zero before
     the first sample.
+
+    Input ``specific_force`` (3, m/s^2, sensor frame): the instantaneous ideal
+    reading (Drake's ``Accelerometer``). A real MEMS part low-passes before it
+    decimates to its output rate (the BMA180's filter bandwidth is at most half
+    the output rate). Sampling the instantaneous acceleration of a discrete
+    simulation instead aliases its step-to-step velocity jitter: a 20 g
+    JoyWarrior held in a tripod grasp reads +-1 g of noise that way, and
+    +-0.2 g even from velocity differences over a period. With ``averaging``
+    (default) the device reports the mean acceleration from the second
+    difference of the sensor point's position over its last two periods (a
+    triangular filter of 2T support, the reading delayed by T, as a decimating
+    filter delays it): ``R_SW(t - T) ((p(t) - 2 p(t - T) + p(t - 2T)) / T^2 -
+    g_W)``, from the plant's ``body_poses``; positions of a discrete plant are
+    smooth where its velocities jitter. The first two samples, with no history,
+    are instantaneous readings.
     """
 
-    def __init__(self, profile: DeviceProfile | str, seed: int = 0):
+    def __init__(self, profile: DeviceProfile | str, seed: int = 0, averaging: bool = False,
+                 body_index=None, X_BS: RigidTransform | None = None, gravity_W=None):
         super().__init__()
         self.profile = get_profile(profile)
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
             raise TypeError(f"seed must be an int, got {type(seed).__name__}")
         self.seed = int(seed)
+        self.averaging = bool(averaging)
         self._bias = device_bias(self.profile, self.seed)
         self._input = self.DeclareVectorInputPort("specific_force", 3)
-        self._counts = self.DeclareDiscreteState(3)
+        # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
+        self._state = self.DeclareDiscreteState(19)
+        if self.averaging:
+            from pydrake.common.value import AbstractValue
+
+            if body_index is None or X_BS is None or gravity_W is None:
+                raise ValueError("averaging needs body_index, X_BS and gravity_W")
+            self._body = body_index
+            self._X_BS = X_BS
+            self._g_W = np.asarray(gravity_W, dtype=float)
+            self._poses = self.DeclareAbstractInputPort(
+                "body_poses", AbstractValue.Make([RigidTransform()]))
         self.DeclarePeriodicDiscreteUpdateEvent(self.profile.period, 0.0, self._sample)
-        self.DeclareStateOutputPort("counts", self._counts)
+        self.DeclareVectorOutputPort("counts", 3, self._calc_counts,
+                                     {self.discrete_state_ticket(self._state)})
         self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration,
-                                     {self.discrete_state_ticket(self._counts)})
+                                     {self.discrete_state_ticket(self._state)})
 
     def _sample(self, context, discrete_state):
+        x = context.get_discrete_state(self._state).get_value().copy()
+        f = None
+        if self.averaging:
+            X_WS = self._poses.Eval(context)[int(self._body)] @ self._X_BS
+            p = np.asarray(X_WS.translation())
+            if x[18] >= 2:
+                T = self.profile.period
+                a_W = (p - 2 * x[3:6] + x[6:9]) / T ** 2 - self._g_W
+                f = x[9:18].reshape(3, 3).T @ a_W
+            x[6:9] = x[3:6]
+            x[3:6] = p
+            x[9:18] = X_WS.rotation().matrix().ravel()
+            x[18] += 1
+        if f is None:
+            f = self._input.Eval(context)
         index = int(round(context.get_time() * self.profile.rate_hz))
-        f = self._input.Eval(context)
         noise = sample_noise(self.profile, self.seed, index)
-        discrete_state.get_mutable_vector(self._counts).SetFromVector(
-            to_counts(f + self._bias + noise, self.profile))
+        x[:3] = to_counts(f + self._bias + noise, self.profile)
+        discrete_state.get_mutable_vector(self._state).SetFromVector(x)
+
+    def _calc_counts(self, context, output: BasicVector):
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
 
     def _calc_acceleration(self, context, output: BasicVector):
-        output.SetFromVector(context.get_discrete_state(self._counts).get_value()
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
                              * self.profile.lsb)
 
 
@@ -134,11 +178,11 @@ def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> N
 
 def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
                            profile: DeviceProfile | str, seed: int = 0,
-                           name: str = "object_accelerometer"):
+                           name: str = "object_accelerometer", averaging: bool = True):
     """Adds Drake's ``Accelerometer`` on ``body`` at ``X_BS`` (with the plant's
-    gravity) and a :class:`DeviceAccelerometer` behind it; returns the device
-    system (outputs ``counts``, ``acceleration``). The ideal sensor is named
-    ``<name>_ideal``."""
+    gravity) and a :class:`DeviceAccelerometer` behind it (averaging over its
+    period by default); returns the device system (outputs ``counts``,
+    ``acceleration``). The ideal sensor is named ``<name>_ideal``."""
     ideal = builder.AddNamedSystem(
         f"{name}_ideal",
         Accelerometer(body, X_BS, plant.gravity_field().gravity_vector()))
@@ -147,8 +191,13 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
                     ideal.get_body_velocities_input_port())
     builder.Connect(plant.get_body_spatial_accelerations_output_port(),
                     ideal.get_body_accelerations_input_port())
-    device = builder.AddNamedSystem(name, DeviceAccelerometer(profile, seed))
-    builder.Connect(ideal.get_measurement_output_port(), device.get_input_port())
+    gravity = plant.gravity_field().gravity_vector()
+    device = builder.AddNamedSystem(name, DeviceAccelerometer(
+        profile, seed, averaging=averaging, body_index=body.index(), X_BS=X_BS,
+        gravity_W=gravity))
+    builder.Connect(ideal.get_measurement_output_port(), device.GetInputPort("specific_force"))
+    if averaging:
+        builder.Connect(plant.get_body_poses_output_port(), device.GetInputPort("body_poses"))
     return device
 
 

@@ -10,10 +10,12 @@ accelerometer output at the device rate:
   Rx(roll)`` (Drake's ``RollPitchYaw``), ``f_S = g0 [-sin p, cos p sin r,
   cos p cos r]``, so ``roll = atan2(f_y, f_z)`` and ``pitch = atan2(-f_x,
   hypot(f_y, f_z))``; yaw is not observable. Valid at rest only, which
-  :func:`at_rest` flags: over a window, the mean magnitude is within
-  ``norm_tol`` of 1 g and no axis spreads more than ``spread_tol``. The angles
-  are those of the window's mean (a moving average: less noise at rest, a lag
-  of half a window while moving).
+  :func:`at_rest` flags over the last ``rest_window`` s: the mean magnitude is
+  within ``rest_norm_tol`` of 1 g, no axis has a standard deviation above
+  ``rest_std_tol`` (vibration), and the mean of the window's second half points
+  within ``rest_angle_tol`` of its first half's (no rotation). The angles are
+  those of the mean over the last ``window`` s (a moving average: less noise
+  at rest, a lag of half a window while moving).
 * **free fall** (:func:`free_fall`): the magnitude stays below ``threshold``
   (default 0.3 g) for ``min_duration`` (default 24 ms, three JoyWarrior
   samples); the report: "a falling object is easily detected, because the
@@ -21,7 +23,9 @@ accelerometer output at the device rate:
 * **slip** (:func:`slip_indicator`), the method stated: while the hand's
   command is still, a held object is static. After the command has been still
   for ``settle_time``, the window's mean specific force is the reference; slip
-  is flagged when, for ``min_duration``, (a) the magnitude departs from 1 g by
+  is flagged when, for ``slip_duration``, the mean over the last ``window`` s
+  (vibration of a held object averages out) is off: (a) its magnitude departs
+  from 1 g by
   more than ``norm_tol`` (a static object feels exactly 1 g; one sliding on an
   incline of angle alpha with friction mu feels only the contact force,
   ``g0 cos(alpha) sqrt(1 + mu^2)``), or (b) its direction turns away from the
@@ -61,9 +65,11 @@ G0 = STANDARD_GRAVITY
 class EstimatorParams:
     """Thresholds of the estimators (g = 9.80665 m/s^2).
 
-    window: s, moving-average and at-rest window (default 40 ms: 5 JoyWarrior samples).
-    rest_norm_tol: g, at rest when the mean magnitude is within this of 1 g.
-    rest_spread_tol: g, ... and no axis spreads (max - min) more than this.
+    window: s, moving average of roll/pitch and slip (default 40 ms: 5 JoyWarrior samples).
+    rest_window: s, the at-rest test's window (default 160 ms: 20 samples).
+    rest_norm_tol: g, at rest when the mean magnitude is within this of 1 g ...
+    rest_std_tol: g, ... no axis has a standard deviation above this ...
+    rest_angle_tol: rad, ... and the means of the window's halves differ by less.
     free_fall_threshold: g, free fall when the magnitude is below this ...
     free_fall_duration: s, ... for this long.
     slip_norm_tol: g, slip when the magnitude departs from 1 g by more than this ...
@@ -75,8 +81,10 @@ class EstimatorParams:
     """
 
     window: float = 0.04
-    rest_norm_tol: float = 0.1
-    rest_spread_tol: float = 0.03
+    rest_window: float = 0.16
+    rest_norm_tol: float = 0.05
+    rest_std_tol: float = 0.1
+    rest_angle_tol: float = math.radians(2.0)
     free_fall_threshold: float = 0.3
     free_fall_duration: float = 0.024
     slip_norm_tol: float = 0.08
@@ -130,17 +138,22 @@ def angle_difference(a, b) -> np.ndarray:
     return (np.asarray(a) - np.asarray(b) + np.pi) % (2 * np.pi) - np.pi
 
 
-def at_rest(window_f, norm_tol: float = 0.1, spread_tol: float = 0.03,
-            g: float = G0) -> bool:
-    """True when the samples ``window_f`` (N, 3; m/s^2) look like a body at rest: the
-    mean magnitude is within ``norm_tol`` g of 1 g and no axis spreads more than
-    ``spread_tol`` g."""
+def at_rest(window_f, norm_tol: float = 0.05, std_tol: float = 0.1,
+            angle_tol: float = math.radians(2.0), g: float = G0) -> bool:
+    """True when the samples ``window_f`` (N >= 2, 3; m/s^2) look like a body at rest:
+    the mean magnitude is within ``norm_tol`` g of 1 g, no axis has a standard
+    deviation above ``std_tol`` g, and the means of the first and second half
+    point within ``angle_tol`` rad of each other."""
     f = _as_samples(window_f).reshape(-1, 3)
-    if len(f) == 0:
+    if len(f) < 2:
         return False
     mean_norm = np.linalg.norm(f.mean(axis=0))
-    spread = np.max(np.ptp(f, axis=0))
-    return bool(abs(mean_norm - g) <= norm_tol * g and spread <= spread_tol * g)
+    half = len(f) // 2
+    a, b = f[:half].mean(axis=0), f[half:].mean(axis=0)
+    cos = a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-12)
+    return bool(abs(mean_norm - g) <= norm_tol * g
+                and np.max(f.std(axis=0)) <= std_tol * g
+                and math.acos(min(1.0, max(-1.0, cos))) <= angle_tol)
 
 
 def free_fall(f, threshold: float = 0.3, min_samples: int = 3, g: float = G0) -> np.ndarray:
@@ -197,10 +210,12 @@ class _Sampled(LeafSystem):
         self._state = self.DeclareDiscreteState(np.r_[np.zeros(3 * self._n + 1), extra])
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, self.OFFSET, self._update)
 
-    def _ring(self, x: np.ndarray) -> tuple[np.ndarray, int]:
+    def _recent(self, x: np.ndarray, k: int) -> np.ndarray:
+        """The last ``min(k, taken)`` samples, oldest first."""
         taken = int(x[3 * self._n])
+        k = min(k, taken, self._n)
         ring = x[: 3 * self._n].reshape(self._n, 3)
-        return ring[: min(taken, self._n)], taken
+        return ring[(taken - k + np.arange(k)) % self._n]
 
     def _update(self, context, discrete_state):
         x = context.get_discrete_state(self._state).get_value().copy()
@@ -223,27 +238,30 @@ class RollPitchEstimator(_Sampled):
     """Roll and pitch of the sensor frame from its accelerometer (valid at rest).
 
     Input ``acceleration`` (3, m/s^2, sensor frame). Outputs ``roll_pitch`` (2,
-    rad, of the window's mean; zeros before the first sample) and ``at_rest``
-    (1: 1.0 when :func:`at_rest` holds over a full window, else 0.0).
+    rad, of the mean over ``window``; zeros before the first sample) and
+    ``at_rest`` (1: 1.0 when :func:`at_rest` holds over a full ``rest_window``).
     """
 
     def __init__(self, period: float, params: EstimatorParams | None = None):
         self.params = params or EstimatorParams()
         period = _check_period(period)
-        super().__init__(period, self.params.samples(self.params.window, period), [])
+        self._n_mean = self.params.samples(self.params.window, period)
+        n = max(self._n_mean, self.params.samples(self.params.rest_window, period), 2)
+        super().__init__(period, n, [])
         self.DeclareVectorOutputPort("roll_pitch", 2, self._calc_roll_pitch,
                                      {self.discrete_state_ticket(self._state)})
         self.DeclareVectorOutputPort("at_rest", 1, self._calc_at_rest,
                                      {self.discrete_state_ticket(self._state)})
 
     def _calc_roll_pitch(self, context, output: BasicVector):
-        ring, _ = self._ring(context.get_discrete_state(self._state).get_value())
-        output.SetFromVector(roll_pitch(ring.mean(axis=0)) if len(ring) else np.zeros(2))
+        recent = self._recent(context.get_discrete_state(self._state).get_value(), self._n_mean)
+        output.SetFromVector(roll_pitch(recent.mean(axis=0)) if len(recent) else np.zeros(2))
 
     def _calc_at_rest(self, context, output: BasicVector):
-        ring, taken = self._ring(context.get_discrete_state(self._state).get_value())
-        rest = taken >= self._n and at_rest(ring, self.params.rest_norm_tol,
-                                            self.params.rest_spread_tol)
+        x = context.get_discrete_state(self._state).get_value()
+        p = self.params
+        rest = int(x[3 * self._n]) >= self._n and at_rest(
+            self._recent(x, self._n), p.rest_norm_tol, p.rest_std_tol, p.rest_angle_tol)
         output.SetFromVector([1.0 if rest else 0.0])
 
 
@@ -321,10 +339,10 @@ class SlipDetector(_Sampled):
         extra[0] += 1
         if extra[0] < self._settle:
             return
-        ring, _ = self._ring(x)
+        mean = self._recent(x, self._n).mean(axis=0)
         if extra[0] == self._settle:
-            extra[2:5] = ring.mean(axis=0)
-        flagged = slip_indicator(f, extra[2:5], p.slip_norm_tol, p.slip_angle_tol)
+            extra[2:5] = mean
+        flagged = slip_indicator(mean, extra[2:5], p.slip_norm_tol, p.slip_angle_tol)
         extra[1] = extra[1] + 1 if flagged else 0.0
 
     def _calc_slip(self, context, output: BasicVector):

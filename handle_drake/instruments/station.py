@@ -65,6 +65,9 @@ def AddSimulatedInstruments(builder, plant, scenario, body) -> dict:
         builder, device.GetOutputPort("acceleration"), device.GetOutputPort("counts"), profile,
         config.estimator_params(), command=_command_port(builder))
     systems["device"] = device
+    # Ground truth for experiments (simulation only): the ideal specific force in S.
+    builder.ExportOutput(builder.GetSubsystemByName("object_accelerometer_ideal")
+                         .get_measurement_output_port(), "object.acceleration_true")
     return systems
 
 

@@ -48,8 +48,11 @@ def test_at_rest_and_free_fall_plain_functions():
     still = np.tile([0.0, 0.0, 9.80665], (5, 1))
     assert at_rest(still)
     assert not at_rest(still * 1.2)  # 1.2 g: accelerating
-    shaking = still + np.array([[0.5, 0, 0], [-0.5, 0, 0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
-    assert not at_rest(shaking)  # spread 1 m/s^2 = 0.1 g > 0.03 g
+    shaking = still + np.array([[2.0, 0, 0], [-2.0, 0, 0]] * 2 + [[0, 0, 0]])
+    assert not at_rest(shaking)  # standard deviation 0.18 g > 0.1 g
+    turning = np.vstack([still[:2], [RotationMatrix.MakeXRotation(math.radians(3)) @ still[0]] * 3])
+    assert not at_rest(turning)  # the halves' means differ by ~2.4 deg > 2 deg
+    assert at_rest(np.vstack([still[:2], [RotationMatrix.MakeXRotation(0.01) @ still[0]] * 3]))
     norms = np.array([1.0, 1.0, 0.1, 0.1, 0.1, 0.1, 1.0, 0.2]) * 9.80665
     f = np.column_stack([np.zeros(8), np.zeros(8), norms])
     np.testing.assert_array_equal(free_fall(f, threshold=0.3, min_samples=3),

@@ -57,7 +57,7 @@ def test_welded_object_reads_gravity_counts_and_roll_pitch_within_quantisation(
         f"object: {{kind: {kind}, fixed: true, on_table: false, "
         f"X_WO: {{translation: [0.3, 0.3, 0.4], rotation: !Rpy {{deg: {list(rpy_deg)}}}}}, "
         f"accelerometer: {{noise: false{sensor}}}}}")
-    simulator.AdvanceTo(0.1)
+    simulator.AdvanceTo(0.25)  # a full at-rest window (160 ms)
     R_WO = RollPitchYaw(np.radians(rpy_deg)).ToRotationMatrix()
     if sensor_rpy_deg is None:
         R_OS = sensor_pose(kind, ObjectSpec.default(kind).size).rotation()
