@@ -77,7 +77,8 @@ class EstimatorParams:
     slip_duration: s, ... for this long, while the command is still.
     still_tol: command units (rad, m), the command is still when no entry changes
         by more than this between two samples ...
-    settle_time: s, ... and the reference is taken after it has been still this long.
+    settle_time: s, ... and the reference is taken after it has been still this long
+        (300 ms: the floating wrist's PD loop still turns the hand ~0.1 s after its command stops).
     """
 
     window: float = 0.04
@@ -91,7 +92,7 @@ class EstimatorParams:
     slip_angle_tol: float = math.radians(3.0)
     slip_duration: float = 0.04
     still_tol: float = 1e-4
-    settle_time: float = 0.1
+    settle_time: float = 0.3
 
     def __post_init__(self):
         for field in dc.fields(self):

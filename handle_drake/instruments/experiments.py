@@ -356,8 +356,11 @@ def plot_figure8(results, path) -> Path:
         d = r.data
         for row, (name, label) in enumerate((("roll", "roll"), ("pitch", "pitch"))):
             ax = axes[row, column]
-            ax.plot(d["t"], np.degrees(d[f"true_{name}"]), "k-", lw=2, label="true (plant)")
-            ax.plot(d["t"], np.degrees(d[name]), "C1-", lw=1, label="estimated (accelerometer)")
+            # Unwrapped for display (a device on its side reads roll near +-180 deg).
+            ax.plot(d["t"], np.degrees(np.unwrap(d[f"true_{name}"])), "k-", lw=2,
+                    label="true (plant)")
+            ax.plot(d["t"], np.degrees(np.unwrap(d[name])), "C1-", lw=1,
+                    label="estimated (accelerometer)")
             for t0, t1 in r.phases.rest:
                 ax.axvspan(t0, t1, color="C2", alpha=0.12, lw=0)
             ax.set_ylabel(f"{label} (deg)")
