@@ -19,9 +19,10 @@ after each device sample. Reported (:class:`Figure8Result.summary`): roll and
 pitch errors in degrees (RMS and max) over the at-rest phases (each hold after
 its first ``REST_SETTLE`` s) and while moving; false free-fall and slip alarms
 while the grasp holds (lift done to the open command); the free-fall
-detection delay, from the instant an ideal sensor (Drake's ``Accelerometer``
-sampled every ``RELEASE_PERIOD`` s) first reads below the free-fall threshold
-to the detector's flag.
+detection delay, from the start of the fall to the detector's flag, where the
+fall starts when an ideal sensor (Drake's ``Accelerometer`` sampled every
+``RELEASE_PERIOD`` s) goes below the free-fall threshold for good (until the
+flag).
 
 ``handle-drake instruments`` runs them; the scenario files
 ``diagrams/instrumented_<device>_<class>.yaml`` (:func:`write_scenarios`) run
@@ -245,11 +246,19 @@ class Figure8Result:
         return np.degrees(angle_difference(est, true))
 
     def release_time(self) -> float:
-        """First instant after the open command when the ideal sensor reads below the
-        free-fall threshold (NaN if never)."""
+        """Start of the free fall the detector flagged: the first instant of the
+        uninterrupted run of ideal-sensor readings below the free-fall threshold
+        that contains the detection (a finger may still brush the object after
+        the first dip). NaN when nothing was detected."""
+        detected = self.detection_time()
+        if not math.isfinite(detected):
+            return math.nan
         t, norm = self.ideal[:, 0], self.ideal[:, 1]
-        low = (t >= self.phases.open_time) & (norm < self.free_fall_threshold * 9.80665)
-        return float(t[low][0]) if low.any() else math.nan
+        low = norm < self.free_fall_threshold * 9.80665
+        i = int(np.searchsorted(t, detected, side="right")) - 1
+        while i > 0 and low[i - 1] and t[i - 1] >= self.phases.open_time:
+            i -= 1
+        return float(t[i]) if low[i] else math.nan
 
     def detection_time(self) -> float:
         t, flag = self.data["t"], self.data["free_fall"]
