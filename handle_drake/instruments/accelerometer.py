@@ -164,7 +164,7 @@ def sensor_pose(kind: str, size: float) -> RigidTransform:
 def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> None:
     """Raises ValueError when the sensor origin is not in or on the object (within
     ``tolerance`` m of its surface: a sensor may be glued on)."""
-    from handle_drake.objects import _halfspaces, _inside
+    from handle_drake.objects.queries import _halfspaces, _inside
 
     p = np.asarray(X_OS.translation(), dtype=float).reshape(1, 3)
     if not np.all(np.isfinite(p)):
