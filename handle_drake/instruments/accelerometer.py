@@ -87,13 +87,17 @@ class DeviceAccelerometer(LeafSystem):
     difference of the sensor point's position over its last two periods (a
     triangular filter of 2T support, the reading delayed by T, as a decimating
     filter delays it): ``R_SW(t - T) ((p(t) - 2 p(t - T) + p(t - 2T)) / T^2 -
-    g_W)``, from the plant's ``body_poses``; positions of a discrete plant are
-    smooth where its velocities jitter. The first two samples, with no history,
-    are instantaneous readings.
+    g_W)``, from the free body's state (input ``body_state``: the plant's state
+    output of the body's model instance, ``[qw qx qy qz x y z, w, v]``; a small
+    vector, where the plant's ``body_poses`` would copy every body's pose into
+    Python at each sample); positions of a discrete plant are smooth where its
+    velocities jitter. The first two samples, with no history, are
+    instantaneous readings. A welded body does not move: it needs no
+    averaging (``AddObjectAccelerometer`` then reads Drake's sensor only).
     """
 
     def __init__(self, profile: DeviceProfile | str, seed: int = 0, averaging: bool = False,
-                 body_index=None, X_BS: RigidTransform | None = None, gravity_W=None):
+                 X_BS: RigidTransform | None = None, gravity_W=None):
         super().__init__()
         self.profile = get_profile(profile)
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
@@ -105,15 +109,12 @@ class DeviceAccelerometer(LeafSystem):
         # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
         self._state = self.DeclareDiscreteState(19)
         if self.averaging:
-            from pydrake.common.value import AbstractValue
-
-            if body_index is None or X_BS is None or gravity_W is None:
-                raise ValueError("averaging needs body_index, X_BS and gravity_W")
-            self._body = body_index
-            self._X_BS = X_BS
+            if X_BS is None or gravity_W is None:
+                raise ValueError("averaging needs X_BS and gravity_W")
+            self._p_BS = np.asarray(X_BS.translation(), dtype=float)
+            self._R_BS = X_BS.rotation().matrix()
             self._g_W = np.asarray(gravity_W, dtype=float)
-            self._poses = self.DeclareAbstractInputPort(
-                "body_poses", AbstractValue.Make([RigidTransform()]))
+            self._body_state = self.DeclareVectorInputPort("body_state", 13)
         self.DeclarePeriodicDiscreteUpdateEvent(self.profile.period, 0.0, self._sample)
         self.DeclareVectorOutputPort("counts", 3, self._calc_counts,
                                      {self.discrete_state_ticket(self._state)})
@@ -124,15 +125,16 @@ class DeviceAccelerometer(LeafSystem):
         x = context.get_discrete_state(self._state).get_value().copy()
         f = None
         if self.averaging:
-            X_WS = self._poses.Eval(context)[int(self._body)] @ self._X_BS
-            p = np.asarray(X_WS.translation())
+            q = self._body_state.Eval(context)[:7]
+            R_WB = _quaternion_matrix(q[:4])
+            p = q[4:7] + R_WB @ self._p_BS
             if x[18] >= 2:
                 T = self.profile.period
                 a_W = (p - 2 * x[3:6] + x[6:9]) / T ** 2 - self._g_W
                 f = x[9:18].reshape(3, 3).T @ a_W
             x[6:9] = x[3:6]
             x[3:6] = p
-            x[9:18] = X_WS.rotation().matrix().ravel()
+            x[9:18] = (R_WB @ self._R_BS).ravel()
             x[18] += 1
         if f is None:
             f = self._input.Eval(context)
@@ -147,6 +149,16 @@ class DeviceAccelerometer(LeafSystem):
     def _calc_acceleration(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
                              * self.profile.lsb)
+
+
+def _quaternion_matrix(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion ``[w x y z]`` (normalised here)."""
+    w, x, y, z = np.asarray(q) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
 
 
 def sensor_pose(kind: str, size: float) -> RigidTransform:
@@ -192,12 +204,16 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
     builder.Connect(plant.get_body_spatial_accelerations_output_port(),
                     ideal.get_body_accelerations_input_port())
     gravity = plant.gravity_field().gravity_vector()
+    instance = body.model_instance()
+    # Averaging reads the body's free state: only for a floating body alone in its
+    # model instance (a welded one does not move and reads Drake's sensor exactly).
+    averaging = bool(averaging and body.is_floating_base_body()
+                     and plant.num_multibody_states(instance) == 13)
     device = builder.AddNamedSystem(name, DeviceAccelerometer(
-        profile, seed, averaging=averaging, body_index=body.index(), X_BS=X_BS,
-        gravity_W=gravity))
+        profile, seed, averaging=averaging, X_BS=X_BS, gravity_W=gravity))
     builder.Connect(ideal.get_measurement_output_port(), device.GetInputPort("specific_force"))
     if averaging:
-        builder.Connect(plant.get_body_poses_output_port(), device.GetInputPort("body_poses"))
+        builder.Connect(plant.get_state_output_port(instance), device.GetInputPort("body_state"))
     return device
 
 

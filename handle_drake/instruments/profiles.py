@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -178,13 +179,23 @@ def counts_to_acceleration(counts: np.ndarray, profile: DeviceProfile) -> np.nda
     return np.asarray(counts, dtype=float) * profile.lsb
 
 
+#: Noise is drawn in blocks of this many samples (one generator per block, cached).
+_NOISE_BLOCK = 1024
+
+
+@lru_cache(maxsize=64)
+def _noise_block(seed: int, block: int) -> np.ndarray:
+    return np.random.default_rng((seed, 1, block)).standard_normal((_NOISE_BLOCK, 3))
+
+
 def sample_noise(profile: DeviceProfile, seed: int, index: int) -> np.ndarray:
     """The noise (m/s^2, 3 axes) of sample ``index``: a function of the seed and the
-    index only, so runs and resets replay it exactly."""
+    index only (standard normals drawn in cached blocks of 1024 samples per
+    ``(seed, block)``), so runs and resets replay it exactly."""
     if profile.noise_std_g == 0.0:
         return np.zeros(3)
-    rng = np.random.default_rng((int(seed), 1, int(index)))
-    return rng.normal(scale=profile.noise_std_g * STANDARD_GRAVITY, size=3)
+    block, row = divmod(int(index), _NOISE_BLOCK)
+    return _noise_block(int(seed), block)[row] * (profile.noise_std_g * STANDARD_GRAVITY)
 
 
 def device_bias(profile: DeviceProfile, seed: int) -> np.ndarray:
