@@ -297,40 +297,42 @@ class Figure8Result:
         }
 
 
+def _runner_class():
+    """A ScenarioRunner (the scenario's script on the trial harness) that also adds the
+    experiment's recorder to the diagram it builds once."""
+    from handle_drake.instruments.station import instrument_X_OS
+    from handle_drake.run import ScenarioRunner
+
+    class Figure8Runner(ScenarioRunner):
+        def _add_driver(self, builder, station):
+            driver = super()._add_driver(builder, station)
+            profile = self.scenario.object.accelerometer.profile(self.scenario.object.kind)
+            self.recorder = builder.AddNamedSystem(
+                "recorder", _Recorder(profile.period, instrument_X_OS(self.scenario)))
+            for name in ("roll_pitch", "at_rest", "free_fall", "slip", "acceleration"):
+                builder.Connect(station.GetOutputPort(f"object.{name}"),
+                                self.recorder.inputs[name])
+            builder.Connect(station.GetOutputPort("object.acceleration_true"),
+                            self.recorder.inputs["ideal"])
+            builder.Connect(station.GetOutputPort("object.pose"),
+                            self.recorder.GetInputPort("pose"))
+            return driver
+
+    return Figure8Runner
+
+
 def run_figure8(device="joywarrior", rotations=ROTATIONS_DEG, seed: int = 0, meshcat=None,
                 html=None) -> Figure8Result:
     """Plans, simulates and measures one Figure 8 experiment (see the module doc)."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import TrajectorySource
-
-    from handle_drake.instruments.station import instrument_X_OS
-    from handle_drake.run import advance_recording, script_trajectories
-    from handle_drake.station import MakeHandStation, hand_initial_command
-
     scenario, phases, _ = figure8_scenario(device, rotations, seed)
-    profile = scenario.object.accelerometer.profile(scenario.object.kind)
-    builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", MakeHandStation(scenario, meshcat))
-    hand, wrist = script_trajectories(scenario, hand_initial_command(scenario))
-    builder.Connect(builder.AddSystem(TrajectorySource(hand)).get_output_port(),
-                    station.GetInputPort("hand.position"))
-    builder.Connect(builder.AddSystem(TrajectorySource(wrist)).get_output_port(),
-                    station.GetInputPort("wrist.pose"))
-    recorder = builder.AddNamedSystem("recorder", _Recorder(profile.period,
-                                                            instrument_X_OS(scenario)))
-    for name in ("roll_pitch", "at_rest", "free_fall", "slip", "acceleration"):
-        builder.Connect(station.GetOutputPort(f"object.{name}"), recorder.inputs[name])
-    builder.Connect(station.GetOutputPort("object.acceleration_true"), recorder.inputs["ideal"])
-    builder.Connect(station.GetOutputPort("object.pose"), recorder.GetInputPort("pose"))
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    simulator.Initialize()
-    wall = advance_recording(simulator, scenario.simulation_duration, station, meshcat, html)
-    rows = np.array(recorder.rows)
+    runner = _runner_class()(scenario, meshcat)
+    runner.reset()
+    runner.recorder.clear()
+    wall = runner.harness.advance(scenario.simulation_duration, html)
+    rows = np.array(runner.recorder.rows)
     data = {name: rows[:, i] for i, name in enumerate(_COLUMNS)}
     params = scenario.object.accelerometer.estimator_params()
-    return Figure8Result(_setup(device), data, np.array(recorder.ideal), phases,
+    return Figure8Result(_setup(device), data, np.array(runner.recorder.ideal), phases,
                          params.free_fall_threshold, wall, scenario.simulation_duration)
 
 
