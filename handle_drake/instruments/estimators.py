@@ -17,7 +17,7 @@ accelerometer output at the device rate:
   those of the mean over the last ``window`` s (a moving average: less noise
   at rest, a lag of half a window while moving).
 * **free fall** (:func:`free_fall`): the magnitude stays below ``threshold``
-  (default 0.3 g) for ``min_duration`` (default 24 ms, three JoyWarrior
+  (default 0.3 g) for ``free_fall_duration`` (default 24 ms, three JoyWarrior
   samples); the report: "a falling object is easily detected, because the
   total measured acceleration is zero in this case".
 * **slip** (:func:`slip_indicator`), the method stated: while the hand's

@@ -5,7 +5,7 @@ parallel-extension grasp and the JoyWarrior held in a tripod grasp. Here:
 
 1. the grasp planner (``handle_drake.grasp``, as ``handle-drake grasp --class
    ...``) plans the class on a box of the device's outer size resting on the
-   table (the JoyWarrior stands on its 37 x 35 mm... side: 25 mm grasp width;
+   table (the JoyWarrior stands on its 37 x 25 mm side: a 25 mm grasp width;
    the Wiimote lies flat: 36.2 mm across its width); its keyframes reach,
    close and lift the device;
 2. the scripted wrist then turns the device about its own centre by world

@@ -221,3 +221,13 @@ def test_stations_without_an_accelerometer_export_no_instrument_ports():
     station = MakeHandStation(LoadScenario(data=HAND_AWAY + "object: {kind: wiimote}"))
     assert not station.HasOutputPort("object.acceleration")
     assert RigidTransform()  # keep the import used
+
+
+def test_instrumented_kinds_are_accepted_where_object_kinds_are():
+    from handle_drake.experiments.grasp_trial import GraspTrialConfig
+    from handle_drake.objects import DEFAULT_SIZE, KINDS
+
+    for kind in DEVICE_OBJECTS:
+        assert kind in KINDS
+        assert GraspTrialConfig(object=kind).object_size == DEFAULT_SIZE[kind]  # babble
+        LoadScenario(data=f"object: {{kind: {kind}}}")  # scenarios, simulate
