@@ -99,6 +99,7 @@ def advance_recording(simulator, t_final, station, meshcat=None,
     if meshcat is not None and station.HasOutputPort("body_poses"):
         # Open the view framed on the hand and object (simulation only: the
         # hardware station has no plant to read poses from).
+        from handle_drake.station import GetPlant
         from handle_drake.viewing import frame_hand_and_object
 
         plant = GetPlant(station)
