@@ -40,9 +40,11 @@ from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from handle_drake.can_hand.config import CanHandDriverConfig
+from handle_drake.instruments.config import AccelerometerConfig
 from handle_drake.scenario_checks import check_ranges, check_yaml_text, short, short_path
 
 __all__ = [
+    "AccelerometerConfig",
     "CONTACT_MODELS",
     "CameraConfig",
     "CanHandDriver",
@@ -130,6 +132,9 @@ class ObjectConfig:
     # trials: the hand closes on an object that cannot move, as in the
     # report's OpenRAVE experiments).
     fixed: bool = False
+    # An accelerometer on the object (see handle_drake.instruments.config): the
+    # station then exports object.acceleration, .roll_pitch, .free_fall, .slip, ...
+    accelerometer: AccelerometerConfig | None = None
 
 
 @dc.dataclass
@@ -401,6 +406,8 @@ def validate_scenario(scenario: Scenario) -> None:
         if not (math.isfinite(scenario.object.mu) and scenario.object.mu >= 0):
             raise ScenarioError(f"object.mu must be finite and >= 0, got {scenario.object.mu}")
         _check_transform("object.X_WO", scenario.object.X_WO)
+        if scenario.object.accelerometer is not None:
+            _validate_accelerometer(scenario)
     if scenario.table is not None:
         if not math.isfinite(scenario.table.top_height):
             raise ScenarioError("table.top_height must be finite")
@@ -438,6 +445,26 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError("driver.max_joint_velocity must be finite and >= 0")
         _check_positive("driver.control_period", scenario.driver.control_period)
     check_ranges(scenario)
+
+
+def _validate_accelerometer(scenario: Scenario) -> None:
+    from handle_drake.instruments.accelerometer import check_sensor_pose
+    from handle_drake.instruments.station import instrument_X_OS
+    from handle_drake.objects import ObjectSpec
+
+    config = scenario.object.accelerometer
+    try:
+        config.validate(scenario.object.kind)
+    except (ValueError, TypeError) as error:
+        raise ScenarioError(f"object.accelerometer.{error}") from None
+    if config.X_OS is not None:
+        _check_transform("object.accelerometer.X_OS", config.X_OS)
+    spec = ObjectSpec(kind=scenario.object.kind, size=scenario.object.size,
+                      dimensions=scenario.object.dimensions or None)
+    try:
+        check_sensor_pose(spec, instrument_X_OS(scenario))
+    except ValueError as error:
+        raise ScenarioError(f"object.accelerometer.{error}") from None
 
 
 def _validate_script(scenario: Scenario, spec) -> None:

@@ -20,11 +20,20 @@ port                              dir    size                      units / frame
 ``object.pose``                   out    ``RigidTransform``        ``X_WO``
 ``object.spatial_velocity``       out    ``SpatialVelocity``       ``V_WO`` in world
 ``object.position``               out    3                         m, ``p_WO``
+``object.acceleration``           out    3                         m/s^2, sensor frame (*)
+``object.acceleration_counts``    out    3                         device counts (*)
+``object.roll_pitch``             out    2                         rad, from gravity (*)
+``object.at_rest``                out    1                         1.0 at rest (*)
+``object.free_fall``              out    1                         1.0 in free fall (*)
+``object.slip``                   out    1                         1.0 while slipping (*)
 ``contact_results``               out    ``ContactResults``        world
 ``query_object``                  out    ``QueryObject``
 ``body_poses``                    out    ``vector<RigidTransform>``  ``X_WB`` per body
 ``plant_state``                   out    plant nq + nv
 ================================  =====  ========================  ==========================
+
+(*) only with an ``object.accelerometer`` in the scenario (also on hardware,
+read through evdev); see ``handle_drake.instruments``.
 
 The diagram's subsystems are named ``plant``, ``scene_graph``, ``hand_driver``,
 ``wrist_driver``, ``tactile`` and ``object_pose``; :func:`GetPlant` returns the
@@ -94,7 +103,12 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
                 "hardware=True needs a !CanHandDriver driver in the scenario, got "
                 f"{type(scenario.driver).__name__}"
             )
-        return MakeHardwareStation(scenario, meshcat=meshcat)
+        station = MakeHardwareStation(scenario, meshcat=meshcat)
+        if scenario.object is not None and scenario.object.accelerometer is not None:
+            from handle_drake.instruments.station import WithHardwareInstruments
+
+            station = WithHardwareInstruments(station, scenario)
+        return station
     if not isinstance(scenario.driver, SimHandDriver):
         raise ValueError(
             "a simulated station needs a !SimHandDriver driver, got "
@@ -166,6 +180,10 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         builder.ExportOutput(selector.GetOutputPort("pose"), "object.pose")
         builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
         builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
+        if scenario.object.accelerometer is not None:
+            from handle_drake.instruments.station import AddSimulatedInstruments
+
+            AddSimulatedInstruments(builder, plant, scenario, object_body(plant))
 
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")

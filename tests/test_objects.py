@@ -121,6 +121,11 @@ def test_rotated_cuboid_is_the_cuboid_turned_about_z():
     assert resting_height(rotated) == resting_height(cuboid)
 
 
+#: Outer size (x, y, z) of the instrumented objects at their default size (README table).
+PUBLISHED_MM = {"joywarrior": (37, 35, 25), "wiimote": (148, 36.2, 30.8),
+                "nunchuk": (113, 38, 37), "sixaxis": (157, 95, 55)}
+
+
 def expected_bounds(spec):
     """Axis-aligned bounds from the documented proportions (README table)."""
     s = spec.size
@@ -138,6 +143,9 @@ def expected_bounds(spec):
     if spec.kind == "wine_glass":
         h = (0.05 + 0.8 + 1.1) * s
         return np.array([[-s / 2, -s / 2, -h / 2], [s / 2, s / 2, h / 2]])
+    if spec.kind in PUBLISHED_MM:  # instrumented objects: the device's outer size, centred
+        half = np.array(PUBLISHED_MM[spec.kind]) / 1000 / 2 * s / DEFAULT_SIZE[spec.kind]
+        return np.array([-half, half])
     r = s / 2
     return np.array([[r * math.cos(0.8 * math.pi), -r * math.sin(0.4 * math.pi), -s / 4],
                      [r, r * math.sin(0.4 * math.pi), s / 4]])  # fmt: skip

@@ -34,7 +34,7 @@ from pydrake.common.schema import Rotation, Transform
 
 from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.learning import TrialResult
-from handle_drake.objects import KINDS, ObjectSpec, total_height
+from handle_drake.objects import DEFAULT_SIZE, KINDS, ObjectSpec, total_height
 from handle_drake.quality import NO_CONTACT
 from handle_drake.run import ScenarioRunner
 from handle_drake.scenario import (
@@ -73,7 +73,7 @@ BABBLING_SIZES = {
 class GraspTrialConfig:
     hand: str = "barrett"
     object: str = "sphere"
-    size: float | None = None  # m; None: BABBLING_SIZES[object]
+    size: float | None = None  # m; None: BABBLING_SIZES[object], else DEFAULT_SIZE[object]
     space: str = "offset"
     noise: float = 0.0  # std of additive metric noise
     mu: float = 0.8  # object friction, also used by the metric
@@ -125,7 +125,10 @@ class GraspTrialConfig:
 
     @property
     def object_size(self) -> float:
-        return BABBLING_SIZES[self.object] if self.size is None else float(self.size)
+        if self.size is not None:
+            return float(self.size)
+        # Kinds without a babbling size (the instrumented devices) keep their own size.
+        return BABBLING_SIZES.get(self.object, DEFAULT_SIZE[self.object])
 
 
 @dc.dataclass

@@ -14,7 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-KINDS = ("sphere", "cylinder", "cuboid", "rotated_cuboid", "mug", "wine_glass", "star_prism")
+from handle_drake.instruments.catalogue import DEVICE_OBJECTS
+
+KINDS = ("sphere", "cylinder", "cuboid", "rotated_cuboid", "mug", "wine_glass", "star_prism",
+         *DEVICE_OBJECTS)  # + the instrumented objects (handle_drake.instruments.catalogue)
 
 #: Name of the object's rigid body inside its model instance (AddObject and write_sdf).
 BODY_NAME = "base_link"
@@ -96,6 +99,14 @@ _COLORS = {
 }
 
 _TABLE_COLOR = (0.55, 0.40, 0.25, 1.0)
+
+# The instrumented objects (report section 2.4): boxes with their published size and
+# mass; no dimension overrides (their shape is the device's).
+for _kind, _device in DEVICE_OBJECTS.items():
+    DEFAULT_SIZE[_kind] = _device.default_size
+    DENSITY[_kind] = _device.density
+    PROPORTIONS[_kind] = dict(_device.proportions)
+    _COLORS[_kind] = _device.color
 
 
 def _check_positive(name: str, value) -> float:
@@ -190,7 +201,7 @@ class ObjectSpec:
                 f"dimensions must be a mapping name -> metres, got {type(given).__name__}"
             ) from error
         names = list(PROPORTIONS[self.kind])
-        allowed = names[1:]
+        allowed = names[1:] if self.kind not in DEVICE_OBJECTS else []
         out = {}
         for name, value in pairs:
             if name not in allowed:

@@ -23,6 +23,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.tree import CalcSpatialInertia, SpatialInertia
 
+from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 from handle_drake.objects.catalogue import (
     _BOWL_PROFILE,
     DENSITY,
@@ -199,6 +200,9 @@ def pieces(spec: ObjectSpec) -> tuple[Piece, ...]:
         yaw = ROTATED_CUBOID_YAW if kind == "rotated_cuboid" else 0.0
         X = RigidTransform(RotationMatrix.MakeZRotation(yaw), [0, 0, 0])
         return (Piece("box", "box", (d["width"], d["depth"], d["height"]), X),)
+    if kind in DEVICE_OBJECTS:
+        return tuple(Piece(name, "box", edges, RigidTransform(list(centre)))
+                     for name, centre, edges in DEVICE_OBJECTS[kind].box_list(spec.size))
     if kind == "mug":
         return tuple(_mug_pieces(spec, d))
     if kind == "wine_glass":

@@ -17,6 +17,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import CoulombFriction
 from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia
 
+from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 from handle_drake.objects.catalogue import (
     _TABLE_COLOR,
     BODY_NAME,
@@ -109,6 +110,8 @@ def contact_feet(spec: ObjectSpec) -> np.ndarray:
         radius = d["diameter"] / 2 - 4 * r
         angles = 2 * math.pi * np.arange(5) / 5
         return np.column_stack([radius * np.cos(angles), radius * np.sin(angles), np.full(5, z)])
+    if spec.kind in DEVICE_OBJECTS:
+        return np.array(DEVICE_OBJECTS[spec.kind].feet(spec.size, r)).reshape(-1, 3)
     return np.zeros((0, 3))
 
 

@@ -1,0 +1,93 @@
+"""What the object accelerometer adds to a trial: the same station with and without it.
+
+The demo grasp (``diagrams/shadow_sphere_grasp.yaml``, first 2 s, 1 ms, point
+contact) run by ``ScenarioRunner`` without an accelerometer (the floor) and with
+one on the sphere (Drake's ``Accelerometer``, the device model, the roll/pitch,
+free-fall and slip estimators, all exported as station ports) at the
+JoyWarrior's 125 Hz, the Wiimote's 100 Hz and an ideal 1 kHz sensor. Every case
+runs once per round, and the overhead is the median over rounds of the
+per-round ratio (wall with / wall without), so the machine's drift cancels.
+
+Target (issue 11): at most 5 % slower than the station without it.
+
+Usage: ``python benchmarks/bench_instruments.py [--repeats N] [--quick]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from handle_drake.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
+from handle_drake.run import ScenarioRunner  # noqa: E402
+from handle_drake.scenario import LoadScenario  # noqa: E402
+
+TRIAL_SECONDS = 2.0
+CASES = {
+    "no accelerometer (floor)": "",
+    "joywarrior24f14, 125 Hz": "object: {accelerometer: {device: joywarrior24f14}}",
+    "wiimote, 100 Hz": "object: {accelerometer: {device: wiimote}}",
+    "ideal, 1 kHz": "object: {accelerometer: {device: ideal}}",
+}
+
+
+def _runner(override: str) -> ScenarioRunner:
+    return ScenarioRunner(LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO,
+                                       data=override or None))
+
+
+def bench(repeats: int) -> list[dict]:
+    runners = {name: _runner(override) for name, override in CASES.items()}
+    walls = {name: [] for name in CASES}
+    for _ in range(repeats):
+        for name, runner in runners.items():
+            runner.reset()
+            start = time.perf_counter()
+            runner.simulator.AdvanceTo(TRIAL_SECONDS)
+            walls[name].append(time.perf_counter() - start)
+    floor = walls[next(iter(CASES))]
+    rows = []
+    for name in CASES:
+        ratios = [w / f for w, f in zip(walls[name], floor, strict=True)]
+        rows.append({"case": name, "wall_s_median": statistics.median(walls[name]),
+                     "realtime_factor": TRIAL_SECONDS / statistics.median(walls[name]),
+                     "ratio_to_floor_median": statistics.median(ratios),
+                     "ratio_to_floor_range": [min(ratios), max(ratios)]})
+    return rows
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--quick", action="store_true", help="two rounds")
+    parser.add_argument("--out", type=Path,
+                        default=Path(__file__).parent / "results" / "instruments.json")
+    args = parser.parse_args(argv)
+    repeats = 2 if args.quick else args.repeats
+    if repeats < 1:
+        parser.error(f"--repeats must be >= 1, got {repeats}")
+    rows = bench(repeats)
+    print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated at 1 ms, {repeats} rounds")
+    print(f"{'case':<26}{'wall (s)':>10}{'x real time':>13}{'ratio':>8}{'range':>16}")
+    for r in rows:
+        lo, hi = r["ratio_to_floor_range"]
+        print(f"{r['case']:<26}{r['wall_s_median']:>10.2f}{r['realtime_factor']:>13.2f}"
+              f"{r['ratio_to_floor_median']:>8.3f}{f'{lo:.3f}-{hi:.3f}':>16}")
+    worst = max(r["ratio_to_floor_median"] for r in rows[1:3])
+    print(f"device sensors: at most {100 * (worst - 1):+.1f} % against the station without "
+          f"(target <= +5 %)")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"trial_seconds": TRIAL_SECONDS, "repeats": repeats,
+                                    "rows": rows, "target_ratio": 1.05}, indent=2))
+    print(f"results: {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

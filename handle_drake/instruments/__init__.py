@@ -1,0 +1,17 @@
+"""Instrumented objects: accelerometers in or on the grasped object (report section 2.4).
+
+- :mod:`~handle_drake.instruments.catalogue`: the JoyWarrior, Wiimote, Nunchuk and
+  Sixaxis as catalogue objects with a named sensor frame (plain data).
+- :mod:`~handle_drake.instruments.profiles`: device profiles (range, bits, rate,
+  noise, bias) and the counts <-> m/s^2 conversion.
+- :mod:`~handle_drake.instruments.accelerometer`: the device model on Drake's
+  ``Accelerometer`` and :func:`AddObjectAccelerometer` for the station.
+- :mod:`~handle_drake.instruments.estimators`: roll/pitch with an at-rest flag, free
+  fall and slip, as plain functions and LeafSystems.
+- :mod:`~handle_drake.instruments.evdev_driver`: a real device (JoyWarrior as a Linux
+  joystick) through ``evdev``, with the same ports.
+- :mod:`~handle_drake.instruments.experiments`: the Figure 8 experiments.
+
+This package's ``__init__`` imports nothing heavy: ``handle_drake.objects`` reads
+the catalogue at import.
+"""

@@ -1,0 +1,260 @@
+"""An accelerometer on the object: Drake's ``Accelerometer`` and a device model.
+
+Drake's :class:`pydrake.systems.sensors.Accelerometer` gives the specific force
+(proper acceleration) ``f_S = R_SW (a_WS - g_W)`` of a sensor frame S on a
+body, continuously, when it is given the plant's gravity vector (without it a
+body at rest would read zero). :class:`DeviceAccelerometer` turns that into
+what a real device reports (:mod:`~handle_drake.instruments.profiles`): sampled
+at the device rate and held, biased, noisy, saturated, quantised, in counts and
+in m/s^2. :func:`AddObjectAccelerometer` adds both to a diagram;
+:func:`AddInstrumentEstimators` adds the estimators
+(:mod:`~handle_drake.instruments.estimators`) behind any source of the
+``acceleration`` signal (this device model, or the evdev driver of a real
+device) and exports the same ports either way:
+
+=============================  ====  ====================================================
+port                           size  units / frame
+=============================  ====  ====================================================
+``<object>.acceleration``      3     m/s^2, specific force in the sensor frame S
+``<object>.acceleration_counts`` 3   device counts (integers)
+``<object>.roll_pitch``        2     rad, roll and pitch of S from gravity (valid at rest)
+``<object>.at_rest``           1     1.0 when the readings look like rest
+``<object>.free_fall``         1     1.0 while free fall is detected
+``<object>.slip``              1     1.0 while slip is detected (hand command still)
+=============================  ====  ====================================================
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.sensors import Accelerometer
+
+from handle_drake.instruments.estimators import (
+    EstimatorParams,
+    FreeFallDetector,
+    RollPitchEstimator,
+    SlipDetector,
+)
+from handle_drake.instruments.profiles import (
+    DeviceProfile,
+    device_bias,
+    get_profile,
+    sample_noise,
+    to_counts,
+)
+
+__all__ = [
+    "DeviceAccelerometer",
+    "device_reading",
+    "sensor_pose",
+    "check_sensor_pose",
+    "AddObjectAccelerometer",
+    "AddInstrumentEstimators",
+    "INSTRUMENT_SIGNALS",
+]
+
+#: The signals every instrumented station exports as ``<object>.<signal>``.
+INSTRUMENT_SIGNALS = ("acceleration", "acceleration_counts", "roll_pitch", "at_rest",
+                      "free_fall", "slip")
+
+
+def device_reading(f_S, profile: DeviceProfile, seed: int = 0, index: int = 0) -> np.ndarray:
+    """The counts a device reports for the specific force ``f_S`` (3, m/s^2) at its
+    sample ``index``: bias and noise added, then quantised and saturated."""
+    f_S = np.asarray(f_S, dtype=float)
+    if f_S.shape != (3,):
+        raise ValueError(f"f_S: expected 3 values (m/s^2), got shape {f_S.shape}")
+    return to_counts(f_S + device_bias(profile, seed) + sample_noise(profile, seed, index),
+                     profile)
+
+
+class DeviceAccelerometer(LeafSystem):
+    """A consumer accelerometer: outputs ``counts`` (3) and ``acceleration`` (3, m/s^2
+    = counts * lsb), sampled every ``1 / profile.rate_hz`` s from t = 0 and held
+    between samples (sample k at t = k / rate uses noise sample k); zero before
+    the first sample.
+
+    Input ``specific_force`` (3, m/s^2, sensor frame): the instantaneous ideal
+    reading (Drake's ``Accelerometer``). A real MEMS part low-passes before it
+    decimates to its output rate (the BMA180's filter bandwidth is at most half
+    the output rate). Sampling the instantaneous acceleration of a discrete
+    simulation instead aliases its step-to-step velocity jitter: a 20 g
+    JoyWarrior held in a tripod grasp reads +-1 g of noise that way, and
+    +-0.2 g even from velocity differences over a period. With ``averaging``
+    (default) the device reports the mean acceleration from the second
+    difference of the sensor point's position over its last two periods (a
+    triangular filter of 2T support, the reading delayed by T, as a decimating
+    filter delays it): ``R_SW(t - T) ((p(t) - 2 p(t - T) + p(t - 2T)) / T^2 -
+    g_W)``, from the free body's state (input ``body_state``: the plant's state
+    output of the body's model instance, ``[qw qx qy qz x y z, w, v]``; a small
+    vector, where the plant's ``body_poses`` would copy every body's pose into
+    Python at each sample); positions of a discrete plant are smooth where its
+    velocities jitter. The first two samples, with no history, are
+    instantaneous readings. A welded body does not move: it needs no
+    averaging (``AddObjectAccelerometer`` then reads Drake's sensor only).
+    """
+
+    def __init__(self, profile: DeviceProfile | str, seed: int = 0, averaging: bool = False,
+                 X_BS: RigidTransform | None = None, gravity_W=None):
+        super().__init__()
+        self.profile = get_profile(profile)
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+            raise TypeError(f"seed must be an int, got {type(seed).__name__}")
+        self.seed = int(seed)
+        self.averaging = bool(averaging)
+        self._bias = device_bias(self.profile, self.seed)
+        self._input = self.DeclareVectorInputPort("specific_force", 3)
+        # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
+        self._state = self.DeclareDiscreteState(19)
+        if self.averaging:
+            if X_BS is None or gravity_W is None:
+                raise ValueError("averaging needs X_BS and gravity_W")
+            self._p_BS = np.asarray(X_BS.translation(), dtype=float)
+            self._R_BS = X_BS.rotation().matrix()
+            self._g_W = np.asarray(gravity_W, dtype=float)
+            self._body_state = self.DeclareVectorInputPort("body_state", 13)
+        self.DeclarePeriodicDiscreteUpdateEvent(self.profile.period, 0.0, self._sample)
+        self.DeclareVectorOutputPort("counts", 3, self._calc_counts,
+                                     {self.discrete_state_ticket(self._state)})
+        self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration,
+                                     {self.discrete_state_ticket(self._state)})
+
+    def _sample(self, context, discrete_state):
+        x = context.get_discrete_state(self._state).get_value().copy()
+        f = None
+        if self.averaging:
+            q = self._body_state.Eval(context)[:7]
+            R_WB = _quaternion_matrix(q[:4])
+            p = q[4:7] + R_WB @ self._p_BS
+            if x[18] >= 2:
+                T = self.profile.period
+                a_W = (p - 2 * x[3:6] + x[6:9]) / T ** 2 - self._g_W
+                f = x[9:18].reshape(3, 3).T @ a_W
+            x[6:9] = x[3:6]
+            x[3:6] = p
+            x[9:18] = (R_WB @ self._R_BS).ravel()
+            x[18] += 1
+        if f is None:
+            f = self._input.Eval(context)
+        index = int(round(context.get_time() * self.profile.rate_hz))
+        noise = sample_noise(self.profile, self.seed, index)
+        x[:3] = to_counts(f + self._bias + noise, self.profile)
+        discrete_state.get_mutable_vector(self._state).SetFromVector(x)
+
+    def _calc_counts(self, context, output: BasicVector):
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
+
+    def _calc_acceleration(self, context, output: BasicVector):
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
+                             * self.profile.lsb)
+
+
+def _quaternion_matrix(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion ``[w x y z]`` (normalised here)."""
+    w, x, y, z = np.asarray(q) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def sensor_pose(kind: str, size: float) -> RigidTransform:
+    """``X_OS``: the named sensor frame of an instrumented catalogue object, or the
+    object frame itself for any other kind."""
+    from handle_drake.instruments.catalogue import DEVICE_OBJECTS
+
+    device = DEVICE_OBJECTS.get(kind)
+    if device is None:
+        return RigidTransform()
+    return RigidTransform(RollPitchYaw(np.radians(device.sensor_rpy_deg)),
+                          np.asarray(device.sensor_xyz) * size)
+
+
+def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> None:
+    """Raises ValueError when the sensor origin is not in or on the object (within
+    ``tolerance`` m of its surface: a sensor may be glued on)."""
+    from handle_drake.objects.queries import _halfspaces, _inside
+
+    p = np.asarray(X_OS.translation(), dtype=float).reshape(1, 3)
+    if not np.all(np.isfinite(p)):
+        raise ValueError(f"X_OS: sensor position must be finite, got {p.ravel().tolist()}")
+    if not any(_inside(desc, p, tolerance)[0] for desc in _halfspaces(spec)):
+        raise ValueError(
+            f"X_OS: the sensor at {np.round(p.ravel(), 4).tolist()} m (object frame) is off "
+            f"the {spec.kind} (expected inside it or within {tolerance * 1e3:.0f} mm of its "
+            "surface)")
+
+
+def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
+                           profile: DeviceProfile | str, seed: int = 0,
+                           name: str = "object_accelerometer", averaging: bool = True):
+    """Adds Drake's ``Accelerometer`` on ``body`` at ``X_BS`` (with the plant's
+    gravity) and a :class:`DeviceAccelerometer` behind it (averaging over its
+    period by default); returns the device system (outputs ``counts``,
+    ``acceleration``). The ideal sensor is named ``<name>_ideal``."""
+    ideal = builder.AddNamedSystem(
+        f"{name}_ideal",
+        Accelerometer(body, X_BS, plant.gravity_field().gravity_vector()))
+    builder.Connect(plant.get_body_poses_output_port(), ideal.get_body_poses_input_port())
+    builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                    ideal.get_body_velocities_input_port())
+    builder.Connect(plant.get_body_spatial_accelerations_output_port(),
+                    ideal.get_body_accelerations_input_port())
+    gravity = plant.gravity_field().gravity_vector()
+    instance = body.model_instance()
+    # Averaging reads the body's free state: only for a floating body alone in its
+    # model instance (a welded one does not move and reads Drake's sensor exactly).
+    averaging = bool(averaging and body.is_floating_base_body()
+                     and plant.num_multibody_states(instance) == 13)
+    device = builder.AddNamedSystem(name, DeviceAccelerometer(
+        profile, seed, averaging=averaging, X_BS=X_BS, gravity_W=gravity))
+    builder.Connect(ideal.get_measurement_output_port(), device.GetInputPort("specific_force"))
+    if averaging:
+        builder.Connect(plant.get_state_output_port(instance), device.GetInputPort("body_state"))
+    return device
+
+
+def AddInstrumentEstimators(builder, acceleration, counts, profile: DeviceProfile,
+                            params: EstimatorParams | None = None, command=None,
+                            prefix: str = "object", export: bool = True) -> dict:
+    """Adds the roll/pitch, free-fall and slip estimators behind the output port
+    ``acceleration`` (3, m/s^2), sampling at the device rate, and exports the
+    instrument ports ``<prefix>.<signal>`` (module doc). ``command`` is the
+    output port whose stillness enables the slip detector (the hand and wrist
+    command); without it the slip output is a constant 0 (nothing tells whether
+    the hand moves). Returns the systems by name."""
+    from pydrake.systems.primitives import ConstantVectorSource
+
+    params = params or EstimatorParams()
+    period = profile.period
+    systems = {
+        "roll_pitch": builder.AddNamedSystem(f"{prefix}_roll_pitch",
+                                             RollPitchEstimator(period, params)),
+        "free_fall": builder.AddNamedSystem(f"{prefix}_free_fall",
+                                            FreeFallDetector(period, params)),
+    }
+    for system in systems.values():
+        builder.Connect(acceleration, system.GetInputPort("acceleration"))
+    if command is not None:
+        slip = builder.AddNamedSystem(f"{prefix}_slip",
+                                      SlipDetector(period, command.size(), params))
+        builder.Connect(acceleration, slip.GetInputPort("acceleration"))
+        builder.Connect(command, slip.GetInputPort("command"))
+        slip_port = slip.GetOutputPort("slip")
+        systems["slip"] = slip
+    else:
+        slip_port = builder.AddNamedSystem(f"{prefix}_slip_unknown",
+                                           ConstantVectorSource([0.0])).get_output_port()
+    if export:
+        builder.ExportOutput(acceleration, f"{prefix}.acceleration")
+        builder.ExportOutput(counts, f"{prefix}.acceleration_counts")
+        builder.ExportOutput(systems["roll_pitch"].GetOutputPort("roll_pitch"),
+                             f"{prefix}.roll_pitch")
+        builder.ExportOutput(systems["roll_pitch"].GetOutputPort("at_rest"), f"{prefix}.at_rest")
+        builder.ExportOutput(systems["free_fall"].GetOutputPort("free_fall"),
+                             f"{prefix}.free_fall")
+        builder.ExportOutput(slip_port, f"{prefix}.slip")
+    return systems

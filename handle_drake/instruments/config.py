@@ -1,0 +1,80 @@
+"""The scenario field that attaches an accelerometer to the object.
+
+No ``from __future__ import annotations`` here: Drake's YAML reader needs real
+types (see ``handle_drake.scenario``).
+
+.. code-block:: yaml
+
+    object:
+      kind: cylinder
+      accelerometer:
+        device: joywarrior24f14      # a profile of handle_drake.instruments.PROFILES
+        X_OS: {translation: [0, 0, 0.05], rotation: !Rpy {deg: [0, 0, 90]}}
+        # range_g: 4.0  bits: 12  rate_hz: 50   (override the profile)
+        # noise: false                (no noise and bias; still sampled and quantised)
+        # seed: 3                     (default: the scenario's random_seed)
+        # estimators: {free_fall_threshold: 0.25}
+        # evdev_device: /dev/input/event5   (hardware=True: the real device)
+
+``X_OS`` is the sensor frame S in the object frame O; left out, it is the
+catalogue's named sensor frame of an instrumented object (JoyWarrior, Wiimote,
+...) or the object's origin. ``device`` left out is the object's own device for
+an instrumented object, else the JoyWarrior.
+"""
+
+import dataclasses as dc
+import math
+
+from pydrake.common.schema import Transform
+
+__all__ = ["AccelerometerConfig"]
+
+
+@dc.dataclass
+class AccelerometerConfig:
+    device: str = ""  # profile name; "" = the object's own device (or joywarrior24f14)
+    X_OS: Transform | None = None  # sensor pose in the object frame; None = named frame
+    range_g: float | None = None  # overrides of the profile
+    bits: int | None = None
+    rate_hz: float | None = None
+    noise: bool = True  # False: no noise, no bias
+    seed: int | None = None  # None: the scenario's random_seed
+    # EstimatorParams fields by name (window, free_fall_threshold, slip_angle_tol, ...).
+    estimators: dict[str, float] = dc.field(default_factory=dict)
+    # hardware=True: the evdev device (path /dev/input/eventN, or a name to look for).
+    evdev_device: str = ""
+
+    def profile(self, kind: str | None = None):
+        """The device profile with this config's overrides (validated)."""
+        from handle_drake.instruments.catalogue import DEVICE_OBJECTS
+        from handle_drake.instruments.profiles import get_profile
+
+        name = self.device or (DEVICE_OBJECTS[kind].device if kind in DEVICE_OBJECTS
+                               else "joywarrior24f14")
+        profile = get_profile(name)
+        changes = {k: getattr(self, k) for k in ("range_g", "bits", "rate_hz")
+                   if getattr(self, k) is not None}
+        if not self.noise:
+            changes.update(noise_std_g=0.0, bias_std_g=0.0, bias_g=None)
+        return profile.replace(**changes) if changes else profile
+
+    def estimator_params(self):
+        from handle_drake.instruments.estimators import EstimatorParams
+
+        known = {f.name for f in dc.fields(EstimatorParams)}
+        for key in self.estimators:
+            if key not in known:
+                raise ValueError(f"estimators: unknown parameter {key!r}; "
+                                 f"expected some of {sorted(known)}")
+        return EstimatorParams(**self.estimators)
+
+    def validate(self, kind: str) -> None:
+        """Raises ValueError naming the field (without the ``object.accelerometer.`` prefix)."""
+        for field in ("range_g", "rate_hz"):
+            value = getattr(self, field)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{field} must be a finite number > 0, got {value!r}")
+        if self.bits is not None and not 2 <= self.bits <= 32:
+            raise ValueError(f"bits must be an integer in [2, 32], got {self.bits!r}")
+        self.profile(kind)
+        self.estimator_params()
