@@ -49,6 +49,7 @@ __all__ = [
     "HandConfig",
     "Keyframe",
     "LoadScenario",
+    "MidiControllerConfig",
     "ObjectConfig",
     "Scenario",
     "ScenarioError",
@@ -136,6 +137,24 @@ class TableConfig:
 
 
 @dc.dataclass
+class MidiControllerConfig:
+    """The iControls Pro MIDI controller model (``handle_drake.midi``) in the scene.
+
+    ``X_WC`` places the controller frame C (bottom centre of its base, x along
+    the channel strips, y away from the user); with ``on_table`` its z is the
+    table top. ``fixed`` welds the base to the world, else it is a free body.
+    ``mapping`` is a mapping file (empty: the shipped iControls Pro mapping);
+    ``scan_period`` (s) how often the device reads its controls and sends MIDI.
+    """
+
+    X_WC: Transform = dc.field(default_factory=Transform)
+    on_table: bool = True
+    fixed: bool = True
+    mapping: str = ""
+    scan_period: float = 0.002
+
+
+@dc.dataclass
 class SimHandDriver:
     """The simulated hand: Drake PD actuators tracking the position command.
 
@@ -190,6 +209,8 @@ class Scenario:
     script: list[Keyframe] = dc.field(default_factory=list)
     # Meshcat publish period (s) when a Meshcat is given.
     visualization_period: float = 1.0 / 32
+    # An optional MIDI controller on the table (an instrumented object).
+    midi_controller: MidiControllerConfig | None = None
 
 
 def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
@@ -306,6 +327,10 @@ def validate_scenario(scenario: Scenario) -> None:
     _check_positive("simulation_duration", scenario.simulation_duration)
     _check_positive("visualization_period", scenario.visualization_period)
     _validate_script(scenario, spec)
+    if scenario.midi_controller is not None:
+        from handle_drake.midi.station import validate_midi_controller
+
+        validate_midi_controller(scenario.midi_controller)
     if isinstance(scenario.driver, CanHandDriver):
         try:
             scenario.driver.validate()

@@ -24,6 +24,8 @@ port                              dir    size                      units / frame
 ``query_object``                  out    ``QueryObject``
 ``body_poses``                    out    ``vector<RigidTransform>``  ``X_WB`` per body
 ``plant_state``                   out    plant nq + nv
+``midi_controller.control_positions``  out  controls                m / rad (with a MIDI controller)
+``midi_controller.midi``          out    ``MidiBatch``             MIDI the controller sent
 ================================  =====  ========================  ==========================
 
 The diagram's subsystems are named ``plant``, ``scene_graph``, ``hand_driver``,
@@ -173,6 +175,11 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
 
+    if scenario.midi_controller is not None:
+        from handle_drake.midi.station import AddMidiControllerSystems
+
+        AddMidiControllerSystems(builder, plant, scenario)
+
     if meshcat is not None:
         _add_visualization(builder, plant, scene_graph, meshcat, scenario)
 
@@ -210,6 +217,10 @@ def AddPlantModels(plant, scenario: Scenario):
         else:
             plant.SetDefaultFloatingBaseBodyPose(object_body(plant),
                                                  object_initial_pose(scenario))
+    if scenario.midi_controller is not None:
+        from handle_drake.midi.station import AddMidiControllerModel
+
+        AddMidiControllerModel(plant, scenario)
     return hand
 
 
