@@ -39,7 +39,7 @@ __all__ = [
 ]
 
 
-class MidiPortError(OSError):
+class MidiPortError(ValueError):
     """A MIDI port could not be opened (no such device, no MIDI system)."""
 
 
