@@ -49,7 +49,6 @@ __all__ = [
     "fader_position",
     "fader_value",
     "control_message",
-    "tick_index",
 ]
 
 MAX_RELATIVE_TICKS = 63
@@ -117,11 +116,6 @@ def fader_position(value: int, travel: float) -> float:
     return float(travel) * min(127, max(0, int(value))) / 127.0
 
 
-def tick_index(angle: float, ticks_per_turn: int) -> int:
-    """``floor(angle * N / 2 pi)``: the detent a rotary control at ``angle`` (rad) sits in."""
-    return int(math.floor(angle * ticks_per_turn / (2.0 * math.pi) + 1e-9))
-
-
 def control_message(control: ControlMap, value: int, encoding: str = "signed_bit"):
     """The ``mido.Message`` a control sends: ``value`` is the fader's 7-bit value,
     the signed tick count of a knob or jog, or 1/0 (pressed/released) of a button."""
@@ -177,22 +171,36 @@ class ControlEncoder:
                 f"{release_fraction}, {press_fraction}"
             )
         self._press, self._release = press_fraction, release_fraction
+        kinds = [c.kind for c in self._controls]
+        self._kinds = tuple(np.array([i for i, k in enumerate(kinds) if k in group], dtype=int)
+                            for group in (("fader",), ("knob", "jog"), ("button",)))
+        if np.any(self._travels[np.r_[self._kinds[0], self._kinds[2]]] <= 0):
+            raise ValueError("travels: faders and buttons need a travel > 0 (m)")
+        self._ticks_per_radian = np.array(
+            [mapping.ticks_per_turn(c) / (2 * math.pi) if c.relative else 0.0
+             for c in self._controls])[self._kinds[1]]
         self.reset(np.zeros(n) if initial_positions is None else initial_positions)
 
     @property
     def names(self) -> list[str]:
         return [c.name for c in self._controls]
 
-    def _level(self, i: int, position: float, previous=None) -> int:
-        control = self._controls[i]
-        if control.kind == "fader":
-            return fader_value(position, self._travels[i])
-        if control.relative:
-            return tick_index(position, self._mapping.ticks_per_turn(control))
-        depth = position / self._travels[i]
-        if previous:  # pressed: released only above release_fraction
-            return int(depth > self._release)
-        return int(depth >= self._press)
+    def _levels(self, positions, previous=None) -> np.ndarray:
+        """Fader values, rotary tick indices and button states of ``positions``."""
+        levels = np.empty(len(self._controls), dtype=np.int64)
+        faders, rotary, buttons = self._kinds
+        if faders.size:
+            levels[faders] = np.clip(
+                np.round(127.0 * positions[faders] / self._travels[faders]), 0, 127)
+        if rotary.size:
+            levels[rotary] = np.floor(positions[rotary] * self._ticks_per_radian + 1e-9)
+        if buttons.size:
+            depth = positions[buttons] / self._travels[buttons]
+            pressed = (np.zeros(buttons.size, dtype=bool) if previous is None
+                       else np.asarray(previous)[buttons] > 0)
+            # Pressed: released only above release_fraction (hysteresis).
+            levels[buttons] = np.where(pressed, depth > self._release, depth >= self._press)
+        return levels
 
     def reset(self, positions) -> None:
         """Sets the state to ``positions`` without sending anything."""
@@ -201,28 +209,30 @@ class ControlEncoder:
             raise ValueError(
                 f"positions: expected {len(self._controls)} finite values, got {positions.shape}"
             )
-        self.levels = [self._level(i, p) for i, p in enumerate(positions)]
+        self.levels = [int(v) for v in self._levels(positions)]
 
     def messages(self, positions) -> list:
-        """The messages for a change from the last positions to ``positions``."""
+        """The messages for a change from the last positions to ``positions``
+        (non-finite positions keep their control's last level)."""
         positions = np.asarray(positions, dtype=float)
+        previous = np.asarray(self.levels, dtype=np.int64)
+        finite = np.isfinite(positions)
+        levels = np.where(finite, self._levels(np.where(finite, positions, 0.0), previous),
+                          previous)
+        changed = np.nonzero(levels != previous)[0]
         out = []
         encoding = self._mapping.relative_encoding
-        for i, control in enumerate(self._controls):
-            if not math.isfinite(positions[i]):
-                continue
-            level = self._level(i, positions[i], self.levels[i])
-            change = level - self.levels[i]
-            if change == 0:
-                continue
-            if control.kind == "fader" or control.kind == "button":
-                out.append(control_message(control, level, encoding))
-            else:
+        for i in changed:
+            control = self._controls[i]
+            if control.relative:
+                change = int(levels[i] - previous[i])
                 while change != 0:
                     chunk = max(-MAX_RELATIVE_TICKS, min(MAX_RELATIVE_TICKS, change))
                     out.append(control_message(control, chunk, encoding))
                     change -= chunk
-            self.levels[i] = level
+            else:
+                out.append(control_message(control, int(levels[i]), encoding))
+        self.levels = [int(v) for v in levels]
         return out
 
 
