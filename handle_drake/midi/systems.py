@@ -429,7 +429,8 @@ class MidiHandControl(LeafSystem, _MidiInput):
         out = np.full(self._spec.num_actuated, np.nan)
         for i, j in enumerate(self._fader_joint):
             if j >= 0:
-                out[j] = self._lower[j] + fader_values[i] / 127.0 * (self._upper[j] - self._lower[j])
+                span = self._upper[j] - self._lower[j]
+                out[j] = self._lower[j] + fader_values[i] / 127.0 * span
         return out
 
     # ---- the maps ----------------------------------------------------------------

@@ -9,7 +9,6 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import VectorLogSink
 
 from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.midi.codec import REJECT_REASONS, fader_value
