@@ -17,6 +17,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from handle_drake.cli import _meshcat
+
 JOG_SCENARIO = "midi_jog_pinch.yaml"
 FADER_SCENARIO = "midi_fader_push.yaml"
 
@@ -69,16 +71,6 @@ def _load(args, default_file: str):
 
     path = args.scenario or diagrams_dir() / default_file
     return LoadScenario(filename=path, data=args.override)
-
-
-def _meshcat(wanted: bool):
-    if not wanted:
-        return None
-    from pydrake.geometry import StartMeshcat
-
-    meshcat = StartMeshcat()
-    print(f"Meshcat: {meshcat.web_url()}", flush=True)
-    return meshcat
 
 
 def _cmd_jog(args) -> int:
