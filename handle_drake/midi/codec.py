@@ -46,7 +46,6 @@ __all__ = [
     "MidiDecoder",
     "decode_relative",
     "encode_relative",
-    "fader_position",
     "fader_value",
     "control_message",
 ]
@@ -109,11 +108,6 @@ def fader_value(position: float, travel: float) -> int:
     if not math.isfinite(position):
         raise ValueError(f"fader position must be finite, got {position}")
     return int(min(127, max(0, round(127.0 * position / travel))))
-
-
-def fader_position(value: int, travel: float) -> float:
-    """The cap position (m) of a 7-bit fader value (the inverse of :func:`fader_value`)."""
-    return float(travel) * min(127, max(0, int(value))) / 127.0
 
 
 def control_message(control: ControlMap, value: int, encoding: str = "signed_bit"):
@@ -300,23 +294,31 @@ class MidiDecoder:
 class ControlCounts:
     """What the controls did, accumulated from decoded events (the learner's view).
 
-    ``ticks[name]``: net relative ticks of each knob and the jog; ``faders[name]``:
-    last 7-bit value (None before any); ``presses[name]``: number of presses;
-    ``pressed[name]``: current state of each button.
+    ``values`` (one per control of the mapping, in file order): a fader's last
+    7-bit value (-1 before any), the net ticks of a knob or the jog, the
+    number of presses of a button; ``pressed``: each button's state (1/0).
+    Both are plain arrays so a system can keep them in its state.
     """
 
-    def __init__(self, mapping: MidiMapping):
-        self.ticks = {n: 0 for n in mapping.names() if mapping.control(n).relative}
-        self.faders: dict[str, int | None] = {n: None for n in mapping.names("fader")}
-        self.presses = {n: 0 for n in mapping.names("button")}
-        self.pressed = {n: False for n in mapping.names("button")}
+    def __init__(self, mapping: MidiMapping, values=None, pressed=None):
+        self.names = mapping.names()
+        self._index = {n: i for i, n in enumerate(self.names)}
+        self.values = (np.array([-1.0 if mapping.control(n).kind == "fader" else 0.0
+                                 for n in self.names])
+                       if values is None else np.array(values, dtype=float))
+        self.pressed = (np.zeros(len(self.names)) if pressed is None
+                        else np.array(pressed, dtype=float))
+
+    def __getitem__(self, name: str) -> int:
+        return int(self.values[self._index[name]])
 
     def add(self, event: ControlEvent) -> None:
+        i = self._index[event.name]
         if event.kind == "fader":
-            self.faders[event.name] = event.value
+            self.values[i] = event.value
         elif event.kind == "button":
-            if event.value and not self.pressed[event.name]:
-                self.presses[event.name] += 1
-            self.pressed[event.name] = bool(event.value)
+            if event.value and not self.pressed[i]:
+                self.values[i] += 1
+            self.pressed[i] = float(bool(event.value))
         else:
-            self.ticks[event.name] += event.value
+            self.values[i] += event.value

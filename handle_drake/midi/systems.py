@@ -46,6 +46,7 @@ from pydrake.systems.framework import LeafSystem
 
 from handle_drake.midi.codec import (
     REJECT_REASONS,
+    ControlCounts,
     ControlEncoder,
     MidiDecoder,
     control_message,
@@ -234,9 +235,7 @@ class MidiReceiver(LeafSystem, _MidiInput):
             raise ValueError(f"period must be a finite number > 0 (s), got {period}")
         self._declare_midi_input(mapping, port, max_messages_per_update)
         self._names = mapping.names()
-        initial = np.array([-1.0 if mapping.control(n).kind == "fader" else 0.0
-                            for n in self._names])
-        self._values = self.DeclareDiscreteState(initial)
+        self._values = self.DeclareDiscreteState(ControlCounts(mapping).values)
         self._pressed = self.DeclareDiscreteState(len(self._names))
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort(
@@ -257,18 +256,11 @@ class MidiReceiver(LeafSystem, _MidiInput):
         events = self._events(context, state)
         if not events:
             return
-        values = context.get_discrete_state(self._values).value().copy()
-        pressed = context.get_discrete_state(self._pressed).value().copy()
+        counts = ControlCounts(self._mapping, context.get_discrete_state(self._values).value(),
+                               context.get_discrete_state(self._pressed).value())
         for event in events:
-            i = self._names.index(event.name)
-            if event.kind == "fader":
-                values[i] = event.value
-            elif event.kind == "button":
-                if event.value and not pressed[i]:
-                    values[i] += 1
-                pressed[i] = event.value
-            else:
-                values[i] += event.value
+            counts.add(event)
+        values, pressed = counts.values, counts.pressed
         state.get_mutable_discrete_state(self._values).SetFromVector(values)
         state.get_mutable_discrete_state(self._pressed).SetFromVector(pressed)
 

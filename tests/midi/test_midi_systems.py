@@ -232,3 +232,23 @@ def test_bad_arguments_name_the_field():
         MidiHandControl("shadow", MAPPING, max_joint_velocity=-1.0)
     with pytest.raises(TypeError, match="port"):
         MidiHandControl("shadow", MAPPING, port=object())
+
+
+def test_station_exports_the_controller_ports_and_checks_its_config(tmp_path):
+    from handle_drake.scenario import ScenarioError
+    from handle_drake.station import GetPlant, MakeHandStation
+
+    scenario = LoadScenario(data="object: null\ntable: {top_height: 0.02}\n"
+                                 "midi_controller: {X_WC: {translation: [0.1, 0, 0.5]}}")
+    station = MakeHandStation(scenario)
+    outputs = {station.get_output_port(i).get_name(): station.get_output_port(i)
+               for i in range(station.num_output_ports())}
+    assert outputs["midi_controller.control_positions"].size() == len(MAPPING.controls)
+    assert "midi_controller.midi" in outputs
+    plant = GetPlant(station)
+    X_WC = plant.GetBodyByName("base").EvalPoseInWorld(plant.CreateDefaultContext())
+    assert X_WC.translation() == pytest.approx([0.1, 0.0, 0.02])  # on the table top
+    for override, field in (("midi_controller: {scan_period: 0}", "scan_period"),
+                            (f"midi_controller: {{mapping: {tmp_path / 'x.yaml'}}}", "mapping")):
+        with pytest.raises(ScenarioError, match=f"midi_controller.{field}"):
+            LoadScenario(data=override)
