@@ -19,9 +19,7 @@ take any of them:
 
 from __future__ import annotations
 
-import collections
 import threading
-import time
 
 import mido
 import mido.ports
@@ -47,15 +45,12 @@ class InProcessPort(mido.ports.BaseIOPort):
     """One end of an in-process MIDI cable (make both ends with :func:`in_process_pair`).
 
     ``send`` appends a copy to the peer's queue; ``receive``/``poll``/
-    ``iter_pending`` read this end's queue. ``sent_times`` holds the
-    ``time.perf_counter()`` of each send on the peer side when ``timestamps``
-    is set (the latency benchmark reads it).
+    ``iter_pending`` read this end's queue.
     """
 
     def __init__(self, name: str = "in-process", **kwargs):
         self._peer = None
         self._ready = threading.Condition()
-        self.timestamps: collections.deque | None = None
         super().__init__(name, **kwargs)
 
     def _open(self, **kwargs):
@@ -67,8 +62,6 @@ class InProcessPort(mido.ports.BaseIOPort):
             return  # like a cable with nothing at the other end
         with peer._ready:
             peer._messages.append(message)
-            if peer.timestamps is not None:
-                peer.timestamps.append(time.perf_counter())
             peer._ready.notify_all()
 
     def _receive(self, block=True):

@@ -232,6 +232,9 @@ def test_bad_arguments_name_the_field():
         MidiHandControl("shadow", MAPPING, max_joint_velocity=-1.0)
     with pytest.raises(TypeError, match="port"):
         MidiHandControl("shadow", MAPPING, port=object())
+    barrett = MidiHandControl("barrett", MAPPING)  # faders 1-4: spread and the three fingers
+    assert barrett.get_position_output_port().size() == 4
+    assert barrett._fader_joint == [0, 1, 2, 3, -1, -1, -1, -1, -1]
 
 
 def test_station_exports_the_controller_ports_and_checks_its_config(tmp_path):
