@@ -24,7 +24,9 @@ while the shared machine's speed drifts):
 An update polls at its period, so the expected latency is half a period on
 average (uniform in 0..period) plus the update's own work and the
 simulator's real-time pacing; p99 shows the scheduler's tail on a loaded
-machine. Writes ``benchmarks/results/midi.json``.
+machine. A second table gives the work of one update of the control system
+alone (no station, 1 ms period, idle and with one message per update)
+against the floor's. Writes ``benchmarks/results/midi.json``.
 
     python benchmarks/bench_midi.py                 # 3 rounds x 4 s per case
     HANDLE_DRAKE_REDUCED=1 python benchmarks/bench_midi.py   # 1 round x 1.5 s
@@ -165,6 +167,38 @@ def run_case(kind: str, period: float, seconds: float, transport: str = "in-proc
             "answered": len(latencies), "realtime_factor": seconds / wall}
 
 
+def update_cost(kind: str, updates: int, busy: bool) -> float:
+    """Wall time (us) per update of the control system alone (no station), 1 ms
+    period; ``busy``: one fader message arrives before every update."""
+    period = 0.001
+    builder = DiagramBuilder()
+    if kind == "floor":
+        source = queue.SimpleQueue()
+        builder.AddSystem(QueueCommand(source, period))
+
+        def send(value):
+            source.put(value)
+    else:
+        from handle_drake.midi.mapping import LoadMidiMapping
+        from handle_drake.midi.systems import MidiHandControl
+
+        device, host = in_process_pair()
+        builder.AddSystem(MidiHandControl("shadow", LoadMidiMapping(), port=host, period=period,
+                                          max_joint_velocity=1000.0))
+
+        def send(value):
+            device.send(mido.Message("control_change", control=FADER_CC, value=value))
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.01)
+    start = time.perf_counter()
+    t0 = simulator.get_context().get_time()
+    for k in range(1, updates + 1):
+        if busy:
+            send(VALUES[k % 2])
+        simulator.AdvanceTo(t0 + k * period)
+    return 1e6 * (time.perf_counter() - start) / updates
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=1 if reduced() else 3)
@@ -217,11 +251,25 @@ def main() -> None:
               f"{row['max_ms']:7.2f} {ratio50:9.2f} {ratio99:9.2f} {row['realtime_factor']:6.2f}")
     for name, why in skipped.items():
         print(f"{name:26s} not run: {why}")
+    updates = 500 if reduced() else 3000
+    cost = {f"{kind}-{'busy' if busy else 'idle'}": [] for kind in ("midi", "floor")
+            for busy in (False, True)}
+    for _ in range(args.rounds):
+        for kind in ("midi", "floor"):
+            for busy in (False, True):
+                cost[f"{kind}-{'busy' if busy else 'idle'}"].append(
+                    update_cost(kind, updates, busy))
+    cost = {k: float(np.median(v)) for k, v in cost.items()}
+    print("\nwork per update, control system alone (us; median of rounds):")
+    for load in ("idle", "busy"):
+        midi, floor = cost["midi-" + load], cost["floor-" + load]
+        print(f"  {load}: MidiHandControl {midi:7.1f}   floor {floor:7.1f}   ratio "
+              f"{midi / floor:5.2f}")
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
     (out / "midi.json").write_text(json.dumps(
-        {"cases": table, "skipped": skipped, "rounds": args.rounds, "seconds": args.seconds,
-         "loadavg": os.getloadavg(), "cpus": os.cpu_count()}, indent=2))
+        {"cases": table, "update_cost_us": cost, "skipped": skipped, "rounds": args.rounds,
+         "seconds": args.seconds, "loadavg": os.getloadavg(), "cpus": os.cpu_count()}, indent=2))
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; "
           f"wrote {out / 'midi.json'}")
 

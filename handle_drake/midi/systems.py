@@ -81,6 +81,15 @@ class MidiBatch:
     seq: int = 0
     messages: tuple = ()
 
+    # Drake clones abstract state values at every unrestricted update (a
+    # Python Value[object] clone is a deepcopy). A batch is never changed
+    # after it is made, so a clone can be the batch itself.
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
+
 
 def _batch_value() -> Value:
     return Value[object](MidiBatch())
@@ -190,16 +199,19 @@ class _MidiInput:
 
     def _events(self, context, state) -> list:
         """Decoded events of this update (port first, then the ``midi_in`` batch)."""
-        counts = context.get_discrete_state(self._counts).value().copy()
-        raw = []
-        if self._port is not None:
-            for message in self._port.iter_pending():
-                raw.append(message)
+        raw = list(self._port.iter_pending()) if self._port is not None else []
+        seq = None
         if self._midi_in.HasValue(context):
             batch = self._midi_in.Eval(context)
-            if isinstance(batch, MidiBatch) and batch.seq != counts[0]:
+            if (isinstance(batch, MidiBatch)
+                    and batch.seq != context.get_discrete_state(self._counts).value()[0]):
                 raw.extend(batch.messages)
-                counts[0] = batch.seq
+                seq = batch.seq
+        if not raw and seq is None:
+            return []
+        counts = context.get_discrete_state(self._counts).value().copy()
+        if seq is not None:
+            counts[0] = seq
         decoder = self._decoder
         decoder.accepted = 0
         decoder.rejected.clear()
@@ -448,8 +460,11 @@ class MidiHandControl(LeafSystem, _MidiInput):
     # ---- update --------------------------------------------------------------------
     def _update(self, context, state):
         events = self._events(context, state)
-        command = context.get_discrete_state(self._command).value().copy()
-        target = context.get_discrete_state(self._target).value().copy()
+        command = context.get_discrete_state(self._command).value()
+        target = context.get_discrete_state(self._target).value()
+        if not events and np.array_equal(command, target):
+            return  # nothing to do: the state stays as it is
+        command, target = command.copy(), target.copy()
         faders = context.get_discrete_state(self._fader_values).value().copy()
         mode = self.get_mode(context)
         feedback = []
