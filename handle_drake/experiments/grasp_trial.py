@@ -34,6 +34,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from handle_drake.hands import actuated_position_limits, get_hand_spec
+from handle_drake.learning import TrialResult
 from handle_drake.objects import KINDS, ObjectSpec, total_height
 from handle_drake.quality import NO_CONTACT, ContactParams, score_contacts
 from handle_drake.quality.object_contacts import ObjectContacts
@@ -41,8 +42,6 @@ from handle_drake.quality.surface import ObjectSurface
 from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
 from handle_drake.systems.guarded_grasp import GuardedGrasp
-
-from .trials import TrialResult
 
 __all__ = [
     "GraspTrial",
