@@ -19,29 +19,25 @@ from __future__ import annotations
 
 import dataclasses as dc
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource, VectorLogSink
 
+from handle_drake.harness import DEFAULT_LOG
 from handle_drake.midi.codec import fader_value
 from handle_drake.midi.device import ControllerGeometry, control_layout
 from handle_drake.midi.mapping import LoadMidiMapping
+from handle_drake.run import ScenarioRunner
 
 __all__ = [
     "MidiRunResult",
+    "MidiScenarioRunner",
     "fader_push_scenario",
     "jog_pinch_scenario",
     "run_midi_scenario",
 ]
-
-LOG_PERIOD = 0.01  # s
-
 
 def _geometry() -> ControllerGeometry:
     return ControllerGeometry()
@@ -204,7 +200,7 @@ def _fingertip_offset(command: dict) -> np.ndarray:
 
 @dc.dataclass
 class MidiRunResult:
-    """What a MIDI experiment recorded (sampled every ``LOG_PERIOD`` s)."""
+    """What a MIDI experiment recorded (sampled every ``harness.LOG_PERIOD`` s)."""
 
     times: np.ndarray  # (T,) s
     control_positions: np.ndarray  # (T, n) m / rad, the true control positions
@@ -243,51 +239,53 @@ class MidiRunResult:
                 if sent.any() else None}
 
 
-def run_midi_scenario(scenario, meshcat=None, html: str | Path | None = None) -> MidiRunResult:
-    """Simulates a scenario with a MIDI controller and a :class:`MidiReceiver` on its MIDI."""
-    from handle_drake.midi.systems import MidiReceiver
-    from handle_drake.run import advance_recording, script_trajectories
-    from handle_drake.station import MakeHandStation, hand_initial_command
+class MidiScenarioRunner(ScenarioRunner):
+    """A :class:`~handle_drake.run.ScenarioRunner` (the trial harness: built once,
+    reset per run) whose scenario has a MIDI controller, with a
+    :class:`MidiReceiver` on the station's ``midi_controller.midi`` and the
+    controls' true positions and the receiver's counts logged."""
 
-    if scenario.midi_controller is None:
-        raise ValueError("scenario.midi_controller: this experiment needs a MIDI controller")
-    mapping = LoadMidiMapping(scenario.midi_controller.mapping or None)
-    builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", MakeHandStation(scenario, meshcat))
-    hand_traj, wrist_traj = script_trajectories(scenario, hand_initial_command(scenario))
-    hand_source = (TrajectorySource(hand_traj) if hand_traj is not None
-                   else ConstantVectorSource(hand_initial_command(scenario)))
-    builder.Connect(builder.AddSystem(hand_source).get_output_port(),
-                    station.GetInputPort("hand.position"))
-    if wrist_traj is not None:
-        builder.Connect(builder.AddSystem(TrajectorySource(wrist_traj)).get_output_port(),
-                        station.GetInputPort("wrist.pose"))
-    receiver = builder.AddNamedSystem("midi_receiver", MidiReceiver(
-        mapping, period=scenario.midi_controller.scan_period))
-    builder.Connect(station.GetOutputPort("midi_controller.midi"), receiver.get_midi_input_port())
-    logs = {}
-    for name, port in (("positions", station.GetOutputPort("midi_controller.control_positions")),
-                       ("midi", receiver.GetOutputPort("control_values"))):
-        logs[name] = builder.AddSystem(VectorLogSink(port.size(), LOG_PERIOD))
-        builder.Connect(port, logs[name].get_input_port())
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    start = time.perf_counter()
-    advance_recording(simulator, scenario.simulation_duration, station, meshcat, html)
-    wall = time.perf_counter() - start
-    context = simulator.get_context()
-    positions = logs["positions"].FindLog(context)
-    midi = logs["midi"].FindLog(context)
-    encoder = station.GetSubsystemByName("midi_controller")
-    if not np.all(np.isfinite(positions.data())):
-        raise FloatingPointError("simulation diverged: non-finite control positions")
-    return MidiRunResult(
-        times=positions.sample_times().copy(),
-        control_positions=positions.data().T.copy(),
-        control_names=encoder.control_names,
-        midi_values=midi.data().T.copy(),
-        midi_names=receiver.control_names,
-        counts=receiver.midi_counts(receiver.GetMyContextFromRoot(context)),
-        ticks_per_turn=mapping.jog_ticks_per_turn,
-        wall_time=wall,
-    )
+    LOG = DEFAULT_LOG + ("midi_controller.control_positions", "control_values")
+
+    def __init__(self, scenario, meshcat=None):
+        if scenario.midi_controller is None:
+            raise ValueError("scenario.midi_controller: this experiment needs a MIDI controller")
+        self.mapping = LoadMidiMapping(scenario.midi_controller.mapping or None)
+        super().__init__(scenario, meshcat, log=self.LOG)
+
+    def _add_driver(self, builder, station):
+        from handle_drake.midi.systems import MidiReceiver
+
+        super()._add_driver(builder, station)
+        receiver = builder.AddNamedSystem("midi_receiver", MidiReceiver(
+            self.mapping, period=self.scenario.midi_controller.scan_period))
+        builder.Connect(station.GetOutputPort("midi_controller.midi"),
+                        receiver.get_midi_input_port())
+        return receiver
+
+    def run_midi(self, html: str | Path | None = None) -> MidiRunResult:
+        """Resets, simulates the scenario's duration and returns what MIDI reported."""
+        duration = self.scenario.simulation_duration
+        self.reset()
+        wall = self.harness.advance(duration, html)
+        logs = self.harness.logs()
+        positions = logs["midi_controller.control_positions"]
+        midi = logs["control_values"]
+        if not np.all(np.isfinite(positions.data())):
+            raise FloatingPointError("simulation diverged: non-finite control positions")
+        receiver = self.controller
+        return MidiRunResult(
+            times=positions.sample_times().copy(),
+            control_positions=positions.data().T.copy(),
+            control_names=self.station.GetSubsystemByName("midi_controller").control_names,
+            midi_values=midi.data().T.copy(),
+            midi_names=receiver.control_names,
+            counts=receiver.midi_counts(self.harness.controller_context()),
+            ticks_per_turn=self.mapping.jog_ticks_per_turn,
+            wall_time=wall,
+        )
+
+
+def run_midi_scenario(scenario, meshcat=None, html: str | Path | None = None) -> MidiRunResult:
+    """Builds a :class:`MidiScenarioRunner` for ``scenario`` and runs it once."""
+    return MidiScenarioRunner(scenario, meshcat).run_midi(html)
