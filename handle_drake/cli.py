@@ -23,6 +23,7 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.grasp.cli",
     "handle_drake.experiments.cli",
     "handle_drake.can_hand.cli",
+    "handle_drake.perception.perceive",
     "handle_drake.midi.cli",
 )
 
