@@ -25,6 +25,7 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.can_hand.cli",
     "handle_drake.instruments.cli",
     "handle_drake.perception.perceive",
+    "handle_drake.midi.cli",
 )
 
 

@@ -18,6 +18,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.hands import get_hand_spec
 from handle_drake.harness import (
+    DEFAULT_LOG,
     LOG_PERIOD,
     HoldScore,
     RunResult,
@@ -87,9 +88,11 @@ class ScenarioRunner:
         meshcat: optional Meshcat for live view and recording.
         hardware: drive the real (CAN) hand instead of the simulation, in
             real time; ``reset`` then only restarts the script and the logs.
+        log: port names to record (see :class:`TrialHarness`).
     """
 
-    def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False):
+    def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False,
+                 log=DEFAULT_LOG):
         if hardware and scenario.controller is not None:
             raise ValueError("a scenario controller (the guarded grasp) reads simulated contact "
                              "results: it cannot drive the hardware; use a script")
@@ -98,7 +101,7 @@ class ScenarioRunner:
         self.hardware = hardware
         self.initial_command = hand_initial_command(scenario)
         self.harness = TrialHarness(
-            scenario, self._add_driver, meshcat=meshcat, hardware=hardware,
+            scenario, self._add_driver, log=log, meshcat=meshcat, hardware=hardware,
             object_contacts=scenario.object is not None and not hardware)
         self.station = self.harness.station
         self.controller = self.harness.controller

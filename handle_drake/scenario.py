@@ -55,6 +55,7 @@ __all__ = [
     "HandConfig",
     "Keyframe",
     "LoadScenario",
+    "MidiControllerConfig",
     "ObjectConfig",
     "Scenario",
     "ScenarioError",
@@ -142,6 +143,24 @@ class TableConfig:
     top_height: float = 0.0  # m, world z of the table top
     size_x: float = 0.8
     size_y: float = 0.8
+
+
+@dc.dataclass
+class MidiControllerConfig:
+    """The iControls Pro MIDI controller model (``handle_drake.midi``) in the scene.
+
+    ``X_WC`` places the controller frame C (bottom centre of its base, x along
+    the channel strips, y away from the user); with ``on_table`` its z is the
+    table top. ``fixed`` welds the base to the world, else it is a free body.
+    ``mapping`` is a mapping file (empty: the shipped iControls Pro mapping);
+    ``scan_period`` (s) how often the device reads its controls and sends MIDI.
+    """
+
+    X_WC: Transform = dc.field(default_factory=Transform)
+    on_table: bool = True
+    fixed: bool = True
+    mapping: str = ""
+    scan_period: float = 0.002
 
 
 @dc.dataclass
@@ -266,6 +285,8 @@ class Scenario:
     visualization_period: float = 1.0 / 32
     # Depth cameras (simulation: Drake's RgbdSensor with RenderEngineVtk).
     cameras: list[CameraConfig] = dc.field(default_factory=list)
+    # An optional MIDI controller on the table (an instrumented object).
+    midi_controller: MidiControllerConfig | None = None
 
 
 def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
@@ -434,6 +455,10 @@ def validate_scenario(scenario: Scenario) -> None:
         _validate_controller(scenario, spec)
     if scenario.metric is not None:
         _validate_metric(scenario)
+    if scenario.midi_controller is not None:
+        from handle_drake.midi.station import validate_midi_controller
+
+        validate_midi_controller(scenario.midi_controller)
     if isinstance(scenario.driver, CanHandDriver):
         try:
             scenario.driver.validate()

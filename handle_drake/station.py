@@ -30,6 +30,8 @@ port                              dir    size                      units / frame
 ``query_object``                  out    ``QueryObject``
 ``body_poses``                    out    ``vector<RigidTransform>``  ``X_WB`` per body
 ``plant_state``                   out    plant nq + nv
+``midi_controller.control_positions``  out  controls                m / rad (with a MIDI controller)
+``midi_controller.midi``          out    ``MidiBatch``             MIDI the controller sent
 ================================  =====  ========================  ==========================
 
 (*) only with an ``object.accelerometer`` in the scenario (also on hardware,
@@ -195,6 +197,11 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
 
         AddCameras(builder, plant, scene_graph, scenario, hand)
 
+    if scenario.midi_controller is not None:
+        from handle_drake.midi.station import AddMidiControllerSystems
+
+        AddMidiControllerSystems(builder, plant, scenario)
+
     if meshcat is not None:
         _add_visualization(builder, plant, scene_graph, meshcat, scenario)
 
@@ -232,6 +239,10 @@ def AddPlantModels(plant, scenario: Scenario):
         else:
             plant.SetDefaultFloatingBaseBodyPose(object_body(plant),
                                                  object_initial_pose(scenario))
+    if scenario.midi_controller is not None:
+        from handle_drake.midi.station import AddMidiControllerModel
+
+        AddMidiControllerModel(plant, scenario)
     return hand
 
 

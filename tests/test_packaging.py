@@ -47,5 +47,7 @@ def test_wheel_contains_models_scenarios_and_data(tmp_path):
                      "handle_drake/_models/barrett_hand/bh8_280.sdf",
                      "handle_drake/_diagrams/shadow_sphere_grasp.yaml",
                      "handle_drake/can_hand/hand.dbc",
+                     "handle_drake/midi/icontrols_pro.yaml",
+                     "handle_drake/_diagrams/midi_jog_pinch.yaml",
                      "handle_drake/grasp/data/synthetic_grasps.csv"):
         assert required in names, required
