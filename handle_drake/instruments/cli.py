@@ -58,9 +58,9 @@ def _cmd_instruments(args) -> int:
         for path in write_scenarios(args.write_scenarios, seed=args.seed):
             print(f"wrote {path}")
         return 0
-    from handle_drake.cli import _meshcat
+    from handle_drake.cli_support import start_meshcat
 
-    meshcat = _meshcat(args.meshcat or args.html is not None)
+    meshcat = start_meshcat(args.meshcat or args.html is not None)
     rotations = QUICK_ROTATIONS if args.quick else ROTATIONS_DEG
     results = []
     for device in args.device:

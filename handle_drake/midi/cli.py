@@ -17,7 +17,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from handle_drake.cli import _meshcat
+from handle_drake.cli_support import start_meshcat
 
 JOG_SCENARIO = "midi_jog_pinch.yaml"
 FADER_SCENARIO = "midi_fader_push.yaml"
@@ -77,7 +77,7 @@ def _cmd_jog(args) -> int:
     from handle_drake.midi.experiments import run_midi_scenario
 
     scenario = _load(args, JOG_SCENARIO)
-    result = run_midi_scenario(scenario, _meshcat(args.meshcat or args.html is not None),
+    result = run_midi_scenario(scenario, start_meshcat(args.meshcat or args.html is not None),
                                html=args.html)
     s = result.jog_summary()
     print(f"jog wheel ({result.ticks_per_turn} ticks per turn), palmar pinch:")
@@ -97,7 +97,7 @@ def _cmd_fader(args) -> int:
     from handle_drake.midi.experiments import run_midi_scenario
 
     scenario = _load(args, FADER_SCENARIO)
-    result = run_midi_scenario(scenario, _meshcat(args.meshcat or args.html is not None),
+    result = run_midi_scenario(scenario, start_meshcat(args.meshcat or args.html is not None),
                                html=args.html)
     travel = ControllerGeometry().fader_travel
     moved = [n for n in result.control_names if n.startswith("fader")]
@@ -136,7 +136,7 @@ def _cmd_control(args) -> int:
         data = ("hand: {mount: !FixedMount {X_WB: {translation: [0, 0, 0.3]}}}\n"
                 "object: null\ntable: null\n" + (data or ""))
     scenario = LoadScenario(filename=args.scenario, data=data)
-    meshcat = _meshcat(args.meshcat)
+    meshcat = start_meshcat(args.meshcat)
     if args.meshcat:
         from handle_drake.midi.ports import MeshcatFaderPort
 
