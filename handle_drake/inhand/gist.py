@@ -319,6 +319,7 @@ class GistMotionSource(LeafSystem):
         c0 = gist.initial_parameters() if parameters is None else \
             _check_parameters(gist, parameters)
         self._c_index = self.DeclareNumericParameter(BasicVector(c0))
+        self._cache_key, self._cache = None, None
         self.DeclareVectorOutputPort("hand_position", len(_NAMES), self._calc)
 
     def set_parameters(self, context, c) -> None:
@@ -329,7 +330,14 @@ class GistMotionSource(LeafSystem):
         """The frame (1..N) sent at time ``t`` (s)."""
         return int(min(self._n, max(1, np.floor(t / self._duration * self._n + 1e-9) + 1)))
 
+    def _frames(self, c) -> np.ndarray:
+        # All N frames at once, kept for the parameter vector last seen (one per trial).
+        key = c.tobytes()
+        if self._cache_key != key:
+            self._cache = frames(self._gist, c, self._q0, self._n, self._ratio)
+            self._cache_key = key
+        return self._cache
+
     def _calc(self, context, output):
         c = context.get_numeric_parameter(self._c_index).get_value()
-        j = self.frame_index(context.get_time())
-        output.SetFromVector(frames_at(self._gist, c, self._q0, [j / self._n], self._ratio)[0])
+        output.SetFromVector(self._frames(np.asarray(c))[self.frame_index(context.get_time()) - 1])

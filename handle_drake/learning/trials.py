@@ -496,7 +496,8 @@ class TrialRunner:
         info = log.get_run(run_id)
         if info is None:
             raise ValueError(f"run {run_id!r} does not exist in {log.path}")
-        synchronous = optimizer.strategy == "bo"
+        # BO and swarms (an optimiser with ``synchronous = True``) run in batches.
+        synchronous = getattr(optimizer, "synchronous", optimizer.strategy == "bo")
         if synchronous:
             q = getattr(optimizer, "batch_size", 1)
             if batch_size is not None and batch_size != q:
