@@ -22,7 +22,8 @@ than ``max_travel`` from its start, and touched the hand at a sample within
 the last ``contact_window``: a rolled object hops off the palm for a few ms), the hand bodies and
 fingertips touching it. Checks after each of ``n_checks`` equal parts of the
 motion (the last one at the end of the hold) compare with the benchmark:
-held, rotation at least ``target * benchmark[k]``. The incremental evaluation
+held, rotation at least ``target * benchmark[k] - tolerance_deg`` (the
+tolerance absorbs the object's sub-degree rocking in the cradle). The incremental evaluation
 stops at the first failed check, the old one when the object drops.
 """
 
@@ -100,6 +101,7 @@ class InHandTask:
     n_frames: int = 50
     n_checks: int = 4
     benchmark: tuple = (0.0, 0.5, 1.0, 1.0)  # rotation / target required at each check
+    tolerance_deg: float = 2.0  # a check or sample passes within this much below the benchmark
     sample_period: float = 0.05
     time_step: float = 0.002
     settle_time: float = 1.0
@@ -119,6 +121,9 @@ class InHandTask:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        if not (np.isfinite(self.tolerance_deg) and self.tolerance_deg >= 0):
+            raise ValueError(f"tolerance_deg: expected a finite value >= 0, got "
+                             f"{self.tolerance_deg!r}")
         if not (np.isfinite(self.hold) and self.hold >= 0):
             raise ValueError(f"hold: expected a finite value >= 0, got {self.hold!r}")
         for name in ("n_frames", "n_checks"):
@@ -358,6 +363,7 @@ simulation_duration: {c.settle_time + c.total_time}
         held_time, held, passed, stopped = 0.0, True, 0, False
         last_touch = 0.0
         step = 1e-3 * c.time_step
+        tolerance = float(np.radians(c.tolerance_deg))
         contacts_port = plant.get_contact_results_output_port()
         for i, t in enumerate(samples):
             simulator.AdvanceTo(float(t))
@@ -379,9 +385,9 @@ simulation_duration: {c.settle_time + c.total_time}
                 held_time = float(t)
             rotations.append(float(np.degrees(angle)))
             contacts_log.append(touching)
-            matches[i] = held and angle >= c.benchmark_at(t) - 1e-9
+            matches[i] = held and angle >= c.benchmark_at(t) - tolerance
             if next_check < checks.size and t >= checks[next_check] - step:
-                ok = held and angle >= c.target * c.benchmark[next_check] - 1e-9
+                ok = held and angle >= c.target * c.benchmark[next_check] - tolerance
                 if ok:
                     passed += 1
                     next_check += 1
