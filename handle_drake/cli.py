@@ -23,6 +23,7 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.grasp.cli",
     "handle_drake.learning.cli",
     "handle_drake.can_hand.cli",
+    "handle_drake.inhand.cli",
 )
 
 
