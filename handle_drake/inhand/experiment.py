@@ -78,7 +78,7 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
             executor = InlineExecutor() if workers == 1 else _default_pool(trial, workers)
         try:
             runner = TrialRunner(trial, opt, log, run_id, executor=executor,
-                                 batch_size=None if opt.synchronous else workers,
+                                 batch_size=None if getattr(opt, "synchronous", False) else workers,
                                  progress=progress)
             runner.run(trials)
         finally:

@@ -91,6 +91,11 @@ class _Generational(_StopMixin, _AskTellBase):
             self._asked = 0
             self._scores = []
 
+    @property
+    def batch_room(self) -> int:
+        """Members of the current generation not asked yet (what a batch may hold now)."""
+        return self.batch_size if self._population is None else self.batch_size - self._asked
+
     def ask(self) -> np.ndarray:
         self._ensure_population()
         if self._asked >= self.batch_size:
@@ -208,10 +213,14 @@ class CMAES(_Generational):
         if not (isinstance(sigma0, int | float) and 0 < sigma0 <= 1):
             raise ValueError(f"sigma0: expected a number in (0, 1], got {sigma0!r}")
         self.sigma0 = float(sigma0)
-        self._es = cma.CMAEvolutionStrategy(
-            np.full(self.dim, 0.5), self.sigma0,
-            {"bounds": [0.0, 1.0], "popsize": self.batch_size, "seed": _derived_seed(seed, 1),
-             "verbose": -9, "verb_log": 0, "verb_disp": 0, "CMA_diagonal": False})
+        state = np.random.get_state()  # cma seeds numpy's global generator: restore it
+        try:
+            self._es = cma.CMAEvolutionStrategy(
+                np.full(self.dim, 0.5), self.sigma0,
+                {"bounds": [0.0, 1.0], "popsize": self.batch_size,
+                 "seed": _derived_seed(seed, 1), "verbose": -9, "verb_log": 0, "verb_disp": 0})
+        finally:
+            np.random.set_state(state)
         self._raw = None
 
     def _new_population(self) -> np.ndarray:
@@ -226,10 +235,13 @@ class CMAES(_Generational):
         return np.clip(np.array(self._raw), 0.0, 1.0)
 
     def _end_generation(self, scores):
-        finite = np.where(np.isfinite(scores), scores, np.nanmin(
-            np.where(np.isfinite(scores), scores, np.nan)) - 1.0 if np.isfinite(scores).any()
-            else 0.0)
-        self._es.tell(self._raw, list(-finite))  # cma minimises
+        ok = np.isfinite(scores)
+        worst = scores[ok].min() - 1.0 if ok.any() else 0.0  # a failure: below every success
+        state = np.random.get_state()
+        try:
+            self._es.tell(self._raw, list(-np.where(ok, scores, worst)))  # cma minimises
+        finally:
+            np.random.set_state(state)
 
 
 class StoppingRandomSearch(_StopMixin, RandomSearch):

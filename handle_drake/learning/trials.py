@@ -570,7 +570,10 @@ class TrialRunner:
                 # and an interrupted batch is finished on its own first.
                 room = self.batch_size - len(in_flight)
                 if self.synchronous:
-                    room = 0 if in_flight else (len(queue) if queue else self.batch_size)
+                    # A generational optimiser (a swarm) resumed in the middle of a
+                    # generation asks only for that generation's remaining members.
+                    room = 0 if in_flight else (len(queue) if queue else getattr(
+                        self.optimizer, "batch_room", self.batch_size))
                 while room > 0 and (queue or (not stop and next_index < n_trials)):
                     room -= 1
                     if queue:
