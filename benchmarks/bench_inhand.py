@@ -139,11 +139,18 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                                      progress=False, target_deg=float(target))
                     s = run.summary()
                     s["seed"], s["elapsed"] = seed, time.perf_counter() - start
+                    done = [r for r in run.records if r.status == "done"]
+                    if done:  # how the best motion ends when run to the end
+                        best = max(done, key=lambda r: r.metric)
+                        full = run.trial.evaluate(best.parameters, early_stop=False)
+                        s["best_full_rotation_deg"] = full.rotation_deg
+                        s["best_full_held"] = full.held
                     runs.append(s)
                     print(f"{task} {target} deg {optimizer} seed {seed}: {json.dumps(s)}",
                           flush=True)
                 reached = [s["trials_to_target"] for s in runs]
                 best = [s.get("best_held_rotation_deg", float("nan")) for s in runs]
+                best = [b if b == b else float("nan") for b in best] or [float("nan")]
                 rows.append({
                     "task": task, "target_deg": target, "optimizer": optimizer,
                     "seeds": seeds, "budget": trials,
@@ -151,18 +158,21 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                     "best_held_rotation_deg_range": [float(np.nanmin(best)),
                                                      float(np.nanmax(best))],
                     "share_held_median": float(np.median([s.get("share_held", 0) for s in runs])),
+                    "best_full": [(round(s.get("best_full_rotation_deg", float("nan")), 1),
+                                   s.get("best_full_held")) for s in runs],
                     "trials_to_target": reached,
                     "trials_to_target_median": float(np.median(
                         [r if r is not None else trials for r in reached])),
                     "reached": sum(r is not None for r in reached),
                     "runs": runs})
     print(f"\n{'task':18s} {'tgt':>4s} {'optimizer':9s} {'best held rot (deg)':>22s} "
-          f"{'held share':>10s} {'to target':>16s}")
+          f"{'held share':>10s} {'to target':>16s}  best trial run to the end (deg, held)")
     for r in rows:
         lo, hi = r["best_held_rotation_deg_range"]
         print(f"{r['task']:18s} {r['target_deg']:4g} {r['optimizer']:9s} "
               f"{r['best_held_rotation_deg_median']:7.1f} ({lo:5.1f}-{hi:5.1f}) "
-              f"{r['share_held_median']:10.2f} {str(r['trials_to_target']):>16s}")
+              f"{r['share_held_median']:10.2f} {str(r['trials_to_target']):>16s}  "
+              f"{r['best_full']}")
     return rows
 
 

@@ -332,8 +332,13 @@ simulation_duration: {c.settle_time + c.total_time}
             detail.pop(key)
         return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario_for(x))
 
-    def evaluate(self, x, meshcat=None, html=None) -> TrialOutcome:
-        """Runs one trial (deterministic: the simulation has no noise; ``seed`` is unused)."""
+    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> TrialOutcome:
+        """Runs one trial (deterministic: the simulation has no noise; ``seed`` is unused).
+
+        ``early_stop=False`` runs the whole motion whatever the checks say (to
+        see how a motion ends; the score is still that of the evaluation with
+        its stop, computed from the checks passed in a row).
+        """
         x = self._check(x)
         c = self.config
         built = self._build(meshcat)
@@ -362,6 +367,7 @@ simulation_duration: {c.settle_time + c.total_time}
         rotations, contacts_log, matches = [], [], np.zeros(samples.size, dtype=bool)
         held_time, held, passed, stopped = 0.0, True, 0, False
         last_touch = 0.0
+        failed = False  # a check failed: no later check counts (the checks pass in a row)
         step = 1e-3 * c.time_step
         tolerance = float(np.radians(c.tolerance_deg))
         contacts_port = plant.get_contact_results_output_port()
@@ -388,13 +394,14 @@ simulation_duration: {c.settle_time + c.total_time}
             matches[i] = held and angle >= c.benchmark_at(t) - tolerance
             if next_check < checks.size and t >= checks[next_check] - step:
                 ok = held and angle >= c.target * c.benchmark[next_check] - tolerance
-                if ok:
+                if ok and not failed:
                     passed += 1
-                    next_check += 1
-                elif c.evaluation == "incremental":
+                failed = failed or not ok
+                next_check += 1
+                if failed and c.evaluation == "incremental" and early_stop:
                     stopped = True
                     break
-            if not held and c.evaluation == "old":
+            if not held and c.evaluation == "old" and early_stop:
                 stopped = True
                 break
         sim_time = float(samples[len(rotations) - 1])
@@ -406,10 +413,11 @@ simulation_duration: {c.settle_time + c.total_time}
         held_end = held and not stopped
         reached = bool(held_end and passed == c.n_checks)
         if c.evaluation == "incremental":
+            if failed:  # the samples after the first failed check count as not matching
+                matches[samples > checks[passed] + step] = False
             score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches)
         else:
-            score = old_score(held_time if held_end or not stopped else held_time,
-                              c.total_time, angle if held_end else 0.0, c.target)
+            score = old_score(held_time, c.total_time, angle if held_end else 0.0, c.target)
             s_b = s_a = None
         return TrialOutcome(
             score=float(score), rotation_deg=rotations[-1], max_rotation_deg=max(rotations),

@@ -36,6 +36,10 @@ def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
     # eqs. 47-49: passing check 1 activated part 2; the samples up to ~0.3 s matched
     assert rest.s_b == trial.dims_per_part[:2].sum()
     assert 0.1 < rest.s_a < 0.3 and rest.score == rest.s_b + rest.s_a
+    # run to the end anyway: same score, the cylinder still lies in the hand, unrotated
+    full = trial.evaluate(still, early_stop=False)
+    assert full.completed and full.held and abs(full.rotation_deg) < 2.0
+    assert full.score == rest.score and full.checks_passed == 1
 
 
 def test_old_evaluation_scores_held_time_and_rotation():
