@@ -15,15 +15,17 @@ replays it).
 The grasp is settled once per process (``settle_time`` of simulation with the
 initial command) and every trial starts from a copy of that context: time 0,
 the settled state, the trial's parameters on the :class:`GistMotionSource`.
-The trial samples every ``sample_period``: object pose (rotation about its axis
-from the plant, unwrapped; positive = the direction the flexing fingers roll
-it), held (the object has not dropped more than ``drop`` below nor moved more
-than ``max_travel`` from its start, and touched the hand at a sample within
-the last ``contact_window``: a rolled object hops off the palm for a few ms), the hand bodies and
-fingertips touching it. Checks after each of ``n_checks`` equal parts of the
-motion (the last one at the end of the hold) compare with the benchmark:
-held, rotation at least ``target * benchmark[k] - tolerance_deg`` (the
-tolerance absorbs the object's sub-degree rocking in the cradle). The incremental evaluation
+The trial samples every ``sample_period``: object pose (rotation about its
+axis from the plant, unwrapped; positive = the direction the flexing fingers
+roll it; and the same from an accelerometer in the object, the report's
+instrumented object, valid at rest), held (the object has not dropped more
+than ``drop`` below nor moved more than ``max_travel`` from its start, and
+touched the hand at a sample within the last ``contact_window``: a rolled
+object hops off the palm for a few ms), the hand bodies and fingertips
+touching it. Checks after each of ``n_checks`` equal parts of the motion (the
+last one at the end of the hold) compare with the benchmark: held, rotation at
+least ``target * benchmark[k] - tolerance_deg`` (the tolerance absorbs the
+object's sub-degree rocking in the cradle). The incremental evaluation
 stops at the first failed check, the old one when the object drops.
 """
 
@@ -172,6 +174,8 @@ class TrialOutcome:
     s_a: float | None
     times: list  # sample times, s
     rotation_deg_series: list
+    # the same from an accelerometer in the object (gravity direction; valid at rest)
+    accelerometer_rotation_deg_series: list
     contacts: list  # per sample, hand bodies touching the object
     sim_time: float
     wall_time: float
@@ -368,6 +372,9 @@ simulation_duration: {c.settle_time + c.total_time}
         held_time, held, passed, stopped = 0.0, True, 0, False
         last_touch = 0.0
         failed = False  # a check failed: no later check counts (the checks pass in a row)
+        gravity = plant.gravity_field().gravity_vector()
+        acc_prev = None
+        acc_angle, accel_rotations = 0.0, []
         step = 1e-3 * c.time_step
         tolerance = float(np.radians(c.tolerance_deg))
         contacts_port = plant.get_contact_results_output_port()
@@ -389,6 +396,18 @@ simulation_duration: {c.settle_time + c.total_time}
                         and t - last_touch <= c.contact_window + 1e-9)
             if held:
                 held_time = float(t)
+            # The instrumented object (report 2.4): a 3-axis accelerometer at its origin
+            # reads the proper acceleration R_WO^T (a_WO - g); at rest that is "up" in the
+            # object frame, whose angle about the object axis gives the rotation (the task
+            # direction turns "up" the other way round).
+            a_W = plant.EvalBodySpatialAccelerationInWorld(plant_context, body).translational()
+            up_O = X.rotation().inverse() @ (a_W - gravity)
+            raw_acc = float(np.arctan2(up_O[1], up_O[0]))
+            if acc_prev is None:
+                acc_prev = raw_acc
+            acc_angle += (raw_acc - acc_prev + np.pi) % (2 * np.pi) - np.pi
+            acc_prev = raw_acc
+            accel_rotations.append(float(np.degrees(acc_angle)))
             rotations.append(float(np.degrees(angle)))
             contacts_log.append(touching)
             matches[i] = held and angle >= c.benchmark_at(t) - tolerance
@@ -423,7 +442,8 @@ simulation_duration: {c.settle_time + c.total_time}
             score=float(score), rotation_deg=rotations[-1], max_rotation_deg=max(rotations),
             held=held_end, held_time=held_time, checks_passed=passed, completed=not stopped,
             reached_target=reached, s_b=s_b, s_a=s_a, times=samples[: len(rotations)].tolist(),
-            rotation_deg_series=rotations, contacts=contacts_log, sim_time=sim_time,
+            rotation_deg_series=rotations, accelerometer_rotation_deg_series=accel_rotations,
+            contacts=contacts_log, sim_time=sim_time,
             wall_time=time.perf_counter() - start_wall)
 
 

@@ -26,6 +26,9 @@ def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
     assert outcome.reached_target and outcome.checks_passed == 4
     assert outcome.score >= trial.target_score == trial.dimension + 1
     assert "palm" in outcome.contacts[-1]  # lies in the palm against the curled fingers
+    # the instrumented object's accelerometer sees the same rotation once it is at rest
+    assert outcome.accelerometer_rotation_deg_series[-1] == pytest.approx(
+        outcome.rotation_deg, abs=2.0)
     # without any variation the cylinder stays in its cradle: no rotation, fails check 2
     still = _stroke(trial)
     for sl in trial.gist.slices():
