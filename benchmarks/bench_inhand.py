@@ -63,8 +63,6 @@ def _bare_plant(trial: InHandTrial, x):
     times = np.arange(c.n_frames + 1) * c.motion_duration / c.n_frames
     F = np.vstack([F[0], F])
     # desired state of the actuated joints in actuator order: positions then zero velocities
-    from handle_drake.systems.hand_driver import actuated_order  # noqa: F401
-
     q_all = np.array([actuated_to_joint_positions(spec, f) for f in F])
     names = [plant.get_joint_actuator(i).joint().name()
              for i in plant.GetJointActuatorIndices(hand)]
