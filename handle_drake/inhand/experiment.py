@@ -130,12 +130,15 @@ def plot_learning_curve(runs, path, title=""):
     ax = fig.subplots()
     target = None
     for run in runs:
-        it, best = learning_curve(run.records, run.n_particles if run.optimizer != "random"
-                                  else run.n_particles)
-        ax.step(it, best, where="post", label=f"{run.optimizer} seed {run.seed}")
+        # random search has no iterations: its trials are grouped in as many
+        it, best = learning_curve(run.records, run.n_particles)
+        ax.step(it, best, where="post", marker="o", ms=3, label=f"{run.optimizer} seed {run.seed}")
         target = run.trial.target_score
     if target is not None:
         ax.axhline(target, color="k", ls="--", lw=0.8, label="target reached")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(f"iteration ({runs[0].n_particles} trials each)" if runs else "iteration")
     ax.set_ylabel("best score so far (maximised)")
     ax.set_title(title or (runs[0].trial.name if runs else ""), fontsize=9)
