@@ -357,12 +357,16 @@ simulation_duration: {c.settle_time + c.total_time}
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
         simulator.Initialize()
         visualizer = None
-        if meshcat is not None and html is not None:
+        if meshcat is not None:
             from pydrake.geometry import MeshcatVisualizer
 
-            visualizer = next(s for s in built["station"].GetSystems()
-                              if isinstance(s, MeshcatVisualizer))
-            visualizer.StartRecording(False)
+            from handle_drake.viewing import frame_hand_and_object
+
+            frame_hand_and_object(meshcat, plant, plant_context)
+            if html is not None:
+                visualizer = next(s for s in built["station"].GetSystems()
+                                  if isinstance(s, MeshcatVisualizer))
+                visualizer.StartRecording(False)
 
         samples = c.sample_times()
         checks = c.check_times()
