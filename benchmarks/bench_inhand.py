@@ -31,7 +31,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from handle_drake.inhand.experiment import run_inhand  # noqa: E402
+from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
 from handle_drake.inhand.gist import frames  # noqa: E402
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
 from handle_drake.inhand.task import TASKS, InHandTrial  # noqa: E402
@@ -130,11 +130,12 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
     for target in targets:
         for task in tasks:
             for optimizer in optimizers:
-                runs = []
+                runs, logged = [], []
                 for seed in seeds:
                     start = time.perf_counter()
                     run = run_inhand(task, optimizer, trials, workers, seed, db, n_particles,
                                      progress=False, target_deg=float(target))
+                    logged.append(run)
                     s = run.summary()
                     s["seed"], s["elapsed"] = seed, time.perf_counter() - start
                     done = [r for r in run.records if r.status == "done"]
@@ -146,6 +147,9 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                     runs.append(s)
                     print(f"{task} {target} deg {optimizer} seed {seed}: {json.dumps(s)}",
                           flush=True)
+                figure = plot_learning_curve(
+                    logged, Path(db).parent / f"curve-{task}-{target:g}deg-{optimizer}.png",
+                    f"{task}, target {target:g} deg held: {optimizer}")
                 reached = [s["trials_to_target"] for s in runs]
                 best = [s.get("best_held_rotation_deg", float("nan")) for s in runs]
                 best = [b if b == b else float("nan") for b in best] or [float("nan")]
@@ -162,6 +166,7 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                     "trials_to_target_median": float(np.median(
                         [r if r is not None else trials for r in reached])),
                     "reached": sum(r is not None for r in reached),
+                    "figure": str(figure),
                     "runs": runs})
     print(f"\n{'task':18s} {'tgt':>4s} {'optimizer':9s} {'best held rot (deg)':>22s} "
           f"{'held share':>10s} {'to target':>16s}  best trial run to the end (deg, held)")
