@@ -41,6 +41,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from handle_drake.hands import get_hand_spec
 from handle_drake.inhand.evaluation import (
     incremental_score,
     old_score,
@@ -49,7 +50,7 @@ from handle_drake.inhand.evaluation import (
 )
 from handle_drake.inhand.gist import ActionGist, GistMotionSource, extract_gist
 from handle_drake.inhand.glove import load_glove
-from handle_drake.inhand.mapping import glove_to_shadow
+from handle_drake.inhand.mapping import ABDUCTION_RULES, glove_to_shadow
 from handle_drake.learning.trials import TrialResult
 from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
@@ -72,7 +73,6 @@ class TaskSpec:
     size: float  # m
     dimensions: tuple  # (("height", m),)
     X_WO_xyz: tuple  # m, initial object position before settling
-    mass: float | None = None
 
 
 TASKS: dict[str, TaskSpec] = {
@@ -233,9 +233,6 @@ class InHandTrial:
 
     def initial_command(self) -> np.ndarray:
         """The grasp's command: the cradle, abductions from the demonstration (rule 2)."""
-        from handle_drake.hands import get_hand_spec
-        from handle_drake.inhand.mapping import ABDUCTION_RULES
-
         names = get_hand_spec("shadow").actuated_joint_names
         recording = load_glove(DATA_DIR / TASKS[self.config.task].demonstration)
         mapped = glove_to_shadow(recording)[0]
@@ -252,8 +249,6 @@ class InHandTrial:
         x, y, z = spec.X_WO_xyz
         dims = ", ".join(f"{k}: {v}" for k, v in spec.dimensions)
         q0 = self.initial_command()
-        from handle_drake.hands import get_hand_spec
-
         names = get_hand_spec("shadow").actuated_joint_names
         initial = ", ".join(f"{n}: {float(v)!r}" for n, v in zip(names, q0, strict=True) if v != 0)
         return LoadScenario(data=f"""
