@@ -106,7 +106,11 @@ def run_summary(records, trial: InHandTrial, n_particles: int) -> dict:
     if not done:
         return out
     best = max(done, key=lambda r: r.metric)
-    reached = [r.index + 1 for r in done if r.contacts and r.contacts.get("reached_target")]
+    # strictly: held at the end and rotated by at least the target (the checks allow
+    # tolerance_deg less; computed from the logged outcome, not from the score)
+    target = trial.config.target_deg
+    reached = [r.index + 1 for r in done if r.contacts and r.contacts.get("held")
+               and r.contacts.get("completed", True) and r.contacts["rotation_deg"] >= target]
     held = [r for r in done if r.contacts and r.contacts.get("held")]
     best_held = max((r.contacts["rotation_deg"] for r in held), default=math.nan)
     out.update(

@@ -429,7 +429,9 @@ simulation_duration: {c.settle_time + c.total_time}
             Path(html).parent.mkdir(parents=True, exist_ok=True)
             Path(html).write_text(meshcat.StaticHtml())
         held_end = held and not stopped
-        reached = bool(held_end and passed == c.n_checks)
+        # The target itself is strict (the checks' tolerance lets a run stop within
+        # tolerance_deg of it; such a trial does not count as reaching it).
+        reached = bool(held_end and passed == c.n_checks and angle >= c.target)
         if c.evaluation == "incremental":
             if failed:  # the samples after the first failed check count as not matching
                 matches[samples > checks[passed] + step] = False
