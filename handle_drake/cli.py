@@ -21,7 +21,7 @@ from pathlib import Path
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.grasp.cli",
-    "handle_drake.learning.cli",
+    "handle_drake.experiments.cli",
     "handle_drake.can_hand.cli",
     "handle_drake.inhand.cli",
 )
@@ -79,6 +79,12 @@ def _cmd_simulate(args) -> int:
     if result.object_position is not None:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
+    if result.score is not None:
+        m, score = scenario.metric, result.score
+        print(f"grasp metric (BW, soft finger, mean of {m.hold_samples} instants over the last "
+              f"{m.hold_window:g} s): {score.value!r} "
+              f"({'force closure' if score.force_closure else 'not in force closure'}); "
+              f"touching: {', '.join(sorted(score.contacts)) or 'nothing'}")
     if args.quality:
         value, closure, contacts = runner.grasp_quality()
         print(f"grasp quality (BW metric, soft finger): {value:+.4f} "
@@ -114,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
 def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
-    from handle_drake.learning.trials import TrialLogError
+    from handle_drake.learning import TrialLogError
 
     _pin_blas()
     args = parser.parse_args(argv)

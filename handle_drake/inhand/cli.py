@@ -19,9 +19,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from handle_drake.experiments.cli import _int_at_least, _positive_float
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS
 from handle_drake.inhand.task import EVALUATIONS, TASKS
-from handle_drake.learning.cli import _int_at_least, _positive_float
 
 __all__ = ["register", "main"]
 
@@ -58,7 +58,7 @@ def register(subparsers) -> None:
 
 def _cmd_inhand(args) -> int:
     from handle_drake.inhand.experiment import plot_learning_curve, replay_best, run_inhand
-    from handle_drake.learning.trials import TrialLog, TrialLogError
+    from handle_drake.learning.log import TrialLog, TrialLogError
 
     for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
         if path is not None and path.suffix.lower() != suffix:

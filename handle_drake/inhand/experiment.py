@@ -20,7 +20,9 @@ import numpy as np
 
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS, make_inhand_optimizer
 from handle_drake.inhand.task import InHandTask, InHandTrial
-from handle_drake.learning.trials import InlineExecutor, TrialLog, TrialRunner, _default_pool
+from handle_drake.learning.executors import InlineExecutor, _default_pool
+from handle_drake.learning.log import TrialLog
+from handle_drake.learning.runner import TrialRunner
 
 __all__ = ["run_inhand", "InHandRun", "run_summary", "learning_curve", "plot_learning_curve",
            "replay_best"]

@@ -36,12 +36,12 @@ import json
 import time
 from functools import cached_property
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
 
 from handle_drake.hands import get_hand_spec
+from handle_drake.harness import TrialHarness
 from handle_drake.inhand.evaluation import (
     incremental_score,
     old_score,
@@ -51,9 +51,9 @@ from handle_drake.inhand.evaluation import (
 from handle_drake.inhand.gist import ActionGist, GistMotionSource, extract_gist
 from handle_drake.inhand.glove import load_glove
 from handle_drake.inhand.mapping import ABDUCTION_RULES, glove_to_shadow
-from handle_drake.learning.trials import TrialResult
+from handle_drake.learning.executors import TrialResult
 from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
-from handle_drake.station import GetPlant, MakeHandStation, object_body
+from handle_drake.station import object_body
 
 __all__ = ["TASKS", "InHandTask", "InHandTrial", "TrialOutcome", "EVALUATIONS", "task_gist"]
 
@@ -284,17 +284,16 @@ simulation_duration: {c.settle_time + c.total_time}
         if meshcat is None and key in _BUILD_CACHE:
             return _BUILD_CACHE[key]
         c = self.config
-        builder = DiagramBuilder()
-        station = builder.AddNamedSystem("station", MakeHandStation(self.scenario(), meshcat))
         q0 = self.initial_command()
-        source = builder.AddNamedSystem("motion", GistMotionSource(
-            self.gist, q0, c.motion_duration, c.n_frames))
-        builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
-        diagram = builder.Build()
-        simulator = Simulator(diagram)
-        context = simulator.get_mutable_context()
-        plant = GetPlant(station)
-        body = object_body(plant)
+
+        def add_motion(builder, station):
+            source = builder.AddNamedSystem("motion", GistMotionSource(
+                self.gist, q0, c.motion_duration, c.n_frames))
+            builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
+            return source
+
+        harness = TrialHarness(self.scenario(), add_motion, log=(), meshcat=meshcat)
+        plant, source = harness.plant, harness.controller
         hand = plant.GetModelInstanceByName("hand")
         hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
                        for i in plant.GetBodyIndices(hand)}
@@ -302,14 +301,15 @@ simulation_duration: {c.settle_time + c.total_time}
         still = self.gist.initial_parameters().copy()
         for sl in self.gist.slices():
             still[sl][1:] = 0.0
-        source.set_parameters(source.GetMyMutableContextFromRoot(context), still)
-        simulator.Initialize()
-        simulator.AdvanceTo(c.settle_time)
-        settled = context.Clone()
+        harness.reset()
+        source.set_parameters(harness.controller_context(), still)
+        harness.initialize()
+        harness.advance(c.settle_time)
+        # Trials start from this context, not from the scenario's default one.
+        settled = harness.context.Clone()
         settled.SetTime(0.0)
-        built = dict(diagram=diagram, simulator=simulator, context=context, settled=settled,
-                     station=station, plant=plant, body=body, hand_bodies=hand_bodies,
-                     source=source)
+        built = dict(harness=harness, settled=settled, body=object_body(plant),
+                     hand_bodies=hand_bodies)
         if meshcat is None:
             _BUILD_CACHE[key] = built
         return built
@@ -341,60 +341,50 @@ simulation_duration: {c.settle_time + c.total_time}
         x = self._check(x)
         c = self.config
         built = self._build(meshcat)
+        harness = built["harness"]
         start_wall = time.perf_counter()
-        context, simulator, plant = built["context"], built["simulator"], built["plant"]
+        context, plant = harness.context, harness.plant
         context.SetTimeStateAndParametersFrom(built["settled"])
-        source = built["source"]
-        source.set_parameters(source.GetMyMutableContextFromRoot(context), x)
-        plant_context = plant.GetMyContextFromRoot(context)
+        harness.controller.set_parameters(harness.controller_context(), x)
+        plant_context = harness.plant_context()
         body = built["body"]
         X0 = plant.EvalBodyPoseInWorld(plant_context, body)
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
-        simulator.Initialize()
-        visualizer = None
-        if meshcat is not None:
-            from pydrake.geometry import MeshcatVisualizer
-
-            from handle_drake.viewing import frame_hand_and_object
-
-            frame_hand_and_object(meshcat, plant, plant_context)
-            if html is not None:
-                visualizer = next(s for s in built["station"].GetSystems()
-                                  if isinstance(s, MeshcatVisualizer))
-                visualizer.StartRecording(False)
+        harness.initialize()
+        if html is not None:
+            early_stop = False  # a replay shows the whole motion (the score is the same)
 
         samples = c.sample_times()
         checks = c.check_times()
-        next_check = 0
-        angle, previous = 0.0, 0.0
-        rotations, contacts_log, matches = [], [], np.zeros(samples.size, dtype=bool)
-        held_time, held, passed, stopped = 0.0, True, 0, False
-        last_touch = 0.0
-        failed = False  # a check failed: no later check counts (the checks pass in a row)
-        gravity = plant.gravity_field().gravity_vector()
-        acc_prev = None
-        acc_angle, accel_rotations = 0.0, []
         step = 1e-3 * c.time_step
         tolerance = float(np.radians(c.tolerance_deg))
+        gravity = plant.gravity_field().gravity_vector()
         contacts_port = plant.get_contact_results_output_port()
-        for i, t in enumerate(samples):
-            simulator.AdvanceTo(float(t))
+        matches = np.zeros(samples.size, dtype=bool)
+        rotations, accel_rotations, contacts_log = [], [], []
+        # failed: a check failed, no later check counts (the checks pass in a row)
+        st = SimpleNamespace(i=0, next_check=0, angle=0.0, previous=0.0, held_time=0.0,
+                             held=True, passed=0, stopped=False, failed=False,
+                             last_touch=0.0, acc_prev=None, acc_angle=0.0)
+
+        def sample():
+            i, t = st.i, float(samples[st.i])
+            st.i += 1
             X = plant.EvalBodyPoseInWorld(plant_context, body)
             R = (R0_inv @ X.rotation()).matrix()
             raw = -np.arctan2(R[1, 0], R[0, 0])  # about the object axis, task direction > 0
-            angle += (raw - previous + np.pi) % (2 * np.pi) - np.pi
-            previous = raw
-            touching = _touching(contacts_port.Eval(plant_context), built["body"],
-                                 built["hand_bodies"])
+            st.angle += (raw - st.previous + np.pi) % (2 * np.pi) - np.pi
+            st.previous = raw
+            touching = _touching(contacts_port.Eval(plant_context), body, built["hand_bodies"])
             p = X.translation()
             if touching:
-                last_touch = float(t)
+                st.last_touch = t
             # A rolling object hops off the palm for a few ms: it counts as
             # touching the hand if it did so within the last contact_window.
-            held = bool(p[2] - p0[2] > -c.drop and np.linalg.norm(p - p0) < c.max_travel
-                        and t - last_touch <= c.contact_window + 1e-9)
-            if held:
-                held_time = float(t)
+            st.held = bool(p[2] - p0[2] > -c.drop and np.linalg.norm(p - p0) < c.max_travel
+                           and t - st.last_touch <= c.contact_window + 1e-9)
+            if st.held:
+                st.held_time = t
             # The instrumented object (report 2.4): a 3-axis accelerometer at its origin
             # reads the proper acceleration R_WO^T (a_WO - g); at rest that is "up" in the
             # object frame, whose angle about the object axis gives the rotation (the task
@@ -402,50 +392,54 @@ simulation_duration: {c.settle_time + c.total_time}
             a_W = plant.EvalBodySpatialAccelerationInWorld(plant_context, body).translational()
             up_O = X.rotation().inverse() @ (a_W - gravity)
             raw_acc = float(np.arctan2(up_O[1], up_O[0]))
-            if acc_prev is None:
-                acc_prev = raw_acc
-            acc_angle += (raw_acc - acc_prev + np.pi) % (2 * np.pi) - np.pi
-            acc_prev = raw_acc
-            accel_rotations.append(float(np.degrees(acc_angle)))
-            rotations.append(float(np.degrees(angle)))
+            if st.acc_prev is None:
+                st.acc_prev = raw_acc
+            st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
+            st.acc_prev = raw_acc
+            accel_rotations.append(float(np.degrees(st.acc_angle)))
+            rotations.append(float(np.degrees(st.angle)))
             contacts_log.append(touching)
-            matches[i] = held and angle >= c.benchmark_at(t) - tolerance
-            if next_check < checks.size and t >= checks[next_check] - step:
-                ok = held and angle >= c.target * c.benchmark[next_check] - tolerance
-                if ok and not failed:
-                    passed += 1
-                failed = failed or not ok
-                next_check += 1
-                if failed and c.evaluation == "incremental" and early_stop:
-                    stopped = True
-                    break
-            if not held and c.evaluation == "old" and early_stop:
-                stopped = True
-                break
+            matches[i] = st.held and st.angle >= c.benchmark_at(t) - tolerance
+            if st.next_check < checks.size and t >= checks[st.next_check] - step:
+                ok = st.held and st.angle >= c.target * c.benchmark[st.next_check] - tolerance
+                if ok and not st.failed:
+                    st.passed += 1
+                st.failed = st.failed or not ok
+                st.next_check += 1
+                if st.failed and c.evaluation == "incremental" and early_stop:
+                    raise _EarlyStop
+            if not st.held and c.evaluation == "old" and early_stop:
+                raise _EarlyStop
+
+        try:
+            harness.advance(samples, html=html if meshcat is not None else None,
+                            at_each=sample)
+        except _EarlyStop:
+            st.stopped = True
         sim_time = float(samples[len(rotations) - 1])
-        if visualizer is not None:
-            visualizer.StopRecording()
-            visualizer.PublishRecording()
-            Path(html).parent.mkdir(parents=True, exist_ok=True)
-            Path(html).write_text(meshcat.StaticHtml())
-        held_end = held and not stopped
+        angle, passed = st.angle, st.passed
+        held_end = st.held and not st.stopped
         # The target itself is strict (the checks' tolerance lets a run stop within
         # tolerance_deg of it; such a trial does not count as reaching it).
         reached = bool(held_end and passed == c.n_checks and angle >= c.target)
         if c.evaluation == "incremental":
-            if failed:  # the samples after the first failed check count as not matching
+            if st.failed:  # the samples after the first failed check count as not matching
                 matches[samples > checks[passed] + step] = False
             score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches)
         else:
-            score = old_score(held_time, c.total_time, angle if held_end else 0.0, c.target)
+            score = old_score(st.held_time, c.total_time, angle if held_end else 0.0, c.target)
             s_b = s_a = None
         return TrialOutcome(
             score=float(score), rotation_deg=rotations[-1], max_rotation_deg=max(rotations),
-            held=held_end, held_time=held_time, checks_passed=passed, completed=not stopped,
-            reached_target=reached, s_b=s_b, s_a=s_a, times=samples[: len(rotations)].tolist(),
-            rotation_deg_series=rotations, accelerometer_rotation_deg_series=accel_rotations,
-            contacts=contacts_log, sim_time=sim_time,
-            wall_time=time.perf_counter() - start_wall)
+            held=held_end, held_time=st.held_time, checks_passed=passed,
+            completed=not st.stopped, reached_target=reached, s_b=s_b, s_a=s_a,
+            times=samples[: len(rotations)].tolist(), rotation_deg_series=rotations,
+            accelerometer_rotation_deg_series=accel_rotations, contacts=contacts_log,
+            sim_time=sim_time, wall_time=time.perf_counter() - start_wall)
+
+
+class _EarlyStop(Exception):
+    """A check failed (incremental) or the object dropped (old): the trial ends here."""
 
 
 def _touching(results, body, hand_bodies) -> list[str]:

@@ -12,7 +12,7 @@ from handle_drake.inhand.optimizers import (
     IncrementalPSO,
     make_inhand_optimizer,
 )
-from handle_drake.learning.trials import InlineExecutor, TrialLog, TrialRunner
+from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
 
 TARGET = np.array([0.8, 0.2, 0.5, 0.5, 0.3, 0.9])
 DIMS = np.array([2, 2, 2])

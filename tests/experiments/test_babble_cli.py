@@ -7,10 +7,10 @@ import sqlite3
 import numpy as np
 import pytest
 
-from handle_drake.learning import grasp_trial
-from handle_drake.learning.cli import main
-from handle_drake.learning.grasp_trial import GraspTrial
-from handle_drake.learning.trials import TrialLog
+from handle_drake.experiments import grasp_trial
+from handle_drake.experiments.cli import main
+from handle_drake.experiments.grasp_trial import GraspTrial
+from handle_drake.learning import TrialLog
 
 ARGS = ["babble", "--object", "sphere", "--dims", "2", "--trials", "5", "--seed", "3",
         "--noise", "0.01", "--no-progress"]
