@@ -17,6 +17,14 @@ steady at the end). A plan that raises (no IK solution) fails both.
 Run: ``python benchmarks/bench_grasp_classes.py [--workers 2]``; prints a table
 and writes ``benchmarks/results/grasp_classes.json``. Under
 HANDLE_DRAKE_REDUCED=1 it runs two sizes of two classes on cuboids only.
+
+Perceived against true object (report sections 3.3 and 4: the object is not
+where the plan thinks): ``--offset MM [--directions N]`` plans on the object
+at the origin and executes on the true object moved by MM millimetres in N
+directions evenly spread from a seeded start angle; ``--size-error F`` plans
+on a size (1 + F) times the true one; ``--yaw-error DEG`` turns the true
+cuboid (round objects have no yaw). Results go to
+``grasp_classes_<error>.json``.
 """
 
 from __future__ import annotations
@@ -36,26 +44,39 @@ RESULTS = Path(__file__).resolve().parent / "results" / "grasp_classes.json"
 
 
 def trial(args):
-    grasp_class, kind, width = args
+    grasp_class, kind, width, error = args if len(args) == 4 else (*args, None)
+    from pydrake.common.schema import Transform
+
     from handle_drake.demo import held_through_lift
     from handle_drake.grasp.execution import ReactiveGraspRunner
     from handle_drake.grasp.planning import plan_grasp, resting_pose
     from handle_drake.run import ScenarioRunner
+    from handle_drake.scenario import ObjectConfig
 
     size = width / 0.6 if kind == "cuboid" else width  # cuboid depth = 0.6 * size
+    # The plan sees the object at the origin with the perceived size; the
+    # world holds the true one (moved, resized, turned) when an error is given.
+    dx, dy, size_factor, yaw = error if error is not None else (0.0, 0.0, 1.0, 0.0)
+    perceived_size = size * size_factor
+    world_object = None
+    if error is not None:
+        world_object = ObjectConfig(
+            kind=kind, size=size, on_table=False,
+            X_WO=Transform(resting_pose(kind, size, xy=(dx, dy), yaw=yaw)))
     start = time.perf_counter()
     try:
-        plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
+        plan = plan_grasp(grasp_class, (kind, perceived_size), resting_pose(kind, perceived_size))
     except ValueError as error:
         return dict(grasp_class=grasp_class, kind=kind, width=width, size=size,
                     planned=False, held=False, lift=0.0, held_reactive=False,
                     lift_reactive=0.0, error=str(error)[:120],
                     plan_time=time.perf_counter() - start)
     plan_time = time.perf_counter() - start
-    open_loop = ScenarioRunner(plan.to_scenario()).run()
-    runner = ReactiveGraspRunner(plan)
+    open_loop = ScenarioRunner(plan.to_scenario(world_object=world_object)).run()
+    runner = ReactiveGraspRunner(plan, world_object=world_object)
     reactive = runner.run()
     return dict(grasp_class=grasp_class, kind=kind, width=width, size=size, planned=True,
+                offset=[dx, dy], size_factor=size_factor, yaw_error=yaw,
                 held=held_through_lift(open_loop), lift=open_loop.object_lift(),
                 held_reactive=held_through_lift(reactive), lift_reactive=reactive.object_lift(),
                 reactive_final_mode=runner.final_mode().name,
@@ -71,9 +92,39 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--sizes", type=int, default=5)
+    parser.add_argument("--offset", type=float, default=0.0,
+                        help="lateral error of the perceived object (mm)")
+    parser.add_argument("--directions", type=int, default=2,
+                        help="directions of the lateral error (evenly spread)")
+    parser.add_argument("--size-error", type=float, default=0.0,
+                        help="perceived size = (1 + F) * true size")
+    parser.add_argument("--yaw-error", type=float, default=0.0,
+                        help="true cuboid turned by this much (deg)")
+    parser.add_argument("--classes", default=None,
+                        help="comma-separated grasp classes (default: all eight)")
+    parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
+    if args.directions < 1 or not 0 <= args.offset < 100 or not -0.5 < args.size_error < 0.5:
+        raise SystemExit("need --directions >= 1, 0 <= --offset < 100 mm, |--size-error| < 0.5")
     small = reduced()
     classes = list(GRASP_CLASSES.values())[:2] if small else list(GRASP_CLASSES.values())
+    if args.classes:
+        wanted = args.classes.split(",")
+        unknown = set(wanted) - {info.name for info in classes}
+        if unknown:
+            raise SystemExit(f"unknown grasp classes: {sorted(unknown)}")
+        classes = [info for info in classes if info.name in wanted]
+    errors = [None]
+    label = ""
+    if args.offset or args.size_error or args.yaw_error:
+        start = np.random.default_rng(args.seed).uniform(0, 2 * np.pi)
+        angles = start + 2 * np.pi * np.arange(args.directions) / args.directions
+        offsets = ([(args.offset / 1000 * np.cos(a), args.offset / 1000 * np.sin(a))
+                    for a in angles] if args.offset else [(0.0, 0.0)])
+        errors = [(float(dx), float(dy), 1.0 + args.size_error, np.radians(args.yaw_error))
+                  for dx, dy in offsets]
+        label = (f"_offset{args.offset:g}mm_size{args.size_error:+g}_yaw{args.yaw_error:g}"
+                 .replace("+", "p").replace("-", "m"))
     kinds = ("cuboid",) if small else ("cuboid", "sphere")
     n_sizes = 2 if small else args.sizes
     jobs = []
@@ -81,7 +132,8 @@ def main(argv=None) -> int:
         lo, hi = info.size_range_m
         # Inset from the range ends, where the IK is least likely to succeed.
         widths = np.linspace(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo), n_sizes)
-        jobs += [(info.name, kind, float(w)) for kind in kinds for w in widths]
+        jobs += [(info.name, kind, float(w), e) for kind in kinds for w in widths
+                 for e in errors]
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
         rows = list(pool.map(trial, jobs))
@@ -115,11 +167,15 @@ def main(argv=None) -> int:
     print(f"\noverall: open loop {total}/{n} held ({total / n:.0%}), reactive {total_r}/{n} "
           f"({total_r / n:.0%}); ratio reactive/open loop {total_r / max(total, 1):.2f}; "
           "* = held")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(dict(reduced=small, wall_time_s=wall, summary=summary,
-                                       held_open_loop=total, held_reactive=total_r,
-                                       trials=rows), indent=1))
-    print(f"wrote {RESULTS}")
+    out = RESULTS.with_name(f"grasp_classes{label}.json")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(dict(reduced=small, wall_time_s=wall, summary=summary,
+                                   held_open_loop=total, held_reactive=total_r,
+                                   error=dict(offset_mm=args.offset, directions=args.directions,
+                                              size_error=args.size_error,
+                                              yaw_error_deg=args.yaw_error),
+                                   trials=rows), indent=1))
+    print(f"wrote {out}")
     return 0
 
 

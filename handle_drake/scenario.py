@@ -43,6 +43,7 @@ from handle_drake.can_hand.config import CanHandDriverConfig
 
 __all__ = [
     "CONTACT_MODELS",
+    "CameraConfig",
     "CanHandDriver",
     "FixedMount",
     "FloatingWrist",
@@ -218,6 +219,26 @@ class CanHandDriver(CanHandDriverConfig):
 
 
 @dc.dataclass
+class CameraConfig:
+    """A depth camera rendered by Drake's ``RgbdSensor`` (see
+    ``handle_drake.perception``).
+
+    The camera frame C follows Drake's convention: +z along the optical axis,
+    +x to the right of the image, +y down. ``X_PC`` is its pose in the parent:
+    ``world`` (a fixed camera) or ``wrist`` (the hand's base body, moving with
+    it). With ``target`` (world-fixed cameras only), only ``X_PC``'s
+    translation is used and the camera looks at ``target`` (m, world) with the
+    image's up direction as close to world +z as possible.
+    """
+
+    name: str = "camera"
+    profile: str = "kinect_v1"  # see handle_drake.perception.PROFILES
+    parent: str = "world"  # world | wrist
+    X_PC: Transform = dc.field(default_factory=Transform)
+    target: list[float] = dc.field(default_factory=list)
+
+
+@dc.dataclass
 class Scenario:
     hand: HandConfig = dc.field(default_factory=HandConfig)
     object: ObjectConfig | None = dc.field(default_factory=ObjectConfig)
@@ -237,6 +258,8 @@ class Scenario:
     metric: GraspMetric | None = None
     # Meshcat publish period (s) when a Meshcat is given.
     visualization_period: float = 1.0 / 32
+    # Depth cameras (simulation: Drake's RgbdSensor with RenderEngineVtk).
+    cameras: list[CameraConfig] = dc.field(default_factory=list)
 
 
 def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
@@ -363,6 +386,7 @@ def validate_scenario(scenario: Scenario) -> None:
     _check_positive("simulation_duration", scenario.simulation_duration)
     _check_positive("visualization_period", scenario.visualization_period)
     _validate_script(scenario, spec)
+    _validate_cameras(scenario)
     if scenario.controller is not None:
         _validate_controller(scenario, spec)
     if scenario.metric is not None:
@@ -403,6 +427,52 @@ def _validate_script(scenario: Scenario, spec) -> None:
                     f"{where}.wrist: expected 6 finite values [x y z roll pitch yaw], "
                     f"got {keyframe.wrist}"
                 )
+
+
+CAMERA_PARENTS = ("world", "wrist")
+
+
+def _validate_cameras(scenario: Scenario) -> None:
+    from handle_drake.perception.camera import get_profile
+
+    names = set()
+    for i, camera in enumerate(scenario.cameras):
+        where = f"cameras[{i}]"
+        if not isinstance(camera.name, str) or not camera.name.strip() or any(
+                c in camera.name for c in "./ \t\n"):
+            raise ScenarioError(f"{where}.name must be a non-empty name without '.', '/' or "
+                                f"spaces, got {camera.name!r}")
+        if camera.name in names:
+            raise ScenarioError(f"{where}.name: duplicate camera name {camera.name!r}")
+        names.add(camera.name)
+        try:
+            get_profile(camera.profile)
+        except ValueError as error:
+            raise ScenarioError(f"{where}.profile: {error}") from None
+        if camera.parent not in CAMERA_PARENTS:
+            raise ScenarioError(f"{where}.parent: expected one of {list(CAMERA_PARENTS)}, "
+                                f"got {camera.parent!r}")
+        _check_transform(f"{where}.X_PC", camera.X_PC)
+        if camera.parent == "world" and scenario.table is not None:
+            p = camera.X_PC.GetDeterministicValue().translation()
+            table = scenario.table
+            # The table top is a 5 cm slab below top_height (objects.AddTable).
+            if (abs(p[0]) < table.size_x / 2 and abs(p[1]) < table.size_y / 2
+                    and table.top_height - 0.05 <= p[2] <= table.top_height):
+                raise ScenarioError(f"{where}.X_PC: the camera at {p.round(4).tolist()} is "
+                                    f"inside the table top (z {table.top_height - 0.05:g} to "
+                                    f"{table.top_height:g} m); place it above the table")
+        if camera.target:
+            if camera.parent != "world":
+                raise ScenarioError(f"{where}.target needs parent: world (a camera on the "
+                                    f"wrist moves; give its orientation in X_PC)")
+            if len(camera.target) != 3 or not all(math.isfinite(v) for v in camera.target):
+                raise ScenarioError(f"{where}.target: expected 3 finite values [x y z] (m), "
+                                    f"got {camera.target}")
+            eye = camera.X_PC.GetDeterministicValue().translation()
+            if np.linalg.norm(np.asarray(camera.target) - eye) < 1e-6:
+                raise ScenarioError(f"{where}.target: the camera cannot look at its own "
+                                    f"position {eye.tolist()}")
 
 
 def _finite_vector(name: str, values, size: int) -> None:

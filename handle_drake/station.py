@@ -173,6 +173,11 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
 
+    if scenario.cameras:
+        from handle_drake.perception.sensors import AddCameras
+
+        AddCameras(builder, plant, scene_graph, scenario, hand)
+
     if meshcat is not None:
         _add_visualization(builder, plant, scene_graph, meshcat, scenario)
 

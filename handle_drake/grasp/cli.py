@@ -58,6 +58,12 @@ def register(subparsers) -> None:
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
     p.add_argument("--save-scenario", type=Path, default=None,
                    help="write the planned scenario YAML here")
+    p.add_argument("--xy", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"),
+                   help="where the object rests on the table (m, default 0 0)")
+    p.add_argument("--yaw", type=float, default=0.0, help="object yaw on the table (deg)")
+    p.add_argument("--perceived", action="store_true",
+                   help="plan on what the tabletop Kinect sees (pose and size from "
+                        "handle_drake.perception), execute on the true object")
     p.set_defaults(func=_cmd_grasp)
 
     s = subparsers.add_parser("synergies", help="fit synergies to recorded grasps, error vs k")
@@ -69,23 +75,41 @@ def register(subparsers) -> None:
 
 
 def run_grasp(grasp_class: str, kind: str, size: float, meshcat=None, html=None,
-              save_scenario=None, reactive: bool | None = None):
+              save_scenario=None, reactive: bool | None = None, xy=(0.0, 0.0),
+              yaw: float = 0.0, perceived: bool = False):
     """Plan, simulate, lift; returns ``(plan, result, held)``.
 
     reactive: execute with :class:`ReactiveGrasp` (True) or the plan's
-    keyframes (False); None: :data:`DEFAULT_REACTIVE`.
+    keyframes (False); None: :data:`DEFAULT_REACTIVE`. The object rests at
+    ``xy`` (m) with ``yaw`` (rad). perceived: plan on the object's pose and
+    size as the tabletop camera estimates them
+    (:func:`handle_drake.perception.grasping.perceive_object`), execute on the
+    true object; the returned plan then carries ``plan.perception``.
     """
     from handle_drake.demo import held_through_lift
     from handle_drake.grasp.execution import run_plan
     from handle_drake.grasp.planning import plan_grasp, resting_pose
 
-    plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
+    world_object = perception = None
+    if perceived:
+        from pydrake.common.schema import Transform
+
+        from handle_drake.perception.grasping import perceive_object
+        from handle_drake.scenario import ObjectConfig
+
+        perception = perceive_object(kind, size, xy=xy, yaw=yaw)
+        plan = plan_grasp(grasp_class, (kind, perception.size), perception.X_WO)
+        world_object = ObjectConfig(kind=kind, size=size, X_WO=Transform(perception.true_X_WO),
+                                    on_table=False)
+    else:
+        plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size, xy=xy, yaw=yaw))
+    plan.perception = perception
     if save_scenario is not None:
         Path(save_scenario).parent.mkdir(parents=True, exist_ok=True)
         Path(save_scenario).write_text(plan.to_scenario_override())
     reactive = DEFAULT_REACTIVE if reactive is None else bool(reactive)
     result = run_plan(plan, reactive=reactive, meshcat=meshcat,
-                      html=html if meshcat is not None else None)
+                      html=html if meshcat is not None else None, world_object=world_object)
     return plan, result, held_through_lift(result)
 
 
@@ -93,8 +117,18 @@ def _cmd_grasp(args) -> int:
     from handle_drake.cli import _meshcat
 
     meshcat = _meshcat(args.meshcat or args.html is not None)
+    import math
+
     plan, result, held = run_grasp(args.grasp_class, args.object, args.size, meshcat,
-                                   args.html, args.save_scenario, args.reactive)
+                                   args.html, args.save_scenario, args.reactive,
+                                   xy=tuple(args.xy), yaw=math.radians(args.yaw),
+                                   perceived=args.perceived)
+    if plan.perception is not None:
+        e = plan.perception.errors()
+        yaw = "n/a (sphere)" if e["yaw_deg"] is None else f"{e['yaw_deg']:+.1f} deg"
+        print(f"perceived by the tabletop Kinect: size {plan.perception.size * 100:.2f} cm "
+              f"(true {args.size * 100:.2f}); error xy {e['xy_mm']:.1f} mm, "
+              f"z {e['z_mm']:+.1f} mm, yaw {yaw}")
     print(plan.summary())
     reactive = DEFAULT_REACTIVE if args.reactive is None else args.reactive
     print(f"execution: {'reactive (tactile)' if reactive else 'open loop (keyframes)'}")

@@ -56,12 +56,13 @@ class ReactiveGraspRunner:
         params: :class:`ReactiveGraspParams` (default :func:`plan_params`).
     """
 
-    def __init__(self, plan: GraspPlan, meshcat=None, params: ReactiveGraspParams | None = None):
+    def __init__(self, plan: GraspPlan, meshcat=None, params: ReactiveGraspParams | None = None,
+                 world_object=None):
         if not isinstance(plan, GraspPlan):
             raise TypeError(f"plan must be a GraspPlan, got {type(plan).__name__}")
         self.plan = plan
         self.meshcat = meshcat
-        self.scenario = plan.to_scenario()
+        self.scenario = plan.to_scenario(world_object=world_object)
         self.scenario.script = []  # the controller drives the station, not keyframes
         self._params = params if params is not None else plan_params(plan)
         self.harness = TrialHarness(self.scenario, self._add_controller, meshcat=meshcat,
@@ -141,13 +142,17 @@ class ReactiveGraspRunner:
 
 
 def run_plan(plan: GraspPlan, reactive: bool = True, meshcat=None, html=None,
-             params: ReactiveGraspParams | None = None) -> RunResult:
+             params: ReactiveGraspParams | None = None, world_object=None) -> RunResult:
     """Executes a plan reactively (:class:`ReactiveGraspRunner`) or open loop
-    (its keyframe script on :class:`~handle_drake.run.ScenarioRunner`)."""
+    (its keyframe script on :class:`~handle_drake.run.ScenarioRunner`).
+
+    world_object: the object that is really there (an ``ObjectConfig``), when
+    the plan was made on an estimate of it (perception, pose error); None:
+    the plan's own object."""
     if reactive:
-        return ReactiveGraspRunner(plan, meshcat, params).run(html=html)
+        return ReactiveGraspRunner(plan, meshcat, params, world_object).run(html=html)
     if params is not None:
         raise ValueError("params apply to the reactive execution only (reactive=True)")
     from handle_drake.run import ScenarioRunner
 
-    return ScenarioRunner(plan.to_scenario(), meshcat).run(html=html)
+    return ScenarioRunner(plan.to_scenario(world_object=world_object), meshcat).run(html=html)

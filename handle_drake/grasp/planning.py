@@ -210,6 +210,9 @@ class GraspPlan:
     table_height: float
     lift_height: float = 0.13
     coupling_ratio: float = 1.0
+    # What perception made of the object, when the plan was made on it
+    # (handle_drake.perception.grasping.PerceivedObject), else None.
+    perception: object = None
 
     @property
     def centre_offset(self) -> float:
@@ -251,8 +254,10 @@ class GraspPlan:
             Keyframe(time=t5, wrist=self.wrist(self.lifted())),
         ]
 
-    def to_scenario(self, settle: float = 0.5):
-        """A complete simulated ``Scenario`` (floating wrist, object, table, script)."""
+    def to_scenario(self, settle: float = 0.5, world_object=None):
+        """A complete simulated ``Scenario`` (floating wrist, object, table,
+        script). ``world_object`` (an ``ObjectConfig``) replaces the planned
+        object: the plan then runs on the object that is really there."""
         from handle_drake.scenario import (
             FloatingWrist,
             HandConfig,
@@ -270,8 +275,9 @@ class GraspPlan:
                 mount=FloatingWrist(X_WB=Transform(self.X_WB_pregrasp)),
                 initial_position=self.command_dict(self.preshape_command),
             ),
-            object=ObjectConfig(kind=spec.kind, size=spec.size, mu=spec.mu,
-                                X_WO=Transform(self.X_WO), on_table=False),
+            object=world_object if world_object is not None else ObjectConfig(
+                kind=spec.kind, size=spec.size, mu=spec.mu, X_WO=Transform(self.X_WO),
+                on_table=False),
             table=TableConfig(top_height=self.table_height),
             contact_model="point",
             time_step=0.001,

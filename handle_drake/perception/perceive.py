@@ -1,0 +1,209 @@
+"""``handle-drake perceive``: render a scenario's cameras (or read recorded
+frames), detect the objects on the table, and in simulation compare them
+with the truth.
+
+- ``perceive SCENARIO [--override YAML] [--json] [--save-frames DIR]``
+- ``perceive --frame FRAME.json [--json]`` (a recorded frame, see
+  :mod:`handle_drake.perception.frames`)
+
+JSON output::
+
+    {"objects": [{"camera": "kinect", "position": [x, y, z], "extent": [l, w, h],
+                  "yaw": rad, "kind": "box", "residual": m,
+                  "error": {"position_mm": [..], "xy_mm": .., "z_mm": ..,
+                            "yaw_deg": .. or null, "extent_mm": [..],
+                            "kind_expected": "box", "kind_ok": true}}],
+     "tables": [{"camera": "kinect", "normal": [..], "height": m}],
+     "messages": [...]}
+
+positions in the world frame in metres; ``position`` is the estimated centre
+of the object's body frame (mid-height on its axis); ``error`` only in
+simulation (the truth is the scenario's object).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from handle_drake.perception.detect import Detection, DetectorParams, TablePlane, detect_objects
+from handle_drake.perception.frames import DepthFrame, load_frame, save_frame
+
+__all__ = ["CameraView", "render_views", "perceive_frame", "detection_error",
+           "CATALOGUE_PRIMITIVE", "register"]
+
+#: The primitive a catalogue object should be recognised as.
+CATALOGUE_PRIMITIVE = {"sphere": "sphere", "cylinder": "cylinder", "mug": "cylinder",
+                       "wine_glass": "cylinder", "star_prism": "cylinder",
+                       "cuboid": "box", "rotated_cuboid": "box"}
+
+
+@dc.dataclass
+class CameraView:
+    camera: str
+    frame: DepthFrame
+    plane: TablePlane | None
+    detections: list[Detection]
+    message: str = ""
+
+
+def perceive_frame(camera: str, frame: DepthFrame,
+                   params: DetectorParams | None = None) -> CameraView:
+    params = DetectorParams() if params is None else params
+    valid = np.isfinite(frame.depth) & (frame.depth > 0)
+    if not valid.any():
+        return CameraView(camera, frame, None, [],
+                          f"camera {camera}: nothing in view (no valid depth pixel: everything "
+                          f"is out of the sensor's range)")
+    plane, detections = detect_objects(frame.points(), params)
+    message = ""
+    if plane is None:
+        message = f"camera {camera}: nothing in view (no table plane among the points)"
+    elif not detections:
+        message = f"camera {camera}: the table is in view, no object on it"
+    return CameraView(camera, frame, plane, detections, message)
+
+
+def render_views(scenario, params: DetectorParams | None = None, time: float = 0.0
+                 ) -> list[CameraView]:
+    """Builds the simulated station, renders every camera at ``time`` (s) with
+    the scenario's initial state, and detects."""
+    from handle_drake.perception.camera import get_profile
+    from handle_drake.perception.sensors import camera_info
+    from handle_drake.station import MakeHandStation
+
+    params = DetectorParams() if params is None else params
+    if not scenario.cameras:
+        raise ValueError("cameras: the scenario has no camera; add one under 'cameras:' "
+                         "(see diagrams/tabletop_perception.yaml)")
+    station = MakeHandStation(scenario)
+    context = station.CreateDefaultContext()
+    context.SetTime(time)
+    views = []
+    for camera in scenario.cameras:
+        image = station.GetOutputPort(f"{camera.name}.depth").Eval(context)
+        X_WC = station.GetOutputPort(f"{camera.name}.pose").Eval(context)
+        info = camera_info(get_profile(camera.profile))
+        K = info.intrinsic_matrix()
+        frame = DepthFrame(depth=np.array(image.data)[:, :, 0], K=K, X_WC=X_WC.GetAsMatrix4())
+        views.append(perceive_frame(camera.name, frame, params))
+    return views
+
+
+def _true_yaw(kind: str, R_WO: np.ndarray) -> float | None:
+    """World yaw (rad) of the footprint's major axis, or None if the
+    footprint has no axis (round objects)."""
+    from handle_drake.objects import ROTATED_CUBOID_YAW
+
+    if CATALOGUE_PRIMITIVE.get(kind) != "box":
+        return None
+    yaw = math.atan2(R_WO[1, 0], R_WO[0, 0])
+    return yaw + (ROTATED_CUBOID_YAW if kind == "rotated_cuboid" else 0.0)
+
+
+def detection_error(detection: Detection, scenario) -> dict:
+    """Errors of a detection against the scenario's object (its initial pose)."""
+    from handle_drake.station import object_initial_pose
+
+    X_WO = object_initial_pose(scenario)
+    delta = detection.position - X_WO.translation()
+    kind = scenario.object.kind
+    yaw_true = _true_yaw(kind, X_WO.rotation().matrix())
+    yaw_error = None
+    if yaw_true is not None and detection.kind == "box":
+        # A rectangle's axis is defined modulo pi.
+        yaw_error = math.degrees((detection.yaw - yaw_true + math.pi / 2) % math.pi
+                                 - math.pi / 2)
+    expected = CATALOGUE_PRIMITIVE.get(kind, "unknown")
+    return {"position_mm": [round(float(v) * 1000, 2) for v in delta],
+            "xy_mm": round(float(np.linalg.norm(delta[:2])) * 1000, 2),
+            "z_mm": round(float(delta[2]) * 1000, 2),
+            "yaw_deg": None if yaw_error is None else round(yaw_error, 2),
+            "kind_expected": expected, "kind_ok": detection.kind == expected}
+
+
+def _report(views, scenario=None) -> dict:
+    objects, tables, messages = [], [], []
+    for view in views:
+        if view.message:
+            messages.append(view.message)
+        if view.plane is not None:
+            tables.append({"camera": view.camera,
+                           "normal": [float(v) for v in view.plane.normal],
+                           "height": float(view.plane.offset / max(view.plane.normal[2], 1e-9))})
+        for detection in view.detections:
+            entry = {"camera": view.camera, **detection.as_dict()}
+            if scenario is not None and scenario.object is not None:
+                entry["error"] = detection_error(detection, scenario)
+            objects.append(entry)
+    return {"objects": objects, "tables": tables, "messages": messages}
+
+
+def _print_report(report: dict) -> None:
+    for message in report["messages"]:
+        print(message)
+    for table in report["tables"]:
+        tilt = math.degrees(math.acos(min(1.0, abs(table["normal"][2]))))
+        print(f"camera {table['camera']}: table at z = {table['height']:.4f} m, "
+              f"normal tilted {tilt:.2f} deg from vertical")
+    for i, obj in enumerate(report["objects"]):
+        p, e = obj["position"], obj["extent"]
+        print(f"object {i} ({obj['camera']}): {obj['kind']} at "
+              f"[{p[0]:+.4f}, {p[1]:+.4f}, {p[2]:+.4f}] m, extent "
+              f"{e[0] * 1000:.0f} x {e[1] * 1000:.0f} x {e[2] * 1000:.0f} mm, "
+              f"yaw {math.degrees(obj['yaw']):.1f} deg, "
+              f"fit residual {obj['residual'] * 1000:.2f} mm")
+        if "error" in obj:
+            err = obj["error"]
+            yaw = "n/a (round)" if err["yaw_deg"] is None else f"{err['yaw_deg']:+.2f} deg"
+            print(f"  error against the truth: xy {err['xy_mm']:.1f} mm, z {err['z_mm']:+.1f} mm, "
+                  f"yaw {yaw}, kind {'ok' if err['kind_ok'] else 'WRONG'} "
+                  f"(expected {err['kind_expected']})")
+    if not report["objects"]:
+        print("no object detected")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "perceive", help="render the scenario's depth cameras and detect objects on the table")
+    p.add_argument("scenario", nargs="?", type=Path, default=None,
+                   help="scenario YAML with cameras (see diagrams/tabletop_perception.yaml)")
+    p.add_argument("--override", default=None, help="YAML text applied on top of the file")
+    p.add_argument("--frame", type=Path, default=None,
+                   help="a recorded frame's JSON sidecar instead of a scenario")
+    p.add_argument("--json", action="store_true", help="print the detections as JSON")
+    p.add_argument("--save-frames", type=Path, default=None,
+                   help="write each camera's depth frame (16-bit PNG + JSON) to this directory")
+    p.set_defaults(func=_cmd_perceive)
+
+
+def _cmd_perceive(args) -> int:
+    from handle_drake.scenario import LoadScenario
+
+    if (args.scenario is None) == (args.frame is None):
+        raise ValueError("give either a SCENARIO file or --frame FRAME.json (not both)")
+    if args.save_frames is not None:
+        if args.save_frames.exists() and not args.save_frames.is_dir():
+            raise ValueError(f"--save-frames: {args.save_frames} exists and is not a directory")
+        args.save_frames.mkdir(parents=True, exist_ok=True)
+    scenario = None
+    if args.frame is not None:
+        if args.override is not None:
+            raise ValueError("--override applies to a scenario, not to --frame")
+        views = [perceive_frame(args.frame.stem, load_frame(args.frame))]
+    else:
+        scenario = LoadScenario(filename=args.scenario, data=args.override)
+        views = render_views(scenario)
+    if args.save_frames is not None:
+        for view in views:
+            save_frame(args.save_frames / view.camera, view.frame)
+    report = _report(views, scenario)
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        _print_report(report)
+    return 0
