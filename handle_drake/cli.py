@@ -24,6 +24,7 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.experiments.cli",
     "handle_drake.can_hand.cli",
     "handle_drake.instruments.cli",
+    "handle_drake.inhand.cli",
     "handle_drake.perception.perceive",
     "handle_drake.midi.cli",
 )

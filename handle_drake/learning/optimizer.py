@@ -167,6 +167,13 @@ class Optimizer:
     def _observations_changed(self):
         pass
 
+    @property
+    def batch_room(self) -> int | None:
+        """How many proposals the next batch of a synchronous optimiser holds:
+        ``batch_size``, or fewer when a generation was resumed part-way (a
+        swarm asks only for its remaining members)."""
+        return self.batch_size
+
     # ------------------------------------------------------------- queries
     @property
     def n_told(self) -> int:

@@ -138,6 +138,7 @@ class TrialRunner:
         from handle_drake.learning.cluster import as_executor, executor_workers
 
         executor = as_executor(executor)
+        # BO and swarms (an optimiser with ``synchronous = True``) run in batches.
         synchronous = bool(optimizer.synchronous)
         if synchronous:
             q = optimizer.batch_size
@@ -209,7 +210,10 @@ class TrialRunner:
                 # and an interrupted batch is finished on its own first.
                 room = self.batch_size - len(in_flight)
                 if self.synchronous:
-                    room = 0 if in_flight else (len(queue) if queue else self.batch_size)
+                    # A generational optimiser (a swarm) resumed in the middle of a
+                    # generation asks only for that generation's remaining members.
+                    room = 0 if in_flight else (len(queue) if queue else
+                                                 self.optimizer.batch_room)
                 while room > 0 and (queue or (not stop and next_index < n_trials)):
                     if queue and self._deaths.get(queue[0].index):
                         if in_flight:  # it saw its pool die: it runs alone

@@ -1,0 +1,215 @@
+"""In-hand babbling: trial speed against the bare plant, and the optimiser table.
+
+1. Speed (``--speed``): one in-hand trial (station, GistMotionSource, checks,
+   reset from the settled context) against the bare plant simulating the same
+   scenario over the same time from the same state (MultibodyPlant +
+   SceneGraph, the hand's PD inputs fed by a TrajectorySource of the same
+   frames: no Python system), and against building the trial's diagram anew;
+   every case once per round, ratios of medians.
+2. Table (``--table``): optimiser x task x seed runs of ``run_inhand`` (all
+   runs in one SQLite log, resumable: whatever already ran is read back), each
+   until a trial reaches the target or the budget is spent. Per optimiser and
+   task: median (range) of the best held rotation, share of held trials, trials
+   to the target (median over seeds; runs that did not reach it count as the
+   budget and are listed).
+
+Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]``;
+writes ``benchmarks/results/inhand.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
+from handle_drake.inhand.gist import frames  # noqa: E402
+from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
+from handle_drake.inhand.task import TASKS, InHandTrial  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results" / "inhand.json"
+
+
+def _bare_plant(trial: InHandTrial, x):
+    """Plant + SceneGraph of the trial's scenario, PD targets from a TrajectorySource."""
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from handle_drake.hands import actuated_to_joint_positions, get_hand_spec
+    from handle_drake.station import AddPlantModels
+
+    scenario = trial.scenario()
+    c = trial.config
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=c.time_step, discrete_contact_approximation="sap",
+        use_sampled_output_ports=False, contact_model="point"), builder)
+    hand = AddPlantModels(plant, scenario)
+    plant.Finalize()
+    spec = get_hand_spec("shadow")
+    F = frames(trial.gist, x, trial.initial_command(), c.n_frames)
+    times = np.arange(c.n_frames + 1) * c.motion_duration / c.n_frames
+    F = np.vstack([F[0], F])
+    # desired state of the actuated joints in actuator order: positions then zero velocities
+    q_all = np.array([actuated_to_joint_positions(spec, f) for f in F])
+    names = [plant.get_joint_actuator(i).joint().name()
+             for i in plant.GetJointActuatorIndices(hand)]
+    cols = [spec.joint_names.index(n) for n in names]
+    desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
+    source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(times,
+                                                                                  desired.T)))
+    builder.Connect(source.get_output_port(), plant.get_desired_state_input_port(hand))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    built = trial._build()
+    plant_ref = built["plant"]
+    q = plant_ref.GetPositions(plant_ref.GetMyContextFromRoot(built["settled"]))
+    v = plant_ref.GetVelocities(plant_ref.GetMyContextFromRoot(built["settled"]))
+    context = simulator.get_mutable_context()
+
+    def run():
+        context.SetTime(0.0)
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
+        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
+        simulator.Initialize()
+        start = time.perf_counter()
+        simulator.AdvanceTo(c.total_time)
+        return time.perf_counter() - start
+
+    return run
+
+
+def speed(rounds: int) -> dict:
+    trial = InHandTrial()
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written full stroke
+        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    trial._build()
+    bare = _bare_plant(trial, x)
+    cases = {"trial (reset, checks)": lambda: trial.evaluate(x).wall_time,
+             "bare plant, same frames": bare,
+             "trial built anew": lambda: _fresh(trial, x)}
+    times = {k: [] for k in cases}
+    for _ in range(rounds):
+        for name, case in cases.items():
+            times[name].append(case())
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    floor = med["bare plant, same frames"]
+    sim = trial.config.total_time
+    print(f"{'case':28s} {'median s':>9s} {'x real time':>11s} {'/ bare':>7s}")
+    for k, v in med.items():
+        print(f"{k:28s} {v:9.3f} {sim / v:11.2f} {v / floor:7.2f}")
+    return {"sim_time": sim, "median_wall": med, "ratio_to_bare": {k: v / floor
+                                                                   for k, v in med.items()}}
+
+
+def _fresh(trial, x):
+    from handle_drake.inhand import task as task_module
+
+    start = time.perf_counter()
+    task_module._BUILD_CACHE.clear()
+    InHandTrial(trial.config).evaluate(x)
+    return time.perf_counter() - start
+
+
+def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -> list[dict]:
+    rows = []
+    for target in targets:
+        for task in tasks:
+            for optimizer in optimizers:
+                runs, logged = [], []
+                for seed in seeds:
+                    start = time.perf_counter()
+                    run = run_inhand(task, optimizer, trials, workers, seed, db, n_particles,
+                                     progress=False, target_deg=float(target))
+                    logged.append(run)
+                    s = run.summary()
+                    s["seed"], s["elapsed"] = seed, time.perf_counter() - start
+                    done = [r for r in run.records if r.status == "done"]
+                    if done:  # how the best motion ends when run to the end
+                        best = max(done, key=lambda r: r.metric)
+                        full = run.trial.evaluate(best.parameters, early_stop=False)
+                        s["best_full_rotation_deg"] = full.rotation_deg
+                        s["best_full_held"] = full.held
+                    runs.append(s)
+                    print(f"{task} {target} deg {optimizer} seed {seed}: {json.dumps(s)}",
+                          flush=True)
+                figure = plot_learning_curve(
+                    logged, Path(db).parent / f"curve-{task}-{target:g}deg-{optimizer}.png",
+                    f"{task}, target {target:g} deg held: {optimizer}")
+                reached = [s["trials_to_target"] for s in runs]
+                best = [s.get("best_held_rotation_deg", float("nan")) for s in runs]
+                best = [b if b == b else float("nan") for b in best] or [float("nan")]
+                rows.append({
+                    "task": task, "target_deg": target, "optimizer": optimizer,
+                    "seeds": seeds, "budget": trials,
+                    "best_held_rotation_deg_median": float(np.nanmedian(best)),
+                    "best_held_rotation_deg_range": [float(np.nanmin(best)),
+                                                     float(np.nanmax(best))],
+                    "share_held_median": float(np.median([s.get("share_held", 0) for s in runs])),
+                    "best_full": [(round(s.get("best_full_rotation_deg", float("nan")), 1),
+                                   s.get("best_full_held")) for s in runs],
+                    "trials_to_target": reached,
+                    "trials_to_target_median": float(np.median(
+                        [r if r is not None else trials for r in reached])),
+                    "reached": sum(r is not None for r in reached),
+                    "figure": str(figure),
+                    "runs": runs})
+    print(f"\n{'task':18s} {'tgt':>4s} {'optimizer':9s} {'best held rot (deg)':>22s} "
+          f"{'held share':>10s} {'to target':>16s}  best trial run to the end (deg, held)")
+    for r in rows:
+        lo, hi = r["best_held_rotation_deg_range"]
+        print(f"{r['task']:18s} {r['target_deg']:4g} {r['optimizer']:9s} "
+              f"{r['best_held_rotation_deg_median']:7.1f} ({lo:5.1f}-{hi:5.1f}) "
+              f"{r['share_held_median']:10.2f} {str(r['trials_to_target']):>16s}  "
+              f"{r['best_full']}")
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--speed", action="store_true")
+    p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--table", action="store_true")
+    p.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
+    p.add_argument("--optimizers", nargs="+", default=list(INHAND_OPTIMIZERS),
+                   choices=list(INHAND_OPTIMIZERS))
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    p.add_argument("--trials", type=int, default=1000)
+    p.add_argument("--targets", nargs="+", type=float, default=[30.0])
+    p.add_argument("--particles", type=int, default=10)
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--db", type=Path, default=Path("out/inhand/bench.sqlite"))
+    p.add_argument("--out", type=Path, default=RESULTS)
+    args = p.parse_args(argv)
+    result = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
+                          "cpus": os.cpu_count()}}
+    if args.out.exists():
+        result = {**json.loads(args.out.read_text()), **result}
+    if args.speed:
+        result["speed"] = speed(args.rounds)
+    if args.table:
+        key = "table_" + "_".join(f"{t:g}" for t in args.targets)
+        result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials, args.targets,
+                            args.db, args.workers, args.particles)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,165 @@
+"""Algorithm 2 (incremental PSO) and the baselines as ask/tell optimisers."""
+
+import math
+
+import numpy as np
+import pytest
+
+from handle_drake.inhand.evaluation import incremental_score
+from handle_drake.inhand.optimizers import (
+    CMAES,
+    INHAND_OPTIMIZERS,
+    IncrementalPSO,
+    make_inhand_optimizer,
+)
+from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
+
+TARGET = np.array([0.8, 0.2, 0.5, 0.5, 0.3, 0.9])
+DIMS = np.array([2, 2, 2])
+
+
+def staged(x):
+    """A staged toy objective: check k passes when part k's two dims are within 0.15."""
+    close = np.abs(np.asarray(x) - TARGET) < 0.15
+    passed = 0
+    while passed < 3 and close[2 * passed: 2 * passed + 2].all():
+        passed += 1
+    matches = close & (np.arange(6) < 2 * min(passed + 1, 3))
+    return incremental_score(DIMS, passed, matches)[0]
+
+
+def _drive(opt, f, generations):
+    for _ in range(generations):
+        xs = [opt.ask() for _ in range(opt.batch_size)]
+        for x in xs:
+            opt.tell(x, f(x))
+        if opt.converged:
+            break
+
+
+def test_algorithm2_finds_a_known_optimum():
+    # every dimension active (incremental=False), the report's w = phi_p = phi_c = 0.4; with
+    # so little inertia a small swarm stagnates early (the report's own finding, 5.5.4), so
+    # 30 particles around the global best
+    opt = IncrementalPSO([[-2, 2]] * 4, seed=0, n_particles=30, incremental=False,
+                         cluster_size=1)
+    _drive(opt, lambda x: -float(np.sum((np.asarray(x) - 0.7) ** 2)), 150)
+    np.testing.assert_allclose(opt.best.x, 0.7, atol=0.02)
+    assert opt.best.y > -1e-3
+
+
+def test_incremental_activation_on_a_staged_objective():
+    opt = IncrementalPSO([[0, 1]] * 6, seed=1, n_particles=10, min_active=2,
+                         stop_score=3 * 2 + 1)
+    frozen = opt.x[:, 2:].copy()
+    xs = [opt.ask() for _ in range(10)]
+    for x in xs:
+        opt.tell(x, staged(x))
+    # after the first iteration each particle moved only its activated dimensions
+    for i in range(10):
+        m = opt.active_dimensions(opt.f_p[i])
+        assert m == min(6, max(2, math.floor(opt.f_p[i])))
+        np.testing.assert_array_equal(opt.x[i, m:], frozen[i, m - 2:])
+    history = []
+    while not opt.converged and opt.generation < 400:
+        before = opt.x.copy()
+        xs = [opt.ask() for _ in range(10)]
+        for x in xs:
+            opt.tell(x, staged(x))
+        for i in range(10):  # dimensions beyond the particle's activation never moved
+            m = opt.active_dimensions(opt.f_p[i])
+            np.testing.assert_array_equal(opt.x[i, m:], before[i, m:])
+        history.append(int(opt.active.max()))
+    assert opt.converged and opt.best.y >= 7.0
+    # the activation grew in stages: 2 -> 4 -> 6 dimensions
+    assert history[0] <= 4 and max(history) == 6
+
+
+def test_standard_pso_and_cmaes_and_random_on_a_sphere():
+    f = lambda x: -float(np.sum((np.asarray(x) - 0.3) ** 2))  # noqa: E731
+    for name, tol in (("pso", 0.05), ("cmaes", 0.05)):
+        opt = make_inhand_optimizer(name, [[-1, 1]] * 5, seed=2, n_particles=10)
+        _drive(opt, f, 80)
+        np.testing.assert_allclose(opt.best.x, 0.3, atol=tol)
+    rnd = make_inhand_optimizer("random", [[-1, 1]] * 5, seed=2)
+    for _ in range(50):
+        x = rnd.ask()
+        rnd.tell(x, f(x))
+    assert rnd.best.y < -0.01  # random search is far worse with the same budget
+
+
+def test_stop_score_stops():
+    for name in INHAND_OPTIMIZERS:
+        opt = make_inhand_optimizer(name, [[0, 1]] * 6, seed=0, n_particles=4, stop_score=7.0)
+        assert not opt.converged
+        x = opt.ask()
+        opt.tell(x, 7.5)
+        assert opt.converged
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(bounds=[[0, 1], [1, 0.5]]), r"bounds\[1\]: lower must be < upper"),
+    (dict(n_particles=0), "n_particles: expected an integer >= 1, got 0"),
+    (dict(w=-0.1), "w: expected a finite number >= 0"),
+    (dict(cluster_size=20), r"cluster_size: expected <= n_particles"),
+])
+def test_bad_input(kwargs, message):
+    args = dict(bounds=[[0, 1]] * 3, seed=0, n_particles=5) | kwargs
+    with pytest.raises(ValueError, match=message):
+        IncrementalPSO(**args)
+    with pytest.raises(ValueError, match="optimizer: expected one of"):
+        make_inhand_optimizer("bo", [[0, 1]], 0)
+
+
+def test_members_are_told_in_order_and_asks_are_bounded():
+    opt = IncrementalPSO([[0, 1]] * 3, seed=0, n_particles=2)
+    a, b = opt.ask(), opt.ask()
+    with pytest.raises(RuntimeError, match="tell their results first"):
+        opt.ask()
+    with pytest.raises(ValueError, match="not member 0"):
+        opt.tell(b, 1.0)
+    opt.tell(a, 1.0)
+    opt.tell_failure(b, "crashed")  # a failure is the worst score
+    assert opt.generation == 1 and opt.f_p[1] == -math.inf
+
+
+class Interrupting:
+    """The staged objective; raises KeyboardInterrupt at one trial of the first run."""
+
+    def __init__(self, stop_at=None):
+        self.calls, self.stop_at = 0, stop_at
+
+    def __call__(self, x):
+        self.calls += 1
+        if self.calls == self.stop_at:
+            raise KeyboardInterrupt
+        return staged(x)
+
+
+@pytest.mark.parametrize("name", ["ipso", "cmaes"])
+def test_resumed_run_equals_uninterrupted(tmp_path, name):
+    def run(db, objective, n):
+        with TrialLog(db) as log:
+            if log.get_run("r") is None:
+                log.create_run("r", name, [[0, 1]] * 6, 5, "staged")
+            opt = make_inhand_optimizer(name, [[0, 1]] * 6, 5, n_particles=4)
+            TrialRunner(objective, opt, log, "r", executor=InlineExecutor(),
+                        progress=False).run(n)
+            return [(r.parameters.tolist(), r.metric, r.status) for r in log.trials("r")]
+
+    whole = run(tmp_path / "a.sqlite", Interrupting(), 24)
+    with pytest.raises(KeyboardInterrupt):  # killed in the middle of the third batch
+        run(tmp_path / "b.sqlite", Interrupting(stop_at=10), 24)
+    resumed = run(tmp_path / "b.sqlite", Interrupting(), 24)
+    assert len(whole) == 24 and resumed == whole
+
+
+def test_cmaes_is_seeded_and_leaves_numpys_global_generator_alone():
+    np.random.seed(123)
+    expected = np.random.random()
+    np.random.seed(123)
+    a = CMAES([[0, 1]] * 4, seed=7, n_particles=6)
+    xa = [a.ask() for _ in range(6)]
+    assert np.random.random() == expected
+    b = CMAES([[0, 1]] * 4, seed=7, n_particles=6)
+    np.testing.assert_array_equal(xa, [b.ask() for _ in range(6)])

@@ -1,0 +1,87 @@
+"""The in-hand trial on the simulated hand: physics of the task, replay, runs, CLI."""
+
+import numpy as np
+import pytest
+
+from handle_drake.cli import main as cli_main
+from handle_drake.inhand.experiment import learning_curve, replay_best, run_inhand
+from handle_drake.inhand.task import InHandTask, InHandTrial
+
+
+def _stroke(trial):
+    """The hand-written motion: the three fingers' flex strokes at J3 +1.0, J2 +0.9 rad,
+    no release, thumb still."""
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):
+        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    return x
+
+
+def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
+    trial = InHandTrial()
+    outcome = trial.evaluate(_stroke(trial))
+    assert outcome.completed and outcome.held
+    assert outcome.rotation_deg >= 30.0
+    assert outcome.reached_target and outcome.checks_passed == 4
+    assert outcome.score >= trial.target_score == trial.dimension + 1
+    assert "palm" in outcome.contacts[-1]  # lies in the palm against the curled fingers
+    # the instrumented object's accelerometer sees the same rotation once it is at rest
+    assert outcome.accelerometer_rotation_deg_series[-1] == pytest.approx(
+        outcome.rotation_deg, abs=2.0)
+    # without any variation the cylinder stays in its cradle: no rotation, fails check 2
+    still = _stroke(trial)
+    for sl in trial.gist.slices():
+        still[sl][1:] = 0.0
+    rest = trial.evaluate(still)
+    assert abs(rest.rotation_deg) < 2.0 and rest.held_time > 0.4
+    assert rest.checks_passed == 1 and not rest.completed  # early stop at check 2
+    # eqs. 47-49: passing check 1 activated part 2; the samples up to ~0.3 s matched
+    assert rest.s_b == trial.dims_per_part[:2].sum()
+    assert 0.1 < rest.s_a < 0.3 and rest.score == rest.s_b + rest.s_a
+    # run to the end anyway: same score, the cylinder still lies in the hand, unrotated
+    full = trial.evaluate(still, early_stop=False)
+    assert full.completed and full.held and abs(full.rotation_deg) < 2.0
+    assert full.score == rest.score and full.checks_passed == 1
+
+
+def test_old_evaluation_scores_held_time_and_rotation():
+    trial = InHandTrial(InHandTask(evaluation="old"))
+    outcome = trial.evaluate(_stroke(trial))
+    assert outcome.score == pytest.approx(2.0)  # held throughout, rotated past the target
+
+
+def test_a_replayed_best_trial_reproduces_its_score(tmp_path):
+    run = run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
+                     db=tmp_path / "r.sqlite", progress=False)
+    assert len(run.records) == 2
+    logged, outcome = replay_best(run)
+    assert outcome.score == pytest.approx(logged, abs=1e-9)
+    it, best = learning_curve(run.records, 1)
+    assert list(it) == [1, 2] and best[1] == max(r.metric for r in run.records)
+    # the same settings resume the run; other settings under its id are refused
+    again = run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
+                       db=tmp_path / "r.sqlite", progress=False)
+    assert [r.metric for r in again.records] == [r.metric for r in run.records]
+
+
+def test_bad_input():
+    trial = InHandTrial()
+    with pytest.raises(ValueError, match=r"expected 26 values \(eq. 45\), got 3"):
+        trial.evaluate(np.zeros(3))
+    with pytest.raises(ValueError, match="task: expected one of"):
+        InHandTask(task="juggling")
+    with pytest.raises(ValueError, match="benchmark: expected 4 values"):
+        InHandTask(benchmark=(0.0, 1.0))
+    with pytest.raises(ValueError, match="n_particles: expected an integer >= 1, got 0"):
+        run_inhand(trials=1, n_particles=0, db="/nonexistent/x.sqlite")
+
+
+def test_cli_bad_arguments_exit_2(tmp_path, capsys):
+    assert cli_main(["inhand", "--plot", "curve.jpg", "--db", str(tmp_path / "a.sqlite")]) == 2
+    assert "--plot: expected a .png file name" in capsys.readouterr().err
+    (tmp_path / "foreign.sqlite").write_text("not a database")
+    assert cli_main(["inhand", "--db", str(tmp_path / "foreign.sqlite")]) == 2
+    with pytest.raises(SystemExit) as error:
+        cli_main(["inhand", "--optimizer", "bo"])
+    assert error.value.code == 2
