@@ -194,6 +194,18 @@ def _check_positive(name: str, value) -> float:
     return value
 
 
+def _mesh_module(spec):
+    """``handle_drake.mesh_objects`` when ``spec`` is a mesh object (kind "mesh"), else None.
+
+    The catalogue's functions hand mesh objects to that module.
+    """
+    if getattr(spec, "kind", None) == "mesh":
+        from handle_drake import mesh_objects
+
+        return mesh_objects
+    return None
+
+
 @dataclass(frozen=True)
 class ObjectSpec:
     """One grasp object: its kind, its size and its contact parameters.
@@ -351,6 +363,8 @@ def dimensions(spec: ObjectSpec) -> dict[str, float]:
 
 def total_height(spec: ObjectSpec) -> float:
     """Vertical extent (m) of the object standing on a table."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.total_height(spec)
     d = dimensions(spec)
     if spec.kind == "sphere":
         return d["diameter"]
@@ -361,6 +375,8 @@ def total_height(spec: ObjectSpec) -> float:
 
 def resting_height(spec: ObjectSpec) -> float:
     """Height (m) of the object origin above a table top the object stands on."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.resting_height(spec)
     return total_height(spec) / 2
 
 
@@ -523,6 +539,8 @@ def _star_pieces(spec: ObjectSpec, d: dict) -> list[Piece]:
 @lru_cache(maxsize=256)
 def pieces(spec: ObjectSpec) -> tuple[Piece, ...]:
     """The convex pieces of ``spec`` in the object frame (they tile it, no overlaps)."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.pieces(spec)
     d = dimensions(spec)
     kind = spec.kind
     if kind == "sphere":
@@ -570,6 +588,8 @@ def _unit_density_inertia(spec: ObjectSpec) -> tuple[SpatialInertia, float]:
 
 def spatial_inertia(spec: ObjectSpec) -> SpatialInertia:
     """``M_OOo_O``: the object's spatial inertia about its origin, expressed in O."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.spatial_inertia(spec)
     M_unit, volume = _unit_density_inertia(spec)
     if spec.mass is not None:
         density = spec.mass / volume
@@ -583,6 +603,8 @@ def spatial_inertia(spec: ObjectSpec) -> SpatialInertia:
 
 def mass_properties(spec: ObjectSpec) -> MassProperties:
     """Mass, volume, centre of mass and central inertia of ``spec``."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.mass_properties(spec)
     M = spatial_inertia(spec)
     _, volume = _unit_density_inertia(spec)
     p_OScm = np.array(M.get_com())
@@ -611,6 +633,8 @@ def AddObject(plant, spec: ObjectSpec, name: str = "object", hydroelastic: bool 
     ``hydroelastic`` is True, else point contact only) and visual geometry.
     Returns the ``ModelInstanceIndex``.
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.AddMeshObject(plant, spec, name, hydroelastic)
     if not isinstance(spec, ObjectSpec):
         raise TypeError(f"spec must be an ObjectSpec, got {type(spec).__name__}")
     if plant.is_finalized():
@@ -656,6 +680,8 @@ def contact_feet(spec: ObjectSpec) -> np.ndarray:
     and do not change the shape. The mug (16 wall pieces on the table) and the
     sphere get none.
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.contact_feet(spec)
     r = _foot_radius(spec)
     d = dimensions(spec)
     z = -resting_height(spec) + r
@@ -742,6 +768,8 @@ def surface_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
     sampling should use :func:`sample_surface`; ray casting :func:`ray_cast`
     (or the nearest hit from outside on this mesh, which is the true surface).
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.surface_mesh(spec)
     return trimesh.util.concatenate([p.mesh() for p in pieces(spec)])
 
 
@@ -794,6 +822,8 @@ def sample_surface(spec: ObjectSpec, n: int, rng=None) -> tuple[np.ndarray, np.n
     every point lies on the true surface (round pieces are faceted: points on a
     sphere or cylinder lie on its 64-facet mesh, within 0.2 % of the radius).
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.sample_surface(spec, n, rng)
     if isinstance(n, bool) or not isinstance(n, int | np.integer):
         raise TypeError(f"n must be an int, got {type(n).__name__}")
     if n < 0:
@@ -917,6 +947,8 @@ def ray_cast(spec: ObjectSpec, p_OA, d_O) -> RayHits:
     (normalised here). Exact for the pieces' true shapes (spheres and cylinders
     are not faceted). Raises ValueError for an origin inside the solid.
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.ray_cast(spec, p_OA, d_O)
     o = np.atleast_2d(np.asarray(p_OA, dtype=float))
     d = np.atleast_2d(np.asarray(d_O, dtype=float))
     if o.ndim != 2 or o.shape[1] != 3:
