@@ -146,6 +146,7 @@ def simulation_fingerprint() -> str:
     files = sorted([
         *(root / "learning").glob("grasp_trial.py"),
         root / "station.py", root / "scenario.py", root / "objects.py", root / "hands.py",
+        root / "mesh_objects.py",
         *(root / "systems").glob("*.py"), *(root / "quality").glob("*.py"),
         *models_dir().glob("*/*.sdf"),
     ])

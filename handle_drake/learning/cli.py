@@ -6,6 +6,7 @@ Examples::
         --seed 1 --noise 0.01 --db out/babble.sqlite
     handle-drake babble --hand shadow --object cuboid --space synergy --trials 100
     handle-drake babble --object sphere --strategy random --trials 200 --workers 2
+    handle-drake babble --mesh my_part.stl --mesh-scale 0.001 --trials 40   # your own object
     handle-drake report --out out/report            # full: ~30 min on 2 cores
     handle-drake report --out /tmp/r --reduced      # seconds
 
@@ -97,6 +98,11 @@ def register(subparsers) -> None:
                    help="std of Gaussian noise added to the metric (seeded per trial)")
     p.add_argument("--size", type=_positive_float, default=None,
                    help="object size in m (default: the babbling catalogue's)")
+    p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
+                   help="grasp your own object: a mesh file (OBJ, STL, PLY, ...) instead of "
+                        "--object; decomposed into convex pieces once (cached)")
+    p.add_argument("--mesh-scale", type=_positive_float, default=1.0, metavar="S",
+                   help="mesh file units to metres (0.001 for millimetres; default 1)")
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
     p.add_argument("--workers", type=_positive_int, default=1,
@@ -154,8 +160,14 @@ def _cmd_babble(args) -> int:
     )
 
     space = _resolve_space(args)
-    config = GraspTrialConfig(hand=args.hand, object=args.object, space=space, noise=args.noise,
-                              size=args.size)
+    if args.mesh is not None:
+        if args.size is not None:
+            raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
+        config = GraspTrialConfig(hand=args.hand, object="mesh", space=space, noise=args.noise,
+                                  object_file=str(args.mesh), object_scale=args.mesh_scale)
+    else:
+        config = GraspTrialConfig(hand=args.hand, object=args.object, space=space,
+                                  noise=args.noise, size=args.size)
     trial = GraspTrial(config)
     if args.ei_stop and args.strategy != "bo":
         raise ValueError(f"--ei-stop {args.ei_stop}: only Bayesian optimisation has a stop rule")

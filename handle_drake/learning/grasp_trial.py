@@ -27,6 +27,7 @@ The diagram is built once per process and reset for each trial.
 from __future__ import annotations
 
 import dataclasses as dc
+import json
 import time
 
 import numpy as np
@@ -65,8 +66,8 @@ DEFAULT_SIZES = {
 @dc.dataclass(frozen=True)
 class GraspTrialConfig:
     hand: str = "barrett"
-    object: str = "sphere"
-    size: float | None = None  # m; None: DEFAULT_SIZES[object]
+    object: str = "sphere"  # a catalogue kind, or "mesh" with object_file
+    size: float | None = None  # m; None: DEFAULT_SIZES[object] (mesh: from the file)
     space: str = "offset"
     noise: float = 0.0  # std of additive metric noise
     mu: float = 0.8  # object friction, also used by the metric
@@ -81,11 +82,26 @@ class GraspTrialConfig:
     # grasp reads 0.40, 0.47 or 0.55 depending on the step it falls on.
     hold_samples: int = 8
     hold_window: float = 0.1  # s
+    # object "mesh": the mesh file and its scale to m (handle_drake.mesh_objects);
+    # object_digest is the file's SHA-256, filled in so that cached trials of a
+    # changed file are never read back.
+    object_file: str | None = None
+    object_scale: float = 1.0
+    object_digest: str = ""
 
     def __post_init__(self):
         get_hand_spec(self.hand)
-        if self.object not in KINDS:
-            raise ValueError(f"object: unknown kind {self.object!r}; expected one of {KINDS}")
+        if self.object == "mesh":
+            if not self.object_file:
+                raise ValueError("object_file: object 'mesh' needs a mesh file")
+            if self.size is not None:
+                raise ValueError("size: a mesh's size comes from its file (use object_scale)")
+            object.__setattr__(self, "object_digest", self.object_spec().digest)
+        elif self.object not in KINDS:
+            raise ValueError(f"object: unknown kind {self.object!r}; expected one of "
+                             f"{KINDS + ('mesh',)}")
+        elif self.object_file is not None:
+            raise ValueError(f"object_file: only object 'mesh' reads a file, got {self.object!r}")
         if self.space not in PARAMETER_SPACES:
             raise ValueError(f"space: expected one of {PARAMETER_SPACES}, got {self.space!r}")
         if self.space == "synergy" and self.hand != "shadow":
@@ -118,7 +134,24 @@ class GraspTrialConfig:
 
     @property
     def object_size(self) -> float:
+        if self.object == "mesh":
+            return self.object_spec().size
         return DEFAULT_SIZES[self.object] if self.size is None else float(self.size)
+
+    def object_spec(self):
+        """The trial's object: an ``ObjectSpec``, or a ``MeshObjectSpec`` for "mesh"."""
+        if self.object == "mesh":
+            from handle_drake.mesh_objects import MeshObjectSpec
+
+            return MeshObjectSpec(self.object_file, scale=self.object_scale, mu=self.mu)
+        return ObjectSpec(self.object, self.object_size, mu=self.mu)
+
+    def object_yaml(self) -> str:
+        """The object's fields of the trial scenario (flow-style YAML, no braces)."""
+        if self.object == "mesh":
+            return (f"kind: mesh, file: {json.dumps(str(self.object_spec().file))}, "
+                    f"scale: {self.object_scale!r}")
+        return f"kind: {self.object}, size: {self.object_size}"
 
 
 @dc.dataclass
@@ -148,7 +181,7 @@ def _hand_setup(config: GraspTrialConfig):
     spec = get_hand_spec(config.hand)
     names = list(spec.actuated_joint_names)
     preshape, closed = np.zeros(len(names)), np.zeros(len(names))
-    top = total_height(ObjectSpec(config.object, config.object_size)) / 2
+    top = total_height(config.object_spec()) / 2
     if config.hand == "barrett":
         # Palm down, fingers raised to 0.8 rad (pointing down and out) and
         # closed towards 2.2 rad; spread 0 (F1, F2 against F3).
@@ -217,6 +250,11 @@ class GraspTrial:
     @property
     def name(self) -> str:
         c = self.config
+        if c.object == "mesh":
+            import re
+
+            stem = re.sub(r"[^A-Za-z0-9_]+", "_", self.config.object_spec().name)
+            return f"{c.hand}-mesh_{stem}-{c.space}"
         return f"{c.hand}-{c.object}-{c.space}"
 
     def base_scenario(self) -> Scenario:
@@ -229,8 +267,7 @@ hand:
     X_WB: {{translation: [{start[0]}, {start[1]}, {start[2]}],
            rotation: !Rpy {{deg: [{np.degrees(start[3])}, {np.degrees(start[4])},
                                   {np.degrees(start[5])}]}}}}
-object: {{kind: {c.object}, size: {c.object_size}, mu: {c.mu}, fixed: true,
-          on_table: false}}
+object: {{{c.object_yaml()}, mu: {c.mu}, fixed: true, on_table: false}}
 table: null
 contact_model: point
 time_step: {c.time_step}
@@ -274,7 +311,7 @@ simulation_duration: 1.2
             default=diagram.CreateDefaultContext(), controller=controller,
             contacts=contacts, start=start, preshape=preshape, closed=closed,
             lower=lower, upper=upper, spec=spec,
-            surface=ObjectSurface(ObjectSpec(c.object, c.object_size, mu=c.mu)),
+            surface=ObjectSurface(c.object_spec()),
             params=ContactParams(model="soft_finger", mu=c.mu, gamma=0.002, num_edges=8,
                                  characteristic_length=c.object_size / 2),
         )
