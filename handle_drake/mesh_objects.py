@@ -369,8 +369,10 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
 
     CoACD (Wei et al. 2022, ``coacd`` on PyPI) with ``threshold`` (its
     concavity bound, relative to the mesh's size) and at most ``max_pieces``
-    hulls, seed 0 (deterministic). A convex mesh (volume within 0.1 % of its
-    hull) is returned as its hull without running CoACD. Results are cached
+    hulls, seed 0 (deterministic); with ``HANDLE_DRAKE_REDUCED`` set, a
+    shallower plane search (a few times faster, a few more pieces). A
+    convex mesh (volume within 0.1 % of its hull) is returned as its hull
+    without running CoACD. Results are cached
     as ``<directory>/convex/<sha256>.npz`` (default :func:`cache_dir`) keyed
     by the vertices, faces and settings; a damaged cache file is recomputed.
     """
@@ -381,8 +383,17 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
                          f"{faces.shape}")
     import coacd
 
+    from handle_drake.testing import reduced
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    # CoACD's manifold remeshing (its "preprocess") is for open or non-manifold
+    # input only; on a closed mesh it just costs time. Reduced mode (the test
+    # suite) searches its cutting planes with fewer tree-search iterations.
     settings = {"method": "coacd", "version": getattr(coacd, "__version__", "1"),
-                "threshold": float(threshold), "max_pieces": int(max_pieces), "seed": 0}
+                "threshold": float(threshold), "max_pieces": int(max_pieces), "seed": 0,
+                "preprocess_mode": "off" if mesh.is_watertight else "on",
+                "mcts_iterations": 40 if reduced() else 150,
+                "mcts_max_depth": 2 if reduced() else 3}
     key = _decomposition_key(vertices, faces, settings)
     folder = Path(directory) if directory is not None else cache_dir()
     path = folder / "convex" / f"{key}.npz"
@@ -393,15 +404,17 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
                 return np.split(data["points"], np.cumsum(counts)[:-1])
         except (OSError, KeyError, ValueError):
             pass  # unreadable: decompose again and overwrite
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
     hull = mesh.convex_hull
     if mesh.is_watertight and abs(hull.volume - abs(mesh.volume)) <= _CONVEX_TOLERANCE * \
             hull.volume:
         result = [np.asarray(hull.vertices, dtype=float)]
     else:
         coacd.set_log_level("error")
-        parts = coacd.run_coacd(coacd.Mesh(vertices, faces), threshold=float(threshold),
-                                max_convex_hull=int(max_pieces), seed=0)
+        parts = coacd.run_coacd(
+            coacd.Mesh(vertices, faces), threshold=settings["threshold"],
+            max_convex_hull=settings["max_pieces"], seed=0,
+            preprocess_mode=settings["preprocess_mode"],
+            mcts_iterations=settings["mcts_iterations"], mcts_max_depth=settings["mcts_max_depth"])
         result = [np.asarray(v, dtype=float) for v, _ in parts if len(v) >= 4]
         if not result:
             result = [np.asarray(hull.vertices, dtype=float)]

@@ -132,6 +132,8 @@ def register(subparsers) -> None:
                    help="stop the Table 3 BO runs on the EI rule with this threshold "
                         "(e.g. 1e-6; default 0: every run uses the whole --trials budget)")
     p.add_argument("--workers", type=_positive_int, default=None, help="processes (default 2)")
+    p.add_argument("--mesh", type=Path, action="append", default=[], metavar="FILE",
+                   help="also run the Table 3 experiment on this mesh object (repeatable)")
     p.add_argument("--reduced", action="store_true",
                    help="tiny grids and few trials (also HANDLE_DRAKE_REDUCED=1)")
     p.add_argument("--no-progress", action="store_true", help="no progress output")
@@ -229,7 +231,7 @@ def _cmd_report(args) -> int:
     reduced = True if args.reduced else None
     summary = make_report(args.out, seeds=args.seeds, trials=args.trials, grid=args.grid,
                           reduced=reduced, workers=args.workers, noise=args.noise,
-                          ei_stop=args.ei_stop,
+                          ei_stop=args.ei_stop, meshes=args.mesh,
                           progress=not args.no_progress)
     print((Path(args.out) / "table3.md").read_text())
     for kind, entry in summary["bo_vs_random"].items():
