@@ -102,6 +102,7 @@ __all__ = [
     "ray_cast",
     "contains",
     "grasp_extents",
+    "write_mesh",
     "AddMeshObject",
 ]
 
@@ -286,7 +287,14 @@ def _mass_integrals(mesh: trimesh.Trimesh, name: str):
             r = p.center_mass - com
             inertia += p.moment_inertia + v * (r @ r * np.eye(3) - np.outer(r, r))
         return volumes.sum(), com, inertia, "parts", False
-    hull = mesh.convex_hull
+    from scipy.spatial import QhullError
+
+    try:
+        hull = mesh.convex_hull
+    except (QhullError, ValueError):
+        hull = None
+    if hull is None or not hull.volume > 0:
+        raise ValueError(f"file: mesh {name} encloses no volume (a flat or degenerate mesh)")
     warnings.warn(f"mesh {name} is not closed (open or non-manifold) and could not be repaired; "
                   "its mass properties are those of its convex hull", MeshObjectWarning,
                   stacklevel=3)
@@ -626,6 +634,24 @@ def grasp_extents(spec: MeshObjectSpec) -> tuple[float, float, float]:
     """
     ex, ey, ez = (float(v) for v in _geometry(spec).extents)
     return (min(ex, ey), max(ex, ey), ez)
+
+
+def write_mesh(spec, path) -> Path:
+    """Writes an object's surface as a mesh file, in metres in O; the format follows the
+    extension (``.obj``, ``.stl``, ``.ply``, ... as trimesh writes them).
+
+    For a catalogue ``ObjectSpec`` the surface is ``objects.surface_mesh``: a
+    closed mesh for the one-piece kinds (sphere as a 1280-face icosphere,
+    cylinder as a 64-gon prism, cuboids exact); the multi-piece kinds (mug,
+    wine glass, star prism) keep the faces their pieces share, so read back
+    they are not one closed surface (the parts fallback of the mass properties).
+    """
+    from handle_drake.objects import surface_mesh as catalogue_surface
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    catalogue_surface(spec).export(path)
+    return path
 
 
 # --------------------------------------------------------------------------- plant
