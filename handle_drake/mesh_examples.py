@@ -86,14 +86,17 @@ def bowl(radius: float = 0.05, height: float = 0.04, wall: float = 0.006,
 EXAMPLES = {"torus": (torus, "obj"), "l_bracket": (l_bracket, "stl"), "bowl": (bowl, "ply")}
 
 
-def write_examples(directory) -> dict[str, Path]:
-    """Writes ``torus.obj``, ``l_bracket.stl`` and ``bowl.ply`` (metres) into ``directory``."""
+def write_examples(directory, sections: int = 32) -> dict[str, Path]:
+    """Writes ``torus.obj``, ``l_bracket.stl`` and ``bowl.ply`` (metres) into ``directory``.
+
+    ``sections``: facets around the torus and the bowl (fewer: coarser, faster to decompose).
+    """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     out = {}
     for name, (make, ext) in EXAMPLES.items():
         path = directory / f"{name}.{ext}"
-        make().export(path)
+        (make() if make is l_bracket else make(sections=sections)).export(path)
         out[name] = path
     return out
 
