@@ -44,6 +44,12 @@ the true outer surface (it rejects points on shared faces) and
 surface seen from outside; trimesh's own ray casting needs ``rtree``, which is
 not installed).
 
+Mesh files (object kind ``mesh``, :class:`handle_drake.mesh_objects.MeshObjectSpec`)
+are accepted by :func:`AddObject`, :func:`pieces`, :func:`mass_properties`,
+:func:`spatial_inertia`, :func:`resting_height`, :func:`total_height`,
+:func:`contact_feet`, :func:`surface_mesh`, :func:`sample_surface` and
+:func:`ray_cast`, which hand them to that module.
+
 Run ``python -m handle_drake.objects export models/objects`` to regenerate the
 committed default-size SDFormat models and the table.
 """
