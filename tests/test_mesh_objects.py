@@ -192,6 +192,13 @@ def test_l_bracket_mass_properties_in_closed_form(files):
     assert mp.mass == pytest.approx(sum(masses), rel=1e-6)
     np.testing.assert_allclose(mp.p_OScm, com, atol=1e-8)
     np.testing.assert_allclose(mp.I_SScm_O, inertia, rtol=1e-5, atol=1e-12)
+    # The plant's spatial inertia (about O) says the same (its product Ixz is not 0).
+    M = objects.spatial_inertia(spec)
+    assert M.get_mass() == pytest.approx(sum(masses), rel=1e-6)
+    np.testing.assert_allclose(M.get_com(), com, atol=1e-8)
+    I_Scm = M.Shift(M.get_com()).CalcRotationalInertia().CopyToFullMatrix3()
+    assert abs(inertia[0, 2]) > 1e-3 * inertia[0, 0]
+    np.testing.assert_allclose(I_Scm, inertia, rtol=1e-5, atol=1e-12)
     # Frame: origin="file" keeps the file's origin; "bbox" centres the bounding box.
     assert objects.resting_height(spec) == pytest.approx(0.0)
     centred = MeshObjectSpec(str(files["l_bracket"]))
