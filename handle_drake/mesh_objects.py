@@ -591,20 +591,9 @@ def ray_cast(spec: MeshObjectSpec, p_OA, d_O):
     the true shape the error is the mesh's facet error. Raises ValueError for
     an origin inside a closed mesh.
     """
-    from handle_drake.objects import RayHits
+    from handle_drake.objects import RayHits, _rays
 
-    o = np.atleast_2d(np.asarray(p_OA, dtype=float))
-    d = np.atleast_2d(np.asarray(d_O, dtype=float))
-    if o.ndim != 2 or o.shape[1] != 3:
-        raise ValueError(f"p_OA: expected shape (k, 3), got {np.shape(p_OA)}")
-    if d.shape != o.shape:
-        raise ValueError(f"d_O: expected shape {o.shape}, got {np.shape(d_O)}")
-    if not (np.all(np.isfinite(o)) and np.all(np.isfinite(d))):
-        raise ValueError("ray origins and directions must be finite")
-    norm = np.linalg.norm(d, axis=1)
-    if np.any(norm == 0):
-        raise ValueError("ray directions must be non-zero")
-    d = d / norm[:, None]
+    o, d = _rays(p_OA, d_O)
     if _geometry(spec).watertight:
         inside = contains(spec, o)
         if np.any(inside):
