@@ -54,6 +54,17 @@ def advance_recording(simulator, t_final: float, station, meshcat=None,
     run with the station's MeshcatVisualizer and saves it as a self-contained
     page. Returns the wall time (s) of the simulation alone."""
     visualizer = None
+    framed = None
+    plant = plant_context = None
+    if meshcat is not None and station.HasOutputPort("body_poses"):
+        # Open the view framed on the hand and object (simulation only: the
+        # hardware station has no plant to read poses from).
+        from handle_drake.station import GetPlant
+        from handle_drake.viewing import frame_hand_and_object
+
+        plant = GetPlant(station)
+        plant_context = plant.GetMyContextFromRoot(simulator.get_context())
+        framed = frame_hand_and_object(meshcat, plant, plant_context)
     if html is not None and meshcat is not None:
         from pydrake.geometry import MeshcatVisualizer
 
@@ -63,6 +74,9 @@ def advance_recording(simulator, t_final: float, station, meshcat=None,
     simulator.AdvanceTo(t_final)
     wall = time.perf_counter() - start
     if visualizer is not None:
+        if framed is not None:
+            # The replay frames where the hand and object went as well (a lift).
+            frame_hand_and_object(meshcat, plant, plant_context, framed)
         visualizer.StopRecording()
         visualizer.PublishRecording()
         path = Path(html)

@@ -21,6 +21,15 @@ def test_demo_grasp_holds_the_sphere_through_a_10cm_lift(tmp_path):
     # The hand, not a glitch, carried it: the fingertips press on it at the end.
     assert np.count_nonzero(report.result.tactile[-1] > 0.5) >= 2
     assert (tmp_path / "height.png").stat().st_size > 10_000
+    # A clean pre-grasp: nothing presses on the sphere while the hand reaches
+    # and pre-shapes (the fingers close from 0.5 s and meet it after 0.75 s),
+    # and the sphere is not pushed into the table (it rests on point contact,
+    # so pressing it sinks it: 17 N on the thumb sank it 2.7 mm).
+    result = report.result
+    reach = result.times < 0.75
+    assert result.tactile[reach].max() < 1.0, result.tactile[reach].max(axis=0)
+    z = result.object_position[:, 2]
+    assert z[result.times < 1.2].min() > z[0] - 0.0005
 
 
 def test_dropped_object_is_reported_as_not_held():
@@ -64,11 +73,25 @@ def test_cli_simulate_writes_a_self_contained_replay(tmp_path):
     assert "http://localhost" not in text  # nothing left to fetch from the server
 
 
+def _screenshot(html, png, profile):
+    """``html`` as headless Chromium draws it at 640 x 480, as an RGB array."""
+    from PIL import Image
+
+    subprocess.run(
+        ["chromium", "--headless", "--no-sandbox", "--disable-gpu",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         "--no-first-run", f"--user-data-dir={profile}", "--window-size=640,480",
+         "--virtual-time-budget=5000", f"--screenshot={png}", html.as_uri()],
+        capture_output=True, timeout=120, check=True,
+    )
+    return np.asarray(Image.open(png).convert("RGB"), dtype=float)
+
+
 @pytest.mark.skipif(shutil.which("chromium") is None,
                     reason="Debian's chromium is not installed (.ci/run installs it)")
 def test_replay_page_renders_the_scene_in_a_browser(tmp_path):
-    """Look at the replay as a person would: the page must draw a scene, not a blank."""
-    from PIL import Image
+    """Look at the replay as a person would: the page must draw a scene, not a
+    blank, and open framed on the hand, not on the whole world."""
     from pydrake.geometry import StartMeshcat
 
     meshcat = StartMeshcat()
@@ -76,16 +99,17 @@ def test_replay_page_renders_the_scene_in_a_browser(tmp_path):
                             meshcat)
     html = tmp_path / "scene.html"
     runner.run(0.2, html=html)
-    png = tmp_path / "scene.png"
-    subprocess.run(
-        ["chromium", "--headless", "--no-sandbox", "--disable-gpu",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--no-first-run", f"--user-data-dir={tmp_path / 'chromium'}", "--window-size=640,480",
-         "--virtual-time-budget=5000", f"--screenshot={png}", html.as_uri()],
-        capture_output=True, timeout=120, check=True,
-    )
-    pixels = np.asarray(Image.open(png).convert("RGB"), dtype=float)
+    pixels = _screenshot(html, tmp_path / "scene.png", tmp_path / "chromium")
     # A drawn scene has the table, the hand and the object: many distinct colours
     # and real contrast; a blank or error page has almost none.
     assert pixels.std() > 20
     assert len(np.unique(pixels.reshape(-1, 3) // 16, axis=0)) > 50
+    # The hand's share of the screen: the pixels that change when it is hidden.
+    # Meshcat's default camera, metres away, showed it on 0.1 % of the pixels;
+    # framed, it covers about 6 %.
+    meshcat.SetProperty("/drake/illustration/hand", "visible", False)
+    hidden = tmp_path / "no_hand.html"
+    hidden.write_text(meshcat.StaticHtml())
+    without = _screenshot(hidden, tmp_path / "no_hand.png", tmp_path / "chromium2")
+    share = float(np.mean(np.abs(pixels - without).sum(axis=2) > 30))
+    assert share > 0.03, share
