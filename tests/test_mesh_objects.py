@@ -163,10 +163,14 @@ def test_a_grasp_that_holds_the_catalogue_cuboid_holds_the_mesh(files):
     np.testing.assert_allclose(grasp_dims(mesh)[1], grasp_dims(cat)[1], rtol=1e-6)
     assert resting_pose(mesh).IsNearlyEqualTo(resting_pose("cuboid", 0.028), 1e-9)
     plan = plan_grasp("lateral", ("cuboid", 0.028), resting_pose("cuboid", 0.028))
-    scenario = plan.to_scenario()
-    assert held_through_lift(ScenarioRunner(scenario).run())  # the catalogue object
-    scenario.object = ObjectConfig(kind="mesh", file=str(files["cuboid"]),
-                                   X_WO=scenario.object.X_WO, on_table=False)
+    assert held_through_lift(ScenarioRunner(plan.to_scenario()).run())  # the catalogue object
+    # The planner, given the mesh, plans the same grasp; its scenario names the file.
+    mesh_plan = plan_grasp("lateral", mesh, resting_pose(mesh))
+    assert mesh_plan.grasp_size == pytest.approx(plan.grasp_size, rel=1e-6)
+    assert mesh_plan.X_WB.IsNearlyEqualTo(plan.X_WB, 1e-4)
+    scenario = mesh_plan.to_scenario()
+    assert scenario.object == ObjectConfig(kind="mesh", file=mesh.file, mu=mesh.mu,
+                                           X_WO=scenario.object.X_WO, on_table=False)
     result = ScenarioRunner(scenario).run()
     assert held_through_lift(result), result.object_position[::25, 2]
 
