@@ -419,3 +419,10 @@ def test_scenario_and_cli_errors_name_the_field(files, tmp_path, capsys):
     assert learning_main(["babble", "--mesh", str(tmp_path / "none.obj"), "--trials", "1",
                           "--db", str(tmp_path / "b.sqlite"), "--no-progress"]) == 2
     assert "mesh file not found" in capsys.readouterr().err
+    assert main(["grasp", "--class", "lateral", "--mesh", str(tmp_path / "none.obj")]) == 2
+    assert "mesh file not found" in capsys.readouterr().err
+    assert main(["grasp", "--class", "lateral", "--mesh", str(files["cuboid"]), "--size",
+                 "0.03"]) == 2
+    assert "--size: a mesh's size comes from its file" in capsys.readouterr().err
+    assert main(["grasp", "--class", "lateral"]) == 2
+    assert "--size: required" in capsys.readouterr().err
