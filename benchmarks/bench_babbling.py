@@ -46,7 +46,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from handle_drake.learning.babbling import (  # noqa: E402
+from handle_drake.experiments.babbling import (  # noqa: E402
     FRACTIONS,
     _config_key,
     _pin_blas_worker,
@@ -56,8 +56,7 @@ from handle_drake.learning.babbling import (  # noqa: E402
     run_history,
     trials_to_within,
 )
-from handle_drake.learning.bayesopt import _derived_seed, v1_options  # noqa: E402
-from handle_drake.learning.report import (  # noqa: E402
+from handle_drake.experiments.report import (  # noqa: E402
     OBJECT_ORDER,
     REPORT_TABLE3,
     ReportSettings,
@@ -65,6 +64,7 @@ from handle_drake.learning.report import (  # noqa: E402
     _random_spec,
     _table3_spec,
 )
+from handle_drake.learning.bayesopt import _derived_seed, v1_options  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "babbling.json"
 
@@ -106,7 +106,7 @@ def gp_minimize_run(config, seed: int, n_calls: int, cache: Path) -> dict:
 
 def _overhead_per_trial(db, spec) -> float:
     """Mean optimiser time between two trials of a logged run (s), from the log's timestamps."""
-    from handle_drake.learning.trials import TrialLog
+    from handle_drake.learning import TrialLog
 
     with TrialLog(db) as log:
         records = log.trials(spec.run_id)[: spec.n_trials]

@@ -3,7 +3,7 @@
 Side by side in one process (ratios count on a shared machine):
 
 1. **Decomposition** of the generated torus, L-bracket and bowl
-   (``handle_drake.mesh_examples``) and of the catalogue mug's cup wall
+   (``handle_drake.objects.mesh_examples``) and of the catalogue mug's cup wall
    re-meshed as one closed solid of revolution: CoACD as ``mesh_objects``
    runs it (cold, into an empty cache), the cached read, and the floor, one
    qhull hull (``scipy.spatial.ConvexHull``, what a single ``Convex`` would
@@ -37,8 +37,11 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial import ConvexHull, Delaunay, QhullError  # noqa: E402
 
-from handle_drake import mesh_examples, mesh_objects  # noqa: E402
-from handle_drake.objects import ObjectSpec  # noqa: E402
+from handle_drake.objects import (
+    ObjectSpec,  # noqa: E402
+    mesh_examples,  # noqa: E402
+)
+from handle_drake.objects import mesh as mesh_objects  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -123,7 +126,7 @@ def decomposition(files: dict, n_points: int, vhacd: bool) -> list[dict]:
 
 
 def trial_times(files: dict, trials: int) -> list[dict]:
-    from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
+    from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
 
     rows = []
     rng = np.random.default_rng(1)

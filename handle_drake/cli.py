@@ -21,7 +21,7 @@ from pathlib import Path
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.grasp.cli",
-    "handle_drake.learning.cli",
+    "handle_drake.experiments.cli",
     "handle_drake.can_hand.cli",
 )
 
@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
 def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
-    from handle_drake.learning.trials import TrialLogError
+    from handle_drake.learning import TrialLogError
 
     _pin_blas()
     args = parser.parse_args(argv)

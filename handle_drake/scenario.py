@@ -129,7 +129,7 @@ class ObjectConfig:
     # kind "mesh": the mesh file (OBJ, STL, PLY, ...; relative paths are taken
     # from the scenario file's folder, else the working directory), the scale
     # from file units to m, and the density (kg/m^3) used when mass is None.
-    # See handle_drake.mesh_objects.
+    # See handle_drake.objects.mesh.
     file: str = ""
     scale: float = 1.0
     density: float | None = None
@@ -357,8 +357,8 @@ def _validate_mesh_object(o: ObjectConfig) -> None:
 
 
 def mesh_object_spec(o: ObjectConfig):
-    """The :class:`~handle_drake.mesh_objects.MeshObjectSpec` of a kind-"mesh" object."""
-    from handle_drake.mesh_objects import MeshObjectSpec
+    """The :class:`~handle_drake.objects.mesh.MeshObjectSpec` of a kind-"mesh" object."""
+    from handle_drake.objects.mesh import MeshObjectSpec
 
     return MeshObjectSpec(file=o.file, scale=o.scale, mass=o.mass, density=o.density, mu=o.mu)
 

@@ -1,4 +1,4 @@
-"""Mesh files as grasp objects (handle_drake.mesh_objects).
+"""Mesh files as grasp objects (handle_drake.objects.mesh).
 
 Independent truths: catalogue objects written as mesh files behave like the
 catalogue objects (mass properties within the facet error, resting height,
@@ -18,8 +18,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from handle_drake import mesh_examples, mesh_objects, objects
-from handle_drake.mesh_objects import MeshObjectSpec, MeshObjectWarning
+from handle_drake import objects
+from handle_drake.objects import mesh as mesh_objects
+from handle_drake.objects import mesh_examples
+from handle_drake.objects.mesh import MeshObjectSpec, MeshObjectWarning
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -278,8 +280,8 @@ simulation_duration: 0.3
 
 @pytest.mark.parametrize("name", ["torus", "l_bracket", "bowl"])
 def test_short_babble_on_generated_meshes(files, tmp_path, capsys, name):
-    from handle_drake.learning.cli import main
-    from handle_drake.learning.trials import TrialLog
+    from handle_drake.experiments.cli import main
+    from handle_drake.learning import TrialLog
 
     db = tmp_path / "b.sqlite"
     assert main(["babble", "--mesh", str(files[name]), "--strategy", "random", "--trials", "2",
@@ -414,7 +416,7 @@ def test_scenario_and_cli_errors_name_the_field(files, tmp_path, capsys):
     scenario.write_text("object: {kind: mesh, file: nowhere.stl}\n")
     assert main(["simulate", str(scenario)]) == 2
     assert "object.file: mesh file not found" in capsys.readouterr().err
-    from handle_drake.learning.cli import main as learning_main
+    from handle_drake.experiments.cli import main as learning_main
 
     assert learning_main(["babble", "--mesh", str(tmp_path / "none.obj"), "--trials", "1",
                           "--db", str(tmp_path / "b.sqlite"), "--no-progress"]) == 2

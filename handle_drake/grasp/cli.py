@@ -103,7 +103,7 @@ def _cmd_grasp(args) -> int:
     from handle_drake.cli import _meshcat
 
     if args.mesh is not None:
-        from handle_drake.mesh_objects import MeshObjectSpec
+        from handle_drake.objects.mesh import MeshObjectSpec
 
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")

@@ -41,7 +41,7 @@ from pydrake.solvers import SnoptSolver, Solve, SolverOptions
 from pydrake.systems.framework import DiagramBuilder
 
 from handle_drake.grasp.taxonomy import OBJECT_SHAPES, GraspClass, grasp_centre_palm, grasp_info
-from handle_drake.hands import get_hand_spec
+from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.models import add_package, model_path
 
 __all__ = [
@@ -50,6 +50,7 @@ __all__ = [
     "GraspKinematics",
     "GraspSolution",
     "contact_layout",
+    "move_contacts",
     "object_dims_for",
 ]
 
@@ -524,3 +525,54 @@ class GraspKinematics:
                 inside = np.min(half - np.abs(p_O))
                 errs.append(np.linalg.norm(outside) if np.any(outside > 0) else inside)
         return float(max(errs))
+
+
+# ------------------------------------------------------- moving contacts
+# Joints that move each finger's contact point (the distal J1 follows J2).
+_FINGER_JOINTS = {
+    "ff": ("FFJ4", "FFJ3", "FFJ2"),
+    "mf": ("MFJ4", "MFJ3", "MFJ2"),
+    "rf": ("RFJ4", "RFJ3", "RFJ2"),
+    "lf": ("LFJ5", "LFJ4", "LFJ3", "LFJ2"),
+    "th": ("THJ5", "THJ4", "THJ3", "THJ2", "THJ1"),
+}
+
+
+def _collapse(J: np.ndarray, joints: tuple[str, ...], ratio: float, names) -> np.ndarray:
+    """Columns of the command joints of one finger, the coupled J1 folded into J2."""
+    cols = []
+    for name in joints:
+        col = J[:, names.index(name)].copy()
+        if name.endswith("J2") and not name.startswith("TH"):
+            col += ratio * J[:, names.index(name[:-1] + "1")]
+        cols.append(col)
+    return np.column_stack(cols)
+
+
+def move_contacts(kin: GraspKinematics, q: np.ndarray, moves: dict, ratio: float = 1.0,
+                  steps: int = 5, damping: float = 0.01) -> np.ndarray:
+    """Move finger contact points by given palm-frame displacements.
+
+    moves: ``{finger: (part, dx_P (3,))}``. Each finger's joints take
+    ``steps`` damped least-squares steps ``dq = J^T (J J^T + damping^2 I)^-1 dx``
+    (Jacobian re-evaluated each step), clipped to the command limits; the
+    coupled J1 follows J2. Returns the new (24,) posture.
+    """
+    names, act = kin.spec.joint_names, kin.spec.actuated_joint_names
+    lower, upper = actuated_position_limits(kin.spec, ratio)
+    q = np.array(q, dtype=float)
+    for finger, (part, dx) in moves.items():
+        joints = _FINGER_JOINTS[finger]
+        idx = [names.index(j) for j in joints]
+        lo = np.array([lower[act.index(j)] for j in joints])
+        hi = np.array([upper[act.index(j)] for j in joints])
+        step = np.asarray(dx, dtype=float) / steps
+        for _ in range(steps):
+            _, J = kin.contact_jacobian(q, finger, part)
+            Jf = _collapse(J, joints, ratio, names)
+            dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + damping**2 * np.eye(3), step)
+            q[idx] = np.clip(q[idx] + dq, lo, hi)
+            for j in joints:
+                if j.endswith("J2") and finger != "th":
+                    q[names.index(j[:-1] + "1")] = ratio * q[names.index(j)]
+    return q

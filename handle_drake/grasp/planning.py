@@ -40,9 +40,9 @@ cuboid. The planner grasps a sphere anywhere, a cylinder lying on its side
 (axis horizontal) and a cuboid standing upright (its z axis vertical); use
 :func:`resting_pose`.
 
-Mesh objects (``MeshObjectSpec``, :mod:`handle_drake.mesh_objects`) are planned
+Mesh objects (``MeshObjectSpec``, :mod:`handle_drake.objects.mesh`) are planned
 like a cuboid standing upright: the IK's proxy is the mesh's bounding box in O
-(:func:`~handle_drake.mesh_objects.grasp_extents`), the fingers close across
+(:func:`~handle_drake.objects.mesh.grasp_extents`), the fingers close across
 its narrower horizontal axis, and the Table 1 grasp size is the mesh's extent
 along that axis (the distance between the planes the opposing fingers close
 on). The contacts are planned on the proxy; the closing squeeze (20 mm past
@@ -63,8 +63,8 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from handle_drake.grasp.kinematics import GraspKinematics, contact_layout
-from handle_drake.grasp.synergies import SizeRegression, Synergies
+from handle_drake.grasp.kinematics import GraspKinematics, contact_layout, move_contacts
+from handle_drake.grasp.synergies import ClassSynergies, default_synergies
 from handle_drake.grasp.taxonomy import (
     GraspClass,
     approach_palm,
@@ -72,7 +72,7 @@ from handle_drake.grasp.taxonomy import (
     grasp_centre_palm,
     grasp_info,
 )
-from handle_drake.hands import actuated_position_limits, get_hand_spec
+from handle_drake.hands import get_hand_spec
 
 __all__ = [
     "PLANNABLE_KINDS",
@@ -107,69 +107,18 @@ WRIST_RANGE = 2.0  # m, travel of the floating wrist's prismatic joints (station
 _SPEC = get_hand_spec("shadow")
 _NAMES = _SPEC.joint_names
 _ACT = _SPEC.actuated_joint_names
-# Joints that move each finger's contact point (the distal J1 follows J2).
-_FINGER_JOINTS = {
-    "ff": ("FFJ4", "FFJ3", "FFJ2"),
-    "mf": ("MFJ4", "MFJ3", "MFJ2"),
-    "rf": ("RFJ4", "RFJ3", "RFJ2"),
-    "lf": ("LFJ5", "LFJ4", "LFJ3", "LFJ2"),
-    "th": ("THJ5", "THJ4", "THJ3", "THJ2", "THJ1"),
-}
 
 
 class GraspPlanningError(ValueError):
     """No grasp of the requested class was found (unreachable pose or object)."""
 
 
-# ---------------------------------------------------------------- synergies
-
-
-@dc.dataclass
-class ClassSynergies:
-    """Global synergies plus, per class, the amplitude-vs-size regression."""
-
-    synergies: Synergies
-    regressions: dict[GraspClass, SizeRegression]
-
-    def amplitudes(self, grasp_class, size: float) -> np.ndarray | None:
-        """Amplitudes (k,) of the class's pre-shape at ``size`` (m), or None without data."""
-        reg = self.regressions.get(grasp_info(grasp_class).grasp_class)
-        return None if reg is None else reg.amplitudes(size)
-
-    def posture(self, grasp_class, size: float) -> np.ndarray | None:
-        """All 24 joints (rad) of the class's synergy pre-shape at ``size``, or None."""
-        a = self.amplitudes(grasp_class, size)
-        return None if a is None else self.synergies.amplitudes_to_positions(a)
-
-    @classmethod
-    def fit(cls, records, k: int | None = None, variance: float = 0.95) -> ClassSynergies:
-        """Fit from :class:`~handle_drake.grasp.recordings.GraspRecords`."""
-        from handle_drake.grasp.analysis import fit_record_synergies
-
-        syn = fit_record_synergies(records, k=k, variance=variance)
-        regs = {}
-        for gc in GraspClass:
-            sub = records.of_class(gc)
-            if len(sub) >= 2 and np.ptp(sub.sizes) > 0:
-                regs[gc] = SizeRegression.fit(syn, sub.q, sub.sizes)
-        return cls(syn, regs)
-
-
-@lru_cache(maxsize=1)
-def default_synergies() -> ClassSynergies:
-    """Synergies and size regressions fitted on the shipped grasp data set."""
-    from handle_drake.grasp.recordings import load_grasps
-    from handle_drake.grasp.synthetic import DATA_FILE
-
-    return ClassSynergies.fit(load_grasps(DATA_FILE))
-
-
 # ---------------------------------------------------------------- objects
 
 
 def _object_spec(obj):
-    from handle_drake.mesh_objects import MeshObjectSpec
     from handle_drake.objects import ObjectSpec
+    from handle_drake.objects.mesh import MeshObjectSpec
 
     if isinstance(obj, MeshObjectSpec):
         return obj
@@ -200,12 +149,12 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
     """(IK shape, dims in the grasp frame G) of a catalogue object (see module doc).
 
     A mesh is planned as its bounding-box proxy standing upright:
-    ``mesh_objects.grasp_extents`` (opposition, row, height extents).
+    ``objects.mesh.grasp_extents`` (opposition, row, height extents).
     """
     from handle_drake.objects import dimensions
 
     if spec.kind == "mesh":
-        from handle_drake.mesh_objects import grasp_extents
+        from handle_drake.objects.mesh import grasp_extents
 
         return "box", grasp_extents(spec)
     d = dimensions(spec)
@@ -423,45 +372,6 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
     return min(up_height) + kin.support[1] > 0.002
 
 
-def _collapse(J: np.ndarray, joints: tuple[str, ...], ratio: float) -> np.ndarray:
-    """Columns of the command joints of one finger, the coupled J1 folded into J2."""
-    cols = []
-    for name in joints:
-        col = J[:, _NAMES.index(name)].copy()
-        if name.endswith("J2") and not name.startswith("TH"):
-            col += ratio * J[:, _NAMES.index(name[:-1] + "1")]
-        cols.append(col)
-    return np.column_stack(cols)
-
-
-def move_contacts(kin: GraspKinematics, q: np.ndarray, moves: dict, ratio: float = 1.0,
-                  steps: int = 5, damping: float = 0.01) -> np.ndarray:
-    """Move finger contact points by given palm-frame displacements.
-
-    moves: ``{finger: (part, dx_P (3,))}``. Each finger's joints take
-    ``steps`` damped least-squares steps ``dq = J^T (J J^T + damping^2 I)^-1 dx``
-    (Jacobian re-evaluated each step), clipped to the command limits; the
-    coupled J1 follows J2. Returns the new (24,) posture.
-    """
-    lower, upper = actuated_position_limits(_SPEC, ratio)
-    q = np.array(q, dtype=float)
-    for finger, (part, dx) in moves.items():
-        joints = _FINGER_JOINTS[finger]
-        idx = [_NAMES.index(j) for j in joints]
-        lo = np.array([lower[_ACT.index(j)] for j in joints])
-        hi = np.array([upper[_ACT.index(j)] for j in joints])
-        step = np.asarray(dx, dtype=float) / steps
-        for _ in range(steps):
-            _, J = kin.contact_jacobian(q, finger, part)
-            Jf = _collapse(J, joints, ratio)
-            dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + damping**2 * np.eye(3), step)
-            q[idx] = np.clip(q[idx] + dq, lo, hi)
-            for j in joints:
-                if j.endswith("J2") and finger != "th":
-                    q[_NAMES.index(j[:-1] + "1")] = ratio * q[_NAMES.index(j)]
-    return q
-
-
 def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)
                        ) -> np.ndarray:
     """R_WG with ``R_WG up_G = z_W`` and the finger row y_G along the object's row axis.
@@ -506,7 +416,7 @@ def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0
 def _row_axis(spec) -> tuple[float, float, float]:
     """The finger row's axis in O: x_O (a cuboid's width), or a mesh's wider horizontal axis."""
     if spec.kind == "mesh":
-        from handle_drake.mesh_objects import mesh_in_object_frame
+        from handle_drake.objects.mesh import mesh_in_object_frame
 
         ex, ey = mesh_in_object_frame(spec).extents[:2]
         return (1.0, 0.0, 0.0) if ex >= ey else (0.0, 1.0, 0.0)
@@ -575,19 +485,11 @@ def plan_grasp(
         raise TypeError(f"X_WO must be a RigidTransform, got {type(X_WO).__name__}")
     shape, dims = grasp_dims(spec)
     size = check_size(info.grasp_class, dims[0])
-    height = float(X_WO.translation()[2] - table_height)
-    if not np.isfinite(height) or height <= 0:
-        raise ValueError(
-            f"the object centre must be above the table top ({table_height} m), "
-            f"got z = {X_WO.translation()[2]:.4f} m"
-        )
+    height = _height_above_table(X_WO, table_height)
     for name, value, lo in (("standoff", standoff, 0.0), ("lift_height", lift_height, 0.0)):
         if not (np.isfinite(value) and value > lo):
             raise ValueError(f"{name} must be a positive distance (m), got {value}")
-    reach = np.asarray(reach_direction, dtype=float)
-    if reach.shape != (2,) or not np.isfinite(reach).all() or np.linalg.norm(reach) == 0:
-        raise ValueError(f"reach_direction: expected a non-zero (x, y), got {reach_direction}")
-    reach = np.r_[reach / np.linalg.norm(reach), 0.0]
+    reach = _horizontal_unit(reach_direction)
     row_O = _row_axis(spec)
     _world_grasp_frame(spec.kind, X_WO, row_O=row_O)  # validates the resting orientation early
 
@@ -595,9 +497,61 @@ def plan_grasp(
     if not isinstance(synergies, ClassSynergies):
         raise TypeError(f"synergies must be ClassSynergies, got {type(synergies).__name__}")
     amplitudes = synergies.amplitudes(info.grasp_class, size)
+    priors, priors_refine = _posture_priors(info.grasp_class, synergies, amplitudes,
+                                            coupling_ratio)
+    c_table1 = grasp_centre_palm(info.grasp_class, size)
+    a_P = approach_palm(info.grasp_class)
+    solution = _solve_contacts(info, spec.kind, shape, dims, height, priors, priors_refine,
+                               c_table1, a_P, coupling_ratio)
+    if solution is None:
+        raise GraspPlanningError(
+            f"unreachable: no collision-free {info.name} grasp puts the "
+            f"{'/'.join(info.fingers)} contacts on this {spec.kind} (grasp width "
+            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
+        )
+    sol, up, source, kin = solution
+    X_PG = sol.X_PO
+    X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
+        kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
+        row_O)
+    q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up, coupling_ratio)
+    grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
+    return GraspPlan(
+        grasp_class=info.grasp_class, object_spec=spec, grasp_size=size, X_WO=X_WO,
+        X_WG=X_WG, X_WP=X_WP, X_WB=X_WB, X_WB_pregrasp=X_WB_pre, approach_W=approach_W,
+        q_grasp=sol.q, preshape_command=_command(q_pre), grasp_command=_command(sol.q),
+        close_command=_command(q_close), amplitudes=amplitudes,
+        grasp_amplitudes=grasp_amplitudes, p_PC_table1=c_table1,
+        p_PC=X_PG.translation().copy(), centre_source=source,
+        contact_error=sol.contact_error, table_height=float(table_height),
+        lift_height=float(lift_height), coupling_ratio=float(coupling_ratio),
+    )
+
+
+def _height_above_table(X_WO: RigidTransform, table_height: float) -> float:
+    height = float(X_WO.translation()[2] - table_height)
+    if not np.isfinite(height) or height <= 0:
+        raise ValueError(
+            f"the object centre must be above the table top ({table_height} m), "
+            f"got z = {X_WO.translation()[2]:.4f} m"
+        )
+    return height
+
+
+def _horizontal_unit(reach_direction) -> np.ndarray:
+    reach = np.asarray(reach_direction, dtype=float)
+    if reach.shape != (2,) or not np.isfinite(reach).all() or np.linalg.norm(reach) == 0:
+        raise ValueError(f"reach_direction: expected a non-zero (x, y), got {reach_direction}")
+    return np.r_[reach / np.linalg.norm(reach), 0.0]
+
+
+def _posture_priors(grasp_class, synergies: ClassSynergies, amplitudes, coupling_ratio):
+    """IK seeds: the synergy pre-shape (if the class has data) and the class prior; for the
+    refined (free-centre) attempts also two perturbed class priors. The planner's own
+    joint settings of the class (``PLANNER_POSTURES``) apply to all."""
     from handle_drake.grasp.synthetic import posture_prior
 
-    class_prior = posture_prior(info.grasp_class, coupling_ratio)
+    class_prior = posture_prior(grasp_class, coupling_ratio)
     priors = []
     if amplitudes is not None:
         priors.append(synergies.synergies.amplitudes_to_positions(amplitudes))
@@ -605,24 +559,29 @@ def plan_grasp(
     rng = np.random.default_rng(0)
     priors_refine = priors + [class_prior + rng.normal(scale=0.1, size=class_prior.size)
                               for _ in range(2)]
-    c_table1 = grasp_centre_palm(info.grasp_class, size)
-    a_P = approach_palm(info.grasp_class)
-    override = PLANNER_POSTURES.get(info.grasp_class, {})
+    override = PLANNER_POSTURES.get(grasp_class, {})
     priors = [_with_joints(p, override, coupling_ratio) for p in priors]
     priors_refine = [_with_joints(p, override, coupling_ratio) for p in priors_refine]
+    return priors, priors_refine
 
-    # Per attempt: (1) a free solve (no table) gives the hand's natural
-    # orientation about the object; (2) "up" is chosen in G from it (the
-    # reverse of its approach direction, restricted to what the object's
-    # resting pose allows) and the problem is solved again with the table and
-    # the approach cone.
-    solution = None
-    # Canonical attempts first: the hand comes in along its Table 2 approach
-    # within a narrow cone, with the grasp frame guessed from the palm
-    # (x_G = up = -a_P, the thumb on the proximal side, z_G ~ -z_P). Seeded
-    # from an identity orientation instead, SNOPT settles in a basin with the
-    # thumb flat in the palm plane (THJ4 = 0) and the hand tilted to the edge of
-    # the cone; such grasps do not hold (the thumb never meets the object).
+
+def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
+                    coupling_ratio):
+    """``(solution, up_G, centre source, kinematics)`` of the first acceptable IK, or None.
+
+    Canonical attempts first: the hand comes in along its Table 2 approach
+    within a narrow cone, with the grasp frame guessed from the palm
+    (x_G = up = -a_P, the thumb on the proximal side, z_G ~ -z_P). Seeded
+    from an identity orientation instead, SNOPT settles in a basin with the
+    thumb flat in the palm plane (THJ4 = 0) and the hand tilted to the edge of
+    the cone; such grasps do not hold (the thumb never meets the object).
+
+    Then, per attempt: (1) a free solve (no table) gives the hand's natural
+    orientation about the object; (2) "up" is chosen in G from it (the
+    reverse of its approach direction, restricted to what the object's
+    resting pose allows) and the problem is solved again with the table and
+    the approach cone.
+    """
     up_canonical = np.array([1.0, 0.0, 0.0])
     kin_canonical = _kinematics(float(coupling_ratio), shape, tuple(dims),
                                 tuple(up_canonical), height)
@@ -635,11 +594,8 @@ def plan_grasp(
         if _acceptable(kin_canonical, sol):
             source = "table1" if np.linalg.norm(sol.X_PO.translation() - c_table1) < 1e-3 \
                 else "refined"
-            solution = (sol, up_canonical, source, kin_canonical)
-            break
+            return sol, up_canonical, source, kin_canonical
     attempts = [(p, "table1") for p in priors] + [(p, "refined") for p in priors_refine]
-    if solution is not None:
-        attempts = []
     free_kin = _kinematics(float(coupling_ratio), shape, tuple(dims), None, None)
     for prior, source in attempts:
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
@@ -647,29 +603,29 @@ def plan_grasp(
         free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None, **kw)
         if not (free.success and free.contact_error < 1.5e-3):
             continue
-        up = _up_in_grasp_frame(spec.kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
+        up = _up_in_grasp_frame(kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
         kin = _kinematics(float(coupling_ratio), shape, tuple(dims), tuple(np.round(up, 6)),
                           height)
         sol = kin.solve_grasp(info.grasp_class, shape, dims, free.q, approach_P=a_P,
                               X_PO_guess=free.X_PO, min_distance=-MAX_PENETRATION,
                               max_approach_angle=MAX_APPROACH_ANGLE, **kw)
         if _acceptable(kin, sol):
-            solution = (sol, up, source, kin)
-            break
-    if solution is None:
-        raise GraspPlanningError(
-            f"unreachable: no collision-free {info.name} grasp puts the "
-            f"{'/'.join(info.fingers)} contacts on this {spec.kind} (grasp width "
-            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
-        )
-    sol, up, source, kin = solution
+            return sol, up, source, kin
+    return None
 
-    # Hand pose in the world.
+
+def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
+                vertical_standoff, row_O=(1.0, 0.0, 0.0)):
+    """``(X_WG, X_WP, X_WB, X_WB_pregrasp, approach_W)`` of an IK solution on the object.
+
+    Raises ValueError when the base's grasp or stand-off pose (with the lift) is
+    outside the floating wrist's travel.
+    """
     X_PG = sol.X_PO
     R_GP = X_PG.rotation().inverse().matrix()
-    R_WG = _world_grasp_frame(spec.kind, X_WO, up, row_O=row_O)
+    R_WG = _world_grasp_frame(kind, X_WO, up, row_O=row_O)
     forearm_W = R_WG @ R_GP @ np.array([0.0, 0.0, -1.0])  # palm -> forearm direction
-    if spec.kind == "sphere":
+    if kind == "sphere":
         h = forearm_W[:2]
         if np.linalg.norm(h) > 1e-6:
             R_WG = _yaw(R_WG, np.arctan2(-reach[1], -reach[0]) - np.arctan2(h[1], h[0]))
@@ -691,16 +647,21 @@ def plan_grasp(
                 f"unreachable pose: the hand base {name} target {np.round(p, 3).tolist()} m "
                 f"(and the lift) is outside the floating wrist's travel of +-{WRIST_RANGE} m"
             )
+    return X_WG, X_WP, X_WB, X_WB_pre, approach_W
 
-    # Pre-shape (open) and closing command along the contact normals.
-    # Opening and squeezing act in the horizontal plane (the outward contact
-    # normal with its vertical part removed), and the opening also lifts the
-    # contacts a little: a pre-shape that swings a fingertip down would hit the
-    # table the plan keeps it clear of.
-    R_PG = X_PG.rotation().matrix()
+
+def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
+    """Postures (24,) of the pre-shape (open) and the closing command, along the contact normals.
+
+    Opening and squeezing act in the horizontal plane (the outward contact
+    normal with its vertical part removed), and the opening also lifts the
+    contacts a little: a pre-shape that swings a fingertip down would hit the
+    table the plan keeps it clear of.
+    """
+    R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
     moves_open, moves_close = {}, {}
-    for t in contact_layout(info.grasp_class):
+    for t in contact_layout(grasp_class):
         n = R_PG @ np.asarray(t.normal, dtype=float)
         n_h = n - (n @ up_P) * up_P
         n_h = n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2 else n
@@ -708,18 +669,9 @@ def plan_grasp(
         moves_close[t.finger] = (t.part, -CLOSING_SQUEEZE * n_h)
     q_pre = move_contacts(kin, sol.q, moves_open, coupling_ratio)
     q_close = move_contacts(kin, sol.q, moves_close, coupling_ratio)
+    return q_pre, q_close
 
-    def command(q):
-        return np.array([q[_NAMES.index(n)] for n in _ACT])
 
-    grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
-    return GraspPlan(
-        grasp_class=info.grasp_class, object_spec=spec, grasp_size=size, X_WO=X_WO,
-        X_WG=X_WG, X_WP=X_WP, X_WB=X_WB, X_WB_pregrasp=X_WB_pre, approach_W=approach_W,
-        q_grasp=sol.q, preshape_command=command(q_pre), grasp_command=command(sol.q),
-        close_command=command(q_close), amplitudes=amplitudes,
-        grasp_amplitudes=grasp_amplitudes, p_PC_table1=c_table1,
-        p_PC=X_PG.translation().copy(), centre_source=source,
-        contact_error=sol.contact_error, table_height=float(table_height),
-        lift_height=float(lift_height), coupling_ratio=float(coupling_ratio),
-    )
+def _command(q) -> np.ndarray:
+    """The 20-entry command of a 24-joint posture."""
+    return np.array([q[_NAMES.index(n)] for n in _ACT])

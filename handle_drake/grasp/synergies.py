@@ -21,17 +21,22 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 from sklearn.decomposition import PCA
 from sklearn.model_selection import KFold
 
+from handle_drake.grasp.taxonomy import GraspClass, grasp_info
+
 __all__ = [
+    "ClassSynergies",
     "Coupling",
     "Synergies",
     "SizeRegression",
     "choose_k",
+    "default_synergies",
     "fit_synergies",
     "reconstruction_error_vs_k",
 ]
@@ -403,3 +408,46 @@ class SizeRegression:
 
     def positions(self, size: float) -> np.ndarray:
         return self.synergies.amplitudes_to_positions(self.amplitudes(size))
+
+
+# ---------------------------------------------------------------- per grasp class
+
+
+@dataclass
+class ClassSynergies:
+    """Global synergies plus, per class, the amplitude-vs-size regression."""
+
+    synergies: Synergies
+    regressions: dict[GraspClass, SizeRegression]
+
+    def amplitudes(self, grasp_class, size: float) -> np.ndarray | None:
+        """Amplitudes (k,) of the class's pre-shape at ``size`` (m), or None without data."""
+        reg = self.regressions.get(grasp_info(grasp_class).grasp_class)
+        return None if reg is None else reg.amplitudes(size)
+
+    def posture(self, grasp_class, size: float) -> np.ndarray | None:
+        """All 24 joints (rad) of the class's synergy pre-shape at ``size``, or None."""
+        a = self.amplitudes(grasp_class, size)
+        return None if a is None else self.synergies.amplitudes_to_positions(a)
+
+    @classmethod
+    def fit(cls, records, k: int | None = None, variance: float = 0.95) -> ClassSynergies:
+        """Fit from :class:`~handle_drake.grasp.recordings.GraspRecords`."""
+        from handle_drake.grasp.analysis import fit_record_synergies
+
+        syn = fit_record_synergies(records, k=k, variance=variance)
+        regs = {}
+        for gc in GraspClass:
+            sub = records.of_class(gc)
+            if len(sub) >= 2 and np.ptp(sub.sizes) > 0:
+                regs[gc] = SizeRegression.fit(syn, sub.q, sub.sizes)
+        return cls(syn, regs)
+
+
+@lru_cache(maxsize=1)
+def default_synergies() -> ClassSynergies:
+    """Synergies and size regressions fitted on the shipped grasp data set."""
+    from handle_drake.grasp.recordings import load_grasps
+    from handle_drake.grasp.synthetic import DATA_FILE
+
+    return ClassSynergies.fit(load_grasps(DATA_FILE))

@@ -1,7 +1,8 @@
 """Learning to grasp by trial: GP regression, expected improvement, DIRECT, BO, trial logs.
 
 Models (:mod:`.gp`), acquisition (:mod:`.acquisition`), optimisers
-(:mod:`.bayesopt`), trial storage and running (:mod:`.trials`) and synthetic
+(:mod:`.bayesopt`), trial storage (:mod:`.log`), where trials run (:mod:`.executors`), the
+resumable runner (:mod:`.runner`) and synthetic
 test problems (:mod:`.test_functions`) are separate modules; the names below
 are the public surface.
 
@@ -30,18 +31,10 @@ from handle_drake.learning.bayesopt import (
     maximize,
     v1_options,
 )
+from handle_drake.learning.executors import InlineExecutor, TrialResult
 from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern32
-from handle_drake.learning.trials import (
-    ExperimentResult,
-    InlineExecutor,
-    RunInfo,
-    TrialLog,
-    TrialLogError,
-    TrialRecord,
-    TrialResult,
-    TrialRunner,
-    run_experiment,
-)
+from handle_drake.learning.log import RunInfo, TrialLog, TrialLogError, TrialRecord
+from handle_drake.learning.runner import ExperimentResult, TrialRunner, run_experiment
 
 __all__ = [
     "BayesianOptimizer",

@@ -622,7 +622,7 @@ def maximize(
 
     A non-finite value of ``f`` is told as a failure; exceptions propagate.
     For logged, resumable or parallel runs use
-    :func:`handle_drake.learning.trials.run_experiment`.
+    :func:`handle_drake.learning.runner.run_experiment`.
     """
     if isinstance(n_trials, bool) or not isinstance(n_trials, int | np.integer) or n_trials < 1:
         raise ValueError(f"n_trials must be a positive integer, got {n_trials!r}")

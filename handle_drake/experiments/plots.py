@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from handle_drake.learning.babbling import (
+from handle_drake.experiments.babbling import (
     RunHistory,
     RunSpec,
     best_so_far,
     grid_points,
     replay_optimizer,
 )
-from handle_drake.learning.grasp_trial import GraspTrial
+from handle_drake.experiments.grasp_trial import GraspTrial
 
 __all__ = ["figure", "panel", "run_model", "gp_mean_map", "plot_run"]
 

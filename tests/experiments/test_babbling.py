@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.learning.babbling import (
+from handle_drake.experiments.babbling import (
     RunSpec,
     best_so_far,
     grid_points,
@@ -15,7 +15,7 @@ from handle_drake.learning.babbling import (
     run_history,
     trials_to_within,
 )
-from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
 
 
 def test_trials_to_within_counts_the_first_trial_in_each_band():
@@ -75,8 +75,8 @@ def test_replayed_optimizer_proposes_the_logged_next_trial(tmp_path):
 
 def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
     """A grid cached by other simulation code must not be read back as current."""
-    from handle_drake.learning import babbling
-    from handle_drake.learning.grasp_trial import GraspTrialConfig
+    from handle_drake.experiments import babbling
+    from handle_drake.experiments.grasp_trial import GraspTrialConfig
 
     config = GraspTrialConfig(hand="barrett", object="sphere")
     key = babbling._config_key(config)
@@ -87,7 +87,7 @@ def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
 
 def test_run_id_changes_with_the_trial_settings_and_simulation_code(monkeypatch):
     """A logged run is resumed or read back only by the same trial on the same code."""
-    from handle_drake.learning import babbling
+    from handle_drake.experiments import babbling
 
     config = GraspTrialConfig(hand="barrett", object="sphere", noise=0.01)
     spec = RunSpec(config, "bo", 3, 10)

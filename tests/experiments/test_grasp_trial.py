@@ -5,7 +5,7 @@ import pickle
 import numpy as np
 import pytest
 
-from handle_drake.learning.grasp_trial import NO_CONTACT, GraspTrial, GraspTrialConfig
+from handle_drake.experiments.grasp_trial import NO_CONTACT, GraspTrial, GraspTrialConfig
 from handle_drake.objects import KINDS
 
 
@@ -76,7 +76,7 @@ def test_standoff_too_large_loses_the_grasp():
 
 
 def test_trial_is_an_objective_for_the_trial_runner(tmp_path):
-    from handle_drake.learning.trials import InlineExecutor, TrialLog, run_experiment
+    from handle_drake.learning import InlineExecutor, TrialLog, run_experiment
 
     trial = GraspTrial(hand="barrett", object="sphere", space="offset")
     result = run_experiment(trial, trial.bounds, strategy="random", n_trials=3, seed=1,

@@ -16,7 +16,7 @@ an interrupted run continues where it stopped, with no trial repeated or lost.
 It then draws the run (``--plot``, default ``<db folder>/<run id>.png``).
 Bad arguments print an error and exit with status 2.
 
-Also runnable as ``python -m handle_drake.learning.cli``.
+Also runnable as ``python -m handle_drake.experiments.cli``.
 """
 
 from __future__ import annotations
@@ -152,9 +152,9 @@ def _resolve_space(args) -> str:
 def _cmd_babble(args) -> int:
     from concurrent.futures import ProcessPoolExecutor
 
-    from handle_drake.learning.babbling import CachedTrial, RunSpec, _pool
-    from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
-    from handle_drake.learning.trials import (
+    from handle_drake.experiments.babbling import CachedTrial, RunSpec, _pool
+    from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+    from handle_drake.learning import (
         InlineExecutor,
         TrialLog,
         TrialLogError,
@@ -215,8 +215,8 @@ def _cmd_babble(args) -> int:
           + (f", noiseless {clean:.6g}" if clean is not None and args.noise > 0 else "")
           + f"): {params}")
     if not args.no_plot:
-        from handle_drake.learning.babbling import run_history
-        from handle_drake.learning.plots import plot_run
+        from handle_drake.experiments.babbling import run_history
+        from handle_drake.experiments.plots import plot_run
 
         path = args.plot or args.db.parent / f"{run_id}.png"
         print(f"figure: {plot_run(spec, run_history(args.db, run_id), path, names)}")
@@ -224,7 +224,7 @@ def _cmd_babble(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from handle_drake.learning.report import make_report
+    from handle_drake.experiments.report import make_report
 
     if args.grid is not None and args.grid < 2:
         raise ValueError(f"--grid: expected an integer >= 2, got {args.grid}")

@@ -7,10 +7,10 @@ import sqlite3
 import numpy as np
 import pytest
 
-from handle_drake.learning import grasp_trial
-from handle_drake.learning.cli import main
-from handle_drake.learning.grasp_trial import GraspTrial
-from handle_drake.learning.trials import TrialLog
+from handle_drake.experiments import grasp_trial
+from handle_drake.experiments.cli import main
+from handle_drake.experiments.grasp_trial import GraspTrial
+from handle_drake.learning import TrialLog
 
 ARGS = ["babble", "--object", "sphere", "--dims", "2", "--trials", "5", "--seed", "3",
         "--noise", "0.01", "--no-progress"]
@@ -164,7 +164,7 @@ def test_babble_refuses_a_corrupt_database_and_leaves_it_alone(tmp_path, capsys)
 
 
 def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
-    from handle_drake.mesh_examples import l_bracket
+    from handle_drake.objects.mesh_examples import l_bracket
 
     out = tmp_path / "report"
     l_bracket().export(tmp_path / "bracket.stl")  # a mesh object: one more row

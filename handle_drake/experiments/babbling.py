@@ -39,9 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.learning import InlineExecutor, TrialLog, run_experiment
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
-from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
-from handle_drake.learning.trials import InlineExecutor, TrialLog, run_experiment
 
 __all__ = [
     "CachedTrial",
@@ -144,9 +144,9 @@ def simulation_fingerprint() -> str:
     from handle_drake.models import models_dir
 
     files = sorted([
-        *(root / "learning").glob("grasp_trial.py"),
-        root / "station.py", root / "scenario.py", root / "objects.py", root / "hands.py",
-        root / "mesh_objects.py",
+        *(root / "experiments").glob("grasp_trial.py"),
+        root / "station.py", root / "scenario.py", *(root / "objects").glob("*.py"),
+        root / "hands.py",
         *(root / "systems").glob("*.py"), *(root / "quality").glob("*.py"),
         *models_dir().glob("*/*.sdf"),
     ])

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handle_drake.learning.babbling import (
+from handle_drake.experiments.babbling import (
     FRACTIONS,
     RunSpec,
     best_so_far,
@@ -55,9 +55,9 @@ from handle_drake.learning.babbling import (
     run_history,
     trials_to_within,
 )
+from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.experiments.plots import figure, gp_mean_map, panel
 from handle_drake.learning.bayesopt import BayesianOptimizer
-from handle_drake.learning.grasp_trial import GraspTrial, GraspTrialConfig
-from handle_drake.learning.plots import figure, gp_mean_map, panel
 from handle_drake.objects import KINDS
 from handle_drake.testing import reduced as reduced_mode
 

@@ -592,7 +592,7 @@ def ray_cast(spec: MeshObjectSpec, p_OA, d_O):
     the true shape the error is the mesh's facet error. Raises ValueError for
     an origin inside a closed mesh.
     """
-    from handle_drake.objects import RayHits, _rays
+    from handle_drake.objects.queries import RayHits, _rays
 
     o, d = _rays(p_OA, d_O)
     if _geometry(spec).watertight:
@@ -662,7 +662,8 @@ def AddMeshObject(plant, spec: MeshObjectSpec, name: str = "object", hydroelasti
     ``mu``, compliant hydroelastic when ``hydroelastic``; under point contact
     also :func:`contact_feet`. Visual: the real mesh. Returns the model instance.
     """
-    from handle_drake.objects import BODY_NAME, _object_proximity
+    from handle_drake.objects.catalogue import BODY_NAME
+    from handle_drake.objects.plant import _object_proximity
 
     if not isinstance(spec, MeshObjectSpec):
         raise TypeError(f"spec: expected a MeshObjectSpec, got {type(spec).__name__}")

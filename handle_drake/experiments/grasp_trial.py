@@ -35,6 +35,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from handle_drake.hands import actuated_position_limits, get_hand_spec
+from handle_drake.learning import TrialResult
 from handle_drake.objects import KINDS, ObjectSpec, total_height
 from handle_drake.quality import NO_CONTACT, ContactParams, score_contacts
 from handle_drake.quality.object_contacts import ObjectContacts
@@ -42,8 +43,6 @@ from handle_drake.quality.surface import ObjectSurface
 from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
 from handle_drake.systems.guarded_grasp import GuardedGrasp
-
-from .trials import TrialResult
 
 __all__ = [
     "GraspTrial",
@@ -82,7 +81,7 @@ class GraspTrialConfig:
     # grasp reads 0.40, 0.47 or 0.55 depending on the step it falls on.
     hold_samples: int = 8
     hold_window: float = 0.1  # s
-    # object "mesh": the mesh file and its scale to m (handle_drake.mesh_objects);
+    # object "mesh": the mesh file and its scale to m (handle_drake.objects.mesh);
     # object_digest is the file's SHA-256, filled in so that cached trials of a
     # changed file are never read back.
     object_file: str | None = None
@@ -141,7 +140,7 @@ class GraspTrialConfig:
     def object_spec(self):
         """The trial's object: an ``ObjectSpec``, or a ``MeshObjectSpec`` for "mesh"."""
         if self.object == "mesh":
-            from handle_drake.mesh_objects import MeshObjectSpec
+            from handle_drake.objects.mesh import MeshObjectSpec
 
             return MeshObjectSpec(self.object_file, scale=self.object_scale, mu=self.mu)
         return ObjectSpec(self.object, self.object_size, mu=self.mu)

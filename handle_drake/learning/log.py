@@ -1,0 +1,311 @@
+"""Trial storage: one SQLite row per trial of a run, and the run's settings.
+
+Every trial of a run is one row of an SQLite database (standard library
+``sqlite3``, WAL journal, ``synchronous=FULL``) holding the parameters, the
+full scenario text, the metric, the contacts, the wall time, the trial seed,
+the status and the error text. A run's settings (strategy, bounds, seed,
+objective name, optimiser options) are in a table of their own. A row goes
+``pending`` -> ``running`` -> ``done`` | ``failed``, one transaction each
+(see :mod:`handle_drake.learning.runner` for how a run resumes from it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sqlite3
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from handle_drake.learning.bayesopt import check_bounds
+
+STATUSES = ("pending", "running", "done", "failed")
+_FORMAT = "handle_drake.trial_log"
+_VERSION = 1
+_SQLITE_HEADER = b"SQLite format 3\x00"
+
+_SCHEMA = """
+CREATE TABLE handle_drake_meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE runs (
+    run_id TEXT PRIMARY KEY,
+    strategy TEXT NOT NULL,
+    bounds TEXT NOT NULL,          -- JSON [[lower, upper], ...]
+    seed INTEGER NOT NULL,
+    objective TEXT NOT NULL,
+    config TEXT NOT NULL,          -- JSON optimiser options
+    created_at REAL NOT NULL       -- unix time, s
+);
+CREATE TABLE trials (
+    run_id TEXT NOT NULL REFERENCES runs(run_id),
+    trial_index INTEGER NOT NULL,
+    parameters TEXT NOT NULL,      -- JSON list, units of the run's bounds
+    scenario TEXT,                 -- full scenario as given by the objective (YAML/JSON text)
+    metric REAL,
+    contacts TEXT,                 -- JSON
+    wall_time REAL,                -- s spent in the objective
+    seed INTEGER NOT NULL,         -- seed handed to the objective
+    status TEXT NOT NULL CHECK (status IN ('pending', 'running', 'done', 'failed')),
+    error TEXT,
+    started_at REAL,
+    finished_at REAL,
+    PRIMARY KEY (run_id, trial_index)
+);
+"""
+
+
+class TrialLogError(RuntimeError):
+    """The trial database cannot be used (corrupt, foreign, inconsistent); it was not modified."""
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    run_id: str
+    strategy: str
+    bounds: np.ndarray
+    seed: int
+    objective: str
+    config: dict
+    created_at: float
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    run_id: str
+    index: int
+    parameters: np.ndarray
+    status: str
+    seed: int
+    metric: float | None = None
+    scenario: str | None = None
+    contacts: Any = None
+    wall_time: float | None = None
+    error: str | None = None
+    started_at: float | None = None
+    finished_at: float | None = None
+
+
+def _parameters_json(x) -> str:
+    # repr-exact floats: json writes the shortest string that reads back equal.
+    return json.dumps([float(v) for v in np.asarray(x, dtype=float).reshape(-1)])
+
+
+class TrialLog:
+    """The SQLite trial database. Opening an existing file never overwrites it.
+
+    Raises :class:`TrialLogError` if ``path`` exists and is not a readable
+    handle_drake trial log (not SQLite, failed integrity check, an SQLite
+    database of something else, or a newer format).
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        existing = self.path.exists() and self.path.stat().st_size > 0
+        if existing:
+            self._check_existing()
+        # Autocommit (isolation_level=None): each write is its own durable transaction.
+        self._conn = sqlite3.connect(str(self.path), timeout=30.0, isolation_level=None)
+        try:
+            self._conn.execute("PRAGMA journal_mode=WAL")
+            self._conn.execute("PRAGMA synchronous=FULL")
+            self._conn.execute("PRAGMA foreign_keys=ON")
+            tables = self._tables(self._conn)
+            if not tables:  # a new (or empty) file: create the schema in one transaction
+                self._conn.executescript(
+                    "BEGIN;"
+                    + _SCHEMA
+                    + f"INSERT INTO handle_drake_meta VALUES ('format', '{_FORMAT}'), "
+                    f"('version', '{_VERSION}');" + "COMMIT;"
+                )
+        except sqlite3.DatabaseError as error:
+            self._conn.close()
+            raise TrialLogError(f"{self.path}: cannot use this trial log: {error}") from error
+
+    @staticmethod
+    def _tables(conn) -> set[str]:
+        rows = conn.execute("SELECT name FROM sqlite_master WHERE type='table'").fetchall()
+        return {name for (name,) in rows}
+
+    def _check_existing(self):
+        """Validate an existing file read-only, before anything may write to it."""
+        with open(self.path, "rb") as f:
+            header = f.read(len(_SQLITE_HEADER))
+        if header != _SQLITE_HEADER:
+            raise TrialLogError(
+                f"{self.path} is not an SQLite database (bad header {header[:16]!r}); "
+                "refusing to open or overwrite it"
+            )
+        uri = f"file:{self.path.resolve()}?mode=ro"
+        try:
+            conn = sqlite3.connect(uri, uri=True)
+            try:
+                check = conn.execute("PRAGMA quick_check").fetchall()
+                if check != [("ok",)]:
+                    problems = "; ".join(str(row[0]) for row in check[:3])
+                    raise TrialLogError(
+                        f"{self.path} failed SQLite's integrity check ({problems}); "
+                        "refusing to use it (restore a backup, or start a new file)"
+                    )
+                tables = self._tables(conn)
+                if tables and "handle_drake_meta" not in tables:
+                    raise TrialLogError(
+                        f"{self.path} is an SQLite database but not a handle_drake trial log "
+                        f"(tables: {sorted(tables)}); refusing to modify it"
+                    )
+                if tables:
+                    meta = dict(conn.execute("SELECT key, value FROM handle_drake_meta"))
+                    if meta.get("format") != _FORMAT or meta.get("version") != str(_VERSION):
+                        raise TrialLogError(
+                            f"{self.path}: trial log format {meta.get('format')!r} version "
+                            f"{meta.get('version')!r}, expected {_FORMAT!r} version {_VERSION}"
+                        )
+            finally:
+                conn.close()
+        except sqlite3.DatabaseError as error:
+            raise TrialLogError(
+                f"{self.path} is corrupt or not a trial log ({error}); it was not modified"
+            ) from error
+
+    def close(self):
+        self._conn.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ------------------------------------------------------------------ runs
+    def create_run(self, run_id, strategy, bounds, seed, objective, config=None) -> RunInfo:
+        if not isinstance(run_id, str) or not run_id:
+            raise ValueError(f"run_id must be a non-empty string, got {run_id!r}")
+        bounds = check_bounds(bounds)
+        info = RunInfo(
+            run_id, strategy, bounds, int(seed), str(objective), dict(config or {}), time.time()
+        )
+        try:
+            self._conn.execute(
+                "INSERT INTO runs VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (
+                    run_id,
+                    strategy,
+                    json.dumps(bounds.tolist()),
+                    info.seed,
+                    info.objective,
+                    json.dumps(info.config, sort_keys=True),
+                    info.created_at,
+                ),
+            )
+        except sqlite3.IntegrityError:
+            raise ValueError(f"run {run_id!r} already exists in {self.path}") from None
+        return info
+
+    def get_run(self, run_id) -> RunInfo | None:
+        row = self._conn.execute("SELECT * FROM runs WHERE run_id = ?", (run_id,)).fetchone()
+        if row is None:
+            return None
+        return RunInfo(
+            row[0],
+            row[1],
+            np.array(json.loads(row[2]), dtype=float),
+            int(row[3]),
+            row[4],
+            json.loads(row[5]),
+            float(row[6]),
+        )
+
+    def runs(self) -> list[RunInfo]:
+        ids = [r for (r,) in self._conn.execute("SELECT run_id FROM runs ORDER BY created_at")]
+        return [self.get_run(r) for r in ids]
+
+    # ---------------------------------------------------------------- trials
+    def add_pending(self, run_id, index, parameters, seed, scenario=None) -> None:
+        """Write the row of a trial about to be evaluated (before evaluating it)."""
+        try:
+            self._conn.execute(
+                "INSERT INTO trials (run_id, trial_index, parameters, scenario, seed, status) "
+                "VALUES (?, ?, ?, ?, ?, 'pending')",
+                (run_id, int(index), _parameters_json(parameters), scenario, int(seed)),
+            )
+        except sqlite3.IntegrityError as error:
+            raise TrialLogError(
+                f"cannot add trial {index} of run {run_id!r}: {error} "
+                "(the trial exists already, or the run does not)"
+            ) from None
+
+    def _update(self, run_id, index, allowed_from, **values):
+        columns = ", ".join(f"{k} = ?" for k in values)
+        marks = ", ".join("?" * len(allowed_from))
+        cursor = self._conn.execute(
+            f"UPDATE trials SET {columns} WHERE run_id = ? AND trial_index = ? "
+            f"AND status IN ({marks})",
+            (*values.values(), run_id, int(index), *allowed_from),
+        )
+        if cursor.rowcount != 1:
+            raise TrialLogError(
+                f"trial {index} of run {run_id!r} is not in state {allowed_from}; cannot set "
+                f"{values.get('status')}"
+            )
+
+    def mark_running(self, run_id, index) -> None:
+        self._update(
+            run_id, index, ("pending", "running"), status="running", started_at=time.time()
+        )
+
+    def mark_done(self, run_id, index, metric, contacts=None, scenario=None, wall_time=None):
+        metric = float(metric)
+        if not math.isfinite(metric):
+            raise ValueError(
+                f"metric must be finite to mark a trial done, got {metric}; use mark_failed"
+            )
+        values = dict(
+            status="done", metric=metric, wall_time=wall_time, finished_at=time.time(), error=None
+        )
+        if contacts is not None:
+            values["contacts"] = contacts if isinstance(contacts, str) else json.dumps(contacts)
+        if scenario is not None:
+            values["scenario"] = scenario
+        self._update(run_id, index, ("pending", "running"), **values)
+
+    def mark_failed(self, run_id, index, error, wall_time=None, scenario=None) -> None:
+        values = dict(
+            status="failed", error=str(error), wall_time=wall_time, finished_at=time.time()
+        )
+        if scenario is not None:
+            values["scenario"] = scenario
+        self._update(run_id, index, ("pending", "running"), **values)
+
+    def trials(self, run_id, status=None) -> list[TrialRecord]:
+        """The run's trials in index order (optionally only those with ``status``)."""
+        query = (
+            "SELECT run_id, trial_index, parameters, status, seed, metric, scenario, contacts, "
+            "wall_time, error, started_at, finished_at FROM trials WHERE run_id = ?"
+        )
+        args = [run_id]
+        if status is not None:
+            if status not in STATUSES:
+                raise ValueError(f"status must be one of {STATUSES}, got {status!r}")
+            query += " AND status = ?"
+            args.append(status)
+        records = []
+        for row in self._conn.execute(query + " ORDER BY trial_index", args):
+            records.append(
+                TrialRecord(
+                    run_id=row[0],
+                    index=int(row[1]),
+                    parameters=np.array(json.loads(row[2])),
+                    status=row[3],
+                    seed=int(row[4]),
+                    metric=row[5],
+                    scenario=row[6],
+                    contacts=None if row[7] is None else json.loads(row[7]),
+                    wall_time=row[8],
+                    error=row[9],
+                    started_at=row[10],
+                    finished_at=row[11],
+                )
+            )
+        return records
