@@ -78,6 +78,12 @@ def _cmd_simulate(args) -> int:
     if result.object_position is not None:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
+    if result.score is not None:
+        m, score = scenario.metric, result.score
+        print(f"grasp metric (BW, soft finger, mean of {m.hold_samples} instants over the last "
+              f"{m.hold_window:g} s): {score.value!r} "
+              f"({'force closure' if score.force_closure else 'not in force closure'}); "
+              f"touching: {', '.join(sorted(score.contacts)) or 'nothing'}")
     if args.quality:
         value, closure, contacts = runner.grasp_quality()
         print(f"grasp quality (BW metric, soft finger): {value:+.4f} "

@@ -1,88 +1,40 @@
 """Run a scenario: station + scripted command + loggers, simulate, report.
 
-:class:`ScenarioRunner` builds the diagram once and re-runs it from the
-default context (a reset, not a rebuild), which is what trials need.
+:class:`ScenarioRunner` is the scenario's keyframe script on a
+:class:`~handle_drake.harness.TrialHarness`: the diagram is built once and
+re-run from the default context (a reset, not a rebuild). ``RunResult``,
+``LOG_PERIOD`` and ``advance_recording`` live in :mod:`handle_drake.harness`
+and are re-exported here.
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
-import time
 from pathlib import Path
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource, VectorLogSink
+from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.hands import get_hand_spec
-from handle_drake.scenario import FloatingWrist, Scenario
-from handle_drake.station import MakeHandStation, hand_initial_command
+from handle_drake.harness import (
+    LOG_PERIOD,
+    HoldScore,
+    RunResult,
+    TrialHarness,
+    advance_recording,
+)
+from handle_drake.scenario import DumpScenario, FloatingWrist, Scenario
+from handle_drake.station import hand_initial_command
 from handle_drake.systems.hand_driver import rpy_pose6
 
-__all__ = ["ScenarioRunner", "RunResult", "script_trajectories", "advance_recording"]
-
-LOG_PERIOD = 0.01  # s
-
-
-@dc.dataclass
-class RunResult:
-    """What one simulated run recorded (sampled every ``LOG_PERIOD`` s)."""
-
-    times: np.ndarray  # (T,) s
-    object_position: np.ndarray | None  # (T, 3) m, p_WO
-    hand_position: np.ndarray  # (T, nq) rad
-    tactile: np.ndarray  # (T, fingertips) N
-    wall_time: float  # s
-    sim_time: float  # s
-
-    @property
-    def realtime_factor(self) -> float:
-        return self.sim_time / self.wall_time if self.wall_time > 0 else float("inf")
-
-    def object_lift(self) -> float:
-        """Height gained by the object between the first and last sample (m)."""
-        if self.object_position is None:
-            raise ValueError("this scenario has no object")
-        return float(self.object_position[-1, 2] - self.object_position[0, 2])
-
-
-def advance_recording(simulator, t_final: float, station, meshcat=None,
-                      html: str | Path | None = None) -> float:
-    """``simulator.AdvanceTo(t_final)``; with a Meshcat and ``html``, records the
-    run with the station's MeshcatVisualizer and saves it as a self-contained
-    page. Returns the wall time (s) of the simulation alone."""
-    visualizer = None
-    framed = None
-    plant = plant_context = None
-    if meshcat is not None and station.HasOutputPort("body_poses"):
-        # Open the view framed on the hand and object (simulation only: the
-        # hardware station has no plant to read poses from).
-        from handle_drake.station import GetPlant
-        from handle_drake.viewing import frame_hand_and_object
-
-        plant = GetPlant(station)
-        plant_context = plant.GetMyContextFromRoot(simulator.get_context())
-        framed = frame_hand_and_object(meshcat, plant, plant_context)
-    if html is not None and meshcat is not None:
-        from pydrake.geometry import MeshcatVisualizer
-
-        visualizer = next(s for s in station.GetSystems() if isinstance(s, MeshcatVisualizer))
-        visualizer.StartRecording(False)
-    start = time.perf_counter()
-    simulator.AdvanceTo(t_final)
-    wall = time.perf_counter() - start
-    if visualizer is not None:
-        if framed is not None:
-            # The replay frames where the hand and object went as well (a lift).
-            frame_hand_and_object(meshcat, plant, plant_context, framed)
-        visualizer.StopRecording()
-        visualizer.PublishRecording()
-        path = Path(html)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(meshcat.StaticHtml())
-    return wall
+__all__ = [
+    "ScenarioRunner",
+    "RunResult",
+    "script_trajectories",
+    "advance_recording",
+    "LOG_PERIOD",
+]
 
 
 def script_trajectories(scenario: Scenario, initial_command: np.ndarray):
@@ -118,78 +70,129 @@ def script_trajectories(scenario: Scenario, initial_command: np.ndarray):
 
 
 class ScenarioRunner:
-    """Builds station + scripted commands + loggers once; runs many times.
+    """The scenario on its station (a :class:`TrialHarness`), built once, run many times.
+
+    What drives the station is the scenario's: its keyframe ``script``, or its
+    ``controller`` (a :class:`~handle_drake.scenario.GuardedGraspController`).
+    With a ``metric`` the run ends by scoring the grasp (``RunResult.score``).
+
+    A trial is a scenario too: :meth:`run` accepts another scenario that
+    differs from the built one only in what a trial sets per run (the
+    controller's start pose, pre-shape, closing command and standoff, the
+    duration), so one diagram serves a whole experiment and a logged trial's
+    scenario replays it alone (``handle-drake simulate``).
 
     Args:
-        scenario: the scenario (its ``script`` drives the hand and wrist).
+        scenario: the scenario.
         meshcat: optional Meshcat for live view and recording.
         hardware: drive the real (CAN) hand instead of the simulation, in
             real time; ``reset`` then only restarts the script and the logs.
     """
 
     def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False):
+        if hardware and scenario.controller is not None:
+            raise ValueError("a scenario controller (the guarded grasp) reads simulated contact "
+                             "results: it cannot drive the hardware; use a script")
         self.scenario = scenario
         self.meshcat = meshcat
         self.hardware = hardware
-        builder = DiagramBuilder()
-        self.station = builder.AddNamedSystem(
-            "station", MakeHandStation(scenario, meshcat, hardware=hardware))
         self.initial_command = hand_initial_command(scenario)
-        hand_traj, wrist_traj = script_trajectories(scenario, self.initial_command)
+        self.harness = TrialHarness(
+            scenario, self._add_driver, meshcat=meshcat, hardware=hardware,
+            object_contacts=scenario.object is not None and not hardware)
+        self.station = self.harness.station
+        self.controller = self.harness.controller
+        self.diagram = self.harness.diagram
+        self.simulator = self.harness.simulator
+        self.context = self.harness.context
+        self._structure = _structure(scenario)
+
+    def _add_driver(self, builder, station):
+        if self.scenario.controller is not None:
+            return _add_guarded_grasp(builder, station, self.scenario)
+        hand_traj, wrist_traj = script_trajectories(self.scenario, self.initial_command)
         if hand_traj is not None:
             source = builder.AddNamedSystem("hand_script", TrajectorySource(hand_traj))
         else:
             source = builder.AddNamedSystem(
                 "hand_script", ConstantVectorSource(self.initial_command))
-        builder.Connect(source.get_output_port(), self.station.GetInputPort("hand.position"))
+        builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
         if wrist_traj is not None:
             wrist_source = builder.AddNamedSystem("wrist_script", TrajectorySource(wrist_traj))
-            builder.Connect(wrist_source.get_output_port(),
-                            self.station.GetInputPort("wrist.pose"))
-        self._loggers = {}
-        for port in ("hand.position_measured", "hand.tactile", "object.position"):
-            if self.station.HasOutputPort(port):
-                output = self.station.GetOutputPort(port)
-                logger = builder.AddSystem(VectorLogSink(output.size(), LOG_PERIOD))
-                builder.Connect(output, logger.get_input_port())
-                self._loggers[port] = logger
-        self._object_contacts = None
-        if scenario.object is not None and not hardware:
-            from handle_drake.quality import ObjectContacts
-            from handle_drake.station import GetPlant, object_body
+            builder.Connect(wrist_source.get_output_port(), station.GetInputPort("wrist.pose"))
+        return None
 
-            plant = GetPlant(self.station)
-            hand = plant.GetModelInstanceByName("hand")
-            bodies = [plant.get_body(i) for i in plant.GetBodyIndices(hand)]
-            self._object_contacts = builder.AddNamedSystem("object_contacts", ObjectContacts(
-                plant, object_body(plant), {b.name(): b for b in bodies}))
-            builder.Connect(self.station.GetOutputPort("contact_results"),
-                            self._object_contacts.GetInputPort("contact_results"))
-            builder.Connect(self.station.GetOutputPort("body_poses"),
-                            self._object_contacts.GetInputPort("body_poses"))
-        self.diagram = builder.Build()
-        self.simulator = Simulator(self.diagram)
-        if hardware:
-            # A real hand runs in real time; the diagram must keep pace with it.
-            self.simulator.set_target_realtime_rate(1.0)
-        self.context = self.simulator.get_mutable_context()
-        self._default_context = self.diagram.CreateDefaultContext()
+    def _trial_scenario(self, scenario: Scenario | None) -> Scenario:
+        if scenario is None:
+            return self.scenario
+        if not isinstance(scenario, Scenario):
+            raise TypeError(f"scenario: expected a Scenario, got {type(scenario).__name__}")
+        if scenario is not self.scenario and _structure(scenario) != self._structure:
+            raise ValueError(
+                "scenario: this runner's diagram was built for another scenario; a run may "
+                "change only the controller's start_pose, preshape, closed and standoff, the "
+                "metric and simulation_duration (build a ScenarioRunner for this one)")
+        return scenario
 
-    def reset(self) -> None:
-        """Back to the scenario's initial state without rebuilding anything."""
-        self.context.SetTimeStateAndParametersFrom(self._default_context)
-        for logger in self._loggers.values():
-            logger.FindMutableLog(self.context).Clear()
-        self.simulator.Initialize()
+    def reset(self, scenario: Scenario | None = None) -> None:
+        """Back to the initial state of ``scenario`` (default: the runner's) without rebuilding
+        anything: the context's defaults, then the controller's trial settings."""
+        scenario = self._trial_scenario(scenario)
+        self.harness.reset()
+        c = scenario.controller
+        if c is not None:
+            names = get_hand_spec(scenario.hand.kind).actuated_joint_names
+            preshape = np.array([c.preshape.get(n, 0.0) for n in names])
+            closed = np.array([c.closed.get(n, 0.0) for n in names])
+            self.controller.set_trial(self.harness.controller_context(), start_pose6=c.start_pose,
+                                      preshape=preshape, closed=closed, standoff=c.standoff)
+            self.harness.place_wrist(c.start_pose)
+            self.harness.place_hand(preshape)
+        self.harness.initialize()
 
-    def run(self, duration: float | None = None, html: str | Path | None = None) -> RunResult:
-        """Resets, simulates ``duration`` (default: the scenario's) and returns the logs."""
-        duration = self.scenario.simulation_duration if duration is None else float(duration)
+    def run(self, duration: float | None = None, html: str | Path | None = None,
+            scenario: Scenario | None = None) -> RunResult:
+        """Resets to ``scenario`` (default: the runner's; see the class doc), simulates
+        ``duration`` (default: the scenario's) and returns the logs, and the score of
+        the scenario's ``metric``."""
+        scenario = self._trial_scenario(scenario)
+        duration = scenario.simulation_duration if duration is None else float(duration)
         if not (np.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be finite and > 0, got {duration}")
-        self.reset()
-        wall = advance_recording(self.simulator, duration, self.station, self.meshcat, html)
-        return self._result(duration, wall)
+        self.reset(scenario)
+        metric = scenario.metric
+        if metric is None:
+            wall = self.harness.advance(duration, html)
+            return self.harness.run_result(duration, wall)
+        if metric.hold_window >= duration:
+            raise ValueError(f"duration must exceed the metric's hold_window "
+                             f"({metric.hold_window} s), got {duration}")
+        hold_times = (duration - metric.hold_window * np.linspace(1.0, 0.0, metric.hold_samples)
+                      if metric.hold_samples > 1 else [duration])
+        params, surface = self._metric_model(scenario)
+        samples, last = [], []
+
+        def score():
+            value, closure, contacts = self.harness.grasp_quality(params, surface,
+                                                                  metric.surface_radius)
+            samples.append(float(value))
+            last[:] = [closure, contacts]
+
+        wall = self.harness.advance(hold_times, html, at_each=score)
+        hold = HoldScore(value=float(np.mean(samples)), samples=samples,
+                         force_closure=bool(last[0]), contacts=last[1])
+        return self.harness.run_result(duration, wall, hold)
+
+    def _metric_model(self, scenario: Scenario):
+        from handle_drake.quality import ContactParams
+        from handle_drake.quality.surface import ObjectSurface
+        from handle_drake.station import object_spec
+
+        m = scenario.metric
+        spec = object_spec(scenario)
+        params = ContactParams(model="soft_finger", mu=spec.mu, gamma=m.gamma,
+                               num_edges=m.num_edges, characteristic_length=spec.size / 2)
+        return params, ObjectSurface(spec)
 
     def grasp_quality(self, surface_radius: float = 0.004, gamma: float = 0.002):
         """BW metric of the hand's contacts on the object now (after :meth:`run`).
@@ -198,33 +201,52 @@ class ScenarioRunner:
         model of radius ``surface_radius`` (m), moments scaled by half the
         object size. Returns ``(value, force_closure, contacts by body)``.
         """
-        if self._object_contacts is None:
+        if self.hardware or self.scenario.object is None:
             raise ValueError("grasp_quality needs a simulated scenario with an object")
-        from handle_drake.quality import ContactParams, score_contacts
+        from handle_drake.quality import ContactParams
         from handle_drake.quality.surface import ObjectSurface
         from handle_drake.station import object_spec
 
         spec = object_spec(self.scenario)
-        contacts = self._object_contacts.get_output_port().Eval(
-            self._object_contacts.GetMyContextFromRoot(self.context))
         params = ContactParams(model="soft_finger", mu=spec.mu, gamma=gamma,
                                characteristic_length=spec.size / 2)
-        return score_contacts(contacts, params, ObjectSurface(spec), surface_radius)
+        return self.harness.grasp_quality(params, ObjectSurface(spec), surface_radius)
 
-    def _result(self, duration, wall) -> RunResult:
-        logs = {port: logger.FindLog(self.context) for port, logger in self._loggers.items()}
-        hand = logs["hand.position_measured"]
-        obj = logs.get("object.position")
-        result = RunResult(
-            times=hand.sample_times().copy(),
-            object_position=None if obj is None else obj.data().T.copy(),
-            hand_position=hand.data().T.copy(),
-            tactile=logs["hand.tactile"].data().T.copy(),
-            wall_time=wall,
-            sim_time=duration,
-        )
-        for name, array in (("hand position", result.hand_position),
-                            ("object position", result.object_position)):
-            if array is not None and not np.all(np.isfinite(array)):
-                raise FloatingPointError(f"simulation diverged: non-finite {name}")
-        return result
+
+def _structure(scenario: Scenario) -> str:
+    """The scenario as text without what a run may change (see :class:`ScenarioRunner`)."""
+    fixed = dc.replace(scenario, simulation_duration=1.0, metric=None)
+    if scenario.controller is not None:
+        fixed.controller = dc.replace(scenario.controller, start_pose=[], preshape={},
+                                      closed={}, standoff=0.0)
+    return DumpScenario(fixed)
+
+
+def _add_guarded_grasp(builder, station, scenario: Scenario):
+    """The scenario's :class:`~handle_drake.systems.guarded_grasp.GuardedGrasp`, connected."""
+    from handle_drake.station import GetPlant, object_body
+    from handle_drake.systems.guarded_grasp import GuardedGrasp
+
+    c = scenario.controller
+    names = get_hand_spec(scenario.hand.kind).actuated_joint_names
+    plant = GetPlant(station)
+    hand = plant.GetModelInstanceByName("hand")
+    hand_bodies = [plant.get_body(i) for i in plant.GetBodyIndices(hand)]
+    known = {b.name() for b in hand_bodies}
+    unknown = sorted(set(c.guard_bodies) - known)
+    if unknown:
+        raise ValueError(f"controller.guard_bodies: {unknown} are not bodies of the "
+                         f"{scenario.hand.kind} hand; expected some of {sorted(known)}")
+    guard = [b for b in hand_bodies if not c.guard_bodies or b.name() in c.guard_bodies]
+    controller = builder.AddNamedSystem("controller", GuardedGrasp(
+        c.start_pose, c.direction, speed=c.speed, max_travel=c.max_travel,
+        preshape=[c.preshape.get(n, 0.0) for n in names],
+        closed=[c.closed.get(n, 0.0) for n in names],
+        hand_bodies=[b.index() for b in guard], object_bodies=[object_body(plant).index()],
+        standoff=c.standoff, period=c.period))
+    builder.Connect(station.GetOutputPort("contact_results"),
+                    controller.get_contact_results_input_port())
+    builder.Connect(controller.GetOutputPort("wrist_pose"), station.GetInputPort("wrist.pose"))
+    builder.Connect(controller.GetOutputPort("hand_position"),
+                    station.GetInputPort("hand.position"))
+    return controller

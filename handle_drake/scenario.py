@@ -46,6 +46,8 @@ __all__ = [
     "CanHandDriver",
     "FixedMount",
     "FloatingWrist",
+    "GraspMetric",
+    "GuardedGraspController",
     "HandConfig",
     "Keyframe",
     "LoadScenario",
@@ -173,6 +175,47 @@ class Keyframe:
 
 
 @dc.dataclass
+class GuardedGraspController:
+    """A guarded approach and close (``systems.guarded_grasp.GuardedGrasp``) drives the station.
+
+    The hand base starts at ``start_pose`` (``[x y z roll pitch yaw]``, m and
+    rad; the floating wrist is placed there) with the hand in ``preshape``,
+    moves along ``direction`` at ``speed`` until a ``guard_bodies`` hand body
+    touches the object (or ``max_travel`` is used up), backs off
+    ``standoff`` and closes to ``closed``. Hand commands are actuated joint
+    positions (rad) by name; joints not named are 0. ``guard_bodies`` names
+    hand bodies; empty means every hand body. A scenario has either a
+    controller or a ``script``, not both.
+    """
+
+    start_pose: list[float] = dc.field(default_factory=list)
+    direction: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, -1.0])
+    speed: float = 0.4  # m/s
+    max_travel: float = 0.25  # m
+    standoff: float = 0.0  # m
+    preshape: dict[str, float] = dc.field(default_factory=dict)
+    closed: dict[str, float] = dc.field(default_factory=dict)
+    guard_bodies: list[str] = dc.field(default_factory=list)
+    period: float = 0.004  # s
+
+
+@dc.dataclass
+class GraspMetric:
+    """Score the grasp the run ends in: the Bimodal Wrench Space metric of the hand's
+    contacts on the object (soft-finger contacts with the object's friction, the
+    contact surface model of radius ``surface_radius``, moments scaled by half the
+    object size), averaged over ``hold_samples`` instants spread over the last
+    ``hold_window`` seconds of the run (its last one at ``simulation_duration``).
+    """
+
+    hold_samples: int = 8
+    hold_window: float = 0.1  # s
+    surface_radius: float = 0.004  # m; 0: raw mean contacts
+    gamma: float = 0.002  # m, torsional friction
+    num_edges: int = 8  # friction-cone edges
+
+
+@dc.dataclass
 class CanHandDriver(CanHandDriverConfig):
     """A real (or simulated-firmware) CAN hand behind the CAN bus server.
 
@@ -195,6 +238,10 @@ class Scenario:
     # An optional scripted command (hand joints and wrist pose over time), so a
     # scenario file alone describes a runnable experiment.
     script: list[Keyframe] = dc.field(default_factory=list)
+    # Or a controller that drives the hand and wrist instead of the script.
+    controller: GuardedGraspController | None = None
+    # An optional score of the run (printed by ``handle-drake simulate``).
+    metric: GraspMetric | None = None
     # Meshcat publish period (s) when a Meshcat is given.
     visualization_period: float = 1.0 / 32
 
@@ -221,8 +268,18 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
 
 
 def DumpScenario(scenario: Scenario) -> str:
-    """The scenario as YAML text that :func:`LoadScenario` reads back."""
-    return yaml_dump_typed(scenario)
+    """The scenario as YAML text that :func:`LoadScenario` reads back.
+
+    Drake's ``yaml_dump_typed`` leaves out fields that are None; a field whose
+    default is not None (``object``, ``table``) is written as ``null`` so that
+    the text loads back to the same scenario.
+    """
+    text = yaml_dump_typed(scenario)
+    defaults = Scenario()
+    for field in dc.fields(Scenario):
+        if getattr(scenario, field.name) is None and getattr(defaults, field.name) is not None:
+            text += f"{field.name}: null\n"
+    return text
 
 
 def _resolve_mesh_file(scenario: Scenario, folder: Path) -> None:
@@ -328,6 +385,10 @@ def validate_scenario(scenario: Scenario) -> None:
     _check_positive("simulation_duration", scenario.simulation_duration)
     _check_positive("visualization_period", scenario.visualization_period)
     _validate_script(scenario, spec)
+    if scenario.controller is not None:
+        _validate_controller(scenario, spec)
+    if scenario.metric is not None:
+        _validate_metric(scenario)
     if isinstance(scenario.driver, CanHandDriver):
         try:
             scenario.driver.validate()
@@ -387,3 +448,55 @@ def _validate_script(scenario: Scenario, spec) -> None:
                     f"{where}.wrist: expected 6 finite values [x y z roll pitch yaw], "
                     f"got {keyframe.wrist}"
                 )
+
+
+def _finite_vector(name: str, values, size: int) -> None:
+    if len(values) != size or not all(isinstance(v, int | float) and math.isfinite(v)
+                                      for v in values):
+        raise ScenarioError(f"{name}: expected {size} finite values, got {list(values)[:8]}")
+
+
+def _validate_controller(scenario: Scenario, spec) -> None:
+    c = scenario.controller
+    if scenario.script:
+        raise ScenarioError("controller: a scenario has a controller or a script, not both")
+    if not isinstance(scenario.hand.mount, FloatingWrist):
+        raise ScenarioError("controller: the guarded grasp moves the hand base: it needs a "
+                            "!FloatingWrist mount")
+    _finite_vector("controller.start_pose", c.start_pose, 6)
+    _finite_vector("controller.direction", c.direction, 3)
+    if not any(c.direction):
+        raise ScenarioError("controller.direction must be non-zero")
+    _check_positive("controller.speed", c.speed)
+    _check_positive("controller.period", c.period)
+    for name in ("max_travel", "standoff"):
+        value = getattr(c, name)
+        if not (math.isfinite(value) and value >= 0):
+            raise ScenarioError(f"controller.{name} must be finite and >= 0, got {value}")
+    for field in ("preshape", "closed"):
+        for name, value in getattr(c, field).items():
+            if name not in spec.actuated_joint_names:
+                raise ScenarioError(
+                    f"controller.{field}: {name!r} is not an actuated joint of the "
+                    f"{spec.name} hand; expected one of {list(spec.actuated_joint_names)}")
+            if not math.isfinite(value):
+                raise ScenarioError(f"controller.{field}[{name}] must be finite, got {value}")
+
+
+def _validate_metric(scenario: Scenario) -> None:
+    m = scenario.metric
+    if scenario.object is None:
+        raise ScenarioError("metric: scoring a grasp needs an object")
+    if isinstance(m.hold_samples, bool) or m.hold_samples < 1:
+        raise ScenarioError(f"metric.hold_samples: expected an integer >= 1, got "
+                            f"{m.hold_samples!r}")
+    _check_positive("metric.hold_window", m.hold_window)
+    if m.hold_window >= scenario.simulation_duration:
+        raise ScenarioError(f"metric.hold_window: expected < simulation_duration "
+                            f"({scenario.simulation_duration} s), got {m.hold_window}")
+    for name in ("surface_radius", "gamma"):
+        value = getattr(m, name)
+        if not (math.isfinite(value) and value >= 0):
+            raise ScenarioError(f"metric.{name} must be finite and >= 0, got {value}")
+    if m.num_edges < 3:
+        raise ScenarioError(f"metric.num_edges: expected >= 3, got {m.num_edges}")

@@ -27,22 +27,26 @@ The diagram is built once per process and reset for each trial.
 from __future__ import annotations
 
 import dataclasses as dc
-import json
 import time
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.common.schema import Rotation, Transform
 
 from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.learning import TrialResult
 from handle_drake.objects import KINDS, ObjectSpec, total_height
-from handle_drake.quality import NO_CONTACT, ContactParams, score_contacts
-from handle_drake.quality.object_contacts import ObjectContacts
-from handle_drake.quality.surface import ObjectSurface
-from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
-from handle_drake.station import GetPlant, MakeHandStation, object_body
-from handle_drake.systems.guarded_grasp import GuardedGrasp
+from handle_drake.quality import NO_CONTACT
+from handle_drake.run import ScenarioRunner
+from handle_drake.scenario import (
+    DumpScenario,
+    FloatingWrist,
+    GraspMetric,
+    GuardedGraspController,
+    HandConfig,
+    ObjectConfig,
+    Scenario,
+    SimHandDriver,
+)
 
 __all__ = [
     "GraspTrial",
@@ -145,12 +149,12 @@ class GraspTrialConfig:
             return MeshObjectSpec(self.object_file, scale=self.object_scale, mu=self.mu)
         return ObjectSpec(self.object, self.object_size, mu=self.mu)
 
-    def object_yaml(self) -> str:
-        """The object's fields of the trial scenario (flow-style YAML, no braces)."""
+    def object_config(self, **fields) -> ObjectConfig:
+        """The trial scenario's object (a catalogue kind or the mesh file), with ``fields``."""
         if self.object == "mesh":
-            return (f"kind: mesh, file: {json.dumps(str(self.object_spec().file))}, "
-                    f"scale: {self.object_scale!r}")
-        return f"kind: {self.object}, size: {self.object_size}"
+            return ObjectConfig(kind="mesh", file=self.object_spec().file,
+                                scale=self.object_scale, mu=self.mu, **fields)
+        return ObjectConfig(kind=self.object, size=self.object_size, mu=self.mu, **fields)
 
 
 @dc.dataclass
@@ -257,63 +261,42 @@ class GraspTrial:
         return f"{c.hand}-{c.object}-{c.space}"
 
     def base_scenario(self) -> Scenario:
-        c = self.config
-        _, start, _, _ = _hand_setup(c)
-        return LoadScenario(data=f"""
-hand:
-  kind: {c.hand}
-  mount: !FloatingWrist
-    X_WB: {{translation: [{start[0]}, {start[1]}, {start[2]}],
-           rotation: !Rpy {{deg: [{np.degrees(start[3])}, {np.degrees(start[4])},
-                                  {np.degrees(start[5])}]}}}}
-object: {{{c.object_yaml()}, mu: {c.mu}, fixed: true, on_table: false}}
-table: null
-contact_model: point
-time_step: {c.time_step}
-driver: !SimHandDriver {{max_joint_velocity: 4.0}}
-simulation_duration: 1.2
-""")
-
-    def _build(self):
+        """The trial at zero parameters: the scenario every trial overrides."""
         c = self.config
         spec, start, preshape, closed = _hand_setup(c)
-        scenario = self.base_scenario()
-        builder = DiagramBuilder()
-        station = builder.AddNamedSystem("station", MakeHandStation(scenario))
-        plant = GetPlant(station)
-        hand = plant.GetModelInstanceByName("hand")
-        hand_bodies = [plant.get_body(i) for i in plant.GetBodyIndices(hand)]
-        obj = object_body(plant)
-        # The approach stops when the palm touches (Shadow: the thumb, opposed
-        # under the palm, must not stop it) or any link touches (Barrett).
-        guard = [b for b in hand_bodies if c.hand == "barrett" or b.name() == "palm"]
-        controller = builder.AddNamedSystem("controller", GuardedGrasp(
-            start, [0, 0, -1], speed=0.4, max_travel=0.25, preshape=preshape, closed=closed,
-            hand_bodies=[b.index() for b in guard], object_bodies=[obj.index()],
-            standoff=c.standoff))
-        builder.Connect(station.GetOutputPort("contact_results"),
-                        controller.get_contact_results_input_port())
-        builder.Connect(controller.GetOutputPort("wrist_pose"), station.GetInputPort("wrist.pose"))
-        builder.Connect(controller.GetOutputPort("hand_position"),
-                        station.GetInputPort("hand.position"))
-        contacts = builder.AddNamedSystem("object_contacts", ObjectContacts(
-            plant, obj, {b.name(): b for b in hand_bodies}))
-        builder.Connect(station.GetOutputPort("contact_results"),
-                        contacts.get_input_port(0))
-        builder.Connect(station.GetOutputPort("body_poses"), contacts.get_input_port(1))
-        diagram = builder.Build()
-        simulator = Simulator(diagram)
-        context = simulator.get_mutable_context()
-        lower, upper = actuated_position_limits(spec, None)
-        self._built = dict(
-            diagram=diagram, simulator=simulator, context=context,
-            default=diagram.CreateDefaultContext(), controller=controller,
-            contacts=contacts, start=start, preshape=preshape, closed=closed,
-            lower=lower, upper=upper, spec=spec,
-            surface=ObjectSurface(c.object_spec()),
-            params=ContactParams(model="soft_finger", mu=c.mu, gamma=0.002, num_edges=8,
-                                 characteristic_length=c.object_size / 2),
+        names = spec.actuated_joint_names
+        X_WB = Transform()
+        X_WB.translation = start[:3].tolist()
+        X_WB.rotation = Rotation()
+        X_WB.rotation.value = Rotation.Rpy(deg=np.degrees(start[3:]).tolist())
+        return Scenario(
+            hand=HandConfig(kind=c.hand, mount=FloatingWrist(X_WB=X_WB)),
+            object=c.object_config(fixed=True, on_table=False),
+            table=None,
+            contact_model="point",
+            time_step=c.time_step,
+            driver=SimHandDriver(max_joint_velocity=4.0),
+            simulation_duration=c.settle_time,
+            # The approach stops when the palm touches (Shadow: the thumb,
+            # opposed under the palm, must not stop it) or any link touches
+            # (Barrett).
+            controller=GuardedGraspController(
+                start_pose=start.tolist(), direction=[0.0, 0.0, -1.0], speed=0.4,
+                max_travel=0.25, standoff=c.standoff,
+                preshape={n: float(v) for n, v in zip(names, preshape, strict=True)},
+                closed={n: float(v) for n, v in zip(names, closed, strict=True)},
+                guard_bodies=[] if c.hand == "barrett" else ["palm"]),
+            metric=GraspMetric(hold_samples=c.hold_samples, hold_window=c.hold_window,
+                               surface_radius=c.surface_radius, gamma=0.002, num_edges=8),
         )
+
+    def _build(self):
+        """The runner of the base scenario, built once per process (per config)."""
+        c = self.config
+        spec, _, _, _ = _hand_setup(c)
+        lower, upper = actuated_position_limits(spec, None)
+        self._built = dict(runner=ScenarioRunner(self.base_scenario()), lower=lower,
+                           upper=upper, spec=spec)
         return self._built
 
     def _check(self, x) -> np.ndarray:
@@ -325,11 +308,39 @@ simulation_duration: 1.2
             raise ValueError(f"parameters: expected finite values, got {x}")
         return x
 
-    def scenario_for(self, x) -> str:
-        """The trial's full scenario (YAML) with its parameters, for the trial log."""
+    def scenario(self, x) -> Scenario:
+        """The trial of parameters ``x``: the base scenario with its controller overridden."""
         x = self._check(x)
-        return DumpScenario(self.base_scenario()) + (
-            f"# trial parameters ({self.config.space}): {x.tolist()}\n")
+        base = self.base_scenario()
+        c, ctrl = self.config, base.controller
+        start = np.array(ctrl.start_pose)
+        names = list(ctrl.preshape)
+        preshape = np.array([ctrl.preshape[n] for n in names])
+        closed = np.array([ctrl.closed[n] for n in names])
+        standoff = c.standoff
+        if c.space == "standoff":
+            standoff = float(x[0])
+        elif c.space == "offset":
+            start[:2] += x
+        else:
+            lower, upper = actuated_position_limits(get_hand_spec(c.hand), None)
+            for amplitude, synergy in zip(x, SHADOW_SYNERGIES.values(), strict=True):
+                for joint, delta in synergy.items():
+                    preshape[names.index(joint)] += amplitude * delta
+                    closed[names.index(joint)] += amplitude * delta
+            preshape = np.clip(preshape, lower, upper)
+            closed = np.clip(closed, lower, upper)
+        base.controller = dc.replace(
+            ctrl, start_pose=start.tolist(), standoff=standoff,
+            preshape={n: float(v) for n, v in zip(names, preshape, strict=True)},
+            closed={n: float(v) for n, v in zip(names, closed, strict=True)})
+        return base
+
+    def scenario_for(self, x) -> str:
+        """The trial's full scenario (YAML): ``handle-drake simulate`` on it replays the trial
+        (its metric is the trial's noiseless one)."""
+        return DumpScenario(self.scenario(x)) + (
+            f"# trial parameters ({self.config.space}): {self._check(x).tolist()}\n")
 
     def __call__(self, x, seed: int = 0) -> TrialResult:
         """The objective for ``run_experiment``: metric, contacts and scenario of one trial."""
@@ -340,83 +351,26 @@ simulation_duration: 1.2
         })
 
     def evaluate(self, x, seed: int = 0) -> TrialOutcome:
-        x = self._check(x)
-        built = self._built or self._build()
-        c = self.config
+        """One trial: parameters -> scenario -> simulate (the process's one diagram) -> metric.
+
+        Approach until contact, let the hand close and settle, then score the
+        hold at ``hold_samples`` instants (the last one at ``settle_time``).
+        """
         start_wall = time.perf_counter()
-        start, preshape, closed = built["start"].copy(), built["preshape"], built["closed"].copy()
-        standoff = c.standoff
-        if c.space == "standoff":
-            standoff = float(x[0])
-        elif c.space == "offset":
-            start[:2] += x
-        else:
-            preshape = preshape.copy()
-            names = list(built["spec"].actuated_joint_names)
-            for amplitude, synergy in zip(x, SHADOW_SYNERGIES.values(), strict=True):
-                for joint, delta in synergy.items():
-                    preshape[names.index(joint)] += amplitude * delta
-                    closed[names.index(joint)] += amplitude * delta
-            preshape = np.clip(preshape, built["lower"], built["upper"])
-            closed = np.clip(closed, built["lower"], built["upper"])
-
-        context, controller = built["context"], built["controller"]
-        context.SetTimeStateAndParametersFrom(built["default"])
-        controller.set_trial(controller.GetMyMutableContextFromRoot(context), start_pose6=start,
-                             preshape=preshape, closed=closed, standoff=standoff)
-        station = built["diagram"].GetSubsystemByName("station")
-        plant = GetPlant(station)
-        plant_context = plant.GetMyMutableContextFromRoot(context)
-        _place_wrist(plant, plant_context, start)
-        _place_hand(plant, plant_context, built["spec"], preshape)
-        driver = station.GetSubsystemByName("hand_driver")
-        driver.set_initial_command(driver.GetMyMutableContextFromRoot(context), preshape)
-        simulator = built["simulator"]
-        simulator.Initialize()
-        # Approach until contact, let the hand close and settle, then score
-        # the hold at hold_samples instants (the last one at settle_time).
-        samples = []
-        contacts_port = built["contacts"].get_output_port()
-        contacts_context = built["contacts"].GetMyContextFromRoot(context)
-        hold_times = (c.settle_time - c.hold_window * np.linspace(1.0, 0.0, c.hold_samples)
-                      if c.hold_samples > 1 else [c.settle_time])
-        for t in hold_times:
-            simulator.AdvanceTo(float(t))
-            value, closure, detail = self._score(contacts_port.Eval(contacts_context), built)
-            samples.append(float(value))
+        scenario = self.scenario(x)
+        runner = (self._built or self._build())["runner"]
+        score = runner.run(scenario=scenario).score
+        controller = runner.controller
         touched = np.isfinite(controller.GetOutputPort("contact_time").Eval(
-            controller.GetMyContextFromRoot(context))[0])
-        value = float(np.mean(samples))
+            controller.GetMyContextFromRoot(runner.context))[0])
+        c = self.config
         rng = np.random.default_rng(seed)
-        noisy = value + (c.noise * rng.standard_normal() if c.noise > 0 else 0.0)
+        noisy = score.value + (c.noise * rng.standard_normal() if c.noise > 0 else 0.0)
         return TrialOutcome(
-            metric=float(noisy), metric_noiseless=value, metric_samples=samples,
-            force_closure=bool(closure),
-            contacts=detail, touched=bool(touched or detail),
-            scenario=self.scenario_for(x), wall_time=time.perf_counter() - start_wall,
+            metric=float(noisy), metric_noiseless=score.value, metric_samples=score.samples,
+            force_closure=score.force_closure, contacts=score.contacts,
+            touched=bool(touched or score.contacts),
+            scenario=DumpScenario(scenario) + (
+                f"# trial parameters ({c.space}): {self._check(x).tolist()}\n"),
+            wall_time=time.perf_counter() - start_wall,
         )
-
-    def _score(self, contacts, built):
-        return score_contacts(contacts, built["params"], built["surface"],
-                              self.config.surface_radius)
-
-
-def _set_joint_positions(plant, plant_context, instance, names, values) -> None:
-    q = plant.GetPositions(plant_context)
-    for name, value in zip(names, values, strict=True):
-        q[plant.GetJointByName(name, instance).position_start()] = value
-    plant.SetPositions(plant_context, q)
-
-
-def _place_wrist(plant, plant_context, pose6) -> None:
-    from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
-
-    _set_joint_positions(plant, plant_context, plant.GetModelInstanceByName("wrist"),
-                         WRIST_JOINTS, pose_to_wrist_joints(pose6))
-
-
-def _place_hand(plant, plant_context, spec, command) -> None:
-    from handle_drake.hands import actuated_to_joint_positions
-
-    _set_joint_positions(plant, plant_context, plant.GetModelInstanceByName("hand"),
-                         spec.joint_names, actuated_to_joint_positions(spec, command))

@@ -22,14 +22,11 @@ judges either.
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, EventStatus
-from pydrake.systems.primitives import VectorLogSink
 
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, GraspPlan
 from handle_drake.hands import get_hand_spec
-from handle_drake.run import LOG_PERIOD, RunResult, advance_recording
-from handle_drake.station import GetPlant, MakeHandStation
+from handle_drake.harness import DEFAULT_LOG, RunResult, TrialHarness
+from handle_drake.station import GetPlant
 from handle_drake.systems.reactive_grasp import (
     ReactiveGrasp,
     ReactiveGraspMode,
@@ -51,7 +48,7 @@ def plan_params(plan: GraspPlan, **overrides) -> ReactiveGraspParams:
 
 
 class ReactiveGraspRunner:
-    """Station + ReactiveGrasp + loggers for one plan; built once, run many times.
+    """Station + ReactiveGrasp + loggers for one plan (a :class:`TrialHarness`); runs many times.
 
     Args:
         plan: a :class:`GraspPlan`.
@@ -66,40 +63,36 @@ class ReactiveGraspRunner:
         self.meshcat = meshcat
         self.scenario = plan.to_scenario()
         self.scenario.script = []  # the controller drives the station, not keyframes
-        builder = DiagramBuilder()
-        self.station = builder.AddNamedSystem("station", MakeHandStation(self.scenario, meshcat))
-        plant = GetPlant(self.station)
+        self._params = params if params is not None else plan_params(plan)
+        self.harness = TrialHarness(self.scenario, self._add_controller, meshcat=meshcat,
+                                    log=(*DEFAULT_LOG, "mode"))
+        self.station = self.harness.station
+        self.controller = self.harness.controller
+        self.diagram = self.harness.diagram
+        self.simulator = self.harness.simulator
+        self.context = self.harness.context
+        self._controller_context = self.controller.GetMyContextFromRoot(self.context)
+        self._done_at = None
+        self.harness.stop_when(self._finished)
+
+    def _add_controller(self, builder, station):
+        plan = self.plan
+        plant = GetPlant(station)
         hand = plant.GetModelInstanceByName("hand")
         spec = get_hand_spec(self.scenario.hand.kind)
         tips = [plant.GetFrameByName(n, hand).body().index() for n in spec.fingertip_frames]
-        self.controller = builder.AddNamedSystem("reactive_grasp", ReactiveGrasp(
+        c = builder.AddNamedSystem("reactive_grasp", ReactiveGrasp(
             plan.wrist(plan.X_WB_pregrasp), plan.wrist(plan.X_WB), plan.preshape_command,
-            plan.close_command, finger_command_groups(spec.name),
-            params=params if params is not None else plan_params(plan),
+            plan.close_command, finger_command_groups(spec.name), params=self._params,
             hand_bodies=plant.GetBodyIndices(hand), fingertip_bodies=tips))
-        c, s = self.controller, self.station
+        s = station
         builder.Connect(s.GetOutputPort("hand.tactile"), c.get_tactile_input_port())
         builder.Connect(s.GetOutputPort("wrist.pose_measured"),
                         c.get_wrist_pose_measured_input_port())
         builder.Connect(s.GetOutputPort("contact_results"), c.get_contact_results_input_port())
         builder.Connect(c.GetOutputPort("wrist_pose"), s.GetInputPort("wrist.pose"))
         builder.Connect(c.GetOutputPort("hand_position"), s.GetInputPort("hand.position"))
-        self._loggers = {}
-        for port in ("hand.position_measured", "hand.tactile", "object.position"):
-            output = s.GetOutputPort(port)
-            logger = builder.AddSystem(VectorLogSink(output.size(), LOG_PERIOD))
-            builder.Connect(output, logger.get_input_port())
-            self._loggers[port] = logger
-        mode_log = builder.AddSystem(VectorLogSink(1, LOG_PERIOD))
-        builder.Connect(c.GetOutputPort("mode"), mode_log.get_input_port())
-        self._loggers["mode"] = mode_log
-        self.diagram = builder.Build()
-        self.simulator = Simulator(self.diagram)
-        self.context = self.simulator.get_mutable_context()
-        self._controller_context = c.GetMyContextFromRoot(self.context)
-        self._default_context = self.diagram.CreateDefaultContext()
-        self._done_at = None
-        self.simulator.set_monitor(self._monitor)
+        return c
 
     @property
     def max_duration(self) -> float:
@@ -110,7 +103,7 @@ class ReactiveGraspRunner:
         slowed = length / (p.approach_speed * p.slow_factor) - length / p.approach_speed
         return self.controller.nominal_duration() + slowed + p.arrival_timeout + SETTLE
 
-    def _monitor(self, root_context):
+    def _finished(self, root_context) -> str | None:
         mode = self.controller.get_mode(self._controller_context)
         finished = (mode is ReactiveGraspMode.STOPPED
                     or self.controller.lift_complete(self._controller_context))
@@ -118,8 +111,8 @@ class ReactiveGraspRunner:
         if finished and self._done_at is None:
             self._done_at = t
         if self._done_at is not None and t >= self._done_at + SETTLE:
-            return EventStatus.ReachedTermination(self.controller, "grasp finished")
-        return EventStatus.DidNothing()
+            return "grasp finished"
+        return None
 
     def run(self, duration: float | None = None, html=None) -> RunResult:
         """Simulates until the lift is done (plus ``SETTLE``), the approach
@@ -127,23 +120,12 @@ class ReactiveGraspRunner:
         duration = self.max_duration if duration is None else float(duration)
         if not (np.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be finite and > 0, got {duration}")
-        self.context.SetTimeStateAndParametersFrom(self._default_context)
-        for logger in self._loggers.values():
-            logger.FindMutableLog(self.context).Clear()
+        self.harness.reset()
         self._done_at = None
-        self.simulator.Initialize()
-        wall = advance_recording(self.simulator, duration, self.station, self.meshcat, html)
-        logs = {k: v.FindLog(self.context) for k, v in self._loggers.items()}
-        result = RunResult(
-            times=logs["hand.position_measured"].sample_times().copy(),
-            object_position=logs["object.position"].data().T.copy(),
-            hand_position=logs["hand.position_measured"].data().T.copy(),
-            tactile=logs["hand.tactile"].data().T.copy(),
-            wall_time=wall, sim_time=self.context.get_time(),
-        )
-        self.modes = [ReactiveGraspMode(int(m)) for m in logs["mode"].data()[0]]
-        if not np.all(np.isfinite(result.object_position)):
-            raise FloatingPointError("simulation diverged: non-finite object position")
+        self.harness.initialize()
+        wall = self.harness.advance(duration, html)
+        result = self.harness.run_result(self.context.get_time(), wall)
+        self.modes = [ReactiveGraspMode(int(m)) for m in self.harness.logs()["mode"].data()[0]]
         return result
 
     def final_mode(self) -> ReactiveGraspMode:

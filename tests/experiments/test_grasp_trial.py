@@ -94,6 +94,41 @@ def test_trial_is_an_objective_for_the_trial_runner(tmp_path):
         assert trial.evaluate(row.parameters).metric == pytest.approx(row.metric, abs=1e-12)
 
 
+def test_a_logged_trial_replays_to_its_metric_through_simulate(tmp_path, capsys):
+    """The logged scenario alone is the trial: ``handle-drake simulate`` on it (a fresh
+    diagram built from the text) scores exactly the logged noiseless metric."""
+    from handle_drake.cli import main
+    from handle_drake.learning import InlineExecutor, TrialLog, run_experiment
+    from handle_drake.run import ScenarioRunner
+    from handle_drake.scenario import LoadScenario
+
+    trial = GraspTrial(hand="barrett", object="cuboid", space="offset", noise=0.05)
+    result = run_experiment(trial, trial.bounds, strategy="random", n_trials=2, seed=4,
+                            db_path=tmp_path / "t.sqlite", executor=InlineExecutor(),
+                            progress=False, objective_name=trial.name)
+    with TrialLog(tmp_path / "t.sqlite") as log:
+        rows = log.trials(result.run_id)
+    for k, row in enumerate(rows):
+        path = tmp_path / f"trial{k}.yaml"
+        path.write_text(row.scenario)
+        noiseless = row.contacts["metric_noiseless"]
+        assert row.metric != noiseless  # the logged metric has the noise on top
+        score = ScenarioRunner(LoadScenario(filename=path)).run().score
+        assert score.value == noiseless
+        assert score.force_closure == row.contacts["force_closure"]
+        assert main(["simulate", str(path)]) == 0
+        assert f"{noiseless!r}" in capsys.readouterr().out
+
+
+def test_a_runner_refuses_a_scenario_it_was_not_built_for(barrett_sphere):
+    from handle_drake.run import ScenarioRunner
+
+    runner = ScenarioRunner(barrett_sphere.base_scenario())
+    other = GraspTrial(hand="barrett", object="mug", space="offset").scenario([0.0, 0.0])
+    with pytest.raises(ValueError, match="built for another scenario"):
+        runner.run(scenario=other)
+
+
 def test_trial_pickles_without_its_diagram(barrett_sphere):
     barrett_sphere.evaluate([0.0, 0.0])
     clone = pickle.loads(pickle.dumps(barrett_sphere))
