@@ -162,11 +162,16 @@ SHADOW_MASS = (
     + (0.010 + 0.040 + 0.005 + 0.020 + 0.017)
 )
 
-# Section 2 (Barrett BH8-280) and our README's choices where the sheet gives a range:
-# distal bend 45 deg (42-50), tip 0.055 (0.050-0.059), distal range 48 deg.
-BEND = math.radians(45.0)
-BARRETT_TIP = 0.055
-BARRETT_MASS = 0.506 + 3 * 0.141 + 3 * (0.062 + 0.041)
+# Section 2 (Barrett BH8-280): Barrett's BH8-280 mass-properties page, per link (kg):
+# hand base (frame W, without palm pad; F3's fixed knuckle is part of it), the F1/F2
+# spread knuckle (link 1), proximal (link 2), distal (link 3). Barrett weighed the
+# hand at 664 g + 3 x 179 g = 1.201 kg.
+BARRETT_MASS = 0.59573 + 2 * 0.14109 + 3 * (0.062139 + 0.041377)
+BARRETT_WEIGHED = 0.664 + 3 * 0.179
+PROX_UPPER = math.radians(140.0)
+# Distal joint 69.94 mm along the proximal link and 3 mm to its palmar side (our link
+# frames: along +z, palmar face on -y).
+DISTAL_XYZ = (0, -0.003, 0.06994)
 
 
 def Rx(a):
@@ -324,14 +329,15 @@ def test_barrett_joints_match_sheet():
     spec = get_hand_spec("barrett")
     expected = {
         # name: parent, child, xyz in parent, axis in child, lower, upper
-        "f1_spread": ("bh_base", "f1_knuckle", (0.025, 0, 0.0415), None, 0, PI),
-        "f2_spread": ("bh_base", "f2_knuckle", (-0.025, 0, 0.0415), None, 0, PI),
-        "f1_prox": ("f1_knuckle", "f1_proximal", None, (1, 0, 0), 0, 2.44),
-        "f2_prox": ("f2_knuckle", "f2_proximal", None, (1, 0, 0), 0, 2.44),
-        "f3_prox": ("bh_base", "f3_proximal", (0, 0.05, 0.0754), (1, 0, 0), 0, 2.44),
-        "f1_dist": ("f1_proximal", "f1_distal", (0, 0, 0.070), (1, 0, 0), 0, math.radians(48)),
-        "f2_dist": ("f2_proximal", "f2_distal", (0, 0, 0.070), (1, 0, 0), 0, math.radians(48)),
-        "f3_dist": ("f3_proximal", "f3_distal", (0, 0, 0.070), (1, 0, 0), 0, math.radians(48)),
+        # Barrett's D-H table: F1's spread axis at x = -0.025, F2's at +0.025
+        "f1_spread": ("bh_base", "f1_knuckle", (-0.025, 0, 0.0415), None, 0, PI),
+        "f2_spread": ("bh_base", "f2_knuckle", (0.025, 0, 0.0415), None, 0, PI),
+        "f1_prox": ("f1_knuckle", "f1_proximal", None, (1, 0, 0), 0, PROX_UPPER),
+        "f2_prox": ("f2_knuckle", "f2_proximal", None, (1, 0, 0), 0, PROX_UPPER),
+        "f3_prox": ("bh_base", "f3_proximal", (0, 0.05, 0.0754), (1, 0, 0), 0, PROX_UPPER),
+        "f1_dist": ("f1_proximal", "f1_distal", DISTAL_XYZ, (1, 0, 0), 0, math.radians(48)),
+        "f2_dist": ("f2_proximal", "f2_distal", DISTAL_XYZ, (1, 0, 0), 0, math.radians(48)),
+        "f3_dist": ("f3_proximal", "f3_distal", DISTAL_XYZ, (1, 0, 0), 0, math.radians(48)),
     }
     assert sorted(spec.joint_names) == sorted(expected)
     for name, (parent, child, xyz, axis, lower, upper) in expected.items():
@@ -345,9 +351,14 @@ def test_barrett_joints_match_sheet():
         if axis is not None:
             np.testing.assert_allclose(joint.revolute_axis(), axis, atol=1e-12)
         assert joint.position_lower_limits()[0] == pytest.approx(lower, abs=1e-9)
-        assert joint.position_upper_limits()[0] == pytest.approx(upper, abs=1e-5)
+        assert joint.position_upper_limits()[0] == pytest.approx(upper, abs=1e-9)
+    # F1's spread axis points along -z of the palm, F2's along +z (mirror fingers)
+    for name, sign in (("f1_spread", -1.0), ("f2_spread", 1.0)):
+        joint = plant.GetJointByName(name, hand)
+        R_BJ = joint.frame_on_parent().GetFixedPoseInBodyFrame().rotation()
+        np.testing.assert_allclose(R_BJ @ joint.revolute_axis(), [0, 0, sign], atol=1e-12)
     # distal range covers the coupled proximal range
-    assert math.radians(48) >= 2.44 / 3
+    assert math.radians(48) >= PROX_UPPER / 3
     assert [a.joint().name() for a in actuators_of(plant, hand)] == [
         "f1_spread",
         "f1_prox",
@@ -355,7 +366,14 @@ def test_barrett_joints_match_sheet():
         "f3_prox",
     ]
     plant.Finalize()
-    assert plant.CalcTotalMass(plant.CreateDefaultContext()) == pytest.approx(BARRETT_MASS)
+    total = plant.CalcTotalMass(plant.CreateDefaultContext())
+    assert total == pytest.approx(BARRETT_MASS)
+    assert abs(total - BARRETT_WEIGHED) <= 0.05 * BARRETT_WEIGHED
+    for body, mass in (("bh_base", 0.59573), ("f1_knuckle", 0.14109), ("f2_knuckle", 0.14109)):
+        assert plant.GetBodyByName(body, hand).default_mass() == pytest.approx(mass)
+    for k in (1, 2, 3):
+        assert plant.GetBodyByName(f"f{k}_proximal", hand).default_mass() == pytest.approx(0.062139)
+        assert plant.GetBodyByName(f"f{k}_distal", hand).default_mass() == pytest.approx(0.041377)
 
 
 @pytest.mark.parametrize("kind", ["shadow", "barrett"])
@@ -496,62 +514,84 @@ def _to_plant_order(plant, hand, spec, q):
     return q_plant
 
 
-@pytest.mark.parametrize("spread, prox", [(0.0, 0.0), (0.6, 0.4), (0.6, 2.0)])
-def test_barrett_fingertips_closed_form(spread, prox):
-    """Zero flexion is the open hand: fingers flat, pointing radially outward, the
-    distal bent up toward the palm normal (jhu-lcsr/barrett_model's convention:
-    ``med_joint`` at 0 along the knuckle's radial axis, ``dist_joint`` turned pi/4)."""
+def _homogeneous(R=None, p=(0.0, 0.0, 0.0)):
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    T[:3, 3] = p
+    return T
+
+
+def _rpy(roll, pitch, yaw):
+    """URDF rpy: R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    return Rz(yaw) @ Ry(pitch) @ Rx(roll)
+
+
+def barrett_reference_tip(finger: str, spread: float, prox: float) -> np.ndarray:
+    """Fingertip of ``finger`` in the palm frame from the BH8-280's reference chain.
+
+    Written out from the references, not from our SDF, in jhu-lcsr/barrett_model's
+    frames (each link along its own x, joint axes along z, flexion turns x toward
+    +y, the palmar side); F3 on +y. Barrett's D-H table: finger k's spread axis at
+    r_k * 25 mm, r = (-1, +1) for (F1, F2), F1's along -z and F2's along +z, 41.5 mm
+    above the base; flexion axis 50 mm out from it (A1) and 33.9 mm up; F3's at
+    (0, 0.05, 0.0754). Distal joint 69.94 mm along the proximal link and 3 mm to its
+    palmar side, turned pi/4; fingertip 50 mm along the distal link (A3). The
+    distal follows the proximal at 1/3 (libbarrett's 125 / 375 ratios).
+    """
+    dist = prox / 3.0
+    if finger in ("f1", "f2"):
+        r = -1.0 if finger == "f1" else 1.0
+        T = _homogeneous(_rpy(0, 0, -PI / 2), (r * 0.025, 0.0, 0.0415))
+        T = T @ _homogeneous(Rz(r * spread))  # axis r * z: F1 about -z, F2 about +z
+        T = T @ _homogeneous(_rpy(PI / 2, 0, 0), (0.05, 0.0, 0.0339))
+    else:
+        T = _homogeneous(_rpy(PI / 2, 0, PI / 2), (0.0, 0.05, 0.0754))
+    T = T @ _homogeneous(Rz(prox))
+    T = T @ _homogeneous(_rpy(0, 0, PI / 4), (0.06994, 0.003, 0.0))
+    T = T @ _homogeneous(Rz(dist))
+    return (T @ np.array([0.05, 0.0, 0.0, 1.0]))[:3]
+
+
+def test_barrett_reference_chain_sanity():
+    """The written-out chain itself: the open hand, by hand."""
+    s45 = math.sqrt(0.5)
+    # F3 open: 0.05 + 0.06994 + 0.05 cos 45 out, 0.003 + 0.05 sin 45 above its axis
+    np.testing.assert_allclose(
+        barrett_reference_tip("f3", 0.0, 0.0),
+        [0, 0.05 + 0.06994 + 0.05 * s45, 0.0754 + 0.003 + 0.05 * s45], atol=1e-12)
+    # F1 on x < 0 and F2 on x > 0, both toward -y; spreading moves them apart
+    f1, f2 = barrett_reference_tip("f1", 0.0, 0.0), barrett_reference_tip("f2", 0.0, 0.0)
+    np.testing.assert_allclose(f2, f1 * np.array([-1, 1, 1]), atol=1e-12)  # mirror images
+    assert f1[0] == pytest.approx(-0.025) and f2[0] == pytest.approx(0.025)
+    assert f1[1] == pytest.approx(-(0.05 + 0.06994 + 0.05 * s45))
+    assert barrett_reference_tip("f1", 0.5, 0.0)[0] < -0.025
+    assert barrett_reference_tip("f2", 0.5, 0.0)[0] > 0.025
+
+
+def test_barrett_fingertips_follow_the_reference_chain():
+    """All three tip frames against the reference chain over spread 0..pi and
+    flexion 0..2.0 rad (distal = proximal / 3): worst error <= 1 mm."""
     plant = MultibodyPlant(time_step=0.0)
     hand = Parser(plant).AddModels(MODELS / "barrett_hand/bh8_280.sdf")[0]
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("bh_base", hand))
     plant.Finalize()
     context = plant.CreateDefaultContext()
     spec = get_hand_spec("barrett")
-    q = dict(
-        f1_spread=spread,
-        f2_spread=spread,
-        f1_prox=prox,
-        f2_prox=prox,
-        f3_prox=prox,
-        f1_dist=prox / 3,
-        f2_dist=prox / 3,
-        f3_dist=prox / 3,
-    )
-    plant.SetPositions(
-        context, hand, _to_plant_order(plant, hand, spec, [q[n] for n in spec.joint_names])
-    )
-
-    def finger(outward_xy):
-        # In the finger's vertical plane, angles from the outward horizontal: flexion
-        # raises the finger toward +z (the palm normal) and past it over the palm; the
-        # distal adds its fixed bend plus its joint angle.
-        a1, a2 = prox, prox + BEND + prox / 3
-        radial = 0.070 * math.cos(a1) + BARRETT_TIP * math.cos(a2)
-        height = 0.070 * math.sin(a1) + BARRETT_TIP * math.sin(a2)
-        return np.array([outward_xy[0] * radial, outward_xy[1] * radial, height])
-
-    z_flex = 0.0415 + 0.0339
-    out1 = np.array([math.sin(spread), -math.cos(spread)])  # F1 swings toward +x
-    out2 = np.array([-math.sin(spread), -math.cos(spread)])  # F2 mirrors it
-    expected = {
-        "f1_tip": np.array([0.025 + 0.05 * out1[0], 0.05 * out1[1], z_flex]) + finger(out1),
-        "f2_tip": np.array([-0.025 + 0.05 * out2[0], 0.05 * out2[1], z_flex]) + finger(out2),
-        "f3_tip": np.array([0, 0.05, 0.0754]) + finger(np.array([0.0, 1.0])),
-    }
-    if prox == 0.0:
-        # the open hand, written out: F3's tip 0.05 + 0.070 + 0.055 cos 45 deg out
-        # and 0.055 sin 45 deg above its flexion axis
-        s45 = math.sqrt(0.5)
-        np.testing.assert_allclose(
-            expected["f3_tip"], [0, 0.12 + 0.055 * s45, 0.0754 + 0.055 * s45]
-        )
-    for name, p in expected.items():
-        np.testing.assert_allclose(
-            plant.GetFrameByName(name, hand).CalcPoseInWorld(context).translation(),
-            p,
-            atol=1e-9,
-            err_msg=name,
-        )
+    worst = 0.0
+    for spread in np.linspace(0.0, PI, 7):
+        for prox in np.linspace(0.0, 2.0, 9):
+            q = dict(f1_spread=spread, f2_spread=spread, f1_prox=prox, f2_prox=prox,
+                     f3_prox=prox, f1_dist=prox / 3, f2_dist=prox / 3, f3_dist=prox / 3)
+            plant.SetPositions(
+                context, hand, _to_plant_order(plant, hand, spec, [q[n] for n in spec.joint_names])
+            )
+            for finger in ("f1", "f2", "f3"):
+                p_model = plant.GetFrameByName(f"{finger}_tip", hand).CalcPoseInWorld(
+                    context).translation()
+                p_ref = barrett_reference_tip(finger, spread, prox)
+                worst = max(worst, float(np.linalg.norm(p_model - p_ref)))
+    assert worst <= 1e-3, f"worst fingertip error {worst * 1e3:.3f} mm"
 
 
 # ---------------------------------------------------------------------------

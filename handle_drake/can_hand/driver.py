@@ -35,7 +35,9 @@ class CanHandProxy(LeafSystem):
     Ports (``nu`` actuated joints, ``nq`` joints, ``nt`` fingertips; order of
     :class:`~handle_drake.can_hand.layout.HandLayout`):
 
-    - input ``position`` (nu, rad): joint position command, actuated order.
+    - input ``position`` (nu, rad): joint position command, actuated order
+      (Barrett: ``f1_spread f1_prox f2_prox f3_prox``, F1 being the finger at
+      x < 0 of the palm, as on the real hand).
     - output ``position_commanded`` (nu, rad): the setpoint the hand is
       tracking (after the server's clamping and rate limits).
     - output ``position_measured`` (nq, rad): all joints.

@@ -22,6 +22,11 @@ HAND_KIND_CODES = {"shadow": 1, "barrett": 2}
 # Joints that close a finger onto an object (used by the simulated firmware's
 # virtual object): Shadow J3/J2 of each finger and the thumb's THJ1, Barrett's
 # proximal flexions. Abduction and wrist joints never press on an object.
+# Barrett fingers are named as on the BH8-280 (Barrett's D-H table, the hand's
+# pucks F1 F2 F3 spread, libbarrett, GraspIt, OpenRAVE): f1 is the finger on the
+# palm's x < 0 side, f2 on x > 0, f3 the fixed one on +y (models/barrett_hand),
+# so a setpoint for ``f1_prox`` moves the same physical finger on the CAN hand
+# as in simulation (tests/can_hand/test_can_finger_sides.py).
 _CLOSING_JOINTS = {
     "shadow": (
         ("FFJ3", "FFJ2"), ("MFJ3", "MFJ2"), ("RFJ3", "RFJ2"), ("LFJ3", "LFJ2"), ("THJ1",),

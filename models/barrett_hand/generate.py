@@ -4,10 +4,13 @@
 Run ``python models/barrett_hand/generate.py``; the generated file is committed
 beside this script (a test checks it equals :func:`make_sdf`'s output).
 
-Numbers: /work/shared/reference/hand_kinematics.md section 2 (public figures
-of barrett_model, GraspIt, OpenRAVE and libbarrett). The SDF writer is the
-one of ``models/shadow_hand/generate.py`` (loaded from the file beside ours).
-What is our own choice (effort and velocity limits, gains, inertias, link
+Numbers: Barrett's BH8-series manual (D-H table of the fingers), Barrett's
+published BH8-280 mass properties and jhu-lcsr/barrett_model
+``models/hand.urdf.xacro`` (CAD-derived), as collected in
+/work/shared/reference/hand_kinematics.md section 2; README.md gives the
+source of every number. The SDF writer is the one of
+``models/shadow_hand/generate.py`` (loaded from the file beside ours). What is
+our own choice (effort and velocity limits, gains, inertias, link
 cross-sections, the 45 degree distal bend within the 42-50 degree range) is
 marked "ours" and listed in README.md.
 
@@ -19,12 +22,15 @@ flexion is the real hand's fully open pose: the proximal joint frame is turned
 pointing radially outward at the height of the flexion axis, with its palmar
 face up (the palm normal, +z); the distal link is bent 45 degrees up from it.
 Positive flexion raises the finger toward the palm normal (vertical at pi/2)
-and then over the palm (2.44 rad = 140 degrees, 50 degrees past vertical).
+and then over the palm (2.4435 rad = 140 degrees, 50 degrees past vertical).
 This is the convention of jhu-lcsr/barrett_model (``med_joint`` at zero along
 the knuckle's radial axis, ``dist_joint`` turned pi/4) and of the hand's
-firmware, whose "open" (HO) position is 0. F1 and F2 sit at x = +0.025 and
--0.025 and face F3 at spread 0; spreading swings F1 toward +x and F2 toward -x
-(mirror axes), and at spread pi both stand beside F3.
+firmware, whose "open" (HO) position is 0. Sides as in Barrett's D-H table
+(finger k's spread axis at r_k * 25 mm, r = -1, +1, 0 for F1, F2, F3; the
+hand's pucks, libbarrett, GraspIt and OpenRAVE name the fingers the same
+way): F1 at x = -0.025 with its spread axis along -z, F2 at x = +0.025 along
++z, F3 on +y. At spread 0 F1 and F2 face F3; spreading swings F1 toward -x and
+F2 toward +x (mirror axes), and at spread pi both stand beside F3.
 """
 
 from __future__ import annotations
@@ -58,19 +64,37 @@ GAINS = {
 }
 DISTAL_DAMPING = 0.01
 
-SPREAD_AXIS_X = 0.025  # |x| of the F1/F2 spread axes
+SPREAD_AXIS_X = 0.025  # |x| of the F1/F2 spread axes (D-H Aw)
+# (finger, side r_k of Barrett's D-H table): F1 at x = -0.025, spread axis -z;
+# F2 at x = +0.025, spread axis +z.
+SPREAD_SIDES = (("f1", -1.0), ("f2", 1.0))
 SPREAD_AXIS_Z = 0.0415
-FLEX_OUT = 0.05  # flexion axis, radially out from the spread axis
+FLEX_OUT = 0.05  # flexion axis, radially out from the spread axis (D-H A1)
 FLEX_UP = 0.0339  # and up
 F3_FLEX = (0.0, 0.05, 0.0754)
-PROXIMAL_LENGTH = 0.070
-DISTAL_TIP = 0.055  # distal joint -> fingertip frame (sheet: 0.050-0.059)
+DISTAL_ALONG = 0.06994  # distal joint along the proximal link (barrett_model)
+DISTAL_PALMAR = 0.003  # and toward its palmar side (barrett_model)
+DISTAL_TIP = 0.050  # distal joint -> fingertip frame (barrett_model tip link, D-H A3)
+DISTAL_TIP_END = 0.057  # end of the rounded tip (barrett_model: tip cylinder r 6.5 mm at 50.5 mm)
 DISTAL_BEND = math.radians(45.0)  # fixed bend of the distal link (sheet: 42-50 deg)
+# In the proximal link's frame (along +z, palmar face on -y).
+DISTAL_JOINT_XYZ = (0.0, -DISTAL_PALMAR, DISTAL_ALONG)
 # Proximal joint frame: the link's +z (along the finger) points outward (+y of the
 # finger frame) and its palmar -y points up (+z) at zero flexion: the hand open flat.
 FLEX_ZERO_RPY = (-math.pi / 2, 0.0, 0.0)
-PROX_UPPER = 2.44
-DIST_UPPER = math.radians(48.0)  # covers PROX_UPPER / 3 = 0.813 rad
+PROX_UPPER = math.radians(140.0)  # 2.4435 rad (D-H table, barrett_model)
+DIST_UPPER = math.radians(48.0)  # covers PROX_UPPER / 3 = 0.8145 rad (barrett_model)
+
+# Masses (kg) of Barrett's BH8-280 mass-properties page: the hand base (frame
+# W, without the palm pad; it holds F3's fixed knuckle), link 1 (the spread
+# knuckle of F1 and F2), link 2 (proximal), link 3 (distal). 1.188 kg in all;
+# Barrett weighed the hand at 664 g (base) + 3 x 179 g (fingers) = 1.201 kg.
+BASE_MASS = 0.59573
+# The page's centre of mass of frame W, turned half a turn about z (F3 on +y here).
+BASE_COM = (-5.1098e-5, 0.0050433, 0.036671)
+KNUCKLE_MASS = 0.14109
+PROXIMAL_MASS = 0.062139
+DISTAL_MASS = 0.041377
 
 FINGER_WIDTH = 0.022  # x extent of proximal and knuckle links (ours)
 DISTAL_RADIUS = 0.009
@@ -86,19 +110,19 @@ def finger_links(prefix: str):
     """(proximal, distal) links of one finger in its local frame."""
     proximal = Link(
         f"{prefix}_proximal",
-        0.062,
-        (0, 0, PROXIMAL_LENGTH / 2),
-        W.solid_box_inertia(0.062, FINGER_WIDTH, 0.020, PROXIMAL_LENGTH),
+        PROXIMAL_MASS,
+        (0, 0, DISTAL_ALONG / 2),
+        W.solid_box_inertia(PROXIMAL_MASS, FINGER_WIDTH, 0.020, DISTAL_ALONG),
         [Shape("box", (FINGER_WIDTH, 0.020, 0.066), (0, 0, 0.037))],
         FINGER_COLOR,
     )
     r = DISTAL_RADIUS
-    tip_end = 0.059  # rounded end, 4 mm past the tip frame
+    tip_end = DISTAL_TIP_END  # rounded end, 7 mm past the tip frame
     distal = Link(
         f"{prefix}_distal",
-        0.041,
+        DISTAL_MASS,
         (0, 0, 0.025),
-        W.solid_cylinder_inertia(0.041, r, tip_end),
+        W.solid_cylinder_inertia(DISTAL_MASS, r, tip_end),
         [
             Shape("capsule", (r, tip_end - 2 * r), (0, 0, tip_end / 2)),
             # tactile pad on the palmar (-y) face, 0.5 mm proud of the capsule (ours)
@@ -125,14 +149,13 @@ def build():
 
     # Base: motor housing (cylinder r 0.045, the sheet's 0.042 base plus the
     # spacer up to the palm plate, ours), palm plate with its top at z 0.080, and
-    # F3's fixed knuckle, whose mass (knuckle 0.141) is added to the palm's 0.506.
-    base_mass = 0.506 + 0.141
+    # F3's fixed knuckle. Barrett's frame W mass includes that knuckle.
     add(
         Link(
             "bh_base",
-            base_mass,
-            (0, 0.005, 0.045),
-            W.solid_cylinder_inertia(base_mass, 0.045, 0.08),
+            BASE_MASS,
+            BASE_COM,
+            W.solid_cylinder_inertia(BASE_MASS, 0.045, 0.08),
             [
                 Shape("cylinder", (0.045, 0.064), (0, 0, 0.032)),
                 Shape("box", (0.076, 0.046, 0.016), (0, 0, 0.072)),
@@ -160,15 +183,14 @@ def build():
             unactuated_damping=DISTAL_DAMPING,
         )
 
-    for i, sign in ((1, 1.0), (2, -1.0)):
-        p = f"f{i}"
+    for p, sign in SPREAD_SIDES:
         # Knuckle frame on the spread axis, turned so that local +y points to world -y.
         add(
             Link(
                 f"{p}_knuckle",
-                0.141,
+                KNUCKLE_MASS,
                 (0, 0.03, 0.02),
-                W.solid_box_inertia(0.141, FINGER_WIDTH, 0.06, 0.03),
+                W.solid_box_inertia(KNUCKLE_MASS, FINGER_WIDTH, 0.06, 0.03),
                 [Shape("box", (FINGER_WIDTH, 0.05, 0.026), (0, 0.032, 0.022))],
                 BASE_COLOR,
             ),
@@ -183,7 +205,7 @@ def build():
                 math.pi,
                 2.0,
                 3.0,
-                "spread" if i == 1 else None,
+                "spread" if p == "f1" else None,
             ),
         )
         proximal, distal = finger_links(p)
@@ -209,7 +231,7 @@ def build():
                 f"{p}_dist",
                 proximal.name,
                 distal.name,
-                (0, 0, PROXIMAL_LENGTH),
+                DISTAL_JOINT_XYZ,
                 (DISTAL_BEND, 0, 0),
                 (1, 0, 0),
                 0.0,
@@ -243,7 +265,7 @@ def build():
             "f3_dist",
             proximal.name,
             distal.name,
-            (0, 0, PROXIMAL_LENGTH),
+            DISTAL_JOINT_XYZ,
             (DISTAL_BEND, 0, 0),
             (1, 0, 0),
             0.0,

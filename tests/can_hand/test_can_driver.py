@@ -134,7 +134,7 @@ def test_driver_closes_the_hand_onto_a_virtual_object():
             simulator.set_target_realtime_rate(1.0)
             simulator.AdvanceTo(1.2)
             context = driver.GetMyContextFromRoot(simulator.get_context())
-            stop = 0.5 * 2.44
+            stop = 0.5 * layout.joint_upper[layout.joint_names.index("f1_prox")]
             q = driver.GetOutputPort("position_measured").Eval(context)
             prox = [layout.joint_names.index(n) for n in ("f1_prox", "f2_prox", "f3_prox")]
             dist = [layout.joint_names.index(n) for n in ("f1_dist", "f2_dist", "f3_dist")]
