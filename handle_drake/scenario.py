@@ -119,8 +119,8 @@ class HandConfig:
 class ObjectConfig:
     """The object to grasp; see ``handle_drake.objects`` for kinds and sizes."""
 
-    kind: str = "sphere"
-    size: float = 0.06  # m, the kind's characteristic length
+    kind: str = "sphere"  # a catalogue kind, or "mesh" (then file, scale, density)
+    size: float = 0.06  # m, the kind's characteristic length (mesh: derived, ignored)
     # Optional overrides (m) of the kind's other dimensions, e.g. {depth: 0.01}
     # for a thin box; see handle_drake.objects.PROPORTIONS.
     dimensions: dict[str, float] = dc.field(default_factory=dict)
@@ -133,6 +133,13 @@ class ObjectConfig:
     # trials: the hand closes on an object that cannot move, as in the
     # report's OpenRAVE experiments).
     fixed: bool = False
+    # kind "mesh": the mesh file (OBJ, STL, PLY, ...; relative paths are taken
+    # from the scenario file's folder, else the working directory), the scale
+    # from file units to m, and the density (kg/m^3) used when mass is None.
+    # See handle_drake.objects.mesh.
+    file: str = ""
+    scale: float = 1.0
+    density: float | None = None
     # An accelerometer on the object (see handle_drake.instruments.config): the
     # station then exports object.acceleration, .roll_pitch, .free_fall, .slip, ...
     accelerometer: AccelerometerConfig | None = None
@@ -300,6 +307,7 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
     scenario = Scenario()
     if filename is not None:
         scenario = _load(read_text_file(filename, "scenario"), scenario, source=str(filename))
+        _resolve_mesh_file(scenario, Path(filename).parent)
     if data is not None:
         scenario = _load(data, scenario, source="override")
     validate_scenario(scenario)
@@ -354,6 +362,15 @@ def DumpScenario(scenario: Scenario) -> str:
     return text
 
 
+def _resolve_mesh_file(scenario: Scenario, folder: Path) -> None:
+    # A relative mesh path in a scenario file names a file next to the scenario.
+    o = scenario.object
+    if o is not None and o.file and not Path(o.file).expanduser().is_absolute():
+        candidate = folder / o.file
+        if candidate.is_file():
+            o.file = str(candidate.resolve())
+
+
 def _load(text: str, defaults: Scenario, source: str) -> Scenario:
     if not text.strip():
         return defaults
@@ -406,13 +423,15 @@ def validate_scenario(scenario: Scenario) -> None:
             )
         if not math.isfinite(value):
             raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
-    if scenario.object is not None:
+    if scenario.object is not None and scenario.object.kind == "mesh":
+        _validate_mesh_object(scenario.object)
+    elif scenario.object is not None:
         from handle_drake.objects import KINDS
 
         if scenario.object.kind not in KINDS:
             raise ScenarioError(
                 f"object.kind: unknown object {short(scenario.object.kind)}; "
-                f"expected one of {list(KINDS)}"
+                f"expected one of {list(KINDS) + ['mesh']}"
             )
         _check_positive("object.size", scenario.object.size)
         from handle_drake.objects import ObjectSpec
@@ -422,6 +441,9 @@ def validate_scenario(scenario: Scenario) -> None:
                        dimensions=scenario.object.dimensions or None)
         except ValueError as error:
             raise ScenarioError(f"object: {error}") from None
+        if scenario.object.file:
+            raise ScenarioError(f"object.file: only kind 'mesh' reads a file, got kind "
+                                f"{scenario.object.kind!r} with file {scenario.object.file!r}")
         if scenario.object.mass is not None:
             _check_positive("object.mass", scenario.object.mass)
         if not (math.isfinite(scenario.object.mu) and scenario.object.mu >= 0):
@@ -490,6 +512,29 @@ def _validate_accelerometer(scenario: Scenario) -> None:
         check_sensor_pose(spec, instrument_X_OS(scenario))
     except ValueError as error:
         raise ScenarioError(f"object.accelerometer.{error}") from None
+
+
+def _validate_mesh_object(o: ObjectConfig) -> None:
+    if not o.file:
+        raise ScenarioError("object.file: kind 'mesh' needs a mesh file (OBJ, STL, PLY, ...)")
+    if o.dimensions:
+        raise ScenarioError(f"object.dimensions: a mesh takes its dimensions from its file "
+                            f"(use scale), got {dict(o.dimensions)}")
+    if o.mass is not None and o.density is not None:
+        raise ScenarioError("object: give mass or density for a mesh, not both")
+    try:
+        mesh_object_spec(o)
+    except FileNotFoundError as error:
+        raise ScenarioError(f"object.{error}") from None
+    except (ValueError, TypeError) as error:
+        raise ScenarioError(f"object.{error}") from None
+
+
+def mesh_object_spec(o: ObjectConfig):
+    """The :class:`~handle_drake.objects.mesh.MeshObjectSpec` of a kind-"mesh" object."""
+    from handle_drake.objects.mesh import MeshObjectSpec
+
+    return MeshObjectSpec(file=o.file, scale=o.scale, mass=o.mass, density=o.density, mu=o.mu)
 
 
 def _validate_script(scenario: Scenario, spec) -> None:

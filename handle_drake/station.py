@@ -250,8 +250,12 @@ def object_spec(scenario: Scenario):
     from handle_drake.objects import ObjectSpec
 
     o = scenario.object
+    if o.kind == "mesh":
+        from handle_drake.scenario import mesh_object_spec
+
+        return mesh_object_spec(o)
     return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu,
-                      dimensions=o.dimensions or None)
+                      dimensions=o.dimensions or None, density=o.density)
 
 
 def object_initial_pose(scenario: Scenario) -> RigidTransform:

@@ -1,4 +1,5 @@
 import os
+import tempfile
 
 # Threaded BLAS on 2 cores makes small solves much slower under load.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -6,3 +7,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 os.environ.setdefault("HANDLE_DRAKE_REDUCED", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Mesh objects' convex decompositions go to a shared temporary cache, not the user's
+# (content-hashed, written atomically: safe across workers and runs).
+os.environ.setdefault("HANDLE_DRAKE_CACHE_DIR",
+                      os.path.join(tempfile.gettempdir(), "handle_drake_test_cache"))

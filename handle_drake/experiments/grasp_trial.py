@@ -72,8 +72,9 @@ BABBLING_SIZES = {
 @dc.dataclass(frozen=True)
 class GraspTrialConfig:
     hand: str = "barrett"
-    object: str = "sphere"
-    size: float | None = None  # m; None: BABBLING_SIZES[object], else DEFAULT_SIZE[object]
+    object: str = "sphere"  # a catalogue kind, or "mesh" with object_file
+    # m; None: BABBLING_SIZES[object], else DEFAULT_SIZE[object] (mesh: from the file)
+    size: float | None = None
     space: str = "offset"
     noise: float = 0.0  # std of additive metric noise
     mu: float = 0.8  # object friction, also used by the metric
@@ -88,11 +89,26 @@ class GraspTrialConfig:
     # grasp reads 0.40, 0.47 or 0.55 depending on the step it falls on.
     hold_samples: int = 8
     hold_window: float = 0.1  # s
+    # object "mesh": the mesh file and its scale to m (handle_drake.objects.mesh);
+    # object_digest is the file's SHA-256, filled in so that cached trials of a
+    # changed file are never read back.
+    object_file: str | None = None
+    object_scale: float = 1.0
+    object_digest: str = ""
 
     def __post_init__(self):
         get_hand_spec(self.hand)
-        if self.object not in KINDS:
-            raise ValueError(f"object: unknown kind {self.object!r}; expected one of {KINDS}")
+        if self.object == "mesh":
+            if not self.object_file:
+                raise ValueError("object_file: object 'mesh' needs a mesh file")
+            if self.size is not None:
+                raise ValueError("size: a mesh's size comes from its file (use object_scale)")
+            object.__setattr__(self, "object_digest", self.object_spec().digest)
+        elif self.object not in KINDS:
+            raise ValueError(f"object: unknown kind {self.object!r}; expected one of "
+                             f"{KINDS + ('mesh',)}")
+        elif self.object_file is not None:
+            raise ValueError(f"object_file: only object 'mesh' reads a file, got {self.object!r}")
         if self.space not in PARAMETER_SPACES:
             raise ValueError(f"space: expected one of {PARAMETER_SPACES}, got {self.space!r}")
         if self.space == "synergy" and self.hand != "shadow":
@@ -125,10 +141,27 @@ class GraspTrialConfig:
 
     @property
     def object_size(self) -> float:
+        if self.object == "mesh":
+            return self.object_spec().size
         if self.size is not None:
             return float(self.size)
         # Kinds without a babbling size (the instrumented devices) keep their own size.
         return BABBLING_SIZES.get(self.object, DEFAULT_SIZE[self.object])
+
+    def object_spec(self):
+        """The trial's object: an ``ObjectSpec``, or a ``MeshObjectSpec`` for "mesh"."""
+        if self.object == "mesh":
+            from handle_drake.objects.mesh import MeshObjectSpec
+
+            return MeshObjectSpec(self.object_file, scale=self.object_scale, mu=self.mu)
+        return ObjectSpec(self.object, self.object_size, mu=self.mu)
+
+    def object_config(self, **fields) -> ObjectConfig:
+        """The trial scenario's object (a catalogue kind or the mesh file), with ``fields``."""
+        if self.object == "mesh":
+            return ObjectConfig(kind="mesh", file=self.object_spec().file,
+                                scale=self.object_scale, mu=self.mu, **fields)
+        return ObjectConfig(kind=self.object, size=self.object_size, mu=self.mu, **fields)
 
 
 @dc.dataclass
@@ -158,7 +191,7 @@ def _hand_setup(config: GraspTrialConfig):
     spec = get_hand_spec(config.hand)
     names = list(spec.actuated_joint_names)
     preshape, closed = np.zeros(len(names)), np.zeros(len(names))
-    top = total_height(ObjectSpec(config.object, config.object_size)) / 2
+    top = total_height(config.object_spec()) / 2
     if config.hand == "barrett":
         # Palm down, fingers raised to 0.8 rad (pointing down and out) and
         # closed towards 2.2 rad; spread 0 (F1, F2 against F3).
@@ -229,6 +262,11 @@ class GraspTrial:
     @property
     def name(self) -> str:
         c = self.config
+        if c.object == "mesh":
+            import re
+
+            stem = re.sub(r"[^A-Za-z0-9_]+", "_", self.config.object_spec().name)
+            return f"{c.hand}-mesh_{stem}-{c.space}"
         return f"{c.hand}-{c.object}-{c.space}"
 
     def base_scenario(self) -> Scenario:
@@ -242,8 +280,7 @@ class GraspTrial:
         X_WB.rotation.value = Rotation.Rpy(deg=np.degrees(start[3:]).tolist())
         return Scenario(
             hand=HandConfig(kind=c.hand, mount=FloatingWrist(X_WB=X_WB)),
-            object=ObjectConfig(kind=c.object, size=c.object_size, mu=c.mu, fixed=True,
-                                on_table=False),
+            object=c.object_config(fixed=True, on_table=False),
             table=None,
             contact_model="point",
             time_step=c.time_step,

@@ -21,6 +21,9 @@
   anatomical synergy amplitudes (thumb abduction, index/middle abduction) on
   a cuboid, the GP mean map after ``trials`` trials next to a grid scan.
 - ``summary.json``: every number above.
+- with ``meshes`` (``handle-drake report --mesh FILE``): each mesh object is
+  one more row of Table 3 (no report column) with its own 2-D figure
+  ``fig_mesh_<name>_2d.png`` (grid ground truth and the GP mean of BO seed 0).
 
 Every trial is logged in ``out_dir/babble.sqlite`` and every grid is cached in
 ``out_dir/grids/``: running the report again (or after an interruption)
@@ -119,7 +122,16 @@ class ReportSettings:
 
 # ------------------------------------------------------------------- specs
 def _offset_config(kind: str, noise: float) -> GraspTrialConfig:
+    """The 2-D offset trial of a catalogue kind, or of a mesh object given by its file path."""
+    if kind not in KINDS:
+        return GraspTrialConfig(hand="barrett", object="mesh", object_file=kind, space="offset",
+                                noise=noise)
     return GraspTrialConfig(hand="barrett", object=kind, space="offset", noise=noise)
+
+
+def _label(kind: str) -> str:
+    """A table row's name: the kind, or ``mesh <file stem>`` for a mesh object."""
+    return kind if kind in KINDS else f"mesh {Path(kind).stem}"
 
 
 def _table3_spec(kind, seed, s: ReportSettings) -> RunSpec:
@@ -140,7 +152,7 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
                 grid: int | None = None, reduced: bool | None = None, workers: int | None = None,
                 noise: float | None = None, ei_stop: float | None = None,
                 progress: bool = True, executor="local",
-                connect_timeout: float = CONNECT_TIMEOUT) -> dict:
+                connect_timeout: float = CONNECT_TIMEOUT, meshes=()) -> dict:
     """Run (or resume) every experiment and write the figures and tables; returns the summary.
 
     ``reduced`` (default: ``handle_drake.testing.reduced()``) starts from
@@ -150,14 +162,18 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
     ``"dask://HOST:PORT"``, or an open executor (a ``distributed.Client``
     too): grids and trials run there, the runs are driven and logged here.
     The numbers do not depend on the choice.
+    ``meshes``: mesh files added to Table 3 and the 2-D figures.
     """
+    objects = OBJECT_ORDER + tuple(str(Path(m).expanduser().resolve()) for m in meshes)
+    for kind in objects[len(OBJECT_ORDER):]:
+        _offset_config(kind, 0.0)  # a bad mesh fails here, before any trial runs
     if isinstance(executor, str | ExecutorSpec):
         spec = ExecutorSpec.parse(executor)
         if spec.kind != "local":
             workers_ = workers if workers is not None else ReportSettings.workers
             with trial_executor(spec, workers_, connect_timeout=connect_timeout) as opened:
                 return make_report(out_dir, seeds, trials, grid, reduced, workers, noise,
-                                   ei_stop, progress, opened)
+                                   ei_stop, progress, opened, meshes=meshes)
         executor = None
     executor = None if executor is None else as_executor(executor)
     if reduced is None:
@@ -186,9 +202,9 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
                             lambda: _one_d(out, db, grids, settings, progress, executor))
     truth = step("2-D grids", lambda: {
         kind: grid_values(_offset_config(kind, 0.0), settings.grid, grids, settings.workers,
-                          progress, executor) for kind in OBJECT_ORDER})
+                          progress, executor) for kind in objects})
     table3_specs = {kind: [_table3_spec(kind, s, settings) for s in range(settings.seeds)]
-                    for kind in OBJECT_ORDER}
+                    for kind in objects}
     random_specs = {kind: [_random_spec(kind, s, settings) for s in range(settings.seeds)]
                     for kind in ("sphere", "mug")}
     synergy_spec = RunSpec(_synergy_config(), "bo", 0, settings.trials)
@@ -295,8 +311,9 @@ def _fmt(value, reached=None):
 
 def _table3(out, db, truth, specs, s: ReportSettings) -> dict:
     rows, result = [], {}
-    for kind in OBJECT_ORDER:
+    for kind in specs:
         (ax_x, ax_y), values = truth[kind]
+        report = REPORT_TABLE3.get(kind, ("-",) * 4)
         f_star = float(np.max(values))
         histories = [run_history(db, spec) for spec in specs[kind]]
         totals = [len(h.X) for h in histories]
@@ -304,7 +321,7 @@ def _table3(out, db, truth, specs, s: ReportSettings) -> dict:
         medians = [_median(hits[:, j]) for j in range(len(FRACTIONS))]
         reached = [int(np.sum(np.isfinite(hits[:, j]))) for j in range(len(FRACTIONS))]
         best = [float(np.nanmax(h.noiseless)) for h in histories]
-        result[kind] = dict(
+        result[_label(kind)] = dict(
             grid_max=f_star, grid_argmax=[float(ax_x[np.unravel_index(np.argmax(values),
                                                                         values.shape)[0]]),
                                           float(ax_y[np.unravel_index(np.argmax(values),
@@ -314,11 +331,11 @@ def _table3(out, db, truth, specs, s: ReportSettings) -> dict:
             within_median=dict(zip(map(str, FRACTIONS), medians, strict=True)),
             within_reached=dict(zip(map(str, FRACTIONS), reached, strict=True)),
             within_per_seed=hits.tolist(), best_found_median=_median(best),
-            report=dict(zip(("total", "5%", "10%", "20%"), REPORT_TABLE3[kind], strict=True)))
-        rows.append([kind, _fmt(_median(totals)), *[
+            report=dict(zip(("total", "5%", "10%", "20%"), report, strict=True)))
+        rows.append([_label(kind), _fmt(_median(totals)), *[
             _fmt(m, s.trials) + ("" if r == len(histories) else f" ({r}/{len(histories)})")
             for m, r in zip(medians, reached, strict=True)],
-            f"{f_star:.3f}", f"{_median(best):.3f}", *map(str, REPORT_TABLE3[kind])])
+            f"{f_star:.3f}", f"{_median(best):.3f}", *map(str, report)])
     header = ["object", "total", "5%", "10%", "20%", "grid max", "best found",
               "report total", "report 5%", "report 10%", "report 20%"]
     with open(out / "table3.csv", "w", newline="") as f:
@@ -346,8 +363,9 @@ def _table3(out, db, truth, specs, s: ReportSettings) -> dict:
 
 
 def _figures_2d(out, db, truth, specs, s):
+    meshes = [(kind, f"fig_mesh_{Path(kind).stem}_2d.png") for kind in specs if kind not in KINDS]
     for kind, name in (("wine_glass", "fig23_wine_glass_2d.png"), ("mug", "fig24_mug_2d.png"),
-                       ("star_prism", "fig25_star_prism_2d.png")):
+                       ("star_prism", "fig25_star_prism_2d.png"), *meshes):
         axes_xy, values = truth[kind]
         spec = specs[kind][0]
         history = run_history(db, spec)
@@ -359,7 +377,8 @@ def _figures_2d(out, db, truth, specs, s):
         panel(axs[0, 1], axes_xy, mean, f"GP mean after {len(history.X)} BO trials "
                f"(seed {spec.seed}; dots: trials, star: best)", history, vmin, vmax)
         fig.colorbar(image, ax=axs[0, :].tolist(), label="BW metric")
-        fig.suptitle(f"Barrett hand, {kind.replace('_', ' ')}: metric over the hand's offset")
+        fig.suptitle(f"Barrett hand, {_label(kind).replace('_', ' ')}: metric over the hand's "
+                     "offset")
         fig.savefig(out / name, dpi=110)
     fig, axs = figure(2, 4, (15, 7))
     for ax, kind in zip(axs.ravel(), OBJECT_ORDER, strict=False):

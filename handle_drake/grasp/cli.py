@@ -47,8 +47,15 @@ def register(subparsers) -> None:
                    help="grasp class (palmar_pinch tip_pinch tripod writing_tripod lateral "
                         "lateral_tripod adduction_grip parallel_extension)")
     p.add_argument("--object", default="cuboid", help="sphere, cylinder or cuboid (box)")
-    p.add_argument("--size", type=float, required=True,
-                   help="catalogue size (m): diameter, or the cuboid's width")
+    p.add_argument("--size", type=float, default=None,
+                   help="catalogue size (m): diameter, or the cuboid's width (required "
+                        "unless --mesh)")
+    p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
+                   help="grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
+                        "--object; planned on its bounding box (see grasp.planning)")
+    p.add_argument("--mesh-scale", type=float, default=1.0, metavar="S",
+                   help="mesh file units to metres (default 1)")
+    p.add_argument("--mass", type=float, default=None, help="mesh object mass (kg)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--reactive", dest="reactive", action="store_true", default=None,
                       help="tactile reactive approach and closing (ReactiveGrasp)")
@@ -74,11 +81,13 @@ def register(subparsers) -> None:
     s.set_defaults(func=_cmd_synergies)
 
 
-def run_grasp(grasp_class: str, kind: str, size: float, meshcat=None, html=None,
+def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=None,
               save_scenario=None, reactive: bool | None = None, xy=(0.0, 0.0),
               yaw: float = 0.0, perceived: bool = False):
     """Plan, simulate, lift; returns ``(plan, result, held)``.
 
+    kind: a catalogue kind with its ``size`` (m), or a ``MeshObjectSpec``
+    (``size`` None).
     reactive: execute with :class:`ReactiveGrasp` (True) or the plan's
     keyframes (False); None: :data:`DEFAULT_REACTIVE`. The object rests at
     ``xy`` (m) with ``yaw`` (rad). perceived: plan on the object's pose and
@@ -102,7 +111,8 @@ def run_grasp(grasp_class: str, kind: str, size: float, meshcat=None, html=None,
         world_object = ObjectConfig(kind=kind, size=size, X_WO=Transform(perception.true_X_WO),
                                     on_table=False)
     else:
-        plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size, xy=xy, yaw=yaw))
+        obj = kind if getattr(kind, "kind", None) == "mesh" else (kind, size)
+        plan = plan_grasp(grasp_class, obj, resting_pose(kind, size, xy=xy, yaw=yaw))
     plan.perception = perception
     if save_scenario is not None:
         Path(save_scenario).parent.mkdir(parents=True, exist_ok=True)
@@ -118,8 +128,21 @@ def _cmd_grasp(args) -> int:
 
     from handle_drake.cli_support import start_meshcat
 
+    if args.mesh is not None:
+        from handle_drake.objects.mesh import MeshObjectSpec
+
+        if args.perceived:
+            raise ValueError("--perceived: the tabletop detector fits spheres, cylinders and "
+                             "boxes; it cannot plan on a --mesh object")
+        if args.size is not None:
+            raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
+        obj = MeshObjectSpec(str(args.mesh), scale=args.mesh_scale, mass=args.mass)
+    elif args.size is None:
+        raise ValueError("--size: required for a catalogue object (or give --mesh FILE)")
+    else:
+        obj = args.object
     meshcat = start_meshcat(args.meshcat or args.html is not None)
-    plan, result, held = run_grasp(args.grasp_class, args.object, args.size, meshcat,
+    plan, result, held = run_grasp(args.grasp_class, obj, args.size, meshcat,
                                    args.html, args.save_scenario, args.reactive,
                                    xy=tuple(args.xy), yaw=math.radians(args.yaw),
                                    perceived=args.perceived)

@@ -40,6 +40,16 @@ cuboid. The planner grasps a sphere anywhere, a cylinder lying on its side
 (axis horizontal) and a cuboid standing upright (its z axis vertical); use
 :func:`resting_pose`.
 
+Mesh objects (``MeshObjectSpec``, :mod:`handle_drake.objects.mesh`) are planned
+like a cuboid standing upright: the IK's proxy is the mesh's bounding box in O
+(:func:`~handle_drake.objects.mesh.grasp_extents`), the fingers close across
+its narrower horizontal axis, and the Table 1 grasp size is the mesh's extent
+along that axis (the distance between the planes the opposing fingers close
+on). The contacts are planned on the proxy; the closing squeeze (20 mm past
+it) brings the fingers onto the real surface, which is what the simulation
+collides with. A mesh whose opposing faces are not the bounding box's (a
+torus, a bowl) is therefore grasped at its outer extent.
+
 Frames: W world, O object, G grasp frame of the IK (``x_G`` up, ``y_G`` finger
 row, ``z_G`` opposition axis, thumb on ``+z_G``), P palm, B hand base (forearm).
 """
@@ -108,7 +118,10 @@ class GraspPlanningError(ValueError):
 
 def _object_spec(obj):
     from handle_drake.objects import ObjectSpec
+    from handle_drake.objects.mesh import MeshObjectSpec
 
+    if isinstance(obj, MeshObjectSpec):
+        return obj
     if isinstance(obj, ObjectSpec):
         spec = obj
     elif isinstance(obj, tuple | list) and len(obj) == 2:
@@ -133,9 +146,17 @@ def _object_spec(obj):
 
 
 def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
-    """(IK shape, dims in the grasp frame G) of a catalogue object (see module doc)."""
+    """(IK shape, dims in the grasp frame G) of a catalogue object (see module doc).
+
+    A mesh is planned as its bounding-box proxy standing upright:
+    ``objects.mesh.grasp_extents`` (opposition, row, height extents).
+    """
     from handle_drake.objects import dimensions
 
+    if spec.kind == "mesh":
+        from handle_drake.objects.mesh import grasp_extents
+
+        return "box", grasp_extents(spec)
     d = dimensions(spec)
     if spec.kind == "sphere":
         return "sphere", (d["diameter"],)
@@ -145,22 +166,29 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
     return "box", (d["depth"], d["width"], d["height"])
 
 
-def resting_pose(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
+def resting_pose(kind, size: float | None = None, xy=(0.0, 0.0), yaw: float = 0.0,
                  table_height: float = 0.0) -> RigidTransform:
     """``X_WO`` of a plannable object resting on a table top at ``table_height``.
 
     sphere and cuboid stand upright; a cylinder lies on its side with its axis
-    along the world direction ``(-sin yaw, cos yaw, 0)``.
+    along the world direction ``(-sin yaw, cos yaw, 0)``. ``kind`` may be a
+    ``MeshObjectSpec`` (``size`` unused): it stands as in its file, on its
+    lowest point.
     """
-    from handle_drake.objects import ObjectSpec, dimensions
+    from handle_drake.objects import ObjectSpec, dimensions, resting_height
 
-    spec = _object_spec((kind, size))
-    d = dimensions(ObjectSpec(spec.kind, spec.size))
+    if getattr(kind, "kind", None) == "mesh":
+        spec, d = kind, None
+    else:
+        spec = _object_spec((kind, size))
+        d = dimensions(ObjectSpec(spec.kind, spec.size))
     xy = np.asarray(xy, dtype=float)
     if xy.shape != (2,) or not np.isfinite(xy).all():
         raise ValueError(f"xy: expected 2 finite values, got {xy}")
     R = RotationMatrix.MakeZRotation(float(yaw))
-    if spec.kind == "sphere":
+    if spec.kind == "mesh":
+        z = resting_height(spec)
+    elif spec.kind == "sphere":
         z = 0.5 * d["diameter"]
     elif spec.kind == "cylinder":
         R = R @ RotationMatrix.MakeXRotation(np.pi / 2)
@@ -168,6 +196,16 @@ def resting_pose(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
     else:
         z = 0.5 * d["height"]
     return RigidTransform(R, [xy[0], xy[1], table_height + z])
+
+
+def _object_config(spec, **fields):
+    """The scenario's ``ObjectConfig`` of a planned object (catalogue or mesh)."""
+    from handle_drake.scenario import ObjectConfig
+
+    if spec.kind == "mesh":
+        return ObjectConfig(kind="mesh", file=spec.file, scale=spec.scale, mass=spec.mass,
+                            density=spec.density, mu=spec.mu, **fields)
+    return ObjectConfig(kind=spec.kind, size=spec.size, mu=spec.mu, **fields)
 
 
 # ---------------------------------------------------------------- the plan
@@ -261,7 +299,6 @@ class GraspPlan:
         from handle_drake.scenario import (
             FloatingWrist,
             HandConfig,
-            ObjectConfig,
             Scenario,
             SimHandDriver,
             TableConfig,
@@ -275,9 +312,8 @@ class GraspPlan:
                 mount=FloatingWrist(X_WB=Transform(self.X_WB_pregrasp)),
                 initial_position=self.command_dict(self.preshape_command),
             ),
-            object=world_object if world_object is not None else ObjectConfig(
-                kind=spec.kind, size=spec.size, mu=spec.mu, X_WO=Transform(self.X_WO),
-                on_table=False),
+            object=world_object if world_object is not None else _object_config(
+                spec, X_WO=Transform(self.X_WO), on_table=False),
             table=TableConfig(top_height=self.table_height),
             contact_model="point",
             time_step=0.001,
@@ -322,7 +358,7 @@ def _up_in_grasp_frame(kind: str, natural_up_G) -> np.ndarray:
         u = np.array([u[0], 0.0, u[2]])
         if np.linalg.norm(u) < 1e-6:
             u = np.array([1.0, 0.0, 0.0])
-    elif kind == "cuboid":
+    elif kind in ("cuboid", "mesh"):
         u = np.array([1.0 if u[0] >= 0 else -1.0, 0.0, 0.0])
     return u / np.linalg.norm(u)
 
@@ -342,7 +378,8 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
     return min(up_height) + kin.support[1] > 0.002
 
 
-def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None) -> np.ndarray:
+def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)
+                       ) -> np.ndarray:
     """R_WG with ``R_WG up_G = z_W`` and the finger row y_G along the object's row axis.
 
     Row axis: a cylinder's axis, a cuboid's width edge (x_O); a sphere has
@@ -364,10 +401,10 @@ def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None) -> np.ndarray
     else:
         if abs(abs(R_WO[:, 2] @ z_W) - 1.0) > 1e-3:
             raise ValueError(
-                "the planner grasps a cuboid standing on a face with its z axis vertical "
+                f"the planner grasps a {kind} standing on a face with its z axis vertical "
                 "(use planning.resting_pose)"
             )
-        row = R_WO[:, 0]
+        row = R_WO @ np.asarray(row_O, dtype=float)
     if up_G is None:
         up_G = np.array([1.0, 0.0, 0.0])
     e1 = np.asarray(up_G, dtype=float) / np.linalg.norm(up_G)
@@ -380,6 +417,16 @@ def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None) -> np.ndarray
     E = np.column_stack([e1, e2, np.cross(e1, e2)])
     F = np.column_stack([z_W, f2, np.cross(z_W, f2)])
     return F @ E.T
+
+
+def _row_axis(spec) -> tuple[float, float, float]:
+    """The finger row's axis in O: x_O (a cuboid's width), or a mesh's wider horizontal axis."""
+    if spec.kind == "mesh":
+        from handle_drake.objects.mesh import mesh_in_object_frame
+
+        ex, ey = mesh_in_object_frame(spec).extents[:2]
+        return (1.0, 0.0, 0.0) if ex >= ey else (0.0, 1.0, 0.0)
+    return (1.0, 0.0, 0.0)
 
 
 def _yaw(R: np.ndarray, psi: float) -> np.ndarray:
@@ -423,7 +470,8 @@ def plan_grasp(
 ) -> GraspPlan:
     """Plan a grasp of class ``grasp_class`` on ``obj`` at ``X_WO`` (see module doc).
 
-    obj: an ``ObjectSpec`` (sphere, cylinder, cuboid) or ``(kind, size)``.
+    obj: an ``ObjectSpec`` (sphere, cylinder, cuboid), ``(kind, size)`` or a
+      ``MeshObjectSpec`` (planned on its bounding box; see the module doc).
     synergies: :class:`ClassSynergies` (default: fitted on the shipped data).
     table_height: world z (m) of the table top under the object.
     reach_direction: preferred horizontal direction (world x, y) the hand
@@ -448,7 +496,8 @@ def plan_grasp(
         if not (np.isfinite(value) and value > lo):
             raise ValueError(f"{name} must be a positive distance (m), got {value}")
     reach = _horizontal_unit(reach_direction)
-    _world_grasp_frame(spec.kind, X_WO)  # validates the resting orientation early
+    row_O = _row_axis(spec)
+    _world_grasp_frame(spec.kind, X_WO, row_O=row_O)  # validates the resting orientation early
 
     synergies = default_synergies() if synergies is None else synergies
     if not isinstance(synergies, ClassSynergies):
@@ -469,7 +518,8 @@ def plan_grasp(
     sol, up, source, kin = solution
     X_PG = sol.X_PO
     X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
-        kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff)
+        kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
+        row_O)
     q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up, coupling_ratio)
     grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
     return GraspPlan(
@@ -571,7 +621,7 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
 
 
 def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
-                vertical_standoff):
+                vertical_standoff, row_O=(1.0, 0.0, 0.0)):
     """``(X_WG, X_WP, X_WB, X_WB_pregrasp, approach_W)`` of an IK solution on the object.
 
     Raises ValueError when the base's grasp or stand-off pose (with the lift) is
@@ -579,7 +629,7 @@ def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
     """
     X_PG = sol.X_PO
     R_GP = X_PG.rotation().inverse().matrix()
-    R_WG = _world_grasp_frame(kind, X_WO, up)
+    R_WG = _world_grasp_frame(kind, X_WO, up, row_O=row_O)
     forearm_W = R_WG @ R_GP @ np.array([0.0, 0.0, -1.0])  # palm -> forearm direction
     if kind == "sphere":
         h = forearm_W[:2]

@@ -47,6 +47,13 @@ not installed).
 Run ``python -m handle_drake.objects export models/objects`` to regenerate the
 committed default-size SDFormat models and the table.
 
+Mesh files (object kind ``mesh``, :class:`handle_drake.objects.mesh.MeshObjectSpec`)
+are accepted by :func:`AddObject`, :func:`pieces`, :func:`mass_properties`,
+:func:`spatial_inertia`, :func:`resting_height`, :func:`total_height`,
+:func:`contact_feet`, :func:`surface_mesh`, :func:`sample_surface` and
+:func:`ray_cast`, which hand them to :mod:`.mesh` (``mesh_examples`` generates
+a torus, an L-bracket and a bowl).
+
 Modules: :mod:`.catalogue` (kinds, proportions, :class:`ObjectSpec`),
 :mod:`.pieces` (convex pieces, mass properties), :mod:`.plant` (``AddObject``,
 ``AddTable``), :mod:`.queries` (surface sampling, ray casts), :mod:`.sdf`

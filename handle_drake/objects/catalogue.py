@@ -109,6 +109,18 @@ for _kind, _device in DEVICE_OBJECTS.items():
     _COLORS[_kind] = _device.color
 
 
+def _mesh_module(spec):
+    """:mod:`handle_drake.objects.mesh` when ``spec`` is a mesh object (kind "mesh"), else None.
+
+    The catalogue's functions hand mesh objects (``MeshObjectSpec``) to that module.
+    """
+    if getattr(spec, "kind", None) == "mesh":
+        from handle_drake.objects import mesh
+
+        return mesh
+    return None
+
+
 def _check_positive(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
         raise TypeError(f"{name} must be a number, got {type(value).__name__}")
@@ -275,6 +287,8 @@ def dimensions(spec: ObjectSpec) -> dict[str, float]:
 
 def total_height(spec: ObjectSpec) -> float:
     """Vertical extent (m) of the object standing on a table."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.total_height(spec)
     d = dimensions(spec)
     if spec.kind == "sphere":
         return d["diameter"]
@@ -285,4 +299,6 @@ def total_height(spec: ObjectSpec) -> float:
 
 def resting_height(spec: ObjectSpec) -> float:
     """Height (m) of the object origin above a table top the object stands on."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.resting_height(spec)
     return total_height(spec) / 2

@@ -29,6 +29,7 @@ from handle_drake.objects.catalogue import (
     DENSITY,
     ROTATED_CUBOID_YAW,
     ObjectSpec,
+    _mesh_module,
     dimensions,
     total_height,
 )
@@ -190,6 +191,8 @@ def _star_pieces(spec: ObjectSpec, d: dict) -> list[Piece]:
 @lru_cache(maxsize=256)
 def pieces(spec: ObjectSpec) -> tuple[Piece, ...]:
     """The convex pieces of ``spec`` in the object frame (they tile it, no overlaps)."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.pieces(spec)
     d = dimensions(spec)
     kind = spec.kind
     if kind == "sphere":
@@ -240,6 +243,8 @@ def _unit_density_inertia(spec: ObjectSpec) -> tuple[SpatialInertia, float]:
 
 def spatial_inertia(spec: ObjectSpec) -> SpatialInertia:
     """``M_OOo_O``: the object's spatial inertia about its origin, expressed in O."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.spatial_inertia(spec)
     M_unit, volume = _unit_density_inertia(spec)
     if spec.mass is not None:
         density = spec.mass / volume
@@ -253,6 +258,8 @@ def spatial_inertia(spec: ObjectSpec) -> SpatialInertia:
 
 def mass_properties(spec: ObjectSpec) -> MassProperties:
     """Mass, volume, centre of mass and central inertia of ``spec``."""
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.mass_properties(spec)
     M = spatial_inertia(spec)
     _, volume = _unit_density_inertia(spec)
     p_OScm = np.array(M.get_com())

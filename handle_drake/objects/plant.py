@@ -24,6 +24,7 @@ from handle_drake.objects.catalogue import (
     ROTATED_CUBOID_YAW,
     ObjectSpec,
     _check_positive,
+    _mesh_module,
     dimensions,
     resting_height,
 )
@@ -48,6 +49,8 @@ def AddObject(plant, spec: ObjectSpec, name: str = "object", hydroelastic: bool 
     ``hydroelastic`` is True, else point contact only) and visual geometry.
     Returns the ``ModelInstanceIndex``.
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.AddMeshObject(plant, spec, name, hydroelastic)
     if not isinstance(spec, ObjectSpec):
         raise TypeError(f"spec must be an ObjectSpec, got {type(spec).__name__}")
     if plant.is_finalized():
@@ -93,6 +96,8 @@ def contact_feet(spec: ObjectSpec) -> np.ndarray:
     and do not change the shape. The mug (16 wall pieces on the table) and the
     sphere get none.
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.contact_feet(spec)
     r = _foot_radius(spec)
     d = dimensions(spec)
     z = -resting_height(spec) + r

@@ -16,7 +16,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull
 
-from handle_drake.objects.catalogue import ObjectSpec
+from handle_drake.objects.catalogue import ObjectSpec, _mesh_module
 from handle_drake.objects.pieces import pieces
 
 
@@ -27,6 +27,8 @@ def surface_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
     sampling should use :func:`sample_surface`; ray casting :func:`ray_cast`
     (or the nearest hit from outside on this mesh, which is the true surface).
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.surface_mesh(spec)
     return trimesh.util.concatenate([p.mesh() for p in pieces(spec)])
 
 
@@ -79,6 +81,8 @@ def sample_surface(spec: ObjectSpec, n: int, rng=None) -> tuple[np.ndarray, np.n
     every point lies on the true surface (round pieces are faceted: points on a
     sphere or cylinder lie on its 64-facet mesh, within 0.2 % of the radius).
     """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.sample_surface(spec, n, rng)
     if isinstance(n, bool) or not isinstance(n, int | np.integer):
         raise TypeError(f"n must be an int, got {type(n).__name__}")
     if n < 0:
@@ -194,14 +198,8 @@ def _ray_cylinder(X, r, half, o, d):
     return best, normal_local @ R.T
 
 
-def ray_cast(spec: ObjectSpec, p_OA, d_O) -> RayHits:
-    """First point where each ray ``p_OA + t d_O`` (t >= 0) enters the object.
-
-    ``p_OA`` (k, 3) or (3,): ray origins in the object frame, outside the solid
-    (a ray may start in the cavity of a mug); ``d_O`` same shape: directions
-    (normalised here). Exact for the pieces' true shapes (spheres and cylinders
-    are not faceted). Raises ValueError for an origin inside the solid.
-    """
+def _rays(p_OA, d_O) -> tuple[np.ndarray, np.ndarray]:
+    """Checked ray origins (k, 3) and unit directions (k, 3) for a ray cast."""
     o = np.atleast_2d(np.asarray(p_OA, dtype=float))
     d = np.atleast_2d(np.asarray(d_O, dtype=float))
     if o.ndim != 2 or o.shape[1] != 3:
@@ -213,7 +211,20 @@ def ray_cast(spec: ObjectSpec, p_OA, d_O) -> RayHits:
     norm = np.linalg.norm(d, axis=1)
     if np.any(norm == 0):
         raise ValueError("ray directions must be non-zero")
-    d = d / norm[:, None]
+    return o, d / norm[:, None]
+
+
+def ray_cast(spec: ObjectSpec, p_OA, d_O) -> RayHits:
+    """First point where each ray ``p_OA + t d_O`` (t >= 0) enters the object.
+
+    ``p_OA`` (k, 3) or (3,): ray origins in the object frame, outside the solid
+    (a ray may start in the cavity of a mug); ``d_O`` same shape: directions
+    (normalised here). Exact for the pieces' true shapes (spheres and cylinders
+    are not faceted). Raises ValueError for an origin inside the solid.
+    """
+    if (mesh := _mesh_module(spec)) is not None:
+        return mesh.ray_cast(spec, p_OA, d_O)
+    o, d = _rays(p_OA, d_O)
     descs = _halfspaces(spec)
     inside = np.zeros(len(o), dtype=bool)
     for desc in descs:

@@ -231,15 +231,17 @@ class ObjectSurface:
     """A catalogue object (``handle_drake.objects.ObjectSpec``), ray cast exactly.
 
     Wraps ``objects.ray_cast`` (analytic spheres and cylinders, exact convex
-    pieces): one hit per ray, the point where the ray first enters the solid.
+    pieces; a ``MeshObjectSpec``'s real mesh): one hit per ray, the point where
+    the ray first enters the solid.
     Rays that start inside the solid report no hit.
     """
 
     def __init__(self, spec):
         from handle_drake import objects  # local: objects is another module's area
 
-        if not isinstance(spec, objects.ObjectSpec):
-            raise TypeError(f"spec: expected an ObjectSpec, got {type(spec).__name__}")
+        if not isinstance(spec, objects.ObjectSpec) and getattr(spec, "kind", None) != "mesh":
+            raise TypeError(f"spec: expected an ObjectSpec or a MeshObjectSpec, got "
+                            f"{type(spec).__name__}")
         self.spec = spec
         self._ray_cast = objects.ray_cast
 

@@ -164,8 +164,12 @@ def test_babble_refuses_a_corrupt_database_and_leaves_it_alone(tmp_path, capsys)
 
 
 def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
+    from handle_drake.objects.mesh_examples import l_bracket
+
     out = tmp_path / "report"
-    assert main(["report", "--out", str(out), "--reduced", "--no-progress"]) == 0
+    l_bracket().export(tmp_path / "bracket.stl")  # a mesh object: one more row
+    mesh = ["--mesh", str(tmp_path / "bracket.stl")]
+    assert main(["report", "--out", str(out), "--reduced", "--no-progress", *mesh]) == 0
     for name in ("fig21_sphere_1d.png", "fig22_star_prism_1d.png", "fig23_wine_glass_2d.png",
                  "fig24_mug_2d.png", "fig25_star_prism_2d.png", "fig23_25_all_objects_2d.png",
                  "fig26_sphere_bo_vs_random.png", "fig27_mug_bo_vs_random.png",
@@ -175,7 +179,9 @@ def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
     with open(out / "table3.csv") as f:
         rows = list(csv.DictReader(f))
     assert [r["object"] for r in rows] == ["sphere", "wine_glass", "cylinder", "mug", "cuboid",
-                                           "rotated_cuboid", "star_prism"]
+                                           "rotated_cuboid", "star_prism", "mesh bracket"]
+    assert rows[7]["report total"] == "-" and float(rows[7]["grid max"]) > -1.0
+    assert (out / "fig_mesh_bracket_2d.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert rows[3]["report total"] == "331" and rows[6]["report 5%"] == "105"
     summary = json.loads((out / "summary.json").read_text())
     # The grid is 3x3, so its centre is the centred grasp: the grid maximum
@@ -186,7 +192,7 @@ def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
     # Everything is cached: a second report runs no trial.
     with TrialLog(out / "babble.sqlite") as log:
         count = sum(len(log.trials(r.run_id)) for r in log.runs())
-    assert main(["report", "--out", str(out), "--reduced", "--no-progress"]) == 0
+    assert main(["report", "--out", str(out), "--reduced", "--no-progress", *mesh]) == 0
     with TrialLog(out / "babble.sqlite") as log:
         assert sum(len(log.trials(r.run_id)) for r in log.runs()) == count
 
