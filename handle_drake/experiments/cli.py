@@ -100,6 +100,13 @@ def register(subparsers) -> None:
                    help="std of Gaussian noise added to the metric (seeded per trial)")
     p.add_argument("--size", type=_positive_float, default=None,
                    help="object size in m (default: the babbling catalogue's)")
+    p.add_argument("--placement-error", type=_non_negative_float, default=0.0, metavar="M",
+                   help="robust objective: score each trial as the mean metric over "
+                        "--placement-samples wrist placements within M metres of the "
+                        "planned one (e.g. 0.002); default 0: the nominal metric")
+    p.add_argument("--placement-samples", type=_positive_int, default=None, metavar="K",
+                   help="placements per trial of the robust objective (default 5 with "
+                        "--placement-error)")
     p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
                    help="grasp your own object: a mesh file (OBJ, STL, PLY, ...) instead of "
                         "--object; decomposed into convex pieces once (cached)")
@@ -162,14 +169,23 @@ def _cmd_babble(args) -> int:
     from handle_drake.learning.cluster import trial_executor
 
     space = _resolve_space(args)
+    samples = args.placement_samples
+    if args.placement_error == 0 and samples not in (None, 1):
+        raise ValueError(f"--placement-samples {samples}: needs --placement-error > 0")
+    if args.placement_error > 0 and samples is None:
+        samples = 5
+    if args.placement_error > 0 and samples == 1:
+        raise ValueError("--placement-samples 1: a robust objective needs at least 2")
+    robust = dict(placement_error=args.placement_error, placement_samples=samples or 1)
     if args.mesh is not None:
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
         config = GraspTrialConfig(hand=args.hand, object="mesh", space=space, noise=args.noise,
-                                  object_file=str(args.mesh), object_scale=args.mesh_scale)
+                                  object_file=str(args.mesh), object_scale=args.mesh_scale,
+                                  **robust)
     else:
         config = GraspTrialConfig(hand=args.hand, object=args.object, space=space,
-                                  noise=args.noise, size=args.size)
+                                  noise=args.noise, size=args.size, **robust)
     trial = GraspTrial(config)
     if args.ei_stop and args.strategy != "bo":
         raise ValueError(f"--ei-stop {args.ei_stop}: only Bayesian optimisation has a stop rule")

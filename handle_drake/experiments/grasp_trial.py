@@ -21,6 +21,17 @@ Trials are deterministic for given parameters; ``noise`` adds Gaussian
 measurement noise (seeded by the trial seed). A trial in which the hand does
 not touch the object scores :data:`NO_CONTACT`.
 
+Robust objective (``placement_error`` e > 0, ``placement_samples`` K): real
+placement is noisy, so the metric of parameters x is the mean BW metric of K
+trials whose wrist start is moved sideways (world x, y, normal to the
+approach) by the points of :func:`placement_stencil`: a fixed sunflower
+pattern that covers the disc of radius e evenly (the expected metric under a
+placement error uniform on that disc). The same K points at every x (common
+random numbers) keep the robust objective a deterministic function of x, so
+its grid maximum is well defined and the optimiser's GP sees no extra noise;
+one noisy draw per trial would only add variance. A maximum of this objective
+is a region at least e wide, not one cell on a cliff edge.
+
 The diagram is built once per process and reset for each trial.
 """
 
@@ -55,6 +66,7 @@ __all__ = [
     "NO_CONTACT",
     "BABBLING_SIZES",
     "PARAMETER_SPACES",
+    "placement_stencil",
 ]
 
 PARAMETER_SPACES = ("standoff", "offset", "synergy")
@@ -95,6 +107,10 @@ class GraspTrialConfig:
     object_file: str | None = None
     object_scale: float = 1.0
     object_digest: str = ""
+    # Robust objective: mean metric over ``placement_samples`` wrist placements
+    # within ``placement_error`` (m) of the planned one (placement_stencil).
+    placement_error: float = 0.0
+    placement_samples: int = 1
 
     def __post_init__(self):
         get_hand_spec(self.hand)
@@ -113,7 +129,7 @@ class GraspTrialConfig:
             raise ValueError(f"space: expected one of {PARAMETER_SPACES}, got {self.space!r}")
         if self.space == "synergy" and self.hand != "shadow":
             raise ValueError("space 'synergy' needs the shadow hand")
-        for name in ("noise", "standoff", "surface_radius"):
+        for name in ("noise", "standoff", "surface_radius", "placement_error"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"{name}: expected a finite value >= 0, got {value}")
@@ -124,6 +140,17 @@ class GraspTrialConfig:
         if isinstance(self.hold_samples, bool) or not isinstance(self.hold_samples, int) \
                 or self.hold_samples < 1:
             raise ValueError(f"hold_samples: expected an integer >= 1, got {self.hold_samples!r}")
+        if isinstance(self.placement_samples, bool) or not isinstance(
+                self.placement_samples, int) or not 1 <= self.placement_samples <= 64:
+            raise ValueError("placement_samples: expected an integer in 1..64, got "
+                             f"{self.placement_samples!r}")
+        if self.placement_error > 0.05:
+            raise ValueError(f"placement_error: expected at most 0.05 m (a placement error, "
+                             f"not a search range), got {self.placement_error}")
+        if (self.placement_error > 0) != (self.placement_samples > 1):
+            raise ValueError("placement_error and placement_samples go together: a robust "
+                             f"objective needs both > 0 and > 1, got {self.placement_error} "
+                             f"and {self.placement_samples}")
         if self.hold_window >= self.settle_time - 0.3:
             raise ValueError(f"hold_window: expected < {self.settle_time - 0.3:.2f} s (the hold "
                              f"starts at the earliest 0.3 s), got {self.hold_window}")
@@ -164,13 +191,30 @@ class GraspTrialConfig:
         return ObjectConfig(kind=self.object, size=self.object_size, mu=self.mu, **fields)
 
 
+def placement_stencil(error: float, samples: int) -> np.ndarray:
+    """(samples, 2) sideways placements (m) covering the disc of radius ``error`` evenly.
+
+    Vogel's sunflower pattern: point k at radius ``error * sqrt((k + 0.5) / K)``
+    and angle ``k`` golden angles, so each point stands for an equal area of
+    the disc (for K >= 2 the mean is near 0 and the mean squared radius is
+    ``error**2 / 2``, those of the uniform disc). Deterministic: the same
+    points for every trial. ``samples == 1``: the planned placement alone.
+    """
+    if samples == 1:
+        return np.zeros((1, 2))
+    k = np.arange(samples)
+    radius = error * np.sqrt((k + 0.5) / samples)
+    angle = k * np.pi * (3.0 - np.sqrt(5.0))
+    return np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+
+
 @dc.dataclass
 class TrialOutcome:
     """What one trial produced (JSON-friendly through :meth:`as_dict`)."""
 
     metric: float  # BW value, noise included
-    metric_noiseless: float  # mean of metric_samples
-    metric_samples: list  # BW value at each hold instant (no noise)
+    metric_noiseless: float  # mean of metric_samples (robust: mean over the placements)
+    metric_samples: list  # BW value at each hold instant (no noise; robust: placement 1)
     force_closure: bool
     contacts: dict  # body name -> {"p_O": [...], "n_O": [...], "f_O": [...]}
     touched: bool  # the approach met the object
@@ -262,12 +306,14 @@ class GraspTrial:
     @property
     def name(self) -> str:
         c = self.config
+        robust = (f"-robust{c.placement_error * 1e3:g}mm{c.placement_samples}"
+                  if c.placement_samples > 1 else "")
         if c.object == "mesh":
             import re
 
             stem = re.sub(r"[^A-Za-z0-9_]+", "_", self.config.object_spec().name)
-            return f"{c.hand}-mesh_{stem}-{c.space}"
-        return f"{c.hand}-{c.object}-{c.space}"
+            return f"{c.hand}-mesh_{stem}-{c.space}{robust}"
+        return f"{c.hand}-{c.object}-{c.space}{robust}"
 
     def base_scenario(self) -> Scenario:
         """The trial at zero parameters: the scenario every trial overrides."""
@@ -315,8 +361,9 @@ class GraspTrial:
             raise ValueError(f"parameters: expected finite values, got {x}")
         return x
 
-    def scenario(self, x) -> Scenario:
-        """The trial of parameters ``x``: the base scenario with its controller overridden."""
+    def scenario(self, x, placement=(0.0, 0.0)) -> Scenario:
+        """The trial of parameters ``x``: the base scenario with its controller overridden;
+        ``placement``: the wrist start moved sideways by (dx, dy) m (the robust objective)."""
         x = self._check(x)
         if self._base is None:
             self._base = self.base_scenario()
@@ -327,6 +374,7 @@ class GraspTrial:
         preshape = np.array([ctrl.preshape[n] for n in names])
         closed = np.array([ctrl.closed[n] for n in names])
         standoff = c.standoff
+        start[:2] += np.asarray(placement, dtype=float)
         if c.space == "standoff":
             standoff = float(x[0])
         elif c.space == "offset":
@@ -368,19 +416,30 @@ class GraspTrial:
         hold at ``hold_samples`` instants (the last one at ``settle_time``).
         """
         start_wall = time.perf_counter()
-        scenario = self.scenario(x)
-        runner = self._built or self._build()
-        score = runner.run(scenario=scenario).score
-        controller = runner.controller
-        touched = np.isfinite(controller.GetOutputPort("contact_time").Eval(
-            controller.GetMyContextFromRoot(runner.context))[0])
         c = self.config
+        runner = self._built or self._build()
+        controller = runner.controller
+        values, touched = [], False
+        # The stencil's first placement (the planned one when K == 1) gives the
+        # outcome's scenario, contacts and hold samples; the metric is the mean.
+        for k, placement in enumerate(placement_stencil(c.placement_error, c.placement_samples)):
+            run_scenario = self.scenario(x, placement)
+            run_score = runner.run(scenario=run_scenario).score
+            values.append(run_score.value)
+            touched = touched or np.isfinite(controller.GetOutputPort("contact_time").Eval(
+                controller.GetMyContextFromRoot(runner.context))[0])
+            if k == 0:
+                scenario, score = run_scenario, run_score
+        value = float(np.mean(values))
         rng = np.random.default_rng(seed)
-        noisy = score.value + (c.noise * rng.standard_normal() if c.noise > 0 else 0.0)
+        noisy = value + (c.noise * rng.standard_normal() if c.noise > 0 else 0.0)
         return TrialOutcome(
-            metric=float(noisy), metric_noiseless=score.value, metric_samples=score.samples,
+            metric=float(noisy), metric_noiseless=value, metric_samples=score.samples,
             force_closure=score.force_closure, contacts=score.contacts,
             touched=bool(touched or score.contacts),
-            scenario=self._scenario_text(scenario, x),
+            scenario=self._scenario_text(scenario, x) + (
+                f"# robust objective: this is placement 1 of {c.placement_samples} within "
+                f"{c.placement_error} m; metric = their mean\n" if c.placement_samples > 1
+                else ""),
             wall_time=time.perf_counter() - start_wall,
         )

@@ -5,7 +5,12 @@ import pickle
 import numpy as np
 import pytest
 
-from handle_drake.experiments.grasp_trial import NO_CONTACT, GraspTrial, GraspTrialConfig
+from handle_drake.experiments.grasp_trial import (
+    NO_CONTACT,
+    GraspTrial,
+    GraspTrialConfig,
+    placement_stencil,
+)
 from handle_drake.objects import KINDS
 
 
@@ -170,6 +175,11 @@ def test_shadow_synergy_trial_is_scored_after_the_hand_has_settled():
     (dict(hold_samples=2.5), "hold_samples"),
     (dict(hold_window=0.0), "hold_window"),
     (dict(hold_window=0.7), "hold_window"),
+    (dict(placement_error=-0.002, placement_samples=5), "placement_error"),
+    (dict(placement_error=0.2, placement_samples=5), "placement_error"),
+    (dict(placement_error=0.002), "placement_samples"),
+    (dict(placement_error=0.002, placement_samples=0), "placement_samples"),
+    (dict(placement_samples=5), "placement_error"),
 ])
 def test_bad_configuration_is_named(kwargs, word):
     with pytest.raises(ValueError, match=word):
@@ -181,3 +191,29 @@ def test_bad_parameters_are_named(barrett_sphere):
         barrett_sphere.evaluate([0.0])
     with pytest.raises(ValueError, match="finite"):
         barrett_sphere.evaluate([np.nan, 0.0])
+
+
+@pytest.mark.parametrize("samples", [2, 5, 16])
+def test_placement_stencil_has_the_moments_of_the_uniform_disc(samples):
+    e = 0.002
+    points = placement_stencil(e, samples)
+    r = np.linalg.norm(points, axis=1)
+    assert points.shape == (samples, 2) and np.all(r <= e)
+    # Uniform on the disc of radius e: E[r^2] = e^2 / 2 (exact for the sunflower radii).
+    assert np.mean(r ** 2) == pytest.approx(e ** 2 / 2, rel=1e-12)
+    assert len({tuple(p) for p in np.round(points, 12)}) == samples
+    assert np.array_equal(placement_stencil(0.0, 1), np.zeros((1, 2)))
+
+
+def test_robust_metric_is_the_mean_over_placed_trials(barrett_sphere):
+    """In the offset space a placement error is an offset: the robust metric at x
+    equals the mean of nominal trials at x + each stencil point."""
+    e, k = 0.004, 3
+    robust = GraspTrial(hand="barrett", object="sphere", space="offset", placement_error=e,
+                        placement_samples=k)
+    x = np.array([0.012, -0.006])
+    nominal = [barrett_sphere.evaluate(x + d).metric_noiseless for d in placement_stencil(e, k)]
+    outcome = robust.evaluate(x)
+    assert outcome.metric_noiseless == pytest.approx(np.mean(nominal), abs=1e-9)
+    assert "robust objective: this is placement 1 of 3" in outcome.scenario
+    assert robust.name == "barrett-sphere-offset-robust4mm3"
