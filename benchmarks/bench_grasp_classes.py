@@ -32,7 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
@@ -136,8 +136,18 @@ def main(argv=None) -> int:
         jobs += [(info.name, kind, float(w), e) for kind in kinds for w in widths
                  for e in errors]
     start = time.perf_counter()
+    rows = [None] * len(jobs)
     with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        rows = list(pool.map(trial, jobs))
+        futures = {pool.submit(trial, job): i for i, job in enumerate(jobs)}
+        for done, future in enumerate(as_completed(futures), 1):
+            i = futures[future]
+            rows[i] = r = future.result()
+            e = jobs[i][3]
+            error = ("" if e is None else f" (true object moved {e[0] * 1e3:+.1f}, "
+                     f"{e[1] * 1e3:+.1f} mm, size x{e[2]:g}, yaw {np.degrees(e[3]):g} deg)")
+            print(f"{done}/{len(jobs)} {r['grasp_class']} {r['kind']} {r['width'] * 1e3:.0f} mm"
+                  f"{error}: open loop {'held' if r['held'] else 'dropped'}, "
+                  f"reactive {'held' if r['held_reactive'] else 'dropped'}", flush=True)
     wall = time.perf_counter() - start
 
     print(f"{len(rows)} trials in {wall:.0f} s\n")

@@ -122,6 +122,9 @@ def test_babble_bad_arguments_exit_2_with_a_message(bad, message, tmp_path, caps
     (["--strategy", "random", "--ei-stop", "1e-6"], "only Bayesian optimisation"),
     (["--plot", "run.jpg"], "expected a .png file name"),
     (["--plot", "run.png", "--no-plot"], "contradict"),
+    (["--placement-samples", "3"], "needs --placement-error"),
+    (["--placement-error", "0.002", "--placement-samples", "1"], "at least 2"),
+    (["--placement-error", "0.5"], "placement_error: expected at most 0.05 m"),
 ])
 def test_babble_inconsistent_arguments_exit_2(bad, message, tmp_path, capsys):
     assert main(["babble", *bad, "--db", str(tmp_path / "x.sqlite")]) == 2
