@@ -184,3 +184,14 @@ def test_the_hand_in_view_is_filtered_out_by_its_render_labels(capsys):
     assert error["kind_ok"] and error["xy_mm"] < 5.0
     assert main(["perceive", "--frame", "x.json", "--keep-robot"]) == 2
     assert "--keep-robot applies to a scenario" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_one_centimetre_sphere_is_seen_with_kinect_noise(seed):
+    scenario = LoadScenario(
+        filename=diagrams_dir() / "tabletop_perception.yaml",
+        data=f"random_seed: {seed}\n"
+             "object: {kind: sphere, size: 0.01, X_WO: {translation: [0.1, -0.1, 0]}}")
+    (view,) = render_views(scenario)
+    (only,) = view.detections
+    assert detection_error(only, scenario)["xy_mm"] < 5.0
