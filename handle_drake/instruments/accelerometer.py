@@ -49,6 +49,7 @@ __all__ = [
     "DeviceAccelerometer",
     "device_reading",
     "sensor_pose",
+    "default_sensor_pose",
     "check_sensor_pose",
     "AddObjectAccelerometer",
     "AddInstrumentEstimators",
@@ -173,15 +174,36 @@ def sensor_pose(kind: str, size: float) -> RigidTransform:
                           np.asarray(device.sensor_xyz) * size)
 
 
+def _in_object(spec, p, tolerance: float) -> bool:
+    """True when the point ``p`` (O) is in one of the object's convex pieces (a mesh's
+    convex decomposition) or within ``tolerance`` m of it."""
+    from handle_drake.objects.queries import _halfspaces, _inside
+
+    p = np.asarray(p, dtype=float).reshape(1, 3)
+    return any(_inside(desc, p, tolerance)[0] for desc in _halfspaces(spec))
+
+
+def default_sensor_pose(spec) -> RigidTransform:
+    """``X_OS`` of an accelerometer the scenario places nowhere in particular: the
+    object frame itself when its origin is in the object, else (a mug's origin is
+    in its cavity, an L bracket's off its arms) the object's surface point
+    nearest to the origin (of 4096 seeded surface samples: a sensor glued there),
+    axes along O's."""
+    if _in_object(spec, np.zeros(3), 0.0):
+        return RigidTransform()
+    from handle_drake.objects import sample_surface
+
+    points, _ = sample_surface(spec, 4096, rng=0)
+    return RigidTransform(points[np.argmin(np.linalg.norm(points, axis=1))])
+
+
 def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> None:
     """Raises ValueError when the sensor origin is not in or on the object (within
     ``tolerance`` m of its surface: a sensor may be glued on)."""
-    from handle_drake.objects.queries import _halfspaces, _inside
-
     p = np.asarray(X_OS.translation(), dtype=float).reshape(1, 3)
     if not np.all(np.isfinite(p)):
         raise ValueError(f"X_OS: sensor position must be finite, got {p.ravel().tolist()}")
-    if not any(_inside(desc, p, tolerance)[0] for desc in _halfspaces(spec)):
+    if not _in_object(spec, p, tolerance):
         raise ValueError(
             f"X_OS: the sensor at {np.round(p.ravel(), 4).tolist()} m (object frame) is off "
             f"the {spec.kind} (expected inside it or within {tolerance * 1e3:.0f} mm of its "

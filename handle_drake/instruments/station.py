@@ -17,6 +17,7 @@ from __future__ import annotations
 from handle_drake.instruments.accelerometer import (
     AddInstrumentEstimators,
     AddObjectAccelerometer,
+    default_sensor_pose,
     sensor_pose,
 )
 
@@ -28,11 +29,20 @@ RECORDING_PREFIX = "recording:"
 
 
 def instrument_X_OS(scenario):
-    """The sensor pose ``X_OS`` of the scenario's object accelerometer."""
+    """The sensor pose ``X_OS`` of the scenario's object accelerometer: ``X_OS`` if
+    given, else an instrumented device's named sensor frame, else
+    :func:`~handle_drake.instruments.accelerometer.default_sensor_pose` (the object
+    frame, or the surface point nearest to it when the origin is off the object)."""
+    from handle_drake.instruments.catalogue import DEVICE_OBJECTS
+
     config = scenario.object.accelerometer
     if config.X_OS is not None:
         return config.X_OS.GetDeterministicValue()
-    return sensor_pose(scenario.object.kind, scenario.object.size)
+    if scenario.object.kind in DEVICE_OBJECTS:
+        return sensor_pose(scenario.object.kind, scenario.object.size)
+    from handle_drake.station import object_spec
+
+    return default_sensor_pose(object_spec(scenario))
 
 
 def instrument_seed(scenario) -> int:
