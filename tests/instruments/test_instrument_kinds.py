@@ -77,3 +77,29 @@ def test_a_mesh_object_accelerometer_is_validated_like_any_other():
                                          "{X_OS: {translation: [0.5, 0, 0]}}}")
     with pytest.raises(ScenarioError, match=r"object\.accelerometer\.device"):
         LoadScenario(filename=path, data="object: {accelerometer: {device: foo}}")
+
+
+def test_simulate_reports_the_free_fall_of_a_dropped_joywarrior(tmp_path, capsys):
+    """``handle-drake simulate`` with ``object.accelerometer``: a JoyWarrior dropped
+    from 5 cm onto the table falls for sqrt(2 h / g) = 101 ms, then rests level."""
+    h = 0.05
+    path = tmp_path / "drop.yaml"
+    path.write_text(HAND_AWAY + "object: {kind: joywarrior, on_table: false, "
+                    f"X_WO: {{translation: [0.3, 0.3, {0.0125 + h}]}}, "
+                    "accelerometer: {noise: false}}\nsimulation_duration: 0.5\n")
+    assert main(["simulate", str(path)]) == 0
+    out = capsys.readouterr().out
+    line = next(s for s in out.splitlines() if "free fall flagged" in s)
+    (span,) = line.split(": ", 1)[1].split(", ")
+    start, end = (float(v) for v in span.removesuffix(" s").split("-"))
+    fall = math.sqrt(2 * h / G)
+    period = 0.008
+    # Flagged after the stated 24 ms (3 samples) of near-zero g; it ends at the impact
+    # (the 2-period filter sees it at the next sample); the log samples every 10 ms.
+    log = 0.01
+    assert 0.016 <= start <= 0.024 + period + log
+    assert fall - log - 0.002 <= end <= fall + period
+    assert "slip flagged: never" in out
+    rest = next(s for s in out.splitlines() if "at 0.50 s" in s)
+    assert "(at rest)" in rest and "|f| = 1.00" in rest
+    assert "roll +0.0 deg, pitch -0.0 deg" in rest or "roll +0.0 deg, pitch +0.0 deg" in rest
