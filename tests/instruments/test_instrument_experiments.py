@@ -60,3 +60,5 @@ def test_bad_experiment_input(capsys):
     with pytest.raises(SystemExit):
         main(["instruments", "--device", "nunchuk"])
     assert "invalid choice" in capsys.readouterr().err
+    assert main(["instruments", "--seed", "-1"]) == 2
+    assert "--seed" in capsys.readouterr().err
