@@ -54,6 +54,7 @@ def _add_demo(subparsers) -> None:
 
 
 def _cmd_simulate(args) -> int:
+    from handle_drake.harness import DEFAULT_LOG
     from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
 
@@ -63,7 +64,13 @@ def _cmd_simulate(args) -> int:
     if args.hardware:
         _check_hardware_server(scenario)
     meshcat = start_meshcat(args.meshcat or args.html is not None)
-    runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware)
+    instrumented = scenario.object is not None and scenario.object.accelerometer is not None
+    log = DEFAULT_LOG
+    if instrumented:
+        from handle_drake.instruments.station import INSTRUMENT_LOG
+
+        log = DEFAULT_LOG + INSTRUMENT_LOG
+    runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
           f"({result.realtime_factor:.1f}x real time)")
@@ -76,6 +83,14 @@ def _cmd_simulate(args) -> int:
               f"{m.hold_window:g} s): {score.value!r} "
               f"({'force closure' if score.force_closure else 'not in force closure'}); "
               f"touching: {', '.join(sorted(score.contacts)) or 'nothing'}")
+    if instrumented:
+        from handle_drake.instruments.station import describe_instruments
+
+        X_WO = None
+        if runner.station.HasOutputPort("object.pose"):
+            X_WO = runner.station.GetOutputPort("object.pose").Eval(
+                runner.station.GetMyContextFromRoot(runner.context))
+        print(describe_instruments(scenario, runner.harness.logs(), X_WO))
     if args.quality:
         value, closure, contacts = runner.grasp_quality()
         print(f"grasp quality (BW metric, soft finger): {value:+.4f} "

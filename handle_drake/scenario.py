@@ -425,6 +425,8 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
+        if scenario.object.accelerometer is not None:
+            _validate_accelerometer(scenario)
     elif scenario.object is not None:
         from handle_drake.objects import KINDS
 
@@ -497,7 +499,7 @@ def validate_scenario(scenario: Scenario) -> None:
 def _validate_accelerometer(scenario: Scenario) -> None:
     from handle_drake.instruments.accelerometer import check_sensor_pose
     from handle_drake.instruments.station import instrument_X_OS
-    from handle_drake.objects import ObjectSpec
+    from handle_drake.station import object_spec
 
     config = scenario.object.accelerometer
     try:
@@ -506,10 +508,8 @@ def _validate_accelerometer(scenario: Scenario) -> None:
         raise ScenarioError(f"object.accelerometer.{error}") from None
     if config.X_OS is not None:
         _check_transform("object.accelerometer.X_OS", config.X_OS)
-    spec = ObjectSpec(kind=scenario.object.kind, size=scenario.object.size,
-                      dimensions=scenario.object.dimensions or None)
     try:
-        check_sensor_pose(spec, instrument_X_OS(scenario))
+        check_sensor_pose(object_spec(scenario), instrument_X_OS(scenario))
     except ValueError as error:
         raise ScenarioError(f"object.accelerometer.{error}") from None
 

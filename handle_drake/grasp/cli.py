@@ -46,10 +46,12 @@ def register(subparsers) -> None:
     p.add_argument("--class", dest="grasp_class", required=True,
                    help="grasp class (palmar_pinch tip_pinch tripod writing_tripod lateral "
                         "lateral_tripod adduction_grip parallel_extension)")
-    p.add_argument("--object", default="cuboid", help="sphere, cylinder or cuboid (box)")
+    p.add_argument("--object", default="cuboid",
+                   help="sphere, cylinder, cuboid (box), or an instrumented device: joywarrior, "
+                        "wiimote, nunchuk, sixaxis (planned on its bounding box, lying flat)")
     p.add_argument("--size", type=float, default=None,
                    help="catalogue size (m): diameter, or the cuboid's width (required "
-                        "unless --mesh)")
+                        "unless --mesh; a device's default: its published size)")
     p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
                    help="grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
                         "--object; planned on its bounding box (see grasp.planning)")
@@ -127,6 +129,7 @@ def _cmd_grasp(args) -> int:
     import math
 
     from handle_drake.cli_support import start_meshcat
+    from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 
     if args.mesh is not None:
         from handle_drake.objects.mesh import MeshObjectSpec
@@ -137,10 +140,15 @@ def _cmd_grasp(args) -> int:
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
         obj = MeshObjectSpec(str(args.mesh), scale=args.mesh_scale, mass=args.mass)
-    elif args.size is None:
+    elif args.object in DEVICE_OBJECTS and args.perceived:
+        raise ValueError(f"--perceived: the tabletop detector fits spheres, cylinders and "
+                         f"boxes; it cannot plan on a {args.object}")
+    elif args.size is None and args.object not in DEVICE_OBJECTS:
         raise ValueError("--size: required for a catalogue object (or give --mesh FILE)")
     else:
         obj = args.object
+        if args.size is None:  # an instrumented device: its published size
+            args.size = DEVICE_OBJECTS[obj].default_size
     meshcat = start_meshcat(args.meshcat or args.html is not None)
     plan, result, held = run_grasp(args.grasp_class, obj, args.size, meshcat,
                                    args.html, args.save_scenario, args.reactive,

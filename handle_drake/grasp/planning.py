@@ -48,7 +48,10 @@ along that axis (the distance between the planes the opposing fingers close
 on). The contacts are planned on the proxy; the closing squeeze (20 mm past
 it) brings the fingers onto the real surface, which is what the simulation
 collides with. A mesh whose opposing faces are not the bounding box's (a
-torus, a bowl) is therefore grasped at its outer extent.
+torus, a bowl) is therefore grasped at its outer extent. The instrumented
+devices (``joywarrior``, ``wiimote``, ``nunchuk``, ``sixaxis``;
+:mod:`handle_drake.instruments.catalogue`) are planned the same way on their
+bounding box, lying in their natural resting pose (buttons up).
 
 Frames: W world, O object, G grasp frame of the IK (``x_G`` up, ``y_G`` finger
 row, ``z_G`` opposition axis, thumb on ``+z_G``), P palm, B hand base (forearm).
@@ -73,6 +76,7 @@ from handle_drake.grasp.taxonomy import (
     grasp_info,
 )
 from handle_drake.hands import get_hand_spec
+from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 
 __all__ = [
     "PLANNABLE_KINDS",
@@ -85,7 +89,7 @@ __all__ = [
     "resting_pose",
 ]
 
-PLANNABLE_KINDS = ("sphere", "cylinder", "cuboid")
+PLANNABLE_KINDS = ("sphere", "cylinder", "cuboid", *DEVICE_OBJECTS)
 _IK_SHAPE = {"sphere": "sphere", "cylinder": "cylinder", "cuboid": "box"}
 _KIND_ALIASES = {"box": "cuboid"}
 MAX_PENETRATION = 0.004  # m, hand-object and hand-hand overlap the plan may keep
@@ -145,11 +149,28 @@ def _object_spec(obj):
     return spec
 
 
+def _on_bounding_box(kind: str) -> bool:
+    """Planned on its bounding box like an upright cuboid: a mesh or an instrumented device."""
+    return kind == "mesh" or kind in DEVICE_OBJECTS
+
+
+def _extents(spec) -> tuple[float, float, float]:
+    """Bounding-box edges (x, y, z) in O (m) of a mesh or an instrumented device."""
+    if spec.kind == "mesh":
+        from handle_drake.objects.mesh import mesh_in_object_frame
+
+        return tuple(float(e) for e in mesh_in_object_frame(spec).extents)
+    from handle_drake.objects import surface_mesh
+
+    return tuple(float(e) for e in surface_mesh(spec).extents)
+
+
 def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
     """(IK shape, dims in the grasp frame G) of a catalogue object (see module doc).
 
-    A mesh is planned as its bounding-box proxy standing upright:
-    ``objects.mesh.grasp_extents`` (opposition, row, height extents).
+    A mesh or an instrumented device is planned as its bounding-box proxy standing
+    upright: (opposition, row, height) extents, the fingers closing across the
+    narrower horizontal edge (``objects.mesh.grasp_extents``).
     """
     from handle_drake.objects import dimensions
 
@@ -157,6 +178,9 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
         from handle_drake.objects.mesh import grasp_extents
 
         return "box", grasp_extents(spec)
+    if spec.kind in DEVICE_OBJECTS:
+        ex, ey, ez = _extents(spec)
+        return "box", (min(ex, ey), max(ex, ey), ez)
     d = dimensions(spec)
     if spec.kind == "sphere":
         return "sphere", (d["diameter"],)
@@ -173,20 +197,23 @@ def resting_pose(kind, size: float | None = None, xy=(0.0, 0.0), yaw: float = 0.
     sphere and cuboid stand upright; a cylinder lies on its side with its axis
     along the world direction ``(-sin yaw, cos yaw, 0)``. ``kind`` may be a
     ``MeshObjectSpec`` (``size`` unused): it stands as in its file, on its
-    lowest point.
+    lowest point; an instrumented device lies in its resting pose (``size``
+    None: its catalogue size).
     """
     from handle_drake.objects import ObjectSpec, dimensions, resting_height
 
     if getattr(kind, "kind", None) == "mesh":
         spec, d = kind, None
     else:
+        if size is None and kind in DEVICE_OBJECTS:
+            size = DEVICE_OBJECTS[kind].default_size
         spec = _object_spec((kind, size))
         d = dimensions(ObjectSpec(spec.kind, spec.size))
     xy = np.asarray(xy, dtype=float)
     if xy.shape != (2,) or not np.isfinite(xy).all():
         raise ValueError(f"xy: expected 2 finite values, got {xy}")
     R = RotationMatrix.MakeZRotation(float(yaw))
-    if spec.kind == "mesh":
+    if _on_bounding_box(spec.kind):
         z = resting_height(spec)
     elif spec.kind == "sphere":
         z = 0.5 * d["diameter"]
@@ -358,7 +385,7 @@ def _up_in_grasp_frame(kind: str, natural_up_G) -> np.ndarray:
         u = np.array([u[0], 0.0, u[2]])
         if np.linalg.norm(u) < 1e-6:
             u = np.array([1.0, 0.0, 0.0])
-    elif kind in ("cuboid", "mesh"):
+    elif kind == "cuboid" or _on_bounding_box(kind):
         u = np.array([1.0 if u[0] >= 0 else -1.0, 0.0, 0.0])
     return u / np.linalg.norm(u)
 
@@ -420,11 +447,10 @@ def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0
 
 
 def _row_axis(spec) -> tuple[float, float, float]:
-    """The finger row's axis in O: x_O (a cuboid's width), or a mesh's wider horizontal axis."""
-    if spec.kind == "mesh":
-        from handle_drake.objects.mesh import mesh_in_object_frame
-
-        ex, ey = mesh_in_object_frame(spec).extents[:2]
+    """The finger row's axis in O: x_O (a cuboid's width), or the wider horizontal axis of
+    a mesh or an instrumented device."""
+    if _on_bounding_box(spec.kind):
+        ex, ey = _extents(spec)[:2]
         return (1.0, 0.0, 0.0) if ex >= ey else (0.0, 1.0, 0.0)
     return (1.0, 0.0, 0.0)
 

@@ -49,6 +49,7 @@ __all__ = [
     "DeviceAccelerometer",
     "device_reading",
     "sensor_pose",
+    "default_sensor_pose",
     "check_sensor_pose",
     "AddObjectAccelerometer",
     "AddInstrumentEstimators",
@@ -104,16 +105,16 @@ class DeviceAccelerometer(LeafSystem):
             raise TypeError(f"seed must be an int, got {type(seed).__name__}")
         self.seed = int(seed)
         self.averaging = bool(averaging)
-        self._bias = device_bias(self.profile, self.seed)
+        self._bias = device_bias(self.profile, self.seed).tolist()
         self._input = self.DeclareVectorInputPort("specific_force", 3)
         # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
         self._state = self.DeclareDiscreteState(19)
         if self.averaging:
             if X_BS is None or gravity_W is None:
                 raise ValueError("averaging needs X_BS and gravity_W")
-            self._p_BS = np.asarray(X_BS.translation(), dtype=float)
-            self._R_BS = X_BS.rotation().matrix()
-            self._g_W = np.asarray(gravity_W, dtype=float)
+            self._p_BS = [float(v) for v in X_BS.translation()]
+            self._R_BS = X_BS.rotation().matrix().ravel().tolist()  # row-major
+            self._g_W = [float(v) for v in gravity_W]
             self._body_state = self.DeclareVectorInputPort("body_state", 13)
         self.DeclarePeriodicDiscreteUpdateEvent(self.profile.period, 0.0, self._sample)
         self.DeclareVectorOutputPort("counts", 3, self._calc_counts,
@@ -122,25 +123,39 @@ class DeviceAccelerometer(LeafSystem):
                                      {self.discrete_state_ticket(self._state)})
 
     def _sample(self, context, discrete_state):
-        x = context.get_discrete_state(self._state).get_value().copy()
+        # Plain Python floats: a sample is a few dozen scalar operations, and tiny numpy
+        # arrays cost more per operation than the arithmetic (this runs once per sample
+        # of every trial; see benchmarks/bench_instruments.py).
+        x = context.get_discrete_state(self._state).get_value().tolist()
         f = None
         if self.averaging:
-            q = self._body_state.Eval(context)[:7]
-            R_WB = _quaternion_matrix(q[:4])
-            p = q[4:7] + R_WB @ self._p_BS
+            qw, qx, qy, qz, bx, by, bz = self._body_state.Eval(context)[:7].tolist()
+            R = _quaternion_rows(qw, qx, qy, qz)
+            sx, sy, sz = self._p_BS
+            p = [bx + R[0] * sx + R[1] * sy + R[2] * sz,
+                 by + R[3] * sx + R[4] * sy + R[5] * sz,
+                 bz + R[6] * sx + R[7] * sy + R[8] * sz]
             if x[18] >= 2:
-                T = self.profile.period
-                a_W = (p - 2 * x[3:6] + x[6:9]) / T ** 2 - self._g_W
-                f = x[9:18].reshape(3, 3).T @ a_W
+                inv_T2 = self.profile.rate_hz ** 2
+                a_W = [(p[i] - 2 * x[3 + i] + x[6 + i]) * inv_T2 - self._g_W[i]
+                       for i in range(3)]
+                R_WS = x[9:18]  # row-major R_WS(t - T): f_S = R_WS^T a_W
+                f = [R_WS[j] * a_W[0] + R_WS[3 + j] * a_W[1] + R_WS[6 + j] * a_W[2]
+                     for j in range(3)]
             x[6:9] = x[3:6]
             x[3:6] = p
-            x[9:18] = (R_WB @ self._R_BS).ravel()
+            R_BS = self._R_BS
+            x[9:18] = [R[3 * i] * R_BS[j] + R[3 * i + 1] * R_BS[3 + j]
+                       + R[3 * i + 2] * R_BS[6 + j] for i in range(3) for j in range(3)]
             x[18] += 1
         if f is None:
-            f = self._input.Eval(context)
+            f = self._input.Eval(context).tolist()
         index = int(round(context.get_time() * self.profile.rate_hz))
-        noise = sample_noise(self.profile, self.seed, index)
-        x[:3] = to_counts(f + self._bias + noise, self.profile)
+        noise = sample_noise(self.profile, self.seed, index).tolist()
+        lsb = self.profile.lsb
+        lo, hi = self.profile.count_limits
+        x[:3] = [min(max(round((f[i] + self._bias[i] + noise[i]) / lsb), lo), hi)
+                 for i in range(3)]
         discrete_state.get_mutable_vector(self._state).SetFromVector(x)
 
     def _calc_counts(self, context, output: BasicVector):
@@ -151,14 +166,13 @@ class DeviceAccelerometer(LeafSystem):
                              * self.profile.lsb)
 
 
-def _quaternion_matrix(q) -> np.ndarray:
-    """Rotation matrix of a unit quaternion ``[w x y z]`` (normalised here)."""
-    w, x, y, z = np.asarray(q) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:
+    """Row-major rotation matrix (9 floats) of the quaternion ``[w x y z]`` (normalised)."""
+    n = (w * w + x * x + y * y + z * z) ** -0.5
+    w, x, y, z = w * n, x * n, y * n, z * n
+    return [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+            2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+            2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]
 
 
 def sensor_pose(kind: str, size: float) -> RigidTransform:
@@ -173,15 +187,36 @@ def sensor_pose(kind: str, size: float) -> RigidTransform:
                           np.asarray(device.sensor_xyz) * size)
 
 
+def _in_object(spec, p, tolerance: float) -> bool:
+    """True when the point ``p`` (O) is in one of the object's convex pieces (a mesh's
+    convex decomposition) or within ``tolerance`` m of it."""
+    from handle_drake.objects.queries import _halfspaces, _inside
+
+    p = np.asarray(p, dtype=float).reshape(1, 3)
+    return any(_inside(desc, p, tolerance)[0] for desc in _halfspaces(spec))
+
+
+def default_sensor_pose(spec) -> RigidTransform:
+    """``X_OS`` of an accelerometer the scenario places nowhere in particular: the
+    object frame itself when its origin is in the object, else (a mug's origin is
+    in its cavity, an L bracket's off its arms) the object's surface point
+    nearest to the origin (of 4096 seeded surface samples: a sensor glued there),
+    axes along O's."""
+    if _in_object(spec, np.zeros(3), 0.0):
+        return RigidTransform()
+    from handle_drake.objects import sample_surface
+
+    points, _ = sample_surface(spec, 4096, rng=0)
+    return RigidTransform(points[np.argmin(np.linalg.norm(points, axis=1))])
+
+
 def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> None:
     """Raises ValueError when the sensor origin is not in or on the object (within
     ``tolerance`` m of its surface: a sensor may be glued on)."""
-    from handle_drake.objects.queries import _halfspaces, _inside
-
     p = np.asarray(X_OS.translation(), dtype=float).reshape(1, 3)
     if not np.all(np.isfinite(p)):
         raise ValueError(f"X_OS: sensor position must be finite, got {p.ravel().tolist()}")
-    if not any(_inside(desc, p, tolerance)[0] for desc in _halfspaces(spec)):
+    if not _in_object(spec, p, tolerance):
         raise ValueError(
             f"X_OS: the sensor at {np.round(p.ravel(), 4).tolist()} m (object frame) is off "
             f"the {spec.kind} (expected inside it or within {tolerance * 1e3:.0f} mm of its "

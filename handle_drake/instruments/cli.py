@@ -53,6 +53,8 @@ def _cmd_instruments(args) -> int:
         write_scenarios,
     )
 
+    if not 0 <= args.seed < 2 ** 32:
+        raise ValueError(f"--seed: expected an integer in [0, 2**32), got {args.seed}")
     if args.write_scenarios is not None:
         args.write_scenarios.mkdir(parents=True, exist_ok=True)
         for path in write_scenarios(args.write_scenarios, seed=args.seed):

@@ -18,8 +18,10 @@ types (see ``handle_drake.scenario``).
 
 ``X_OS`` is the sensor frame S in the object frame O; left out, it is the
 catalogue's named sensor frame of an instrumented object (JoyWarrior, Wiimote,
-...) or the object's origin. ``device`` left out is the object's own device for
-an instrumented object, else the JoyWarrior.
+...), else the object's origin, or, where the origin is off the object (a mug's
+is in its cavity, an L bracket's beside its arms), the surface point nearest to
+it (``instruments.accelerometer.default_sensor_pose``). ``device`` left out is
+the object's own device for an instrumented object, else the JoyWarrior.
 """
 
 import dataclasses as dc
@@ -76,5 +78,7 @@ class AccelerometerConfig:
                 raise ValueError(f"{field} must be a finite number > 0, got {value!r}")
         if self.bits is not None and not 2 <= self.bits <= 32:
             raise ValueError(f"bits must be an integer in [2, 32], got {self.bits!r}")
+        if self.seed is not None and not 0 <= self.seed < 2 ** 32:
+            raise ValueError(f"seed must be an integer in [0, 2**32), got {self.seed!r}")
         self.profile(kind)
         self.estimator_params()

@@ -17,22 +17,86 @@ from __future__ import annotations
 from handle_drake.instruments.accelerometer import (
     AddInstrumentEstimators,
     AddObjectAccelerometer,
+    default_sensor_pose,
     sensor_pose,
 )
 
 __all__ = ["AddSimulatedInstruments", "WithHardwareInstruments", "instrument_X_OS",
-           "instrument_seed", "RECORDING_PREFIX"]
+           "instrument_seed", "RECORDING_PREFIX", "INSTRUMENT_LOG", "flag_intervals",
+           "describe_instruments"]
 
 #: ``evdev_device: recording:FILE`` replays a recording (``evdev_driver.save_events``).
 RECORDING_PREFIX = "recording:"
 
 
 def instrument_X_OS(scenario):
-    """The sensor pose ``X_OS`` of the scenario's object accelerometer."""
+    """The sensor pose ``X_OS`` of the scenario's object accelerometer: ``X_OS`` if
+    given, else an instrumented device's named sensor frame, else
+    :func:`~handle_drake.instruments.accelerometer.default_sensor_pose` (the object
+    frame, or the surface point nearest to it when the origin is off the object)."""
+    from handle_drake.instruments.catalogue import DEVICE_OBJECTS
+
     config = scenario.object.accelerometer
     if config.X_OS is not None:
         return config.X_OS.GetDeterministicValue()
-    return sensor_pose(scenario.object.kind, scenario.object.size)
+    if scenario.object.kind in DEVICE_OBJECTS:
+        return sensor_pose(scenario.object.kind, scenario.object.size)
+    from handle_drake.station import object_spec
+
+    return default_sensor_pose(object_spec(scenario))
+
+
+#: The instrument ports ``handle-drake simulate`` records (every ``harness.LOG_PERIOD``).
+INSTRUMENT_LOG = ("object.acceleration", "object.roll_pitch", "object.at_rest",
+                  "object.free_fall", "object.slip")
+
+
+def flag_intervals(times, flag) -> list[tuple[float, float]]:
+    """``(first, last)`` sample times of each run of ``flag > 0.5``."""
+    import numpy as np
+
+    on = np.asarray(flag, dtype=float).ravel() > 0.5
+    times = np.asarray(times, dtype=float).ravel()
+    edges = np.flatnonzero(np.diff(np.r_[0, on.astype(int), 0]))
+    return [(float(times[a]), float(times[b - 1])) for a, b in zip(edges[::2], edges[1::2],
+                                                                   strict=True)]
+
+
+def describe_instruments(scenario, logs, X_WO=None) -> str:
+    """What the object's accelerometer said over a run, for ``handle-drake simulate``:
+    the last reading and its roll/pitch (and the plant's true roll/pitch of the
+    sensor frame, given the object pose ``X_WO`` at the end), and when free fall and
+    slip were flagged. ``logs``: the ``VectorLog`` of each :data:`INSTRUMENT_LOG`
+    port (a flag shorter than the log period may fall between two samples)."""
+    import numpy as np
+
+    from handle_drake.instruments.estimators import true_roll_pitch
+    from handle_drake.instruments.profiles import STANDARD_GRAVITY
+
+    config = scenario.object.accelerometer
+    profile = config.profile(scenario.object.kind)
+    times = logs["object.acceleration"].sample_times()
+    lines = [f"object accelerometer ({profile.name}, {profile.rate_hz:g} Hz, +-{profile.range_g:g}"
+             f" g, {profile.bits} bit) at X_OS = "
+             f"{np.round(instrument_X_OS(scenario).translation() * 1e3, 1).tolist()} mm:"]
+    if not len(times):
+        return "\n".join(lines + ["  no samples (the run was too short)"])
+    f = logs["object.acceleration"].data()[:, -1]
+    roll, pitch = np.degrees(logs["object.roll_pitch"].data()[:, -1])
+    rest = logs["object.at_rest"].data()[0, -1] > 0.5
+    end = (f"  at {times[-1]:.2f} s: |f| = {np.linalg.norm(f) / STANDARD_GRAVITY:.3f} g, "
+           f"roll {roll:+.1f} deg, pitch {pitch:+.1f} deg "
+           f"({'at rest' if rest else 'not at rest: roll/pitch not valid'})")
+    if X_WO is not None:
+        true = np.degrees(true_roll_pitch((X_WO @ instrument_X_OS(scenario)).rotation()))
+        end += f"; true (plant) roll {true[0]:+.1f} deg, pitch {true[1]:+.1f} deg"
+    lines.append(end)
+    for name in ("free_fall", "slip"):
+        spans = flag_intervals(times, logs[f"object.{name}"].data()[0])
+        text = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in spans[:5]) or "never"
+        more = f" (+{len(spans) - 5} more)" if len(spans) > 5 else ""
+        lines.append(f"  {name.replace('_', ' ')} flagged: {text}{more}")
+    return "\n".join(lines)
 
 
 def instrument_seed(scenario) -> int:

@@ -173,3 +173,88 @@ def test_virtual_uinput_joystick():  # pragma: no cover - needs the uinput modul
         simulator.AdvanceTo(0.1)
         np.testing.assert_array_equal(
             diagram.GetOutputPort("object.acceleration_counts").Eval(context), [0, 0, 4096])
+
+
+class _FakeInputDevice:
+    """What the live path uses of ``evdev.InputDevice`` (this kernel has no uinput):
+    name, path, absinfo, set_absinfo and non-blocking read()."""
+
+    def __init__(self, path, name="Code Mercenaries JoyWarrior24F14", writable=True):
+        self.path, self.name, self.writable = path, name, writable
+        self.flat = {code: 64 for code in (ABS_X, ABS_Y, ABS_Z)}  # the kernel's deadband
+        self.pending = []
+
+    def absinfo(self, code):
+        from evdev import AbsInfo
+
+        return AbsInfo(value=CENTRE, min=0, max=2 ** 14 - 1, fuzz=0, flat=self.flat[code],
+                       resolution=0)
+
+    def set_absinfo(self, code, flat=None):
+        if not self.writable:
+            raise PermissionError(13, "Permission denied")
+        self.flat[code] = flat
+
+    def read(self):
+        if not self.pending:
+            raise BlockingIOError(11, "Resource temporarily unavailable")
+        events, self.pending = self.pending, []
+        return iter(events)
+
+
+def _fake_evdev(monkeypatch, devices):
+    import evdev
+
+    by_path = {d.path: d for d in devices}
+    monkeypatch.setattr(evdev, "list_devices", lambda: list(by_path))
+    monkeypatch.setattr(evdev, "InputDevice", lambda path: by_path[path])
+    monkeypatch.setattr("handle_drake.instruments.evdev_driver.Path.exists",
+                        lambda self: str(self) in by_path)
+
+
+def test_live_device_found_by_name_deadband_cleared_and_read(monkeypatch):
+    from evdev import InputEvent
+
+    from handle_drake.instruments.evdev_driver import LiveEvents, open_device
+
+    mouse = _FakeInputDevice("/dev/input/event3", name="USB Optical Mouse")
+    joy = _FakeInputDevice("/dev/input/event7")
+    _fake_evdev(monkeypatch, [mouse, joy])
+    source = open_device("joywarrior")  # case-insensitive part of the name
+    assert isinstance(source, LiveEvents) and source.device is joy
+    # The report's warning: the kernel's joystick deadband would zero a level sensor.
+    assert joy.flat == {ABS_X: 0, ABS_Y: 0, ABS_Z: 0} and mouse.flat[ABS_X] == 64
+    assert open_device("/dev/input/event7").device is joy
+    assert source.read_events(0.0) == []  # nothing pending: no blocking
+    diagram = _diagram(source)
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    # 1 g on z: the centre (min + max + 1) / 2 = 8192 from absinfo, plus 4096 counts.
+    joy.pending = [InputEvent(0, 0, EV_ABS, ABS_Z, CENTRE + 4096),
+                   InputEvent(0, 0, EV_ABS, ABS_X, CENTRE - 100),
+                   InputEvent(0, 0, EV_SYN, 0, 0)]
+    simulator.AdvanceTo(0.01)
+    np.testing.assert_array_equal(
+        diagram.GetOutputPort("object.acceleration_counts").Eval(context), [-100, 0, 4096])
+    np.testing.assert_allclose(diagram.GetOutputPort("object.acceleration").Eval(context)[2],
+                               9.80665)
+    simulator.AdvanceTo(0.05)  # no new events: the last values are held
+    np.testing.assert_array_equal(
+        diagram.GetOutputPort("object.acceleration_counts").Eval(context), [-100, 0, 4096])
+
+
+def test_live_device_errors_and_a_read_only_device(monkeypatch):
+    from handle_drake.instruments.evdev_driver import open_device
+
+    joy = _FakeInputDevice("/dev/input/event7", writable=False)
+    _fake_evdev(monkeypatch, [joy])
+    with pytest.warns(UserWarning, match="deadband"):
+        source = open_device("JoyWarrior")
+    assert source.device is joy
+    with pytest.raises(FileNotFoundError,
+                       match=r"no input device named like 'Wiimote'.*JoyWarrior"):
+        open_device("Wiimote")
+    with pytest.raises(FileNotFoundError, match="/dev/input/event9 does not exist"):
+        open_device("/dev/input/event9")
+    with pytest.raises(ValueError, match="evdev_device"):
+        open_device("")

@@ -18,8 +18,11 @@ def test_joywarrior_tripod_rotation_is_measured_by_the_object_itself(tmp_path):
     """The user's path: ``handle-drake instruments --quick`` (turn 25 deg and back)."""
     out = tmp_path / "figure8.json"
     assert main(["instruments", "--device", "joywarrior", "--quick", "--json", str(out),
-                 "--plot", str(tmp_path / "figure8.png")]) == 0
+                 "--plot", str(tmp_path / "figure8.png"), "--html", str(tmp_path / "r.html")]) == 0
     assert (tmp_path / "figure8.png").stat().st_size > 10_000
+    # --html starts Meshcat and saves one replay per device (NAME_<device>.html).
+    replay = (tmp_path / "r_joywarrior.html").read_text()
+    assert "meshcat" in replay.lower() and len(replay) > 100_000
     (s,) = json.loads(out.read_text())
     assert s["device"] == "joywarrior" and s["grasp_class"] == "tripod"
     assert s["held_through_rotations"]
@@ -57,3 +60,5 @@ def test_bad_experiment_input(capsys):
     with pytest.raises(SystemExit):
         main(["instruments", "--device", "nunchuk"])
     assert "invalid choice" in capsys.readouterr().err
+    assert main(["instruments", "--seed", "-1"]) == 2
+    assert "--seed" in capsys.readouterr().err
