@@ -177,10 +177,7 @@ def _cmd_write(args) -> int:
             (FADER_SCENARIO, fader_push_scenario,
              "a fingertip pushes fader5 40 mm up its slot")):
         path = args.directory / name
-        scenario = build()
-        text = DumpScenario(scenario)
-        if scenario.object is None:  # the dump leaves None out; loading would add the default
-            text += "object: null\n"
+        text = DumpScenario(build())  # writes object: null itself
         path.write_text(f"# {note}.\n# Written by: handle-drake midi write-scenarios "
                         f"{args.directory}\n# Run: handle-drake midi "
                         f"{'jog' if name == JOG_SCENARIO else 'fader'} (or handle-drake "
