@@ -1,6 +1,7 @@
 """``handle-drake midi``: errors are one line and exit 2; live control runs."""
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -78,3 +79,20 @@ def test_write_scenarios_writes_files_that_load_back_to_the_shipped_ones(
         assert written.object is None and written.midi_controller is not None
         assert DumpScenario(written) == DumpScenario(scenario)
     assert capsys.readouterr().out.count("wrote ") == 2
+
+
+def test_jog_and_fader_commands_run_and_report_what_midi_counted(tmp_path, capsys):
+    # Cut short (the jog after ~20 degrees of the turn, the fader after the
+    # first millimetres of the push); the full runs are in test_midi_experiments.
+    assert main(["midi", "jog", "--override", "simulation_duration: 1.7"]) == 0
+    out = capsys.readouterr().out
+    true_ticks = float(re.search(r"= *([-+\d.]+) ticks", out).group(1))
+    counted = int(re.search(r"counted from MIDI *([-+\d]+) ticks", out).group(1))
+    assert true_ticks > 2 and abs(counted - true_ticks) < 1.0, out
+    html = tmp_path / "replay" / "fader.html"
+    assert main(["midi", "fader", "--override", "simulation_duration: 0.9",
+                 "--html", str(html)]) == 0
+    out = capsys.readouterr().out
+    moved = float(re.search(r"fader5 pushed by the first finger: moved ([\d.]+) mm", out)[1])
+    assert moved > 1.0, out
+    assert html.is_file() and "meshcat" in html.read_text()[:200000].lower()
