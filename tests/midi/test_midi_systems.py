@@ -140,6 +140,7 @@ def test_fader_messages_move_the_hand_joints_to_their_targets_and_mode_switch_se
     assert built.control.get_mode(control_context) == JOINT_MODE
 
     # Mode button -> synergy mode: the faders are sent to the current posture's amplitudes.
+    list(feedback.iter_pending())  # (what was sent at the start)
     device.send(mido.Message("note_on", note=84, velocity=127))
     device.send(mido.Message("note_off", note=84))
     simulator.AdvanceTo(1.25)
@@ -163,6 +164,29 @@ def test_fader_messages_move_the_hand_joints_to_their_targets_and_mode_switch_se
     simulator.AdvanceTo(1.55)
     back = list(feedback.iter_pending())
     assert [m.value for m in back] == pytest.approx(values, abs=1)
+
+
+def test_faders_are_sent_to_the_initial_command_at_start():
+    # Shadow limits (reference hand_kinematics.md): FFJ3 -0.2618..1.5708 rad,
+    # THJ5 +-1.0472 rad; the other fader joints start at 0 (FFJ2 etc. 0..1.5708).
+    initial = np.zeros(len(NAMES))
+    initial[NAMES.index("FFJ3")], initial[NAMES.index("THJ5")] = 1.0, -0.5
+    simulator, built, device, feedback = hand_control(initial_command=initial, synergies=None)
+    simulator.Initialize()
+    sent = list(feedback.iter_pending())
+    assert [m.control for m in sent] == list(range(20, 29))  # fader1..9, nothing else
+    expected = [round((1.0 + 0.2618) / (1.5708 + 0.2618) * 127), 0,  # FFJ3 87, FFJ2
+                round(0.2618 / 1.8326 * 127), 0, round(0.2618 / 1.8326 * 127), 0,  # MF, RF
+                round(0.2618 / 1.8326 * 127), 0,  # LF
+                round((-0.5 + 1.0472) / 2.0944 * 127)]  # THJ5 33
+    assert [m.value for m in sent] == expected
+    # Touching a fader one count from there moves its joint by one count's worth.
+    device.send(cc(20, expected[0] + 1))
+    simulator.AdvanceTo(0.05)
+    command = built.control.get_position_output_port().Eval(
+        built.control.GetMyContextFromRoot(simulator.get_context()))
+    assert command[NAMES.index("FFJ3")] == pytest.approx(
+        -0.2618 + (expected[0] + 1) / 127 * 1.8326, abs=1e-3)
 
 
 def test_knob_ticks_move_a_joint_relatively_and_the_command_is_rate_limited():
@@ -215,7 +239,9 @@ def test_meshcat_sliders_drive_the_hand():
     built = BuildMidiHandControl(LoadScenario(data=FIXED_HAND), port=port, feedback_port=port,
                                  synergies=None)
     simulator = Simulator(built.diagram)
-    meshcat.SetSliderValue("MIDI fader1", 127)
+    simulator.Initialize()  # the sliders are sent to the initial command
+    assert meshcat.GetSliderValue("MIDI fader1") == round(0.2618 / 1.8326 * 127)  # FFJ3 = 0
+    meshcat.SetSliderValue("MIDI fader1", 127)  # as if dragged in the browser
     simulator.AdvanceTo(1.0)
     assert measured(built, simulator)["FFJ3"] == pytest.approx(math.pi / 2, abs=0.03)
     port.close()
