@@ -17,7 +17,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from handle_drake.cli_support import start_meshcat
+from handle_drake.cli_support import check_hardware_server, start_meshcat
 
 JOG_SCENARIO = "midi_jog_pinch.yaml"
 FADER_SCENARIO = "midi_fader_push.yaml"
@@ -136,6 +136,8 @@ def _cmd_control(args) -> int:
         data = ("hand: {mount: !FixedMount {X_WB: {translation: [0, 0, 0.3]}}}\n"
                 "object: null\ntable: null\n" + (data or ""))
     scenario = LoadScenario(filename=args.scenario, data=data)
+    if args.hardware:
+        check_hardware_server(scenario)
     meshcat = start_meshcat(args.meshcat)
     if args.meshcat:
         from handle_drake.midi.ports import MeshcatFaderPort

@@ -2,6 +2,7 @@
 
 import os
 import re
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -96,3 +97,18 @@ def test_jog_and_fader_commands_run_and_report_what_midi_counted(tmp_path, capsy
     moved = float(re.search(r"fader5 pushed by the first finger: moved ([\d.]+) mm", out)[1])
     assert moved > 1.0, out
     assert html.is_file() and "meshcat" in html.read_text()[:200000].lower()
+
+
+def test_control_on_hardware_needs_an_answering_can_server(capsys):
+    # Nothing listens on a port just freed: a one-line error before any build,
+    # instead of "driving" a hand that is not there.
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    assert main(["midi", "control", "--meshcat", "--hardware", "--duration", "0.1",
+                 "--scenario", str(diagrams_dir() / "shadow_can_hand.yaml"), "--override",
+                 f"driver: !CanHandDriver {{host: 127.0.0.1, port: {port}}}"]) == 2
+    err = capsys.readouterr().err
+    assert f"expected a CAN bus server at 127.0.0.1:{port}" in err and "Traceback" not in err
+    assert main(["midi", "control", "--meshcat", "--hardware", "--duration", "0.1"]) == 2
+    assert "driver: !CanHandDriver" in capsys.readouterr().err
