@@ -189,6 +189,34 @@ def test_faders_are_sent_to_the_initial_command_at_start():
         -0.2618 + (expected[0] + 1) / 127 * 1.8326, abs=1e-3)
 
 
+def test_synergy_mode_faders_set_synergy_amplitudes():
+    """Synergy mode: fader i sets amplitude i to lo_i + v/127 (hi_i - lo_i); the target is
+    mean + a @ components[:k] within the joint limits (the PCA basis, written out here)."""
+    simulator, built, device, feedback = hand_control(max_joint_velocity=4.0)
+    simulator.Initialize()
+    list(feedback.iter_pending())
+    device.send(mido.Message("note_on", note=84, velocity=127))  # -> synergy mode
+    simulator.AdvanceTo(0.02)
+    faders = [m.value for m in feedback.iter_pending()]
+    synergies = built.control._synergies
+    lo, hi = synergies.amplitude_bounds()
+    k = len(lo)
+    assert 1 <= k <= 9 and len(faders) == 9
+    device.send(cc(20, 127))  # fader1: the first synergy at the top of its range
+    simulator.AdvanceTo(1.5)
+    a = np.array([lo[i] + (127 if i == 0 else faders[i]) / 127 * (hi[i] - lo[i])
+                  for i in range(k)])
+    lower, upper = actuated_position_limits(SPEC, 1.0)
+    expected = np.clip(synergies.mean + a @ synergies.components[:k], lower, upper)
+    control_context = built.control.GetMyContextFromRoot(simulator.get_context())
+    assert built.control.get_mode(control_context) == SYNERGY_MODE
+    command = built.control.get_position_output_port().Eval(control_context)
+    assert command == pytest.approx(expected, abs=1e-9)
+    q = measured(built, simulator)
+    for joint in ("FFJ3", "MFJ3", "THJ5", "THJ4"):
+        assert q[joint] == pytest.approx(expected[NAMES.index(joint)], abs=0.03), joint
+
+
 def test_knob_ticks_move_a_joint_relatively_and_the_command_is_rate_limited():
     simulator, built, device, _ = hand_control(max_joint_velocity=1.0, period=0.005,
                                                radians_per_tick=0.01)
