@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import mido
+
 from handle_drake.cli import main
 from handle_drake.demo import diagrams_dir
 from handle_drake.midi import ports
@@ -37,26 +39,27 @@ def test_bad_arguments_exit_2(tmp_path, capsys):
 
 
 def test_real_midi_device_without_a_midi_system_is_one_line(monkeypatch, tmp_path, capsys):
-    # ``midi ports`` and ``midi control`` (the real-device path) in a fresh
+    # ``midi ports``, ``midi control`` and ``midi monitor`` (the real-device path) in a fresh
     # interpreter, stderr as the user sees it (with what C libraries write to
     # file descriptor 2): with no ALSA sequencer, exit 2 and one line each (no
     # libasound chatter, no traceback); with one, the ports are listed.
     code = ("import sys; from handle_drake.cli import main; "
-            "sys.exit(10 * main(['midi', 'ports']) + main(['midi', 'control', '--duration', "
-            "'0.1', '--port', 'iControls-absent']))")
+            "sys.exit(100 * main(['midi', 'ports']) + 10 * main(['midi', 'control', "
+            "'--duration', '0.1', '--port', 'iControls-absent']) + main(['midi', 'monitor', "
+            "'--duration', '0.1', '--port', 'iControls-absent']))")
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
                          cwd=ROOT, timeout=120)
     if not os.path.exists(ALSA_SEQUENCER):
-        assert run.returncode == 22, run.stderr
+        assert run.returncode == 222, run.stderr
         lines = run.stderr.splitlines()
-        assert len(lines) == 2, run.stderr
+        assert len(lines) == 3, run.stderr
         for line in lines:
             assert line.startswith("handle-drake midi: error: no MIDI system available: "
                                    f"the ALSA sequencer {ALSA_SEQUENCER} does not exist")
     else:
-        assert run.returncode == 2 and "MIDI inputs:" in run.stdout
-        assert "no MIDI device matching 'iControls-absent'" in run.stderr
+        assert run.returncode == 22 and "MIDI inputs:" in run.stdout
+        assert run.stderr.count("no MIDI device matching 'iControls-absent'") == 2
         # The missing-sequencer message, forced.
         monkeypatch.setattr(ports, "ALSA_SEQUENCER", str(tmp_path / "seq"))
         assert main(["midi", "ports"]) == 2
@@ -112,3 +115,27 @@ def test_control_on_hardware_needs_an_answering_can_server(capsys):
     assert f"expected a CAN bus server at 127.0.0.1:{port}" in err and "Traceback" not in err
     assert main(["midi", "control", "--meshcat", "--hardware", "--duration", "0.1"]) == 2
     assert "driver: !CanHandDriver" in capsys.readouterr().err
+
+
+def test_monitor_prints_what_the_device_reports(monkeypatch, capsys):
+    # An in-process port plays the device (no MIDI system here).
+    device, host = ports.in_process_pair()
+    _, output = ports.in_process_pair()
+    monkeypatch.setattr(ports, "open_device_ports", lambda name: (host, output))
+    for message in (mido.Message("control_change", control=22, value=77),  # fader3
+                    mido.Message("control_change", control=60, value=3),  # jog +3
+                    mido.Message("control_change", control=60, value=64 + 1),  # jog -1
+                    mido.Message("note_on", note=84, velocity=127),  # mode pressed
+                    mido.Message("sysex", data=[1, 2]),
+                    mido.Message("control_change", channel=5, control=22, value=1)):
+        device.send(message)
+    assert main(["midi", "monitor", "--duration", "0.2"]) == 0
+    lines = [" ".join(line.split()) for line in capsys.readouterr().out.splitlines()]
+    assert lines[1:] == ["fader3 77", "jog +3 ticks (net +3)", "jog -1 ticks (net +2)",
+                         "mode pressed (presses: 1)",
+                         "ignored (sysex): sysex data=(1,2) time=0",
+                         "ignored (unknown_channel): control_change channel=5 control=22 "
+                         "value=1 time=0",
+                         "messages: 4 accepted, 2 ignored (sysex 1, unknown_channel 1)"]
+    assert host.closed
+    assert main(["midi", "monitor", "--duration", "0"]) == 2
