@@ -72,6 +72,28 @@ def test_free_base_falls_onto_nothing_but_stays_finite():
     assert z == pytest.approx(-0.5 * 9.81 * 0.1**2, abs=2e-3)  # free fall, no table
 
 
+def test_free_base_rests_flat_on_a_table():
+    # Point contact, SAP, 2 ms (the experiments' settings). Box-on-box point
+    # contact has a single contact point: without its corner feet the base
+    # sank 12 mm into the table.
+    from handle_drake.objects.plant import AddTable
+
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=0.002, contact_model="point", discrete_contact_approximation="sap"), builder)
+    AddTable(plant, top_height=0.1)
+    AddMidiController(plant, RigidTransform([0.05, 0.0, 0.1]), fixed=False)
+    plant.Finalize()
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.5)
+    context = plant.GetMyContextFromRoot(simulator.get_context())
+    X = plant.GetBodyByName("base").EvalPoseInWorld(context)
+    assert X.translation()[2] == pytest.approx(0.1, abs=3e-4)  # on the top, not in it
+    assert np.abs(X.rotation().matrix() - np.eye(3)).max() < 1e-3  # flat
+    assert np.abs(plant.GetBodyByName("base").EvalSpatialVelocityInWorld(context)
+                  .translational()).max() < 1e-3  # at rest
+
+
 @pytest.mark.parametrize("turns", [1.37, -2.61])
 def test_known_wheel_rotation_gives_known_ticks_in_the_diagram(turns):
     simulator, plant, receiver = controller_diagram()
