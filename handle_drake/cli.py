@@ -16,7 +16,7 @@ import importlib
 import sys
 from pathlib import Path
 
-from handle_drake.cli_support import run_command, start_meshcat
+from handle_drake.cli_support import check_hardware_server, run_command, start_meshcat
 
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
@@ -62,7 +62,7 @@ def _cmd_simulate(args) -> int:
     if args.duration is not None:
         _check_duration(args.duration, scenario)
     if args.hardware:
-        _check_hardware_server(scenario)
+        check_hardware_server(scenario)
     meshcat = start_meshcat(args.meshcat or args.html is not None)
     instrumented = scenario.object is not None and scenario.object.accelerometer is not None
     log = DEFAULT_LOG
@@ -110,27 +110,6 @@ def _check_duration(duration: float, scenario) -> None:
         validate_scenario(dataclasses.replace(scenario, simulation_duration=duration))
     except ValueError as error:
         raise ValueError(f"--duration: {error}") from None
-
-
-def _check_hardware_server(scenario) -> None:
-    """``--hardware`` needs a !CanHandDriver and its server answering, before anything runs."""
-    import socket
-
-    from handle_drake.scenario import CanHandDriver
-
-    driver = scenario.driver
-    if not isinstance(driver, CanHandDriver):
-        raise ValueError(f"--hardware: expected a scenario with driver: !CanHandDriver, got "
-                         f"!{type(driver).__name__}")
-    try:
-        with socket.create_connection((driver.host, driver.port),
-                                      timeout=max(driver.connect_timeout, 1.0)):
-            pass
-    except OSError as error:
-        raise ValueError(
-            f"--hardware: expected a CAN bus server at {driver.host}:{driver.port} (driver.host, "
-            f"driver.port), got {error.strerror or error}; start `handle-drake can-server`"
-        ) from None
 
 
 def _cmd_demo(args) -> int:

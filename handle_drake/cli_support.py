@@ -13,7 +13,7 @@ import sys
 
 from handle_drake.blas import pin_blas
 
-__all__ = ["run_command", "start_meshcat"]
+__all__ = ["check_hardware_server", "run_command", "start_meshcat"]
 
 
 def start_meshcat(wanted: bool):
@@ -25,6 +25,27 @@ def start_meshcat(wanted: bool):
     meshcat = StartMeshcat()
     print(f"Meshcat: {meshcat.web_url()}", flush=True)
     return meshcat
+
+
+def check_hardware_server(scenario) -> None:
+    """``--hardware`` needs a !CanHandDriver and its server answering, before anything runs."""
+    import socket
+
+    from handle_drake.scenario import CanHandDriver
+
+    driver = scenario.driver
+    if not isinstance(driver, CanHandDriver):
+        raise ValueError(f"--hardware: expected a scenario with driver: !CanHandDriver, got "
+                         f"!{type(driver).__name__}")
+    try:
+        with socket.create_connection((driver.host, driver.port),
+                                      timeout=max(driver.connect_timeout, 1.0)):
+            pass
+    except OSError as error:
+        raise ValueError(
+            f"--hardware: expected a CAN bus server at {driver.host}:{driver.port} (driver.host, "
+            f"driver.port), got {error.strerror or error}; start `handle-drake can-server`"
+        ) from None
 
 
 def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:

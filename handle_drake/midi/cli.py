@@ -7,6 +7,8 @@
 - ``midi control``: faders, knobs and the mode button drive the hand in real
   time (a MIDI device, or Meshcat sliders with ``--meshcat``), simulated or on
   the CAN hand with ``--hardware``.
+- ``midi monitor``: what a real device's controls report, decoded by the
+  mapping (check a device's preset against the mapping file).
 - ``midi ports``: the MIDI devices python-rtmidi sees.
 - ``midi write-scenarios DIR``: plans the two experiments and writes their
   scenario files (``diagrams/midi_jog_pinch.yaml``, ``midi_fader_push.yaml``).
@@ -17,7 +19,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from handle_drake.cli_support import start_meshcat
+from handle_drake.cli_support import check_hardware_server, start_meshcat
 
 JOG_SCENARIO = "midi_jog_pinch.yaml"
 FADER_SCENARIO = "midi_fader_push.yaml"
@@ -48,6 +50,14 @@ def register(subparsers) -> None:
                    help="drive the CAN hand of the scenario's !CanHandDriver")
     q.add_argument("--duration", type=float, default=60.0, help="seconds to run")
     q.set_defaults(func=_cmd_control)
+
+    q = sub.add_parser("monitor", help="print what a MIDI device's controls report, decoded "
+                                       "by the mapping (what a learner is told)")
+    q.add_argument("--mapping", type=Path, default=None, help="MIDI mapping file")
+    q.add_argument("--port", default=None,
+                   help="MIDI device name (substring; default: the mapping's port_name)")
+    q.add_argument("--duration", type=float, default=60.0, help="seconds to listen")
+    q.set_defaults(func=_cmd_monitor)
 
     q = sub.add_parser("ports", help="list the MIDI devices python-rtmidi sees")
     q.set_defaults(func=_cmd_ports)
@@ -123,6 +133,47 @@ def _cmd_ports(args) -> int:
     return 0
 
 
+def _cmd_monitor(args) -> int:
+    from handle_drake.midi import ports
+    from handle_drake.midi.codec import ControlCounts, MidiDecoder
+    from handle_drake.midi.mapping import LoadMidiMapping
+
+    if not (args.duration > 0):
+        raise ValueError(f"--duration must be > 0 s, got {args.duration}")
+    mapping = LoadMidiMapping(args.mapping)
+    port, output = ports.open_device_ports(args.port or mapping.port_name)
+    output.close()
+    decoder, counts = MidiDecoder(mapping), ControlCounts(mapping)
+    print(f"listening to {port.name} for {args.duration:g} s (Ctrl-C stops)", flush=True)
+    deadline = time.monotonic() + args.duration
+    try:
+        while time.monotonic() < deadline:
+            for message in port.iter_pending():
+                rejected = dict(decoder.rejected)
+                event = decoder.decode(message)
+                if event is None:
+                    reason = next(r for r, n in decoder.rejected.items()
+                                  if n > rejected.get(r, 0))
+                    print(f"  ignored ({reason}): {message}", flush=True)
+                    continue
+                counts.add(event)
+                if event.kind == "fader":
+                    text = f"{event.value:4d}"
+                elif event.kind == "button":
+                    text = f"{'pressed' if event.value else 'released'} (presses: " \
+                           f"{counts[event.name]})"
+                else:
+                    text = f"{event.value:+4d} ticks (net {counts[event.name]:+d})"
+                print(f"{event.name:8s} {text}", flush=True)
+            time.sleep(0.002)
+    finally:
+        port.close()
+    rejected = ", ".join(f"{r} {n}" for r, n in decoder.rejected.items() if n)
+    print(f"messages: {decoder.accepted} accepted, {decoder.total_rejected} ignored"
+          + (f" ({rejected})" if rejected else ""))
+    return 0
+
+
 def _cmd_control(args) -> int:
     from handle_drake.midi.hand_control import BuildMidiHandControl
     from handle_drake.midi.mapping import LoadMidiMapping
@@ -136,6 +187,8 @@ def _cmd_control(args) -> int:
         data = ("hand: {mount: !FixedMount {X_WB: {translation: [0, 0, 0.3]}}}\n"
                 "object: null\ntable: null\n" + (data or ""))
     scenario = LoadScenario(filename=args.scenario, data=data)
+    if args.hardware:
+        check_hardware_server(scenario)
     meshcat = start_meshcat(args.meshcat)
     if args.meshcat:
         from handle_drake.midi.ports import MeshcatFaderPort
@@ -177,10 +230,7 @@ def _cmd_write(args) -> int:
             (FADER_SCENARIO, fader_push_scenario,
              "a fingertip pushes fader5 40 mm up its slot")):
         path = args.directory / name
-        scenario = build()
-        text = DumpScenario(scenario)
-        if scenario.object is None:  # the dump leaves None out; loading would add the default
-            text += "object: null\n"
+        text = DumpScenario(build())  # writes object: null itself
         path.write_text(f"# {note}.\n# Written by: handle-drake midi write-scenarios "
                         f"{args.directory}\n# Run: handle-drake midi "
                         f"{'jog' if name == JOG_SCENARIO else 'fader'} (or handle-drake "

@@ -19,6 +19,8 @@ take any of them:
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 
 import mido
@@ -80,15 +82,38 @@ def in_process_pair(name: str = "in-process") -> tuple[InProcessPort, InProcessP
     return a, b
 
 
+ALSA_SEQUENCER = "/dev/snd/seq"
+
+
+def _check_midi_system() -> None:
+    """Refuses before python-rtmidi is asked where its ALSA back end cannot work.
+
+    Without the ALSA sequencer device, rtmidi's ``MidiIn()`` raises a
+    ``SystemError`` *and* libasound prints its own line to the process's
+    stderr (C level, past Python's ``sys.stderr``); checking the device first
+    keeps the failure to the one line of :class:`MidiPortError`. Only for
+    mido's rtmidi back end with the ALSA (or the default) API on Linux: other
+    back ends and APIs are asked as they are.
+    """
+    backend = mido.backend
+    if (sys.platform.startswith("linux") and backend.name == "mido.backends.rtmidi"
+            and backend.api in (None, "LINUX_ALSA") and not os.path.exists(ALSA_SEQUENCER)):
+        raise MidiPortError(
+            f"no MIDI system available: the ALSA sequencer {ALSA_SEQUENCER} does not exist "
+            "(python-rtmidi needs it on Linux: load the snd-seq module, or pass /dev/snd into "
+            "the container); use the in-process port or Meshcat sliders (--meshcat) instead")
+
+
 def device_port_names() -> tuple[list[str], list[str]]:
     """(input names, output names) of the MIDI system; raises :class:`MidiPortError`."""
+    _check_midi_system()
     try:
         return list(mido.get_input_names()), list(mido.get_output_names())
     except Exception as error:  # rtmidi raises SystemError without an ALSA sequencer
         raise MidiPortError(
             "no MIDI system available (python-rtmidi: "
             f"{' '.join(str(error).split())[:160]}); on Linux the ALSA sequencer "
-            "/dev/snd/seq is needed; use the in-process port or Meshcat sliders instead"
+            f"{ALSA_SEQUENCER} is needed; use the in-process port or Meshcat sliders instead"
         ) from None
 
 

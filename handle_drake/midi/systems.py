@@ -31,7 +31,7 @@ port                        dir    size            units
 ``midi_in``                 in     ``MidiBatch``   optional; and/or a mido ``port`` polled
 ``position``                out    nu              rad, connect to ``hand.position``
 ``mode``                    out    1               0 joint mode, 1 synergy mode
-``feedback``                out    ``MidiBatch``   fader feedback sent at the last mode switch
+``feedback``                out    ``MidiBatch``   fader feedback sent at start / the last switch
 ``midi_counts``             out    2 + reasons     as above
 ==========================  =====  ==============  =======================================
 """
@@ -291,7 +291,9 @@ class MidiHandControl(LeafSystem, _MidiInput):
     becomes the current command (nothing jumps) and the faders are sent to
     the values that command has in the new mode (``control_change`` messages
     to ``feedback_port`` and on the ``feedback`` output): motorised faders
-    move there, so the next touch starts from where the hand is.
+    move there, so the next touch starts from where the hand is. At the
+    simulator's initialization the faders are sent to the initial command the
+    same way.
 
     The command moves towards the target by at most ``max_joint_velocity *
     period`` per update (the rate limit) and stays within the hand's command
@@ -376,6 +378,7 @@ class MidiHandControl(LeafSystem, _MidiInput):
         self._fader_values = self.DeclareDiscreteState(self._fader_levels(initial, mode))
         self._mode = self.DeclareDiscreteState([float(mode)])
         self._feedback = self.DeclareAbstractState(_batch_value())
+        self.DeclareInitializationUnrestrictedUpdateEvent(self._initialize)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
         self._position = self.DeclareVectorOutputPort(
             "position", nu,
@@ -458,6 +461,24 @@ class MidiHandControl(LeafSystem, _MidiInput):
         return self._synergies.amplitudes_to_command(a)
 
     # ---- update --------------------------------------------------------------------
+    def _send_feedback(self, context, state, fader_values) -> None:
+        """Sends the faders to ``fader_values`` (feedback port and ``feedback`` output)."""
+        feedback = [control_message(self._mapping.control(name), int(v))
+                    for name, v in zip(self._faders, fader_values, strict=True)]
+        if self._feedback_port is not None:
+            for message in feedback:
+                self._feedback_port.send(message)
+        previous = context.get_abstract_state(int(self._feedback)).get_value()
+        state.get_mutable_abstract_state(int(self._feedback)).set_value(
+            MidiBatch(previous.seq + 1, tuple(feedback)))
+
+    def _initialize(self, context, state):
+        # Motorised faders (or Meshcat sliders) start where the command is, so
+        # the first touch of a fader moves its joint from there, not from
+        # wherever the fader was left.
+        self._send_feedback(context, state,
+                            context.get_discrete_state(self._fader_values).value())
+
     def _update(self, context, state):
         events = self._events(context, state)
         command = context.get_discrete_state(self._command).value()
@@ -467,7 +488,7 @@ class MidiHandControl(LeafSystem, _MidiInput):
         command, target = command.copy(), target.copy()
         faders = context.get_discrete_state(self._fader_values).value().copy()
         mode = self.get_mode(context)
-        feedback = []
+        switched = False
         for event in events:
             if event.kind == "fader":
                 i = self._faders.index(event.name)
@@ -489,18 +510,12 @@ class MidiHandControl(LeafSystem, _MidiInput):
                 mode = new_mode
                 target = command.copy()
                 faders = self._fader_levels(command, mode)
-                feedback = [control_message(self._mapping.control(name), int(v))
-                            for name, v in zip(self._faders, faders, strict=True)]
+                switched = True
         target = np.clip(target, self._lower, self._upper)
         step = np.clip(target - command, -self._max_step, self._max_step)
         state.get_mutable_discrete_state(self._command).SetFromVector(command + step)
         state.get_mutable_discrete_state(self._target).SetFromVector(target)
         state.get_mutable_discrete_state(self._fader_values).SetFromVector(faders)
         state.get_mutable_discrete_state(self._mode).SetFromVector([float(mode)])
-        if feedback:
-            if self._feedback_port is not None:
-                for message in feedback:
-                    self._feedback_port.send(message)
-            previous = context.get_abstract_state(int(self._feedback)).get_value()
-            state.get_mutable_abstract_state(int(self._feedback)).set_value(
-                MidiBatch(previous.seq + 1, tuple(feedback)))
+        if switched:
+            self._send_feedback(context, state, faders)

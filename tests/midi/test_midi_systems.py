@@ -72,6 +72,28 @@ def test_free_base_falls_onto_nothing_but_stays_finite():
     assert z == pytest.approx(-0.5 * 9.81 * 0.1**2, abs=2e-3)  # free fall, no table
 
 
+def test_free_base_rests_flat_on_a_table():
+    # Point contact, SAP, 2 ms (the experiments' settings). Box-on-box point
+    # contact has a single contact point: without its corner feet the base
+    # sank 12 mm into the table.
+    from handle_drake.objects.plant import AddTable
+
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=0.002, contact_model="point", discrete_contact_approximation="sap"), builder)
+    AddTable(plant, top_height=0.1)
+    AddMidiController(plant, RigidTransform([0.05, 0.0, 0.1]), fixed=False)
+    plant.Finalize()
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(0.5)
+    context = plant.GetMyContextFromRoot(simulator.get_context())
+    X = plant.GetBodyByName("base").EvalPoseInWorld(context)
+    assert X.translation()[2] == pytest.approx(0.1, abs=3e-4)  # on the top, not in it
+    assert np.abs(X.rotation().matrix() - np.eye(3)).max() < 1e-3  # flat
+    assert np.abs(plant.GetBodyByName("base").EvalSpatialVelocityInWorld(context)
+                  .translational()).max() < 1e-3  # at rest
+
+
 @pytest.mark.parametrize("turns", [1.37, -2.61])
 def test_known_wheel_rotation_gives_known_ticks_in_the_diagram(turns):
     simulator, plant, receiver = controller_diagram()
@@ -140,6 +162,7 @@ def test_fader_messages_move_the_hand_joints_to_their_targets_and_mode_switch_se
     assert built.control.get_mode(control_context) == JOINT_MODE
 
     # Mode button -> synergy mode: the faders are sent to the current posture's amplitudes.
+    list(feedback.iter_pending())  # (what was sent at the start)
     device.send(mido.Message("note_on", note=84, velocity=127))
     device.send(mido.Message("note_off", note=84))
     simulator.AdvanceTo(1.25)
@@ -163,6 +186,57 @@ def test_fader_messages_move_the_hand_joints_to_their_targets_and_mode_switch_se
     simulator.AdvanceTo(1.55)
     back = list(feedback.iter_pending())
     assert [m.value for m in back] == pytest.approx(values, abs=1)
+
+
+def test_faders_are_sent_to_the_initial_command_at_start():
+    # Shadow limits (reference hand_kinematics.md): FFJ3 -0.2618..1.5708 rad,
+    # THJ5 +-1.0472 rad; the other fader joints start at 0 (FFJ2 etc. 0..1.5708).
+    initial = np.zeros(len(NAMES))
+    initial[NAMES.index("FFJ3")], initial[NAMES.index("THJ5")] = 1.0, -0.5
+    simulator, built, device, feedback = hand_control(initial_command=initial, synergies=None)
+    simulator.Initialize()
+    sent = list(feedback.iter_pending())
+    assert [m.control for m in sent] == list(range(20, 29))  # fader1..9, nothing else
+    expected = [round((1.0 + 0.2618) / (1.5708 + 0.2618) * 127), 0,  # FFJ3 87, FFJ2
+                round(0.2618 / 1.8326 * 127), 0, round(0.2618 / 1.8326 * 127), 0,  # MF, RF
+                round(0.2618 / 1.8326 * 127), 0,  # LF
+                round((-0.5 + 1.0472) / 2.0944 * 127)]  # THJ5 33
+    assert [m.value for m in sent] == expected
+    # Touching a fader one count from there moves its joint by one count's worth.
+    device.send(cc(20, expected[0] + 1))
+    simulator.AdvanceTo(0.05)
+    command = built.control.get_position_output_port().Eval(
+        built.control.GetMyContextFromRoot(simulator.get_context()))
+    assert command[NAMES.index("FFJ3")] == pytest.approx(
+        -0.2618 + (expected[0] + 1) / 127 * 1.8326, abs=1e-3)
+
+
+def test_synergy_mode_faders_set_synergy_amplitudes():
+    """Synergy mode: fader i sets amplitude i to lo_i + v/127 (hi_i - lo_i); the target is
+    mean + a @ components[:k] within the joint limits (the PCA basis, written out here)."""
+    simulator, built, device, feedback = hand_control(max_joint_velocity=4.0)
+    simulator.Initialize()
+    list(feedback.iter_pending())
+    device.send(mido.Message("note_on", note=84, velocity=127))  # -> synergy mode
+    simulator.AdvanceTo(0.02)
+    faders = [m.value for m in feedback.iter_pending()]
+    synergies = built.control._synergies
+    lo, hi = synergies.amplitude_bounds()
+    k = len(lo)
+    assert 1 <= k <= 9 and len(faders) == 9
+    device.send(cc(20, 127))  # fader1: the first synergy at the top of its range
+    simulator.AdvanceTo(1.5)
+    a = np.array([lo[i] + (127 if i == 0 else faders[i]) / 127 * (hi[i] - lo[i])
+                  for i in range(k)])
+    lower, upper = actuated_position_limits(SPEC, 1.0)
+    expected = np.clip(synergies.mean + a @ synergies.components[:k], lower, upper)
+    control_context = built.control.GetMyContextFromRoot(simulator.get_context())
+    assert built.control.get_mode(control_context) == SYNERGY_MODE
+    command = built.control.get_position_output_port().Eval(control_context)
+    assert command == pytest.approx(expected, abs=1e-9)
+    q = measured(built, simulator)
+    for joint in ("FFJ3", "MFJ3", "THJ5", "THJ4"):
+        assert q[joint] == pytest.approx(expected[NAMES.index(joint)], abs=0.03), joint
 
 
 def test_knob_ticks_move_a_joint_relatively_and_the_command_is_rate_limited():
@@ -215,7 +289,9 @@ def test_meshcat_sliders_drive_the_hand():
     built = BuildMidiHandControl(LoadScenario(data=FIXED_HAND), port=port, feedback_port=port,
                                  synergies=None)
     simulator = Simulator(built.diagram)
-    meshcat.SetSliderValue("MIDI fader1", 127)
+    simulator.Initialize()  # the sliders are sent to the initial command
+    assert meshcat.GetSliderValue("MIDI fader1") == round(0.2618 / 1.8326 * 127)  # FFJ3 = 0
+    meshcat.SetSliderValue("MIDI fader1", 127)  # as if dragged in the browser
     simulator.AdvanceTo(1.0)
     assert measured(built, simulator)["FFJ3"] == pytest.approx(math.pi / 2, abs=0.03)
     port.close()
