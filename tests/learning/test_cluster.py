@@ -166,6 +166,15 @@ def test_a_wrong_scheduler_address_fails_fast_with_a_clear_message(tmp_path, cap
                  "--db", str(db), "--no-progress", "--no-plot"])
     assert code == 2
     assert "no Dask scheduler answered" in capsys.readouterr().err
+    from handle_drake.cli import main as cli_main
+
+    code = cli_main(["inhand", "--executor", f"dask://{address}", "--connect-timeout", "1",
+                     "--db", str(tmp_path / "inhand.sqlite"), "--no-progress", "--no-plot",
+                     "--no-html"])
+    assert code == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
+    with TrialLog(tmp_path / "inhand.sqlite") as log:
+        assert log.runs() == []  # refused before any trial
     with pytest.raises(SystemExit) as exit_:
         main(["babble", "--executor", "dask://h:99999", "--db", str(db)])
     assert exit_.value.code == 2
@@ -247,3 +256,31 @@ def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_p
     trial = GraspTrial(hand="barrett", object="sphere", space="offset", noise=0.01)
     for row in rows[:2]:
         assert row.metric == trial(row.parameters, seed=row.seed).metric
+
+
+def test_inhand_pso_on_a_dask_cluster_equals_the_run_in_process(tmp_path, capsys,
+                                                                dask_executor):
+    """``handle-drake inhand --executor dask://HOST:PORT`` (the module's 2-process
+    LocalCluster): two iterations of Algorithm 2 (4 particles) log the same particles and
+    scores, trial for trial, as the same run simulated in this process."""
+    from handle_drake.cli import main as cli_main
+    from handle_drake.inhand.experiment import run_inhand
+
+    db = tmp_path / "inhand.sqlite"
+    address = "dask://" + dask_executor.address.removeprefix("tcp://")
+    assert cli_main(["inhand", "--optimizer", "ipso", "--particles", "4", "--trials", "8",
+                     "--seed", "1", "--executor", address, "--db", str(db),
+                     "--no-progress", "--no-plot", "--no-html"]) == 0
+    assert f"({address} executor)" in capsys.readouterr().out
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        rows = log.trials(run.run_id)
+    reference = run_inhand("cylinder_rotation", "ipso", 8, 1, 1, tmp_path / "ref.sqlite", 4,
+                           progress=False)
+    assert run.run_id == reference.run_id
+    assert [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in rows] == [
+        (r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in reference.records]
+    assert [r.status for r in rows] == ["done"] * 8
+    # the swarm moved: the second iteration's particles are not the first's
+    X = np.array([r.parameters for r in rows])
+    assert not np.allclose(X[:4], X[4:])
