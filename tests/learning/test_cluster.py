@@ -17,7 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handle_drake.learning import InlineExecutor, RandomSearch, TrialLog, run_experiment
+from handle_drake.learning import (
+    InlineExecutor,
+    RandomSearch,
+    TrialLog,
+    TrialResult,
+    run_experiment,
+)
 from handle_drake.learning.cluster import (
     WORKER_DEATHS,
     DaskExecutor,
@@ -132,6 +138,39 @@ def test_a_trial_that_always_kills_its_worker_fails_after_the_stated_deaths(
     assert len(marker.read_text().split()) == WORKER_DEATHS
     assert all(r.status == "done" for r in result.trials if r.parameters[0] <= 8.0)
     assert len(result.trials) == 4
+
+
+class Counting:
+    """Branin that counts its own calls and reports its process and its BLAS threads."""
+
+    name = "branin"
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, x):
+        from threadpoolctl import threadpool_info
+
+        self.calls += 1
+        blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+        return TrialResult(BRANIN(x), {"pid": os.getpid(), "calls": self.calls, "blas": blas})
+
+
+def test_each_worker_keeps_the_objective_it_received_once_and_runs_one_blas_thread(
+        tmp_path, dask_executor):
+    """The objective is unpickled once per worker process and kept (so is a Drake diagram
+    it builds on its first call): a worker's trials see its call count go 1, 2, 3, ...;
+    an objective unpickled per trial would count 1 every time."""
+    result = _run(tmp_path / "count.sqlite", "random", 8, dask_executor, Counting())
+    calls: dict[int, list] = {}
+    for r in result.trials:
+        calls.setdefault(r.contacts["pid"], []).append(r.contacts["calls"])
+        assert r.contacts["blas"] and set(r.contacts["blas"]) == {1}
+        assert r.metric == BRANIN(r.parameters)
+    assert os.getpid() not in calls and sum(map(len, calls.values())) == 8
+    for counts in calls.values():
+        assert sorted(counts) == list(range(1, len(counts) + 1))
+    assert max(map(len, calls.values())) > 1
 
 
 def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
