@@ -37,6 +37,7 @@ writes ``benchmarks/results/dask.json``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -137,21 +138,24 @@ def main(argv=None) -> int:
     samples: dict[tuple, list] = {}
     loads: dict[tuple, list] = {}
     opened = {}
-    try:
+    # Closed in reverse order: each Dask executor holds its Dask settings while open.
+    with contextlib.ExitStack() as stack:
         for kind in EXECUTORS:
             for workers in WORKERS:
                 # The local pool with 1 worker too (not the inline executor that
                 # `--executor local --workers 1` gives): the same costs as with 2.
-                context = (_closing(LocalPool(workers)) if kind == "local"
-                           else trial_executor("dask", workers))
-                executor = context.__enter__()
-                opened[(kind, workers)] = (context, executor)
+                if kind == "local":
+                    executor = LocalPool(workers)
+                    stack.callback(executor.shutdown, wait=True, cancel_futures=True)
+                else:
+                    executor = stack.enter_context(trial_executor("dask", workers))
+                opened[(kind, workers)] = executor
                 # Warm-up: every worker builds its diagram (a few trials each).
                 _pso_iterations(executor, objective, bounds, 2 * workers, 2, seed=99)
                 _inhand_pso(executor, 2 * workers, 1, seed=99)
                 _bare_noop(executor, 20)
         for r in range(rounds):
-            for (kind, workers), (_, executor) in opened.items():
+            for (kind, workers), executor in opened.items():
                 tag = f"{kind}{workers}-r{r}"
                 cases = {
                     "random": lambda e=executor, t=tag: _random_run(
@@ -171,9 +175,6 @@ def main(argv=None) -> int:
                     loads.setdefault((name, kind, workers), []).append([before, _load()])
                     print(f"  round {r + 1}: {name:14s} {kind:5s} x{workers}: {value:8.2f} "
                           f"trials/s (load {before} -> {_load()})", flush=True)
-    finally:
-        for context, _ in opened.values():
-            context.__exit__(None, None, None)
 
     median = {key: statistics.median(values) for key, values in samples.items()}
     rows = []
@@ -232,19 +233,6 @@ def main(argv=None) -> int:
     args.out.write_text(json.dumps(result, indent=1))
     print(f"\nwritten to {args.out}")
     return 0
-
-
-class _closing:
-    """A context manager that shuts an executor down (``trial_executor`` does the same)."""
-
-    def __init__(self, executor):
-        self.executor = executor
-
-    def __enter__(self):
-        return self.executor
-
-    def __exit__(self, *exc):
-        self.executor.shutdown(wait=True, cancel_futures=True)
 
 
 if __name__ == "__main__":

@@ -363,7 +363,9 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     of ``workers`` processes, ``dask://HOST:PORT``: the scheduler's workers,
     ``workers`` is then not used here). Raises :class:`ExecutorError` when no
     scheduler answers at the address, or it has no worker, within
-    ``connect_timeout`` s.
+    ``connect_timeout`` s. A ``dask`` executor holds its Dask settings while
+    open: close several in the reverse order of opening (nested ``with``
+    blocks or a ``contextlib.ExitStack`` do).
     """
     from handle_drake.learning.executors import InlineExecutor
 

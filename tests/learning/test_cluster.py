@@ -214,6 +214,9 @@ def test_a_wrong_scheduler_address_fails_fast_with_a_clear_message(tmp_path, cap
     assert "no Dask scheduler answered" in capsys.readouterr().err
     with TrialLog(tmp_path / "inhand.sqlite") as log:
         assert log.runs() == []  # refused before any trial
+    assert main(["report", "--executor", f"dask://{address}", "--connect-timeout", "1",
+                 "--out", str(tmp_path / "report"), "--reduced", "--no-progress"]) == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_:
         main(["babble", "--executor", "dask://h:99999", "--db", str(db)])
     assert exit_.value.code == 2
@@ -323,3 +326,28 @@ def test_inhand_pso_on_a_dask_cluster_equals_the_run_in_process(tmp_path, capsys
     # the swarm moved: the second iteration's particles are not the first's
     X = np.array([r.parameters for r in rows])
     assert not np.allclose(X[:4], X[4:])
+
+
+def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path, dask_executor):
+    """``report --executor dask``'s two parts: a ground-truth grid evaluated in chunks on
+    the workers (the client writes the cache) and a batch of runs driven by client threads
+    give the values and trials of the same grid and runs in this process. The grid gets a
+    bare ``distributed.Client``."""
+    from handle_drake.experiments.babbling import RunSpec, grid_values, run_batch
+    from handle_drake.experiments.grasp_trial import GraspTrialConfig
+
+    config = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
+    axes, on_dask = grid_values(config, 2, tmp_path / "grids", executor=dask_executor.client)
+    _, here = grid_values(config, 2)
+    np.testing.assert_array_equal(on_dask, here)
+    assert on_dask.shape == (2, 2) and len(list((tmp_path / "grids").glob("*.npz"))) == 1
+    specs = [RunSpec(config, "random", seed, n_trials=1) for seed in (0, 1)]
+    run_batch(specs, tmp_path / "dask.sqlite", progress=False, executor=dask_executor)
+    run_batch(specs, tmp_path / "here.sqlite", progress=False)
+    for spec in specs:
+        with TrialLog(tmp_path / "dask.sqlite") as a, TrialLog(tmp_path / "here.sqlite") as b:
+            rows = [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed)
+                    for r in a.trials(spec.run_id)]
+            assert len(rows) == 1 and rows == [
+                (r.index, r.status, r.parameters.tolist(), r.metric, r.seed)
+                for r in b.trials(spec.run_id)]
