@@ -58,7 +58,11 @@ def _run(db, strategy, n_trials, executor, objective=BRANIN, seed=4, **kwargs):
 
 
 def _rows(result):
-    return [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in result.trials]
+    return _record_rows(result.trials)
+
+
+def _record_rows(records):
+    return [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in records]
 
 
 class DiesOnce:
@@ -320,8 +324,7 @@ def test_inhand_pso_on_a_dask_cluster_equals_the_run_in_process(tmp_path, capsys
     reference = run_inhand("cylinder_rotation", "ipso", 8, 1, 1, tmp_path / "ref.sqlite", 4,
                            progress=False)
     assert run.run_id == reference.run_id
-    assert [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in rows] == [
-        (r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in reference.records]
+    assert _record_rows(rows) == _record_rows(reference.records)
     assert [r.status for r in rows] == ["done"] * 8
     # the swarm moved: the second iteration's particles are not the first's
     X = np.array([r.parameters for r in rows])
@@ -337,7 +340,7 @@ def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path,
     from handle_drake.experiments.grasp_trial import GraspTrialConfig
 
     config = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
-    axes, on_dask = grid_values(config, 2, tmp_path / "grids", executor=dask_executor.client)
+    _, on_dask = grid_values(config, 2, tmp_path / "grids", executor=dask_executor.client)
     _, here = grid_values(config, 2)
     np.testing.assert_array_equal(on_dask, here)
     assert on_dask.shape == (2, 2) and len(list((tmp_path / "grids").glob("*.npz"))) == 1
@@ -346,8 +349,5 @@ def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path,
     run_batch(specs, tmp_path / "here.sqlite", progress=False)
     for spec in specs:
         with TrialLog(tmp_path / "dask.sqlite") as a, TrialLog(tmp_path / "here.sqlite") as b:
-            rows = [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed)
-                    for r in a.trials(spec.run_id)]
-            assert len(rows) == 1 and rows == [
-                (r.index, r.status, r.parameters.tolist(), r.metric, r.seed)
-                for r in b.trials(spec.run_id)]
+            rows = _record_rows(a.trials(spec.run_id))
+            assert len(rows) == 1 and rows == _record_rows(b.trials(spec.run_id))
