@@ -14,9 +14,11 @@ on the floating-wrist station, and count a success when the object held
 through the 13 cm lift (``demo.held_through_lift``: >= 10 cm higher and
 steady at the end). A plan that raises (no IK solution) fails both.
 
-Run: ``python benchmarks/bench_grasp_classes.py [--workers 2]``; prints a table
-and writes ``benchmarks/results/grasp_classes.json``. Under
-HANDLE_DRAKE_REDUCED=1 it runs two sizes of two classes on cuboids only.
+Run: ``python benchmarks/bench_grasp_classes.py [--workers 2] [--executor dask://HOST:PORT]``
+(``--executor``: ``local`` process pool, default, ``dask`` LocalCluster or a running
+Dask scheduler, ``handle_drake.learning.cluster``); prints a table and writes
+``benchmarks/results/grasp_classes.json``. Under HANDLE_DRAKE_REDUCED=1 it runs
+two sizes of two classes on cuboids only.
 
 Perceived against true object (report sections 3.3 and 4: the object is not
 where the plan thinks): ``--offset MM [--directions N]`` plans on the object
@@ -32,12 +34,13 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from pathlib import Path
 
 import numpy as np
 
 from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.learning.cluster import add_executor_arguments, trial_executor
 
 pin_blas(force=False)
 
@@ -104,6 +107,7 @@ def main(argv=None) -> int:
     parser.add_argument("--classes", default=None,
                         help="comma-separated grasp classes (default: all eight)")
     parser.add_argument("--seed", type=int, default=0)
+    add_executor_arguments(parser)
     args = parser.parse_args(argv)
     if args.directions < 1 or not 0 <= args.offset < 100 or not -0.5 < args.size_error < 0.5:
         raise SystemExit("need --directions >= 1, 0 <= --offset < 100 mm, |--size-error| < 0.5")
@@ -137,7 +141,8 @@ def main(argv=None) -> int:
                  for e in errors]
     start = time.perf_counter()
     rows = [None] * len(jobs)
-    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
+    with trial_executor(args.executor, max(1, args.workers),
+                        connect_timeout=args.connect_timeout) as pool:
         futures = {pool.submit(trial, job): i for i, job in enumerate(jobs)}
         for done, future in enumerate(as_completed(futures), 1):
             i = futures[future]

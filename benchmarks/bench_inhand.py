@@ -13,6 +13,9 @@
    to the target (median over seeds; runs that did not reach it count as the
    budget and are listed).
 
+The table's trials run where ``--executor`` says (``local`` with ``--workers``,
+``dask`` LocalCluster, ``dask://HOST:PORT``: ``handle_drake.learning.cluster``).
+
 Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]``;
 writes ``benchmarks/results/inhand.json``.
 """
@@ -35,6 +38,7 @@ from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # no
 from handle_drake.inhand.gist import frames  # noqa: E402
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
 from handle_drake.inhand.task import TASKS, InHandTrial  # noqa: E402
+from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
@@ -125,7 +129,8 @@ def _fresh(trial, x):
     return time.perf_counter() - start
 
 
-def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -> list[dict]:
+def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles,
+          executor=None) -> list[dict]:
     rows = []
     for target in targets:
         for task in tasks:
@@ -134,7 +139,8 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                 for seed in seeds:
                     start = time.perf_counter()
                     run = run_inhand(task, optimizer, trials, workers, seed, db, n_particles,
-                                     progress=False, target_deg=float(target))
+                                     progress=False, executor=executor,
+                                     target_deg=float(target))
                     logged.append(run)
                     s = run.summary()
                     s["seed"], s["elapsed"] = seed, time.perf_counter() - start
@@ -194,6 +200,7 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/bench.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
+    add_executor_arguments(p)
     args = p.parse_args(argv)
     result = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                           "cpus": os.cpu_count()}}
@@ -203,8 +210,10 @@ def main(argv=None) -> int:
         result["speed"] = speed(args.rounds)
     if args.table:
         key = "table_" + "_".join(f"{t:g}" for t in args.targets)
-        result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials, args.targets,
-                            args.db, args.workers, args.particles)
+        with trial_executor(args.executor, args.workers,
+                            connect_timeout=args.connect_timeout) as executor:
+            result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials,
+                                args.targets, args.db, None, args.particles, executor)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"wrote {args.out}")

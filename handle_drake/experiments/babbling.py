@@ -42,7 +42,7 @@ import numpy as np
 from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
-from handle_drake.learning.cluster import LocalPool, executor_workers
+from handle_drake.learning.cluster import LocalPool, as_executor, executor_workers
 
 __all__ = [
     "CachedTrial",
@@ -187,12 +187,13 @@ def grid_values(config: GraspTrialConfig, n: int, cache_dir=None, workers: int =
     back on the next call (the hash covers every field of the config, noise
     included, so a changed trial is never served stale values).
 
-    ``executor`` (e.g. a :class:`~handle_drake.learning.cluster.DaskExecutor`)
-    evaluates the chunks instead of a pool of ``workers`` processes; it is
-    not shut down.
+    ``executor`` (e.g. a :class:`~handle_drake.learning.cluster.DaskExecutor`
+    or a ``distributed.Client``) evaluates the chunks instead of a pool of
+    ``workers`` processes; it is not shut down.
     """
     workers = _check_workers(workers)
     if executor is not None:
+        executor = as_executor(executor)
         workers = executor_workers(executor)
     config = dc.replace(config, noise=0.0)
     trial = GraspTrial(config)
@@ -301,7 +302,7 @@ def run_batch(specs, db_path, workers: int = 1, progress: bool = True, executor=
     bar = _bar(len(todo), f"runs -> {Path(db_path).name}", progress)
     if executor is not None:
         try:
-            _run_threads(executor, todo, db_path, bar)
+            _run_threads(as_executor(executor), todo, db_path, bar)
         finally:
             bar.close()
         return

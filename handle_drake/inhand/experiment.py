@@ -6,7 +6,10 @@ and runs them with :class:`handle_drake.learning.TrialRunner` (the machinery of
 continues the run, re-running interrupted trials; other settings under the
 same run id are refused), the particles of one iteration evaluated in
 parallel as one batch, and the run stops once a trial reaches the task's
-target (held, rotated by ``target_deg``) or the budget is spent.
+target (held, rotated by ``target_deg``) or the budget is spent. The trials
+run where ``executor`` says (``handle-drake inhand --executor``): in this
+process, a local process pool or a Dask cluster
+(:mod:`handle_drake.learning.cluster`); the run is the same whichever.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS, make_inhand_optimizer
 from handle_drake.inhand.task import InHandTask, InHandTrial
+from handle_drake.learning.cluster import as_executor, executor_workers
 from handle_drake.learning.executors import InlineExecutor, _default_pool
 from handle_drake.learning.log import TrialLog
 from handle_drake.learning.runner import TrialRunner
@@ -48,12 +52,22 @@ def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
 
 
 def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials: int = 200,
-               workers: int = 1, seed: int = 0, db="out/inhand.sqlite",
+               workers: int | None = None, seed: int = 0, db="out/inhand.sqlite",
                n_particles: int = 10, progress: bool = True, executor=None,
                **task_options) -> InHandRun:
-    """Optimises the in-hand task (module doc); ``task_options`` go to :class:`InHandTask`."""
+    """Optimises the in-hand task (module doc); ``task_options`` go to :class:`InHandTask`.
+
+    ``executor``: any ``concurrent.futures.Executor``, a ``distributed.Client``
+    or what :func:`~handle_drake.learning.cluster.trial_executor` yields; None
+    runs the trials in this process (``workers`` 1, the default) or in a
+    process pool of ``workers``. The swarms evaluate one iteration's particles
+    at once; random search runs ``workers`` trials at once (default: as many
+    as the executor has workers).
+    """
     if optimizer not in INHAND_OPTIMIZERS:
         raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {optimizer!r}")
+    if workers is None:
+        workers = 1 if executor is None else executor_workers(as_executor(executor))
     for name, value, low in (("trials", trials, 0), ("workers", workers, 1),
                              ("n_particles", n_particles, 1), ("seed", seed, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:

@@ -160,37 +160,48 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
 _SHIPPED: dict[str, object] = {}  # hash of the pickled objective -> the objective, per process
 
 
-def _receive(token: str, payload: bytes):
-    objective = _SHIPPED.get(token)
-    if objective is None:
-        if not _SHIPPED:
-            pin_blas()  # the first trial in this worker (a `dask worker --no-nanny` too)
-        objective = _SHIPPED[token] = pickle.loads(payload)
-    return objective
+def _shipped(token: str, payload: bytes) -> _ShippedOnce:
+    return _ShippedOnce(None, token, payload)
 
 
 class _ShippedOnce:
     """An objective pickled once on the client and unpickled once per worker process.
 
-    Pickles as ``(hash, bytes)``; a worker that receives it returns the
-    objective it unpickled for the same hash before, so the objective's own
-    caches (a Drake diagram built on its first call) live for the worker's
-    lifetime instead of one trial. Dask has no per-worker object cache that
-    survives a worker restart without the client's help; this needs none.
+    Pickles as ``(hash, bytes)`` and unpickles as the same light handle: the
+    scheduler, which deserialises and re-serialises every task it receives
+    (distributed >= 2024; in the client's process for a ``LocalCluster``),
+    passes it on untouched. Only a call resolves it, in the worker: the
+    objective unpickled for the same hash before in this process, so the
+    objective's own caches (a Drake diagram built on its first call) live for
+    the worker's lifetime instead of one trial. Dask has no per-worker object
+    cache that survives a worker restart without the client's help; this
+    needs none.
     """
 
-    def __init__(self, objective):
-        from distributed.protocol.pickle import dumps
+    def __init__(self, objective, token: str | None = None, payload: bytes | None = None):
+        if token is None:
+            from distributed.protocol.pickle import dumps
 
-        self.objective = objective
-        self.payload = dumps(objective)  # cloudpickle for what plain pickle cannot
-        self.token = hashlib.sha1(self.payload).hexdigest()
+            payload = dumps(objective)  # cloudpickle for what plain pickle cannot
+            token = hashlib.sha1(payload).hexdigest()
+        self.objective, self.token, self.payload = objective, token, payload
 
     def __reduce__(self):
-        return _receive, (self.token, self.payload)
+        return _shipped, (self.token, self.payload)
+
+    def resolve(self):
+        """The objective: this process's one copy of it (unpickled on the first call)."""
+        if self.objective is None:
+            objective = _SHIPPED.get(self.token)
+            if objective is None:
+                if not _SHIPPED:
+                    pin_blas()  # the first trial in this worker (a `dask worker --no-nanny` too)
+                objective = _SHIPPED[self.token] = pickle.loads(self.payload)
+            self.objective = objective
+        return self.objective
 
     def __call__(self, *args, **kwargs):
-        return self.objective(*args, **kwargs)
+        return self.resolve()(*args, **kwargs)
 
 
 # ------------------------------------------------------------------- pools
@@ -352,7 +363,9 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     of ``workers`` processes, ``dask://HOST:PORT``: the scheduler's workers,
     ``workers`` is then not used here). Raises :class:`ExecutorError` when no
     scheduler answers at the address, or it has no worker, within
-    ``connect_timeout`` s.
+    ``connect_timeout`` s. A ``dask`` executor holds its Dask settings while
+    open: close several in the reverse order of opening (nested ``with``
+    blocks or a ``contextlib.ExitStack`` do).
     """
     from handle_drake.learning.executors import InlineExecutor
 

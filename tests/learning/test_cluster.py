@@ -17,7 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handle_drake.learning import InlineExecutor, RandomSearch, TrialLog, run_experiment
+from handle_drake.learning import (
+    InlineExecutor,
+    RandomSearch,
+    TrialLog,
+    TrialResult,
+    run_experiment,
+)
 from handle_drake.learning.cluster import (
     WORKER_DEATHS,
     DaskExecutor,
@@ -52,7 +58,11 @@ def _run(db, strategy, n_trials, executor, objective=BRANIN, seed=4, **kwargs):
 
 
 def _rows(result):
-    return [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in result.trials]
+    return _record_rows(result.trials)
+
+
+def _record_rows(records):
+    return [(r.index, r.status, r.parameters.tolist(), r.metric, r.seed) for r in records]
 
 
 class DiesOnce:
@@ -134,6 +144,39 @@ def test_a_trial_that_always_kills_its_worker_fails_after_the_stated_deaths(
     assert len(result.trials) == 4
 
 
+class Counting:
+    """Branin that counts its own calls and reports its process and its BLAS threads."""
+
+    name = "branin"
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, x):
+        from threadpoolctl import threadpool_info
+
+        self.calls += 1
+        blas = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+        return TrialResult(BRANIN(x), {"pid": os.getpid(), "calls": self.calls, "blas": blas})
+
+
+def test_each_worker_keeps_the_objective_it_received_once_and_runs_one_blas_thread(
+        tmp_path, dask_executor):
+    """The objective is unpickled once per worker process and kept (so is a Drake diagram
+    it builds on its first call): a worker's trials see its call count go 1, 2, 3, ...;
+    an objective unpickled per trial would count 1 every time."""
+    result = _run(tmp_path / "count.sqlite", "random", 8, dask_executor, Counting())
+    calls: dict[int, list] = {}
+    for r in result.trials:
+        calls.setdefault(r.contacts["pid"], []).append(r.contacts["calls"])
+        assert r.contacts["blas"] and set(r.contacts["blas"]) == {1}
+        assert r.metric == BRANIN(r.parameters)
+    assert os.getpid() not in calls and sum(map(len, calls.values())) == 8
+    for counts in calls.values():
+        assert sorted(counts) == list(range(1, len(counts) + 1))
+    assert max(map(len, calls.values())) > 1
+
+
 def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
     marker = tmp_path / "deaths"
     with LocalPool(2) as pool:
@@ -165,6 +208,18 @@ def test_a_wrong_scheduler_address_fails_fast_with_a_clear_message(tmp_path, cap
     code = main(["babble", "--executor", f"dask://{address}", "--connect-timeout", "1",
                  "--db", str(db), "--no-progress", "--no-plot"])
     assert code == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
+    from handle_drake.cli import main as cli_main
+
+    code = cli_main(["inhand", "--executor", f"dask://{address}", "--connect-timeout", "1",
+                     "--db", str(tmp_path / "inhand.sqlite"), "--no-progress", "--no-plot",
+                     "--no-html"])
+    assert code == 2
+    assert "no Dask scheduler answered" in capsys.readouterr().err
+    with TrialLog(tmp_path / "inhand.sqlite") as log:
+        assert log.runs() == []  # refused before any trial
+    assert main(["report", "--executor", f"dask://{address}", "--connect-timeout", "1",
+                 "--out", str(tmp_path / "report"), "--reduced", "--no-progress"]) == 2
     assert "no Dask scheduler answered" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_:
         main(["babble", "--executor", "dask://h:99999", "--db", str(db)])
@@ -247,3 +302,52 @@ def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_p
     trial = GraspTrial(hand="barrett", object="sphere", space="offset", noise=0.01)
     for row in rows[:2]:
         assert row.metric == trial(row.parameters, seed=row.seed).metric
+
+
+def test_inhand_pso_on_a_dask_cluster_equals_the_run_in_process(tmp_path, capsys,
+                                                                dask_executor):
+    """``handle-drake inhand --executor dask://HOST:PORT`` (the module's 2-process
+    LocalCluster): two iterations of Algorithm 2 (4 particles) log the same particles and
+    scores, trial for trial, as the same run simulated in this process."""
+    from handle_drake.cli import main as cli_main
+    from handle_drake.inhand.experiment import run_inhand
+
+    db = tmp_path / "inhand.sqlite"
+    address = "dask://" + dask_executor.address.removeprefix("tcp://")
+    assert cli_main(["inhand", "--optimizer", "ipso", "--particles", "4", "--trials", "8",
+                     "--seed", "1", "--executor", address, "--db", str(db),
+                     "--no-progress", "--no-plot", "--no-html"]) == 0
+    assert f"({address} executor)" in capsys.readouterr().out
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        rows = log.trials(run.run_id)
+    reference = run_inhand("cylinder_rotation", "ipso", 8, 1, 1, tmp_path / "ref.sqlite", 4,
+                           progress=False)
+    assert run.run_id == reference.run_id
+    assert _record_rows(rows) == _record_rows(reference.records)
+    assert [r.status for r in rows] == ["done"] * 8
+    # the swarm moved: the second iteration's particles are not the first's
+    X = np.array([r.parameters for r in rows])
+    assert not np.allclose(X[:4], X[4:])
+
+
+def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path, dask_executor):
+    """``report --executor dask``'s two parts: a ground-truth grid evaluated in chunks on
+    the workers (the client writes the cache) and a batch of runs driven by client threads
+    give the values and trials of the same grid and runs in this process. The grid gets a
+    bare ``distributed.Client``."""
+    from handle_drake.experiments.babbling import RunSpec, grid_values, run_batch
+    from handle_drake.experiments.grasp_trial import GraspTrialConfig
+
+    config = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
+    _, on_dask = grid_values(config, 2, tmp_path / "grids", executor=dask_executor.client)
+    _, here = grid_values(config, 2)
+    np.testing.assert_array_equal(on_dask, here)
+    assert on_dask.shape == (2, 2) and len(list((tmp_path / "grids").glob("*.npz"))) == 1
+    specs = [RunSpec(config, "random", seed, n_trials=1) for seed in (0, 1)]
+    run_batch(specs, tmp_path / "dask.sqlite", progress=False, executor=dask_executor)
+    run_batch(specs, tmp_path / "here.sqlite", progress=False)
+    for spec in specs:
+        with TrialLog(tmp_path / "dask.sqlite") as a, TrialLog(tmp_path / "here.sqlite") as b:
+            rows = _record_rows(a.trials(spec.run_id))
+            assert len(rows) == 1 and rows == _record_rows(b.trials(spec.run_id))
