@@ -348,7 +348,8 @@ def _run_threads(executor, specs, db_path, bar) -> None:
 
 
 def _complete(spec: RunSpec, db_path) -> bool:
-    """True when the log holds a finished run for ``spec`` (budget used or BO converged)."""
+    """True when the log holds a finished run for ``spec`` (budget used or its optimiser
+    converged)."""
     with TrialLog(db_path) as log:
         if log.get_run(spec.run_id) is None:
             return False
@@ -357,9 +358,7 @@ def _complete(spec: RunSpec, db_path) -> bool:
         return False
     if len(records) >= spec.n_trials:
         return True
-    if spec.strategy != "bo":
-        return False
-    # A BO run that stopped early converged: replaying its trials says so.
+    # A run that stopped early converged (BO's EI rule): replaying its trials says so.
     optimizer = replay_optimizer(spec, records)
     optimizer.ask()
     return bool(optimizer.converged)
