@@ -76,7 +76,6 @@ class RunInfo:
     created_at: float
 
 
-
 def _first_difference(name: str, a, b):
     """``(dotted name, a's value, b's value)`` of the first nested dict entry where ``a``
     and ``b`` differ (``a``, ``b`` themselves when they are not both dicts)."""
@@ -95,6 +94,7 @@ class _Missing:
 
 
 _MISSING = _Missing()
+
 
 @dataclass(frozen=True)
 class TrialRecord:
