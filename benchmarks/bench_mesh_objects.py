@@ -31,16 +31,15 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial import ConvexHull, Delaunay, QhullError  # noqa: E402
 
-from handle_drake.objects import (
-    ObjectSpec,  # noqa: E402
-    mesh_examples,  # noqa: E402
-)
+from handle_drake.objects import ObjectSpec, mesh_examples  # noqa: E402
 from handle_drake.objects import mesh as mesh_objects  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -18,13 +18,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-import numpy as np
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+pin_blas(force=False)
+
+import numpy as np  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "perception_grasp.json"
 

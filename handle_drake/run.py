@@ -101,7 +101,7 @@ class ScenarioRunner:
         self.hardware = hardware
         self.initial_command = hand_initial_command(scenario)
         self.harness = TrialHarness(
-            scenario, self._add_driver, log=log, meshcat=meshcat, hardware=hardware,
+            scenario, self.add_driver, log=log, meshcat=meshcat, hardware=hardware,
             object_contacts=scenario.object is not None and not hardware)
         self.station = self.harness.station
         self.controller = self.harness.controller
@@ -110,7 +110,14 @@ class ScenarioRunner:
         self.context = self.harness.context
         self._structure = None  # the scenario's text without its trial settings, when needed
 
-    def _add_driver(self, builder, station):
+    def add_driver(self, builder, station):
+        """Adds what drives ``station`` (the scenario's controller, else its script) to
+        ``builder``; returns the controller, or None for a script.
+
+        The extension point of an experiment that needs more systems in the one
+        diagram (a recorder, a MIDI receiver): override it, call ``super()`` and
+        return the system whose ports :attr:`harness` may log.
+        """
         if self.scenario.controller is not None:
             return _add_guarded_grasp(builder, station, self.scenario)
         hand_traj, wrist_traj = script_trajectories(self.scenario, self.initial_command)

@@ -1,10 +1,10 @@
 import os
 import tempfile
 
+from handle_drake.blas import pin_blas  # light: loads neither numpy nor Drake
+
 # Threaded BLAS on 2 cores makes small solves much slower under load.
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-os.environ.setdefault("MKL_NUM_THREADS", "1")
+pin_blas(force=False)
 os.environ.setdefault("HANDLE_DRAKE_REDUCED", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
 # Mesh objects' convex decompositions go to a shared temporary cache, not the user's

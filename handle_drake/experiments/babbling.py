@@ -140,12 +140,27 @@ def code_digest(source: str) -> bytes:
     return ast.dump(tree, annotate_fields=False, include_attributes=False).encode()
 
 
+def simulation_sources() -> list[Path]:
+    """The source files a grasp trial's metric depends on: the trial, harness, scenario
+    runner, station, scenario, hands, objects (the instrumented devices' geometry
+    included), drivers, controllers and grasp quality. What else a trial loads
+    cannot change its metric: the learning engine, validation, port names, other
+    drivers' settings (``tests/experiments/test_babbling.py`` keeps this true)."""
+    root = Path(__file__).resolve().parents[1]
+    return sorted([
+        root / "experiments" / "grasp_trial.py", root / "harness.py", root / "run.py",
+        root / "station.py", root / "scenario.py", root / "hands.py",
+        root / "instruments" / "catalogue.py",
+        *(root / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
+        *(root / "quality").glob("*.py"),
+    ])
+
+
 @functools.cache
 def simulation_fingerprint() -> str:
     """Hash of everything a grasp trial's metric depends on besides its config:
-    the code of the trial, harness, scenario runner, station, drivers,
-    controllers, objects, hands and grasp quality (:func:`code_digest`: not
-    its comments or docstrings), the hand model files and Drake's version. A
+    the code of :func:`simulation_sources` (:func:`code_digest`: not its
+    comments or docstrings), the hand model files and Drake's version. A
     run or cached grid computed by other code is never resumed or read back
     as if it were current.
 
@@ -156,14 +171,8 @@ def simulation_fingerprint() -> str:
     from handle_drake.models import models_dir
 
     root = Path(__file__).resolve().parents[1]
-    sources = sorted([
-        root / "experiments" / "grasp_trial.py", root / "harness.py", root / "run.py",
-        root / "station.py", root / "scenario.py", root / "hands.py",
-        *(root / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
-        *(root / "quality").glob("*.py"),
-    ])
     digest = hashlib.sha1(f"drake {version('drake')}".encode())
-    for path in sources:
+    for path in simulation_sources():
         digest.update(path.relative_to(root).as_posix().encode())
         digest.update(code_digest(path.read_text()))
     for path in sorted(models_dir().glob("*/*.sdf")):
@@ -340,7 +349,8 @@ def _run_threads(executor, specs, db_path, bar) -> None:
 
 
 def _complete(spec: RunSpec, db_path) -> bool:
-    """True when the log holds a finished run for ``spec`` (budget used or BO converged)."""
+    """True when the log holds a finished run for ``spec`` (budget used or its optimiser
+    converged)."""
     with TrialLog(db_path) as log:
         if log.get_run(spec.run_id) is None:
             return False
@@ -349,9 +359,7 @@ def _complete(spec: RunSpec, db_path) -> bool:
         return False
     if len(records) >= spec.n_trials:
         return True
-    if spec.strategy != "bo":
-        return False
-    # A BO run that stopped early converged: replaying its trials says so.
+    # A run that stopped early converged (BO's EI rule): replaying its trials says so.
     optimizer = replay_optimizer(spec, records)
     optimizer.ask()
     return bool(optimizer.converged)

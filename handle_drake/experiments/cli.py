@@ -23,10 +23,15 @@ Also runnable as ``python -m handle_drake.experiments.cli``.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
+from handle_drake.cli_support import (
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 from handle_drake.learning.cluster import add_executor_arguments
 from handle_drake.objects import KINDS
 
@@ -38,42 +43,6 @@ _PARAMETER_NAMES = {
     "offset": ("x_offset_m", "y_offset_m"),
     "synergy": ("thumb_abduction", "index_middle_abduction"),
 }
-
-
-def _int_at_least(minimum: int, expected: str):
-    """An argparse type: an integer >= ``minimum``, else "expected <expected>, got ..."."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected {expected}, got {value}")
-        return value
-
-    return parse
-
-
-_positive_int = _int_at_least(1, "a positive integer")
-_non_negative_int = _int_at_least(0, "an integer >= 0")
-
-
-def _non_negative_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    value = _non_negative_float(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text}")
-    return value
 
 
 def register(subparsers) -> None:
@@ -89,16 +58,16 @@ def register(subparsers) -> None:
     p.add_argument("--space", choices=("standoff", "offset", "synergy"), default=None,
                    help="parameter space (synergy: Shadow anatomical synergies, 2-D)")
     p.add_argument("--strategy", choices=("bo", "random"), default="bo")
-    p.add_argument("--trials", type=_positive_int, default=50,
+    p.add_argument("--trials", type=positive_int, default=50,
                    help="trials in the run (BO may stop earlier on its EI rule)")
-    p.add_argument("--seed", type=_non_negative_int, default=0)
-    p.add_argument("--ei-stop", type=_non_negative_float, default=0.0, metavar="THRESHOLD",
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--ei-stop", type=non_negative_float, default=0.0, metavar="THRESHOLD",
                    help="BO only: stop when the best expected improvement falls below "
                         "THRESHOLD x the RMS of the metric (the report's stop rule, e.g. 1e-6; "
                         "default 0: use the whole --trials budget)")
-    p.add_argument("--noise", type=_non_negative_float, default=0.0,
+    p.add_argument("--noise", type=non_negative_float, default=0.0,
                    help="std of Gaussian noise added to the metric (seeded per trial)")
-    p.add_argument("--size", type=_positive_float, default=None,
+    p.add_argument("--size", type=positive_float, default=None,
                    help="object size in m (default: the babbling catalogue's)")
     p.add_argument("--placement-error", type=_non_negative_float, default=0.0, metavar="M",
                    help="robust objective: score each trial as the mean metric over "
@@ -110,11 +79,11 @@ def register(subparsers) -> None:
     p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
                    help="grasp your own object: a mesh file (OBJ, STL, PLY, ...) instead of "
                         "--object; decomposed into convex pieces once (cached)")
-    p.add_argument("--mesh-scale", type=_positive_float, default=1.0, metavar="S",
+    p.add_argument("--mesh-scale", type=positive_float, default=1.0, metavar="S",
                    help="mesh file units to metres (0.001 for millimetres; default 1)")
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
-    p.add_argument("--workers", type=_positive_int, default=1,
+    p.add_argument("--workers", type=positive_int, default=1,
                    help="trials run in parallel (worker processes of 'local' and 'dask'); BO "
                         "then proposes batches of this size (kriging believer), a run of its "
                         "own (default 1: the report's sequential BO). With dask://, random "
@@ -133,16 +102,16 @@ def register(subparsers) -> None:
         description="Runs every babbling experiment (cached: re-running is cheap) and writes "
                     "PNG figures, table3.md/csv and summary.json.")
     p.add_argument("--out", type=Path, default=Path("out/report"), help="output folder")
-    p.add_argument("--seeds", type=_positive_int, default=None, help="seeds per comparison")
-    p.add_argument("--trials", type=_positive_int, default=None, help="trials per 2-D run")
+    p.add_argument("--seeds", type=positive_int, default=None, help="seeds per comparison")
+    p.add_argument("--trials", type=positive_int, default=None, help="trials per 2-D run")
     p.add_argument("--grid", type=int, default=None,
                    help="points per dimension of the ground-truth grids (>= 2)")
-    p.add_argument("--noise", type=_non_negative_float, default=None,
+    p.add_argument("--noise", type=non_negative_float, default=None,
                    help="metric noise std of the 2-D runs")
-    p.add_argument("--ei-stop", type=_non_negative_float, default=None, metavar="THRESHOLD",
+    p.add_argument("--ei-stop", type=non_negative_float, default=None, metavar="THRESHOLD",
                    help="stop the Table 3 BO runs on the EI rule with this threshold "
                         "(e.g. 1e-6; default 0: every run uses the whole --trials budget)")
-    p.add_argument("--workers", type=_positive_int, default=None,
+    p.add_argument("--workers", type=positive_int, default=None,
                    help="worker processes of 'local' and 'dask' (default 2)")
     add_executor_arguments(p)
     p.add_argument("--mesh", type=Path, action="append", default=[], metavar="FILE",

@@ -22,7 +22,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from handle_drake.experiments.cli import _int_at_least, _positive_float
+from handle_drake.cli_support import int_at_least as _int_at_least
+from handle_drake.cli_support import positive_float as _positive_float
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS
 from handle_drake.inhand.task import EVALUATIONS, TASKS
 from handle_drake.learning.cluster import add_executor_arguments

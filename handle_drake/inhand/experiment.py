@@ -15,7 +15,6 @@ process, a local process pool or a Dask cluster
 from __future__ import annotations
 
 import dataclasses as dc
-import json
 import math
 from pathlib import Path
 
@@ -24,7 +23,7 @@ import numpy as np
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS, make_inhand_optimizer
 from handle_drake.inhand.task import InHandTask, InHandTrial
 from handle_drake.learning.cluster import as_executor, executor_workers
-from handle_drake.learning.executors import InlineExecutor, _default_pool
+from handle_drake.learning.executors import InlineExecutor
 from handle_drake.learning.log import TrialLog
 from handle_drake.learning.runner import TrialRunner
 
@@ -81,25 +80,13 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     db = Path(db)
     db.parent.mkdir(parents=True, exist_ok=True)
     with TrialLog(db) as log:
-        info = log.get_run(run_id)
-        if info is None:
-            log.create_run(run_id, optimizer, trial.bounds, seed, trial.name,
-                           json.loads(json.dumps(config)))
-        elif info.config != json.loads(json.dumps(config)) or info.seed != seed or \
-                not np.array_equal(info.bounds, trial.bounds):
-            raise ValueError(f"run {run_id!r} exists in {db} with other settings; "
-                             "use another --db")
-        own = executor is None
-        if own:
-            executor = InlineExecutor() if workers == 1 else _default_pool(trial, workers)
-        try:
-            runner = TrialRunner(trial, opt, log, run_id, executor=executor,
-                                 batch_size=None if opt.synchronous else workers,
-                                 progress=progress)
-            runner.run(trials)
-        finally:
-            if own and workers > 1:
-                executor.shutdown(wait=True, cancel_futures=True)
+        log.open_run(run_id, optimizer, trial.bounds, seed, trial.name, config)
+        if executor is None and workers == 1:
+            executor = InlineExecutor()  # no process start-up; more workers: the runner's pool
+        runner = TrialRunner(trial, opt, log, run_id, executor=executor, workers=workers,
+                             batch_size=None if opt.synchronous else workers,
+                             progress=progress)
+        runner.run(trials)
         records = log.trials(run_id)
     return InHandRun(run_id, db, trial, optimizer, n_particles, seed, records)
 

@@ -304,8 +304,8 @@ def _runner_class():
     from handle_drake.run import ScenarioRunner
 
     class Figure8Runner(ScenarioRunner):
-        def _add_driver(self, builder, station):
-            driver = super()._add_driver(builder, station)
+        def add_driver(self, builder, station):
+            driver = super().add_driver(builder, station)
             profile = self.scenario.object.accelerometer.profile(self.scenario.object.kind)
             self.recorder = builder.AddNamedSystem(
                 "recorder", _Recorder(profile.period, instrument_X_OS(self.scenario)))

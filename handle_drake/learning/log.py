@@ -25,6 +25,7 @@ from urllib.parse import quote
 import numpy as np
 
 from handle_drake.learning.bayesopt import check_bounds
+from handle_drake.scenario_checks import short as _short
 
 STATUSES = ("pending", "running", "done", "failed")
 _FORMAT = "handle_drake.trial_log"
@@ -73,6 +74,26 @@ class RunInfo:
     objective: str
     config: dict
     created_at: float
+
+
+def _first_difference(name: str, a, b):
+    """``(dotted name, a's value, b's value)`` of the first nested dict entry where ``a``
+    and ``b`` differ (``a``, ``b`` themselves when they are not both dicts)."""
+    while isinstance(a, dict) and isinstance(b, dict):
+        key = next((k for k in sorted(set(a) | set(b), key=str) if a.get(k, _MISSING) !=
+                    b.get(k, _MISSING)), None)
+        if key is None:
+            break
+        name, a, b = f"{name}.{key}", a.get(key, _MISSING), b.get(key, _MISSING)
+    return name, a, b
+
+
+class _Missing:
+    def __repr__(self):
+        return "(missing)"
+
+
+_MISSING = _Missing()
 
 
 @dataclass(frozen=True)
@@ -283,6 +304,33 @@ class TrialLog:
             )
         except sqlite3.IntegrityError:
             raise ValueError(f"run {run_id!r} already exists in {self.path}") from None
+        return info
+
+    def open_run(self, run_id, strategy, bounds, seed, objective, config=None) -> RunInfo:
+        """Creates the run, or checks that the logged run of that id has these settings.
+
+        The one place a run is opened for writing (``run_experiment``, the
+        in-hand runs): calling it again with the same settings resumes the run;
+        another strategy, seed, objective name, config (compared as JSON) or
+        bounds raises ``ValueError`` naming the field, its logged and its given
+        value.
+        """
+        bounds = check_bounds(bounds)
+        info = self.get_run(run_id)
+        if info is None:
+            return self.create_run(run_id, strategy, bounds, seed, objective, config)
+        given = dict(strategy=strategy, seed=int(seed), objective=str(objective),
+                     config=json.loads(json.dumps(dict(config or {}), sort_keys=True)))
+        for key, value in given.items():
+            stored = getattr(info, key)
+            if stored != value:
+                field, stored, value = _first_difference(key, stored, value)
+                raise ValueError(f"run {run_id!r} exists in {self.path} with {field}="
+                                 f"{_short(stored)}, got {_short(value)}; use another run id "
+                                 "or trial log")
+        if info.bounds.shape != bounds.shape or not np.array_equal(info.bounds, bounds):
+            raise ValueError(f"run {run_id!r} exists in {self.path} with bounds "
+                             f"{_short(info.bounds.tolist())}, got {_short(bounds.tolist())}")
         return info
 
     @_guarded

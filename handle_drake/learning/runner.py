@@ -371,25 +371,7 @@ def run_experiment(
             "directly"
         ) from None
     with TrialLog(db_path) as log:
-        info = log.get_run(run_id)
-        if info is None:
-            log.create_run(run_id, strategy, bounds, seed, name, config)
-        else:
-            stored = dict(
-                strategy=info.strategy, seed=info.seed, objective=info.objective, config=info.config
-            )
-            given = dict(strategy=strategy, seed=int(seed), objective=name, config=config)
-            for key in stored:
-                if stored[key] != given[key]:
-                    raise ValueError(
-                        f"run {run_id!r} exists in {db_path} with {key}="
-                        f"{stored[key]!r}, got {given[key]!r}; use another run_id"
-                    )
-            if info.bounds.shape != bounds.shape or not np.array_equal(info.bounds, bounds):
-                raise ValueError(
-                    f"run {run_id!r} exists in {db_path} with bounds "
-                    f"{info.bounds.tolist()}, got {bounds.tolist()}"
-                )
+        log.open_run(run_id, strategy, bounds, seed, name, config)
         runner = TrialRunner(
             objective,
             optimizer,

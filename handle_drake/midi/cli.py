@@ -198,23 +198,21 @@ def _cmd_control(args) -> int:
         from handle_drake.midi.ports import open_device_ports
 
         port, feedback = open_device_ports(args.port or mapping.port_name)
-    from pydrake.systems.analysis import Simulator
-
     built = BuildMidiHandControl(scenario, port=port, feedback_port=feedback, mapping=mapping,
                                  meshcat=meshcat, hardware=args.hardware)
-    simulator = Simulator(built.diagram)
-    simulator.set_target_realtime_rate(1.0)
+    harness = built.harness
+    harness.simulator.set_target_realtime_rate(1.0)  # a person plays it, also in simulation
     print(f"driving the {scenario.hand.kind} hand for {args.duration:.0f} s "
           "(mode button toggles joint/synergy mode; Ctrl-C stops)", flush=True)
     start = time.perf_counter()
     try:
-        simulator.AdvanceTo(args.duration)
+        harness.initialize()
+        harness.advance(args.duration)
     finally:
         port.close()
         if feedback is not port:
             feedback.close()
-    counts = built.control.midi_counts(built.control.GetMyContextFromRoot(
-        simulator.get_context()))
+    counts = built.control.midi_counts(harness.controller_context())
     print(f"ran {time.perf_counter() - start:.1f} s; messages: {counts}")
     return 0
 

@@ -253,10 +253,10 @@ class MidiScenarioRunner(ScenarioRunner):
         self.mapping = LoadMidiMapping(scenario.midi_controller.mapping or None)
         super().__init__(scenario, meshcat, log=self.LOG)
 
-    def _add_driver(self, builder, station):
+    def add_driver(self, builder, station):
         from handle_drake.midi.systems import MidiReceiver
 
-        super()._add_driver(builder, station)
+        super().add_driver(builder, station)
         receiver = builder.AddNamedSystem("midi_receiver", MidiReceiver(
             self.mapping, period=self.scenario.midi_controller.scan_period))
         builder.Connect(station.GetOutputPort("midi_controller.midi"),

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 
-from pydrake.systems.framework import DiagramBuilder
-
+from handle_drake.harness import TrialHarness
 from handle_drake.midi.mapping import LoadMidiMapping, MidiMapping
 from handle_drake.midi.systems import MidiHandControl
 
@@ -23,13 +22,15 @@ class MidiHandControlDiagram:
     diagram: object
     station: object
     control: MidiHandControl
+    harness: TrialHarness  # built it; ``handle-drake midi control`` runs its simulator
 
 
 def BuildMidiHandControl(scenario, port=None, feedback_port=None,
                          mapping: MidiMapping | None = None, synergies="default",
                          meshcat=None, hardware: bool = False,
                          **control_options) -> MidiHandControlDiagram:
-    """Station + :class:`MidiHandControl` (+ the wrist held at its initial pose).
+    """Station + :class:`MidiHandControl` (+ the wrist held at its initial pose), built by
+    the :class:`~handle_drake.harness.TrialHarness` like every station diagram.
 
     Args:
         scenario: the station's scenario (its ``script`` is not used).
@@ -40,7 +41,7 @@ def BuildMidiHandControl(scenario, port=None, feedback_port=None,
             grasp data; Shadow hand only), a ``Synergies`` or None (joint mode only).
         control_options: passed on to :class:`MidiHandControl`.
     """
-    from handle_drake.station import MakeHandStation, hand_initial_command
+    from handle_drake.station import hand_initial_command
 
     mapping = LoadMidiMapping() if mapping is None else mapping
     if isinstance(synergies, str):
@@ -52,23 +53,24 @@ def BuildMidiHandControl(scenario, port=None, feedback_port=None,
             from handle_drake.grasp.planning import default_synergies
 
             synergies = default_synergies().synergies
-    builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", MakeHandStation(scenario, meshcat,
-                                                                hardware=hardware))
     control_options.setdefault("initial_command", hand_initial_command(scenario))
     control_options.setdefault("coupling_ratio", scenario.hand.coupling_ratio)
-    control = builder.AddNamedSystem("midi_hand_control", MidiHandControl(
-        scenario.hand.kind, mapping, synergies=synergies, port=port,
-        feedback_port=feedback_port, **control_options))
-    builder.Connect(control.get_position_output_port(), station.GetInputPort("hand.position"))
-    if station.HasInputPort("wrist.pose"):
-        from pydrake.systems.primitives import ConstantVectorSource
 
-        from handle_drake.systems.hand_driver import rpy_pose6
+    def add_control(builder, station):
+        control = builder.AddNamedSystem("midi_hand_control", MidiHandControl(
+            scenario.hand.kind, mapping, synergies=synergies, port=port,
+            feedback_port=feedback_port, **control_options))
+        builder.Connect(control.get_position_output_port(),
+                        station.GetInputPort("hand.position"))
+        if station.HasInputPort("wrist.pose"):
+            from pydrake.systems.primitives import ConstantVectorSource
 
-        pose = rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue())
-        builder.Connect(builder.AddSystem(ConstantVectorSource(pose)).get_output_port(),
-                        station.GetInputPort("wrist.pose"))
-    diagram = builder.Build()
-    diagram.set_name("midi_hand_control")
-    return MidiHandControlDiagram(diagram, station, control)
+            from handle_drake.systems.hand_driver import rpy_pose6
+
+            pose = rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue())
+            builder.Connect(builder.AddSystem(ConstantVectorSource(pose)).get_output_port(),
+                            station.GetInputPort("wrist.pose"))
+        return control
+
+    harness = TrialHarness(scenario, add_control, log=(), meshcat=meshcat, hardware=hardware)
+    return MidiHandControlDiagram(harness.diagram, harness.station, harness.controller, harness)

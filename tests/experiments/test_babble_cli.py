@@ -272,3 +272,27 @@ def test_babble_bo_on_two_workers_runs_batches_as_a_run_of_its_own(reference_run
     assert [t.status for t in trials] == ["done"] * 5
     # The initial design does not depend on the batch size.
     np.testing.assert_array_equal([t.parameters for t in trials], [r.parameters for r in rows])
+
+
+@pytest.mark.parametrize("parse, text, value, error", [
+    ("positive_int", "3", 3, None), ("positive_int", "0", None, "a positive integer, got 0"),
+    ("positive_int", "2.5", None, "a positive integer, got '2.5'"),
+    ("non_negative_int", "0", 0, None), ("non_negative_int", "-1", None, "integer >= 0, got -1"),
+    ("non_negative_float", "0", 0.0, None),
+    ("non_negative_float", "nan", None, "finite number >= 0, got nan"),
+    ("non_negative_float", "inf", None, "finite number >= 0, got inf"),
+    ("positive_float", "1e-3", 1e-3, None), ("positive_float", "0", None, "number > 0, got 0"),
+    ("positive_float", "x", None, "number >= 0, got 'x'"),
+])
+def test_the_shared_argument_types(parse, text, value, error):
+    """One set of argparse types for every sub-command (babble, report, inhand)."""
+    import argparse
+
+    from handle_drake import cli_support
+
+    function = getattr(cli_support, parse)
+    if error is None:
+        assert function(text) == value
+    else:
+        with pytest.raises(argparse.ArgumentTypeError, match=f"expected .*{error}"):
+            function(text)

@@ -99,6 +99,37 @@ def test_run_ids_follow_the_code_not_its_comments_or_docstrings():
     assert code_digest(only_doc) != code_digest(code)
 
 
+# What a grasp trial loads that cannot change its metric: the learning engine, validation
+# and port names, settings of drivers and sensors it does not use, where models live (the
+# model files themselves are hashed).
+_NOT_SIMULATION = ("blas", "learning/", "scenario_checks", "ports", "models", "can_hand/",
+                   "instruments/config", "perception/camera", "__init__")
+
+
+def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():
+    """Every module a grasp trial (on an instrumented device, the widest object) loads is
+    hashed into the run id unless it cannot change a metric; a device's geometry can."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from handle_drake.experiments.babbling import simulation_sources
+
+    code = ("import sys\nfrom handle_drake.experiments.grasp_trial import GraspTrial, "
+            "GraspTrialConfig\ntrial = GraspTrial(GraspTrialConfig(object='wiimote'))\n"
+            "trial(trial.bounds.mean(axis=1))\n"
+            "print('\\n'.join(m.__file__ for n, m in sys.modules.items() "
+            "if n.startswith('handle_drake') and getattr(m, '__file__', None)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=600).stdout
+    root = Path(simulation_sources()[0]).parents[1]
+    loaded = {Path(line).relative_to(root).as_posix() for line in out.split()}
+    assert "instruments/catalogue.py" in loaded and "systems/guarded_grasp.py" in loaded
+    hashed = {p.relative_to(root).as_posix() for p in simulation_sources()}
+    unhashed = sorted(f for f in loaded - hashed if not any(k in f for k in _NOT_SIMULATION))
+    assert unhashed == []
+
+
 def test_run_id_changes_with_the_trial_settings_and_simulation_code(monkeypatch):
     """A logged run is resumed or read back only by the same trial on the same code."""
     from handle_drake.experiments import babbling

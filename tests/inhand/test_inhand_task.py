@@ -63,6 +63,9 @@ def test_a_replayed_best_trial_reproduces_its_score(tmp_path):
     again = run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
                        db=tmp_path / "r.sqlite", progress=False)
     assert [r.metric for r in again.records] == [r.metric for r in run.records]
+    with pytest.raises(ValueError, match=r"exists in .* with config.task.mu=0.8, got 0.9"):
+        run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
+                   db=tmp_path / "r.sqlite", progress=False, mu=0.9)
 
 
 def test_bad_input():

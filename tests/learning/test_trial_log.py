@@ -278,6 +278,29 @@ def test_mismatched_resume_is_refused(tmp_path):
         )
 
 
+def test_open_run_creates_resumes_and_names_what_differs(tmp_path):
+    """The one create-or-check of a run (run_experiment, the in-hand runs)."""
+    with TrialLog(tmp_path / "t.sqlite") as log:
+        created = log.open_run("r", "ipso", [(0, 1), (0, 2)], 4, "task", {"shape": (1, 2)})
+        # a resume with the same settings (a tuple is logged as a JSON list) gets the run
+        again = log.open_run("r", "ipso", [(0, 1), (0, 2)], 4, "task", {"shape": [1, 2]})
+        assert again.created_at == created.created_at and again.config == {"shape": [1, 2]}
+        for change, field in ((dict(strategy="pso"), "strategy='ipso', got 'pso'"),
+                              (dict(seed=5), "seed=4, got 5"),
+                              (dict(objective="other"), "objective='task', got 'other'"),
+                              (dict(config={"shape": [1, 3]}),
+                               r"config.shape=\[1, 2\], got \[1, 3\]"),
+                              (dict(config={}), r"config.shape=\[1, 2\], got \(missing\)")):
+            settings = dict(strategy="ipso", seed=4, objective="task", config={"shape": (1, 2)})
+            settings.update(change)
+            with pytest.raises(ValueError, match=f"run 'r' exists in .* with {field}"):
+                log.open_run("r", settings["strategy"], [(0, 1), (0, 2)], settings["seed"],
+                             settings["objective"], settings["config"])
+        with pytest.raises(ValueError, match=r"with bounds \[\[0.0, 1.0\], \[0.0, 2.0\]\]"):
+            log.open_run("r", "ipso", [(0, 1), (0, 3)], 4, "task", {"shape": (1, 2)})
+        assert [r.run_id for r in log.runs()] == ["r"]
+
+
 def test_garbage_file_is_refused_and_left_untouched(tmp_path):
     path = tmp_path / "garbage.sqlite"
     content = os.urandom(4096)

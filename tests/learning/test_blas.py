@@ -1,0 +1,40 @@
+"""handle_drake.blas: the one place BLAS is pinned to one thread per process."""
+
+import json
+import os
+import subprocess
+import sys
+
+CHECK = """
+import json, os, sys
+from handle_drake.blas import BLAS_VARIABLES, pin_blas
+mode = sys.argv[1]
+if mode == "late":  # numpy (and its BLAS) loaded first, as in a worker process
+    import numpy
+pin_blas(force=mode != "cli")
+import numpy
+from threadpoolctl import threadpool_info
+print(json.dumps({"env": {n: os.environ.get(n) for n in BLAS_VARIABLES},
+                  "threads": [p["num_threads"] for p in threadpool_info()
+                              if p["user_api"] == "blas"]}))
+"""
+
+
+def _run(mode, **env):
+    base = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", CHECK, mode], capture_output=True, text=True,
+                         check=True, env={**base, **env}, timeout=120).stdout
+    return json.loads(out)
+
+
+def test_workers_get_one_blas_thread_even_when_numpy_is_loaded_first():
+    late = _run("late")
+    assert late["threads"] and set(late["threads"]) == {1}
+    assert set(late["env"].values()) == {"1"}  # and the processes it starts
+
+
+def test_the_command_line_keeps_what_the_user_set():
+    cli = _run("cli", OPENBLAS_NUM_THREADS="2")
+    assert cli["env"] == {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "1",
+                          "MKL_NUM_THREADS": "1"}
+    assert set(_run("cli")["threads"]) == {1}
