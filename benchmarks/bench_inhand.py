@@ -74,7 +74,7 @@ def _bare_plant(trial: InHandTrial, x):
     diagram = builder.Build()
     simulator = Simulator(diagram)
     built = trial._build()
-    plant_ref = built["plant"]
+    plant_ref = built["harness"].plant  # the trial's plant; its settled state starts both
     q = plant_ref.GetPositions(plant_ref.GetMyContextFromRoot(built["settled"]))
     v = plant_ref.GetVelocities(plant_ref.GetMyContextFromRoot(built["settled"]))
     context = simulator.get_mutable_context()
