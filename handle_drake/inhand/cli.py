@@ -5,9 +5,14 @@ Examples::
     handle-drake inhand --task cylinder_rotation --optimizer ipso --trials 1000 --seed 0
     handle-drake inhand --task star_rotation --optimizer cmaes --trials 100 --workers 2 \\
         --db out/inhand/star.sqlite
+    handle-drake inhand --optimizer pso --trials 1000 --executor dask://head:8786
 
 Every trial goes to the SQLite log ``--db``; running the same command again
-resumes the run. The run stops when a trial reaches the target (held at the
+resumes the run. The particles of one iteration run in parallel on
+``--executor`` (as for ``handle-drake babble``: ``local`` processes, a ``dask``
+LocalCluster of ``--workers`` processes, or ``dask://HOST:PORT``, the workers
+of a running ``dask scheduler``); a run depends only on its seed, not on where
+its trials ran. The run stops when a trial reaches the target (held at the
 end, rotated by ``--target-deg``) or after ``--trials``. It writes the learning
 curve (best score per iteration, Figure 34) and an HTML replay of the best
 trial next to the log. Scores are maximised. Bad arguments exit with status 2.
@@ -22,6 +27,7 @@ from pathlib import Path
 from handle_drake.experiments.cli import _int_at_least, _positive_float
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS
 from handle_drake.inhand.task import EVALUATIONS, TASKS
+from handle_drake.learning.cluster import add_executor_arguments
 
 __all__ = ["register", "main"]
 
@@ -37,7 +43,8 @@ def register(subparsers) -> None:
     p.add_argument("--trials", type=_int_at_least(1, "a positive integer"), default=200,
                    help="budget of trials (the run stops earlier at the target)")
     p.add_argument("--workers", type=_int_at_least(1, "a positive integer"), default=1,
-                   help="trials in parallel (the particles of one iteration)")
+                   help="trials in parallel (the particles of one iteration): worker "
+                        "processes of 'local' and 'dask'")
     p.add_argument("--seed", type=_int_at_least(0, "an integer >= 0"), default=0)
     p.add_argument("--particles", type=_int_at_least(1, "a positive integer"), default=10,
                    help="particles per iteration (CMA-ES: population)")
@@ -53,11 +60,13 @@ def register(subparsers) -> None:
     p.add_argument("--no-plot", action="store_true")
     p.add_argument("--no-html", action="store_true")
     p.add_argument("--no-progress", action="store_true")
+    add_executor_arguments(p)
     p.set_defaults(func=_cmd_inhand)
 
 
 def _cmd_inhand(args) -> int:
     from handle_drake.inhand.experiment import plot_learning_curve, replay_best, run_inhand
+    from handle_drake.learning.cluster import trial_executor
     from handle_drake.learning.log import TrialLog, TrialLogError
 
     for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
@@ -69,10 +78,17 @@ def _cmd_inhand(args) -> int:
     except TrialLogError as error:
         raise ValueError(f"--db: {error}") from None
     print(f"inhand: {args.task}, {args.optimizer}, seed {args.seed}, up to {args.trials} trials "
-          f"in {args.db}", flush=True)
-    run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed, args.db,
-                     args.particles, progress=not args.no_progress,
-                     target_deg=args.target_deg, evaluation=args.evaluation)
+          f"in {args.db} ({args.executor} executor)", flush=True)
+    options = dict(progress=not args.no_progress, target_deg=args.target_deg,
+                   evaluation=args.evaluation)
+    if args.executor.kind == "local":  # run_inhand's own pool: workers build the trial first
+        run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed,
+                         args.db, args.particles, **options)
+    else:
+        with trial_executor(args.executor, args.workers,
+                            connect_timeout=args.connect_timeout) as executor:
+            run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed,
+                             args.db, args.particles, executor=executor, **options)
     s = run.summary()
     print(f"trials: {s['done']} done, {s['failed']} failed")
     if "best_score" not in s:

@@ -1,5 +1,7 @@
 """The in-hand trial on the simulated hand: physics of the task, replay, runs, CLI."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -85,3 +87,35 @@ def test_cli_bad_arguments_exit_2(tmp_path, capsys):
     with pytest.raises(SystemExit) as error:
         cli_main(["inhand", "--optimizer", "bo"])
     assert error.value.code == 2
+
+
+def _rows(db):
+    from handle_drake.learning import TrialLog
+
+    with TrialLog(db) as log:
+        (run,) = log.runs()
+        return [(r.index, r.status, r.parameters.tolist(), r.metric)
+                for r in log.trials(run.run_id)]
+
+
+def test_cli_run_in_parallel_on_dask_equals_the_sequential_run(tmp_path, capsys):
+    """``handle-drake inhand`` as a user runs it: the sequential run writes its learning
+    curve and replay (the replayed best trial scores what was logged); the same run with
+    the particles of each iteration on a 2-worker Dask cluster logs the same trials."""
+    common = ["inhand", "--optimizer", "ipso", "--particles", "2", "--trials", "4", "--seed",
+              "1", "--no-progress"]
+    png, html = tmp_path / "curve.png", tmp_path / "best.html"
+    assert cli_main([*common, "--db", str(tmp_path / "seq.sqlite"), "--plot", str(png),
+                     "--html", str(html)]) == 0
+    out = capsys.readouterr().out
+    assert "(local executor)" in out and "trials: 4 done, 0 failed" in out
+    assert png.stat().st_size > 10_000 and "<html" in html.read_text()[:2000].lower()
+    logged, replayed = (float(v) for v in re.search(
+        r"score ([-\d.e+]+), logged ([-\d.e+]+)\)", out).groups())
+    assert replayed == pytest.approx(logged, abs=1e-3)
+    assert cli_main([*common, "--db", str(tmp_path / "dask.sqlite"), "--executor", "dask",
+                     "--workers", "2", "--no-plot", "--no-html"]) == 0
+    assert "(dask executor)" in capsys.readouterr().out
+    sequential = _rows(tmp_path / "seq.sqlite")
+    assert [r[0] for r in sequential] == [0, 1, 2, 3]
+    assert _rows(tmp_path / "dask.sqlite") == sequential
