@@ -43,7 +43,10 @@ class InHandRun:
 
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
-    return {"task": dc.asdict(trial.config), "optimizer": optimizer,
+    task = dc.asdict(trial.config)
+    if not task["accelerometer"]:  # a setting added later: logs written before still resume
+        del task["accelerometer"]
+    return {"task": task, "optimizer": optimizer,
             "n_particles": n_particles, "inhand_version": 1}
 
 

@@ -21,14 +21,17 @@ def _stroke(trial):
 
 
 def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
-    trial = InHandTrial()
+    # the cylinder is an instrumented object: a JoyWarrior accelerometer at its origin
+    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
     outcome = trial.evaluate(_stroke(trial))
     assert outcome.completed and outcome.held
     assert outcome.rotation_deg >= 30.0
     assert outcome.reached_target and outcome.checks_passed == 4
     assert outcome.score >= trial.target_score == trial.dimension + 1
     assert "palm" in outcome.contacts[-1]  # lies in the palm against the curled fingers
-    # the instrumented object's accelerometer sees the same rotation once it is at rest
+    # the instrumented object's accelerometer (noisy, quantised device model) sees the
+    # same rotation as the plant's pose once the cylinder is at rest
+    assert len(outcome.accelerometer_rotation_deg_series) == len(outcome.rotation_deg_series)
     assert outcome.accelerometer_rotation_deg_series[-1] == pytest.approx(
         outcome.rotation_deg, abs=2.0)
     # without any variation the cylinder stays in its cradle: no rotation, fails check 2
@@ -59,6 +62,7 @@ def test_a_replayed_best_trial_reproduces_its_score(tmp_path):
     assert len(run.records) == 2
     logged, outcome = replay_best(run)
     assert outcome.score == pytest.approx(logged, abs=1e-9)
+    assert outcome.accelerometer_rotation_deg_series == []  # a plain cylinder
     it, best = learning_curve(run.records, 1)
     assert list(it) == [1, 2] and best[1] == max(r.metric for r in run.records)
     # the same settings resume the run; other settings under its id are refused
@@ -73,6 +77,8 @@ def test_bad_input():
         trial.evaluate(np.zeros(3))
     with pytest.raises(ValueError, match="task: expected one of"):
         InHandTask(task="juggling")
+    with pytest.raises(ValueError, match="accelerometer: device: unknown accelerometer 'adxl'"):
+        InHandTask(accelerometer="adxl")
     with pytest.raises(ValueError, match="benchmark: expected 4 values"):
         InHandTask(benchmark=(0.0, 1.0))
     with pytest.raises(ValueError, match="n_particles: expected an integer >= 1, got 0"):
