@@ -13,7 +13,8 @@
    to the target (median over seeds; runs that did not reach it count as the
    budget and are listed).
 
-Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]``;
+Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]
+[--evaluation old]``;
 writes ``benchmarks/results/inhand.json``.
 """
 
@@ -34,7 +35,7 @@ import numpy as np  # noqa: E402
 from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
 from handle_drake.inhand.gist import frames  # noqa: E402
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
-from handle_drake.inhand.task import TASKS, InHandTrial  # noqa: E402
+from handle_drake.inhand.task import EVALUATIONS, TASKS, InHandTrial  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
@@ -125,7 +126,8 @@ def _fresh(trial, x):
     return time.perf_counter() - start
 
 
-def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -> list[dict]:
+def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles,
+          evaluation="incremental") -> list[dict]:
     rows = []
     for target in targets:
         for task in tasks:
@@ -134,7 +136,8 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                 for seed in seeds:
                     start = time.perf_counter()
                     run = run_inhand(task, optimizer, trials, workers, seed, db, n_particles,
-                                     progress=False, target_deg=float(target))
+                                     progress=False, target_deg=float(target),
+                                     evaluation=evaluation)
                     logged.append(run)
                     s = run.summary()
                     s["seed"], s["elapsed"] = seed, time.perf_counter() - start
@@ -145,16 +148,19 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles) -
                         s["best_full_rotation_deg"] = full.rotation_deg
                         s["best_full_held"] = full.held
                     runs.append(s)
-                    print(f"{task} {target} deg {optimizer} seed {seed}: {json.dumps(s)}",
+                    print(f"{task} {target} deg {evaluation} {optimizer} seed {seed}: "
+                          f"{json.dumps(s)}",
                           flush=True)
                 figure = plot_learning_curve(
-                    logged, Path(db).parent / f"curve-{task}-{target:g}deg-{optimizer}.png",
-                    f"{task}, target {target:g} deg held: {optimizer}")
+                    logged, Path(db).parent / f"curve-{task}-{evaluation}-{target:g}deg-"
+                                              f"{optimizer}.png",
+                    f"{task}, target {target:g} deg held: {optimizer} ({evaluation})")
                 reached = [s["trials_to_target"] for s in runs]
                 best = [s.get("best_held_rotation_deg", float("nan")) for s in runs]
                 best = [b if b == b else float("nan") for b in best] or [float("nan")]
                 rows.append({
                     "task": task, "target_deg": target, "optimizer": optimizer,
+                    "evaluation": evaluation,
                     "seeds": seeds, "budget": trials,
                     "best_held_rotation_deg_median": float(np.nanmedian(best)),
                     "best_held_rotation_deg_range": [float(np.nanmin(best)),
@@ -191,6 +197,7 @@ def main(argv=None) -> int:
     p.add_argument("--trials", type=int, default=1000)
     p.add_argument("--targets", nargs="+", type=float, default=[30.0])
     p.add_argument("--particles", type=int, default=10)
+    p.add_argument("--evaluation", choices=EVALUATIONS, default="incremental")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/bench.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
@@ -202,9 +209,9 @@ def main(argv=None) -> int:
     if args.speed:
         result["speed"] = speed(args.rounds)
     if args.table:
-        key = "table_" + "_".join(f"{t:g}" for t in args.targets)
+        key = "table_" + "_".join(f"{t:g}" for t in args.targets) + f"_{args.evaluation}"
         result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials, args.targets,
-                            args.db, args.workers, args.particles)
+                            args.db, args.workers, args.particles, args.evaluation)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"wrote {args.out}")
