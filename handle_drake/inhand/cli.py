@@ -27,6 +27,7 @@ from pathlib import Path
 from handle_drake.experiments.cli import _int_at_least, _positive_float
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS
 from handle_drake.inhand.task import EVALUATIONS, TASKS
+from handle_drake.instruments.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
 
 __all__ = ["register", "main"]
@@ -52,6 +53,10 @@ def register(subparsers) -> None:
                    help="rotation the object must reach, held, at the end (deg)")
     p.add_argument("--evaluation", choices=EVALUATIONS, default="incremental",
                    help="incremental: eqs. 47-49 with early stop; old: held time + rotation")
+    p.add_argument("--accelerometer", choices=sorted(PROFILES), default=None, metavar="DEVICE",
+                   help="make the object the report's instrumented object: this accelerometer "
+                        f"({', '.join(sorted(PROFILES))}) at its origin also measures the "
+                        "rotation (logged per trial; valid at rest)")
     p.add_argument("--db", type=Path, default=Path("out/inhand/inhand.sqlite"))
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="learning curve (default <db folder>/<run id>.png)")
@@ -81,6 +86,8 @@ def _cmd_inhand(args) -> int:
           f"in {args.db} ({args.executor} executor)", flush=True)
     options = dict(progress=not args.no_progress, target_deg=args.target_deg,
                    evaluation=args.evaluation)
+    if args.accelerometer:
+        options["accelerometer"] = args.accelerometer
     if args.executor.kind == "local":  # run_inhand's own pool: workers build the trial first
         run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed,
                          args.db, args.particles, **options)
@@ -108,6 +115,10 @@ def _cmd_inhand(args) -> int:
         logged, outcome = replay_best(run, html)
         print(f"replay of the best trial: {html} (score {outcome.score:.4g}, logged "
               f"{logged:.4g})")
+        if outcome.accelerometer_rotation_deg_series:
+            print(f"its rotation at the end: {outcome.rotation_deg:.1f} deg (plant), "
+                  f"{outcome.accelerometer_rotation_deg_series[-1]:.1f} deg "
+                  f"({args.accelerometer} accelerometer)")
     return 0
 
 

@@ -90,9 +90,10 @@ def test_cli_bad_arguments_exit_2(tmp_path, capsys):
     assert "--plot: expected a .png file name" in capsys.readouterr().err
     (tmp_path / "foreign.sqlite").write_text("not a database")
     assert cli_main(["inhand", "--db", str(tmp_path / "foreign.sqlite")]) == 2
-    with pytest.raises(SystemExit) as error:
-        cli_main(["inhand", "--optimizer", "bo"])
-    assert error.value.code == 2
+    for bad in (["--optimizer", "bo"], ["--accelerometer", "adxl"], ["--executor", "mpi"]):
+        with pytest.raises(SystemExit) as error:
+            cli_main(["inhand", *bad])
+        assert error.value.code == 2
 
 
 def _rows(db):
@@ -105,20 +106,22 @@ def _rows(db):
 
 
 def test_cli_run_in_parallel_on_dask_equals_the_sequential_run(tmp_path, capsys):
-    """``handle-drake inhand`` as a user runs it: the sequential run writes its learning
-    curve and replay (the replayed best trial scores what was logged); the same run with
-    the particles of each iteration on a 2-worker Dask cluster logs the same trials."""
+    """``handle-drake inhand`` as a user runs it: the sequential run (with an instrumented
+    cylinder) writes its learning curve and replay (the replayed best trial scores what
+    was logged); the same run with the particles of each iteration on a 2-worker Dask
+    cluster (a plain cylinder: the sensor changes no physics) logs the same trials."""
     common = ["inhand", "--optimizer", "ipso", "--particles", "2", "--trials", "4", "--seed",
               "1", "--no-progress"]
     png, html = tmp_path / "curve.png", tmp_path / "best.html"
     assert cli_main([*common, "--db", str(tmp_path / "seq.sqlite"), "--plot", str(png),
-                     "--html", str(html)]) == 0
+                     "--html", str(html), "--accelerometer", "joywarrior24f14"]) == 0
     out = capsys.readouterr().out
     assert "(local executor)" in out and "trials: 4 done, 0 failed" in out
     assert png.stat().st_size > 10_000 and "<html" in html.read_text()[:2000].lower()
     logged, replayed = (float(v) for v in re.search(
         r"score ([-\d.e+]+), logged ([-\d.e+]+)\)", out).groups())
     assert replayed == pytest.approx(logged, abs=1e-3)
+    assert "deg (joywarrior24f14 accelerometer)" in out
     assert cli_main([*common, "--db", str(tmp_path / "dask.sqlite"), "--executor", "dask",
                      "--workers", "2", "--no-plot", "--no-html"]) == 0
     assert "(dask executor)" in capsys.readouterr().out
