@@ -26,11 +26,12 @@ import math
 
 import numpy as np
 from pydrake.common.schema import Transform
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 
 from handle_drake.perception.detect import Detection
 
-__all__ = ["PerceivedObject", "perceive_object", "planner_input", "PLANNABLE"]
+__all__ = ["PerceivedObject", "perceive_object", "planner_input", "PLANNABLE", "PerceivedTrial",
+           "aimed_trial_scenario", "perceived_grasp_trial"]
 
 PLANNABLE = ("sphere", "cylinder", "cuboid")
 
@@ -101,3 +102,112 @@ def perceive_object(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
     detection = min(view.detections, key=lambda d: float(np.linalg.norm(d.position[:2] - truth)))
     perceived_size, X_WO_perceived = planner_input(kind, detection)
     return PerceivedObject(kind, perceived_size, X_WO_perceived, float(size), X_WO, detection)
+
+
+# --------------------------------------------------- the seven babbling objects
+@dc.dataclass
+class PerceivedTrial:
+    """One of the seven grasp objects perceived on the table and grasped
+    centred on its perceived pose (see :func:`perceived_grasp_trial`)."""
+
+    kind: str
+    true_xy_yaw: tuple  # (m, m, rad): where the object stood
+    error: dict | None  # detection_error(): xy_mm, z_mm, yaw_deg, kind_ok; None: not seen
+    offset_O: tuple  # (m, m): the hand's aim error in the object's frame
+    yaw_error: float  # rad, the hand's yaw about the object against the trial's (see below)
+    metric: float  # BW value of the grasp aimed at the perception (nan: not seen)
+    force_closure: bool
+
+    def as_dict(self) -> dict:
+        return dc.asdict(self)
+
+
+def _trial_runner(trial):
+    from handle_drake.run import ScenarioRunner
+
+    runner = getattr(trial, "_perception_runner", None)
+    if runner is None:
+        runner = ScenarioRunner(trial.base_scenario())
+        trial._perception_runner = runner
+    return runner
+
+
+def aimed_trial_scenario(trial, offset_O, yaw_error: float = 0.0):
+    """The babbling trial's scenario (``space='offset'``) with the hand aimed
+    ``offset_O`` (m, object frame) off the object's axis and turned
+    ``yaw_error`` (rad) about the vertical through its aim point: the grasp
+    a perception error of that size produces, the object staying where the
+    trial has it."""
+    from handle_drake.experiments.grasp_trial import GraspTrial
+
+    if not isinstance(trial, GraspTrial) or trial.config.space != "offset":
+        raise ValueError("trial: expected a GraspTrial in the 'offset' space")
+    offset_O = np.asarray(offset_O, dtype=float)
+    if offset_O.shape != (2,) or not np.isfinite(offset_O).all():
+        raise ValueError(f"offset_O: expected 2 finite values, got {offset_O}")
+    if not math.isfinite(yaw_error):
+        raise ValueError(f"yaw_error: expected a finite angle, got {yaw_error}")
+    scenario = trial.scenario(offset_O)
+    ctrl = scenario.controller
+    start = np.array(ctrl.start_pose, dtype=float)
+    c, s = math.cos(yaw_error), math.sin(yaw_error)
+    rel = start[:2] - offset_O
+    start[:2] = offset_O + np.array([c * rel[0] - s * rel[1], s * rel[0] + c * rel[1]])
+    start[5] += yaw_error  # roll-pitch-yaw: the yaw turns about the world vertical
+    return dc.replace(scenario, controller=dc.replace(ctrl, start_pose=start.tolist()))
+
+
+def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str = "barrett",
+                          profile: str = "kinect_v1", seed: int = 0, trial=None
+                          ) -> PerceivedTrial:
+    """Perceives a grasp object of the babbling experiments (any of the seven
+    kinds, at its babbling size) standing on the table of
+    ``diagrams/tabletop_perception.yaml`` at ``xy`` with ``yaw``, then runs
+    the babbling grasp trial (guarded approach from above, close, BW metric)
+    with the hand centred on the *perceived* centre and turned with the
+    perceived yaw (box footprints; a round footprint has none, so the hand
+    keeps its world yaw). The trial's object stands at the origin, so the
+    error is carried into its frame; from the truth the same trial scores
+    ``trial.evaluate([0, 0])``. ``trial``: a
+    ``GraspTrial`` of that kind to reuse (its diagram is built once)."""
+    from handle_drake.demo import diagrams_dir
+    from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+    from handle_drake.objects import KINDS
+    from handle_drake.perception.perceive import detection_error, render_views
+    from handle_drake.scenario import CameraConfig, LoadScenario, ObjectConfig
+    from handle_drake.station import object_initial_pose
+
+    if kind not in KINDS:
+        raise ValueError(f"kind: expected one of {list(KINDS)}, got {kind!r}")
+    if trial is None:
+        trial = GraspTrial(GraspTrialConfig(hand=hand, object=kind, space="offset"))
+    if trial.config.object != kind:
+        raise ValueError(f"trial: its object is {trial.config.object!r}, not {kind!r}")
+    scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml")
+    X = Transform(RigidTransform(RotationMatrix.MakeZRotation(float(yaw)),
+                                 [float(xy[0]), float(xy[1]), 0.0]))
+    scenario.object = ObjectConfig(kind=kind, size=trial.config.object_size, X_WO=X,
+                                   on_table=True)
+    scenario.random_seed = int(seed)
+    camera = scenario.cameras[0]
+    scenario.cameras = [CameraConfig(name=camera.name, profile=profile, parent=camera.parent,
+                                     X_PC=camera.X_PC, target=list(camera.target))]
+    (view,) = render_views(scenario)
+    X_WO = object_initial_pose(scenario)
+    truth = X_WO.translation()[:2]
+    if not view.detections:
+        return PerceivedTrial(kind, (float(xy[0]), float(xy[1]), float(yaw)), None,
+                              (math.nan, math.nan), math.nan, math.nan, False)
+    detection = min(view.detections, key=lambda d: float(np.linalg.norm(d.position[:2] - truth)))
+    error = detection_error(detection, scenario)
+    R_OW = X_WO.rotation().inverse().matrix()
+    d_W = np.array([*(detection.position[:2] - truth), 0.0])
+    offset_O = (R_OW @ d_W)[:2]
+    # A box footprint gives its yaw (the hand turns with it, off by the error);
+    # a round footprint gives none, so the hand keeps its world yaw and meets
+    # the object turned by -yaw (a mug's handle; nothing for a sphere).
+    yaw_error = -float(yaw) if error["yaw_deg"] is None else math.radians(error["yaw_deg"])
+    result = _trial_runner(trial).run(scenario=aimed_trial_scenario(trial, offset_O, yaw_error))
+    return PerceivedTrial(kind, (float(xy[0]), float(xy[1]), float(yaw)), error,
+                          (float(offset_O[0]), float(offset_O[1])), float(yaw_error),
+                          float(result.score.value), bool(result.score.force_closure))

@@ -68,10 +68,17 @@ def perceive_frame(camera: str, frame: DepthFrame,
     return CameraView(camera, frame, plane, detections, message)
 
 
-def render_views(scenario, params: DetectorParams | None = None, time: float = 0.0
-                 ) -> list[CameraView]:
+def render_views(scenario, params: DetectorParams | None = None, time: float = 0.0,
+                 exclude_robot: bool = True) -> list[CameraView]:
     """Builds the simulated station, renders every camera at ``time`` (s) with
-    the scenario's initial state, and detects."""
+    the scenario's initial state, and detects.
+
+    ``exclude_robot``: pixels whose render label belongs to the hand or the
+    wrist (the label image: Drake labels each body's geometry) are dropped
+    before detection, as a real system filters itself out with its known
+    model and joint angles; otherwise a hand in view merges with the object
+    into one wrong cluster. The views' frames are then the filtered depth.
+    """
     from handle_drake.perception.camera import get_profile
     from handle_drake.perception.sensors import camera_info
     from handle_drake.station import MakeHandStation
@@ -83,15 +90,44 @@ def render_views(scenario, params: DetectorParams | None = None, time: float = 0
     station = MakeHandStation(scenario)
     context = station.CreateDefaultContext()
     context.SetTime(time)
+    robot = robot_labels(station) if exclude_robot else np.empty(0, dtype=int)
     views = []
     for camera in scenario.cameras:
         image = station.GetOutputPort(f"{camera.name}.depth").Eval(context)
+        depth = np.array(image.data)[:, :, 0]
+        if robot.size:
+            labels = np.array(station.GetOutputPort(f"{camera.name}.label").Eval(context).data)
+            depth = np.where(np.isin(labels[:, :, 0], robot), np.inf, depth)
         X_WC = station.GetOutputPort(f"{camera.name}.pose").Eval(context)
         info = camera_info(get_profile(camera.profile))
         K = info.intrinsic_matrix()
-        frame = DepthFrame(depth=np.array(image.data)[:, :, 0], K=K, X_WC=X_WC.GetAsMatrix4())
+        frame = DepthFrame(depth=depth, K=K, X_WC=X_WC.GetAsMatrix4())
         views.append(perceive_frame(camera.name, frame, params))
     return views
+
+
+def robot_labels(station) -> np.ndarray:
+    """The render labels of the hand's and wrist's geometry in ``station``
+    (read from each perception geometry's ``("label", "id")`` property)."""
+    from pydrake.geometry import Role
+
+    from handle_drake.station import HAND_INSTANCE, WRIST_INSTANCE
+
+    plant = station.GetSubsystemByName("plant")
+    inspector = station.GetSubsystemByName("scene_graph").model_inspector()
+    labels = set()
+    for name in (HAND_INSTANCE, WRIST_INSTANCE):
+        if not plant.HasModelInstanceNamed(name):
+            continue
+        for body_index in plant.GetBodyIndices(plant.GetModelInstanceByName(name)):
+            frame_id = plant.GetBodyFrameIdIfExists(body_index)
+            if frame_id is None:
+                continue
+            for geometry in inspector.GetGeometries(frame_id, Role.kPerception):
+                properties = inspector.GetPerceptionProperties(geometry)
+                if properties.HasProperty("label", "id"):
+                    labels.add(int(properties.GetProperty("label", "id")))
+    return np.array(sorted(labels), dtype=int)
 
 
 def _true_yaw(kind: str, R_WO: np.ndarray) -> float | None:
@@ -176,6 +212,8 @@ def register(subparsers) -> None:
     p.add_argument("--frame", type=Path, default=None,
                    help="a recorded frame's JSON sidecar instead of a scenario")
     p.add_argument("--json", action="store_true", help="print the detections as JSON")
+    p.add_argument("--keep-robot", action="store_true",
+                   help="keep the hand's pixels (by default its render labels are filtered out)")
     p.add_argument("--save-frames", type=Path, default=None,
                    help="write each camera's depth frame (16-bit PNG + JSON) to this directory")
     p.set_defaults(func=_cmd_perceive)
@@ -194,10 +232,12 @@ def _cmd_perceive(args) -> int:
     if args.frame is not None:
         if args.override is not None:
             raise ValueError("--override applies to a scenario, not to --frame")
+        if args.keep_robot:
+            raise ValueError("--keep-robot applies to a scenario's cameras, not to --frame")
         views = [perceive_frame(args.frame.stem, load_frame(args.frame))]
     else:
         scenario = LoadScenario(filename=args.scenario, data=args.override)
-        views = render_views(scenario)
+        views = render_views(scenario, exclude_robot=not args.keep_robot)
     if args.save_frames is not None:
         for view in views:
             save_frame(args.save_frames / view.camera, view.frame)

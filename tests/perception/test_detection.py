@@ -160,3 +160,38 @@ def test_perceive_cli_json_and_recorded_frame_round_trip(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "handle_drake.cli", "perceive"],
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
+
+
+def test_the_hand_in_view_is_filtered_out_by_its_render_labels(capsys):
+    """A hand hovering over the table is a cluster of its own (a false object
+    'standing' there); its render labels take it out of the cloud."""
+    from handle_drake.cli import main
+    from handle_drake.perception.perceive import robot_labels
+
+    hand = ("hand: {kind: shadow, mount: !FixedMount {X_WB: {translation: [-0.25, 0.0, 0.3], "
+            "rotation: !Rpy {deg: [90, 0, 90]}}}}")
+    scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml", data=hand)
+    station = MakeHandStation(scenario)
+    plant = station.GetSubsystemByName("plant")
+    # Drake labels each body's geometry: every hand body, and nothing of the table or object.
+    hand_bodies = {int(i) for i in plant.GetBodyIndices(plant.GetModelInstanceByName("hand"))}
+    assert set(robot_labels(station).tolist()) == hand_bodies
+    (kept,) = render_views(scenario, exclude_robot=False)
+    (filtered,) = render_views(scenario)
+    assert len(kept.detections) == 2  # the object and the hand
+    (only,) = filtered.detections
+    error = detection_error(only, scenario)
+    assert error["kind_ok"] and error["xy_mm"] < 5.0
+    assert main(["perceive", "--frame", "x.json", "--keep-robot"]) == 2
+    assert "--keep-robot applies to a scenario" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_one_centimetre_sphere_is_seen_with_kinect_noise(seed):
+    scenario = LoadScenario(
+        filename=diagrams_dir() / "tabletop_perception.yaml",
+        data=f"random_seed: {seed}\n"
+             "object: {kind: sphere, size: 0.01, X_WO: {translation: [0.1, -0.1, 0]}}")
+    (view,) = render_views(scenario)
+    (only,) = view.detections
+    assert detection_error(only, scenario)["xy_mm"] < 5.0
