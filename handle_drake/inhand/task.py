@@ -385,6 +385,9 @@ simulation_duration: {c.settle_time + c.total_time}
         st = SimpleNamespace(i=0, next_check=0, angle=0.0, previous=0.0, held_time=0.0,
                              held=True, passed=0, stopped=False, failed=False,
                              last_touch=0.0, acc_prev=None, acc_angle=0.0)
+        if accelerometer is not None:  # the reading at the start of the trial (settled)
+            up_O = accelerometer.Eval(station_context)
+            st.acc_prev = float(np.arctan2(up_O[1], up_O[0]))
 
         def sample():
             i, t = st.i, float(samples[st.i])
@@ -411,8 +414,6 @@ simulation_duration: {c.settle_time + c.total_time}
                 # rotation (the task direction turns "up" the other way round).
                 up_O = accelerometer.Eval(station_context)
                 raw_acc = float(np.arctan2(up_O[1], up_O[0]))
-                if st.acc_prev is None:
-                    st.acc_prev = raw_acc
                 st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
                 st.acc_prev = raw_acc
                 accel_rotations.append(float(np.degrees(st.acc_angle)))
