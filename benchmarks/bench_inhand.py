@@ -4,7 +4,8 @@
    reset from the settled context) against the bare plant simulating the same
    scenario over the same time from the same state (MultibodyPlant +
    SceneGraph, the hand's PD inputs fed by a TrajectorySource of the same
-   frames: no Python system), and against building the trial's diagram anew;
+   frames: no Python system), against building the trial's diagram anew, and
+   the same trial with an instrumented object (the JoyWarrior model in it);
    every case once per round, ratios of medians.
 2. Table (``--table``): optimiser x task x seed runs of ``run_inhand`` (all
    runs in one SQLite log, resumable: whatever already ran is read back), each
@@ -35,7 +36,7 @@ import numpy as np  # noqa: E402
 from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
 from handle_drake.inhand.gist import frames  # noqa: E402
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
-from handle_drake.inhand.task import EVALUATIONS, TASKS, InHandTrial  # noqa: E402
+from handle_drake.inhand.task import EVALUATIONS, TASKS, InHandTask, InHandTrial  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
@@ -100,9 +101,12 @@ def speed(rounds: int) -> dict:
         x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
     trial._build()
     bare = _bare_plant(trial, x)
+    instrumented = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
+    instrumented._build()
     cases = {"trial (reset, checks)": lambda: trial.evaluate(x).wall_time,
              "bare plant, same frames": bare,
-             "trial built anew": lambda: _fresh(trial, x)}
+             "trial built anew": lambda: _fresh(trial, x),
+             "trial, instrumented object": lambda: instrumented.evaluate(x).wall_time}
     times = {k: [] for k in cases}
     for _ in range(rounds):
         for name, case in cases.items():
@@ -121,7 +125,7 @@ def _fresh(trial, x):
     from handle_drake.inhand import task as task_module
 
     start = time.perf_counter()
-    task_module._BUILD_CACHE.clear()
+    task_module._BUILD_CACHE.pop((trial.config, False), None)  # this trial's diagram only
     InHandTrial(trial.config).evaluate(x)
     return time.perf_counter() - start
 
