@@ -4,7 +4,8 @@
    reset from the settled context) against the bare plant simulating the same
    scenario over the same time from the same state (MultibodyPlant +
    SceneGraph, the hand's PD inputs fed by a TrajectorySource of the same
-   frames: no Python system), and against building the trial's diagram anew;
+   frames: no Python system), against building the trial's diagram anew, and
+   the same trial with an instrumented object (the JoyWarrior model in it);
    every case once per round, ratios of medians.
 2. Table (``--table``): optimiser x task x seed runs of ``run_inhand`` (all
    runs in one SQLite log, resumable: whatever already ran is read back), each
@@ -16,7 +17,8 @@
 The table's trials run where ``--executor`` says (``local`` with ``--workers``,
 ``dask`` LocalCluster, ``dask://HOST:PORT``: ``handle_drake.learning.cluster``).
 
-Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]``;
+Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]
+[--evaluation old]``;
 writes ``benchmarks/results/inhand.json``.
 """
 
@@ -39,7 +41,7 @@ import numpy as np  # noqa: E402
 from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
 from handle_drake.inhand.gist import frames  # noqa: E402
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
-from handle_drake.inhand.task import TASKS, InHandTrial  # noqa: E402
+from handle_drake.inhand.task import EVALUATIONS, TASKS, InHandTask, InHandTrial  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
@@ -80,7 +82,7 @@ def _bare_plant(trial: InHandTrial, x):
     diagram = builder.Build()
     simulator = Simulator(diagram)
     built = trial._build()
-    plant_ref = built["plant"]
+    plant_ref = built["harness"].plant  # the trial's plant; its settled state starts both
     q = plant_ref.GetPositions(plant_ref.GetMyContextFromRoot(built["settled"]))
     v = plant_ref.GetVelocities(plant_ref.GetMyContextFromRoot(built["settled"]))
     context = simulator.get_mutable_context()
@@ -105,9 +107,12 @@ def speed(rounds: int) -> dict:
         x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
     trial._build()
     bare = _bare_plant(trial, x)
+    instrumented = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
+    instrumented._build()
     cases = {"trial (reset, checks)": lambda: trial.evaluate(x).wall_time,
              "bare plant, same frames": bare,
-             "trial built anew": lambda: _fresh(trial, x)}
+             "trial built anew": lambda: _fresh(trial, x),
+             "trial, instrumented object": lambda: instrumented.evaluate(x).wall_time}
     times = {k: [] for k in cases}
     for _ in range(rounds):
         for name, case in cases.items():
@@ -126,13 +131,13 @@ def _fresh(trial, x):
     from handle_drake.inhand import task as task_module
 
     start = time.perf_counter()
-    task_module._BUILD_CACHE.clear()
+    task_module._BUILD_CACHE.pop((trial.config, False), None)  # this trial's diagram only
     InHandTrial(trial.config).evaluate(x)
     return time.perf_counter() - start
 
 
 def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles,
-          executor=None) -> list[dict]:
+          executor=None, evaluation="incremental") -> list[dict]:
     rows = []
     for target in targets:
         for task in tasks:
@@ -142,7 +147,7 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles,
                     start = time.perf_counter()
                     run = run_inhand(task, optimizer, trials, workers, seed, db, n_particles,
                                      progress=False, executor=executor,
-                                     target_deg=float(target))
+                                     target_deg=float(target), evaluation=evaluation)
                     logged.append(run)
                     s = run.summary()
                     s["seed"], s["elapsed"] = seed, time.perf_counter() - start
@@ -153,16 +158,19 @@ def table(tasks, optimizers, seeds, trials, targets, db, workers, n_particles,
                         s["best_full_rotation_deg"] = full.rotation_deg
                         s["best_full_held"] = full.held
                     runs.append(s)
-                    print(f"{task} {target} deg {optimizer} seed {seed}: {json.dumps(s)}",
+                    print(f"{task} {target} deg {evaluation} {optimizer} seed {seed}: "
+                          f"{json.dumps(s)}",
                           flush=True)
                 figure = plot_learning_curve(
-                    logged, Path(db).parent / f"curve-{task}-{target:g}deg-{optimizer}.png",
-                    f"{task}, target {target:g} deg held: {optimizer}")
+                    logged, Path(db).parent / f"curve-{task}-{evaluation}-{target:g}deg-"
+                                              f"{optimizer}.png",
+                    f"{task}, target {target:g} deg held: {optimizer} ({evaluation})")
                 reached = [s["trials_to_target"] for s in runs]
                 best = [s.get("best_held_rotation_deg", float("nan")) for s in runs]
                 best = [b if b == b else float("nan") for b in best] or [float("nan")]
                 rows.append({
                     "task": task, "target_deg": target, "optimizer": optimizer,
+                    "evaluation": evaluation,
                     "seeds": seeds, "budget": trials,
                     "best_held_rotation_deg_median": float(np.nanmedian(best)),
                     "best_held_rotation_deg_range": [float(np.nanmin(best)),
@@ -199,6 +207,7 @@ def main(argv=None) -> int:
     p.add_argument("--trials", type=int, default=1000)
     p.add_argument("--targets", nargs="+", type=float, default=[30.0])
     p.add_argument("--particles", type=int, default=10)
+    p.add_argument("--evaluation", choices=EVALUATIONS, default="incremental")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/bench.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
@@ -211,11 +220,12 @@ def main(argv=None) -> int:
     if args.speed:
         result["speed"] = speed(args.rounds)
     if args.table:
-        key = "table_" + "_".join(f"{t:g}" for t in args.targets)
+        key = "table_" + "_".join(f"{t:g}" for t in args.targets) + f"_{args.evaluation}"
         with trial_executor(args.executor, args.workers,
                             connect_timeout=args.connect_timeout) as executor:
             result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials,
-                                args.targets, args.db, None, args.particles, executor)
+                                args.targets, args.db, None, args.particles, executor,
+                                args.evaluation)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"wrote {args.out}")

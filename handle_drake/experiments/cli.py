@@ -69,11 +69,11 @@ def register(subparsers) -> None:
                    help="std of Gaussian noise added to the metric (seeded per trial)")
     p.add_argument("--size", type=positive_float, default=None,
                    help="object size in m (default: the babbling catalogue's)")
-    p.add_argument("--placement-error", type=_non_negative_float, default=0.0, metavar="M",
+    p.add_argument("--placement-error", type=non_negative_float, default=0.0, metavar="M",
                    help="robust objective: score each trial as the mean metric over "
                         "--placement-samples wrist placements within M metres of the "
                         "planned one (e.g. 0.002); default 0: the nominal metric")
-    p.add_argument("--placement-samples", type=_positive_int, default=None, metavar="K",
+    p.add_argument("--placement-samples", type=positive_int, default=None, metavar="K",
                    help="placements per trial of the robust objective (default 5 with "
                         "--placement-error)")
     p.add_argument("--mesh", type=Path, default=None, metavar="FILE",

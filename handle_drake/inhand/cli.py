@@ -8,7 +8,11 @@ Examples::
     handle-drake inhand --optimizer ipso --trials 1000 --executor dask://head:8786
 
 Every trial goes to the SQLite log ``--db``; running the same command again
-resumes the run. The run stops when a trial reaches the target (held at the
+resumes the run. The particles of one iteration run in parallel on
+``--executor`` (as for ``handle-drake babble``: ``local`` processes, a ``dask``
+LocalCluster of ``--workers`` processes, or ``dask://HOST:PORT``, the workers
+of a running ``dask scheduler``); a run depends only on its seed, not on where
+its trials ran. The run stops when a trial reaches the target (held at the
 end, rotated by ``--target-deg``) or after ``--trials``. It writes the learning
 curve (best score per iteration, Figure 34) and an HTML replay of the best
 trial next to the log. Scores are maximised. Bad arguments exit with status 2.
@@ -26,6 +30,7 @@ from handle_drake.cli_support import int_at_least as _int_at_least
 from handle_drake.cli_support import positive_float as _positive_float
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS
 from handle_drake.inhand.task import EVALUATIONS, TASKS
+from handle_drake.instruments.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
 
 __all__ = ["register", "main"]
@@ -53,6 +58,10 @@ def register(subparsers) -> None:
                    help="rotation the object must reach, held, at the end (deg)")
     p.add_argument("--evaluation", choices=EVALUATIONS, default="incremental",
                    help="incremental: eqs. 47-49 with early stop; old: held time + rotation")
+    p.add_argument("--accelerometer", choices=sorted(PROFILES), default=None, metavar="DEVICE",
+                   help="make the object the report's instrumented object: this accelerometer "
+                        f"({', '.join(sorted(PROFILES))}) at its origin also measures the "
+                        "rotation (logged per trial; valid at rest)")
     p.add_argument("--db", type=Path, default=Path("out/inhand/inhand.sqlite"))
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="learning curve (default <db folder>/<run id>.png)")
@@ -77,13 +86,20 @@ def _cmd_inhand(args) -> int:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
     except TrialLogError as error:
         raise ValueError(f"--db: {error}") from None
-    with trial_executor(args.executor, args.workers,
-                        connect_timeout=args.connect_timeout) as executor:
-        print(f"inhand: {args.task}, {args.optimizer}, seed {args.seed}, up to {args.trials} "
-              f"trials in {args.db} ({args.executor} executor)", flush=True)
-        run = run_inhand(args.task, args.optimizer, args.trials, None, args.seed, args.db,
-                         args.particles, progress=not args.no_progress, executor=executor,
-                         target_deg=args.target_deg, evaluation=args.evaluation)
+    print(f"inhand: {args.task}, {args.optimizer}, seed {args.seed}, up to {args.trials} trials "
+          f"in {args.db} ({args.executor} executor)", flush=True)
+    options = dict(progress=not args.no_progress, target_deg=args.target_deg,
+                   evaluation=args.evaluation)
+    if args.accelerometer:
+        options["accelerometer"] = args.accelerometer
+    if args.executor.kind == "local":  # run_inhand's own pool: workers build the trial first
+        run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed,
+                         args.db, args.particles, **options)
+    else:  # dask: as many trials at once as the cluster has workers
+        with trial_executor(args.executor, args.workers,
+                            connect_timeout=args.connect_timeout) as executor:
+            run = run_inhand(args.task, args.optimizer, args.trials, None, args.seed,
+                             args.db, args.particles, executor=executor, **options)
     s = run.summary()
     print(f"trials: {s['done']} done, {s['failed']} failed")
     if "best_score" not in s:
@@ -103,6 +119,10 @@ def _cmd_inhand(args) -> int:
         logged, outcome = replay_best(run, html)
         print(f"replay of the best trial: {html} (score {outcome.score:.4g}, logged "
               f"{logged:.4g})")
+        if outcome.accelerometer_rotation_deg_series:
+            print(f"its rotation at the end: {outcome.rotation_deg:.1f} deg (plant), "
+                  f"{outcome.accelerometer_rotation_deg_series[-1]:.1f} deg "
+                  f"({args.accelerometer} accelerometer)")
     return 0
 
 

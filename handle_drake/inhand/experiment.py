@@ -46,7 +46,10 @@ class InHandRun:
 
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
-    return {"task": dc.asdict(trial.config), "optimizer": optimizer,
+    task = dc.asdict(trial.config)
+    if not task["accelerometer"]:  # a setting added later: logs written before still resume
+        del task["accelerometer"]
+    return {"task": task, "optimizer": optimizer,
             "n_particles": n_particles, "inhand_version": 1}
 
 
@@ -135,17 +138,19 @@ def plot_learning_curve(runs, path, title=""):
 
     fig = Figure(figsize=(6, 3.6), layout="constrained")
     ax = fig.subplots()
-    target = None
+    target, last = None, 1
     for run in runs:
         # random search has no iterations: its trials are grouped in as many
         it, best = learning_curve(run.records, run.n_particles)
+        last = max(last, int(it[-1]) if it.size else 1)
         ax.step(it, best, where="post", marker="o", ms=3, label=f"{run.optimizer} seed {run.seed}")
         target = run.trial.target_score
     if target is not None:
         ax.axhline(target, color="k", ls="--", lw=0.8, label="target reached")
     from matplotlib.ticker import MaxNLocator
 
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
+    ax.set_xlim(0.5, last + 0.5)  # whole iterations, also for a run that stopped after one
     ax.set_xlabel(f"iteration ({runs[0].n_particles} trials each)" if runs else "iteration")
     ax.set_ylabel("best score so far (maximised)")
     ax.set_title(title or (runs[0].trial.name if runs else ""), fontsize=9)

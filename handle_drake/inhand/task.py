@@ -8,17 +8,19 @@ joint sags a little, so the object settles against the finger bases). The
 hand is fixed and the object is already in the hand, as the report assumes
 (5.4, 5.6). Flexing the fingers rolls the object towards the wrist: rotation
 about its own axis. A hand-written stroke (J3 +1.0 rad, J2 +0.9 rad on the
-three fingers over 1 s) turns the 4 cm cylinder by 35 deg and it stays on the
-palm, so 30 deg held is physically reachable (``tests/test_inhand_task.py``
-replays it).
+three fingers over 1 s) turns the 4 cm cylinder by about 50 deg and it stays on
+the palm, so 30 deg held is physically reachable
+(``tests/inhand/test_inhand_task.py`` replays it).
 
 The grasp is settled once per process (``settle_time`` of simulation with the
 initial command) and every trial starts from a copy of that context: time 0,
 the settled state, the trial's parameters on the :class:`GistMotionSource`.
 The trial samples every ``sample_period``: object pose (rotation about its
 axis from the plant, unwrapped; positive = the direction the flexing fingers
-roll it; and the same from an accelerometer in the object, the report's
-instrumented object, valid at rest), held (the object has not dropped more
+roll it; with ``accelerometer`` set, the object is the report's instrumented
+object (2.4): the station's ``object.acceleration`` port, the device model of
+:mod:`handle_drake.instruments` at the object's origin, gives the same rotation
+from the gravity direction, valid at rest), held (the object has not dropped more
 than ``drop`` below nor moved more than ``max_travel`` from its start, and
 touched the hand at a sample within the last ``contact_window``: a rolled
 object hops off the palm for a few ms), the hand bodies and fingertips
@@ -111,6 +113,8 @@ class InHandTask:
     max_travel: float = 0.04  # m from the start: left the hand
     contact_window: float = 0.15  # s: touching the hand at some sample this recent
     mu: float = 0.8
+    # "" or an accelerometer profile (handle_drake.instruments.PROFILES) in the object
+    accelerometer: str = ""
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -132,6 +136,13 @@ class InHandTask:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+        if self.accelerometer:
+            from handle_drake.instruments.profiles import get_profile
+
+            try:
+                get_profile(self.accelerometer)
+            except ValueError as error:
+                raise ValueError(f"accelerometer: {error}") from None
         if len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
@@ -174,7 +185,8 @@ class TrialOutcome:
     s_a: float | None
     times: list  # sample times, s
     rotation_deg_series: list
-    # the same from an accelerometer in the object (gravity direction; valid at rest)
+    # the same from the object's accelerometer (gravity direction; valid at rest);
+    # empty without InHandTask.accelerometer
     accelerometer_rotation_deg_series: list
     contacts: list  # per sample, hand bodies touching the object
     sim_time: float
@@ -251,6 +263,9 @@ class InHandTrial:
         q0 = self.initial_command()
         names = get_hand_spec("shadow").actuated_joint_names
         initial = ", ".join(f"{n}: {float(v)!r}" for n, v in zip(names, q0, strict=True) if v != 0)
+        # the sensor frame is the object's origin (the default X_OS of a plain object)
+        sensor = f"\n  accelerometer: {{device: {c.accelerometer}, seed: 0}}" \
+            if c.accelerometer else ""
         return LoadScenario(data=f"""
 hand:
   kind: shadow
@@ -264,7 +279,7 @@ object:
   dimensions: {{{dims}}}
   mu: {c.mu}
   X_WO: {{translation: [{x}, {y}, {z}], rotation: !Rpy {{deg: [-90, 0, 0]}}}}
-  on_table: false
+  on_table: false{sensor}
 table: null
 contact_model: point
 time_step: {c.time_step}
@@ -308,8 +323,11 @@ simulation_duration: {c.settle_time + c.total_time}
         # Trials start from this context, not from the scenario's default one.
         settled = harness.context.Clone()
         settled.SetTime(0.0)
+        station = harness.station
         built = dict(harness=harness, settled=settled, body=object_body(plant),
-                     hand_bodies=hand_bodies)
+                     hand_bodies=hand_bodies,
+                     accelerometer=station.GetOutputPort("object.acceleration")
+                     if c.accelerometer else None)
         if meshcat is None:
             _BUILD_CACHE[key] = built
         return built
@@ -358,7 +376,8 @@ simulation_duration: {c.settle_time + c.total_time}
         checks = c.check_times()
         step = 1e-3 * c.time_step
         tolerance = float(np.radians(c.tolerance_deg))
-        gravity = plant.gravity_field().gravity_vector()
+        accelerometer = built["accelerometer"]
+        station_context = harness.station.GetMyContextFromRoot(context)
         contacts_port = plant.get_contact_results_output_port()
         matches = np.zeros(samples.size, dtype=bool)
         rotations, accel_rotations, contacts_log = [], [], []
@@ -366,6 +385,9 @@ simulation_duration: {c.settle_time + c.total_time}
         st = SimpleNamespace(i=0, next_check=0, angle=0.0, previous=0.0, held_time=0.0,
                              held=True, passed=0, stopped=False, failed=False,
                              last_touch=0.0, acc_prev=None, acc_angle=0.0)
+        if accelerometer is not None:  # the reading at the start of the trial (settled)
+            up_O = accelerometer.Eval(station_context)
+            st.acc_prev = float(np.arctan2(up_O[1], up_O[0]))
 
         def sample():
             i, t = st.i, float(samples[st.i])
@@ -385,18 +407,16 @@ simulation_duration: {c.settle_time + c.total_time}
                            and t - st.last_touch <= c.contact_window + 1e-9)
             if st.held:
                 st.held_time = t
-            # The instrumented object (report 2.4): a 3-axis accelerometer at its origin
-            # reads the proper acceleration R_WO^T (a_WO - g); at rest that is "up" in the
-            # object frame, whose angle about the object axis gives the rotation (the task
-            # direction turns "up" the other way round).
-            a_W = plant.EvalBodySpatialAccelerationInWorld(plant_context, body).translational()
-            up_O = X.rotation().inverse() @ (a_W - gravity)
-            raw_acc = float(np.arctan2(up_O[1], up_O[0]))
-            if st.acc_prev is None:
+            if accelerometer is not None:
+                # The instrumented object (report 2.4): its accelerometer (sensor frame =
+                # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
+                # "up" in the object frame, whose angle about the object axis gives the
+                # rotation (the task direction turns "up" the other way round).
+                up_O = accelerometer.Eval(station_context)
+                raw_acc = float(np.arctan2(up_O[1], up_O[0]))
+                st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
                 st.acc_prev = raw_acc
-            st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
-            st.acc_prev = raw_acc
-            accel_rotations.append(float(np.degrees(st.acc_angle)))
+                accel_rotations.append(float(np.degrees(st.acc_angle)))
             rotations.append(float(np.degrees(st.angle)))
             contacts_log.append(touching)
             matches[i] = st.held and st.angle >= c.benchmark_at(t) - tolerance
