@@ -47,6 +47,11 @@ def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
             "n_particles": n_particles, "inhand_version": 1}
 
 
+#: Particles (CMA-ES: population) per iteration: the report uses 10; a
+#: thousand already spends a 1000-trial budget in one iteration.
+MAX_PARTICLES = 1000
+
+
 def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials: int = 200,
                workers: int = 1, seed: int = 0, db="out/inhand.sqlite",
                n_particles: int = 10, progress: bool = True, executor=None,
@@ -54,10 +59,16 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     """Optimises the in-hand task (module doc); ``task_options`` go to :class:`InHandTask`."""
     if optimizer not in INHAND_OPTIMIZERS:
         raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {optimizer!r}")
-    for name, value, low in (("trials", trials, 0), ("workers", workers, 1),
-                             ("n_particles", n_particles, 1), ("seed", seed, 0)):
+    from handle_drake.learning.cluster import max_local_workers
+
+    for name, value, low, high in (("trials", trials, 0, None),
+                                   ("workers", workers, 1, max_local_workers()),
+                                   ("n_particles", n_particles, 1, MAX_PARTICLES),
+                                   ("seed", seed, 0, None)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+        if high is not None and value > high:
+            raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
     trial = InHandTrial(InHandTask(task=task, **task_options))
     opt = make_inhand_optimizer(optimizer, trial.bounds, seed, n_particles,
                                 stop_score=trial.target_score,
