@@ -12,6 +12,7 @@ import argparse
 import math
 import signal
 import sys
+import warnings
 
 from handle_drake.blas import pin_blas
 
@@ -100,8 +101,10 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     args = parser.parse_args(argv)
     previous = _terminate_like_ctrl_c()
     try:
-        check_outputs(args)  # before minutes of work, not after
-        return int(args.func(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(args.command)
+            check_outputs(args)  # before minutes of work, not after
+            return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
@@ -131,6 +134,17 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line_warning(command: str):
+    """A ``warnings.showwarning`` that prints ``handle-drake CMD: warning: ...`` on one
+    line (not ``<string>:15: MeshObjectWarning: ...`` and the source line)."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        print(f"handle-drake {command}: warning: {text[:500]}", file=file or sys.stderr)
+
+    return show
 
 
 def _raise_keyboard_interrupt(signum, frame):

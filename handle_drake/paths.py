@@ -23,6 +23,10 @@ OUTPUT_OPTIONS = {
     "db": ("--db", "file"),
     "out": ("--out", "dir"),
     "plot": ("--plot", "file"),
+    "json": ("--json", "file"),  # a file path (instruments); perceive's --json is a flag
+    "save_frames": ("--save-frames", "dir"),
+    "write_scenarios": ("--write-scenarios", "dir"),
+    "directory": ("DIRECTORY", "dir"),  # midi write-scenarios
 }
 
 

@@ -41,7 +41,12 @@ from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from handle_drake.can_hand.config import CanHandDriverConfig
 from handle_drake.instruments.config import AccelerometerConfig
-from handle_drake.scenario_checks import check_ranges, check_yaml_text, short, short_path
+from handle_drake.scenario_checks import (
+    check_ranges,
+    check_yaml_text,
+    read_text_file,
+    short,
+)
 
 __all__ = [
     "AccelerometerConfig",
@@ -314,39 +319,6 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
     return scenario
 
 
-def read_text_file(filename, what: str, max_bytes: int = 16 << 20) -> str:
-    """The text of a regular file; FileNotFoundError only when it does not exist.
-
-    A directory, a FIFO or device (which would block), a file too big, unreadable
-    or not UTF-8 is a ValueError saying which.
-    """
-    import os
-    import stat
-
-    path = Path(filename)
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{what} file not found: {short_path(path)}") from None
-    except OSError as error:
-        raise ValueError(f"{what} file {short_path(path)}: {error.strerror}") from None
-    if stat.S_ISDIR(info.st_mode):
-        raise ValueError(f"{what} file: expected a file, got the directory {short_path(path)}")
-    if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"{what} file: expected a regular file, got a FIFO, socket or device "
-                         f"{short_path(path)}")
-    if info.st_size > max_bytes:
-        raise ValueError(f"{what} file {short_path(path)}: expected at most {max_bytes} bytes, "
-                         f"got {info.st_size}")
-    try:
-        return path.read_text(encoding="utf-8")
-    except OSError as error:
-        raise ValueError(f"{what} file {short_path(path)}: {error.strerror}") from None
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{what} file {short_path(path)}: expected UTF-8 text, got a byte "
-                         f"0x{error.object[error.start]:02x} at offset {error.start}") from None
-
-
 def DumpScenario(scenario: Scenario) -> str:
     """The scenario as YAML text that :func:`LoadScenario` reads back.
 
@@ -508,6 +480,10 @@ def _validate_accelerometer(scenario: Scenario) -> None:
         raise ScenarioError(f"object.accelerometer.{error}") from None
     if config.X_OS is not None:
         _check_transform("object.accelerometer.X_OS", config.X_OS)
+        p = config.X_OS.GetDeterministicValue().translation()
+        if not np.all(np.abs(p) <= 1.0):  # before the distance sums below overflow
+            raise ScenarioError(f"object.accelerometer.X_OS.translation: expected values in "
+                                f"[-1, 1] m (a point on the object), got {short(p.tolist())}")
     try:
         check_sensor_pose(object_spec(scenario), instrument_X_OS(scenario))
     except ValueError as error:

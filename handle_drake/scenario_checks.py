@@ -26,13 +26,16 @@ annotations, and the ranges are this project's physical envelope.
 import dataclasses as dc
 import functools
 import math
+import os
 import types
 import typing
+from pathlib import Path
 
 import numpy as np
 import yaml
 
-__all__ = ["LIMITS", "check_yaml_text", "check_ranges", "short", "short_path"]
+__all__ = ["LIMITS", "check_input_file", "check_yaml_text", "check_ranges", "read_text_file",
+           "short", "short_path"]
 
 #: (low, high) accepted for each bounded quantity, SI units.
 LIMITS = {
@@ -71,6 +74,51 @@ def short_path(path, limit: int = 120) -> str:
     """A path for a message: its end (the file name) kept when it is long."""
     text = str(path)
     return text if len(text) <= limit else f"...{text[-limit:]}"
+
+
+def check_input_file(filename, what: str, max_bytes: int | None = None) -> Path:
+    """``filename`` as a Path if it names a readable regular file.
+
+    FileNotFoundError only when nothing is there; a directory, a FIFO or
+    device (reading it would block), an unreadable file or one larger than
+    ``max_bytes`` is a ValueError saying which, ``what`` naming the field.
+    """
+    import stat
+
+    if not isinstance(filename, (str, os.PathLike)) or not str(filename):
+        raise TypeError(f"{what}: expected a file path, got {short(filename)}")
+    path = Path(filename).expanduser()
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} not found: {short_path(path)}") from None
+    except (OSError, ValueError) as error:  # name too long, NUL byte, a file as a folder, ...
+        reason = getattr(error, "strerror", None) or str(error)
+        raise ValueError(f"{what} {short_path(path)}: {reason}") from None
+    if stat.S_ISDIR(info.st_mode):
+        raise ValueError(f"{what}: expected a file, got the directory {short_path(path)}")
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{what}: expected a regular file, got a FIFO, socket or device "
+                         f"{short_path(path)}")
+    if max_bytes is not None and info.st_size > max_bytes:
+        raise ValueError(f"{what} {short_path(path)}: expected at most {max_bytes} bytes, "
+                         f"got {info.st_size}")
+    if not os.access(path, os.R_OK):
+        raise ValueError(f"{what} {short_path(path)}: not readable (permission denied)")
+    return path
+
+
+def read_text_file(filename, what: str, max_bytes: int = 16 << 20) -> str:
+    """The UTF-8 text of a regular file (see :func:`check_input_file`); a file
+    that is not UTF-8 is a ValueError naming ``what`` and the offending byte."""
+    path = check_input_file(filename, f"{what} file", max_bytes)
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as error:
+        raise ValueError(f"{what} file {short_path(path)}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise ValueError(f"{what} file {short_path(path)}: expected UTF-8 text, got a byte "
+                         f"0x{error.object[error.start]:02x} at offset {error.start}") from None
 
 
 def _error(path: str, expected: str, got) -> Exception:
@@ -256,19 +304,20 @@ def _is_transform(kind) -> bool:
         kind, "__module__", "")
 
 
-def check_yaml_text(text: str, schema, source: str) -> None:
-    """Refuses scenario YAML the typed reader would misread; see the module docstring."""
+def check_yaml_text(text: str, schema, source: str, what: str = "scenario") -> None:
+    """Refuses YAML (a scenario, or ``what`` of dataclass ``schema``) the typed
+    reader would misread; see the module docstring."""
     from handle_drake.scenario import ScenarioError
 
     try:
         documents = list(yaml.compose_all(text, Loader=_LOADER))
     except yaml.YAMLError as error:
-        raise ScenarioError(f"invalid scenario ({source}): not YAML: "
+        raise ScenarioError(f"invalid {what} ({source}): not YAML: "
                             f"{short(' '.join(str(error).split()), 300)}") from None
     except RecursionError:
-        raise ScenarioError(f"invalid scenario ({source}): nested too deeply") from None
+        raise ScenarioError(f"invalid {what} ({source}): nested too deeply") from None
     if len(documents) > 1:
-        raise ScenarioError(f"invalid scenario ({source}): expected one YAML document, got "
+        raise ScenarioError(f"invalid {what} ({source}): expected one YAML document, got "
                             f"{len(documents)}")
     if not documents or documents[0] is None:
         return
@@ -276,9 +325,12 @@ def check_yaml_text(text: str, schema, source: str) -> None:
     try:
         _Walker()._dataclass(root, schema, "", tagged=False)
     except ScenarioError as error:
-        raise ScenarioError(f"{error} ({source})") from None
+        message = str(error)
+        if message.startswith("scenario:"):  # the root itself (see _error)
+            message = what + message.removeprefix("scenario")
+        raise ScenarioError(f"{message} ({source})") from None
     except RecursionError:
-        raise ScenarioError(f"invalid scenario ({source}): nested too deeply") from None
+        raise ScenarioError(f"invalid {what} ({source}): nested too deeply") from None
 
 
 def _in(path: str, value, key: str, unit: str = "") -> None:

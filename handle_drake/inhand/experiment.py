@@ -53,6 +53,11 @@ def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
             "n_particles": n_particles, "inhand_version": 1}
 
 
+#: Particles (CMA-ES: population) per iteration: the report uses 10; a
+#: thousand already spends a 1000-trial budget in one iteration.
+MAX_PARTICLES = 1000
+
+
 def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials: int = 200,
                workers: int | None = None, seed: int = 0, db="out/inhand.sqlite",
                n_particles: int = 10, progress: bool = True, executor=None,
@@ -68,12 +73,19 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     """
     if optimizer not in INHAND_OPTIMIZERS:
         raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {optimizer!r}")
+    from handle_drake.learning.cluster import max_local_workers
+
     if workers is None:
         workers = 1 if executor is None else executor_workers(as_executor(executor))
-    for name, value, low in (("trials", trials, 0), ("workers", workers, 1),
-                             ("n_particles", n_particles, 1), ("seed", seed, 0)):
+    for name, value, low, high in (("trials", trials, 0, None),
+                                   ("workers", workers, 1,
+                                    max_local_workers() if executor is None else None),
+                                   ("n_particles", n_particles, 1, MAX_PARTICLES),
+                                   ("seed", seed, 0, None)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
+        if high is not None and value > high:
+            raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
     trial = InHandTrial(InHandTask(task=task, **task_options))
     opt = make_inhand_optimizer(optimizer, trial.bounds, seed, n_particles,
                                 stop_score=trial.target_score,

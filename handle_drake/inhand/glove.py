@@ -150,12 +150,12 @@ def load_glove(path) -> GloveRecording:
     not JSON, another format, missing or extra sensors, NaN values, time not
     increasing, a calibration of the wrong size.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"glove recording not found: {path}")
+    from handle_drake.scenario_checks import check_input_file
+
+    path = check_input_file(path, "glove recording")
     try:
-        document = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as error:
         raise GloveFormatError(f"{path}: not a JSON glove recording ({error})") from None
     if not isinstance(document, dict):
         raise GloveFormatError(f"{path}: expected a JSON object, got {type(document).__name__}")

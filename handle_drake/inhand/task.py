@@ -127,6 +127,13 @@ class InHandTask:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        from handle_drake.scenario_checks import LIMITS
+
+        for name, (low, high) in (("target_deg", (0.0, 360.0)), ("time_step", LIMITS["time_step"]),
+                                  ("mu", LIMITS["mu"])):
+            if not low < getattr(self, name) <= high:  # one turn; what the station accepts
+                raise ValueError(f"{name}: expected a value in ({low:g}, {high:g}], got "
+                                 f"{getattr(self, name)!r}")
         if not (np.isfinite(self.tolerance_deg) and self.tolerance_deg >= 0):
             raise ValueError(f"tolerance_deg: expected a finite value >= 0, got "
                              f"{self.tolerance_deg!r}")

@@ -78,7 +78,7 @@ class AccelerometerConfig:
                 raise ValueError(f"{field} must be a finite number > 0, got {value!r}")
         if self.bits is not None and not 2 <= self.bits <= 32:
             raise ValueError(f"bits must be an integer in [2, 32], got {self.bits!r}")
-        if self.seed is not None and not 0 <= self.seed < 2 ** 32:
-            raise ValueError(f"seed must be an integer in [0, 2**32), got {self.seed!r}")
+        if self.seed is not None and not 0 <= self.seed < 2**32:
+            raise ValueError(f"seed: expected an integer in [0, 2**32), got {self.seed!r}")
         self.profile(kind)
         self.estimator_params()

@@ -37,6 +37,13 @@ __all__ = [
 STANDARD_GRAVITY = 9.80665
 
 
+#: Accepted ranges. Accelerometers span about +-1 g (tilt sensors) to a few
+#: hundred g (shock sensors), sampled from a few Hz to tens of kHz; outside
+#: that a value is a typo (1e-300 g: every reading saturates; 1e300 Hz: a
+#: sample period Drake cannot schedule).
+PROFILE_LIMITS = {"range_g": (0.01, 1000.0), "rate_hz": (0.1, 100_000.0)}
+
+
 @dc.dataclass(frozen=True)
 class DeviceProfile:
     """What a device does to the acceleration it feels (see the module doc).
@@ -67,6 +74,9 @@ class DeviceProfile:
             if isinstance(value, bool) or not isinstance(value, int | float | np.number) \
                     or not math.isfinite(value) or value <= 0:
                 raise ValueError(f"{field} must be a finite number > 0, got {value!r}")
+            low, high = PROFILE_LIMITS[field]
+            if not low <= value <= high:
+                raise ValueError(f"{field} must be in [{low:g}, {high:g}], got {value!r}")
             object.__setattr__(self, field, float(value))
         if isinstance(self.bits, bool) or not isinstance(self.bits, int | np.integer) \
                 or not 2 <= self.bits <= 32:

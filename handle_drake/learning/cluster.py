@@ -49,6 +49,7 @@ import hashlib
 import logging
 import math
 import multiprocessing
+import os
 import pickle
 import re
 import threading
@@ -74,6 +75,7 @@ __all__ = [
 
 WORKER_DEATHS = 3  # worker deaths while running one trial before it is `failed`
 CONNECT_TIMEOUT = 10.0  # s, to reach a scheduler and to see its first worker
+MAX_CONNECT_TIMEOUT = 3600.0  # s: longer is a typo (1e300 would wait for ever)
 DEFAULT_PORT = 8786  # the port `dask scheduler` listens on by default
 _LOG_LEVEL = logging.ERROR
 
@@ -128,12 +130,13 @@ def _executor_type(text: str) -> ExecutorSpec:
 
 
 def _timeout_type(text: str) -> float:
+    expected = f"expected seconds in (0, {MAX_CONNECT_TIMEOUT:g}]"
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {text}")
+        raise argparse.ArgumentTypeError(f"{expected}, got {text!r}") from None
+    if not (math.isfinite(value) and 0 < value <= MAX_CONNECT_TIMEOUT):
+        raise argparse.ArgumentTypeError(f"{expected}, got {text}")
     return value
 
 
@@ -205,6 +208,24 @@ class _ShippedOnce:
 
 
 # ------------------------------------------------------------------- pools
+def max_local_workers() -> int:
+    """Most worker processes one machine runs: 4 per CPU core (at least 8).
+
+    Trials are CPU-bound simulations: more processes than that only add
+    memory (each imports Drake, ~250 MB), and ``--workers 100000`` would
+    start processes until the machine runs out of memory.
+    """
+    return max(8, 4 * (os.cpu_count() or 1))
+
+
+def _check_local_workers(workers) -> None:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if workers > max_local_workers():
+        raise ValueError(f"workers: expected at most {max_local_workers()} worker processes "
+                         f"on this machine (4 per CPU core), got {workers}")
+
+
 class LocalPool(Executor):
     """A spawn process pool (one BLAS thread per worker) that replaces itself once broken.
 
@@ -214,8 +235,7 @@ class LocalPool(Executor):
     """
 
     def __init__(self, max_workers: int, initializer=pin_blas, initargs=()):
-        if isinstance(max_workers, bool) or not isinstance(max_workers, int) or max_workers < 1:
-            raise ValueError(f"workers: expected an integer >= 1, got {max_workers!r}")
+        _check_local_workers(max_workers)
         self.max_workers = max_workers
         self._initializer, self._initargs = initializer, initargs
         self._pool = None
@@ -370,8 +390,14 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     from handle_drake.learning.executors import InlineExecutor
 
     spec = ExecutorSpec.parse(executor)
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+    if spec.address is None:  # processes on this machine
+        _check_local_workers(workers)
+    elif isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if not (isinstance(connect_timeout, int | float)
+            and 0 < connect_timeout <= MAX_CONNECT_TIMEOUT):
+        raise ValueError(f"connect_timeout: expected seconds in (0, {MAX_CONNECT_TIMEOUT:g}], "
+                         f"got {connect_timeout!r}")
     if not (isinstance(worker_deaths, int) and worker_deaths >= 1):
         raise ValueError(f"worker_deaths: expected an integer >= 1, got {worker_deaths!r}")
     if spec.kind == "local":

@@ -150,13 +150,15 @@ def LoadMidiMapping(filename: str | Path | None = None, data: str | None = None)
         FileNotFoundError: no such file.
         ValueError: malformed YAML, an unknown field, or an invalid value.
     """
+    from handle_drake.scenario_checks import check_yaml_text, read_text_file
+
     path = DEFAULT_MAPPING_FILE if filename is None else Path(filename)
-    if not path.is_file():
-        raise FileNotFoundError(f"MIDI mapping file not found: {path}")
     mapping = MidiMapping()
-    for text, source in ((path.read_text(), str(path)), (data, "override")):
+    for text, source in ((read_text_file(path, "MIDI mapping"), str(path)), (data, "override")):
         if text is None or not text.strip():
             continue
+        # Field-naming refusals of duplicate keys, unknown tags and wrong kinds first.
+        check_yaml_text(text, MidiMapping, source, what="MIDI mapping")
         try:
             mapping = yaml_load_typed(schema=MidiMapping, data=text, defaults=mapping)
         except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError

@@ -177,11 +177,11 @@ class MeshObjectSpec:
     def __post_init__(self):
         if not isinstance(self.file, str | os.PathLike):
             raise TypeError(f"file: expected a path, got {type(self.file).__name__}")
-        path = Path(self.file).expanduser()
+        from handle_drake.scenario_checks import check_input_file
+
         if not str(self.file):
             raise ValueError("file: expected a mesh file path, got an empty string")
-        if not path.is_file():
-            raise FileNotFoundError(f"file: mesh file not found: {path}")
+        path = check_input_file(self.file, "file: mesh file")
         object.__setattr__(self, "file", str(path.resolve()))
         object.__setattr__(self, "scale", _number("scale", self.scale))
         if self.mass is not None:
@@ -244,9 +244,14 @@ class _Geometry:
     watertight: bool
 
 
+#: m (or file units): larger coordinates are garbage, and their products overflow.
+MAX_COORDINATE = 1e12
+
+
 def _read(path: str) -> trimesh.Trimesh:
     try:
-        loaded = trimesh.load(path, force="mesh")
+        with np.errstate(all="ignore"):  # overflow warnings would precede the refusal
+            loaded = trimesh.load(path, force="mesh")
     except Exception as error:  # trimesh raises many kinds for bad or unknown files
         text = " ".join(str(error).split())[:200]
         raise ValueError(f"file: cannot read mesh {path}: {type(error).__name__}: {text}") from None
@@ -254,6 +259,10 @@ def _read(path: str) -> trimesh.Trimesh:
         raise ValueError(f"file: {path} holds no triangles (empty mesh or a point cloud)")
     if not np.all(np.isfinite(loaded.vertices)):
         raise ValueError(f"file: {path} has non-finite vertex coordinates")
+    if np.abs(loaded.vertices).max() > MAX_COORDINATE:
+        raise ValueError(f"file: {path} has vertex coordinates up to "
+                         f"{np.abs(loaded.vertices).max():.3g}, expected at most "
+                         f"{MAX_COORDINATE:g} (file units)")
     loaded.remove_unreferenced_vertices()
     if loaded.area <= 0.0:
         raise ValueError(f"file: {path} has only degenerate (zero-area) triangles")
@@ -323,16 +332,16 @@ def _geometry(spec: MeshObjectSpec) -> _Geometry:
                 else "")
         raise ValueError(f"scale: mesh {name} would be {largest * 1000:.3g} mm across, smaller "
                          f"than {MIN_EXTENT * 1000:g} mm{hint}")
-    if largest > LARGE_EXTENT:
-        warnings.warn(f"mesh {name} is {largest:.2f} m across, larger than the hands can "
-                      f"enclose (~{LARGE_EXTENT:g} m); grasps will be partial", MeshObjectWarning,
-                      stacklevel=3)
     mesh = raw.copy()
     mesh.apply_translation(-p_FO)
     mesh.apply_scale(spec.scale)
     volume, com, inertia, source, watertight = _mass_integrals(mesh, name)
     if not volume > 0:
         raise ValueError(f"file: mesh {name} encloses no volume (a flat or degenerate mesh)")
+    if largest > LARGE_EXTENT:  # warned only for a mesh that is accepted
+        warnings.warn(f"mesh {name} is {largest:.2f} m across, larger than the hands can "
+                      f"enclose (~{LARGE_EXTENT:g} m); grasps will be partial", MeshObjectWarning,
+                      stacklevel=3)
     if spec.mass is not None:
         density = spec.mass / volume
         if not DENSITY_RANGE[0] <= density <= DENSITY_RANGE[1]:

@@ -99,27 +99,26 @@ def load_frame(path: str | Path) -> DepthFrame:
     """Reads a frame's JSON sidecar and its 16-bit depth PNG."""
     from PIL import Image, UnidentifiedImageError
 
+    from handle_drake.scenario_checks import read_text_file
+
+    text = read_text_file(path, "frame", max_bytes=1 << 20)  # the sidecar is < 1 kB
     path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"frame: {path} is a directory; expected the frame's .json file")
-    if not path.is_file():
-        raise FileNotFoundError(f"frame file not found: {path}")
     try:
-        meta = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        meta = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as error:
         raise ValueError(f"frame {path}: not a JSON file ({error})"[:300]) from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise ValueError(f"frame {path}: expected a JSON object with format {FORMAT!r}")
     for key in ("depth_png", "depth_scale", "width", "height", "K", "X_WC"):
         if key not in meta:
             raise ValueError(f"frame {path}: missing field {key!r}")
-    png = path.parent / str(meta["depth_png"])
-    if not png.is_file():
-        raise FileNotFoundError(f"frame {path}: depth image not found: {png}")
+    from handle_drake.scenario_checks import check_input_file
+
+    png = check_input_file(path.parent / str(meta["depth_png"]), f"frame {path}: depth image")
     try:
         image = Image.open(png)
         units = np.asarray(image)
-    except (UnidentifiedImageError, OSError) as error:
+    except (UnidentifiedImageError, OSError, Image.DecompressionBombError) as error:
         raise ValueError(f"frame {path}: cannot read depth image {png.name}: {error}") from None
     if units.ndim != 2 or units.dtype not in (np.uint16, np.int32, np.uint8):
         raise ValueError(f"frame {path}: {png.name} must be a single-channel 16-bit image, got "
