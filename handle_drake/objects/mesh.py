@@ -714,8 +714,10 @@ def write_mesh(spec, path) -> Path:
 
 
 def _visual_shape(spec: MeshObjectSpec):
-    text = trimesh.exchange.obj.export_obj(_geometry(spec).mesh, include_normals=False,
-                                           include_texture=False)
+    # With normals: Drake's renderers (RgbdSensor, RenderEngineVtk) refuse an OBJ
+    # without them. Smooth-shaded: vertices split at sharp edges, so a box is flat.
+    text = trimesh.exchange.obj.export_obj(_geometry(spec).mesh.smooth_shaded,
+                                           include_normals=True, include_texture=False)
     from pydrake.common import MemoryFile
 
     return Mesh(InMemoryMesh(mesh_file=MemoryFile(text, ".obj", spec.name)), 1.0)
