@@ -60,6 +60,8 @@ import hashlib
 import json
 import math
 import os
+import sys
+import time
 import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -242,6 +244,10 @@ class _Geometry:
     I_SScm_unit: np.ndarray  # central inertia for density 1 kg/m^3, expressed in O
     mass_source: str  # "mesh", "parts" or "convex hull"
     watertight: bool
+    # The closed solids the collision pieces are cut from, each (vertices in the
+    # file frame and units, faces): the mesh as read when it is closed, else the
+    # solid its mass properties describe (repaired mesh, each closed part, hull).
+    solids: tuple = ()
 
 
 #: m (or file units): larger coordinates are garbage, and their products overflow.
@@ -270,11 +276,17 @@ def _read(path: str) -> trimesh.Trimesh:
 
 
 def _mass_integrals(mesh: trimesh.Trimesh, name: str):
-    """(volume, centre of mass, unit-density central inertia, source, watertight)."""
+    """(volume, centre of mass, unit-density central inertia, source, watertight, solids).
+
+    ``solids``: the closed meshes (in the frame of ``mesh``) that the mass
+    properties describe, for the convex decomposition: CoACD cuts closed
+    solids fast; an open surface it must first remesh into a thin shell, which
+    took minutes (a 300-face open hemisphere: > 5 min, 32 slivers).
+    """
     if mesh.is_watertight:
         if mesh.volume < 0:
             mesh.invert()
-        return mesh.volume, mesh.center_mass, mesh.moment_inertia, "mesh", True
+        return mesh.volume, mesh.center_mass, mesh.moment_inertia, "mesh", True, (mesh,)
     repaired = mesh.copy()
     trimesh.repair.fix_winding(repaired)
     trimesh.repair.fill_holes(repaired)
@@ -282,7 +294,8 @@ def _mass_integrals(mesh: trimesh.Trimesh, name: str):
     if repaired.is_watertight and repaired.volume > 0:
         warnings.warn(f"mesh {name} was not closed; holes were filled for its mass properties",
                       MeshObjectWarning, stacklevel=3)
-        return repaired.volume, repaired.center_mass, repaired.moment_inertia, "mesh", False
+        return (repaired.volume, repaired.center_mass, repaired.moment_inertia, "mesh", False,
+                (repaired,))
     parts = mesh.split(only_watertight=False)
     if len(parts) > 1 and all(p.is_watertight for p in parts):
         warnings.warn(f"mesh {name} is {len(parts)} closed parts; their mass properties are "
@@ -296,7 +309,7 @@ def _mass_integrals(mesh: trimesh.Trimesh, name: str):
         for v, p in zip(volumes, parts, strict=True):
             r = p.center_mass - com
             inertia += p.moment_inertia + v * (r @ r * np.eye(3) - np.outer(r, r))
-        return volumes.sum(), com, inertia, "parts", False
+        return volumes.sum(), com, inertia, "parts", False, tuple(parts)
     from scipy.spatial import QhullError
 
     try:
@@ -306,9 +319,9 @@ def _mass_integrals(mesh: trimesh.Trimesh, name: str):
     if hull is None or not hull.volume > 0:
         raise ValueError(f"file: mesh {name} encloses no volume (a flat or degenerate mesh)")
     warnings.warn(f"mesh {name} is not closed (open or non-manifold) and could not be repaired; "
-                  "its mass properties are those of its convex hull", MeshObjectWarning,
-                  stacklevel=3)
-    return hull.volume, hull.center_mass, hull.moment_inertia, "convex hull", False
+                  "its mass properties and collision geometry are those of its convex hull "
+                  "(ray casts still use the real surface)", MeshObjectWarning, stacklevel=3)
+    return hull.volume, hull.center_mass, hull.moment_inertia, "convex hull", False, (hull,)
 
 
 @lru_cache(maxsize=64)
@@ -335,7 +348,16 @@ def _geometry(spec: MeshObjectSpec) -> _Geometry:
     mesh = raw.copy()
     mesh.apply_translation(-p_FO)
     mesh.apply_scale(spec.scale)
-    volume, com, inertia, source, watertight = _mass_integrals(mesh, name)
+    volume, com, inertia, source, watertight, solids = _mass_integrals(mesh, name)
+    if watertight:  # the file's own vertices: the cache key does not depend on scale, origin
+        # Each closed component apart: a convex one is its own hull, and CoACD
+        # segfaulted on two overlapping closed boxes given as one mesh.
+        components = raw.split(only_watertight=False)
+        solids_F = tuple((np.asarray(m.vertices, dtype=float), np.asarray(m.faces, np.int64))
+                         for m in (components if len(components) > 1 else (raw,)))
+    else:
+        solids_F = tuple((np.asarray(m.vertices, dtype=float) / spec.scale + p_FO,
+                          np.asarray(m.faces, dtype=np.int64)) for m in solids)
     if not volume > 0:
         raise ValueError(f"file: mesh {name} encloses no volume (a flat or degenerate mesh)")
     if largest > LARGE_EXTENT:  # warned only for a mesh that is accepted
@@ -353,7 +375,7 @@ def _geometry(spec: MeshObjectSpec) -> _Geometry:
                      file_faces=np.asarray(raw.faces, dtype=np.int64), p_FO=p_FO,
                      extents=extents, volume=float(volume), p_OScm=np.asarray(com, dtype=float),
                      I_SScm_unit=np.asarray(inertia, dtype=float), mass_source=source,
-                     watertight=watertight)
+                     watertight=watertight, solids=solids_F)
 
 
 def mesh_in_object_frame(spec: MeshObjectSpec) -> trimesh.Trimesh:
@@ -382,7 +404,7 @@ def _decomposition_key(vertices: np.ndarray, faces: np.ndarray, settings: dict) 
 
 
 def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: int = 32,
-                         directory=None) -> list[np.ndarray]:
+                         directory=None, name: str = "mesh") -> list[np.ndarray]:
     """Convex pieces (a list of (k, 3) hull vertex arrays) of a closed triangle mesh.
 
     CoACD (Wei et al. 2022, ``coacd`` on PyPI) with ``threshold`` (its
@@ -393,6 +415,8 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
     without running CoACD. Results are cached
     as ``<directory>/convex/<sha256>.npz`` (default :func:`cache_dir`) keyed
     by the vertices, faces and settings; a damaged cache file is recomputed.
+    A CoACD run (seconds to minutes for dense meshes) says so on stderr, with
+    ``name``, before it starts and when it ends.
     """
     vertices = np.asarray(vertices, dtype=float)
     faces = np.asarray(faces, dtype=np.int64)
@@ -427,13 +451,24 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
             hull.volume:
         result = [np.asarray(hull.vertices, dtype=float)]
     else:
-        coacd.set_log_level("error")
-        parts = coacd.run_coacd(
-            coacd.Mesh(vertices, faces), threshold=settings["threshold"],
-            max_convex_hull=settings["max_pieces"], seed=0,
-            preprocess_mode=settings["preprocess_mode"],
-            mcts_iterations=settings["mcts_iterations"], mcts_max_depth=settings["mcts_max_depth"])
-        result = [np.asarray(v, dtype=float) for v, _ in parts if len(v) >= 4]
+        print(f"decomposing {name} ({len(faces)} triangles) into convex pieces with CoACD, "
+              f"once (cached in {folder / 'convex'}) ...", file=sys.stderr, flush=True)
+        start = time.perf_counter()
+        run = {k: settings[k] for k in ("threshold", "preprocess_mode", "mcts_iterations",
+                                        "mcts_max_depth")}
+        run["max_convex_hull"] = settings["max_pieces"]
+        result = _isolated(_run_coacd, vertices, faces, run)
+        if result is None and run["preprocess_mode"] == "off":
+            # CoACD crashes on some closed but self-intersecting meshes (two
+            # overlapping boxes in one file); its manifold remeshing repairs them.
+            result = _isolated(_run_coacd, vertices, faces, {**run, "preprocess_mode": "on"})
+        if result is None:
+            warnings.warn(f"CoACD failed on mesh {name}; its collision geometry is its convex "
+                          "hull", MeshObjectWarning, stacklevel=2)
+            return [np.asarray(hull.vertices, dtype=float)]  # not cached: the next run retries
+        result = [np.asarray(v, dtype=float) for v in result if len(v) >= 4]
+        print(f"decomposed {name}: {len(result)} pieces in {time.perf_counter() - start:.1f} s",
+              file=sys.stderr, flush=True)
         if not result:
             result = [np.asarray(hull.vertices, dtype=float)]
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -443,13 +478,44 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
     return result
 
 
+def _run_coacd(vertices, faces, run: dict) -> list[np.ndarray]:
+    import coacd
+
+    coacd.set_log_level("error")
+    return [np.asarray(v, dtype=float)
+            for v, _ in coacd.run_coacd(coacd.Mesh(vertices, faces), seed=0, **run)]
+
+
+def _isolated(function, *args):
+    """``function(*args)`` in a child process: its result, or None when the child died
+    or the function raised RuntimeError or ValueError.
+
+    CoACD is C++ that segfaults on some inputs (measured: a closed,
+    self-intersecting mesh with its remeshing off); in a child process that
+    costs the child, not the user's session. Spawning costs ~1 s, against
+    seconds to minutes of decomposition.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    if multiprocessing.current_process().daemon:  # a Dask or pool worker may not have children
+        return function(*args)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        try:
+            return pool.submit(function, *args).result()
+        except (BrokenProcessPool, RuntimeError, ValueError):
+            return None
+
+
 @lru_cache(maxsize=64)
 def pieces(spec: MeshObjectSpec) -> tuple:
     """The convex pieces (``objects.Piece``, shape "convex", vertices in O) of the mesh."""
     from handle_drake.objects import Piece
 
     g = _geometry(spec)
-    parts = convex_decomposition(g.file_vertices, g.file_faces, spec.threshold, spec.max_pieces)
+    parts = [p for v, f in g.solids
+             for p in convex_decomposition(v, f, spec.threshold, spec.max_pieces, name=spec.name)]
     identity = RigidTransform()
     return tuple(Piece(f"piece_{i:02d}", "convex", (), identity, (v - g.p_FO) * spec.scale)
                  for i, v in enumerate(parts))
@@ -657,8 +723,10 @@ def write_mesh(spec, path) -> Path:
 
 
 def _visual_shape(spec: MeshObjectSpec):
-    text = trimesh.exchange.obj.export_obj(_geometry(spec).mesh, include_normals=False,
-                                           include_texture=False)
+    # With normals: Drake's renderers (RgbdSensor, RenderEngineVtk) refuse an OBJ
+    # without them. Smooth-shaded: vertices split at sharp edges, so a box is flat.
+    text = trimesh.exchange.obj.export_obj(_geometry(spec).mesh.smooth_shaded,
+                                           include_normals=True, include_texture=False)
     from pydrake.common import MemoryFile
 
     return Mesh(InMemoryMesh(mesh_file=MemoryFile(text, ".obj", spec.name)), 1.0)

@@ -154,12 +154,15 @@ def detection_error(detection: Detection, scenario) -> dict:
         # A rectangle's axis is defined modulo pi.
         yaw_error = math.degrees((detection.yaw - yaw_true + math.pi / 2) % math.pi
                                  - math.pi / 2)
-    expected = CATALOGUE_PRIMITIVE.get(kind, "unknown")
+    # A mesh (or an instrumented device) is no primitive: its detected kind
+    # cannot be right or wrong (kind_expected and kind_ok are None).
+    expected = CATALOGUE_PRIMITIVE.get(kind)
     return {"position_mm": [round(float(v) * 1000, 2) for v in delta],
             "xy_mm": round(float(np.linalg.norm(delta[:2])) * 1000, 2),
             "z_mm": round(float(delta[2]) * 1000, 2),
             "yaw_deg": None if yaw_error is None else round(yaw_error, 2),
-            "kind_expected": expected, "kind_ok": detection.kind == expected}
+            "kind_expected": expected,
+            "kind_ok": None if expected is None else detection.kind == expected}
 
 
 def _report(views, scenario=None) -> dict:
@@ -195,10 +198,14 @@ def _print_report(report: dict) -> None:
               f"fit residual {obj['residual'] * 1000:.2f} mm")
         if "error" in obj:
             err = obj["error"]
-            yaw = "n/a (round)" if err["yaw_deg"] is None else f"{err['yaw_deg']:+.2f} deg"
+            yaw = "n/a" if err["yaw_deg"] is None else f"{err['yaw_deg']:+.2f} deg"
+            if err["kind_expected"] is None:
+                kind = "n/a (the object is no primitive)"
+            else:
+                kind = (f"{'ok' if err['kind_ok'] else 'WRONG'} "
+                        f"(expected {err['kind_expected']})")
             print(f"  error against the truth: xy {err['xy_mm']:.1f} mm, z {err['z_mm']:+.1f} mm, "
-                  f"yaw {yaw}, kind {'ok' if err['kind_ok'] else 'WRONG'} "
-                  f"(expected {err['kind_expected']})")
+                  f"yaw {yaw}, kind {kind}")
     if not report["objects"]:
         print("no object detected")
 
