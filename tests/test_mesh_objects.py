@@ -505,3 +505,33 @@ def test_a_mesh_object_renders_for_the_cameras_and_is_detected_as_its_catalogue_
     np.testing.assert_allclose(sorted(box.extent), [0.0168, 0.028, 0.042], atol=0.004)
     error = detection_error(box, scenario)
     assert error["xy_mm"] < 5.0 and error["kind_ok"] is None and error["kind_expected"] is None
+
+
+def test_an_accelerometer_on_a_mesh_object_reads_gravity_and_off_it_is_refused(files):
+    from pydrake.math import RollPitchYaw
+    from pydrake.systems.analysis import Simulator
+
+    from handle_drake.instruments.profiles import get_profile
+    from handle_drake.scenario import LoadScenario, ScenarioError
+    from handle_drake.station import MakeHandStation
+
+    hand_away = "hand: {mount: !FixedMount {X_WB: {translation: [0, 0, 1.5]}}}\n"
+    rpy = (20.0, -35.0, 60.0)
+    scenario = LoadScenario(data=hand_away + (
+        f"object: {{kind: mesh, file: '{files['cuboid']}', fixed: true, on_table: false, "
+        f"X_WO: {{translation: [0.3, 0.3, 0.4], rotation: !Rpy {{deg: {list(rpy)}}}}}, "
+        "accelerometer: {noise: false, X_OS: {translation: [0, 0, 0.01]}}}"))
+    station = MakeHandStation(scenario)
+    simulator = Simulator(station)
+    context = simulator.get_mutable_context()
+    station.GetInputPort("hand.position").FixValue(context, np.zeros(20))
+    simulator.AdvanceTo(0.05)
+    # At rest, the sensor (axes of O) feels +g up: R_WO^T [0, 0, 9.81], in counts.
+    R_WO = RollPitchYaw(np.radians(rpy)).ToRotationMatrix()
+    lsb = get_profile("joywarrior24f14").lsb
+    expected = np.rint((R_WO.inverse() @ np.array([0.0, 0.0, 9.81])) / lsb)
+    counts = station.GetOutputPort("object.acceleration_counts").Eval(context)
+    np.testing.assert_array_equal(counts, expected)
+    with pytest.raises(ScenarioError, match="object.accelerometer.X_OS"):
+        LoadScenario(data=f"object: {{kind: mesh, file: '{files['cuboid']}', accelerometer: "
+                          "{X_OS: {translation: [0.05, 0, 0]}}}")
