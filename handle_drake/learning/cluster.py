@@ -409,6 +409,10 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
         return
     try:
         import dask
+        # Loads distributed's defaults into dask.config *before* the settings below:
+        # set() on a missing "distributed" subtree records it as new and deletes the
+        # whole subtree on exit, and every later Client then fails (KeyError).
+        import distributed  # noqa: F401
     except ImportError as error:
         raise ExecutorError(f"executor {spec}: Dask is not installed ({error}); "
                             "pip install 'handle_drake[dask]'") from None

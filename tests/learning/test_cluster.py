@@ -97,6 +97,23 @@ def test_executor_choice_is_parsed_or_refused_with_the_field_named():
             pass
 
 
+def test_a_dask_executor_leaves_dasks_settings_whole_for_the_next_one():
+    """The first Dask executor of a fresh process (distributed not yet imported) once
+    deleted distributed's whole config subtree on closing: every later Client failed
+    with KeyError 'distributed'. Two in a row in a new process, then the config."""
+    code = (
+        "from handle_drake.learning.cluster import trial_executor\n"
+        "for _ in range(2):\n"
+        "    with trial_executor('dask', 1) as pool:\n"
+        "        assert pool.submit(pow, 2, 10).result() == 1024\n"
+        "import dask\n"
+        "print(dask.config.get('distributed.client.direct-to-workers', 'missing'))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] != "missing"
+
+
 def test_bo_and_random_runs_on_dask_equal_the_local_pool(tmp_path, dask_executor):
     """Same seed, same trials and metrics: the run does not depend on the executor. The
     Dask runs get a bare ``distributed.Client`` and its ``get_executor()``."""
