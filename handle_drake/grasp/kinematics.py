@@ -55,6 +55,12 @@ __all__ = [
 ]
 
 FINGER_SPACING = 0.022  # m, between neighbouring finger knuckles (2 x 11 mm)
+# The forearm's collision cylinder (models/shadow_hand/README.md): radius 0.045 m
+# about the base frame's z axis from z = 0 to 0.18 m. With a support its axis ends
+# stay a radius above the table, so the forearm never reaches into it (a small
+# object grasped with the hand turned flat drove it 40 mm into the table top).
+FOREARM_RADIUS = 0.045
+FOREARM_AXIS_B = (np.zeros(3), np.array([0.0, 0.0, 0.18]))
 _DISTAL = {"th": "thdistal", "ff": "ffdistal", "mf": "mfdistal", "rf": "rfdistal", "lf": "lfdistal"}
 
 # (point in the distal frame, outward surface normal in the distal frame).
@@ -232,6 +238,7 @@ class GraspKinematics:
         self.diagram_context = self.diagram.CreateDefaultContext()
         self.context = plant.GetMyMutableContextFromRoot(self.diagram_context)
         self.palm = plant.GetFrameByName("palm", self.hand)
+        self.forearm = plant.GetFrameByName(self.spec.base_body, self.hand)
         self.object_frame = self.object_body.body_frame()
         self.q_index = np.array(
             [plant.GetJointByName(n, self.hand).position_start() for n in self.spec.joint_names]
@@ -411,6 +418,12 @@ class GraspKinematics:
                     p_B, _ = CONTACT_POINTS[(t.finger, t.part)]
                     ik.AddPositionConstraint(self.distal[t.finger], p_B, self.up_frame,
                                              [-big, -big, floor + contact_height],
+                                             [big, big, big])
+                # The forearm too: both ends of its axis a radius above the table
+                # (exact for a level forearm, a radius to spare for an upright one).
+                for p_B in FOREARM_AXIS_B:
+                    ik.AddPositionConstraint(self.forearm, p_B, self.up_frame,
+                                             [-big, -big, floor + FOREARM_RADIUS],
                                              [big, big, big])
             if approach is not None:
                 ik.AddAngleBetweenVectorsConstraint(

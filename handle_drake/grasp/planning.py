@@ -66,7 +66,13 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from handle_drake.grasp.kinematics import GraspKinematics, contact_layout, move_contacts
+from handle_drake.grasp.kinematics import (
+    FOREARM_AXIS_B,
+    FOREARM_RADIUS,
+    GraspKinematics,
+    contact_layout,
+    move_contacts,
+)
 from handle_drake.grasp.synergies import ClassSynergies, default_synergies
 from handle_drake.grasp.taxonomy import (
     GraspClass,
@@ -392,7 +398,8 @@ def _up_in_grasp_frame(kind: str, natural_up_G) -> np.ndarray:
 
 def _acceptable(kin: GraspKinematics, sol) -> bool:
     """Our own check of an IK result (SNOPT often reports failure a hair from
-    feasibility): contacts on the surface, little penetration, tips above the table."""
+    feasibility): contacts on the surface, little penetration, tips and forearm above the
+    table."""
     if sol.contact_error > MAX_CONTACT_ERROR:
         return False
     kin.plant.SetPositions(kin.context, kin.plant.GetPositions(kin.context))
@@ -402,7 +409,11 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
         return False
     up_height = [kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, f).translation()[2]
                  for f in kin.tip_frames]
-    return min(up_height) + kin.support[1] > 0.002
+    if min(up_height) + kin.support[1] <= 0.002:
+        return False
+    X_UB = kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, kin.forearm)
+    forearm = min((X_UB @ p_B)[2] for p_B in FOREARM_AXIS_B) + kin.support[1]
+    return forearm > FOREARM_RADIUS - 0.002
 
 
 def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)
