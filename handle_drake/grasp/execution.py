@@ -136,6 +136,12 @@ class ReactiveGraspRunner:
         """(fingers,) bool: which fingers stopped closing on their own contact (last run)."""
         return self.controller.fingers_touched(self._controller_context)
 
+    def approach_shift(self) -> np.ndarray:
+        """(3,) sideways shift (m, world) of the approach line at the end of the last
+        run: how far the reactive approach moved the hand to meet the object."""
+        p = self.controller.get_progress(self._controller_context)
+        return np.array([p.shift_x, p.shift_y, p.shift_z])
+
     def closing_at_squeeze(self) -> np.ndarray:
         """(fingers,) closing fraction of each finger when the squeeze began (last run)."""
         return self.controller.closing_at_squeeze(self._controller_context)
