@@ -139,3 +139,41 @@ def test_bad_input_raises_clear_errors():
     with pytest.raises(ValueError, match="unreachable pose"):
         plan_grasp("tripod", ("cylinder", 0.045), far)
     assert issubclass(GraspPlanningError, ValueError)
+
+
+@pytest.mark.parametrize("grasp_class, diameter", [("palmar_pinch", 0.028),
+                                                   ("lateral_tripod", 0.025)])
+def test_the_planned_forearm_stays_above_the_table(grasp_class, diameter):
+    """The forearm's collision cylinders (read from the hand model) at the planned
+    grasp pose stay above the table top: these grasps of small spheres were once
+    planned with the forearm 36 and 179 mm inside the table, so the hand stopped
+    short and closed on air."""
+    from pydrake.geometry import Cylinder, Role
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+    from pydrake.systems.framework import DiagramBuilder
+
+    from handle_drake.models import add_package, model_path
+
+    plan = plan_grasp(grasp_class, ("sphere", diameter), resting_pose("sphere", diameter))
+    spec = get_hand_spec("shadow")
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+    parser = Parser(plant)
+    add_package(parser)
+    hand = parser.AddModels(model_path(spec.model_relative_path))[0]
+    plant.Finalize()
+    inspector = scene_graph.model_inspector()
+    forearm = plant.GetBodyByName(spec.base_body, hand)
+    lowest = []
+    for geometry in inspector.GetGeometries(plant.GetBodyFrameIdOrThrow(forearm.index()),
+                                            Role.kProximity):
+        shape = inspector.GetShape(geometry)
+        assert isinstance(shape, Cylinder)
+        X_WG = plan.X_WB @ inspector.GetPoseInFrame(geometry)
+        axis = X_WG.rotation().matrix()[:, 2]
+        ends = [X_WG.translation() + s * 0.5 * shape.length() * axis for s in (-1, 1)]
+        lowest.append(min(e[2] for e in ends)
+                      - shape.radius() * np.sqrt(max(0.0, 1.0 - axis[2] ** 2)))
+    assert len(lowest) == 2  # the forearm and its neck
+    assert min(lowest) > plan.table_height - 1e-3, lowest
