@@ -52,7 +52,7 @@ def register(subparsers) -> None:
         description="Runs (or resumes) grasp trials chosen by Bayesian optimisation or random "
                     "search and logs each one to an SQLite file.")
     p.add_argument("--hand", choices=("barrett", "shadow"), default="barrett")
-    p.add_argument("--object", choices=KINDS, default="sphere")
+    p.add_argument("--object", choices=KINDS, default=None, help="the object (default sphere)")
     p.add_argument("--dims", type=int, choices=(1, 2), default=None,
                    help="1: standoff along the approach axis; 2: (x, y) offset (default 2)")
     p.add_argument("--space", choices=("standoff", "offset", "synergy"), default=None,
@@ -79,7 +79,7 @@ def register(subparsers) -> None:
     p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
                    help="grasp your own object: a mesh file (OBJ, STL, PLY, ...) instead of "
                         "--object; decomposed into convex pieces once (cached)")
-    p.add_argument("--mesh-scale", type=positive_float, default=1.0, metavar="S",
+    p.add_argument("--mesh-scale", type=positive_float, default=None, metavar="S",
                    help="mesh file units to metres (0.001 for millimetres; default 1)")
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
@@ -149,11 +149,16 @@ def _cmd_babble(args) -> int:
     if args.mesh is not None:
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
+        if args.object is not None:
+            raise ValueError(f"--object {args.object}: give either --object or --mesh, not both")
         config = GraspTrialConfig(hand=args.hand, object="mesh", space=space, noise=args.noise,
-                                  object_file=str(args.mesh), object_scale=args.mesh_scale,
+                                  object_file=str(args.mesh), object_scale=args.mesh_scale or 1.0,
                                   **robust)
     else:
-        config = GraspTrialConfig(hand=args.hand, object=args.object, space=space,
+        if args.mesh_scale is not None:
+            raise ValueError(f"--mesh-scale: only for a --mesh object, got {args.mesh_scale} "
+                             f"without --mesh")
+        config = GraspTrialConfig(hand=args.hand, object=args.object or "sphere", space=space,
                                   noise=args.noise, size=args.size, **robust)
     trial = GraspTrial(config)
     if args.ei_stop and args.strategy != "bo":

@@ -46,16 +46,17 @@ def register(subparsers) -> None:
     p.add_argument("--class", dest="grasp_class", required=True,
                    help="grasp class (palmar_pinch tip_pinch tripod writing_tripod lateral "
                         "lateral_tripod adduction_grip parallel_extension)")
-    p.add_argument("--object", default="cuboid",
-                   help="sphere, cylinder, cuboid (box), or an instrumented device: joywarrior, "
-                        "wiimote, nunchuk, sixaxis (planned on its bounding box, lying flat)")
+    p.add_argument("--object", default=None,
+                   help="sphere, cylinder, cuboid (box, the default), or an instrumented device: "
+                        "joywarrior, wiimote, nunchuk, sixaxis (planned on its bounding box, "
+                        "lying flat)")
     p.add_argument("--size", type=float, default=None,
                    help="catalogue size (m): diameter, or the cuboid's width (required "
                         "unless --mesh; a device's default: its published size)")
     p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
                    help="grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
                         "--object; planned on its bounding box (see grasp.planning)")
-    p.add_argument("--mesh-scale", type=float, default=1.0, metavar="S",
+    p.add_argument("--mesh-scale", type=float, default=None, metavar="S",
                    help="mesh file units to metres (default 1)")
     p.add_argument("--mass", type=float, default=None, help="mesh object mass (kg)")
     mode = p.add_mutually_exclusive_group()
@@ -131,15 +132,23 @@ def _cmd_grasp(args) -> int:
     from handle_drake.cli_support import start_meshcat
     from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 
+    if args.mesh is None:  # the mesh options alone would be silently ignored
+        for option, value in (("--mesh-scale", args.mesh_scale), ("--mass", args.mass)):
+            if value is not None:
+                raise ValueError(f"{option}: only for a --mesh object, got {value} without "
+                                 f"--mesh")
+        args.object = args.object or "cuboid"
     if args.mesh is not None:
         from handle_drake.objects.mesh import MeshObjectSpec
 
+        if args.object is not None:
+            raise ValueError(f"--object {args.object}: give either --object or --mesh, not both")
         if args.perceived:
             raise ValueError("--perceived: the tabletop detector fits spheres, cylinders and "
                              "boxes; it cannot plan on a --mesh object")
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
-        obj = MeshObjectSpec(str(args.mesh), scale=args.mesh_scale, mass=args.mass)
+        obj = MeshObjectSpec(str(args.mesh), scale=args.mesh_scale or 1.0, mass=args.mass)
     elif args.object in DEVICE_OBJECTS and args.perceived:
         raise ValueError(f"--perceived: the tabletop detector fits spheres, cylinders and "
                          f"boxes; it cannot plan on a {args.object}")
