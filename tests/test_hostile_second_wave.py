@@ -126,3 +126,19 @@ def test_a_size_given_to_a_mesh_object_is_ignored_with_a_warning(folder):
         LoadScenario(data=text)  # no size: no warning
     with pytest.warns(MeshObjectWarning, match="object.size: ignored for a mesh"):
         LoadScenario(data=text[:-1] + ", size: 2}")
+
+
+def test_simulate_says_when_the_object_ends_below_the_table(tmp_path, capsys):
+    # Off the table's edge (the top spans |x| <= 0.4 m) the sphere falls: 0.4 s of free
+    # fall is g t^2 / 2 = 0.78 m. Once only a height in the output said so.
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("object: {kind: sphere, size: 0.04, X_WO: {translation: [0.6, 0, 0]}}\n"
+                        "simulation_duration: 0.4\n")
+    assert main(["simulate", str(scenario)]) == 0
+    out, err = capsys.readouterr()
+    end = float(out.split("end ")[1].split(" m")[0])
+    assert end == pytest.approx(0.02 - 9.81 * 0.4**2 / 2, abs=0.02)
+    assert "warning: object.position" in err and "below the table top" in err
+    scenario.write_text("object: {kind: sphere, size: 0.04}\nsimulation_duration: 0.1\n")
+    assert main(["simulate", str(scenario)]) == 0
+    assert "below the table" not in capsys.readouterr().err  # at rest on the top

@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from handle_drake.cli_support import add_mesh_arguments
+
 __all__ = ["DEFAULT_REACTIVE", "register", "run_grasp", "write_class_scenarios"]
 
 #: Execution used when neither --reactive nor --open-loop is given. Open loop:
@@ -53,11 +55,8 @@ def register(subparsers) -> None:
     p.add_argument("--size", type=float, default=None,
                    help="catalogue size (m): diameter, or the cuboid's width (required "
                         "unless --mesh; a device's default: its published size)")
-    p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
-                   help="grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
-                        "--object; planned on its bounding box (see grasp.planning)")
-    p.add_argument("--mesh-scale", type=float, default=None, metavar="S",
-                   help="mesh file units to metres (default 1)")
+    add_mesh_arguments(p, "grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
+                          "--object; planned on its bounding box (see grasp.planning)")
     p.add_argument("--mass", type=float, default=None, help="mesh object mass (kg)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--reactive", dest="reactive", action="store_true", default=None,
@@ -129,14 +128,11 @@ def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=Non
 def _cmd_grasp(args) -> int:
     import math
 
-    from handle_drake.cli_support import start_meshcat
+    from handle_drake.cli_support import refuse_without_mesh, start_meshcat
     from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 
-    if args.mesh is None:  # the mesh options alone would be silently ignored
-        for option, value in (("--mesh-scale", args.mesh_scale), ("--mass", args.mass)):
-            if value is not None:
-                raise ValueError(f"{option}: only for a --mesh object, got {value} without "
-                                 f"--mesh")
+    refuse_without_mesh(args, "--mesh-scale", "--mass")
+    if args.mesh is None:
         args.object = args.object or "cuboid"
     if args.mesh is not None:
         from handle_drake.objects.mesh import MeshObjectSpec

@@ -409,6 +409,7 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
         return
     try:
         import dask
+
         # Loads distributed's defaults into dask.config *before* the settings below:
         # set() on a missing "distributed" subtree records it as new and deletes the
         # whole subtree on exit, and every later Client then fails (KeyError).
