@@ -86,6 +86,7 @@ def _cmd_simulate(args) -> int:
     if result.object_position is not None:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
+        _warn_below_table(scenario, result.object_position[:, 2])
     if result.score is not None:
         m, score = scenario.metric, result.score
         print(f"grasp metric (BW, soft finger, mean of {m.hold_samples} instants over the last "
@@ -112,6 +113,22 @@ def _cmd_simulate(args) -> int:
     if args.html:
         print(f"replay written to {args.html}")
     return 0
+
+
+def _warn_below_table(scenario, z) -> None:
+    """A run whose object ends under the table top is not what happened on a real table:
+    it fell off the edge, or a hand pressing down drove it through the top (point contact
+    gives way under forces far beyond the object's weight). Said, not left to be read
+    from a height."""
+    import warnings
+
+    if scenario.table is None or scenario.object is None or scenario.object.fixed:
+        return
+    top = scenario.table.top_height
+    if z[0] >= top and z[-1] < top - 0.01:
+        warnings.warn(f"object.position: the object ended at z = {z[-1]:.3f} m, below the "
+                      f"table top ({top:.3f} m): it fell off the table or the hand pushed it "
+                      f"through the top (check the script's wrist heights)", stacklevel=2)
 
 
 def _check_duration(duration: float, scenario) -> None:
