@@ -31,7 +31,8 @@ Targets (issue 14): Dask within 10 % of the local pool; efficiency at 2
 workers >= 0.85 for random search and for a PSO iteration.
 
 Run: ``python benchmarks/bench_dask.py [--quick]``; prints the table and
-writes ``benchmarks/results/dask.json``.
+writes ``benchmarks/results/dask.json``; ``--summarise FILE.json`` prints the
+table of a saved run again.
 """
 
 from __future__ import annotations
@@ -115,6 +116,64 @@ def _bare_noop(executor, n_tasks) -> float:
     return n_tasks / (time.perf_counter() - start)
 
 
+def summarise(samples: dict, loads: dict) -> dict:
+    """The table, the overheads and the 100-worker projection from per-case samples
+    (``{(workload, executor, workers): [trials/s per round]}``); prints them."""
+    median = {key: statistics.median(values) for key, values in samples.items()}
+    rows = []
+    for name in ("random", "pso", "inhand_pso", "noop_executor", "noop_runner"):
+        for kind in EXECUTORS:
+            one, two = median[(name, kind, 1)], median[(name, kind, 2)]
+            rows.append(dict(workload=name, executor=kind, tps_1=one, tps_2=two,
+                             efficiency_2=two / one / 2,
+                             vs_local_1=one / median[(name, "local", 1)],
+                             vs_local_2=two / median[(name, "local", 2)],
+                             load=loads[(name, kind, 2)]))
+    overhead = {w: 1 / median[("noop_executor", "dask", w)]
+                - 1 / median[("noop_executor", "local", w)] for w in WORKERS}
+    # The scheduler handles tasks one after another: its cost per task (the
+    # no-op seconds per task at 2 workers, 1000 tasks in flight; an upper bound:
+    # it includes the client and the workers' share of two cores) caps the
+    # cluster's rate. The runner does its part of every trial (ask, the three
+    # SQLite transactions, tell) one after another in the client: its cost is
+    # the no-op trial through the runner on the local pool (whose own cost is
+    # ~0.4 ms). With 100 workers 100 trials are in flight, so these costs are
+    # capacities; the no-op runner on Dask (2 trials in flight) is a latency.
+    per_task = 1 / median[("noop_executor", "dask", 2)]
+    per_trial_client = 1 / median[("noop_runner", "local", 2)]
+    per_trial_latency = 1 / median[("noop_runner", "dask", 2)] * 2  # 2 in flight
+    projection = {}
+    for trial_s in (0.1, 3.0):
+        demand = 100 / trial_s  # tasks/s that 100 busy workers need
+        for label, cost in (("scheduler", per_task), ("runner", per_trial_client),
+                            ("both", max(per_task, per_trial_client))):
+            projection[f"{trial_s:g}s_{label}"] = dict(
+                tasks_per_s_needed=demand, capacity_tasks_per_s=1 / cost,
+                utilisation=demand * cost, efficiency_bound=min(1.0, 1 / (demand * cost)))
+
+    print()
+    print(f"{'workload':14s} {'executor':8s} {'1 worker':>10s} {'2 workers':>10s} "
+          f"{'efficiency':>10s} {'/local x1':>10s} {'/local x2':>10s}  load (x2 cases)")
+    for row in rows:
+        print(f"{row['workload']:14s} {row['executor']:8s} {row['tps_1']:10.2f} "
+              f"{row['tps_2']:10.2f} {row['efficiency_2']:10.2f} {row['vs_local_1']:10.3f} "
+              f"{row['vs_local_2']:10.3f}  {row['load']}")
+    print("\nDask overhead per task over the local pool (no-op): "
+          + ", ".join(f"{w} worker(s) {overhead[w] * 1e3:+.2f} ms" for w in WORKERS))
+    print(f"Dask per-task cost (no-op, 2 workers, pipelined): {per_task * 1e3:.2f} ms; the "
+          f"runner's own cost per trial (ask, SQLite, tell): {per_trial_client * 1e3:.2f} ms; "
+          f"a no-op trial's latency through the runner on Dask: "
+          f"{per_trial_latency * 1e3:.2f} ms")
+    for key, value in projection.items():
+        print(f"100 workers, trials of {key.replace('_', ' ')}: need "
+              f"{value['tasks_per_s_needed']:.0f}/s, capacity "
+              f"{value['capacity_tasks_per_s']:.0f}/s, efficiency bound "
+              f"{value['efficiency_bound']:.2f}")
+    return dict(table=rows, dask_overhead_per_task_s=overhead, dask_per_task_s=per_task,
+                runner_per_trial_s=per_trial_client, dask_trial_latency_s=per_trial_latency,
+                projection_100_workers=projection)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer trials and rounds")
@@ -126,7 +185,15 @@ def main(argv=None) -> int:
                         help="PSO iterations per case (default 6, quick 2)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "dask.json")
+    parser.add_argument("--summarise", type=Path, default=None, metavar="JSON",
+                        help="print the table of a saved run (its samples) and exit")
     args = parser.parse_args(argv)
+    if args.summarise is not None:
+        saved = json.loads(args.summarise.read_text())
+        key = lambda text: (*text.split("|")[:2], int(text.split("|")[2]))  # noqa: E731
+        summarise({key(k): v for k, v in saved["samples"].items()},
+                  {key(k): v for k, v in saved["loads"].items()})
+        return 0
     rounds = args.rounds or (1 if args.quick else 3)
     n_random = args.trials or (16 if args.quick else 60)
     iterations = args.iterations or (2 if args.quick else 6)
@@ -177,55 +244,12 @@ def main(argv=None) -> int:
                     print(f"  round {r + 1}: {name:14s} {kind:5s} x{workers}: {value:8.2f} "
                           f"trials/s (load {before} -> {_load()})", flush=True)
 
-    median = {key: statistics.median(values) for key, values in samples.items()}
-    rows = []
-    for name in ("random", "pso", "inhand_pso", "noop_executor", "noop_runner"):
-        for kind in EXECUTORS:
-            one, two = median[(name, kind, 1)], median[(name, kind, 2)]
-            rows.append(dict(workload=name, executor=kind, tps_1=one, tps_2=two,
-                             efficiency_2=two / one / 2,
-                             vs_local_1=one / median[(name, "local", 1)],
-                             vs_local_2=two / median[(name, "local", 2)],
-                             load=loads[(name, kind, 2)]))
-    overhead = {w: 1 / median[("noop_executor", "dask", w)]
-                - 1 / median[("noop_executor", "local", w)] for w in WORKERS}
-    # The scheduler handles tasks one after another: its cost per task (the
-    # no-op seconds per task at 2 workers, an upper bound: it includes the
-    # client and the workers' share of two cores) caps the cluster's rate.
-    per_task = 1 / median[("noop_executor", "dask", 2)]
-    per_trial_runner = 1 / median[("noop_runner", "dask", 2)]
-    projection = {}
-    for trial_s in (0.1, 3.0):
-        demand = 100 / trial_s  # tasks/s that 100 busy workers need
-        for label, cost in (("scheduler", per_task), ("runner_and_scheduler", per_trial_runner)):
-            projection[f"{trial_s:g}s_{label}"] = dict(
-                tasks_per_s_needed=demand, capacity_tasks_per_s=1 / cost,
-                scheduler_utilisation=demand * cost,
-                efficiency_bound=min(1.0, 1 / (demand * cost)))
-
-    print()
-    print(f"{'workload':14s} {'executor':8s} {'1 worker':>10s} {'2 workers':>10s} "
-          f"{'efficiency':>10s} {'/local x1':>10s} {'/local x2':>10s}  load (x2 cases)")
-    for row in rows:
-        print(f"{row['workload']:14s} {row['executor']:8s} {row['tps_1']:10.2f} "
-              f"{row['tps_2']:10.2f} {row['efficiency_2']:10.2f} {row['vs_local_1']:10.3f} "
-              f"{row['vs_local_2']:10.3f}  {row['load']}")
-    print("\nDask overhead per task over the local pool (no-op): "
-          + ", ".join(f"{w} worker(s) {overhead[w] * 1e3:+.2f} ms" for w in WORKERS))
-    print(f"Dask per-task cost (no-op, 2 workers): {per_task * 1e3:.2f} ms executor only, "
-          f"{per_trial_runner * 1e3:.2f} ms per trial through the runner (ask, SQLite, tell)")
-    for key, value in projection.items():
-        print(f"100 workers, trials of {key.replace('_', ' ')}: need "
-              f"{value['tasks_per_s_needed']:.0f}/s, capacity "
-              f"{value['capacity_tasks_per_s']:.0f}/s, efficiency bound "
-              f"{value['efficiency_bound']:.2f}")
     result = dict(
         benchmark="dask", config=str(CONFIG), rounds=rounds, random_trials=n_random,
         pso=dict(swarm=args.swarm, iterations=iterations), noop_tasks=n_noop,
         samples={"|".join(map(str, k)): v for k, v in samples.items()},
         loads={"|".join(map(str, k)): v for k, v in loads.items()},
-        table=rows, dask_overhead_per_task_s=overhead, dask_per_task_s=per_task,
-        runner_per_trial_s=per_trial_runner, projection_100_workers=projection,
+        **summarise(samples, loads),
         targets=dict(dask_vs_local=">= 0.90",
                      efficiency_2=">= 0.85 (random, pso, inhand_pso)"),
         machine=dict(cpus=os.cpu_count(), python=sys.version.split()[0],

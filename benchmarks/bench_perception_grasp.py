@@ -8,8 +8,9 @@ the object, and the class's grasp is planned twice, on the true pose and size
 and on the perceived ones; each plan is executed open loop and reactively on
 the true object. Success = held through the 13 cm lift.
 
-Run: ``python benchmarks/bench_perception_grasp.py [--poses 3] [--workers 2]``;
-prints the pose errors and a success table and writes
+Run: ``python benchmarks/bench_perception_grasp.py [--poses 3] [--workers 2]
+[--executor local|dask|dask://HOST:PORT]`` (the cases run where ``--executor`` says:
+``handle_drake.learning.cluster``); prints the pose errors and a success table and writes
 ``benchmarks/results/perception_grasp.json``.
 """
 
@@ -18,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
@@ -26,6 +26,8 @@ from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither nump
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
+
+from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "perception_grasp.json"
 
@@ -73,6 +75,7 @@ def main(argv=None) -> int:
     parser.add_argument("--poses", type=int, default=3)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
+    add_executor_arguments(parser)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     cases = []
@@ -84,7 +87,8 @@ def main(argv=None) -> int:
             cases.append((grasp_class, kind, size, r * math.cos(a), r * math.sin(a),
                           float(rng.uniform(-math.pi, math.pi)), int(rng.integers(1 << 30))))
     rows = []
-    with ProcessPoolExecutor(args.workers) as pool:
+    with trial_executor(args.executor, args.workers,
+                        connect_timeout=args.connect_timeout) as pool:
         for i, row in enumerate(pool.map(trial, cases)):
             rows.append(row)
             print(f"[{i + 1}/{len(cases)}] {row['grasp_class']} done", flush=True)

@@ -129,7 +129,6 @@ def probe_scenarios():
 
 
 def probe_cli(tmp):
-    from handle_drake.cli import main
 
     (tmp / "ok.yaml").write_text("simulation_duration: 0.01\n")
     (tmp / "bad.yaml").write_text("time_step: 10\n")
@@ -174,27 +173,7 @@ def probe_cli(tmp):
         ["nosuchcommand"], ["simulate"],
     ]
     for argv in argvs:
-        err = io.StringIO()
-        try:
-            with time_limit(120), contextlib.redirect_stderr(err), \
-                    contextlib.redirect_stdout(io.StringIO()):
-                try:
-                    code = main(argv)
-                except SystemExit as exit_:
-                    code = exit_.code
-        except Hang:
-            record("command line", "hang", " ".join(argv))
-            continue
-        except BaseException as error:  # noqa: BLE001
-            record("command line", "traceback", f"{' '.join(argv)}: {type(error).__name__}")
-            continue
-        text = err.getvalue()
-        if "Traceback" in text:
-            record("command line", "traceback", " ".join(argv))
-        elif code == 2 and len(text) < 2000:
-            record("command line", "clean", " ".join(argv))
-        else:
-            record("command line", "wrong", f"{' '.join(argv)} -> exit {code} {text[:80]!r}")
+        _cli_probe("command line", argv)
     busy.close()
 
 
@@ -371,10 +350,194 @@ def _can_outcome(sim, server, streaming):
     return "clean" if streaming() or streaming() else "hang"
 
 
+def _write_meshes(tmp):
+    """Meshes a user would bring, good and bad (written here: no third-party files)."""
+    import trimesh
+
+    box = trimesh.creation.box((40.0, 30.0, 60.0))  # millimetres
+    box.export(tmp / "box_mm.stl")
+    trimesh.creation.torus(0.03, 0.01).export(tmp / "torus.obj")
+    shell = trimesh.creation.icosphere(2, 0.03)
+    shell.update_faces(shell.triangles_center[:, 2] < 0.01)  # a bowl-like open shell
+    shell.export(tmp / "open_shell.ply")
+    (tmp / "empty.stl").write_bytes(b"")
+    (tmp / "garbage.stl").write_bytes(os.urandom(500))
+    (tmp / "text.obj").write_text("hello world\n")
+    (tmp / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (tmp / "line.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    (tmp / "points.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n0 0 0\n1 1 1\n")
+    (tmp / "bad_index.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n")
+    (tmp / "mesh.txt").write_text("v 0 0 0\n")
+    trimesh.creation.box((1000.0, 1000.0, 1000.0)).export(tmp / "km.stl")  # 1 km at scale 1
+
+
+def probe_second_wave(tmp):
+    """The second-wave surfaces: inhand, instruments, midi, perceive, mesh objects, --executor."""
+    _write_meshes(tmp)
+    if not (tmp / "ok.yaml").exists():
+        (tmp / "ok.yaml").write_text("simulation_duration: 0.01\n")
+        (tmp / "dir").mkdir()
+        os.mkfifo(tmp / "fifo")
+    d, fifo, ok = str(tmp / "dir"), str(tmp / "fifo"), str(tmp / "ok.yaml")
+    long = "a" * 300
+    (tmp / "frame.json").write_text('{"format": "handle_drake-depth-frame", "version": 1}')
+    (tmp / "garbage.json").write_bytes(os.urandom(200))
+    (tmp / "frame_nopng.json").write_text(json.dumps({
+        "format": "handle_drake-depth-frame", "version": 1, "depth_png": "none.png",
+        "depth_scale": 0.001, "width": 4, "height": 4,
+        "K": [[1, 0, 2], [0, 1, 2], [0, 0, 1]], "X_WC": np.eye(4).tolist()}))
+    (tmp / "mapping.yaml").write_text("controls: 5\n")
+    (tmp / "mapping_dup.yaml").write_text("port_name: a\nport_name: b\n")
+    mesh_scn = tmp / "mesh_scn.yaml"
+    dsec = ["--executor", "dask://127.0.0.1:1", "--connect-timeout", "1"]
+    argvs = {
+        "inhand": [
+            ["--trials", "0"], ["--trials", "-1"], ["--trials", "big"], ["--trials", "1e9"],
+            ["--workers", "0"], ["--workers", "100000"], ["--particles", "0"],
+            ["--particles", "1e9"], ["--particles", "1000000"], ["--target-deg", "-5"],
+            ["--target-deg", "nan"], ["--target-deg", "1000"], ["--accelerometer", "nope"],
+            ["--seed", "-1"], ["--seed", "1e300"], ["--db", d], ["--db", fifo], ["--db", ok],
+            ["--db", f"{ok}/x.sqlite"], ["--db", f"{tmp}/{long}.sqlite"], ["--plot", d],
+            ["--html", d], ["--connect-timeout", "-1"], ["--connect-timeout", "nan"],
+            ["--connect-timeout", "1e9"], ["--executor", "ftp://x"],
+            ["--executor", "dask://HOST:PORT"], ["--executor", "dask://:"], dsec,
+            ["--task", "nope"], ["--optimizer", "nope"], ["--evaluation", "nope"]],
+        "instruments": [
+            ["--device", "nope"], ["--seed", "-1"], ["--seed", "x"], ["--plot", d],
+            ["--json", d], ["--html", d], ["--plot", f"{ok}/x.png"], ["--json", f"{ok}/x.json"],
+            ["--write-scenarios", ok], ["--write-scenarios", f"{ok}/sub"],
+            ["--plot", f"{tmp}/{long}.png"]],
+        "midi": [
+            ["jog", "--html", d], ["jog", "--scenario", d], ["jog", "--scenario", fifo],
+            ["jog", "--scenario", str(tmp / "missing.yaml")], ["fader", "--override", "driver: 5"],
+            ["fader", "--override", "midi_controller: null"], ["jog", "--override", "!Foo {}"],
+            ["control", "--mapping", d], ["control", "--mapping", str(tmp / "mapping.yaml")],
+            ["control", "--mapping", str(tmp / "mapping_dup.yaml")],
+            ["control", "--mapping", str(tmp / "garbage.stl")],
+            ["control", "--duration", "-1"], ["control", "--duration", "1e300"],
+            ["control", "--duration", "nan"], ["control", "--hardware", "--duration", "0.1"],
+            ["control", "--port", "nope", "--duration", "0.1"],
+            ["monitor", "--duration", "-1"], ["monitor", "--mapping", fifo],
+            ["monitor", "--port", "nope", "--duration", "0.1"],
+            ["write-scenarios", ok], ["write-scenarios", f"{ok}/x"], ["nope"]],
+        "perceive": [
+            [ok], [d], [fifo], ["--frame", d], ["--frame", fifo],
+            ["--frame", str(tmp / "missing.json")], ["--frame", str(tmp / "garbage.json")],
+            ["--frame", str(tmp / "frame.json")], ["--frame", str(tmp / "frame_nopng.json")],
+            ["--frame", str(tmp / "box_mm.stl")],
+            ["diagrams/tabletop_perception.yaml", "--save-frames", ok],
+            ["diagrams/tabletop_perception.yaml", "--override", "cameras: 5"],
+            ["diagrams/tabletop_perception.yaml", "--override",
+             "cameras: [{name: k, profile: nope}]"],
+            ["diagrams/tabletop_perception.yaml", "--override",
+             "cameras: [{name: k, profile: kinect_v1, parent: nowhere}]"],
+            ["diagrams/tabletop_perception.yaml", "--override",
+             "cameras: [{name: k, profile: kinect_v1, width: 1000000000}]"],
+            ["diagrams/tabletop_perception.yaml", "--override",
+             "cameras: [{name: k, profile: kinect_v1, target: [0, 0, 0], "
+             "X_PC: {translation: [0, 0, 0]}}]"],
+            ["diagrams/tabletop_perception.yaml", "--override",
+             "cameras: [{name: k, X_PC: {translation: [-0.7, 0, 0.7]}, target: [0, 0, 0]}, "
+             "{name: k, X_PC: {translation: [0.7, 0, 0.7]}, target: [0, 0, 0]}]"],
+            []],
+        "mesh objects": [
+            *[[c, "--mesh", str(tmp / f)] for c in ("grasp --class tripod", "babble --trials 1")
+              for f in ("missing.stl", "dir", "fifo", "empty.stl", "garbage.stl", "text.obj",
+                        "nan.obj", "line.obj", "points.ply", "bad_index.obj", "mesh.txt",
+                        "km.stl")],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "0"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "-1"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "nan"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "1e300"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "1e-300"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "0.001",
+             "--mass", "-1"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--mesh-scale", "0.001",
+             "--mass", "1e30"],
+            ["grasp --class tripod", "--mesh-scale", "0.001"],
+            ["grasp --class tripod", "--mass", "2", "--size", "0.05"],
+            ["babble", "--mesh-scale", "0.001"],
+            ["babble", "--mesh", str(tmp / "box_mm.stl"), "--object", "mug"],
+            ["grasp --class tripod", "--mesh", str(tmp / "box_mm.stl"), "--object", "sphere"],
+            ["report --reduced", "--mesh", str(tmp / "missing.stl")],
+            ["report --reduced", "--mesh", str(tmp / "km.stl")],
+            *[["simulate", str(mesh_scn), "--override", o] for o in (
+                "object: {kind: mesh}", "object: {kind: mesh, file: 5}",
+                "object: {kind: mesh, file: empty.stl}", "object: {kind: mesh, file: dir}",
+                "object: {kind: mesh, file: box_mm.stl, scale: -1}",
+                "object: {kind: mesh, file: box_mm.stl, scale: 0.001, mass: 0}",
+                "object: {kind: mesh, file: box_mm.stl, scale: 0.001, density: -1}",
+                "object: {kind: mesh, file: box_mm.stl, scale: 0.001, mass: 1, density: 1}",
+                "object: {kind: mesh, file: box_mm.stl, scale: 0.001, size: 2}",
+                "object: {kind: mesh, file: box_mm.stl, scale: 0.001, nope: 2}",
+                "object: {kind: mesh, file: box_mm.stl, scale: [1, 2]}",
+                "object: {kind: sphere, file: box_mm.stl}")],
+            ["perceive", str(mesh_scn), "--override",
+             "object: {kind: mesh, file: garbage.stl}"]],
+        "executor": [
+            ["babble", "--trials", "2", *dsec], ["babble", "--executor", "nope"],
+            ["babble", "--executor", "dask", "--workers", "0"],
+            ["babble", "--executor", "dask", "--workers", "100000"],
+            ["babble", "--executor", "dask://", "--trials", "2"],
+            ["babble", "--executor", "dask://256.1.1.1:8786", "--connect-timeout", "1"],
+            ["babble", "--executor", "dask://127.0.0.1:99999", "--connect-timeout", "1"],
+            ["report", "--reduced", *dsec], ["report", "--workers", "-1"],
+            ["inhand", "--trials", "2", *dsec]],
+    }
+    mesh_scn.write_text("simulation_duration: 0.01\n")
+    for part, cases in argvs.items():
+        for case in cases:
+            argv = case
+            if part in ("inhand", "instruments", "midi", "perceive"):
+                argv = [part, *case]
+            if argv and " " in argv[0]:
+                argv = argv[0].split() + argv[1:]
+            _cli_probe(part, argv, cwd=tmp if "simulate" in argv or "perceive" in argv else None,
+                       warned=any("size: 2" in a for a in argv))  # a warning is the answer
+
+
+def _cli_probe(part, argv, cwd=None, limit=120, warned=False):
+    """Runs ``handle-drake argv``: clean is exit 2 with a short message (or, where
+    ``warned``, exit 0 with a one-line warning)."""
+    from handle_drake.cli import main
+
+    err, here = io.StringIO(), os.getcwd()
+    if cwd is not None and argv[1:2] != ["diagrams/tabletop_perception.yaml"]:
+        os.chdir(cwd)
+    try:
+        with time_limit(limit), contextlib.redirect_stderr(err), \
+                contextlib.redirect_stdout(io.StringIO()):
+            try:
+                code = main(argv)
+            except SystemExit as exit_:
+                code = exit_.code
+    except Hang:
+        record(part, "hang", " ".join(argv))
+        return
+    except BaseException as error:  # noqa: BLE001
+        record(part, "traceback", f"{' '.join(argv)}: {type(error).__name__}: {error}"[:300])
+        return
+    finally:
+        os.chdir(here)
+    text = err.getvalue()
+    if "Traceback" in text:
+        record(part, "traceback", f"{' '.join(argv)}: {text[-300:]}")
+    elif (code == 2 or (warned and code == 0 and "warning:" in text)) and len(text) < 2000:
+        record(part, "clean", f"{' '.join(argv)} -> {text.strip()[:200]}")
+        if os.environ.get("PROBE_VERBOSE"):
+            print(f"  clean {part}: {' '.join(argv)[-80:]} -> {text.strip()[:160]}",
+                  file=sys.stderr)
+    else:
+        record(part, "wrong", f"{' '.join(argv)} -> exit {code} {text[-200:]!r}")
+
+
 def main():
-    if sys.argv[1:] == ["can"]:  # only the CAN part (it needs the least time)
+    only = {"can": probe_can, "second": probe_second_wave}
+    if sys.argv[1:2] and sys.argv[1] in only:  # one part only ('can' needs the least time)
         with tempfile.TemporaryDirectory() as tmp:
-            probe_can(Path(tmp))
+            only[sys.argv[1]](Path(tmp))
         print(json.dumps({k: {n: v for n, v in r.items() if n != "failures"} | {
             "failures": r["failures"]} for k, r in RESULTS.items()}, indent=1))
         return
@@ -383,7 +546,8 @@ def main():
         for name, function in (("scenario", probe_scenarios), ("cli", lambda: probe_cli(tmp)),
                                ("quality", probe_quality),
                                ("log", lambda: probe_trial_log(tmp)),
-                               ("can", lambda: probe_can(tmp))):
+                               ("can", lambda: probe_can(tmp)),
+                               ("second wave", lambda: probe_second_wave(tmp))):
             start = time.monotonic()
             function()
             print(f"{name}: {time.monotonic() - start:.1f} s", file=sys.stderr)

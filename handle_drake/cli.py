@@ -70,13 +70,23 @@ def _cmd_simulate(args) -> int:
         from handle_drake.instruments.station import INSTRUMENT_LOG
 
         log = DEFAULT_LOG + INSTRUMENT_LOG
-    runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
+    # A MIDI controller model on the table (simulation): a receiver counts what its MIDI
+    # said, as a learner would be told (the experiments' runner; a script drives the hand).
+    midi = (scenario.midi_controller is not None and not args.hardware
+            and scenario.controller is None)
+    if midi:
+        from handle_drake.midi.experiments import MidiScenarioRunner
+
+        runner = MidiScenarioRunner(scenario, meshcat, log=log)
+    else:
+        runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
           f"({result.realtime_factor:.1f}x real time)")
     if result.object_position is not None:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
+        _warn_below_table(scenario, result.object_position[:, 2])
     if result.score is not None:
         m, score = scenario.metric, result.score
         print(f"grasp metric (BW, soft finger, mean of {m.hold_samples} instants over the last "
@@ -91,6 +101,10 @@ def _cmd_simulate(args) -> int:
             X_WO = runner.station.GetOutputPort("object.pose").Eval(
                 runner.station.GetMyContextFromRoot(runner.context))
         print(describe_instruments(scenario, runner.harness.logs(), X_WO))
+    if midi:
+        from handle_drake.midi.experiments import describe_midi
+
+        print(describe_midi(runner.midi_result(result.wall_time), runner.mapping))
     if args.quality:
         value, closure, contacts = runner.grasp_quality()
         print(f"grasp quality (BW metric, soft finger): {value:+.4f} "
@@ -99,6 +113,22 @@ def _cmd_simulate(args) -> int:
     if args.html:
         print(f"replay written to {args.html}")
     return 0
+
+
+def _warn_below_table(scenario, z) -> None:
+    """A run whose object ends under the table top is not what happened on a real table:
+    it fell off the edge, or a hand pressing down drove it through the top (point contact
+    gives way under forces far beyond the object's weight). Said, not left to be read
+    from a height."""
+    import warnings
+
+    if scenario.table is None or scenario.object is None or scenario.object.fixed:
+        return
+    top = scenario.table.top_height
+    if z[0] >= top and z[-1] < top - 0.01:
+        warnings.warn(f"object.position: the object ended at z = {z[-1]:.3f} m, below the "
+                      f"table top ({top:.3f} m): it fell off the table or the hand pushed it "
+                      f"through the top (check the script's wrist heights)", stacklevel=2)
 
 
 def _check_duration(duration: float, scenario) -> None:

@@ -13,11 +13,13 @@ import math
 import signal
 import sys
 import warnings
+from pathlib import Path
 
 from handle_drake.blas import pin_blas
 
 __all__ = ["check_hardware_server", "run_command", "start_meshcat", "int_at_least", "positive_int",
-           "non_negative_int", "positive_float", "non_negative_float"]
+           "non_negative_int", "positive_float", "non_negative_float", "add_mesh_arguments",
+           "refuse_without_mesh"]
 
 
 def start_meshcat(wanted: bool):
@@ -88,6 +90,26 @@ def positive_float(text: str) -> float:
     if value == 0:
         raise argparse.ArgumentTypeError(f"expected a number > 0, got {text}")
     return value
+
+
+def add_mesh_arguments(parser: argparse.ArgumentParser, mesh_help: str, **mesh_options) -> None:
+    """``--mesh FILE`` (your own object) and ``--mesh-scale S`` (default None: 1, and
+    :func:`refuse_without_mesh` can tell it was given)."""
+    parser.add_argument("--mesh", type=Path, metavar="FILE", help=mesh_help,
+                        **{"default": None, **mesh_options})
+    parser.add_argument("--mesh-scale", type=positive_float, default=None, metavar="S",
+                        help="mesh file units to metres (0.001 for millimetres; default 1)")
+
+
+def refuse_without_mesh(args, *options: str) -> None:
+    """Refuses mesh-only options (``"--mesh-scale"``, ``"--mass"``) given without ``--mesh``:
+    they would be silently ignored."""
+    if args.mesh:
+        return
+    for option in options:
+        value = getattr(args, option.lstrip("-").replace("-", "_"))
+        if value is not None:
+            raise ValueError(f"{option}: only for a --mesh object, got {value} without --mesh")
 
 
 def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:

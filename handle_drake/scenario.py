@@ -498,6 +498,13 @@ def _validate_mesh_object(o: ObjectConfig) -> None:
                             f"(use scale), got {dict(o.dimensions)}")
     if o.mass is not None and o.density is not None:
         raise ScenarioError("object: give mass or density for a mesh, not both")
+    if o.size != ObjectConfig.size:
+        import warnings
+
+        from handle_drake.objects.mesh import MeshObjectWarning
+
+        warnings.warn(f"object.size: ignored for a mesh (its size comes from its file and "
+                      f"scale), got {short(o.size)}", MeshObjectWarning, stacklevel=3)
     try:
         mesh_object_spec(o)
     except FileNotFoundError as error:

@@ -164,6 +164,9 @@ class _Walker:
         if kind is str:
             if not isinstance(node, yaml.ScalarNode) or node.tag not in _SCALAR_TAGS:
                 raise _error(path, "a string", _describe(node))
+            if not node.tag.endswith(":str"):  # Drake's reader refuses a plain 5, true, null
+                raise _error(path, "a string (quote a value YAML reads as a number, "
+                             "boolean or null)", _describe(node))
             return None
         if origin is dict:
             self._mapping(node, path)

@@ -27,10 +27,12 @@ import sys
 from pathlib import Path
 
 from handle_drake.cli_support import (
+    add_mesh_arguments,
     non_negative_float,
     non_negative_int,
     positive_float,
     positive_int,
+    refuse_without_mesh,
 )
 from handle_drake.learning.cluster import add_executor_arguments
 from handle_drake.objects import KINDS
@@ -52,7 +54,7 @@ def register(subparsers) -> None:
         description="Runs (or resumes) grasp trials chosen by Bayesian optimisation or random "
                     "search and logs each one to an SQLite file.")
     p.add_argument("--hand", choices=("barrett", "shadow"), default="barrett")
-    p.add_argument("--object", choices=KINDS, default="sphere")
+    p.add_argument("--object", choices=KINDS, default=None, help="the object (default sphere)")
     p.add_argument("--dims", type=int, choices=(1, 2), default=None,
                    help="1: standoff along the approach axis; 2: (x, y) offset (default 2)")
     p.add_argument("--space", choices=("standoff", "offset", "synergy"), default=None,
@@ -76,11 +78,8 @@ def register(subparsers) -> None:
     p.add_argument("--placement-samples", type=positive_int, default=None, metavar="K",
                    help="placements per trial of the robust objective (default 5 with "
                         "--placement-error)")
-    p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
-                   help="grasp your own object: a mesh file (OBJ, STL, PLY, ...) instead of "
-                        "--object; decomposed into convex pieces once (cached)")
-    p.add_argument("--mesh-scale", type=positive_float, default=1.0, metavar="S",
-                   help="mesh file units to metres (0.001 for millimetres; default 1)")
+    add_mesh_arguments(p, "grasp your own object: a mesh file (OBJ, STL, PLY, ...) instead of "
+                          "--object; decomposed into convex pieces once (cached)")
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
     p.add_argument("--workers", type=positive_int, default=1,
@@ -114,8 +113,8 @@ def register(subparsers) -> None:
     p.add_argument("--workers", type=positive_int, default=None,
                    help="worker processes of 'local' and 'dask' (default 2)")
     add_executor_arguments(p)
-    p.add_argument("--mesh", type=Path, action="append", default=[], metavar="FILE",
-                   help="also run the Table 3 experiment on this mesh object (repeatable)")
+    add_mesh_arguments(p, "also run the Table 3 experiment on this mesh object (repeatable; "
+                          "--mesh-scale applies to each)", action="append", default=[])
     p.add_argument("--reduced", action="store_true",
                    help="tiny grids and few trials (also HANDLE_DRAKE_REDUCED=1)")
     p.add_argument("--no-progress", action="store_true", help="no progress output")
@@ -149,11 +148,14 @@ def _cmd_babble(args) -> int:
     if args.mesh is not None:
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
+        if args.object is not None:
+            raise ValueError(f"--object {args.object}: give either --object or --mesh, not both")
         config = GraspTrialConfig(hand=args.hand, object="mesh", space=space, noise=args.noise,
-                                  object_file=str(args.mesh), object_scale=args.mesh_scale,
+                                  object_file=str(args.mesh), object_scale=args.mesh_scale or 1.0,
                                   **robust)
     else:
-        config = GraspTrialConfig(hand=args.hand, object=args.object, space=space,
+        refuse_without_mesh(args, "--mesh-scale")
+        config = GraspTrialConfig(hand=args.hand, object=args.object or "sphere", space=space,
                                   noise=args.noise, size=args.size, **robust)
     trial = GraspTrial(config)
     if args.ei_stop and args.strategy != "bo":
@@ -212,9 +214,11 @@ def _cmd_report(args) -> int:
     if args.grid is not None and args.grid < 2:
         raise ValueError(f"--grid: expected an integer >= 2, got {args.grid}")
     reduced = True if args.reduced else None
+    refuse_without_mesh(args, "--mesh-scale")
     summary = make_report(args.out, seeds=args.seeds, trials=args.trials, grid=args.grid,
                           reduced=reduced, workers=args.workers, noise=args.noise,
-                          ei_stop=args.ei_stop, meshes=args.mesh, progress=not args.no_progress,
+                          ei_stop=args.ei_stop, meshes=args.mesh, mesh_scale=args.mesh_scale or 1.0,
+                          progress=not args.no_progress,
                           executor=args.executor, connect_timeout=args.connect_timeout)
     print((Path(args.out) / "table3.md").read_text())
     for kind, entry in summary["bo_vs_random"].items():

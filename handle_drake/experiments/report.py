@@ -98,6 +98,7 @@ class ReportSettings:
     noise: float = 0.01  # std of the metric noise in the 2-D runs
     workers: int = 2
     ei_stop: float = 0.0  # EI stop threshold of the Table 3 runs (0: whole budget)
+    mesh_scale: float = 1.0  # file units -> m of the mesh objects (``meshes``)
 
     def __post_init__(self):
         for name in ("seeds", "trials", "trials_1d", "workers"):
@@ -112,6 +113,8 @@ class ReportSettings:
             raise ValueError(f"noise: expected a finite value >= 0, got {self.noise}")
         if not (math.isfinite(self.ei_stop) and self.ei_stop >= 0):
             raise ValueError(f"ei_stop: expected a finite value >= 0, got {self.ei_stop}")
+        if not (math.isfinite(self.mesh_scale) and self.mesh_scale > 0):
+            raise ValueError(f"mesh_scale: expected a finite value > 0, got {self.mesh_scale}")
 
     @classmethod
     def small(cls, workers: int = 1) -> ReportSettings:
@@ -121,11 +124,12 @@ class ReportSettings:
 
 
 # ------------------------------------------------------------------- specs
-def _offset_config(kind: str, noise: float) -> GraspTrialConfig:
-    """The 2-D offset trial of a catalogue kind, or of a mesh object given by its file path."""
+def _offset_config(kind: str, noise: float, mesh_scale: float = 1.0) -> GraspTrialConfig:
+    """The 2-D offset trial of a catalogue kind, or of a mesh object given by its file path
+    (``mesh_scale``: its file units to metres)."""
     if kind not in KINDS:
         return GraspTrialConfig(hand="barrett", object="mesh", object_file=kind, space="offset",
-                                noise=noise)
+                                noise=noise, object_scale=mesh_scale)
     return GraspTrialConfig(hand="barrett", object=kind, space="offset", noise=noise)
 
 
@@ -136,11 +140,12 @@ def _label(kind: str) -> str:
 
 def _table3_spec(kind, seed, s: ReportSettings) -> RunSpec:
     options = (("ei_threshold", s.ei_stop),) if s.ei_stop else ()
-    return RunSpec(_offset_config(kind, s.noise), "bo", seed, s.trials, options=options)
+    return RunSpec(_offset_config(kind, s.noise, s.mesh_scale), "bo", seed, s.trials,
+                   options=options)
 
 
 def _random_spec(kind, seed, s: ReportSettings) -> RunSpec:
-    return RunSpec(_offset_config(kind, s.noise), "random", seed, s.trials)
+    return RunSpec(_offset_config(kind, s.noise, s.mesh_scale), "random", seed, s.trials)
 
 
 def _synergy_config(noise=0.0) -> GraspTrialConfig:
@@ -152,7 +157,8 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
                 grid: int | None = None, reduced: bool | None = None, workers: int | None = None,
                 noise: float | None = None, ei_stop: float | None = None,
                 progress: bool = True, executor="local",
-                connect_timeout: float = CONNECT_TIMEOUT, meshes=()) -> dict:
+                connect_timeout: float = CONNECT_TIMEOUT, meshes=(),
+                mesh_scale: float = 1.0) -> dict:
     """Run (or resume) every experiment and write the figures and tables; returns the summary.
 
     ``reduced`` (default: ``handle_drake.testing.reduced()``) starts from
@@ -162,25 +168,28 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
     ``"dask://HOST:PORT"``, or an open executor (a ``distributed.Client``
     too): grids and trials run there, the runs are driven and logged here.
     The numbers do not depend on the choice.
-    ``meshes``: mesh files added to Table 3 and the 2-D figures.
+    ``meshes``: mesh files added to Table 3 and the 2-D figures, their units
+    times ``mesh_scale`` in metres (0.001: files in millimetres).
     """
     objects = OBJECT_ORDER + tuple(str(Path(m).expanduser().resolve()) for m in meshes)
     for kind in objects[len(OBJECT_ORDER):]:
-        _offset_config(kind, 0.0)  # a bad mesh fails here, before any trial runs
+        _offset_config(kind, 0.0, mesh_scale)  # a bad mesh fails here, before any trial runs
     if isinstance(executor, str | ExecutorSpec):
         spec = ExecutorSpec.parse(executor)
         if spec.kind != "local":
             workers_ = workers if workers is not None else ReportSettings.workers
             with trial_executor(spec, workers_, connect_timeout=connect_timeout) as opened:
                 return make_report(out_dir, seeds, trials, grid, reduced, workers, noise,
-                                   ei_stop, progress, opened, meshes=meshes)
+                                   ei_stop, progress, opened, meshes=meshes,
+                                   mesh_scale=mesh_scale)
         executor = None
     executor = None if executor is None else as_executor(executor)
     if reduced is None:
         reduced = reduced_mode()
     base = ReportSettings.small() if reduced else ReportSettings()
     overrides = {k: v for k, v in dict(seeds=seeds, trials=trials, grid=grid, workers=workers,
-                                       noise=noise, ei_stop=ei_stop).items()
+                                       noise=noise, ei_stop=ei_stop,
+                                       mesh_scale=mesh_scale).items()
                  if v is not None}
     settings = dc.replace(base, **overrides)
     out = Path(out_dir)
@@ -201,8 +210,8 @@ def make_report(out_dir="out/report", seeds: int | None = None, trials: int | No
     summary["one_d"] = step("1-D scans (Figures 21-22)",
                             lambda: _one_d(out, db, grids, settings, progress, executor))
     truth = step("2-D grids", lambda: {
-        kind: grid_values(_offset_config(kind, 0.0), settings.grid, grids, settings.workers,
-                          progress, executor) for kind in objects})
+        kind: grid_values(_offset_config(kind, 0.0, settings.mesh_scale), settings.grid, grids,
+                          settings.workers, progress, executor) for kind in objects})
     table3_specs = {kind: [_table3_spec(kind, s, settings) for s in range(settings.seeds)]
                     for kind in objects}
     random_specs = {kind: [_random_spec(kind, s, settings) for s in range(settings.seeds)]

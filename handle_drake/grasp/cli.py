@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from handle_drake.cli_support import add_mesh_arguments
+
 __all__ = ["DEFAULT_REACTIVE", "register", "run_grasp", "write_class_scenarios"]
 
 #: Execution used when neither --reactive nor --open-loop is given. Open loop:
@@ -46,17 +48,15 @@ def register(subparsers) -> None:
     p.add_argument("--class", dest="grasp_class", required=True,
                    help="grasp class (palmar_pinch tip_pinch tripod writing_tripod lateral "
                         "lateral_tripod adduction_grip parallel_extension)")
-    p.add_argument("--object", default="cuboid",
-                   help="sphere, cylinder, cuboid (box), or an instrumented device: joywarrior, "
-                        "wiimote, nunchuk, sixaxis (planned on its bounding box, lying flat)")
+    p.add_argument("--object", default=None,
+                   help="sphere, cylinder, cuboid (box, the default), or an instrumented device: "
+                        "joywarrior, wiimote, nunchuk, sixaxis (planned on its bounding box, "
+                        "lying flat)")
     p.add_argument("--size", type=float, default=None,
                    help="catalogue size (m): diameter, or the cuboid's width (required "
                         "unless --mesh; a device's default: its published size)")
-    p.add_argument("--mesh", type=Path, default=None, metavar="FILE",
-                   help="grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
-                        "--object; planned on its bounding box (see grasp.planning)")
-    p.add_argument("--mesh-scale", type=float, default=1.0, metavar="S",
-                   help="mesh file units to metres (default 1)")
+    add_mesh_arguments(p, "grasp your own object, a mesh file (OBJ, STL, PLY, ...), instead of "
+                          "--object; planned on its bounding box (see grasp.planning)")
     p.add_argument("--mass", type=float, default=None, help="mesh object mass (kg)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--reactive", dest="reactive", action="store_true", default=None,
@@ -128,18 +128,23 @@ def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=Non
 def _cmd_grasp(args) -> int:
     import math
 
-    from handle_drake.cli_support import start_meshcat
+    from handle_drake.cli_support import refuse_without_mesh, start_meshcat
     from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 
+    refuse_without_mesh(args, "--mesh-scale", "--mass")
+    if args.mesh is None:
+        args.object = args.object or "cuboid"
     if args.mesh is not None:
         from handle_drake.objects.mesh import MeshObjectSpec
 
+        if args.object is not None:
+            raise ValueError(f"--object {args.object}: give either --object or --mesh, not both")
         if args.perceived:
             raise ValueError("--perceived: the tabletop detector fits spheres, cylinders and "
                              "boxes; it cannot plan on a --mesh object")
         if args.size is not None:
             raise ValueError("--size: a mesh's size comes from its file; use --mesh-scale")
-        obj = MeshObjectSpec(str(args.mesh), scale=args.mesh_scale, mass=args.mass)
+        obj = MeshObjectSpec(str(args.mesh), scale=args.mesh_scale or 1.0, mass=args.mass)
     elif args.object in DEVICE_OBJECTS and args.perceived:
         raise ValueError(f"--perceived: the tabletop detector fits spheres, cylinders and "
                          f"boxes; it cannot plan on a {args.object}")

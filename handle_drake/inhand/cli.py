@@ -16,8 +16,6 @@ its trials ran. The run stops when a trial reaches the target (held at the
 end, rotated by ``--target-deg``) or after ``--trials``. It writes the learning
 curve (best score per iteration, Figure 34) and an HTML replay of the best
 trial next to the log. Scores are maximised. Bad arguments exit with status 2.
-The trials run where ``--executor`` says (``local``, ``dask``, ``dask://HOST:PORT``,
-see :mod:`handle_drake.learning.cluster`); the run is the same whichever.
 """
 
 from __future__ import annotations

@@ -408,10 +408,10 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
             pool.shutdown(wait=True, cancel_futures=True)
         return
     try:
+        # distributed loads its defaults into dask.config on import: *before* the
+        # settings below, since set() on a missing "distributed" subtree records it as
+        # new and deletes the whole subtree on exit (every later Client: KeyError).
         import dask
-        # Loads distributed's defaults into dask.config *before* the settings below:
-        # set() on a missing "distributed" subtree records it as new and deletes the
-        # whole subtree on exit, and every later Client then fails (KeyError).
         import distributed  # noqa: F401
     except ImportError as error:
         raise ExecutorError(f"executor {spec}: Dask is not installed ({error}); "

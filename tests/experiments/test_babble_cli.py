@@ -170,8 +170,9 @@ def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
     from handle_drake.objects.mesh_examples import l_bracket
 
     out = tmp_path / "report"
-    l_bracket().export(tmp_path / "bracket.stl")  # a mesh object: one more row
-    mesh = ["--mesh", str(tmp_path / "bracket.stl")]
+    # a mesh object in millimetres, as CAD exports it: one more row
+    l_bracket().apply_scale(1000.0).export(tmp_path / "bracket.stl")
+    mesh = ["--mesh", str(tmp_path / "bracket.stl"), "--mesh-scale", "0.001"]
     assert main(["report", "--out", str(out), "--reduced", "--no-progress", *mesh]) == 0
     for name in ("fig21_sphere_1d.png", "fig22_star_prism_1d.png", "fig23_wine_glass_2d.png",
                  "fig24_mug_2d.png", "fig25_star_prism_2d.png", "fig23_25_all_objects_2d.png",

@@ -346,6 +346,10 @@ def test_inhand_pso_on_a_dask_cluster_equals_the_run_in_process(tmp_path, capsys
     # the swarm moved: the second iteration's particles are not the first's
     X = np.array([r.parameters for r in rows])
     assert not np.allclose(X[:4], X[4:])
+    # in Python, run_inhand takes a bare distributed.Client as its executor
+    first = run_inhand("cylinder_rotation", "ipso", 4, None, 1, tmp_path / "client.sqlite", 4,
+                       progress=False, executor=dask_executor.client)
+    assert _record_rows(first.records) == _record_rows(reference.records[:4])
 
 
 def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path, dask_executor):
