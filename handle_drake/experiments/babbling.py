@@ -318,13 +318,18 @@ class GridSurrogate:
             value += self.noise * np.random.default_rng(seed).standard_normal()
         return float(value)
 
-    def maximum(self, n: int = 161) -> tuple[np.ndarray, float]:
-        """The objective's maximum on an ``n``-per-dimension grid of the box: ``(x*, f*)``.
+    def maximum(self, refine: int = 12) -> tuple[np.ndarray, float]:
+        """The objective's maximum on the grid with each cell cut ``refine`` times: ``(x*, f*)``.
 
-        Denser than the simulated grid: the nominal interpolant peaks on a
-        grid node, the robust mean may peak between nodes.
+        The refined grid keeps every node (the nominal interpolant peaks on
+        one); the robust mean may peak between them.
         """
-        _, points = grid_points(self.bounds, n)
+        if isinstance(refine, bool) or not isinstance(refine, int | np.integer) or refine < 1:
+            raise ValueError(f"refine: expected an integer >= 1, got {refine!r}")
+        axes = [np.concatenate([np.linspace(a, b, refine + 1)[:-1] for a, b in zip(
+            axis[:-1], axis[1:], strict=True)] + [axis[-1:]]) for axis in self.axes]
+        mesh = np.meshgrid(*axes, indexing="ij")
+        points = np.column_stack([m.ravel() for m in mesh])
         values = self.noiseless(points)
         best = int(np.argmax(values))
         return points[best], float(values[best])

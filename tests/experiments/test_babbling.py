@@ -197,11 +197,11 @@ def test_grid_surrogate_robust_optimum_leaves_a_spike_for_a_plateau():
     X, Y = np.meshgrid(*axes, indexing="ij")
     values = np.where(np.hypot(X - 0.02, Y) <= 0.006, 0.8, 0.1)
     values[np.argmin(np.abs(axes[0] + 0.02)), 30] = 1.0
-    x_nominal, f_nominal = GridSurrogate(axes, values).maximum(61)
+    x_nominal, f_nominal = GridSurrogate(axes, values).maximum(refine=1)
     np.testing.assert_allclose(x_nominal, [-0.02, 0.0], atol=1e-12)
     assert f_nominal == pytest.approx(1.0)
     x_robust, f_robust = GridSurrogate(axes, values, placement_error=0.002,
-                                       placement_samples=8).maximum(61)
+                                       placement_samples=8).maximum(refine=1)
     assert np.hypot(x_robust[0] - 0.02, x_robust[1]) <= 0.004
     assert f_robust == pytest.approx(0.8)
 

@@ -51,7 +51,7 @@ def test_surrogate_tables_judge_each_objective_against_its_own_optimum(bench):
     grids = {"bump": _bump_grid(61)}  # 1 mm cells: the interpolant is within 1e-3
     tables = bench.surrogate_tables(grids, seeds=[0, 1], n_trials=30, noise=0.01,
                                     placement_error=0.004, placement_samples=5,
-                                    methods=("bo", "random"), dense=61)
+                                    methods=("bo", "random"), refine=2)
     nominal, robust = tables["nominal"]["bump"], tables["robust"]["bump"]
     # Nominal optimum: the bump's top (a grid node); robust: the same place,
     # lower by the bump's curvature over the 4 mm disc (mean r^2 = e^2 / 2).
