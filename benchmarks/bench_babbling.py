@@ -57,6 +57,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses as dc
+import hashlib
 import json
 import math
 import multiprocessing
@@ -94,6 +95,7 @@ from handle_drake.experiments.report import (  # noqa: E402
     _table3_spec,
 )
 from handle_drake.learning.bayesopt import (  # noqa: E402
+    BO_DEFAULTS_VERSION,
     _derived_seed,
     make_optimizer,
     v1_options,
@@ -207,14 +209,33 @@ def surrogate_run(surrogate: GridSurrogate, method: str, seed: int, n_trials: in
                 wall_time_s=time.perf_counter() - start)
 
 
-def _surrogate_job(surrogate, method, seed, n_trials, target):
-    return surrogate_run(surrogate, method, seed, n_trials, target)
+def _surrogate_job(surrogate, method, seed, n_trials, target, cache=None):
+    """One surrogate run, read back from ``cache`` (JSON) when it holds it."""
+    if cache is not None and cache.exists():
+        return json.loads(cache.read_text())
+    run = surrogate_run(surrogate, method, seed, n_trials, target)
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_suffix(".tmp")
+        tmp.write_text(json.dumps(run))
+        os.replace(tmp, cache)
+    return run
+
+
+def _surrogate_key(surrogate: GridSurrogate, *settings) -> str:
+    """What a surrogate run depends on: the grid, noise, stencil and the run's settings."""
+    digest = hashlib.sha1(json.dumps([surrogate.noise, surrogate.stencil.tolist(),
+                                      *settings]).encode())
+    for axis in surrogate.axes:
+        digest.update(axis.tobytes())
+    digest.update(surrogate.values.tobytes())
+    return digest.hexdigest()[:12]
 
 
 def surrogate_tables(grids: dict, *, seeds, n_trials: int, noise: float,
                      placement_error: float = 0.0, placement_samples: int = 5,
                      methods=SURROGATE_METHODS, workers: int = 1, refine: int = 12,
-                     objectives=("nominal", "robust")) -> dict:
+                     objectives=("nominal", "robust"), cache_dir=None) -> dict:
     """Trials to within 5 / 10 / 20 % of the optimum per object, method and objective.
 
     ``grids``: object -> ``(axes, values)`` of its simulated nominal grid.
@@ -225,7 +246,8 @@ def surrogate_tables(grids: dict, *, seeds, n_trials: int, noise: float,
     value at the robust optimum and the nominal loss ``1 - that / nominal f*``.
     The optimisers run on the ``objectives`` named (the other's optimum is
     still given). Runs go to a spawn pool of ``workers`` processes (the
-    numbers do not depend on it).
+    numbers do not depend on it); with ``cache_dir`` each run is kept there
+    as JSON and read back on the next call (an interrupted table resumes).
     """
     stencils = {"nominal": {}}
     if placement_error > 0:
@@ -236,18 +258,25 @@ def surrogate_tables(grids: dict, *, seeds, n_trials: int, noise: float,
     optima = {key: s.maximum(refine) for key, s in surrogates.items()}
     jobs = [(key, method, seed) for key in surrogates if key[0] in objectives
             for method in methods for seed in seeds]
+
+    def cache(key, method, seed):
+        if cache_dir is None:
+            return None
+        tag = _surrogate_key(surrogates[key], method, seed, n_trials, optima[key][1],
+                             min(FRACTIONS), BO_DEFAULTS_VERSION)
+        return Path(cache_dir) / f"{key[1]}-{key[0]}-{method}-seed{seed}-{tag}.json"
+
     runs = {}
     pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                 initializer=pin_blas) if workers > 1 else None)
     try:
         if pool is None:
-            for key, method, seed in jobs:
-                runs[key, method, seed] = surrogate_run(surrogates[key], method, seed, n_trials,
-                                                        optima[key][1])
+            for job in jobs:
+                runs[job] = _surrogate_job(surrogates[job[0]], *job[1:], n_trials,
+                                           optima[job[0]][1], cache(*job))
         else:
-            futures = {pool.submit(_surrogate_job, surrogates[key], method, seed, n_trials,
-                                   optima[key][1]): (key, method, seed)
-                       for key, method, seed in jobs}
+            futures = {pool.submit(_surrogate_job, surrogates[job[0]], *job[1:], n_trials,
+                                   optima[job[0]][1], cache(*job)): job for job in jobs}
             for i, future in enumerate(as_completed(futures), 1):
                 runs[futures[future]] = future.result()
                 if i % 20 == 0 or i == len(jobs):
@@ -359,7 +388,8 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
     start = time.perf_counter()
     tables = surrogate_tables(grids, seeds=seeds, n_trials=settings.trials, noise=settings.noise,
                               methods=methods, workers=settings.workers, **robust,
-                              objectives=("robust",) if args.robust_only else ("nominal", "robust"))
+                              objectives=("robust",) if args.robust_only else ("nominal", "robust"),
+                              cache_dir=out / "surrogate_runs")
     timings["surrogate_runs_s"] = time.perf_counter() - start
     # Simulated check points: both optima and a few Sobol points of the box.
     points = {}

@@ -47,11 +47,16 @@ def test_a_surrogate_run_sees_the_simulated_runs_noise_and_stops_within_5_percen
         assert math.isfinite(hits[0])
 
 
-def test_surrogate_tables_judge_each_objective_against_its_own_optimum(bench):
+def test_surrogate_tables_judge_each_objective_against_its_own_optimum(bench, tmp_path,
+                                                                      monkeypatch):
     grids = {"bump": _bump_grid(61)}  # 1 mm cells: the interpolant is within 1e-3
-    tables = bench.surrogate_tables(grids, seeds=[0, 1], n_trials=30, noise=0.01,
-                                    placement_error=0.004, placement_samples=5,
-                                    methods=("bo", "random"), refine=2)
+    settings = dict(seeds=[0, 1], n_trials=30, noise=0.01, placement_error=0.004,
+                    placement_samples=5, methods=("bo", "random"), refine=2,
+                    cache_dir=tmp_path)
+    tables = bench.surrogate_tables(grids, **settings)
+    # Every run is cached: the same table again runs nothing.
+    monkeypatch.setattr(bench, "surrogate_run", lambda *a, **k: pytest.fail("not cached"))
+    assert bench.surrogate_tables(grids, **settings) == tables
     nominal, robust = tables["nominal"]["bump"], tables["robust"]["bump"]
     # Nominal optimum: the bump's top (a grid node); robust: the same place,
     # lower by the bump's curvature over the 4 mm disc (mean r^2 = e^2 / 2).
