@@ -77,6 +77,7 @@ import numpy as np  # noqa: E402
 
 from handle_drake.experiments.babbling import (  # noqa: E402
     FRACTIONS,
+    CachedTrial,
     GridSurrogate,
     _config_key,
     _grid_chunk,
@@ -323,37 +324,59 @@ def bo_verdicts(entry: dict) -> dict:
 
 
 def validate_surrogate(configs: dict, grids: dict, points: dict, *, placement_error: float,
-                       placement_samples: int, workers: int = 1) -> dict:
+                       placement_samples: int, workers: int = 1, cache_dir=None) -> dict:
     """Simulated trials against the surrogate at ``points[kind]`` (n, 2) per object.
 
     Nominal: one trial per point against the interpolant; robust (with
     ``placement_error`` > 0): the robust trial (``placement_samples``
     simulations) against the surrogate's stencil mean. Returns per object the
-    points, both values and the absolute errors.
+    points, both values and the absolute errors. With ``cache_dir`` each
+    simulated value is kept (keyed by the trial's config, simulation code
+    included, and the point) and read back.
     """
     jobs = {}
     for kind, X in points.items():
-        jobs[kind, "nominal"] = (configs[kind], X)
+        jobs[kind, "nominal"] = (configs[kind], np.asarray(X, dtype=float))
         if placement_error > 0:
             jobs[kind, "robust"] = (dc.replace(configs[kind], placement_error=placement_error,
-                                               placement_samples=placement_samples), X)
+                                               placement_samples=placement_samples),
+                                    np.asarray(X, dtype=float))
+
+    def cache(config, x):
+        if cache_dir is None:
+            return None
+        tag = hashlib.sha1((_config_key(config) + x.tobytes().hex()).encode()).hexdigest()[:12]
+        return Path(cache_dir) / f"{CachedTrial(config).name}-{tag}.json"
+
+    simulated = {key: np.full(len(X), np.nan) for key, (_, X) in jobs.items()}
+    todo = []
+    for key, (config, X) in jobs.items():
+        for i, x in enumerate(X):
+            path = cache(config, x)
+            if path is not None and path.exists():
+                simulated[key][i] = json.loads(path.read_text())["metric"]
+            else:
+                todo.append((key, i))
     pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                initializer=pin_blas) if workers > 1 else None)
-    simulated = {}
+                                initializer=pin_blas) if workers > 1 and todo else None)
     try:
         if pool is None:
-            simulated = {key: _grid_chunk(config, X) for key, (config, X) in jobs.items()}
-        else:
-            # One point per job: the robust ones are K times dearer.
-            futures = {pool.submit(_grid_chunk, config, X[i:i + 1]): (key, i)
-                       for key, (config, X) in jobs.items() for i in range(len(X))}
+            for key, i in todo:
+                simulated[key][i] = _grid_chunk(jobs[key][0], jobs[key][1][i:i + 1])[0]
+        else:  # one point per job: the robust ones are K times dearer
+            futures = {pool.submit(_grid_chunk, jobs[key][0], jobs[key][1][i:i + 1]): (key, i)
+                       for key, i in todo}
             for future in as_completed(futures):
                 key, i = futures[future]
-                simulated.setdefault(key, np.full(len(jobs[key][1]), np.nan))[i] = \
-                    future.result()[0]
+                simulated[key][i] = future.result()[0]
     finally:
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+    for key, i in todo:
+        path = cache(jobs[key][0], jobs[key][1][i])
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(dict(metric=float(simulated[key][i]))))
     out = {}
     for (kind, name), values in simulated.items():
         robust = (dict(placement_error=placement_error, placement_samples=placement_samples)
@@ -401,7 +424,8 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
             X += qmc.scale(sobol, bounds[:, 0], bounds[:, 1]).tolist()
         points[kind] = np.array(X)
     start = time.perf_counter()
-    validation = validate_surrogate(configs, grids, points, workers=settings.workers, **robust)
+    validation = validate_surrogate(configs, grids, points, workers=settings.workers, **robust,
+                                    cache_dir=out / "validation")
     timings["validation_s"] = time.perf_counter() - start
 
     budget = settings.trials
