@@ -81,3 +81,38 @@ def test_bo_verdicts_compare_medians_and_reached_seeds(bench):
     entry = dict(bo=summary(math.inf, 4), random=summary(math.inf, 2),
                  gp_minimize=summary(30.0, 8))
     assert bench.bo_verdicts(entry) == dict(vs_random="ahead", vs_gp_minimize="behind")
+
+
+def test_validation_compares_simulated_trials_with_the_surrogate_and_caches_them(
+        bench, tmp_path, monkeypatch):
+    from handle_drake.experiments.grasp_trial import GraspTrialConfig, placement_stencil
+
+    def simulated(x, y):  # a "simulation" that is not bilinear: the interpolant errs
+        return 0.5 + 40.0 * x * x + 10.0 * y
+
+    def fake_trials(config, points):
+        calls.append((config.placement_samples, len(points)))
+        stencil = placement_stencil(config.placement_error, config.placement_samples)
+        return np.array([np.mean([simulated(*(x + s)) for s in stencil]) for x in points])
+
+    calls = []
+    monkeypatch.setattr(bench, "_grid_chunk", fake_trials)
+    axes = [np.linspace(-0.03, 0.03, 7)] * 2
+    X, Y = np.meshgrid(*axes, indexing="ij")
+    grids = {"sphere": (axes, simulated(X, Y))}
+    configs = {"sphere": GraspTrialConfig(object="sphere")}
+    points = {"sphere": np.array([[0.0, 0.0], [0.005, 0.001]])}
+    result = bench.validate_surrogate(configs, grids, points, placement_error=0.002,
+                                      placement_samples=5, cache_dir=tmp_path)["sphere"]
+    # On a node the interpolant is exact; half-way between nodes 1 cm apart it
+    # overestimates 40 x^2 by 40 * (0.005)^2 (the chord over the parabola).
+    assert result["nominal"]["abs_error"] == pytest.approx([0.0, 40.0 * 0.005 ** 2], abs=1e-12)
+    robust = GridSurrogate(axes, simulated(X, Y), placement_error=0.002, placement_samples=5)
+    np.testing.assert_allclose(result["robust"]["surrogate"], robust.noiseless(points["sphere"]),
+                               atol=1e-12)
+    assert result["robust"]["max_abs_error"] > 0
+    assert sorted(calls) == [(1, 1), (1, 1), (5, 1), (5, 1)]  # one point per simulation job
+    calls.clear()
+    again = bench.validate_surrogate(configs, grids, points, placement_error=0.002,
+                                     placement_samples=5, cache_dir=tmp_path)["sphere"]
+    assert calls == [] and again == result
