@@ -9,7 +9,11 @@ runs once per round, and the overhead is the median over rounds of the
 per-round ratio (with / without), so the machine's drift cancels. Both the wall
 time and the process CPU time are measured; the ratio is judged on CPU time
 (the simulation is single-threaded, and on a shared machine the wall time
-also counts the other processes' turns on the cores).
+also counts the other processes' turns on the cores). On a loaded machine
+the CPU time of one run varies by +-20 % too (caches and cores shared with
+other processes), so the table also gives the ratio of the least-disturbed
+runs (the smallest CPU time of each case, as ``timeit`` advises); the target
+is judged on both.
 
 Target (issue 11): at most 5 % slower than the station without it.
 
@@ -67,6 +71,7 @@ def bench(repeats: int) -> list[dict]:
                      "realtime_factor": TRIAL_SECONDS / statistics.median(walls[name]),
                      "ratio_to_floor_median": statistics.median(ratios),
                      "ratio_to_floor_range": [min(ratios), max(ratios)],
+                     "ratio_of_fastest_runs": min(cpus[name]) / min(cpu_floor),
                      "wall_ratio_to_floor_median": statistics.median(wall_ratios)})
     return rows
 
@@ -84,15 +89,17 @@ def main(argv=None) -> int:
     rows = bench(repeats)
     print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated at 1 ms, {repeats} rounds")
     print(f"{'case':<26}{'wall (s)':>10}{'CPU (s)':>9}{'wall ratio':>12}{'CPU ratio':>11}"
-          f"{'CPU range':>16}")
+          f"{'CPU range':>16}{'fastest ratio':>15}")
     for r in rows:
         lo, hi = r["ratio_to_floor_range"]
         print(f"{r['case']:<26}{r['wall_s_median']:>10.2f}{r['cpu_s_median']:>9.2f}"
               f"{r['wall_ratio_to_floor_median']:>12.3f}{r['ratio_to_floor_median']:>11.3f}"
-              f"{f'{lo:.3f}-{hi:.3f}':>16}")
+              f"{f'{lo:.3f}-{hi:.3f}':>16}{r['ratio_of_fastest_runs']:>15.3f}")
     worst = max(r["ratio_to_floor_median"] for r in rows[1:3])
+    fastest = max(r["ratio_of_fastest_runs"] for r in rows[1:3])
     print(f"device sensors: at most {100 * (worst - 1):+.1f} % CPU time against the station "
-          f"without (target <= +5 %)")
+          f"without (median of paired rounds), {100 * (fastest - 1):+.1f} % (fastest runs); "
+          f"target <= +5 %")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"trial_seconds": TRIAL_SECONDS, "repeats": repeats,
                                     "rows": rows, "target_ratio": 1.05}, indent=2))

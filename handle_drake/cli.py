@@ -70,7 +70,16 @@ def _cmd_simulate(args) -> int:
         from handle_drake.instruments.station import INSTRUMENT_LOG
 
         log = DEFAULT_LOG + INSTRUMENT_LOG
-    runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
+    # A MIDI controller model on the table (simulation): a receiver counts what its MIDI
+    # said, as a learner would be told (the experiments' runner; a script drives the hand).
+    midi = (scenario.midi_controller is not None and not args.hardware
+            and scenario.controller is None)
+    if midi:
+        from handle_drake.midi.experiments import MidiScenarioRunner
+
+        runner = MidiScenarioRunner(scenario, meshcat, log=log)
+    else:
+        runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
           f"({result.realtime_factor:.1f}x real time)")
@@ -91,6 +100,10 @@ def _cmd_simulate(args) -> int:
             X_WO = runner.station.GetOutputPort("object.pose").Eval(
                 runner.station.GetMyContextFromRoot(runner.context))
         print(describe_instruments(scenario, runner.harness.logs(), X_WO))
+    if midi:
+        from handle_drake.midi.experiments import describe_midi
+
+        print(describe_midi(runner.midi_result(result.wall_time), runner.mapping))
     if args.quality:
         value, closure, contacts = runner.grasp_quality()
         print(f"grasp quality (BW metric, soft finger): {value:+.4f} "

@@ -34,6 +34,7 @@ from handle_drake.run import ScenarioRunner
 __all__ = [
     "MidiRunResult",
     "MidiScenarioRunner",
+    "describe_midi",
     "fader_push_scenario",
     "jog_pinch_scenario",
     "run_midi_scenario",
@@ -247,11 +248,14 @@ class MidiScenarioRunner(ScenarioRunner):
 
     LOG = DEFAULT_LOG + ("midi_controller.control_positions", "control_values")
 
-    def __init__(self, scenario, meshcat=None):
+    def __init__(self, scenario, meshcat=None, log=()):
         if scenario.midi_controller is None:
             raise ValueError("scenario.midi_controller: this experiment needs a MIDI controller")
+        if scenario.controller is not None:
+            raise ValueError("scenario.controller: a MIDI experiment runs the scenario's script "
+                             "(its receiver takes the controller's place); remove the controller")
         self.mapping = LoadMidiMapping(scenario.midi_controller.mapping or None)
-        super().__init__(scenario, meshcat, log=self.LOG)
+        super().__init__(scenario, meshcat, log=tuple(dict.fromkeys(self.LOG + tuple(log))))
 
     def add_driver(self, builder, station):
         from handle_drake.midi.systems import MidiReceiver
@@ -267,7 +271,10 @@ class MidiScenarioRunner(ScenarioRunner):
         """Resets, simulates the scenario's duration and returns what MIDI reported."""
         duration = self.scenario.simulation_duration
         self.reset()
-        wall = self.harness.advance(duration, html)
+        return self.midi_result(self.harness.advance(duration, html))
+
+    def midi_result(self, wall_time: float) -> MidiRunResult:
+        """What MIDI reported over the last run (after :meth:`run_midi` or ``run``)."""
         logs = self.harness.logs()
         positions = logs["midi_controller.control_positions"]
         midi = logs["control_values"]
@@ -282,8 +289,45 @@ class MidiScenarioRunner(ScenarioRunner):
             midi_names=receiver.control_names,
             counts=receiver.midi_counts(self.harness.controller_context()),
             ticks_per_turn=self.mapping.jog_ticks_per_turn,
-            wall_time=wall,
+            wall_time=wall_time,
         )
+
+
+def describe_midi(result: MidiRunResult, mapping=None) -> str:
+    """What the controller's MIDI said over a run against what its controls did, for
+    ``handle-drake simulate``: per control that moved or sent anything, its true
+    change (a fader's position and the value it gives; a knob's or the jog's turn in
+    degrees and ticks) and what MIDI reported (the last fader value, the net ticks,
+    the presses of a button). ``mapping``: the run's (default: the shipped one)."""
+    layout = {c.name: c for c in control_layout(_geometry())}
+    knob_ticks = (mapping or LoadMidiMapping()).knob_ticks_per_turn
+    counts = result.counts
+    lines = [f"MIDI controller: {counts['accepted']} messages accepted, "
+             f"{counts['rejected']} ignored"]
+    for name in result.midi_names:
+        if name not in result.control_names:
+            continue
+        control, s, midi = layout[name], result.position(name), result.midi(name)
+        change = float(s[-1] - s[0])
+        if control.kind in ("knob", "jog"):
+            n = result.ticks_per_turn if control.kind == "jog" else knob_ticks
+            ticks = change * n / (2 * math.pi)
+            if abs(ticks) < 0.5 and midi[-1] == 0:
+                continue
+            lines.append(f"  {name:8s} turned {math.degrees(change):+7.1f} deg "
+                         f"({ticks:+.2f} ticks at {n}/turn); MIDI net ticks {int(midi[-1]):+d}")
+        elif control.kind == "fader":
+            if midi[-1] < 0 and abs(change) < 1e-4:
+                continue
+            sent = str(int(midi[-1])) if midi[-1] >= 0 else "none sent"
+            lines.append(f"  {name:8s} at {s[-1] * 1e3:5.1f} of {control.travel * 1e3:.0f} mm "
+                         f"(value {fader_value(float(s[-1]), control.travel)}); MIDI value "
+                         f"{sent}")
+        elif midi[-1] > 0:
+            lines.append(f"  {name:8s} pressed {int(midi[-1])} time(s) (MIDI)")
+    if len(lines) == 1:
+        lines.append("  no control moved")
+    return "\n".join(lines)
 
 
 def run_midi_scenario(scenario, meshcat=None, html: str | Path | None = None) -> MidiRunResult:

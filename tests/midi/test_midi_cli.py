@@ -139,3 +139,20 @@ def test_monitor_prints_what_the_device_reports(monkeypatch, capsys):
                          "messages: 4 accepted, 2 ignored (sysex 1, unknown_channel 1)"]
     assert host.closed
     assert main(["midi", "monitor", "--duration", "0"]) == 2
+
+
+def test_simulate_reports_what_the_controller_midi_said(capsys):
+    """``simulate`` of a MIDI scenario: a fader pushed 1 s into the push reads, through
+    MIDI, the value its cap position gives (round(127 s / travel), within one count:
+    the receiver reads the scan before)."""
+    assert main(["simulate", str(diagrams_dir() / "midi_fader_push.yaml"),
+                 "--duration", "1.0"]) == 0
+    out = capsys.readouterr().out
+    line = re.search(r"fader5 +at +([\d.]+) of (\d+) mm \(value (\d+)\); MIDI value (\d+)", out)
+    assert line, out
+    position, travel, value, midi = (float(line[1]), float(line[2]), int(line[3]), int(line[4]))
+    assert position > 2.0  # mm: the fingertip moved the cap
+    assert abs(value - 127 * position / travel) <= 0.5 + 127 * 0.05 / travel  # printed 0.1 mm
+    assert abs(midi - value) <= 1
+    accepted = int(re.search(r"MIDI controller: (\d+) messages accepted, 0 ignored", out)[1])
+    assert accepted >= midi  # a message per count the cap passed (at least)

@@ -4,6 +4,7 @@ The scenarios are the planned files in diagrams/ (``handle-drake midi
 write-scenarios`` writes them); the jog run is cut after the back-turn.
 """
 
+import dataclasses as dc
 import math
 
 import numpy as np
@@ -58,4 +59,8 @@ def test_experiment_arguments_are_checked():
         fader_push_scenario(push=0.5)
     with pytest.raises(ValueError, match="midi_controller"):
         run_midi_scenario(LoadScenario(data="object: null"))
+    from handle_drake.scenario import GuardedGraspController
+
+    with pytest.raises(ValueError, match="scenario.controller"):  # the receiver takes its place
+        run_midi_scenario(dc.replace(fader_push_scenario(), controller=GuardedGraspController()))
     assert math.isfinite(fader_push_scenario().simulation_duration)
