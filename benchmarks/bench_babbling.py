@@ -476,7 +476,9 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
     results = RESULTS.with_name(
         f"babbling_surrogate{settings.grid}"
         + (f"_robust{args.placement_error * 1e3:g}mm{args.placement_samples}"
-           if args.placement_error else "") + ".json")
+           if args.placement_error else "")
+        # A subset of the objects does not overwrite the whole table.
+        + ("" if tuple(objects) == OBJECT_ORDER else "_" + "+".join(objects)) + ".json")
     results.parent.mkdir(parents=True, exist_ok=True)
     results.write_text(json.dumps(dict(
         surrogate=True, robust=robust, settings=dc.asdict(settings), seeds=seeds,
@@ -547,6 +549,9 @@ def main(argv=None) -> int:
         parser.error(f"--validate-points: expected an integer >= 0, got {args.validate_points}")
     if args.robust_only and not (args.surrogate and args.placement_error):
         parser.error("--robust-only: needs --surrogate and --placement-error")
+    if args.surrogate and args.executor.kind != "local":
+        parser.error(f"--surrogate: runs on this machine only (--executor local), got "
+                     f"--executor {args.executor.kind}")
     if args.surrogate:
         return surrogate_main(args, settings, objects, out)
     robust = dict(placement_error=args.placement_error,
