@@ -32,6 +32,22 @@ them against the robust grid's maximum, and adds to the table how much the
 robust optimum loses in nominal metric against the nominal grid's maximum
 (``nominal loss``). Writes ``babbling_robust<M mm>mm<K>.json``.
 
+Grid surrogate (``--surrogate``): every trial is read off the object's
+simulated ``--grid`` instead of simulated (``babbling.GridSurrogate``: the
+grid's interpolant; with ``--placement-error`` also the robust objective, the
+mean of the interpolant over the same placement stencil), with the same metric
+noise and per-trial noise seeds as simulated runs. A robust run of 100 trials
+on one object costs 100 K simulations; the surrogate needs one grid of grid^2
+simulations per object, shared by every optimiser, seed and objective. It
+prints the nominal table and the robust one side by side (trials to within
+5 / 10 / 20 % of the surrogate's maximum on the grid refined 12x, median of
+``--seeds`` for BO, random search and gp_minimize alike) and how much the
+robust optimum loses in nominal metric, and checks the surrogate against
+simulated trials at the nominal and robust optima and ``--validate-points``
+Sobol points per object (nominal and robust, the absolute error). Each run
+stops at its first trial within 5 % (the counts are then known). Writes
+``babbling_surrogate<grid>[_robust<M mm>mm<K>].json``.
+
 Run: ``python benchmarks/bench_babbling.py [--quick]``; writes
 ``benchmarks/results/babbling.json``.
 """
@@ -41,6 +57,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses as dc
+import hashlib
 import json
 import math
 import multiprocessing
@@ -60,7 +77,10 @@ import numpy as np  # noqa: E402
 
 from handle_drake.experiments.babbling import (  # noqa: E402
     FRACTIONS,
+    CachedTrial,
+    GridSurrogate,
     _config_key,
+    _grid_chunk,
     _trial,
     grid_values,
     run_batch,
@@ -75,7 +95,12 @@ from handle_drake.experiments.report import (  # noqa: E402
     _random_spec,
     _table3_spec,
 )
-from handle_drake.learning.bayesopt import _derived_seed, v1_options  # noqa: E402
+from handle_drake.learning.bayesopt import (  # noqa: E402
+    BO_DEFAULTS_VERSION,
+    _derived_seed,
+    make_optimizer,
+    v1_options,
+)
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "babbling.json"
@@ -138,6 +163,333 @@ def _fmt(value, budget):
     return f">{budget}" if not math.isfinite(value) else f"{value:g}"
 
 
+# ------------------------------------------------------------------ surrogate
+SURROGATE_METHODS = ("bo", "random", "gp_minimize")
+
+
+def surrogate_run(surrogate: GridSurrogate, method: str, seed: int, n_trials: int,
+                  target: float | None = None) -> dict:
+    """One run of ``method`` (``SURROGATE_METHODS``) on a grid surrogate, in this process.
+
+    Trial ``k`` observes ``surrogate(x, seed=_derived_seed(seed, k))``: the
+    noise a logged run (``run_experiment``) or ``gp_minimize_run`` of simulated
+    trials with this seed would add. BO and random search are the engine's
+    optimisers with their defaults; gp_minimize is scikit-optimize's with
+    its defaults, minimising ``-metric``. With ``target`` the run stops after
+    its first trial whose noiseless value is within ``min(FRACTIONS)`` of it:
+    every count of the table is known by then.
+    """
+    if method not in SURROGATE_METHODS:
+        raise ValueError(f"method: expected one of {SURROGATE_METHODS}, got {method!r}")
+    X, observed, noiseless = [], [], []
+    goal = math.inf if target is None else target - min(FRACTIONS) * abs(target)
+
+    def trial(x) -> float:
+        x = np.asarray(x, dtype=float)
+        y = surrogate(x, seed=_derived_seed(seed, len(observed)))
+        X.append(x.tolist())
+        observed.append(y)
+        noiseless.append(surrogate.noiseless(x))
+        return y
+
+    start = time.perf_counter()
+    if method == "gp_minimize":
+        from skopt import gp_minimize
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # skopt warns about repeated points near the end
+            gp_minimize(lambda x: -trial(x), [tuple(map(float, b)) for b in surrogate.bounds],
+                        n_calls=n_trials, random_state=seed,
+                        callback=lambda _: noiseless[-1] >= goal)
+    else:
+        optimizer = make_optimizer(method, surrogate.bounds, seed)
+        while len(observed) < n_trials and not (noiseless and noiseless[-1] >= goal):
+            x = optimizer.ask()
+            optimizer.tell(x, trial(x))
+    return dict(X=X, observed=observed, noiseless=noiseless,
+                wall_time_s=time.perf_counter() - start)
+
+
+def _surrogate_job(surrogate, method, seed, n_trials, target, cache=None):
+    """One surrogate run, read back from ``cache`` (JSON) when it holds it."""
+    if cache is not None and cache.exists():
+        return json.loads(cache.read_text())
+    run = surrogate_run(surrogate, method, seed, n_trials, target)
+    if cache is not None:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_suffix(".tmp")
+        tmp.write_text(json.dumps(run))
+        os.replace(tmp, cache)
+    return run
+
+
+def _surrogate_key(surrogate: GridSurrogate, *settings) -> str:
+    """What a surrogate run depends on: the grid, noise, stencil and the run's settings."""
+    digest = hashlib.sha1(json.dumps([surrogate.noise, surrogate.stencil.tolist(),
+                                      *settings]).encode())
+    for axis in surrogate.axes:
+        digest.update(axis.tobytes())
+    digest.update(surrogate.values.tobytes())
+    return digest.hexdigest()[:12]
+
+
+def surrogate_tables(grids: dict, *, seeds, n_trials: int, noise: float,
+                     placement_error: float = 0.0, placement_samples: int = 5,
+                     methods=SURROGATE_METHODS, workers: int = 1, refine: int = 12,
+                     objectives=("nominal", "robust"), cache_dir=None) -> dict:
+    """Trials to within 5 / 10 / 20 % of the optimum per object, method and objective.
+
+    ``grids``: object -> ``(axes, values)`` of its simulated nominal grid.
+    Objectives: ``"nominal"`` (the grid's interpolant) and, with
+    ``placement_error`` > 0, ``"robust"`` (its mean over the placement
+    stencil). ``f*`` is each objective's maximum on the grid with every cell
+    cut ``refine`` times (``GridSurrogate.maximum``); the robust entry also gives the nominal
+    value at the robust optimum and the nominal loss ``1 - that / nominal f*``.
+    The optimisers run on the ``objectives`` named (the other's optimum is
+    still given). Runs go to a spawn pool of ``workers`` processes (the
+    numbers do not depend on it); with ``cache_dir`` each run is kept there
+    as JSON and read back on the next call (an interrupted table resumes).
+    """
+    stencils = {"nominal": {}}
+    if placement_error > 0:
+        stencils["robust"] = dict(placement_error=placement_error,
+                                  placement_samples=placement_samples)
+    surrogates = {(name, kind): GridSurrogate(*grids[kind], noise=noise, **robust)
+                  for name, robust in stencils.items() for kind in grids}
+    optima = {key: s.maximum(refine) for key, s in surrogates.items()}
+    jobs = [(key, method, seed) for key in surrogates if key[0] in objectives
+            for method in methods for seed in seeds]
+
+    def cache(key, method, seed):
+        if cache_dir is None:
+            return None
+        tag = _surrogate_key(surrogates[key], method, seed, n_trials, optima[key][1],
+                             min(FRACTIONS), BO_DEFAULTS_VERSION)
+        return Path(cache_dir) / f"{key[1]}-{key[0]}-{method}-seed{seed}-{tag}.json"
+
+    runs = {}
+    pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                initializer=pin_blas) if workers > 1 else None)
+    try:
+        if pool is None:
+            for job in jobs:
+                runs[job] = _surrogate_job(surrogates[job[0]], *job[1:], n_trials,
+                                           optima[job[0]][1], cache(*job))
+        else:
+            futures = {pool.submit(_surrogate_job, surrogates[job[0]], *job[1:], n_trials,
+                                   optima[job[0]][1], cache(*job)): job for job in jobs}
+            for i, future in enumerate(as_completed(futures), 1):
+                runs[futures[future]] = future.result()
+                if i % 20 == 0 or i == len(jobs):
+                    print(f"surrogate runs {i}/{len(jobs)}", flush=True)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    tables = {}
+    for name, kind in surrogates:
+        x_star, f_star = optima[name, kind]
+        entry = dict(f_star=f_star, x_star=x_star.tolist())
+        if name == "robust":
+            nominal = surrogates["nominal", kind]
+            entry["nominal_at_optimum"] = nominal.noiseless(x_star)
+            f_nominal = optima["nominal", kind][1]
+            entry["nominal_loss"] = (1.0 - entry["nominal_at_optimum"] / f_nominal
+                                     if f_nominal > 0 else math.nan)
+        for method in methods if name in objectives else ():
+            histories = [runs[(name, kind), method, seed] for seed in seeds]
+            entry[method] = _summary([trials_to_within(h["noiseless"], f_star)
+                                      for h in histories])
+            entry[method]["overhead_per_trial_s"] = float(np.mean(
+                [h["wall_time_s"] / len(h["noiseless"]) for h in histories]))
+        tables.setdefault(name, {})[kind] = entry
+    return tables
+
+
+def bo_verdicts(entry: dict) -> dict:
+    """BO against random search and gp_minimize on one object: trials to within 5 %.
+
+    "ahead": a smaller median; with both medians past the budget, more
+    seeds that got there. "level": the same median (or, past the budget, as
+    many seeds). Returns ``{"vs_random": ..., "vs_gp_minimize": ...}`` with
+    values ``"ahead"``, ``"level"`` or ``"behind"``.
+    """
+    def compare(ours, theirs):
+        a, b = ours["median"][0], theirs["median"][0]
+        if a == b == math.inf:
+            a, b = -ours["reached"][0], -theirs["reached"][0]
+        return "ahead" if a < b else "level" if a == b else "behind"
+
+    return {f"vs_{m}": compare(entry["bo"], entry[m]) for m in ("random", "gp_minimize")
+            if m in entry}
+
+
+def validate_surrogate(configs: dict, grids: dict, points: dict, *, placement_error: float,
+                       placement_samples: int, workers: int = 1, cache_dir=None) -> dict:
+    """Simulated trials against the surrogate at ``points[kind]`` (n, 2) per object.
+
+    Nominal: one trial per point against the interpolant; robust (with
+    ``placement_error`` > 0): the robust trial (``placement_samples``
+    simulations) against the surrogate's stencil mean. Returns per object the
+    points, both values and the absolute errors. With ``cache_dir`` each
+    simulated value is kept (keyed by the trial's config, simulation code
+    included, and the point) and read back.
+    """
+    jobs = {}
+    for kind, X in points.items():
+        jobs[kind, "nominal"] = (configs[kind], np.asarray(X, dtype=float))
+        if placement_error > 0:
+            jobs[kind, "robust"] = (dc.replace(configs[kind], placement_error=placement_error,
+                                               placement_samples=placement_samples),
+                                    np.asarray(X, dtype=float))
+
+    def cache(config, x):
+        if cache_dir is None:
+            return None
+        tag = hashlib.sha1((_config_key(config) + x.tobytes().hex()).encode()).hexdigest()[:12]
+        return Path(cache_dir) / f"{CachedTrial(config).name}-{tag}.json"
+
+    simulated = {key: np.full(len(X), np.nan) for key, (_, X) in jobs.items()}
+    todo = []
+    for key, (config, X) in jobs.items():
+        for i, x in enumerate(X):
+            path = cache(config, x)
+            if path is not None and path.exists():
+                simulated[key][i] = json.loads(path.read_text())["metric"]
+            else:
+                todo.append((key, i))
+    pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                initializer=pin_blas) if workers > 1 and todo else None)
+    try:
+        if pool is None:
+            for key, i in todo:
+                simulated[key][i] = _grid_chunk(jobs[key][0], jobs[key][1][i:i + 1])[0]
+        else:  # one point per job: the robust ones are K times dearer
+            futures = {pool.submit(_grid_chunk, jobs[key][0], jobs[key][1][i:i + 1]): (key, i)
+                       for key, i in todo}
+            for future in as_completed(futures):
+                key, i = futures[future]
+                simulated[key][i] = future.result()[0]
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+    for key, i in todo:
+        path = cache(jobs[key][0], jobs[key][1][i])
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps(dict(metric=float(simulated[key][i]))))
+    out = {}
+    for (kind, name), values in simulated.items():
+        robust = (dict(placement_error=placement_error, placement_samples=placement_samples)
+                  if name == "robust" else {})
+        predicted = GridSurrogate(*grids[kind], **robust).noiseless(points[kind])
+        error = np.abs(np.asarray(values) - predicted)
+        out.setdefault(kind, dict(points=np.asarray(points[kind]).tolist()))[name] = dict(
+            simulated=np.asarray(values).tolist(), surrogate=predicted.tolist(),
+            abs_error=error.tolist(), max_abs_error=float(error.max()),
+            mean_abs_error=float(error.mean()))
+    return out
+
+
+def surrogate_main(args, settings, objects, out: Path) -> int:
+    """``--surrogate``: the nominal and robust tables on the simulated grids' surrogates."""
+    from scipy.stats import qmc
+
+    if not args.no_v1:
+        print("(--surrogate runs bo with its current defaults only; bo_v1 is left out)")
+    if args.skopt_seeds and args.skopt_seeds != settings.seeds:
+        raise SystemExit("--skopt-seeds: --surrogate runs every method on the same --seeds")
+    methods = tuple(m for m in SURROGATE_METHODS if not (args.no_skopt and m == "gp_minimize"))
+    robust = dict(placement_error=args.placement_error,
+                  placement_samples=args.placement_samples)
+    seeds = list(range(args.seed_offset, args.seed_offset + settings.seeds))
+    configs = {kind: _offset_config(kind, 0.0) for kind in objects}
+    timings = {}
+    start = time.perf_counter()
+    grids = {kind: grid_values(configs[kind], settings.grid, out / "grids", settings.workers,
+                               progress=True) for kind in objects}
+    timings["grids_s"] = time.perf_counter() - start
+    start = time.perf_counter()
+    tables = surrogate_tables(grids, seeds=seeds, n_trials=settings.trials, noise=settings.noise,
+                              methods=methods, workers=settings.workers, **robust,
+                              objectives=("robust",) if args.robust_only else ("nominal", "robust"),
+                              cache_dir=out / "surrogate_runs")
+    timings["surrogate_runs_s"] = time.perf_counter() - start
+    # Simulated check points: both optima and a few Sobol points of the box.
+    points = {}
+    for kind in objects:
+        X = [tables[name][kind]["x_star"] for name in tables]
+        if args.validate_points:
+            bounds = GridSurrogate(*grids[kind]).bounds
+            sobol = qmc.Sobol(2, seed=7).random(args.validate_points)
+            X += qmc.scale(sobol, bounds[:, 0], bounds[:, 1]).tolist()
+        points[kind] = np.array(X)
+    start = time.perf_counter()
+    validation = validate_surrogate(configs, grids, points, workers=settings.workers, **robust,
+                                    cache_dir=out / "validation")
+    timings["validation_s"] = time.perf_counter() - start
+
+    budget = settings.trials
+    for name, table in tables.items():
+        if args.robust_only and name == "nominal":
+            continue
+        print(f"\n{name} objective on the {settings.grid}x{settings.grid} grid surrogate"
+              + (f" (mean over {args.placement_samples} placements within "
+                 f"{args.placement_error * 1e3:g} mm)" if name == "robust" else "")
+              + f": trials to within 5 / 10 % of f* (the surrogate's maximum, cells cut 12x), "
+              f"median "
+              f"of {len(seeds)} seeds from {args.seed_offset}, budget {budget}, noise std "
+              f"{settings.noise}; \"(k)\": only k seeds got there")
+        header = ["object", "f*"] + [f"{m} {p}" for m in methods for p in ("5%", "10%")]
+        header += ["BO vs random", "BO vs gp_min"] + (
+            ["nominal at x*", "nominal loss"] if name == "robust" else [])
+        header += ["|sim - surr| max"]
+        rows = []
+        for kind, entry in table.items():
+            verdict = bo_verdicts(entry)
+            entry["verdict"] = verdict
+            row = [kind, f"{entry['f_star']:.3f}"]
+            for method in methods:
+                summary = entry[method]
+                row += [_fmt(m, budget) + ("" if r == len(seeds) or not math.isfinite(m)
+                                           else f"({r})")
+                        for m, r in list(zip(summary["median"], summary["reached"],
+                                             strict=True))[:2]]
+            row += [verdict.get("vs_random", "-"), verdict.get("vs_gp_minimize", "-")]
+            if name == "robust":
+                row += [f"{entry['nominal_at_optimum']:.3f}", f"{entry['nominal_loss']:.1%}"]
+            row += [f"{validation[kind][name]['max_abs_error']:.3f}"]
+            rows.append(row)
+        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+        print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
+        for row in rows:
+            print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+        ahead_random = sum(e["verdict"]["vs_random"] == "ahead" for e in table.values())
+        level_gp = sum(e["verdict"].get("vs_gp_minimize") in ("ahead", "level")
+                       for e in table.values())
+        print(f"BO ahead of random on {ahead_random} of {len(table)}; ahead of or level with "
+              f"gp_minimize on {level_gp} of {len(table)}")
+    print("\nsurrogate against simulated trials (absolute error, per object: mean / max over "
+          f"{len(next(iter(points.values())))} points): " + "; ".join(
+              f"{kind} " + ", ".join(f"{name} {v['mean_abs_error']:.3f}/{v['max_abs_error']:.3f}"
+                                     for name, v in entry.items() if name != "points")
+              for kind, entry in validation.items()))
+    results = RESULTS.with_name(
+        f"babbling_surrogate{settings.grid}"
+        + (f"_robust{args.placement_error * 1e3:g}mm{args.placement_samples}"
+           if args.placement_error else "")
+        # A subset of the objects does not overwrite the whole table.
+        + ("" if tuple(objects) == OBJECT_ORDER else "_" + "+".join(objects)) + ".json")
+    results.parent.mkdir(parents=True, exist_ok=True)
+    results.write_text(json.dumps(dict(
+        surrogate=True, robust=robust, settings=dc.asdict(settings), seeds=seeds,
+        methods=methods, fractions=FRACTIONS, tables=tables, validation=validation,
+        timings=timings, python=sys.version.split()[0], machine=platform.machine(),
+        cpu_count=os.cpu_count(), load_average=os.getloadavg()), indent=1,
+        default=lambda v: str(v)).replace("Infinity", '"inf"'))
+    print(f"\nwritten {results}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true",
@@ -161,6 +513,14 @@ def main(argv=None) -> int:
                         help="placements per trial of the robust objective (default 5)")
     parser.add_argument("--trials", type=int, default=None, help="trials per run (100)")
     parser.add_argument("--grid", type=int, default=None, help="grid points per dimension (41)")
+    parser.add_argument("--surrogate", action="store_true",
+                        help="run the optimisers on the simulated grid's surrogate (nominal and, "
+                             "with --placement-error, robust tables side by side)")
+    parser.add_argument("--robust-only", action="store_true",
+                        help="--surrogate: run the optimisers on the robust objective only")
+    parser.add_argument("--validate-points", type=int, default=2, metavar="V",
+                        help="--surrogate: Sobol points per object simulated to check the "
+                             "surrogate, besides both optima (default 2)")
     add_executor_arguments(parser)  # grids and BO/random runs; gp_minimize stays local
     args = parser.parse_args(argv)
 
@@ -185,6 +545,15 @@ def main(argv=None) -> int:
         settings = dc.replace(settings, trials=args.trials)
     if args.grid:
         settings = dc.replace(settings, grid=args.grid)
+    if args.validate_points < 0:
+        parser.error(f"--validate-points: expected an integer >= 0, got {args.validate_points}")
+    if args.robust_only and not (args.surrogate and args.placement_error):
+        parser.error("--robust-only: needs --surrogate and --placement-error")
+    if args.surrogate and args.executor.kind != "local":
+        parser.error(f"--surrogate: runs on this machine only (--executor local), got "
+                     f"--executor {args.executor.kind}")
+    if args.surrogate:
+        return surrogate_main(args, settings, objects, out)
     robust = dict(placement_error=args.placement_error,
                   placement_samples=args.placement_samples if args.placement_error else 1)
 

@@ -17,6 +17,9 @@ The pieces the ``handle-drake report`` figures, the ``babble`` command and
 - :func:`replay_optimizer`: a fresh optimiser told the first ``k`` trials of
   a logged run, i.e. exactly the GP and EI that proposed trial ``k + 1``
   (the optimiser's state is a function of its seed and the told data only).
+- :class:`GridSurrogate`: a trial's metric read off its simulated grid (the
+  nominal or the robust objective), for sample-efficiency studies that
+  cannot afford a simulation per trial (``bench_babbling.py --surrogate``).
 
 "Within p of the global maximum" (Table 3): the first trial whose noiseless
 metric ``f(x_t)`` satisfies ``f(x_t) >= f* - p |f*|`` with ``f*`` the grid
@@ -39,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig, placement_stencil
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.bayesopt import BO_DEFAULTS_VERSION, make_optimizer
 from handle_drake.learning.cluster import LocalPool, as_executor, executor_workers
@@ -56,6 +59,7 @@ __all__ = [
     "replay_optimizer",
     "best_so_far",
     "FRACTIONS",
+    "GridSurrogate",
 ]
 
 FRACTIONS = (0.05, 0.10, 0.20)  # Table 3's columns
@@ -243,6 +247,92 @@ def _bar(total, description, enabled):
     from tqdm.auto import tqdm
 
     return tqdm(total=total, desc=description, disable=not enabled, unit="job")
+
+
+class GridSurrogate:
+    """A grasp trial's objective read off its simulated grid instead of simulated.
+
+    ``noiseless(x)``: the grid's multilinear interpolant (scipy's
+    ``RegularGridInterpolator``) at ``x``, clamped to the box (the grid covers
+    the whole search box; only the robust stencil reaches past its edges,
+    where the hand is off the object). With ``placement_error`` e > 0 and
+    ``placement_samples`` K > 1 it is the robust objective exactly as
+    :class:`GraspTrialConfig` defines it, on the interpolant: the mean over
+    ``x + placement_stencil(e, K)`` (the same sunflower points, only for the
+    offset space, whose parameters are the wrist's sideways placement).
+    ``surrogate(x, seed)`` adds the trial's metric noise as
+    :meth:`GraspTrial.evaluate` does (``noise * N(0, 1)`` from
+    ``default_rng(seed)``), so a run told these values sees what a run of
+    simulated trials with the same seeds would see, up to the interpolation.
+
+    Why: a simulated trial costs about a second on one core and a robust one
+    K of them; 7 objects x 3 optimisers x 10 seeds x 100 trials do not fit a
+    small machine, one grid per object does. The surrogate is only as fine as
+    its grid (features narrower than a cell are smoothed away): check it
+    against simulated trials (``bench_babbling.py --surrogate`` does) before
+    trusting its figures.
+    """
+
+    def __init__(self, axes, values, *, placement_error: float = 0.0,
+                 placement_samples: int = 1, noise: float = 0.0):
+        from scipy.interpolate import RegularGridInterpolator
+
+        axes = [np.asarray(a, dtype=float) for a in axes]
+        values = np.asarray(values, dtype=float)
+        if values.shape != tuple(len(a) for a in axes):
+            raise ValueError(f"values: expected shape {tuple(len(a) for a in axes)} (one value "
+                             f"per grid point), got {values.shape}")
+        if not np.all(np.isfinite(values)):
+            raise ValueError("values: expected finite metric values on every grid point")
+        if placement_error > 0 and len(axes) != 2:
+            raise ValueError(f"placement_error: the robust objective moves the wrist sideways "
+                             f"(the 2-D offset space), got a {len(axes)}-D grid")
+        # The same checks (and messages) as the simulated trial's robust objective.
+        GraspTrialConfig(noise=noise, placement_error=placement_error,
+                         placement_samples=placement_samples)
+        self.axes, self.values = axes, values
+        self.bounds = np.array([[a[0], a[-1]] for a in axes])
+        self.noise = float(noise)
+        self.placement_error, self.placement_samples = float(placement_error), placement_samples
+        self.stencil = placement_stencil(placement_error, placement_samples)
+        if len(axes) != 2:
+            self.stencil = np.zeros((1, len(axes)))
+        self._interpolant = RegularGridInterpolator(axes, values, method="linear")
+
+    def noiseless(self, X) -> np.ndarray | float:
+        """The objective at ``x`` (d,) or at each row of ``X`` (n, d)."""
+        X = np.asarray(X, dtype=float)
+        points = np.atleast_2d(X)
+        if points.shape[1] != len(self.axes):
+            raise ValueError(f"parameters: expected {len(self.axes)} values, got "
+                             f"{points.shape[1]}")
+        moved = points[:, None, :] + self.stencil[None, :, :]
+        moved = np.clip(moved, self.bounds[:, 0], self.bounds[:, 1])
+        values = self._interpolant(moved.reshape(-1, len(self.axes))).reshape(moved.shape[:2])
+        mean = values.mean(axis=1)
+        return float(mean[0]) if X.ndim == 1 else mean
+
+    def __call__(self, x, seed: int = 0) -> float:
+        value = self.noiseless(np.asarray(x, dtype=float).reshape(-1))
+        if self.noise > 0:
+            value += self.noise * np.random.default_rng(seed).standard_normal()
+        return float(value)
+
+    def maximum(self, refine: int = 12) -> tuple[np.ndarray, float]:
+        """The objective's maximum on the grid with each cell cut ``refine`` times: ``(x*, f*)``.
+
+        The refined grid keeps every node (the nominal interpolant peaks on
+        one); the robust mean may peak between them.
+        """
+        if isinstance(refine, bool) or not isinstance(refine, int | np.integer) or refine < 1:
+            raise ValueError(f"refine: expected an integer >= 1, got {refine!r}")
+        axes = [np.concatenate([np.linspace(a, b, refine + 1)[:-1] for a, b in zip(
+            axis[:-1], axis[1:], strict=True)] + [axis[-1:]]) for axis in self.axes]
+        mesh = np.meshgrid(*axes, indexing="ij")
+        points = np.column_stack([m.ravel() for m in mesh])
+        values = self.noiseless(points)
+        best = int(np.argmax(values))
+        return points[best], float(values[best])
 
 
 # ------------------------------------------------------------------- batches

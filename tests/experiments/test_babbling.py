@@ -145,3 +145,79 @@ def test_run_id_changes_with_the_trial_settings_and_simulation_code(monkeypatch)
     run_id = spec.run_id
     monkeypatch.setattr(babbling, "simulation_fingerprint", lambda: "other-code")
     assert RunSpec(config, "bo", 3, 10).run_id != run_id
+
+
+# ------------------------------------------------------------- grid surrogate
+def _sunflower(error, samples):
+    """The placement stencil written out from its definition (Vogel's pattern)."""
+    k = np.arange(samples)
+    radius = error * np.sqrt((k + 0.5) / samples)
+    angle = k * np.pi * (3.0 - np.sqrt(5.0))
+    return np.column_stack([radius * np.cos(angle), radius * np.sin(angle)])
+
+
+def test_grid_surrogate_interpolates_and_averages_over_the_placement_stencil():
+    from handle_drake.experiments.babbling import GridSurrogate
+
+    axes = [np.linspace(-0.04, 0.04, 5), np.array([-0.03, -0.01, 0.0, 0.02, 0.03])]
+    X, Y = np.meshgrid(*axes, indexing="ij")
+
+    def f(x, y):  # bilinear: the grid's interpolant is exact everywhere in the box
+        return 0.3 + 2.0 * x - 3.0 * y + 40.0 * x * y
+
+    nominal = GridSurrogate(axes, f(X, Y))
+    inside = np.random.default_rng(0).uniform([-0.04, -0.03], [0.04, 0.03], (20, 2))
+    np.testing.assert_allclose(nominal.noiseless(inside), f(*inside.T), atol=1e-12)
+    assert nominal.noiseless([0.01, 0.005]) == pytest.approx(f(0.01, 0.005), abs=1e-12)
+    # Robust: E[f(x + s)] over the stencil = f(x) + 2 mean(sx) - 3 mean(sy)
+    # + 40 (x mean(sy) + y mean(sx) + mean(sx sy)), away from the box's edges.
+    e, k = 0.004, 7
+    robust = GridSurrogate(axes, f(X, Y), placement_error=e, placement_samples=k)
+    s = _sunflower(e, k)
+    x, y = 0.012, -0.007
+    expected = f(x, y) + 2.0 * s[:, 0].mean() - 3.0 * s[:, 1].mean() + 40.0 * (
+        x * s[:, 1].mean() + y * s[:, 0].mean() + (s[:, 0] * s[:, 1]).mean())
+    assert robust.noiseless([x, y]) == pytest.approx(expected, abs=1e-12)
+    # On the box's edge the placements that fall outside read the edge's value.
+    edge = robust.noiseless([0.04, 0.0])
+    assert edge == pytest.approx(np.mean(f(np.minimum(0.04 + s[:, 0], 0.04), s[:, 1])),
+                                 abs=1e-12)
+    # Noise as the simulated trial adds it: noise * N(0, 1) from the trial's seed.
+    noisy = GridSurrogate(axes, f(X, Y), noise=0.01)
+    assert noisy([x, y], seed=5) == pytest.approx(
+        f(x, y) + 0.01 * np.random.default_rng(5).standard_normal(), abs=1e-12)
+
+
+def test_grid_surrogate_robust_optimum_leaves_a_spike_for_a_plateau():
+    from handle_drake.experiments.babbling import GridSurrogate
+
+    # A one-cell spike of 1.0 at (-0.02, 0) and a plateau of 0.8 around (0.02, 0),
+    # cells of 1 mm: the nominal maximum is the spike, the robust one (2 mm) the plateau.
+    axes = [np.linspace(-0.03, 0.03, 61)] * 2
+    X, Y = np.meshgrid(*axes, indexing="ij")
+    values = np.where(np.hypot(X - 0.02, Y) <= 0.006, 0.8, 0.1)
+    values[np.argmin(np.abs(axes[0] + 0.02)), 30] = 1.0
+    x_nominal, f_nominal = GridSurrogate(axes, values).maximum(refine=1)
+    np.testing.assert_allclose(x_nominal, [-0.02, 0.0], atol=1e-12)
+    assert f_nominal == pytest.approx(1.0)
+    x_robust, f_robust = GridSurrogate(axes, values, placement_error=0.002,
+                                       placement_samples=8).maximum(refine=1)
+    assert np.hypot(x_robust[0] - 0.02, x_robust[1]) <= 0.004
+    assert f_robust == pytest.approx(0.8)
+
+
+def test_grid_surrogate_refuses_bad_grids_and_settings():
+    from handle_drake.experiments.babbling import GridSurrogate
+
+    axes = [np.linspace(0, 1, 3), np.linspace(0, 1, 4)]
+    with pytest.raises(ValueError, match=r"values: expected shape \(3, 4\)"):
+        GridSurrogate(axes, np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="values: expected finite"):
+        GridSurrogate(axes, np.full((3, 4), np.nan))
+    with pytest.raises(ValueError, match="placement_error: the robust objective"):
+        GridSurrogate([np.linspace(0, 1, 3)], np.zeros(3), placement_error=0.002,
+                      placement_samples=5)
+    with pytest.raises(ValueError, match="placement_error and placement_samples go together"):
+        GridSurrogate(axes, np.zeros((3, 4)), placement_samples=5)
+    with pytest.raises(ValueError, match="parameters: expected 2 values"):
+        GridSurrogate(axes, np.zeros((3, 4))).noiseless([0.5])
