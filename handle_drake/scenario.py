@@ -37,8 +37,9 @@ step, point contact, the ``sap`` approximation and
 keep Drake's defaults. Drake's strict ``contact_model: hydroelastic`` is refused
 with a hint: it throws at the first contact between two geometries without
 compliant hydroelastic properties (the hands' links have none);
-``hydroelastic_with_fallback`` gives the object (and table) hydroelastic
-properties and falls back to point contact elsewhere. The old top-level keys
+``hydroelastic_with_fallback`` gives the object compliant hydroelastic
+properties (the table is rigid hydroelastic) and falls back to point contact
+elsewhere. The old top-level keys
 ``contact_model`` (``hydroelastic`` meant ``hydroelastic_with_fallback``),
 ``time_step`` and ``contact_approximation`` are still read, moved into
 ``plant_config`` with a :class:`~handle_drake.scenario_checks.ScenarioDeprecationWarning`.
