@@ -37,8 +37,9 @@ TRIAL_SECONDS = 2.0
 
 def _scenario(contact_model: str, time_step: float, approximation: str = "sap"):
     return LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO,
-                        data=f"contact_model: {contact_model}\ntime_step: {time_step}\n"
-                             f"contact_approximation: {approximation}")
+                        data=f"plant_config: {{contact_model: {contact_model}, "
+                             f"time_step: {time_step}, "
+                             f"discrete_contact_approximation: {approximation}}}")
 
 
 class _Case:

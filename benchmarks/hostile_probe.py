@@ -75,11 +75,18 @@ def probe_scenarios():
         "object: {kind: cuboid, dimensions: {depth: 0}}": "depth",
         "object: {X_WO: {translation: [1e300, 0, 0]}}": "object.X_WO",
         "object: {X_WO: {translation: [0, 0]}}": "translation",
-        "time_step: 1e300": "time_step", "time_step: 10": "time_step",
-        "time_step: 1e-9": "time_step", "time_step: 0": "time_step", "time_step: -1": "time_step",
+        **{f"plant_config: {{time_step: {v}}}": "plant_config.time_step"
+           for v in ("1e300", "10", "1e-9", "0", "-1", ".nan", "fast")},
+        "plant_config: {penetration_allowance: 0}": "penetration_allowance",
+        "plant_config: {stiction_tolerance: .inf}": "stiction_tolerance",
+        "plant_config: {sap_near_rigid_threshold: -1}": "sap_near_rigid_threshold",
+        "plant_config: {contact_surface_representation: quad}": "contact_surface_representation",
+        "plant_config: {contact_model: hydroelastic}": "hydroelastic_with_fallback",
+        "plant_config: [1, 2]": "plant_config",
+        "time_step: 10": "plant_config.time_step",  # a deprecated key: translated, then checked
         "simulation_duration: 1e300": "simulation_duration",
         "simulation_duration: .inf": "simulation_duration",
-        "time_step: 1e-5\nsimulation_duration: 3000": "steps",
+        "plant_config: {time_step: 1e-5}\nsimulation_duration: 3000": "steps",
         "visualization_period: 1e-12": "visualization_period",
         "hand: {mount: !FloatingWrist {translation_kp: -5}}": "translation_kp",
         "hand: {mount: !FloatingWrist {translation_kd: .inf}}": "translation_kd",
@@ -101,13 +108,15 @@ def probe_scenarios():
         "script: [{time: 0.5, wrist: [0, 0, 0, 0, 0, 0]}]": "wrist",
         "script: [{time: 1}, {time: 0.5}]": "time", "script: [{time: -1}]": "time",
         "script: [{time: 1e300}]": "time",
-        "time_step: 0.001\ntime_step: 0.002": "duplicate",
+        "plant_config: {time_step: 0.001, time_step: 0.002}": "duplicate",
+        "time_step: 0.001\nplant_config: {time_step: 0.002}": "plant_config.time_step",
         "object: {size: 1, size: 2}": "duplicate",
         "driver: 5": "driver", "driver: !Foo {}": "driver", "!Foo {}": "!Foo",
         "driver: !CanHandDriver {port: 0}": "port", "driver: !CanHandDriver {port: 1e9}": "port",
         "driver: !CanHandDriver {period: 0}": "period",
         "driver: !SimHandDriver {control_period: 1e300}": "control_period",
-        "contact_model: magic": "contact_model", "contact_approximation: tamsi": "tamsi",
+        "plant_config: {contact_model: magic}": "plant_config.contact_model",
+        "plant_config: {discrete_contact_approximation: tamsi}": "tamsi",
         "random_seed: -1": "random_seed", "random_seed: 1e300": "random_seed",
         "colour: red": "colour", "object: {kind: " + "x" * 1_000_000 + "}": "object.kind",
         "- 1\n- 2": "mapping", "5": "mapping", "{a: [": "YAML", "a: &a [*a]": "",
@@ -131,7 +140,7 @@ def probe_scenarios():
 def probe_cli(tmp):
 
     (tmp / "ok.yaml").write_text("simulation_duration: 0.01\n")
-    (tmp / "bad.yaml").write_text("time_step: 10\n")
+    (tmp / "bad.yaml").write_text("plant_config: {time_step: 10}\n")
     (tmp / "dir").mkdir()
     os.mkfifo(tmp / "fifo")
     with socket.socket() as s:
@@ -153,7 +162,7 @@ def probe_cli(tmp):
         ["simulate", ok, "--duration", "nan"], ["simulate", ok, "--duration", "-1"],
         ["simulate", ok, "--hardware"], ["simulate", str(tmp / "can.yaml"), "--hardware"],
         ["simulate", ok, "--override", "driver: 5"], ["simulate", ok, "--override", "!Foo {}"],
-        ["simulate", ok, "--override", "time_step: 0.001\ntime_step: 0.002"],
+        ["simulate", ok, "--override", "plant_config: {time_step: 0.001, time_step: 0.002}"],
         ["babble", "--db", str(tmp)], ["babble", "--db", f"{tmp}/ok.yaml/x.sqlite"],
         ["babble", "--db", f"{tmp}/{long}.sqlite"], ["babble", "--trials", "-5"],
         ["babble", "--trials", "big"], ["babble", "--db", ok],

@@ -16,6 +16,7 @@ import warnings
 from pathlib import Path
 
 from handle_drake.blas import pin_blas
+from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
 __all__ = ["check_hardware_server", "run_command", "start_meshcat", "int_at_least", "positive_int",
            "non_negative_int", "positive_float", "non_negative_float", "add_mesh_arguments",
@@ -125,6 +126,8 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     try:
         with warnings.catch_warnings():
             warnings.showwarning = _one_line_warning(args.command)
+            # Shown to CLI users too (Python hides DeprecationWarnings outside __main__).
+            warnings.filterwarnings("always", category=ScenarioDeprecationWarning)
             check_outputs(args)  # before minutes of work, not after
             return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:

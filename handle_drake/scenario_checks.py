@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-__all__ = ["LIMITS", "check_input_file", "check_yaml_text", "check_ranges", "read_text_file",
-           "short", "short_path"]
+__all__ = ["DEPRECATED_KEYS", "LIMITS", "ScenarioDeprecationWarning", "check_input_file",
+           "check_yaml_text", "check_ranges", "read_text_file", "short", "short_path",
+           "translate_deprecated_keys"]
 
 #: (low, high) accepted for each bounded quantity, SI units.
 LIMITS = {
@@ -44,7 +45,7 @@ LIMITS = {
     "mu": (0.0, 10.0),
     "time_step": (1e-5, 0.01),  # s: SAP at point contact needs <= 10 ms
     "simulation_duration": (1e-3, 3600.0),  # s
-    "steps": (1, 2_000_000),  # simulation_duration / time_step
+    "steps": (1, 2_000_000),  # simulation_duration / plant_config.time_step
     "position": (-10.0, 10.0),  # m: any pose's translation, the wrist script
     "table_size": (1e-2, 100.0),  # m
     "gain": (1e-6, 1e8),  # wrist PD gains (N/m, N*s/m, N*m/rad, N*m*s/rad)
@@ -183,7 +184,7 @@ class _Walker:
             return None
         if _is_transform(kind):
             return self._transform(node, path)
-        if dc.is_dataclass(kind):
+        if dc.is_dataclass(kind) or _is_drake_struct(kind):
             return self._dataclass(node, kind, path, tagged=False)
         return None  # a type this walker does not know: Drake's reader checks it
 
@@ -295,7 +296,16 @@ class _Walker:
 
 @functools.cache
 def _schema(kind):
+    if _is_drake_struct(kind):  # e.g. MultibodyPlantConfig: its fields are __fields__
+        types_ = {f.name: f.type for f in kind.__fields__}
+        return types_, types_
     return {f.name: f for f in dc.fields(kind)}, typing.get_type_hints(kind)
+
+
+def _is_drake_struct(kind) -> bool:
+    """A pydrake struct that Drake's YAML reader fills by its ``__fields__``."""
+    return isinstance(kind, type) and kind.__module__.startswith("pydrake") and isinstance(
+        getattr(kind, "__fields__", None), tuple)
 
 
 def _is_null(node) -> bool:
@@ -334,6 +344,72 @@ def check_yaml_text(text: str, schema, source: str, what: str = "scenario") -> N
         raise ScenarioError(f"{message} ({source})") from None
     except RecursionError:
         raise ScenarioError(f"invalid {what} ({source}): nested too deeply") from None
+
+
+#: Top-level scenario keys that moved into ``plant_config`` (Drake's
+#: ``MultibodyPlantConfig``): old key -> its field there.
+DEPRECATED_KEYS = {"contact_model": "contact_model", "time_step": "time_step",
+                   "contact_approximation": "discrete_contact_approximation"}
+_STR = "tag:yaml.org,2002:str"
+
+
+class ScenarioDeprecationWarning(DeprecationWarning):
+    """A scenario key that still works but has a new name (the CLI shows it)."""
+
+
+def translate_deprecated_keys(text: str, source: str, what: str = "scenario") -> str:
+    """``text`` with the old top-level keys of :data:`DEPRECATED_KEYS` moved into
+    ``plant_config`` (one :class:`ScenarioDeprecationWarning` naming the new keys).
+
+    The old ``contact_model: hydroelastic`` meant Drake's
+    ``hydroelastic_with_fallback`` and becomes that. Text without an old key
+    is returned unchanged (not re-emitted); text that is not a YAML mapping is
+    left for :func:`check_yaml_text` to report. Giving an old key and its new
+    field both is refused (which one would win is a guess).
+    """
+    import warnings
+
+    from handle_drake.scenario import ScenarioError
+
+    if not any(key in text for key in DEPRECATED_KEYS):
+        return text
+    try:
+        root = yaml.compose(text, Loader=_LOADER)
+    except (yaml.YAMLError, RecursionError):
+        return text
+    if not isinstance(root, yaml.MappingNode):
+        return text
+
+    def name(key):
+        return key.value if isinstance(key, yaml.ScalarNode) else None
+
+    old = [(key, value) for key, value in root.value if name(key) in DEPRECATED_KEYS]
+    if not old:
+        return text
+    plant = [value for key, value in root.value if name(key) == "plant_config"]
+    if plant and not isinstance(plant[-1], yaml.MappingNode):
+        return text  # check_yaml_text names plant_config and the old keys
+    if not plant:
+        plant = [yaml.MappingNode(_MAP, [])]
+        root.value.append((yaml.ScalarNode(_STR, "plant_config"), plant[0]))
+    plant = plant[-1]
+    given = {name(key) for key, _ in plant.value}
+    moved = []
+    for key, value in old:
+        new = DEPRECATED_KEYS[key.value]
+        if new in given:
+            raise ScenarioError(f"{key.value}: deprecated, and plant_config.{new} is given too; "
+                                f"keep only plant_config.{new} ({source})")
+        if new == "contact_model" and isinstance(value, yaml.ScalarNode) and \
+                value.value == "hydroelastic":
+            value = yaml.ScalarNode(_STR, "hydroelastic_with_fallback")
+        plant.value.append((yaml.ScalarNode(_STR, new), value))
+        moved.append(f"{key.value} -> plant_config.{new}")
+    root.value = [(key, value) for key, value in root.value if name(key) not in DEPRECATED_KEYS]
+    warnings.warn(f"{what} ({source}): deprecated top-level keys, move them into plant_config "
+                  f"(Drake's MultibodyPlantConfig): {', '.join(moved)}",
+                  ScenarioDeprecationWarning, stacklevel=4)
+    return yaml.serialize(root, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper))
 
 
 def _in(path: str, value, key: str, unit: str = "") -> None:
@@ -393,14 +469,15 @@ def check_ranges(scenario) -> None:
         _in("table.top_height", scenario.table.top_height, "position", " m")
         _in("table.size_x", scenario.table.size_x, "table_size", " m")
         _in("table.size_y", scenario.table.size_y, "table_size", " m")
-    _in("time_step", scenario.time_step, "time_step", " s")
+    time_step = scenario.plant_config.time_step
+    _in("plant_config.time_step", time_step, "time_step", " s")
     _in("simulation_duration", scenario.simulation_duration, "simulation_duration", " s")
-    steps = scenario.simulation_duration / scenario.time_step
+    steps = scenario.simulation_duration / time_step
     low, high = LIMITS["steps"]
     if steps > high:
         raise ScenarioError(
-            f"simulation_duration / time_step: expected at most {high:,} steps, got "
-            f"{steps:,.0f} ({scenario.simulation_duration:g} s / {scenario.time_step:g} s)")
+            f"simulation_duration / plant_config.time_step: expected at most {high:,} steps, "
+            f"got {steps:,.0f} ({scenario.simulation_duration:g} s / {time_step:g} s)")
     _in("visualization_period", scenario.visualization_period, "visualization_period", " s")
     if isinstance(scenario.random_seed, bool) or not isinstance(scenario.random_seed, int) or \
             not 0 <= scenario.random_seed < 2**32:

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.multibody.tree import (
     PdControllerGains,
     PrismaticJoint,
@@ -119,19 +119,9 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         )
 
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(
-        MultibodyPlantConfig(
-            time_step=scenario.time_step,
-            discrete_contact_approximation=scenario.contact_approximation,
-            # Outputs computed from the current state on demand: the contact
-            # results are then only built when a sensor asks (every control
-            # period), not stored in the state at every step (~10% faster).
-            use_sampled_output_ports=False,
-            contact_model="point" if scenario.contact_model == "point"
-            else "hydroelastic_with_fallback",
-        ),
-        builder,
-    )
+    # Drake's config as the scenario gives it (scenario.default_plant_config:
+    # SAP, point contact, outputs computed on demand).
+    plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
     spec = get_hand_spec(scenario.hand.kind)
     hand = AddPlantModels(plant, scenario)
     plant.Finalize()
@@ -232,7 +222,7 @@ def AddPlantModels(plant, scenario: Scenario):
         from handle_drake.objects import AddObject
 
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
-                  hydroelastic=scenario.contact_model == "hydroelastic")
+                  hydroelastic=scenario.plant_config.contact_model != "point")
         if scenario.object.fixed:
             plant.WeldFrames(plant.world_frame(), object_body(plant).body_frame(),
                              object_initial_pose(scenario))
@@ -383,13 +373,13 @@ def MakeHardwareStation(scenario: Scenario, meshcat=None):
 def _add_hardware_visualization(builder, driver, scenario, spec, meshcat) -> None:
     from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role, SceneGraph
     from pydrake.multibody.parsing import Parser
-    from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
+    from pydrake.multibody.plant import ApplyMultibodyPlantConfig, MultibodyPlant
     from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 
     scene_graph = builder.AddNamedSystem("scene_graph", SceneGraph())
     # Not added to the diagram: it only converts positions to geometry poses.
-    plant = MultibodyPlant(time_step=scenario.time_step)
-    plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
+    plant = MultibodyPlant(time_step=scenario.plant_config.time_step)
+    ApplyMultibodyPlantConfig(scenario.plant_config, plant)
     plant.RegisterAsSourceForSceneGraph(scene_graph)
     hand = AddHand(plant, scenario.hand.kind, coupling_ratio=scenario.hand.coupling_ratio,
                    parser=Parser(plant), model_instance_name="hand")

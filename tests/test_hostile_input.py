@@ -25,11 +25,12 @@ REFUSED = [
     ("object: {size: 1e-300}", ["object.size", "[0.001, 2]"]),
     ("object: {mass: 1e-30}", ["object.mass", "kg"]),
     ("object: {kind: cuboid, dimensions: {depth: 1e300}}", ["depth"]),
-    ("time_step: 1e300", ["time_step", "[1e-05, 0.01]"]),
-    ("time_step: 10", ["time_step"]),
-    ("time_step: 1e-9", ["time_step"]),
+    ("plant_config: {time_step: 1e300}", ["plant_config.time_step", "[1e-05, 0.01]"]),
+    ("plant_config: {time_step: 10}", ["plant_config.time_step"]),
+    ("plant_config: {time_step: 1e-9}", ["plant_config.time_step"]),
     ("simulation_duration: 1e300", ["simulation_duration", "3600"]),
-    ("time_step: 1e-5\nsimulation_duration: 3000", ["2,000,000 steps"]),
+    ("plant_config: {time_step: 1e-5}\nsimulation_duration: 3000",
+     ["2,000,000 steps", "plant_config.time_step"]),
     ("hand: {mount: !FloatingWrist {translation_kp: -5}}", ["hand.mount.translation_kp"]),
     ("hand: {mount: !FloatingWrist {rotation_kd: .nan}}", ["hand.mount.rotation_kd"]),
     ("hand: {mount: !FloatingWrist {rotation_kp: .inf}}", ["hand.mount.rotation_kp"]),
@@ -48,7 +49,8 @@ REFUSED = [
              "{time: 0.25, wrist: [0, 0, 0.3, 1e4, 0, 0]}]", ["script[1].wrist[3]", "rad"]),
     (WRIST + "script: [{time: 0, wrist: [0, 0, 0.3, 0, 0, 0]}, "
              "{time: 0.25, wrist: [0, 0, 9.9, 0, 0, 0]}]", ["speed", "m/s"]),
-    ("time_step: 0.001\ntime_step: 0.002", ["time_step", "duplicate"]),
+    ("plant_config: {time_step: 0.001, time_step: 0.002}", ["plant_config.time_step",
+                                                            "duplicate"]),
     ("object: {size: 0.05, size: 0.07}", ["object.size", "duplicate"]),
     ("driver: 5", ["driver", "!SimHandDriver", "!CanHandDriver"]),
     ("!Foo {}", ["Scenario fields", "!Foo"]),
@@ -72,9 +74,9 @@ def test_out_of_range_and_misread_scenarios_are_refused_naming_the_field(text, w
 
 
 def test_plain_yaml_12_numbers_and_untagged_variants_still_load():
-    scenario = LoadScenario(data="time_step: 1e-3\nobject: {size: 5e-2}\n"
+    scenario = LoadScenario(data="plant_config: {time_step: 1e-3}\nobject: {size: 5e-2}\n"
                                  "driver: {max_joint_velocity: 2}\n")
-    assert scenario.time_step == 1e-3 and scenario.object.size == 0.05
+    assert scenario.plant_config.time_step == 1e-3 and scenario.object.size == 0.05
     assert scenario.driver.max_joint_velocity == 2.0
 
 
@@ -122,9 +124,15 @@ def _cli(argv, capsys):
 
 def test_cli_refuses_bad_scenarios_and_outputs_with_exit_2_and_no_traceback(tmp_path, capsys):
     scenario = tmp_path / "s.yaml"
+    scenario.write_text("plant_config: {time_step: 10}\n")
+    code, err = _cli(["simulate", str(scenario)], capsys)
+    assert code == 2 and "plant_config.time_step" in err and "Traceback" not in err
+    # An old top-level key: one warning line naming the new key, then the same error.
     scenario.write_text("time_step: 10\n")
     code, err = _cli(["simulate", str(scenario)], capsys)
-    assert code == 2 and "time_step" in err and "Traceback" not in err
+    assert code == 2 and "Traceback" not in err
+    assert "warning: " in err and "time_step -> plant_config.time_step" in err, err
+    assert "error: plant_config.time_step" in err
     scenario.write_text("simulation_duration: 0.01\n")
     code, err = _cli(["simulate", str(scenario), "--html", str(tmp_path)], capsys)
     assert code == 2 and "--html" in err and "directory" in err

@@ -265,7 +265,7 @@ def test_hydroelastic_contact_uses_the_same_pieces(files):
     scenario = LoadScenario(data=f"""
 hand: {{kind: barrett, mount: !FixedMount {{X_WB: {{translation: [0.3, 0, 0.4]}}}}}}
 object: {{kind: mesh, file: '{files["torus"]}', mass: 0.05}}
-contact_model: hydroelastic
+plant_config: {{contact_model: hydroelastic_with_fallback}}
 simulation_duration: 0.3
 """)
     runner = ScenarioRunner(scenario)

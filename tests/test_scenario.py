@@ -3,6 +3,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydrake.multibody.plant import MultibodyPlantConfig
 
 from handle_drake.demo import diagrams_dir
 from handle_drake.scenario import (
@@ -13,7 +14,9 @@ from handle_drake.scenario import (
     Scenario,
     ScenarioError,
     SimHandDriver,
+    default_plant_config,
 )
+from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
 SCENARIO_FILES = sorted(diagrams_dir().glob("*.yaml"))
 
@@ -22,7 +25,10 @@ def test_defaults_are_a_valid_shadow_scenario():
     scenario = LoadScenario()
     assert scenario.hand.kind == "shadow"
     assert isinstance(scenario.driver, SimHandDriver)
-    assert scenario.contact_model == "point"
+    config = scenario.plant_config
+    assert (config.contact_model, config.time_step) == ("point", 0.001)
+    assert config.discrete_contact_approximation == "sap"
+    assert config.use_sampled_output_ports is False
 
 
 @pytest.mark.parametrize("path", SCENARIO_FILES, ids=[p.stem for p in SCENARIO_FILES])
@@ -32,11 +38,15 @@ def test_every_shipped_scenario_loads(path):
 
 def test_override_applies_on_top_of_file(tmp_path):
     base = tmp_path / "base.yaml"
-    base.write_text("object: {kind: cylinder, size: 0.05}\ntime_step: 0.002\n")
+    base.write_text("object: {kind: cylinder, size: 0.05}\nplant_config: {time_step: 0.002}\n")
     scenario = LoadScenario(filename=base, data="object: {size: 0.07}\nrandom_seed: 3")
     assert scenario.object.kind == "cylinder"  # kept from the file
     assert scenario.object.size == 0.07  # replaced by the override
-    assert scenario.time_step == 0.002
+    assert scenario.plant_config.time_step == 0.002
+    # A partial plant_config keeps the other fields (ours, then Drake's defaults).
+    assert scenario.plant_config.discrete_contact_approximation == "sap"
+    assert scenario.plant_config.use_sampled_output_ports is False
+    assert scenario.plant_config.stiction_tolerance == MultibodyPlantConfig().stiction_tolerance
     assert scenario.random_seed == 3
 
 
@@ -71,10 +81,28 @@ def test_dump_round_trips():
         ("object: {kind: [sphere}", ["invalid scenario"]),  # malformed YAML
         ("object: {X_WO: {translation: [.nan, 0, 0]}}", ["object.X_WO", "finite"]),
         ("hand: {mount: !FixedMount {X_WB: {translation: [.inf, 0, 0]}}}", ["X_WB"]),
-        ("contact_model: soft", ["contact_model", "soft"]),
-        ("contact_approximation: convex", ["contact_approximation", "convex"]),
-        ("contact_approximation: tamsi", ["contact_approximation", "PD actuators"]),
-        ("time_step: -0.001", ["time_step"]),
+        ("plant_config: {contact_model: soft}", ["plant_config.contact_model", "soft"]),
+        ("plant_config: {contact_model: hydroelastic}",
+         ["plant_config.contact_model", "hydroelastic_with_fallback"]),
+        ("plant_config: {discrete_contact_approximation: convex}",
+         ["plant_config.discrete_contact_approximation", "convex"]),
+        ("plant_config: {discrete_contact_approximation: tamsi}",
+         ["plant_config.discrete_contact_approximation", "PD actuators"]),
+        ("plant_config: {time_step: -0.001}", ["plant_config.time_step", "-0.001"]),
+        ("plant_config: {time_step: 0}", ["plant_config.time_step"]),
+        ("plant_config: {time_step: 0.5}", ["plant_config.time_step", "0.01"]),
+        ("plant_config: {penetration_allowance: 0}", ["plant_config.penetration_allowance"]),
+        ("plant_config: {penetration_allowance: .inf}", ["plant_config.penetration_allowance"]),
+        ("plant_config: {stiction_tolerance: -1e-4}", ["plant_config.stiction_tolerance"]),
+        ("plant_config: {stiction_tolerance: .nan}", ["plant_config.stiction_tolerance"]),
+        ("plant_config: {sap_near_rigid_threshold: -1}", ["plant_config.sap_near_rigid_threshold"]),
+        ("plant_config: {contact_surface_representation: quad}",
+         ["plant_config.contact_surface_representation", "quad"]),
+        ("plant_config: {use_sampled_output_ports: maybe}",
+         ["plant_config.use_sampled_output_ports", "true or false"]),
+        ("plant_config: {time_step: fast}", ["plant_config.time_step", "a number"]),
+        ("plant_config: {timestep: 0.001}", ["plant_config.timestep", "unknown field"]),
+        ("plant_config: 0.001", ["plant_config", "a mapping"]),
         ("driver: !TeleportDriver {}", ["TeleportDriver"]),
         ("hand: {initial_position: {XXJ9: 1.0}}", ["XXJ9"]),
         ("object: {kind: cuboid, dimensions: {wingspan: 0.1}}", ["wingspan"]),
@@ -108,3 +136,77 @@ def test_rotation_in_degrees_is_converted():
     R = scenario.object.X_WO.GetDeterministicValue().rotation().matrix()
     np.testing.assert_allclose(R @ [1, 0, 0], [0, 1, 0], atol=1e-12)
     assert math.isclose(np.linalg.det(R), 1.0)
+
+
+@pytest.mark.parametrize("old, new, field, value", [
+    ("time_step: 0.002", "time_step", "time_step", 0.002),
+    ("contact_approximation: lagged", "discrete_contact_approximation",
+     "discrete_contact_approximation", "lagged"),
+    ("contact_model: point", "contact_model", "contact_model", "point"),
+    # The old "hydroelastic" was built as Drake's hydroelastic_with_fallback.
+    ("contact_model: hydroelastic", "contact_model", "contact_model",
+     "hydroelastic_with_fallback"),
+])
+def test_old_top_level_plant_keys_move_into_plant_config_with_a_warning(old, new, field, value):
+    with pytest.warns(ScenarioDeprecationWarning) as record:
+        scenario = LoadScenario(data=old)
+    (warning,) = record
+    message = str(warning.message)
+    assert "\n" not in message and f"plant_config.{new}" in message and "override" in message
+    assert getattr(scenario.plant_config, field) == value
+    # Everything else is what the new key alone gives.
+    key, text = old.split(": ")
+    text = {"hydroelastic": "hydroelastic_with_fallback"}.get(text, text)
+    assert repr(scenario) == repr(LoadScenario(data=f"plant_config: {{{new}: {text}}}"))
+
+
+def test_old_keys_in_a_file_keep_the_file_and_override_order(tmp_path):
+    path = tmp_path / "old.yaml"
+    path.write_text("contact_model: hydroelastic\ntime_step: 0.002\ncontact_approximation: "
+                    "similar\nplant_config: {stiction_tolerance: 0.001}\nobject: {size: 0.05}\n")
+    with pytest.warns(ScenarioDeprecationWarning) as record:
+        scenario = LoadScenario(filename=path, data="time_step: 0.0015")
+    assert len(record) == 2  # one line for the file, one for the override
+    assert "old.yaml" in str(record[0].message) and "override" in str(record[1].message)
+    assert "contact_approximation -> plant_config.discrete_contact_approximation" in str(
+        record[0].message)
+    c = scenario.plant_config
+    assert (c.contact_model, c.time_step, c.discrete_contact_approximation,
+            c.stiction_tolerance) == ("hydroelastic_with_fallback", 0.0015, "similar", 0.001)
+    assert scenario.object.size == 0.05
+    # The dumped scenario is in the new form and loads back without a warning.
+    text = DumpScenario(scenario)
+    assert "\ntime_step" not in text and "\ncontact_approximation" not in text
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert repr(LoadScenario(data=text)) == repr(scenario)
+
+
+def test_old_key_and_its_new_field_together_are_refused():
+    with pytest.raises(ScenarioError, match=r"time_step.*plant_config\.time_step"):
+        LoadScenario(data="time_step: 0.002\nplant_config: {time_step: 0.001}")
+    # A duplicated old key is still a duplicate (YAML would keep only the last one).
+    with pytest.warns(ScenarioDeprecationWarning), pytest.raises(ScenarioError,
+                                                                 match="duplicate"):
+        LoadScenario(data="time_step: 0.001\ntime_step: 0.002")
+    # Bad values under an old key name the new field.
+    with pytest.warns(ScenarioDeprecationWarning), pytest.raises(
+            ScenarioError, match="plant_config.discrete_contact_approximation.*PD actuators"):
+        LoadScenario(data="contact_approximation: tamsi")
+
+
+def test_python_callers_get_the_same_checks():
+    from handle_drake.scenario import validate_scenario
+
+    assert repr(Scenario().plant_config) == repr(default_plant_config())
+    assert default_plant_config(time_step=0.002).discrete_contact_approximation == "sap"
+    for config, field in ((default_plant_config(time_step=float("nan")), "time_step"),
+                          (default_plant_config(contact_model="hydroelastic"), "contact_model"),
+                          (MultibodyPlantConfig(discrete_contact_approximation=""),
+                           "discrete_contact_approximation")):
+        with pytest.raises(ScenarioError, match=f"plant_config.{field}"):
+            validate_scenario(Scenario(plant_config=config))
+    with pytest.raises(ScenarioError, match="plant_config: expected a pydrake"):
+        validate_scenario(Scenario(plant_config={"time_step": 0.001}))

@@ -48,12 +48,12 @@ def test_every_scenario_simulates_and_stays_finite(path):
 
 
 @pytest.mark.parametrize("hand", ["shadow", "barrett"])
-@pytest.mark.parametrize("contact_model", ["point", "hydroelastic"])
+@pytest.mark.parametrize("contact_model", ["point", "hydroelastic_with_fallback"])
 @pytest.mark.parametrize("mount", ["!FixedMount {X_WB: {translation: [0, 0, 0.4]}}",
                                    "!FloatingWrist {X_WB: {translation: [0, 0, 0.4]}}"])
 def test_hands_mounts_and_contact_models_simulate(hand, contact_model, mount):
     scenario = LoadScenario(data=f"hand: {{kind: {hand}, mount: {mount}}}\n"
-                                 f"contact_model: {contact_model}")
+                                 f"plant_config: {{contact_model: {contact_model}}}")
     _, _, state = _simulate_random(scenario)
     assert np.all(np.isfinite(state))
 
@@ -164,7 +164,8 @@ script: [{{time: 0.0}}, {{time: 0.3, wrist: {target}}}]
 def test_station_uses_the_scenario_contact_approximation(approximation):
     """The field reaches the plant, and every SAP-family approximation drives
     the PD actuators (under TAMSI the joints would silently never move)."""
-    scenario = LoadScenario(data=f"contact_approximation: {approximation}\nobject: null\n"
+    scenario = LoadScenario(data=f"plant_config: {{discrete_contact_approximation: "
+                                 f"{approximation}}}\nobject: null\n"
                                  "table: null\nscript: [{time: 0.3, hand: {FFJ3: 1.0}}]")
     runner = ScenarioRunner(scenario)
     plant = GetPlant(runner.station)
@@ -234,3 +235,31 @@ def test_hardware_flag_needs_a_can_driver():
         MakeHandStation(LoadScenario(), hardware=True)
     with pytest.raises(ValueError, match="SimHandDriver"):
         MakeHandStation(LoadScenario(data="driver: !CanHandDriver {port: 1}"))
+
+
+@pytest.mark.parametrize("text, time_step, model, approximation, surface", [
+    ("", 0.001, "kPoint", "kSap", "kPolygon"),  # the defaults
+    ("{time_step: 0.002, contact_model: hydroelastic_with_fallback, "
+     "discrete_contact_approximation: similar, contact_surface_representation: triangle}",
+     0.002, "kHydroelasticWithFallback", "kSimilar", "kTriangle"),
+    ("{time_step: 0.0005, discrete_contact_approximation: lagged}", 0.0005, "kPoint", "kLagged",
+     "kPolygon"),
+])
+def test_the_plant_is_built_from_the_scenario_plant_config(text, time_step, model, approximation,
+                                                           surface):
+    """Read back from the station's MultibodyPlant: what plant_config says, and the object
+    (and only with a hydroelastic model) gets hydroelastic properties."""
+    from pydrake.geometry import Role
+
+    scenario = LoadScenario(data=f"plant_config: {text}" if text else "")
+    station = MakeHandStation(scenario)
+    plant = GetPlant(station)
+    assert plant.time_step() == time_step
+    assert plant.get_contact_model().name == model
+    assert plant.get_discrete_contact_approximation().name == approximation
+    assert plant.get_contact_surface_representation().name == surface
+    scene_graph = station.GetSubsystemByName("scene_graph")
+    inspector = scene_graph.model_inspector()
+    geometry = plant.GetCollisionGeometriesForBody(object_body(plant))[0]
+    props = inspector.GetProperties(geometry, Role.kProximity)
+    assert props.HasGroup("hydroelastic") == (model != "kPoint")

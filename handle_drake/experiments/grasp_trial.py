@@ -57,6 +57,7 @@ from handle_drake.scenario import (
     ObjectConfig,
     Scenario,
     SimHandDriver,
+    default_plant_config,
 )
 
 __all__ = [
@@ -328,8 +329,7 @@ class GraspTrial:
             hand=HandConfig(kind=c.hand, mount=FloatingWrist(X_WB=X_WB)),
             object=c.object_config(fixed=True, on_table=False),
             table=None,
-            contact_model="point",
-            time_step=c.time_step,
+            plant_config=default_plant_config(time_step=c.time_step),
             driver=SimHandDriver(max_joint_velocity=4.0),
             simulation_duration=c.settle_time,
             # The approach stops when the palm touches (Shadow: the thumb,

@@ -335,6 +335,7 @@ class GraspPlan:
             Scenario,
             SimHandDriver,
             TableConfig,
+            default_plant_config,
         )
 
         script = self.to_script()
@@ -348,8 +349,7 @@ class GraspPlan:
             object=world_object if world_object is not None else _object_config(
                 spec, X_WO=Transform(self.X_WO), on_table=False),
             table=TableConfig(top_height=self.table_height),
-            contact_model="point",
-            time_step=0.001,
+            plant_config=default_plant_config(time_step=0.001),
             driver=SimHandDriver(max_joint_velocity=4.0),
             simulation_duration=script[-1].time + settle,
             script=script,

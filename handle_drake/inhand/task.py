@@ -288,8 +288,7 @@ object:
   X_WO: {{translation: [{x}, {y}, {z}], rotation: !Rpy {{deg: [-90, 0, 0]}}}}
   on_table: false{sensor}
 table: null
-contact_model: point
-time_step: {c.time_step}
+plant_config: {{time_step: {c.time_step}, contact_model: point}}
 driver: !SimHandDriver {{max_joint_velocity: 4.0}}
 simulation_duration: {c.settle_time + c.total_time}
 """)

@@ -57,6 +57,7 @@ def _base_scenario(X_WB: RigidTransform, initial: dict, script, duration: float,
         Scenario,
         SimHandDriver,
         TableConfig,
+        default_plant_config,
     )
 
     return Scenario(
@@ -65,10 +66,9 @@ def _base_scenario(X_WB: RigidTransform, initial: dict, script, duration: float,
                         initial_position=dict(initial)),
         object=None,
         table=TableConfig(top_height=0.0),
-        contact_model="point",
         # 2 ms: the same wheel rotation and fader travel as at 1 ms (within
         # 1 degree / 0.1 mm) at twice the speed.
-        time_step=0.002,
+        plant_config=default_plant_config(time_step=0.002),
         driver=SimHandDriver(max_joint_velocity=4.0, control_period=0.002),
         simulation_duration=duration,
         script=script,

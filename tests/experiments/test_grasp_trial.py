@@ -125,6 +125,27 @@ def test_a_logged_trial_replays_to_its_metric_through_simulate(tmp_path, capsys)
         assert f"{noiseless!r}" in capsys.readouterr().out
 
 
+def test_a_trial_logged_with_the_old_plant_keys_replays_to_the_same_metric(barrett_sphere):
+    """Logs written before plant_config (top-level contact_model/time_step/
+    contact_approximation) still replay, bit for bit, to what the trial scores now."""
+    import re
+
+    from handle_drake.run import ScenarioRunner
+    from handle_drake.scenario import LoadScenario
+    from handle_drake.scenario_checks import ScenarioDeprecationWarning
+
+    x = [0.004, -0.012]
+    text = barrett_sphere.scenario_for(x)
+    old, n = re.subn(r"plant_config:\n(  .*\n)+", "contact_model: point\ntime_step: 0.002\n"
+                     "contact_approximation: sap\n", text)
+    assert n == 1 and "plant_config" not in old
+    with pytest.warns(ScenarioDeprecationWarning, match="plant_config.time_step"):
+        scenario = LoadScenario(data=old)
+    assert repr(scenario) == repr(LoadScenario(data=text))
+    score = ScenarioRunner(scenario).run().score
+    assert score.value == barrett_sphere.evaluate(x).metric_noiseless
+
+
 def test_a_runner_refuses_a_scenario_it_was_not_built_for(barrett_sphere):
     from handle_drake.run import ScenarioRunner
 
