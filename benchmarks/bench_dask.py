@@ -17,7 +17,12 @@ diagram before the clock starts):
   slowest particle;
 - ``noop``: the floor, a trial that returns at once, through the bare
   executor (submit + result) and through ``run_experiment`` (plus the ask,
-  the three SQLite transactions of a trial and the tell).
+  the three SQLite transactions of a trial and the tell);
+- ``hardware``: the machine's own ceiling, no executor and no project
+  scheduling: one process, then two at once, each running the same list of
+  grasp trials in a loop after building its diagram. Its efficiency (one
+  process's time over the slower of two) is what two cores give two
+  independent trial loops; no executor can beat it.
 
 Reported: trials/s per case, parallel efficiency = (trials/s at 2 workers /
 trials/s at 1) / 2 per executor, Dask / local per workload and worker count,
@@ -116,18 +121,52 @@ def _bare_noop(executor, n_tasks) -> float:
     return n_tasks / (time.perf_counter() - start)
 
 
+def _hardware_loop(config, xs, barrier, results):
+    """One process of the hardware floor: build, wait for the others, time the loop."""
+    from handle_drake.blas import pin_blas as _pin
+
+    _pin()
+    objective = CachedTrial(config)
+    objective(xs[0], seed=0)  # builds the diagram before the clock starts
+    barrier.wait()
+    start = time.perf_counter()
+    for i, x in enumerate(xs):
+        objective(x, seed=i)
+    results.put(time.perf_counter() - start)
+
+
+def _hardware(processes: int, xs) -> float:
+    """Trials/s of ``processes`` independent trial loops (each runs all of ``xs``)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    barrier, results = ctx.Barrier(processes), ctx.Queue()
+    procs = [ctx.Process(target=_hardware_loop, args=(CONFIG, xs, barrier, results))
+             for _ in range(processes)]
+    for proc in procs:
+        proc.start()
+    times = [results.get(timeout=3600) for _ in procs]
+    for proc in procs:
+        proc.join()
+        if proc.exitcode != 0:
+            raise RuntimeError(f"hardware floor: a loop process exited with {proc.exitcode}")
+    return processes * len(xs) / max(times)
+
+
 def summarise(samples: dict, loads: dict) -> dict:
     """The table, the overheads and the 100-worker projection from per-case samples
     (``{(workload, executor, workers): [trials/s per round]}``); prints them."""
     median = {key: statistics.median(values) for key, values in samples.items()}
     rows = []
-    for name in ("random", "pso", "inhand_pso", "noop_executor", "noop_runner"):
-        for kind in EXECUTORS:
+    for name in ("random", "pso", "inhand_pso", "noop_executor", "noop_runner", "hardware"):
+        for kind in (("none",) if name == "hardware" else EXECUTORS):
+            if (name, kind, 1) not in median:  # a saved run from before the floor
+                continue
             one, two = median[(name, kind, 1)], median[(name, kind, 2)]
             rows.append(dict(workload=name, executor=kind, tps_1=one, tps_2=two,
                              efficiency_2=two / one / 2,
-                             vs_local_1=one / median[(name, "local", 1)],
-                             vs_local_2=two / median[(name, "local", 2)],
+                             vs_local_1=one / median.get((name, "local", 1), one),
+                             vs_local_2=two / median.get((name, "local", 2), two),
                              load=loads[(name, kind, 2)]))
     overhead = {w: 1 / median[("noop_executor", "dask", w)]
                 - 1 / median[("noop_executor", "local", w)] for w in WORKERS}
@@ -222,7 +261,16 @@ def main(argv=None) -> int:
                 _pso_iterations(executor, objective, bounds, 2 * workers, 2, seed=99)
                 _inhand_pso(executor, 2 * workers, 1, seed=99)
                 _bare_noop(executor, 20)
+        floor_xs = np.random.default_rng(7).uniform(
+            bounds[:, 0], bounds[:, 1], size=(max(4, n_random // 4), len(bounds)))
         for r in range(rounds):
+            for workers in WORKERS:
+                before = _load()
+                value = _hardware(workers, floor_xs)
+                samples.setdefault(("hardware", "none", workers), []).append(value)
+                loads.setdefault(("hardware", "none", workers), []).append([before, _load()])
+                print(f"  round {r + 1}: {'hardware':14s} none  x{workers}: {value:8.2f} "
+                      f"trials/s (load {before} -> {_load()})", flush=True)
             for (kind, workers), executor in opened.items():
                 tag = f"{kind}{workers}-r{r}"
                 cases = {
