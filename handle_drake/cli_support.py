@@ -16,7 +16,6 @@ import warnings
 from pathlib import Path
 
 from handle_drake.blas import pin_blas
-from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
 __all__ = ["check_hardware_server", "run_command", "start_meshcat", "int_at_least", "positive_int",
            "non_negative_int", "positive_float", "non_negative_float", "add_mesh_arguments",
@@ -119,6 +118,7 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     from handle_drake.learning import TrialLogError
     from handle_drake.learning.cluster import ExecutorError
     from handle_drake.paths import check_outputs
+    from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
     pin_blas(force=False)
     args = parser.parse_args(argv)
