@@ -435,8 +435,6 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
-        if scenario.object.accelerometer is not None:
-            _validate_accelerometer(scenario)
     elif scenario.object is not None:
         from handle_drake.objects import KINDS
 
@@ -461,8 +459,8 @@ def validate_scenario(scenario: Scenario) -> None:
         if not (math.isfinite(scenario.object.mu) and scenario.object.mu >= 0):
             raise ScenarioError(f"object.mu must be finite and >= 0, got {scenario.object.mu}")
         _check_transform("object.X_WO", scenario.object.X_WO)
-        if scenario.object.accelerometer is not None:
-            _validate_accelerometer(scenario)
+    if scenario.object is not None and scenario.object.accelerometer is not None:
+        _validate_accelerometer(scenario)  # mesh or catalogue object alike
     if scenario.table is not None:
         if not math.isfinite(scenario.table.top_height):
             raise ScenarioError("table.top_height must be finite")
