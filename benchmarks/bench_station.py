@@ -89,7 +89,7 @@ def _plant_case(variant: str) -> _Case:
     """
     import numpy as np
     from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
-    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.multibody.plant import AddMultibodyPlant
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import MatrixGain, TrajectorySource
@@ -103,9 +103,7 @@ def _plant_case(variant: str) -> _Case:
     if variant == "no_contact":
         scenario.object, scenario.table = None, None
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=0.001, discrete_contact_approximation="sap", contact_model="point",
-        use_sampled_output_ports=False), builder)
+    plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)  # as the station
     hand = AddPlantModels(plant, scenario)
     if variant == "no_self_collision":
         geometries = [g for i in plant.GetBodyIndices(hand)
