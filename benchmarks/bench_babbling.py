@@ -81,6 +81,7 @@ from handle_drake.experiments.babbling import (  # noqa: E402
     GridSurrogate,
     _config_key,
     _grid_chunk,
+    _pool,
     _trial,
     grid_values,
     run_batch,
@@ -210,6 +211,24 @@ def surrogate_run(surrogate: GridSurrogate, method: str, seed: int, n_trials: in
                 wall_time_s=time.perf_counter() - start)
 
 
+def _run_jobs(fn, jobs: dict, workers: int, progress: str | None = None) -> dict:
+    """``{key: fn(*args)}`` for ``jobs`` (key -> args): in this process with one worker,
+    else on ``babbling._pool``'s spawn pool of ``workers`` (printing ``progress`` counts)."""
+    pool = _pool(workers) if jobs else None
+    if pool is None:
+        return {key: fn(*args) for key, args in jobs.items()}
+    try:
+        futures = {pool.submit(fn, *args): key for key, args in jobs.items()}
+        results = {}
+        for i, future in enumerate(as_completed(futures), 1):
+            results[futures[future]] = future.result()
+            if progress and (i % 20 == 0 or i == len(jobs)):
+                print(f"{progress} {i}/{len(jobs)}", flush=True)
+        return results
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def _surrogate_job(surrogate, method, seed, n_trials, target, cache=None):
     """One surrogate run, read back from ``cache`` (JSON) when it holds it."""
     if cache is not None and cache.exists():
@@ -267,24 +286,9 @@ def surrogate_tables(grids: dict, *, seeds, n_trials: int, noise: float,
                              min(FRACTIONS), BO_DEFAULTS_VERSION)
         return Path(cache_dir) / f"{key[1]}-{key[0]}-{method}-seed{seed}-{tag}.json"
 
-    runs = {}
-    pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                initializer=pin_blas) if workers > 1 else None)
-    try:
-        if pool is None:
-            for job in jobs:
-                runs[job] = _surrogate_job(surrogates[job[0]], *job[1:], n_trials,
-                                           optima[job[0]][1], cache(*job))
-        else:
-            futures = {pool.submit(_surrogate_job, surrogates[job[0]], *job[1:], n_trials,
-                                   optima[job[0]][1], cache(*job)): job for job in jobs}
-            for i, future in enumerate(as_completed(futures), 1):
-                runs[futures[future]] = future.result()
-                if i % 20 == 0 or i == len(jobs):
-                    print(f"surrogate runs {i}/{len(jobs)}", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+    runs = _run_jobs(_surrogate_job, {job: (surrogates[job[0]], *job[1:], n_trials,
+                                            optima[job[0]][1], cache(*job)) for job in jobs},
+                     workers, progress="surrogate runs")
     tables = {}
     for name, kind in surrogates:
         x_star, f_star = optima[name, kind]
@@ -357,21 +361,11 @@ def validate_surrogate(configs: dict, grids: dict, points: dict, *, placement_er
                 simulated[key][i] = json.loads(path.read_text())["metric"]
             else:
                 todo.append((key, i))
-    pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                initializer=pin_blas) if workers > 1 and todo else None)
-    try:
-        if pool is None:
-            for key, i in todo:
-                simulated[key][i] = _grid_chunk(jobs[key][0], jobs[key][1][i:i + 1])[0]
-        else:  # one point per job: the robust ones are K times dearer
-            futures = {pool.submit(_grid_chunk, jobs[key][0], jobs[key][1][i:i + 1]): (key, i)
-                       for key, i in todo}
-            for future in as_completed(futures):
-                key, i = futures[future]
-                simulated[key][i] = future.result()[0]
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+    # One point per job: the robust ones are K times dearer.
+    done = _run_jobs(_grid_chunk, {(key, i): (jobs[key][0], jobs[key][1][i:i + 1])
+                                   for key, i in todo}, workers)
+    for (key, i), values in done.items():
+        simulated[key][i] = values[0]
     for key, i in todo:
         path = cache(jobs[key][0], jobs[key][1][i])
         if path is not None:
