@@ -77,7 +77,6 @@ import numpy as np  # noqa: E402
 
 from handle_drake.experiments.babbling import (  # noqa: E402
     FRACTIONS,
-    CachedTrial,
     GridSurrogate,
     _config_key,
     _grid_chunk,
@@ -88,6 +87,7 @@ from handle_drake.experiments.babbling import (  # noqa: E402
     run_history,
     trials_to_within,
 )
+from handle_drake.experiments.grasp_trial import GraspTrial  # noqa: E402
 from handle_drake.experiments.report import (  # noqa: E402
     OBJECT_ORDER,
     REPORT_TABLE3,
@@ -135,11 +135,16 @@ def gp_minimize_run(config, seed: int, n_calls: int, cache: Path) -> dict:
     total = time.perf_counter() - start
     data = dict(X=np.asarray(result.x_iters).tolist(), observed=observed, noiseless=noiseless,
                 wall_time_s=total, sim_time_s=float(sum(sim_time)))
-    cache.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cache.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data))
-    os.replace(tmp, cache)
+    _write_json(cache, data)
     return data
+
+
+def _write_json(path: Path, data) -> None:
+    """``data`` as JSON at ``path``, whole or not at all (a killed run leaves no half file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data))
+    os.replace(tmp, path)
 
 
 def _overhead_per_trial(db, spec) -> float:
@@ -235,10 +240,7 @@ def _surrogate_job(surrogate, method, seed, n_trials, target, cache=None):
         return json.loads(cache.read_text())
     run = surrogate_run(surrogate, method, seed, n_trials, target)
     if cache is not None:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp")
-        tmp.write_text(json.dumps(run))
-        os.replace(tmp, cache)
+        _write_json(cache, run)
     return run
 
 
@@ -350,27 +352,24 @@ def validate_surrogate(configs: dict, grids: dict, points: dict, *, placement_er
         if cache_dir is None:
             return None
         tag = hashlib.sha1((_config_key(config) + x.tobytes().hex()).encode()).hexdigest()[:12]
-        return Path(cache_dir) / f"{CachedTrial(config).name}-{tag}.json"
+        return Path(cache_dir) / f"{GraspTrial(config).name}-{tag}.json"
 
     simulated = {key: np.full(len(X), np.nan) for key, (_, X) in jobs.items()}
-    todo = []
+    todo = {}  # (key, i) -> its cache file (or None)
     for key, (config, X) in jobs.items():
         for i, x in enumerate(X):
             path = cache(config, x)
             if path is not None and path.exists():
                 simulated[key][i] = json.loads(path.read_text())["metric"]
             else:
-                todo.append((key, i))
+                todo[key, i] = path
     # One point per job: the robust ones are K times dearer.
     done = _run_jobs(_grid_chunk, {(key, i): (jobs[key][0], jobs[key][1][i:i + 1])
                                    for key, i in todo}, workers)
     for (key, i), values in done.items():
         simulated[key][i] = values[0]
-    for key, i in todo:
-        path = cache(jobs[key][0], jobs[key][1][i])
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps(dict(metric=float(simulated[key][i]))))
+        if todo[key, i] is not None:
+            _write_json(todo[key, i], dict(metric=float(values[0])))
     out = {}
     for (kind, name), values in simulated.items():
         robust = (dict(placement_error=placement_error, placement_samples=placement_samples)
