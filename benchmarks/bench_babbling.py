@@ -169,6 +169,20 @@ def _fmt(value, budget):
     return f">{budget}" if not math.isfinite(value) else f"{value:g}"
 
 
+def _cells(summary, budget) -> list[str]:
+    """A :func:`_summary`'s medians per fraction, "(k)" when only k seeds got there."""
+    return [_fmt(m, budget) + ("" if r == len(summary["per_seed"]) or not math.isfinite(m)
+                               else f"({r})")
+            for m, r in zip(summary["median"], summary["reached"], strict=True)]
+
+
+def _print_table(header, rows) -> None:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
+    for row in rows:
+        print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+
+
 # ------------------------------------------------------------------ surrogate
 SURROGATE_METHODS = ("bo", "random", "gp_minimize")
 
@@ -442,20 +456,13 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
             entry["verdict"] = verdict
             row = [kind, f"{entry['f_star']:.3f}"]
             for method in methods:
-                summary = entry[method]
-                row += [_fmt(m, budget) + ("" if r == len(seeds) or not math.isfinite(m)
-                                           else f"({r})")
-                        for m, r in list(zip(summary["median"], summary["reached"],
-                                             strict=True))[:2]]
+                row += _cells(entry[method], budget)[:2]
             row += [verdict.get("vs_random", "-"), verdict.get("vs_gp_minimize", "-")]
             if name == "robust":
                 row += [f"{entry['nominal_at_optimum']:.3f}", f"{entry['nominal_loss']:.1%}"]
             row += [f"{validation[kind][name]['max_abs_error']:.3f}"]
             rows.append(row)
-        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-        print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
-        for row in rows:
-            print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+        _print_table(header, rows)
         ahead_random = sum(e["verdict"]["vs_random"] == "ahead" for e in table.values())
         level_gp = sum(e["verdict"].get("vs_gp_minimize") in ("ahead", "level")
                        for e in table.values())
@@ -607,11 +614,6 @@ def main(argv=None) -> int:
 
     budget = settings.trials
 
-    def cells(summary):
-        return [_fmt(m, budget) + ("" if r == len(summary["per_seed"]) or not math.isfinite(m)
-                                   else f"({r})")
-                for m, r in zip(summary["median"], summary["reached"], strict=True)]
-
     methods = [("bo", bo)] + ([("bo_v1", v1)] if v1 else [])
     rows, per_object = [], {}
     for kind in objects:
@@ -648,12 +650,12 @@ def main(argv=None) -> int:
         entry["bo_5pct_over_report"] = ours_5 / report_5
         entry["target_met"] = bool(ours_5 <= report_5 / 2)
         per_object[kind] = entry
-        row = [kind, f"{f_star:.3f}", *cells(entry["bo"])]
+        row = [kind, f"{f_star:.3f}", *_cells(entry["bo"], budget)]
         if v1:
-            row += cells(entry["bo_v1"])
-        row += cells(entry["random"])
+            row += _cells(entry["bo_v1"], budget)
+        row += _cells(entry["random"], budget)
         if "gp_minimize" in entry:
-            row += cells(entry["gp_minimize"])
+            row += _cells(entry["gp_minimize"], budget)
         row += [*map(str, REPORT_TABLE3[kind][1:]), f"{entry['bo_5pct_over_report']:.2f}",
                 "yes" if entry["target_met"] else "NO"]
         if args.placement_error:
@@ -669,7 +671,6 @@ def main(argv=None) -> int:
     header += ["rep 5%", "10%", "20%", "BO/rep 5%", "<=1/2"]
     if args.placement_error:
         header += ["nominal f*", "nominal loss"]
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     print(f"\nTrials to within 5/10/20 % of the grid maximum ({settings.grid}x{settings.grid}), "
           f"median of {settings.seeds} seeds from {args.seed_offset} (gp_minimize: "
           f"{0 if args.no_skopt else skopt_seeds}), budget {settings.trials}, noise std "
@@ -678,9 +679,7 @@ def main(argv=None) -> int:
              f"{args.placement_error * 1e3:g} mm (f* is the robust grid's maximum; nominal "
              "loss: 1 - nominal metric at the robust optimum / nominal f*)"
              if args.placement_error else ""))
-    print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
-    for row in rows:
-        print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+    _print_table(header, rows)
     print("\nbest noiseless metric found (median): " + ", ".join(
         f"{k}: " + " / ".join(f"{m} {e[m]['best_median']:.3f}"
                              for m in ("bo", "bo_v1", "random", "gp_minimize") if m in e)
