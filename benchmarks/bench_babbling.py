@@ -77,16 +77,17 @@ import numpy as np  # noqa: E402
 
 from handle_drake.experiments.babbling import (  # noqa: E402
     FRACTIONS,
-    CachedTrial,
     GridSurrogate,
     _config_key,
     _grid_chunk,
+    _pool,
     _trial,
     grid_values,
     run_batch,
     run_history,
     trials_to_within,
 )
+from handle_drake.experiments.grasp_trial import GraspTrial  # noqa: E402
 from handle_drake.experiments.report import (  # noqa: E402
     OBJECT_ORDER,
     REPORT_TABLE3,
@@ -134,11 +135,16 @@ def gp_minimize_run(config, seed: int, n_calls: int, cache: Path) -> dict:
     total = time.perf_counter() - start
     data = dict(X=np.asarray(result.x_iters).tolist(), observed=observed, noiseless=noiseless,
                 wall_time_s=total, sim_time_s=float(sum(sim_time)))
-    cache.parent.mkdir(parents=True, exist_ok=True)
-    tmp = cache.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data))
-    os.replace(tmp, cache)
+    _write_json(cache, data)
     return data
+
+
+def _write_json(path: Path, data) -> None:
+    """``data`` as JSON at ``path``, whole or not at all (a killed run leaves no half file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data))
+    os.replace(tmp, path)
 
 
 def _overhead_per_trial(db, spec) -> float:
@@ -161,6 +167,20 @@ def _summary(hits):
 
 def _fmt(value, budget):
     return f">{budget}" if not math.isfinite(value) else f"{value:g}"
+
+
+def _cells(summary, budget) -> list[str]:
+    """A :func:`_summary`'s medians per fraction, "(k)" when only k seeds got there."""
+    return [_fmt(m, budget) + ("" if r == len(summary["per_seed"]) or not math.isfinite(m)
+                               else f"({r})")
+            for m, r in zip(summary["median"], summary["reached"], strict=True)]
+
+
+def _print_table(header, rows) -> None:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
+    for row in rows:
+        print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
 
 
 # ------------------------------------------------------------------ surrogate
@@ -210,16 +230,31 @@ def surrogate_run(surrogate: GridSurrogate, method: str, seed: int, n_trials: in
                 wall_time_s=time.perf_counter() - start)
 
 
+def _run_jobs(fn, jobs: dict, workers: int, progress: str | None = None) -> dict:
+    """``{key: fn(*args)}`` for ``jobs`` (key -> args): in this process with one worker,
+    else on ``babbling._pool``'s spawn pool of ``workers`` (printing ``progress`` counts)."""
+    pool = _pool(workers) if jobs else None
+    if pool is None:
+        return {key: fn(*args) for key, args in jobs.items()}
+    try:
+        futures = {pool.submit(fn, *args): key for key, args in jobs.items()}
+        results = {}
+        for i, future in enumerate(as_completed(futures), 1):
+            results[futures[future]] = future.result()
+            if progress and (i % 20 == 0 or i == len(jobs)):
+                print(f"{progress} {i}/{len(jobs)}", flush=True)
+        return results
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def _surrogate_job(surrogate, method, seed, n_trials, target, cache=None):
     """One surrogate run, read back from ``cache`` (JSON) when it holds it."""
     if cache is not None and cache.exists():
         return json.loads(cache.read_text())
     run = surrogate_run(surrogate, method, seed, n_trials, target)
     if cache is not None:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cache.with_suffix(".tmp")
-        tmp.write_text(json.dumps(run))
-        os.replace(tmp, cache)
+        _write_json(cache, run)
     return run
 
 
@@ -267,24 +302,9 @@ def surrogate_tables(grids: dict, *, seeds, n_trials: int, noise: float,
                              min(FRACTIONS), BO_DEFAULTS_VERSION)
         return Path(cache_dir) / f"{key[1]}-{key[0]}-{method}-seed{seed}-{tag}.json"
 
-    runs = {}
-    pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                initializer=pin_blas) if workers > 1 else None)
-    try:
-        if pool is None:
-            for job in jobs:
-                runs[job] = _surrogate_job(surrogates[job[0]], *job[1:], n_trials,
-                                           optima[job[0]][1], cache(*job))
-        else:
-            futures = {pool.submit(_surrogate_job, surrogates[job[0]], *job[1:], n_trials,
-                                   optima[job[0]][1], cache(*job)): job for job in jobs}
-            for i, future in enumerate(as_completed(futures), 1):
-                runs[futures[future]] = future.result()
-                if i % 20 == 0 or i == len(jobs):
-                    print(f"surrogate runs {i}/{len(jobs)}", flush=True)
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+    runs = _run_jobs(_surrogate_job, {job: (surrogates[job[0]], *job[1:], n_trials,
+                                            optima[job[0]][1], cache(*job)) for job in jobs},
+                     workers, progress="surrogate runs")
     tables = {}
     for name, kind in surrogates:
         x_star, f_star = optima[name, kind]
@@ -346,37 +366,24 @@ def validate_surrogate(configs: dict, grids: dict, points: dict, *, placement_er
         if cache_dir is None:
             return None
         tag = hashlib.sha1((_config_key(config) + x.tobytes().hex()).encode()).hexdigest()[:12]
-        return Path(cache_dir) / f"{CachedTrial(config).name}-{tag}.json"
+        return Path(cache_dir) / f"{GraspTrial(config).name}-{tag}.json"
 
     simulated = {key: np.full(len(X), np.nan) for key, (_, X) in jobs.items()}
-    todo = []
+    todo = {}  # (key, i) -> its cache file (or None)
     for key, (config, X) in jobs.items():
         for i, x in enumerate(X):
             path = cache(config, x)
             if path is not None and path.exists():
                 simulated[key][i] = json.loads(path.read_text())["metric"]
             else:
-                todo.append((key, i))
-    pool = (ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                initializer=pin_blas) if workers > 1 and todo else None)
-    try:
-        if pool is None:
-            for key, i in todo:
-                simulated[key][i] = _grid_chunk(jobs[key][0], jobs[key][1][i:i + 1])[0]
-        else:  # one point per job: the robust ones are K times dearer
-            futures = {pool.submit(_grid_chunk, jobs[key][0], jobs[key][1][i:i + 1]): (key, i)
-                       for key, i in todo}
-            for future in as_completed(futures):
-                key, i = futures[future]
-                simulated[key][i] = future.result()[0]
-    finally:
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
-    for key, i in todo:
-        path = cache(jobs[key][0], jobs[key][1][i])
-        if path is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(json.dumps(dict(metric=float(simulated[key][i]))))
+                todo[key, i] = path
+    # One point per job: the robust ones are K times dearer.
+    done = _run_jobs(_grid_chunk, {(key, i): (jobs[key][0], jobs[key][1][i:i + 1])
+                                   for key, i in todo}, workers)
+    for (key, i), values in done.items():
+        simulated[key][i] = values[0]
+        if todo[key, i] is not None:
+            _write_json(todo[key, i], dict(metric=float(values[0])))
     out = {}
     for (kind, name), values in simulated.items():
         robust = (dict(placement_error=placement_error, placement_samples=placement_samples)
@@ -449,20 +456,13 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
             entry["verdict"] = verdict
             row = [kind, f"{entry['f_star']:.3f}"]
             for method in methods:
-                summary = entry[method]
-                row += [_fmt(m, budget) + ("" if r == len(seeds) or not math.isfinite(m)
-                                           else f"({r})")
-                        for m, r in list(zip(summary["median"], summary["reached"],
-                                             strict=True))[:2]]
+                row += _cells(entry[method], budget)[:2]
             row += [verdict.get("vs_random", "-"), verdict.get("vs_gp_minimize", "-")]
             if name == "robust":
                 row += [f"{entry['nominal_at_optimum']:.3f}", f"{entry['nominal_loss']:.1%}"]
             row += [f"{validation[kind][name]['max_abs_error']:.3f}"]
             rows.append(row)
-        widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-        print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
-        for row in rows:
-            print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+        _print_table(header, rows)
         ahead_random = sum(e["verdict"]["vs_random"] == "ahead" for e in table.values())
         level_gp = sum(e["verdict"].get("vs_gp_minimize") in ("ahead", "level")
                        for e in table.values())
@@ -614,11 +614,6 @@ def main(argv=None) -> int:
 
     budget = settings.trials
 
-    def cells(summary):
-        return [_fmt(m, budget) + ("" if r == len(summary["per_seed"]) or not math.isfinite(m)
-                                   else f"({r})")
-                for m, r in zip(summary["median"], summary["reached"], strict=True)]
-
     methods = [("bo", bo)] + ([("bo_v1", v1)] if v1 else [])
     rows, per_object = [], {}
     for kind in objects:
@@ -655,12 +650,12 @@ def main(argv=None) -> int:
         entry["bo_5pct_over_report"] = ours_5 / report_5
         entry["target_met"] = bool(ours_5 <= report_5 / 2)
         per_object[kind] = entry
-        row = [kind, f"{f_star:.3f}", *cells(entry["bo"])]
+        row = [kind, f"{f_star:.3f}", *_cells(entry["bo"], budget)]
         if v1:
-            row += cells(entry["bo_v1"])
-        row += cells(entry["random"])
+            row += _cells(entry["bo_v1"], budget)
+        row += _cells(entry["random"], budget)
         if "gp_minimize" in entry:
-            row += cells(entry["gp_minimize"])
+            row += _cells(entry["gp_minimize"], budget)
         row += [*map(str, REPORT_TABLE3[kind][1:]), f"{entry['bo_5pct_over_report']:.2f}",
                 "yes" if entry["target_met"] else "NO"]
         if args.placement_error:
@@ -676,7 +671,6 @@ def main(argv=None) -> int:
     header += ["rep 5%", "10%", "20%", "BO/rep 5%", "<=1/2"]
     if args.placement_error:
         header += ["nominal f*", "nominal loss"]
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
     print(f"\nTrials to within 5/10/20 % of the grid maximum ({settings.grid}x{settings.grid}), "
           f"median of {settings.seeds} seeds from {args.seed_offset} (gp_minimize: "
           f"{0 if args.no_skopt else skopt_seeds}), budget {settings.trials}, noise std "
@@ -685,9 +679,7 @@ def main(argv=None) -> int:
              f"{args.placement_error * 1e3:g} mm (f* is the robust grid's maximum; nominal "
              "loss: 1 - nominal metric at the robust optimum / nominal f*)"
              if args.placement_error else ""))
-    print("  ".join(h.rjust(w) for h, w in zip(header, widths, strict=True)))
-    for row in rows:
-        print("  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)))
+    _print_table(header, rows)
     print("\nbest noiseless metric found (median): " + ", ".join(
         f"{k}: " + " / ".join(f"{m} {e[m]['best_median']:.3f}"
                              for m in ("bo", "bo_v1", "random", "gp_minimize") if m in e)

@@ -123,9 +123,7 @@ def _bare_noop(executor, n_tasks) -> float:
 
 def _hardware_loop(config, xs, barrier, results):
     """One process of the hardware floor: build, wait for the others, time the loop."""
-    from handle_drake.blas import pin_blas as _pin
-
-    _pin()
+    pin_blas()
     objective = CachedTrial(config)
     objective(xs[0], seed=0)  # builds the diagram before the clock starts
     barrier.wait()
@@ -136,8 +134,13 @@ def _hardware_loop(config, xs, barrier, results):
 
 
 def _hardware(processes: int, xs) -> float:
-    """Trials/s of ``processes`` independent trial loops (each runs all of ``xs``)."""
+    """Trials/s of ``processes`` independent trial loops (each runs all of ``xs``).
+
+    A loop process that dies stops the measurement at once (its partners, waiting
+    at the barrier, are terminated) instead of leaving them waiting for ever.
+    """
     import multiprocessing
+    import queue
 
     ctx = multiprocessing.get_context("spawn")
     barrier, results = ctx.Barrier(processes), ctx.Queue()
@@ -145,11 +148,24 @@ def _hardware(processes: int, xs) -> float:
              for _ in range(processes)]
     for proc in procs:
         proc.start()
-    times = [results.get(timeout=3600) for _ in procs]
-    for proc in procs:
-        proc.join()
-        if proc.exitcode != 0:
-            raise RuntimeError(f"hardware floor: a loop process exited with {proc.exitcode}")
+    times = []
+    try:
+        while len(times) < processes:
+            try:
+                times.append(results.get(timeout=1.0))
+            except queue.Empty:
+                failed = [proc.exitcode for proc in procs if proc.exitcode not in (None, 0)]
+                if failed:
+                    raise RuntimeError(f"hardware floor: a loop process exited with "
+                                       f"{failed[0]}") from None
+    finally:
+        for proc in procs:
+            if len(times) < processes:
+                proc.terminate()
+            proc.join()
+    if any(proc.exitcode != 0 for proc in procs):
+        raise RuntimeError(f"hardware floor: a loop process exited with "
+                           f"{[proc.exitcode for proc in procs]}")
     return processes * len(xs) / max(times)
 
 

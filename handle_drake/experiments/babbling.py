@@ -118,8 +118,12 @@ def grid_points(bounds, n: int) -> tuple[list[np.ndarray], np.ndarray]:
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 2:
         raise ValueError(f"grid: expected an integer >= 2 points per dimension, got {n!r}")
     axes = [np.linspace(lo, hi, int(n)) for lo, hi in bounds]
-    mesh = np.meshgrid(*axes, indexing="ij")
-    return axes, np.column_stack([m.ravel() for m in mesh])
+    return axes, _mesh(axes)
+
+
+def _mesh(axes) -> np.ndarray:
+    """The (prod len(axes), d) points of the grid on ``axes``, 'ij' order."""
+    return np.column_stack([m.ravel() for m in np.meshgrid(*axes, indexing="ij")])
 
 
 def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
@@ -294,9 +298,8 @@ class GridSurrogate:
         self.bounds = np.array([[a[0], a[-1]] for a in axes])
         self.noise = float(noise)
         self.placement_error, self.placement_samples = float(placement_error), placement_samples
-        self.stencil = placement_stencil(placement_error, placement_samples)
-        if len(axes) != 2:
-            self.stencil = np.zeros((1, len(axes)))
+        self.stencil = (placement_stencil(placement_error, placement_samples) if len(axes) == 2
+                        else np.zeros((1, len(axes))))
         self._interpolant = RegularGridInterpolator(axes, values, method="linear")
 
     def noiseless(self, X) -> np.ndarray | float:
@@ -328,8 +331,7 @@ class GridSurrogate:
             raise ValueError(f"refine: expected an integer >= 1, got {refine!r}")
         axes = [np.concatenate([np.linspace(a, b, refine + 1)[:-1] for a, b in zip(
             axis[:-1], axis[1:], strict=True)] + [axis[-1:]]) for axis in self.axes]
-        mesh = np.meshgrid(*axes, indexing="ij")
-        points = np.column_stack([m.ravel() for m in mesh])
+        points = _mesh(axes)
         values = self.noiseless(points)
         best = int(np.argmax(values))
         return points[best], float(values[best])

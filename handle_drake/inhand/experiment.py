@@ -22,7 +22,7 @@ import numpy as np
 
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS, make_inhand_optimizer
 from handle_drake.inhand.task import InHandTask, InHandTrial
-from handle_drake.learning.cluster import as_executor, executor_workers
+from handle_drake.learning.cluster import as_executor, executor_workers, max_local_workers
 from handle_drake.learning.executors import InlineExecutor
 from handle_drake.learning.log import TrialLog
 from handle_drake.learning.runner import TrialRunner
@@ -73,8 +73,6 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     """
     if optimizer not in INHAND_OPTIMIZERS:
         raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {optimizer!r}")
-    from handle_drake.learning.cluster import max_local_workers
-
     if workers is None:
         workers = 1 if executor is None else executor_workers(as_executor(executor))
     for name, value, low, high in (("trials", trials, 0, None),
