@@ -66,13 +66,7 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from handle_drake.grasp.kinematics import (
-    FOREARM_AXIS_B,
-    FOREARM_RADIUS,
-    GraspKinematics,
-    contact_layout,
-    move_contacts,
-)
+from handle_drake.grasp.kinematics import GraspKinematics, contact_layout, move_contacts
 from handle_drake.grasp.synergies import ClassSynergies, default_synergies
 from handle_drake.grasp.taxonomy import (
     GraspClass,
@@ -412,8 +406,8 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
     if min(up_height) + kin.support[1] <= 0.002:
         return False
     X_UB = kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, kin.forearm)
-    forearm = min((X_UB @ p_B)[2] for p_B in FOREARM_AXIS_B) + kin.support[1]
-    return forearm > FOREARM_RADIUS - 0.002
+    forearm = min((X_UB @ p_B)[2] for p_B in kin.forearm_axis_B) + kin.support[1]
+    return forearm > kin.forearm_radius - 0.002
 
 
 def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)
