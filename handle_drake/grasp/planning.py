@@ -156,11 +156,7 @@ def _on_bounding_box(kind: str) -> bool:
 
 def _extents(spec) -> tuple[float, float, float]:
     """Bounding-box edges (x, y, z) in O (m) of a mesh or an instrumented device."""
-    if spec.kind == "mesh":
-        from handle_drake.objects.mesh import mesh_in_object_frame
-
-        return tuple(float(e) for e in mesh_in_object_frame(spec).extents)
-    from handle_drake.objects import surface_mesh
+    from handle_drake.objects import surface_mesh  # a mesh's: the mesh in O
 
     return tuple(float(e) for e in surface_mesh(spec).extents)
 
@@ -170,15 +166,11 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
 
     A mesh or an instrumented device is planned as its bounding-box proxy standing
     upright: (opposition, row, height) extents, the fingers closing across the
-    narrower horizontal edge (``objects.mesh.grasp_extents``).
+    narrower horizontal edge (as ``objects.mesh.grasp_extents`` gives a mesh's).
     """
     from handle_drake.objects import dimensions
 
-    if spec.kind == "mesh":
-        from handle_drake.objects.mesh import grasp_extents
-
-        return "box", grasp_extents(spec)
-    if spec.kind in DEVICE_OBJECTS:
+    if _on_bounding_box(spec.kind):
         ex, ey, ez = _extents(spec)
         return "box", (min(ex, ey), max(ex, ey), ez)
     d = dimensions(spec)
