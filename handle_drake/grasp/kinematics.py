@@ -55,12 +55,6 @@ __all__ = [
 ]
 
 FINGER_SPACING = 0.022  # m, between neighbouring finger knuckles (2 x 11 mm)
-# The forearm's collision cylinder (models/shadow_hand/README.md): radius 0.045 m
-# about the base frame's z axis from z = 0 to 0.18 m. With a support its axis ends
-# stay a radius above the table, so the forearm never reaches into it (a small
-# object grasped with the hand turned flat drove it 40 mm into the table top).
-FOREARM_RADIUS = 0.045
-FOREARM_AXIS_B = (np.zeros(3), np.array([0.0, 0.0, 0.18]))
 _DISTAL = {"th": "thdistal", "ff": "ffdistal", "mf": "mfdistal", "rf": "rfdistal", "lf": "lfdistal"}
 
 # (point in the distal frame, outward surface normal in the distal frame).
@@ -174,6 +168,19 @@ class GraspSolution:
     contact_error: float  # m, worst distance of a contact point from its surface
 
 
+def _widest_cylinder(plant, inspector, body) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
+    """``(radius, (end, end))``: the widest collision cylinder on ``body`` (its
+    radius and the two ends of its axis in the body frame)."""
+    found = [(inspector.GetShape(g), inspector.GetPoseInFrame(g))
+             for g in plant.GetCollisionGeometriesForBody(body)
+             if isinstance(inspector.GetShape(g), Cylinder)]
+    if not found:
+        raise RuntimeError(f"{body.name()}: the model has no collision cylinder on it")
+    cylinder, X_BG = max(found, key=lambda f: f[0].radius())
+    half = np.array([0.0, 0.0, cylinder.length() / 2])
+    return cylinder.radius(), (X_BG @ -half, X_BG @ half)
+
+
 class GraspKinematics:
     """Kinematics of the Shadow hand for grasp synthesis and analysis (see module doc)."""
 
@@ -239,6 +246,12 @@ class GraspKinematics:
         self.context = plant.GetMyMutableContextFromRoot(self.diagram_context)
         self.palm = plant.GetFrameByName("palm", self.hand)
         self.forearm = plant.GetFrameByName(self.spec.base_body, self.hand)
+        # The forearm's collision cylinder, as the model declares it: with a
+        # support its axis ends stay a radius above the table, so the forearm
+        # never reaches into it (a small object grasped with the hand turned
+        # flat drove it 40 mm into the table top).
+        self.forearm_radius, self.forearm_axis_B = _widest_cylinder(
+            plant, scene_graph.model_inspector(), self.forearm.body())
         self.object_frame = self.object_body.body_frame()
         self.q_index = np.array(
             [plant.GetJointByName(n, self.hand).position_start() for n in self.spec.joint_names]
@@ -421,9 +434,9 @@ class GraspKinematics:
                                              [big, big, big])
                 # The forearm too: both ends of its axis a radius above the table
                 # (exact for a level forearm, a radius to spare for an upright one).
-                for p_B in FOREARM_AXIS_B:
+                for p_B in self.forearm_axis_B:
                     ik.AddPositionConstraint(self.forearm, p_B, self.up_frame,
-                                             [-big, -big, floor + FOREARM_RADIUS],
+                                             [-big, -big, floor + self.forearm_radius],
                                              [big, big, big])
             if approach is not None:
                 ik.AddAngleBetweenVectorsConstraint(

@@ -66,13 +66,7 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from handle_drake.grasp.kinematics import (
-    FOREARM_AXIS_B,
-    FOREARM_RADIUS,
-    GraspKinematics,
-    contact_layout,
-    move_contacts,
-)
+from handle_drake.grasp.kinematics import GraspKinematics, contact_layout, move_contacts
 from handle_drake.grasp.synergies import ClassSynergies, default_synergies
 from handle_drake.grasp.taxonomy import (
     GraspClass,
@@ -162,11 +156,7 @@ def _on_bounding_box(kind: str) -> bool:
 
 def _extents(spec) -> tuple[float, float, float]:
     """Bounding-box edges (x, y, z) in O (m) of a mesh or an instrumented device."""
-    if spec.kind == "mesh":
-        from handle_drake.objects.mesh import mesh_in_object_frame
-
-        return tuple(float(e) for e in mesh_in_object_frame(spec).extents)
-    from handle_drake.objects import surface_mesh
+    from handle_drake.objects import surface_mesh  # a mesh's: the mesh in O
 
     return tuple(float(e) for e in surface_mesh(spec).extents)
 
@@ -176,15 +166,11 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
 
     A mesh or an instrumented device is planned as its bounding-box proxy standing
     upright: (opposition, row, height) extents, the fingers closing across the
-    narrower horizontal edge (``objects.mesh.grasp_extents``).
+    narrower horizontal edge (as ``objects.mesh.grasp_extents`` gives a mesh's).
     """
     from handle_drake.objects import dimensions
 
-    if spec.kind == "mesh":
-        from handle_drake.objects.mesh import grasp_extents
-
-        return "box", grasp_extents(spec)
-    if spec.kind in DEVICE_OBJECTS:
+    if _on_bounding_box(spec.kind):
         ex, ey, ez = _extents(spec)
         return "box", (min(ex, ey), max(ex, ey), ez)
     d = dimensions(spec)
@@ -412,8 +398,8 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
     if min(up_height) + kin.support[1] <= 0.002:
         return False
     X_UB = kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, kin.forearm)
-    forearm = min((X_UB @ p_B)[2] for p_B in FOREARM_AXIS_B) + kin.support[1]
-    return forearm > FOREARM_RADIUS - 0.002
+    forearm = min((X_UB @ p_B)[2] for p_B in kin.forearm_axis_B) + kin.support[1]
+    return forearm > kin.forearm_radius - 0.002
 
 
 def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)

@@ -26,6 +26,8 @@ port                           size  units / frame
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -202,12 +204,19 @@ def default_sensor_pose(spec) -> RigidTransform:
     in its cavity, an L bracket's off its arms) the object's surface point
     nearest to the origin (of 4096 seeded surface samples: a sensor glued there),
     axes along O's."""
+    return RigidTransform(np.array(_default_sensor_position(spec)))
+
+
+@lru_cache(maxsize=64)
+def _default_sensor_position(spec) -> tuple[float, float, float]:
+    """``p_OS`` of :func:`default_sensor_pose`, once per object: scenario validation, the
+    station and its recorders all ask (the surface sampling takes tens of ms)."""
     if _in_object(spec, np.zeros(3), 0.0):
-        return RigidTransform()
+        return (0.0, 0.0, 0.0)
     from handle_drake.objects import sample_surface
 
     points, _ = sample_surface(spec, 4096, rng=0)
-    return RigidTransform(points[np.argmin(np.linalg.norm(points, axis=1))])
+    return tuple(float(v) for v in points[np.argmin(np.linalg.norm(points, axis=1))])
 
 
 def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> None:

@@ -75,10 +75,11 @@ def describe_instruments(scenario, logs, X_WO=None) -> str:
 
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)
+    X_OS = instrument_X_OS(scenario)
     times = logs["object.acceleration"].sample_times()
     lines = [f"object accelerometer ({profile.name}, {profile.rate_hz:g} Hz, +-{profile.range_g:g}"
              f" g, {profile.bits} bit) at X_OS = "
-             f"{np.round(instrument_X_OS(scenario).translation() * 1e3, 1).tolist()} mm:"]
+             f"{np.round(X_OS.translation() * 1e3, 1).tolist()} mm:"]
     if not len(times):
         return "\n".join(lines + ["  no samples (the run was too short)"])
     f = logs["object.acceleration"].data()[:, -1]
@@ -88,7 +89,7 @@ def describe_instruments(scenario, logs, X_WO=None) -> str:
            f"roll {roll:+.1f} deg, pitch {pitch:+.1f} deg "
            f"({'at rest' if rest else 'not at rest: roll/pitch not valid'})")
     if X_WO is not None:
-        true = np.degrees(true_roll_pitch((X_WO @ instrument_X_OS(scenario)).rotation()))
+        true = np.degrees(true_roll_pitch((X_WO @ X_OS).rotation()))
         end += f"; true (plant) roll {true[0]:+.1f} deg, pitch {true[1]:+.1f} deg"
     lines.append(end)
     for name in ("free_fall", "slip"):

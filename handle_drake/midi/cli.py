@@ -149,11 +149,10 @@ def _cmd_monitor(args) -> int:
     try:
         while time.monotonic() < deadline:
             for message in port.iter_pending():
-                rejected = dict(decoder.rejected)
+                before = decoder.rejected.copy()
                 event = decoder.decode(message)
-                if event is None:
-                    reason = next(r for r, n in decoder.rejected.items()
-                                  if n > rejected.get(r, 0))
+                if event is None:  # the one reason it counted
+                    (reason,) = decoder.rejected - before
                     print(f"  ignored ({reason}): {message}", flush=True)
                     continue
                 counts.add(event)

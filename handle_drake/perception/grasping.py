@@ -77,29 +77,44 @@ def planner_input(kind: str, detection: Detection, table_height: float = 0.0
     return size, resting_pose(kind, size, xy=xy, yaw=yaw, table_height=table_height)
 
 
-def perceive_object(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
-                    profile: str = "kinect_v1", seed: int = 0) -> PerceivedObject:
-    """Renders the true object (resting pose at ``xy``, ``yaw`` rad) through
-    the tabletop camera and returns what the planner is given."""
+def _tabletop_view(object_config, profile: str, seed: int):
+    """``(scenario, view)``: ``object_config`` on the table of
+    ``diagrams/tabletop_perception.yaml``, rendered through its camera (made a
+    ``profile`` camera) with the scenario's noise seed ``seed``, and detected."""
     from handle_drake.demo import diagrams_dir
-    from handle_drake.grasp.planning import resting_pose
     from handle_drake.perception.perceive import render_views
-    from handle_drake.scenario import CameraConfig, LoadScenario, ObjectConfig
+    from handle_drake.scenario import CameraConfig, LoadScenario
 
-    if kind not in PLANNABLE:
-        raise ValueError(f"kind: the planner grasps {list(PLANNABLE)}, got {kind!r}")
-    X_WO = resting_pose(kind, size, xy=xy, yaw=yaw)
     scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml")
-    scenario.object = ObjectConfig(kind=kind, size=size, X_WO=Transform(X_WO), on_table=False)
+    scenario.object = object_config
     scenario.random_seed = int(seed)
     camera = scenario.cameras[0]
     scenario.cameras = [CameraConfig(name=camera.name, profile=profile, parent=camera.parent,
                                      X_PC=camera.X_PC, target=list(camera.target))]
     (view,) = render_views(scenario)
+    return scenario, view
+
+
+def _nearest_detection(view, xy) -> Detection:
+    """The view's detection whose centre lies nearest (horizontally) to ``xy`` (m, world)."""
+    return min(view.detections, key=lambda d: float(np.linalg.norm(d.position[:2] - xy)))
+
+
+def perceive_object(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
+                    profile: str = "kinect_v1", seed: int = 0) -> PerceivedObject:
+    """Renders the true object (resting pose at ``xy``, ``yaw`` rad) through
+    the tabletop camera and returns what the planner is given."""
+    from handle_drake.grasp.planning import resting_pose
+    from handle_drake.scenario import ObjectConfig
+
+    if kind not in PLANNABLE:
+        raise ValueError(f"kind: the planner grasps {list(PLANNABLE)}, got {kind!r}")
+    X_WO = resting_pose(kind, size, xy=xy, yaw=yaw)
+    _, view = _tabletop_view(ObjectConfig(kind=kind, size=size, X_WO=Transform(X_WO),
+                                          on_table=False), profile, seed)
     if not view.detections:
         raise ValueError(f"perception: no object detected ({view.message or 'empty view'})")
-    truth = X_WO.translation()[:2]
-    detection = min(view.detections, key=lambda d: float(np.linalg.norm(d.position[:2] - truth)))
+    detection = _nearest_detection(view, X_WO.translation()[:2])
     perceived_size, X_WO_perceived = planner_input(kind, detection)
     return PerceivedObject(kind, perceived_size, X_WO_perceived, float(size), X_WO, detection)
 
@@ -120,16 +135,6 @@ class PerceivedTrial:
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
-
-
-def _trial_runner(trial):
-    from handle_drake.run import ScenarioRunner
-
-    runner = getattr(trial, "_perception_runner", None)
-    if runner is None:
-        runner = ScenarioRunner(trial.base_scenario())
-        trial._perception_runner = runner
-    return runner
 
 
 def aimed_trial_scenario(trial, offset_O, yaw_error: float = 0.0):
@@ -170,11 +175,10 @@ def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str 
     error is carried into its frame; from the truth the same trial scores
     ``trial.evaluate([0, 0])``. ``trial``: a
     ``GraspTrial`` of that kind to reuse (its diagram is built once)."""
-    from handle_drake.demo import diagrams_dir
     from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
     from handle_drake.objects import KINDS
-    from handle_drake.perception.perceive import detection_error, render_views
-    from handle_drake.scenario import CameraConfig, LoadScenario, ObjectConfig
+    from handle_drake.perception.perceive import detection_error
+    from handle_drake.scenario import ObjectConfig
     from handle_drake.station import object_initial_pose
 
     if kind not in KINDS:
@@ -183,22 +187,16 @@ def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str 
         trial = GraspTrial(GraspTrialConfig(hand=hand, object=kind, space="offset"))
     if trial.config.object != kind:
         raise ValueError(f"trial: its object is {trial.config.object!r}, not {kind!r}")
-    scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml")
     X = Transform(RigidTransform(RotationMatrix.MakeZRotation(float(yaw)),
                                  [float(xy[0]), float(xy[1]), 0.0]))
-    scenario.object = ObjectConfig(kind=kind, size=trial.config.object_size, X_WO=X,
-                                   on_table=True)
-    scenario.random_seed = int(seed)
-    camera = scenario.cameras[0]
-    scenario.cameras = [CameraConfig(name=camera.name, profile=profile, parent=camera.parent,
-                                     X_PC=camera.X_PC, target=list(camera.target))]
-    (view,) = render_views(scenario)
+    scenario, view = _tabletop_view(ObjectConfig(kind=kind, size=trial.config.object_size,
+                                                 X_WO=X, on_table=True), profile, seed)
     X_WO = object_initial_pose(scenario)
     truth = X_WO.translation()[:2]
     if not view.detections:
         return PerceivedTrial(kind, (float(xy[0]), float(xy[1]), float(yaw)), None,
                               (math.nan, math.nan), math.nan, math.nan, False)
-    detection = min(view.detections, key=lambda d: float(np.linalg.norm(d.position[:2] - truth)))
+    detection = _nearest_detection(view, truth)
     error = detection_error(detection, scenario)
     R_OW = X_WO.rotation().inverse().matrix()
     d_W = np.array([*(detection.position[:2] - truth), 0.0])
@@ -207,7 +205,9 @@ def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str 
     # a round footprint gives none, so the hand keeps its world yaw and meets
     # the object turned by -yaw (a mug's handle; nothing for a sphere).
     yaw_error = -float(yaw) if error["yaw_deg"] is None else math.radians(error["yaw_deg"])
-    result = _trial_runner(trial).run(scenario=aimed_trial_scenario(trial, offset_O, yaw_error))
+    # The trial's own runner (built once, shared with trial.evaluate).
+    runner = trial._built or trial._build()
+    result = runner.run(scenario=aimed_trial_scenario(trial, offset_O, yaw_error))
     return PerceivedTrial(kind, (float(xy[0]), float(xy[1]), float(yaw)), error,
                           (float(offset_O[0]), float(offset_O[1])), float(yaw_error),
                           float(result.score.value), bool(result.score.force_closure))
