@@ -24,7 +24,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from handle_drake.cli_support import int_at_least as _int_at_least
+from handle_drake.cli_support import non_negative_int, positive_int
 from handle_drake.cli_support import positive_float as _positive_float
 from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS
 from handle_drake.inhand.task import EVALUATIONS, TASKS
@@ -42,15 +42,15 @@ def register(subparsers) -> None:
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO); pso: standard PSO; cmaes: CMA-ES; "
                         "random: random search")
-    p.add_argument("--trials", type=_int_at_least(1, "a positive integer"), default=200,
+    p.add_argument("--trials", type=positive_int, default=200,
                    help="budget of trials (the run stops earlier at the target)")
-    p.add_argument("--workers", type=_int_at_least(1, "a positive integer"), default=1,
+    p.add_argument("--workers", type=positive_int, default=1,
                    help="worker processes of 'local' and 'dask' (default 1: trials run in this "
                         "process); the particles of one iteration run in parallel. With "
                         "dask://, the cluster's workers")
     add_executor_arguments(p)
-    p.add_argument("--seed", type=_int_at_least(0, "an integer >= 0"), default=0)
-    p.add_argument("--particles", type=_int_at_least(1, "a positive integer"), default=10,
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--particles", type=positive_int, default=10,
                    help="particles per iteration (CMA-ES: population)")
     p.add_argument("--target-deg", type=_positive_float, default=30.0,
                    help="rotation the object must reach, held, at the end (deg)")
