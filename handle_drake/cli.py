@@ -16,6 +16,7 @@ import importlib
 import sys
 from pathlib import Path
 
+from handle_drake.blas import pin_blas
 from handle_drake.cli_support import check_hardware_server, run_command, start_meshcat
 
 # Modules that add their own sub-commands with ``register(subparsers)``.
@@ -165,6 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    pin_blas(force=False)  # before the area modules load numpy (build_parser imports them)
     return run_command(build_parser(), argv)
 
 

@@ -115,12 +115,12 @@ def refuse_without_mesh(args, *options: str) -> None:
 def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) -> int:
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
+    pin_blas(force=False)  # before the imports below load numpy
     from handle_drake.learning import TrialLogError
     from handle_drake.learning.cluster import ExecutorError
     from handle_drake.paths import check_outputs
     from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
-    pin_blas(force=False)
     args = parser.parse_args(argv)
     previous = _terminate_like_ctrl_c()
     try:

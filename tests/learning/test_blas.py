@@ -38,3 +38,25 @@ def test_the_command_line_keeps_what_the_user_set():
     assert cli["env"] == {"OPENBLAS_NUM_THREADS": "2", "OMP_NUM_THREADS": "1",
                           "MKL_NUM_THREADS": "1"}
     assert set(_run("cli")["threads"]) == {1}
+
+
+COMMAND_LINE = """
+import json
+import handle_drake.cli as cli
+from threadpoolctl import threadpool_info
+
+def probe(parser, argv):  # the sub-command would run here, every area module imported
+    print(json.dumps([p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]))
+    return 0
+
+cli.run_command = probe
+cli.main(["demo"])
+"""
+
+
+def test_handle_drake_pins_blas_before_its_area_modules_load_numpy():
+    base = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", COMMAND_LINE], capture_output=True, text=True,
+                         check=True, env=base, timeout=120).stdout
+    threads = json.loads(out)
+    assert threads and set(threads) == {1}
