@@ -345,11 +345,14 @@ class GraspTrial:
                                surface_radius=c.surface_radius, gamma=0.002, num_edges=8),
         )
 
-    def _build(self) -> ScenarioRunner:
-        """The runner of the base scenario, built once per process (per config)."""
-        if self._base is None:
-            self._base = self.base_scenario()
-        self._built = ScenarioRunner(self._base)
+    @property
+    def runner(self) -> ScenarioRunner:
+        """The runner of the base scenario, built on first use, once per process
+        (per config); other scenarios of this trial run on it (``runner.run(scenario=...)``)."""
+        if self._built is None:
+            if self._base is None:
+                self._base = self.base_scenario()
+            self._built = ScenarioRunner(self._base)
         return self._built
 
     def _check(self, x) -> np.ndarray:
@@ -417,7 +420,7 @@ class GraspTrial:
         """
         start_wall = time.perf_counter()
         c = self.config
-        runner = self._built or self._build()
+        runner = self.runner
         controller = runner.controller
         values, touched = [], False
         # The stencil's first placement (the planned one when K == 1) gives the

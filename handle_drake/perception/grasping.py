@@ -206,7 +206,7 @@ def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str 
     # the object turned by -yaw (a mug's handle; nothing for a sphere).
     yaw_error = -float(yaw) if error["yaw_deg"] is None else math.radians(error["yaw_deg"])
     # The trial's own runner (built once, shared with trial.evaluate).
-    runner = trial._built or trial._build()
+    runner = trial.runner
     result = runner.run(scenario=aimed_trial_scenario(trial, offset_O, yaw_error))
     return PerceivedTrial(kind, (float(xy[0]), float(xy[1]), float(yaw)), error,
                           (float(offset_O[0]), float(offset_O[1])), float(yaw_error),
