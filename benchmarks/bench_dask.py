@@ -70,7 +70,7 @@ from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig  #
 from handle_drake.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.learning import run_experiment  # noqa: E402
 from handle_drake.learning.cluster import LocalPool, trial_executor  # noqa: E402
-from handle_drake.learning.executors import _evaluate  # noqa: E402
+from handle_drake.learning.executors import TrialResult, _evaluate  # noqa: E402
 
 CONFIG = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
 EXECUTORS = ("local", "dask")
@@ -82,16 +82,45 @@ def noop(x, seed: int = 0) -> float:
     return 0.0
 
 
+class ThreadClock:
+    """``objective`` that also reports the CPU seconds of the thread that ran the trial.
+
+    The trial's wall time over that CPU time is what the trial lost inside its
+    process, waiting: for the GIL (a Dask worker's event loop runs beside it),
+    or for a core (other processes on a loaded machine).
+    """
+
+    def __init__(self, objective):
+        self.objective = objective
+
+    def __call__(self, x, seed: int = 0):
+        start = time.thread_time()
+        value = self.objective(x, seed=seed)
+        cpu = time.thread_time() - start
+        result = value if isinstance(value, TrialResult) else TrialResult(value)
+        return TrialResult(result.metric, {"cpu": cpu, "contacts": result.contacts},
+                           result.scenario)
+
+
 def _load() -> float:
     return round(os.getloadavg()[0], 2)
 
 
 class Case:
-    """One case's outcome: trials/s and the workers' busy fraction (None: not measured)."""
+    """One case's outcome: trials/s, the workers' busy fraction and the trials' wall
+    time over their threads' CPU time, less 1 (None: not measured)."""
 
-    def __init__(self, n_trials, elapsed, trial_seconds=None, workers=1):
+    def __init__(self, n_trials, elapsed, trial_seconds=None, workers=1, cpu_seconds=None):
         self.tps = n_trials / elapsed
         self.busy = None if trial_seconds is None else trial_seconds / (elapsed * workers)
+        self.wait = None if not cpu_seconds else trial_seconds / cpu_seconds - 1
+
+
+def _cpu(contacts) -> float:
+    """The thread CPU seconds a :class:`ThreadClock` trial reported (JSON text or dict)."""
+    if isinstance(contacts, str):
+        contacts = json.loads(contacts)
+    return contacts["cpu"] if isinstance(contacts, dict) and "cpu" in contacts else 0.0
 
 
 def _random_run(executor, objective, bounds, n_trials, tag, workers) -> Case:
@@ -101,13 +130,14 @@ def _random_run(executor, objective, bounds, n_trials, tag, workers) -> Case:
                                 Path(folder) / "t.sqlite", executor=executor, progress=False,
                                 run_id=tag)
         elapsed = time.perf_counter() - start
-    return Case(n_trials, elapsed, sum(r.wall_time for r in result.trials), workers)
+    return Case(n_trials, elapsed, sum(r.wall_time for r in result.trials), workers,
+                sum(_cpu(r.contacts) for r in result.trials))
 
 
 def _pso_iterations(executor, objective, bounds, k, iterations, seed, workers=1) -> Case:
     rng = np.random.default_rng(seed)
     shipped = executor.ship(objective) if hasattr(executor, "ship") else objective
-    busy = 0.0
+    busy = cpu = 0.0
     start = time.perf_counter()
     for _ in range(iterations):
         swarm = rng.uniform(bounds[:, 0], bounds[:, 1], size=(k, len(bounds)))
@@ -116,7 +146,8 @@ def _pso_iterations(executor, objective, bounds, k, iterations, seed, workers=1)
         for future in futures:
             assert future.result()["status"] == "done", future.result().get("error")
             busy += future.result()["wall_time"]
-    return Case(k * iterations, time.perf_counter() - start, busy, workers)
+            cpu += _cpu(future.result()["contacts"])
+    return Case(k * iterations, time.perf_counter() - start, busy, workers, cpu)
 
 
 def _inhand_pso(executor, k, iterations, seed, workers=1) -> Case:
@@ -200,13 +231,13 @@ def _paired(samples: dict, top: tuple, bottom: tuple, scale=1.0) -> list:
 
 
 def summarise(samples: dict, loads: dict, busy: dict | None = None,
-              in_flight: int = RUNNER_IN_FLIGHT) -> dict:
+              in_flight: int = RUNNER_IN_FLIGHT, wait: dict | None = None) -> dict:
     """The table, the overheads and the 100-worker projection from per-case samples
     (``{(workload, executor, workers): [trials/s per round]}``) and, when given, the
-    workers' busy fractions per round; prints them. ``in_flight``: the runner's
-    trials in flight in the no-op runner case at 2 workers (4; 2 before the runner
-    queued a trial per worker)."""
-    busy = busy or {}
+    workers' busy fractions and the trials' waits per round; prints them.
+    ``in_flight``: the runner's trials in flight in the no-op runner case at 2
+    workers (4; 2 before the runner queued a trial per worker)."""
+    busy, wait = busy or {}, wait or {}
     median = {key: statistics.median(values) for key, values in samples.items()}
     rows = []
     for name in (*WORKLOADS, "hardware"):
@@ -228,7 +259,9 @@ def summarise(samples: dict, loads: dict, busy: dict | None = None,
                 vs_local_1_range=[ratios[1]["min"], ratios[1]["max"]],
                 vs_local_2_range=[ratios[2]["min"], ratios[2]["max"]],
                 **{f"busy_{w}": statistics.median(busy[(name, kind, w)])
-                   for w in WORKERS if busy.get((name, kind, w))}))
+                   for w in WORKERS if busy.get((name, kind, w))},
+                **{f"wait_{w}": statistics.median(wait[(name, kind, w)])
+                   for w in WORKERS if wait.get((name, kind, w))}))
     overhead = {w: 1 / median[("noop_executor", "dask", w)]
                 - 1 / median[("noop_executor", "local", w)] for w in WORKERS}
     # The scheduler handles tasks one after another: its cost per task (the
@@ -259,15 +292,15 @@ def summarise(samples: dict, loads: dict, busy: dict | None = None,
         print(f"{row['workload']:14s} {row['executor']:8s} {row['tps_1']:10.2f} "
               f"{row['tps_2']:10.2f} {row['efficiency_2']:10.2f} {row['vs_local_1']:10.3f} "
               f"{row['vs_local_2']:10.3f}  {row['load']}")
-    print("\nPer-round spread (min-max of the paired ratios whose medians are above) and the "
-          "workers' busy fraction (median):")
+    print("\nPer-round spread (min-max of the paired ratios whose medians are above); the "
+          "workers' busy fraction and the trials' wait (wall / thread CPU - 1), medians:")
     print(f"{'workload':14s} {'executor':8s} {'efficiency':>12s} {'/local x1':>12s} "
-          f"{'/local x2':>12s} {'busy x1':>8s} {'busy x2':>8s}")
+          f"{'/local x2':>12s} {'busy x1':>8s} {'busy x2':>8s} {'wait x1':>8s} {'wait x2':>8s}")
     for row in rows:
         spread = "  ".join(f"{row[key][0]:5.2f}-{row[key][1]:<5.2f}" for key in
                            ("efficiency_2_range", "vs_local_1_range", "vs_local_2_range"))
-        busy_text = " ".join(f"{row[f'busy_{w}']:8.3f}" if f"busy_{w}" in row else f"{'':8s}"
-                             for w in WORKERS)
+        busy_text = " ".join(f"{row[f'{k}_{w}']:8.3f}" if f"{k}_{w}" in row else f"{'':8s}"
+                             for k in ("busy", "wait") for w in WORKERS)
         print(f"{row['workload']:14s} {row['executor']:8s} {spread} {busy_text}")
     print("\nDask overhead per task over the local pool (no-op): "
           + ", ".join(f"{w} worker(s) {overhead[w] * 1e3:+.2f} ms" for w in WORKERS))
@@ -312,13 +345,14 @@ def main(argv=None) -> int:
         summarise({key(k): v for k, v in saved["samples"].items()},
                   {key(k): v for k, v in saved["loads"].items()},
                   {key(k): v for k, v in saved.get("busy", {}).items()},
-                  saved.get("runner_in_flight", 2))
+                  saved.get("runner_in_flight", 2),
+                  {key(k): v for k, v in saved.get("wait", {}).items()})
         return 0
     rounds = args.rounds or (2 if args.quick else 3)
     n_random = args.trials or (16 if args.quick else 60)
     iterations = args.iterations or (2 if args.quick else 6)
     n_noop = 200 if args.quick else 1000
-    objective = CachedTrial(CONFIG)
+    objective = ThreadClock(CachedTrial(CONFIG))
     bounds = GraspTrial(CONFIG).bounds
     print(f"bench_dask: {GraspTrial(CONFIG).name}, {rounds} round(s), {n_random} random trials, "
           f"{iterations} PSO iterations of {args.swarm}, load average {_load()}", flush=True)
@@ -326,6 +360,7 @@ def main(argv=None) -> int:
     samples: dict[tuple, list] = {}
     loads: dict[tuple, list] = {}
     busy: dict[tuple, list] = {}
+    waits: dict[tuple, list] = {}
     opened = {}
     # Closed in reverse order: each Dask executor holds its Dask settings while open.
     with contextlib.ExitStack() as stack:
@@ -373,9 +408,12 @@ def main(argv=None) -> int:
                     loads.setdefault((name, kind, workers), []).append([before, _load()])
                     if outcome.busy is not None and not name.startswith("noop"):
                         busy.setdefault((name, kind, workers), []).append(outcome.busy)
+                    if outcome.wait is not None:
+                        waits.setdefault((name, kind, workers), []).append(outcome.wait)
                     print(f"  round {r + 1}: {name:14s} {kind:5s} x{workers}: "
                           f"{outcome.tps:8.2f} trials/s"
                           + ("" if outcome.busy is None else f", busy {outcome.busy:.3f}")
+                          + ("" if outcome.wait is None else f", wait {outcome.wait:.3f}")
                           + f" (load {before} -> {_load()})", flush=True)
 
     result = dict(
@@ -386,8 +424,9 @@ def main(argv=None) -> int:
         samples={"|".join(map(str, k)): v for k, v in samples.items()},
         loads={"|".join(map(str, k)): v for k, v in loads.items()},
         busy={"|".join(map(str, k)): v for k, v in busy.items()},
+        wait={"|".join(map(str, k)): v for k, v in waits.items()},
         runner_in_flight=RUNNER_IN_FLIGHT,
-        **summarise(samples, loads, busy),
+        **summarise(samples, loads, busy, RUNNER_IN_FLIGHT, waits),
         targets=dict(dask_vs_local=">= 0.90",
                      efficiency_2=">= 0.85 (random, pso, inhand_pso)"),
         machine=dict(cpus=os.cpu_count(), python=sys.version.split()[0],
