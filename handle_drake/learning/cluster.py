@@ -8,7 +8,8 @@ Every command that runs trials takes the same ``--executor`` option
   command's own process);
 - ``dask``: a ``distributed.LocalCluster`` of ``--workers N`` worker
   processes with one thread each (BLAS pinned by Dask's nanny and again by
-  the first trial a worker runs), scheduler on loopback, no dashboard;
+  the first trial a worker runs), scheduler on loopback, no dashboard, and
+  no profiler or fast event-loop tick in the workers (:data:`QUIET_WORKER`);
 - ``dask://HOST:PORT``: an existing ``dask scheduler`` and the ``dask worker``
   processes that joined it, on any number of machines.
 
@@ -63,6 +64,7 @@ from handle_drake.blas import pin_blas
 __all__ = [
     "WORKER_DEATHS",
     "CONNECT_TIMEOUT",
+    "QUIET_WORKER",
     "ExecutorError",
     "ExecutorSpec",
     "DaskExecutor",

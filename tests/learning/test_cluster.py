@@ -197,7 +197,8 @@ def test_each_worker_keeps_the_objective_it_received_once_and_runs_one_blas_thre
 
 def test_our_cluster_workers_run_without_the_profiler_and_the_fast_tick(dask_executor):
     """A worker's event loop shares the GIL with its trial: our LocalCluster's workers run
-    neither Dask's statistical profiler (every 10 ms) nor the 20 ms event-loop tick."""
+    neither Dask's statistical profiler (every 10 ms) nor the 20 ms event-loop tick, nor
+    do the workers the nannies restart after the deaths of earlier tests."""
 
     def settings(dask_worker):
         import dask
@@ -205,6 +206,7 @@ def test_our_cluster_workers_run_without_the_profiler_and_the_fast_tick(dask_exe
         return ("profile" in dask_worker.periodic_callbacks,
                 dask.config.get("distributed.admin.tick.interval"))
 
+    dask_executor.client.wait_for_workers(2, timeout=120)  # one may be restarting
     seen = dask_executor.client.run(settings)
     assert len(seen) == 2 and set(seen.values()) == {(False, "1s")}
 
