@@ -12,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -192,6 +193,64 @@ def test_each_worker_keeps_the_objective_it_received_once_and_runs_one_blas_thre
     for counts in calls.values():
         assert sorted(counts) == list(range(1, len(counts) + 1))
     assert max(map(len, calls.values())) > 1
+
+
+def test_our_cluster_workers_run_without_the_profiler_and_the_fast_tick(dask_executor):
+    """A worker's event loop shares the GIL with its trial: our LocalCluster's workers run
+    neither Dask's statistical profiler (every 10 ms) nor the 20 ms event-loop tick, nor
+    do the workers the nannies restart after the deaths of earlier tests."""
+
+    def settings(dask_worker):
+        import dask
+
+        return ("profile" in dask_worker.periodic_callbacks,
+                dask.config.get("distributed.admin.tick.interval"))
+
+    dask_executor.client.wait_for_workers(2, timeout=120)  # one may be restarting
+    seen = dask_executor.client.run(settings)
+    assert len(seen) == 2 and set(seen.values()) == {(False, "1s")}
+
+
+class InFlight(ThreadPoolExecutor):
+    """A 2-thread pool that records the most trials submitted and not yet finished."""
+
+    def __init__(self):
+        super().__init__(2)
+        self.now = self.most = 0
+        self.lock = threading.Lock()
+
+    def submit(self, fn, /, *args, **kwargs):
+        with self.lock:
+            self.now += 1
+            self.most = max(self.most, self.now)
+        future = super().submit(fn, *args, **kwargs)
+        future.add_done_callback(self._done)
+        return future
+
+    def _done(self, _):
+        with self.lock:
+            self.now -= 1
+
+
+def _slow_branin(x):
+    time.sleep(0.05)
+    return BRANIN(x)
+
+
+def test_random_search_queues_a_trial_per_worker_and_bo_keeps_its_batch(tmp_path):
+    """Random search keeps 2 x workers trials in flight (a worker finds its next trial
+    queued instead of waiting for the client to log one and submit another); BO's
+    synchronous batches stay at its batch size; the inline executor runs one at a time.
+    The trials are the seeded sequence whatever the count."""
+    with InFlight() as pool:
+        queued = _run(tmp_path / "a.sqlite", "random", 12, pool, _slow_branin)
+    assert pool.most == 4
+    with InFlight() as pool:
+        bo = _run(tmp_path / "b.sqlite", "bo", 12, pool, _slow_branin)
+    assert pool.most == 2
+    assert bo.n_done == 12
+    reference = _run(tmp_path / "c.sqlite", "random", 12, InlineExecutor(), _slow_branin)
+    assert _rows(queued) == _rows(reference)
 
 
 def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
