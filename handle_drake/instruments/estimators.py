@@ -590,7 +590,7 @@ class InstrumentSystem(LeafSystem):
 
     def _update(self, context, discrete_state):
         # Drake hands the update a copy of the current state: write what changes.
-        x = discrete_state.get_mutable_vector(self._state).get_mutable_value()
+        x = discrete_state.get_mutable_value(self._state)
         f = self._sample(context, x)
         if self.estimators is not None:
             command = self._command.Eval(context).tolist() if self.estimators.command_size \
