@@ -114,6 +114,11 @@ class DeviceAccelerometer(InstrumentSystem):
         self.averaging = bool(averaging)
         self._bias = device_bias(self.profile, self.seed).tolist()
         self._noise_rows = (None, None)  # (block, that block's noise rows as floats)
+        # The profile's derived numbers, once (properties computed per access).
+        self._rate = self.profile.rate_hz
+        self._inv_T2 = self.profile.rate_hz ** 2
+        self._lsb = self.profile.lsb
+        self._lo, self._hi = self.profile.count_limits
         self._input = self.DeclareVectorInputPort("specific_force", 3)
         if self.averaging:
             if X_BS is None or gravity_W is None:
@@ -152,7 +157,7 @@ class DeviceAccelerometer(InstrumentSystem):
                  by + R[3] * sx + R[4] * sy + R[5] * sz,
                  bz + R[6] * sx + R[7] * sy + R[8] * sz]
             if x[18] >= 2:
-                inv_T2 = self.profile.rate_hz ** 2
+                inv_T2 = self._inv_T2
                 a_W = [(p[i] - 2 * x[3 + i] + x[6 + i]) * inv_T2 - self._g_W[i]
                        for i in range(3)]
                 R_WS = x[9:18]  # row-major R_WS(t - T): f_S = R_WS^T a_W
@@ -166,10 +171,9 @@ class DeviceAccelerometer(InstrumentSystem):
             x[18] += 1
         if f is None:
             f = self._input.Eval(context).tolist()
-        noise = self._noise(int(round(context.get_time() * self.profile.rate_hz)))
-        lsb = self.profile.lsb
-        lo, hi = self.profile.count_limits
-        counts = [min(max(round((f[i] + self._bias[i] + noise[i]) / lsb), lo), hi)
+        noise = self._noise(int(round(context.get_time() * self._rate)))
+        lsb, lo, hi, bias = self._lsb, self._lo, self._hi, self._bias
+        counts = [min(max(round((f[i] + bias[i] + noise[i]) / lsb), lo), hi)
                   for i in range(3)]
         x[:3] = counts
         state[:19] = x
@@ -180,7 +184,7 @@ class DeviceAccelerometer(InstrumentSystem):
 
     def _calc_acceleration(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
-                             * self.profile.lsb)
+                             * self._lsb)
 
 
 def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:

@@ -418,13 +418,14 @@ class InstrumentEstimators:
         self._tail = 3 * self._n
         m = self.command_size
         self._initial_tail = [0.0, 0.0, math.nan] + ([0.0] * (2 + 3 + m + 1) if m else [])
+        self._tail_end = self._tail + len(self._initial_tail)
 
     def initial_state(self) -> list[float]:
         return [0.0] * self._tail + self._initial_tail
 
     @property
     def size(self) -> int:
-        return self._tail + len(self._initial_tail)
+        return self._tail_end
 
     def step(self, x: np.ndarray, offset: int, t: float, f: list[float], command=None) -> None:
         """Takes the sample ``f`` (3 floats, m/s^2) at time ``t``: updates the
@@ -432,8 +433,8 @@ class InstrumentEstimators:
         writable discrete state). ``command``: the command's values (a list), when
         the estimators have one."""
         fx, fy, fz = f
-        n3 = offset + self._tail
-        tail = x[n3:n3 + len(self._initial_tail)].tolist()
+        n3, end = offset + self._tail, offset + self._tail_end
+        tail = x[n3:end].tolist()
         taken = int(tail[0])
         slot = offset + 3 * (taken % self._n)
         x[slot:slot + 3] = f
@@ -453,7 +454,7 @@ class InstrumentEstimators:
             tail[2] = math.nan
         if self.command_size:
             self._slip_step(x, offset, tail, taken, command)
-        x[n3:n3 + len(tail)] = tail
+        x[n3:end] = tail
 
     def _slip_step(self, x, offset, tail, taken, command) -> None:
         """SlipDetector._step on ``tail`` (the state after the ring, as floats)."""
