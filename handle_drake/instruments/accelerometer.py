@@ -6,10 +6,11 @@ body, continuously, when it is given the plant's gravity vector (without it a
 body at rest would read zero). :class:`DeviceAccelerometer` turns that into
 what a real device reports (:mod:`~handle_drake.instruments.profiles`): sampled
 at the device rate and held, biased, noisy, saturated, quantised, in counts and
-in m/s^2. :func:`AddObjectAccelerometer` adds both to a diagram, the device
-with the estimators (:mod:`~handle_drake.instruments.estimators`) updated in
-its own update at each sample (one event per sample: the device's); the evdev
-driver of a real device carries the same estimators, and
+in m/s^2. :func:`AddObjectAccelerometer` adds both to a diagram; given
+``estimators``, the device also runs the roll/pitch, free-fall and slip
+estimators (:mod:`~handle_drake.instruments.estimators`) on each sample in its
+own update (one event per sample, the device's). The evdev driver of a real
+device carries the same estimators the same way, and
 :func:`ExportInstrumentPorts` exports the same ports from either:
 
 =============================  ====  ====================================================
