@@ -598,9 +598,10 @@ class InstrumentSystem(LeafSystem):
                 else None
             self.estimators.step(x, self._device_size, context.get_time(), f, command)
 
-    def _sample(self, context, x: np.ndarray) -> list[float]:
+    def _sample(self, context, x: np.ndarray) -> list[float] | None:
         """Takes the device's sample: updates the device state ``x[:device size]`` and
-        returns the new ``acceleration`` (3 floats, m/s^2, as the output reads it)."""
+        returns the new ``acceleration`` (3 floats, m/s^2, as the output reads it; a
+        device without estimators may return None)."""
         raise NotImplementedError
 
     def _calc_counts(self, context, output: BasicVector):

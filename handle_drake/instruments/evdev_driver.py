@@ -226,7 +226,7 @@ class EvdevAccelerometer(InstrumentSystem):
                 pass
         return float(2 ** (self.profile.bits - 1))
 
-    def _sample(self, context, state) -> list[float]:
+    def _sample(self, context, state) -> list[float] | None:
         raw = state[:3].tolist()
         slot = self._slot
         for ev_type, code, value in self.source.read_events(context.get_time()):
