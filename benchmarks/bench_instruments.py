@@ -17,7 +17,15 @@ is judged on both.
 
 Target (issue 11): at most 5 % slower than the station without it.
 
-Usage: ``python benchmarks/bench_instruments.py [--repeats N] [--quick]``
+``--profile`` instead runs one trial per case under cProfile (CPU clock) and
+reports where the sensor's time goes: the time inside Drake's ``AdvanceTo``
+itself (event dispatch, the plant; the profiler's own overhead inflates the
+Python side, so compare cases, not absolute figures), the Python callbacks of
+``handle_drake.instruments`` that Drake calls (per device sample), and how many
+of them run per sample (the instrument's events: 1 since the estimators run in
+the device's update; 4 before, at two instants).
+
+Usage: ``python benchmarks/bench_instruments.py [--repeats N] [--quick] [--profile]``
 """
 
 from __future__ import annotations
@@ -76,13 +84,64 @@ def bench(repeats: int) -> list[dict]:
     return rows
 
 
+def profile() -> list[dict]:
+    """One profiled trial per case (module doc)."""
+    import cProfile
+    import pstats
+
+    rows = []
+    for name, override in CASES.items():
+        runner = _runner(override)
+        runner.reset()
+        runner.simulator.AdvanceTo(0.05)  # first-call costs out of the way
+        runner.reset()
+        profiler = cProfile.Profile(time.process_time)
+        cpu = time.process_time()
+        profiler.enable()
+        runner.simulator.AdvanceTo(TRIAL_SECONDS)
+        profiler.disable()
+        cpu = time.process_time() - cpu
+        stats = pstats.Stats(profiler).stats
+        advance = [key for key in stats if "AdvanceTo" in key[2]]
+        own = sum(stats[key][2] for key in advance)
+        # Instrument functions Drake calls itself (their caller is AdvanceTo).
+        callbacks = {key: value for key, value in stats.items()
+                     if "handle_drake/instruments/" in key[0].replace("\\", "/")
+                     and any(caller in value[4] for caller in advance)}
+        config = runner.scenario.object.accelerometer
+        samples = (round(TRIAL_SECONDS * config.profile(runner.scenario.object.kind).rate_hz)
+                   if config is not None else 0)
+        calls = sum(value[1] for value in callbacks.values())
+        python = sum(value[3] for value in callbacks.values())
+        rows.append({"case": name, "cpu_s": cpu, "advance_to_own_s": own,
+                     "samples": samples, "callback_calls": calls, "callbacks_s": python,
+                     "callbacks": sorted(f"{key[2]} ({key[0].rsplit('/', 1)[-1]}:{key[1]})"
+                                         for key in callbacks)})
+    return rows
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--quick", action="store_true", help="two rounds")
+    parser.add_argument("--profile", action="store_true",
+                        help="one cProfile'd trial per case instead: where the time goes")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "instruments.json")
     args = parser.parse_args(argv)
+    if args.profile:
+        rows = profile()
+        print(f"One {TRIAL_SECONDS:.0f} s trial per case under cProfile (CPU clock)")
+        print(f"{'case':<26}{'CPU (s)':>9}{'in AdvanceTo':>14}{'callbacks':>11}"
+              f"{'per sample':>12}{'events/sample':>15}")
+        for r in rows:
+            per = r["callbacks_s"] / r["samples"] * 1e6 if r["samples"] else 0.0
+            events = r["callback_calls"] / r["samples"] if r["samples"] else 0.0
+            print(f"{r['case']:<26}{r['cpu_s']:>9.3f}{r['advance_to_own_s']:>14.3f}"
+                  f"{r['callbacks_s']:>11.3f}{f'{per:.0f} us':>12}{events:>15.2f}")
+        for r in rows[1:]:
+            print(f"  {r['case']}: {', '.join(r['callbacks'])}")
+        return 0
     repeats = 2 if args.quick else args.repeats
     if repeats < 1:
         parser.error(f"--repeats must be >= 1, got {repeats}")

@@ -7,9 +7,10 @@
 - :mod:`~handle_drake.instruments.accelerometer`: the device model on Drake's
   ``Accelerometer`` and :func:`AddObjectAccelerometer` for the station.
 - :mod:`~handle_drake.instruments.estimators`: roll/pitch with an at-rest flag, free
-  fall and slip, as plain functions and LeafSystems.
+  fall and slip, as plain functions, as one per-sample update the device systems
+  run in their own update (one event per sample), and as separate LeafSystems.
 - :mod:`~handle_drake.instruments.evdev_driver`: a real device (JoyWarrior as a Linux
-  joystick) through ``evdev``, with the same ports.
+  joystick) through ``evdev``, with the same estimators and ports.
 - :mod:`~handle_drake.instruments.experiments`: the Figure 8 experiments.
 
 This package's ``__init__`` imports nothing heavy: ``handle_drake.objects`` reads

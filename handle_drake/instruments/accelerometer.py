@@ -6,11 +6,12 @@ body, continuously, when it is given the plant's gravity vector (without it a
 body at rest would read zero). :class:`DeviceAccelerometer` turns that into
 what a real device reports (:mod:`~handle_drake.instruments.profiles`): sampled
 at the device rate and held, biased, noisy, saturated, quantised, in counts and
-in m/s^2. :func:`AddObjectAccelerometer` adds both to a diagram;
-:func:`AddInstrumentEstimators` adds the estimators
-(:mod:`~handle_drake.instruments.estimators`) behind any source of the
-``acceleration`` signal (this device model, or the evdev driver of a real
-device) and exports the same ports either way:
+in m/s^2. :func:`AddObjectAccelerometer` adds both to a diagram; given
+``estimators``, the device also runs the roll/pitch, free-fall and slip
+estimators (:mod:`~handle_drake.instruments.estimators`) on each sample in its
+own update (one event per sample, the device's). The evdev driver of a real
+device carries the same estimators the same way, and
+:func:`ExportInstrumentPorts` exports the same ports from either:
 
 =============================  ====  ====================================================
 port                           size  units / frame
@@ -30,17 +31,15 @@ from functools import lru_cache
 
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 from pydrake.systems.sensors import Accelerometer
 
-from handle_drake.instruments.estimators import (
-    EstimatorParams,
-    FreeFallDetector,
-    RollPitchEstimator,
-    SlipDetector,
-)
+from handle_drake.instruments.estimators import EstimatorParams, InstrumentSystem
 from handle_drake.instruments.profiles import (
+    _NOISE_BLOCK,
+    STANDARD_GRAVITY,
     DeviceProfile,
+    _noise_block,
     device_bias,
     get_profile,
     sample_noise,
@@ -54,7 +53,7 @@ __all__ = [
     "default_sensor_pose",
     "check_sensor_pose",
     "AddObjectAccelerometer",
-    "AddInstrumentEstimators",
+    "ExportInstrumentPorts",
     "INSTRUMENT_SIGNALS",
 ]
 
@@ -73,7 +72,7 @@ def device_reading(f_S, profile: DeviceProfile, seed: int = 0, index: int = 0) -
                      profile)
 
 
-class DeviceAccelerometer(LeafSystem):
+class DeviceAccelerometer(InstrumentSystem):
     """A consumer accelerometer: outputs ``counts`` (3) and ``acceleration`` (3, m/s^2
     = counts * lsb), sampled every ``1 / profile.rate_hz`` s from t = 0 and held
     between samples (sample k at t = k / rate uses noise sample k); zero before
@@ -97,10 +96,17 @@ class DeviceAccelerometer(LeafSystem):
     velocities jitter. The first two samples, with no history, are
     instantaneous readings. A welded body does not move: it needs no
     averaging (``AddObjectAccelerometer`` then reads Drake's sensor only).
+
+    With ``estimators`` (:class:`~handle_drake.instruments.estimators.EstimatorParams`)
+    the device also runs the roll/pitch, free-fall and slip estimators on each
+    new sample in the same update (:class:`~handle_drake.instruments.estimators.
+    InstrumentSystem`: their outputs and, with ``command_size``, the ``command``
+    input); without, it is the device alone.
     """
 
     def __init__(self, profile: DeviceProfile | str, seed: int = 0, averaging: bool = False,
-                 X_BS: RigidTransform | None = None, gravity_W=None):
+                 X_BS: RigidTransform | None = None, gravity_W=None,
+                 estimators: EstimatorParams | None = None, command_size: int | None = None):
         super().__init__()
         self.profile = get_profile(profile)
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
@@ -108,9 +114,13 @@ class DeviceAccelerometer(LeafSystem):
         self.seed = int(seed)
         self.averaging = bool(averaging)
         self._bias = device_bias(self.profile, self.seed).tolist()
+        self._noise_rows = (None, None)  # (block, that block's noise rows as floats)
+        # The profile's derived numbers, once (properties computed per access).
+        self._rate = self.profile.rate_hz
+        self._inv_T2 = self.profile.rate_hz ** 2
+        self._lsb = self.profile.lsb
+        self._lo, self._hi = self.profile.count_limits
         self._input = self.DeclareVectorInputPort("specific_force", 3)
-        # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
-        self._state = self.DeclareDiscreteState(19)
         if self.averaging:
             if X_BS is None or gravity_W is None:
                 raise ValueError("averaging needs X_BS and gravity_W")
@@ -118,17 +128,27 @@ class DeviceAccelerometer(LeafSystem):
             self._R_BS = X_BS.rotation().matrix().ravel().tolist()  # row-major
             self._g_W = [float(v) for v in gravity_W]
             self._body_state = self.DeclareVectorInputPort("body_state", 13)
-        self.DeclarePeriodicDiscreteUpdateEvent(self.profile.period, 0.0, self._sample)
-        self.DeclareVectorOutputPort("counts", 3, self._calc_counts,
-                                     {self.discrete_state_ticket(self._state)})
-        self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration,
-                                     {self.discrete_state_ticket(self._state)})
+        # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
+        self._declare_instrument(self.profile.period, [0.0] * 19, estimators, command_size)
 
-    def _sample(self, context, discrete_state):
+    def _noise(self, index: int) -> list[float]:
+        """:func:`~handle_drake.instruments.profiles.sample_noise` of sample ``index`` as
+        floats (the same products, taken once per block of samples)."""
+        if self.profile.noise_std_g == 0.0:
+            return [0.0, 0.0, 0.0]
+        block, row = divmod(index, _NOISE_BLOCK)
+        cached, rows = self._noise_rows
+        if cached != block:
+            rows = (_noise_block(self.seed, block)
+                    * (self.profile.noise_std_g * STANDARD_GRAVITY)).tolist()
+            self._noise_rows = (block, rows)
+        return rows[row]
+
+    def _sample(self, context, state) -> list[float]:
         # Plain Python floats: a sample is a few dozen scalar operations, and tiny numpy
         # arrays cost more per operation than the arithmetic (this runs once per sample
         # of every trial; see benchmarks/bench_instruments.py).
-        x = context.get_discrete_state(self._state).get_value().tolist()
+        x = state[:19].tolist()
         f = None
         if self.averaging:
             qw, qx, qy, qz, bx, by, bz = self._body_state.Eval(context)[:7].tolist()
@@ -138,7 +158,7 @@ class DeviceAccelerometer(LeafSystem):
                  by + R[3] * sx + R[4] * sy + R[5] * sz,
                  bz + R[6] * sx + R[7] * sy + R[8] * sz]
             if x[18] >= 2:
-                inv_T2 = self.profile.rate_hz ** 2
+                inv_T2 = self._inv_T2
                 a_W = [(p[i] - 2 * x[3 + i] + x[6 + i]) * inv_T2 - self._g_W[i]
                        for i in range(3)]
                 R_WS = x[9:18]  # row-major R_WS(t - T): f_S = R_WS^T a_W
@@ -152,20 +172,20 @@ class DeviceAccelerometer(LeafSystem):
             x[18] += 1
         if f is None:
             f = self._input.Eval(context).tolist()
-        index = int(round(context.get_time() * self.profile.rate_hz))
-        noise = sample_noise(self.profile, self.seed, index).tolist()
-        lsb = self.profile.lsb
-        lo, hi = self.profile.count_limits
-        x[:3] = [min(max(round((f[i] + self._bias[i] + noise[i]) / lsb), lo), hi)
-                 for i in range(3)]
-        discrete_state.get_mutable_vector(self._state).SetFromVector(x)
+        noise = self._noise(int(round(context.get_time() * self._rate)))
+        lsb, lo, hi, bias = self._lsb, self._lo, self._hi, self._bias
+        counts = [min(max(round((f[i] + bias[i] + noise[i]) / lsb), lo), hi)
+                  for i in range(3)]
+        x[:3] = counts
+        state[:19] = x
+        return [c * lsb for c in counts]
 
     def _calc_counts(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
 
     def _calc_acceleration(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
-                             * self.profile.lsb)
+                             * self._lsb)
 
 
 def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:
@@ -234,11 +254,19 @@ def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> N
 
 def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
                            profile: DeviceProfile | str, seed: int = 0,
-                           name: str = "object_accelerometer", averaging: bool = True):
+                           name: str = "object_accelerometer", averaging: bool = True,
+                           estimators: EstimatorParams | None = None, command=None):
     """Adds Drake's ``Accelerometer`` on ``body`` at ``X_BS`` (with the plant's
     gravity) and a :class:`DeviceAccelerometer` behind it (averaging over its
     period by default); returns the device system (outputs ``counts``,
-    ``acceleration``). The ideal sensor is named ``<name>_ideal``."""
+    ``acceleration``). The ideal sensor is named ``<name>_ideal``.
+
+    With ``estimators`` the device also carries the roll/pitch, free-fall and slip
+    estimators, updated in its own update at each sample (their outputs are the
+    device's; :func:`ExportInstrumentPorts` exports them); ``command`` is the
+    output port whose stillness enables the slip detector (the hand and wrist
+    command); without it the slip output is a constant 0 (nothing tells whether
+    the hand moves)."""
     ideal = builder.AddNamedSystem(
         f"{name}_ideal",
         Accelerometer(body, X_BS, plant.gravity_field().gravity_vector()))
@@ -253,52 +281,27 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
     # model instance (a welded one does not move and reads Drake's sensor exactly).
     averaging = bool(averaging and body.is_floating_base_body()
                      and plant.num_multibody_states(instance) == 13)
+    if estimators is None and command is not None:
+        raise ValueError("command: the slip detector's command needs estimators")
     device = builder.AddNamedSystem(name, DeviceAccelerometer(
-        profile, seed, averaging=averaging, X_BS=X_BS, gravity_W=gravity))
+        profile, seed, averaging=averaging, X_BS=X_BS, gravity_W=gravity,
+        estimators=estimators, command_size=None if command is None else command.size()))
     builder.Connect(ideal.get_measurement_output_port(), device.GetInputPort("specific_force"))
     if averaging:
         builder.Connect(plant.get_state_output_port(instance), device.GetInputPort("body_state"))
+    if command is not None:
+        builder.Connect(command, device.GetInputPort("command"))
     return device
 
 
-def AddInstrumentEstimators(builder, acceleration, counts, profile: DeviceProfile,
-                            params: EstimatorParams | None = None, command=None,
-                            prefix: str = "object", export: bool = True) -> dict:
-    """Adds the roll/pitch, free-fall and slip estimators behind the output port
-    ``acceleration`` (3, m/s^2), sampling at the device rate, and exports the
-    instrument ports ``<prefix>.<signal>`` (module doc). ``command`` is the
-    output port whose stillness enables the slip detector (the hand and wrist
-    command); without it the slip output is a constant 0 (nothing tells whether
-    the hand moves). Returns the systems by name."""
-    from pydrake.systems.primitives import ConstantVectorSource
-
-    params = params or EstimatorParams()
-    period = profile.period
-    systems = {
-        "roll_pitch": builder.AddNamedSystem(f"{prefix}_roll_pitch",
-                                             RollPitchEstimator(period, params)),
-        "free_fall": builder.AddNamedSystem(f"{prefix}_free_fall",
-                                            FreeFallDetector(period, params)),
-    }
-    for system in systems.values():
-        builder.Connect(acceleration, system.GetInputPort("acceleration"))
-    if command is not None:
-        slip = builder.AddNamedSystem(f"{prefix}_slip",
-                                      SlipDetector(period, command.size(), params))
-        builder.Connect(acceleration, slip.GetInputPort("acceleration"))
-        builder.Connect(command, slip.GetInputPort("command"))
-        slip_port = slip.GetOutputPort("slip")
-        systems["slip"] = slip
-    else:
-        slip_port = builder.AddNamedSystem(f"{prefix}_slip_unknown",
-                                           ConstantVectorSource([0.0])).get_output_port()
-    if export:
-        builder.ExportOutput(acceleration, f"{prefix}.acceleration")
-        builder.ExportOutput(counts, f"{prefix}.acceleration_counts")
-        builder.ExportOutput(systems["roll_pitch"].GetOutputPort("roll_pitch"),
-                             f"{prefix}.roll_pitch")
-        builder.ExportOutput(systems["roll_pitch"].GetOutputPort("at_rest"), f"{prefix}.at_rest")
-        builder.ExportOutput(systems["free_fall"].GetOutputPort("free_fall"),
-                             f"{prefix}.free_fall")
-        builder.ExportOutput(slip_port, f"{prefix}.slip")
-    return systems
+def ExportInstrumentPorts(builder, device, prefix: str = "object") -> None:
+    """Exports the instrument ports ``<prefix>.<signal>`` (module doc) of a device
+    system that carries the estimators (a :class:`DeviceAccelerometer` or an
+    :class:`~handle_drake.instruments.evdev_driver.EvdevAccelerometer` made with
+    ``estimators``)."""
+    if getattr(device, "estimators", None) is None:
+        raise ValueError(f"{device.get_name()}: the device carries no estimators "
+                         "(make it with estimators=EstimatorParams())")
+    for signal in INSTRUMENT_SIGNALS:
+        port = "counts" if signal == "acceleration_counts" else signal
+        builder.ExportOutput(device.GetOutputPort(port), f"{prefix}.{signal}")

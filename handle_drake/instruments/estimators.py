@@ -33,12 +33,24 @@ accelerometer output at the device rate:
   the command moves, the detector is idle (0) and forgets its reference.
 
 Thresholds are parameters (:class:`EstimatorParams`) with the defaults above.
+
+In the station the estimators run inside the device's own update
+(:class:`InstrumentSystem`: the simulated
+:class:`~handle_drake.instruments.accelerometer.DeviceAccelerometer` and the
+evdev driver of a real device): one periodic event per device sample updates
+the reading and all three estimators (:class:`InstrumentEstimators`, on plain
+floats). :class:`RollPitchEstimator`, :class:`FreeFallDetector` and
+:class:`SlipDetector` are the same estimators as separate systems behind any
+acceleration signal, each sampling it :attr:`_Sampled.OFFSET` s after the
+device; they are the reference the fused update is tested against, output for
+output and sample for sample (``tests/instruments/test_instrument_fused.py``).
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
 import math
+import operator
 
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -56,6 +68,8 @@ __all__ = [
     "RollPitchEstimator",
     "FreeFallDetector",
     "SlipDetector",
+    "InstrumentEstimators",
+    "InstrumentSystem",
 ]
 
 G0 = STANDARD_GRAVITY
@@ -348,3 +362,250 @@ class SlipDetector(_Sampled):
 
     def _calc_slip(self, context, output: BasicVector):
         output.SetFromVector([1.0 if self._extra_state(context)[1] >= self._need else 0.0])
+
+
+# ------------------------------------------------------------ fused, one update
+
+
+class InstrumentEstimators:
+    """:class:`RollPitchEstimator`, :class:`FreeFallDetector` and (with a
+    ``command_size``) :class:`SlipDetector` as one update of one state vector,
+    for a device system to run in its own periodic update (not a System:
+    :class:`InstrumentSystem` holds it). The state is the separate systems'
+    state in one vector: one ring of the last samples (as many as the longest
+    window needs), then ``[samples taken, low samples, free-fall detection time]``
+    and, with a command, ``[still samples, samples flagged, reference (3),
+    previous command (m), have previous command]``.
+
+    :meth:`step` works on plain Python floats (tiny numpy arrays cost more per
+    operation than the arithmetic) and writes only the new sample's ring slot
+    and the tail. Where its float arithmetic could differ from the separate
+    systems' numpy arithmetic in the last bits (a magnitude against the
+    free-fall threshold, the slip test's magnitude and angle against their
+    tolerances), a value within :attr:`BAND` of its threshold is decided by the
+    separate systems' own expressions (``np.linalg.norm``,
+    :func:`slip_indicator`), so every decision is theirs exactly. The outputs
+    are computed as the separate systems compute them (:func:`roll_pitch`,
+    :func:`at_rest` of the same samples).
+    """
+
+    #: Relative half-width of the band around a threshold where the numpy expression
+    #: decides (the float and numpy values differ by a few ulps, far less than this).
+    BAND = 1e-9
+
+    def __init__(self, period: float, params: EstimatorParams | None = None,
+                 command_size: int | None = None):
+        self.params = p = params or EstimatorParams()
+        self.period = period = _check_period(period)
+        if command_size is not None and (
+                isinstance(command_size, bool) or not isinstance(command_size, int | np.integer)
+                or command_size < 1):
+            raise ValueError(f"command_size must be an int >= 1, got {command_size!r}")
+        self.command_size = 0 if command_size is None else int(command_size)
+        # The separate systems' windows (samples): RollPitchEstimator's mean and ring
+        # (its at-rest window), SlipDetector's ring (its mean).
+        self._n_mean = p.samples(p.window, period)
+        self._n_rest = max(self._n_mean, p.samples(p.rest_window, period), 2)
+        self._n_slip = p.samples(p.window, period)
+        self._n = max(self._n_rest, self._n_slip)
+        self._fall_need = p.samples(p.free_fall_duration, period)
+        self._settle = p.samples(p.settle_time, period)
+        self._slip_need = p.samples(p.slip_duration, period)
+        self._fall_threshold = p.free_fall_threshold * G0
+        self._norm_tol = p.slip_norm_tol * G0
+        # arccos(c) > angle_tol  <=>  c < cos(angle_tol) (never when angle_tol >= pi).
+        self._cos_tol = math.cos(p.slip_angle_tol) if p.slip_angle_tol < math.pi else -math.inf
+        self._tail = 3 * self._n
+        m = self.command_size
+        self._initial_tail = [0.0, 0.0, math.nan] + ([0.0] * (2 + 3 + m + 1) if m else [])
+        self._tail_end = self._tail + len(self._initial_tail)
+
+    def initial_state(self) -> list[float]:
+        return [0.0] * self._tail + self._initial_tail
+
+    @property
+    def size(self) -> int:
+        return self._tail_end
+
+    def step(self, x: np.ndarray, offset: int, t: float, f: list[float], command=None) -> None:
+        """Takes the sample ``f`` (3 floats, m/s^2) at time ``t``: updates the
+        estimators' state ``x[offset:offset + size]`` in place (``x``: the update's
+        writable discrete state). ``command``: the command's values (a list), when
+        the estimators have one."""
+        fx, fy, fz = f
+        n3, end = offset + self._tail, offset + self._tail_end
+        tail = x[n3:end].tolist()
+        taken = int(tail[0])
+        slot = offset + 3 * (taken % self._n)
+        x[slot:slot + 3] = f
+        taken += 1
+        tail[0] = taken
+        # FreeFallDetector._step
+        norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+        threshold = self._fall_threshold
+        if abs(norm - threshold) > self.BAND * threshold:
+            low = norm < threshold
+        else:  # at the threshold (or not finite): FreeFallDetector's own expression
+            low = bool(np.linalg.norm(np.array(f, dtype=float)) < threshold)
+        tail[1] = tail[1] + 1 if low else 0
+        if tail[1] == self._fall_need:
+            tail[2] = t
+        elif tail[1] < self._fall_need:
+            tail[2] = math.nan
+        if self.command_size:
+            self._slip_step(x, offset, tail, taken, command)
+        x[n3:end] = tail
+
+    def _slip_step(self, x, offset, tail, taken, command) -> None:
+        """SlipDetector._step on ``tail`` (the state after the ring, as floats)."""
+        m = self.command_size
+        tol = self.params.still_tol
+        # max |command - previous| <= tol, as each entry's (a NaN is not still)
+        still = tail[-1] > 0 and all(map(tol.__ge__, map(abs, map(operator.sub, command,
+                                                                   tail[8:8 + m]))))
+        tail[8:8 + m] = command
+        tail[-1] = 1.0
+        if not still:
+            tail[3:8] = [0.0] * 5
+            return
+        tail[3] += 1
+        if tail[3] < self._settle:
+            return
+        if tail[3] == self._settle:  # the reference: once per still spell, as numpy does it
+            tail[5:8] = self._recent(x, offset, self._n_slip, taken).mean(axis=0).tolist()
+        # The mean of the last samples, in order (the ring slots, oldest first).
+        n, k = self._n, min(self._n_slip, taken, self._n)
+        first = (taken - k) % n
+        if first + k <= n:
+            window = x[offset + 3 * first:offset + 3 * (first + k)].tolist()
+        else:
+            window = (x[offset + 3 * first:offset + 3 * n].tolist()
+                      + x[offset:offset + 3 * (first + k - n)].tolist())
+        mx, my, mz = sum(window[0::3]) / k, sum(window[1::3]) / k, sum(window[2::3]) / k
+        rx, ry, rz = tail[5:8]
+        r_norm = max(math.sqrt(rx * rx + ry * ry + rz * rz), 1e-12)
+        rx, ry, rz = rx / r_norm, ry / r_norm, rz / r_norm
+        norm = math.sqrt(mx * mx + my * my + mz * mz)
+        cos = (mx * rx + my * ry + mz * rz) / max(norm, 1e-12)
+        off = abs(norm - G0)
+        band = self.BAND
+        if (abs(off - self._norm_tol) > band * G0 and abs(cos - self._cos_tol) > band
+                and math.isfinite(norm) and math.isfinite(r_norm)):
+            flagged = off > self._norm_tol or cos < self._cos_tol
+        else:  # near a threshold (or not finite): SlipDetector's own expression
+            p = self.params
+            flagged = bool(slip_indicator(self._recent(x, offset, self._n_slip, taken)
+                                          .mean(axis=0), np.array(tail[5:8]),
+                                          p.slip_norm_tol, p.slip_angle_tol))
+        tail[4] = tail[4] + 1 if flagged else 0.0
+
+    def _recent(self, x: np.ndarray, offset: int, k: int, taken: int | None = None
+                ) -> np.ndarray:
+        """The last ``min(k, taken)`` samples, oldest first (as ``_Sampled._recent``)."""
+        if taken is None:
+            taken = int(x[offset + self._tail])
+        k = min(k, taken, self._n)
+        ring = x[offset:offset + self._tail].reshape(self._n, 3)
+        return ring[(taken - k + np.arange(k)) % self._n]
+
+    # Outputs, from the state x[offset:], as the separate systems compute them.
+
+    def roll_pitch(self, x: np.ndarray, offset: int) -> np.ndarray:
+        recent = self._recent(x, offset, self._n_mean)
+        return roll_pitch(recent.mean(axis=0)) if len(recent) else np.zeros(2)
+
+    def at_rest(self, x: np.ndarray, offset: int) -> float:
+        p = self.params
+        rest = int(x[offset + self._tail]) >= self._n_rest and at_rest(
+            self._recent(x, offset, self._n_rest), p.rest_norm_tol, p.rest_std_tol,
+            p.rest_angle_tol)
+        return 1.0 if rest else 0.0
+
+    def free_fall(self, x: np.ndarray, offset: int) -> float:
+        return 1.0 if x[offset + self._tail + 1] >= self._fall_need else 0.0
+
+    def detection_time(self, x: np.ndarray, offset: int) -> float:
+        return float(x[offset + self._tail + 2])
+
+    def slip(self, x: np.ndarray, offset: int) -> float:
+        if not self.command_size:
+            return 0.0
+        return 1.0 if x[offset + self._tail + 4] >= self._slip_need else 0.0
+
+
+class InstrumentSystem(LeafSystem):
+    """A device system (``counts`` and ``acceleration`` outputs) that can carry the
+    estimators: one discrete state group ``[device state, estimator state]`` and
+    one periodic update per device sample, at ``k * period``, which takes the
+    device's sample (:meth:`_sample`, the subclass's) and, with estimators, steps
+    them on it (:class:`InstrumentEstimators`) in the same update. Its outputs
+    are then those of the separate estimator systems behind the device:
+    ``roll_pitch`` (2), ``at_rest``, ``free_fall``, ``detection_time`` (the time
+    of the sample that completed the free-fall run; the separate
+    :class:`FreeFallDetector` reports its own update's, :attr:`_Sampled.OFFSET`
+    later), ``slip`` (a constant 0.0 without a command: nothing tells whether the
+    hand moves), and the input ``command`` (with a ``command_size``), which the
+    update reads at the sample instant.
+    """
+
+    def _declare_instrument(self, period: float, device_state, estimators, command_size):
+        """Declares the state, the update and the ports (the subclass's input ports
+        first). ``estimators``: None (the device alone) or :class:`EstimatorParams`."""
+        self._device_size = len(device_state)
+        self.estimators = (None if estimators is None else
+                           InstrumentEstimators(period, estimators, command_size))
+        x0 = [float(v) for v in device_state]
+        if self.estimators is not None:
+            x0 += self.estimators.initial_state()
+            if self.estimators.command_size:
+                self._command = self.DeclareVectorInputPort("command",
+                                                            self.estimators.command_size)
+        self._state = self.DeclareDiscreteState(np.array(x0))
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        ticket = {self.discrete_state_ticket(self._state)}
+        self.DeclareVectorOutputPort("counts", 3, self._calc_counts, ticket)
+        self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration, ticket)
+        if self.estimators is None:
+            return
+        est, o = self.estimators, self._device_size
+        for name, size, value in (("roll_pitch", 2, est.roll_pitch),
+                                  ("at_rest", 1, est.at_rest),
+                                  ("free_fall", 1, est.free_fall),
+                                  ("detection_time", 1, est.detection_time),
+                                  ("slip", 1, est.slip)):
+            if name == "slip" and not est.command_size:
+                self.DeclareVectorOutputPort("slip", 1, lambda context, out: out.SetAtIndex(0, 0.0),
+                                             {self.nothing_ticket()})
+                continue
+            self.DeclareVectorOutputPort(name, size, self._calc_estimate(value, o, size), ticket)
+
+    def _calc_estimate(self, value, offset, size):
+        state = self._state
+        if size == 1:
+            def calc(context, output):
+                output.SetAtIndex(0, value(context.get_discrete_state(state).get_value(), offset))
+        else:
+            def calc(context, output):
+                output.SetFromVector(value(context.get_discrete_state(state).get_value(), offset))
+        return calc
+
+    def _update(self, context, discrete_state):
+        # Drake hands the update a copy of the current state: write what changes.
+        x = discrete_state.get_mutable_value(self._state)
+        f = self._sample(context, x)
+        if self.estimators is not None:
+            command = self._command.Eval(context).tolist() if self.estimators.command_size \
+                else None
+            self.estimators.step(x, self._device_size, context.get_time(), f, command)
+
+    def _sample(self, context, x: np.ndarray) -> list[float] | None:
+        """Takes the device's sample: updates the device state ``x[:device size]`` and
+        returns the new ``acceleration`` (3 floats, m/s^2, as the output reads it; a
+        device without estimators may return None)."""
+        raise NotImplementedError
+
+    def _calc_counts(self, context, output: BasicVector):
+        raise NotImplementedError
+
+    def _calc_acceleration(self, context, output: BasicVector):
+        raise NotImplementedError

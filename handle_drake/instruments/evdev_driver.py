@@ -12,7 +12,10 @@ else a warning), and the raw value's centre is taken from the device's
 :class:`EvdevAccelerometer` is a LeafSystem with the outputs of
 :class:`~handle_drake.instruments.accelerometer.DeviceAccelerometer` (``counts``,
 ``acceleration``): at the device rate it drains the pending events of its
-source and holds the latest value per axis. A source is anything with
+source and holds the latest value per axis; made with ``estimators`` it also
+runs the roll/pitch, free-fall and slip estimators on each reading in the same
+update, as the simulated device does, so the hardware station exports the same
+instrument ports. A source is anything with
 ``read_events(t) -> iterable of (type, code, value)``: :class:`LiveEvents`
 wraps an ``evdev.InputDevice`` (non-blocking reads),
 :class:`RecordedEvents` replays a recorded stream by its time stamps against
@@ -27,8 +30,9 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector
 
+from handle_drake.instruments.estimators import EstimatorParams, InstrumentSystem
 from handle_drake.instruments.profiles import DeviceProfile, get_profile
 
 __all__ = [
@@ -167,9 +171,11 @@ def record_events(device: LiveEvents, seconds: float, path) -> int:
     return len(events)
 
 
-class EvdevAccelerometer(LeafSystem):
+class EvdevAccelerometer(InstrumentSystem):
     """A real accelerometer read through evdev; outputs ``counts`` (3) and
-    ``acceleration`` (3, m/s^2), as :class:`DeviceAccelerometer`.
+    ``acceleration`` (3, m/s^2), as :class:`DeviceAccelerometer`, and with
+    ``estimators`` the same estimator outputs (and ``command`` input, with
+    ``command_size``), updated in the same periodic update as the reading.
 
     Args:
         source: a :class:`LiveEvents`, :class:`RecordedEvents` or anything with
@@ -180,10 +186,15 @@ class EvdevAccelerometer(LeafSystem):
         signs: +-1 per axis (a device mounted with flipped axes).
         centre: raw value of 0 g per axis; default: from the device's absinfo
             ((min + max + 1) // 2) when it has one, else ``2**(bits-1)``.
+        estimators: :class:`~handle_drake.instruments.estimators.EstimatorParams`
+            to run the estimators on each reading, or None (the device alone).
+        command_size: the size of the slip detector's ``command`` input (None: no
+            slip detection, the ``slip`` output is a constant 0).
     """
 
     def __init__(self, source, profile: DeviceProfile | str, axes=(ABS_X, ABS_Y, ABS_Z),
-                 signs=(1, 1, 1), centre=None):
+                 signs=(1, 1, 1), centre=None, estimators: EstimatorParams | None = None,
+                 command_size: int | None = None):
         super().__init__()
         if not hasattr(source, "read_events"):
             raise TypeError(f"source must have read_events(t), got {type(source).__name__}")
@@ -200,13 +211,10 @@ class EvdevAccelerometer(LeafSystem):
         self._centre = np.asarray(centre, dtype=float)
         if self._centre.shape != (3,) or not np.all(np.isfinite(self._centre)):
             raise ValueError(f"centre: expected 3 finite raw values, got {centre!r}")
+        self._slot = {code: i for i, code in enumerate(self._axes)}
         # Raw values, held; start at the centre (0 g) until the first event.
-        self._raw = self.DeclareDiscreteState(self._centre.copy())
-        self.DeclarePeriodicDiscreteUpdateEvent(self.profile.period, 0.0, self._poll)
-        self.DeclareVectorOutputPort("counts", 3, self._calc_counts,
-                                     {self.discrete_state_ticket(self._raw)})
-        self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration,
-                                     {self.discrete_state_ticket(self._raw)})
+        self._declare_instrument(self.profile.period, self._centre.tolist(), estimators,
+                                 command_size)
 
     def _default_centre(self, code: int) -> float:
         absinfo = getattr(self.source, "absinfo", None)
@@ -218,18 +226,23 @@ class EvdevAccelerometer(LeafSystem):
                 pass
         return float(2 ** (self.profile.bits - 1))
 
-    def _poll(self, context, discrete_state):
-        raw = context.get_discrete_state(self._raw).get_value().copy()
-        slot = {code: i for i, code in enumerate(self._axes)}
+    def _sample(self, context, state) -> list[float] | None:
+        raw = state[:3].tolist()
+        slot = self._slot
         for ev_type, code, value in self.source.read_events(context.get_time()):
             if ev_type == EV_ABS and code in slot:
                 raw[slot[code]] = value
-        discrete_state.get_mutable_vector(self._raw).SetFromVector(raw)
+        state[:3] = raw
+        if self.estimators is None:
+            return None
+        return (self._counts(state[:3]) * self.profile.lsb).tolist()
+
+    def _counts(self, raw) -> np.ndarray:
+        lo, hi = self.profile.count_limits
+        return np.clip(self._signs * (raw - self._centre), lo, hi)
 
     def counts(self, context) -> np.ndarray:
-        lo, hi = self.profile.count_limits
-        raw = context.get_discrete_state(self._raw).get_value()
-        return np.clip(self._signs * (raw - self._centre), lo, hi)
+        return self._counts(context.get_discrete_state(self._state).get_value()[:3])
 
     def _calc_counts(self, context, output: BasicVector):
         output.SetFromVector(self.counts(context))

@@ -2,21 +2,24 @@
 
 :func:`AddSimulatedInstruments` (called by ``MakeHandStation`` when the
 scenario's object has an ``accelerometer``) puts the accelerometer on the
-object body at ``X_OS`` and adds the estimators; :func:`WithHardwareInstruments`
-(``hardware=True``) wraps the hardware station with the evdev driver of the real
-device and the same estimators. Both export ``object.acceleration``,
+object body at ``X_OS``, the estimators running in the device's own update
+(one event per sample); :func:`WithHardwareInstruments` (``hardware=True``)
+wraps the hardware station with the evdev driver of the real device, which
+runs the same estimators the same way. Both export ``object.acceleration``,
 ``object.acceleration_counts``, ``object.roll_pitch``, ``object.at_rest``,
 ``object.free_fall`` and ``object.slip`` (see
 :mod:`handle_drake.instruments.accelerometer`). The slip detector's ``command``
 is the hand driver's ``position_commanded`` (and, with a floating wrist, the
-wrist driver's ``desired_state``).
+wrist driver's ``desired_state``), read at the sample instant: the command as
+it was before the drivers' own updates at that instant, if any (the
+estimators used to sample 0.1 ms after the device, after those updates).
 """
 
 from __future__ import annotations
 
 from handle_drake.instruments.accelerometer import (
-    AddInstrumentEstimators,
     AddObjectAccelerometer,
+    ExportInstrumentPorts,
     default_sensor_pose,
     sensor_pose,
 )
@@ -120,20 +123,19 @@ def _command_port(builder):
 
 
 def AddSimulatedInstruments(builder, plant, scenario, body) -> dict:
-    """Adds the scenario's object accelerometer on ``body`` and its estimators to the
+    """Adds the scenario's object accelerometer on ``body``, with its estimators, to the
     station's builder (after the hand driver); exports the instrument ports."""
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)
     device = AddObjectAccelerometer(builder, plant, body, instrument_X_OS(scenario), profile,
-                                    seed=instrument_seed(scenario))
-    systems = AddInstrumentEstimators(
-        builder, device.GetOutputPort("acceleration"), device.GetOutputPort("counts"), profile,
-        config.estimator_params(), command=_command_port(builder))
-    systems["device"] = device
+                                    seed=instrument_seed(scenario),
+                                    estimators=config.estimator_params(),
+                                    command=_command_port(builder))
+    ExportInstrumentPorts(builder, device)
     # Ground truth for experiments (simulation only): the ideal specific force in S.
     builder.ExportOutput(builder.GetSubsystemByName("object_accelerometer_ideal")
                          .get_measurement_output_port(), "object.acceleration_true")
-    return systems
+    return {"device": device}
 
 
 def WithHardwareInstruments(station, scenario, source=None):
@@ -168,10 +170,11 @@ def WithHardwareInstruments(station, scenario, source=None):
     for i in range(station.num_output_ports()):
         port = station.get_output_port(i)
         builder.ExportOutput(port, port.get_name())
-    device = builder.AddNamedSystem("object_accelerometer", EvdevAccelerometer(source, profile))
-    AddInstrumentEstimators(builder, device.GetOutputPort("acceleration"),
-                            device.GetOutputPort("counts"), profile, config.estimator_params(),
-                            command=inner.GetOutputPort("hand.position_commanded"))
+    command = inner.GetOutputPort("hand.position_commanded")
+    device = builder.AddNamedSystem("object_accelerometer", EvdevAccelerometer(
+        source, profile, estimators=config.estimator_params(), command_size=command.size()))
+    builder.Connect(command, device.GetInputPort("command"))
+    ExportInstrumentPorts(builder, device)
     diagram = builder.Build()
     diagram.set_name(station.get_name() + "_instrumented")
     return diagram

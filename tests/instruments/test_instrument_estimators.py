@@ -12,7 +12,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 
-from handle_drake.instruments.accelerometer import AddInstrumentEstimators, AddObjectAccelerometer
+from handle_drake.instruments.accelerometer import AddObjectAccelerometer
 from handle_drake.instruments.estimators import (
     EstimatorParams,
     SlipDetector,
@@ -87,14 +87,12 @@ def _incline(alpha_deg: float, mu: float, duration: float = 0.6):
     plant.SetDefaultFloatingBaseBodyPose(body, X_WP @ RigidTransform([0, 0, resting_height(spec)]))
     plant.Finalize()
     profile = get_profile("joywarrior24f14").replace(noise_std_g=0.0, bias_std_g=0.0)
-    device = AddObjectAccelerometer(builder, plant, body, RigidTransform(), profile)
     still = builder.AddSystem(ConstantVectorSource(np.zeros(4)))  # the hand does not move
-    systems = AddInstrumentEstimators(builder, device.GetOutputPort("acceleration"),
-                                      device.GetOutputPort("counts"), profile,
-                                      command=still.get_output_port(), export=False)
+    device = AddObjectAccelerometer(builder, plant, body, RigidTransform(), profile,
+                                    estimators=EstimatorParams(), command=still.get_output_port())
     logs = {}
     for name, port in (("f", device.GetOutputPort("acceleration")),
-                       ("slip", systems["slip"].GetOutputPort("slip"))):
+                       ("slip", device.GetOutputPort("slip"))):
         logs[name] = builder.AddSystem(VectorLogSink(port.size(), profile.period))
         builder.Connect(port, logs[name].get_input_port())
     diagram = builder.Build()

@@ -12,7 +12,8 @@ from pydrake.math import RollPitchYaw
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.instruments.accelerometer import INSTRUMENT_SIGNALS, AddInstrumentEstimators
+from handle_drake.instruments.accelerometer import INSTRUMENT_SIGNALS, ExportInstrumentPorts
+from handle_drake.instruments.estimators import EstimatorParams
 from handle_drake.instruments.evdev_driver import (
     ABS_X,
     ABS_Y,
@@ -47,9 +48,8 @@ def _stream(rpy, until=0.5, fall_until=0.6, rate=125.0):
 
 def _diagram(source):
     builder = DiagramBuilder()
-    device = builder.AddSystem(EvdevAccelerometer(source, PROFILE))
-    AddInstrumentEstimators(builder, device.GetOutputPort("acceleration"),
-                            device.GetOutputPort("counts"), PROFILE)
+    device = builder.AddSystem(EvdevAccelerometer(source, PROFILE, estimators=EstimatorParams()))
+    ExportInstrumentPorts(builder, device)
     return builder.Build()
 
 

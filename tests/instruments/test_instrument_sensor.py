@@ -94,10 +94,10 @@ def test_free_fall_reads_zero_and_is_detected_after_the_stated_time():
     assert _out(station, context, "object.free_fall")[0] == 1.0
     assert _out(station, context, "object.at_rest")[0] == 0.0
     # Samples at 0, 8, 16 ms are all below 0.3 g: flagged at the third (24 ms stated
-    # duration = 3 samples), i.e. 0.1 ms after the 16 ms sample.
-    detector = station.GetSubsystemByName("object_free_fall")
-    t = detector.GetOutputPort("detection_time").Eval(detector.GetMyContextFromRoot(context))
-    assert t[0] == pytest.approx(0.016 + 1e-4, abs=1e-9)
+    # duration = 3 samples), in the 16 ms sample's own update.
+    device = station.GetSubsystemByName("object_accelerometer")
+    t = device.GetOutputPort("detection_time").Eval(device.GetMyContextFromRoot(context))
+    assert t[0] == pytest.approx(0.016, abs=1e-12)
 
 
 def test_saturation_at_the_range():

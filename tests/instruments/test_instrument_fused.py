@@ -1,0 +1,326 @@
+"""The estimators fused into the device's own update (one event per sample) against
+the separate systems they replace (the device, then RollPitchEstimator,
+FreeFallDetector and SlipDetector sampling it 0.1 ms later): every output exactly
+equal at every sample.
+
+Two levels: the estimators alone, on scripted sequences of rest, rotation, free
+fall, impacts, slip, values exactly at the thresholds and signed zeros, with a
+command that is still, moves, and is still again; and the device model on a
+box that falls onto an incline and slides or rests there (noise, bias,
+quantisation; three devices, seeds and thresholds). The command is the same
+value for both at each sample (it changes between samples): the fused update
+reads it at the sample instant, the separate slip detector 0.1 ms later.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.geometry import AddContactMaterial, Box, ProximityProperties
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import BasicVector, DiagramBuilder
+from pydrake.systems.primitives import TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from handle_drake.instruments.accelerometer import AddObjectAccelerometer, DeviceAccelerometer
+from handle_drake.instruments.estimators import (
+    EstimatorParams,
+    FreeFallDetector,
+    InstrumentEstimators,
+    InstrumentSystem,
+    RollPitchEstimator,
+    SlipDetector,
+    _Sampled,
+)
+from handle_drake.instruments.profiles import STANDARD_GRAVITY as G0
+from handle_drake.instruments.profiles import get_profile, sample_noise
+from handle_drake.objects import AddObject, ObjectSpec, resting_height
+
+M = 4  # command size
+OFFSET = _Sampled.OFFSET
+ESTIMATES = ("roll_pitch", "at_rest", "free_fall", "detection_time", "slip")
+
+
+class _Scripted(InstrumentSystem):
+    """An instrument whose 'device' reads its input ``f`` as it is (any float)."""
+
+    def __init__(self, period, params, command_size):
+        super().__init__()
+        self._f = self.DeclareVectorInputPort("f", 3)
+        self._declare_instrument(period, [0.0, 0.0, 0.0], params, command_size)
+
+    def _sample(self, context, x):
+        f = self._f.Eval(context).tolist()
+        x[:3] = f
+        return f
+
+    def _calc_counts(self, context, output: BasicVector):
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
+
+    _calc_acceleration = _calc_counts
+
+
+def _separate(builder, period, params, acceleration, command_size):
+    """The separate estimators behind the output port ``acceleration`` (and a slip
+    detector with a ``command_size``): the systems and which has each output."""
+    systems = [builder.AddSystem(RollPitchEstimator(period, params)),
+               builder.AddSystem(FreeFallDetector(period, params))]
+    if command_size:
+        systems.append(builder.AddSystem(SlipDetector(period, command_size, params)))
+    for system in systems:
+        builder.Connect(acceleration, system.GetInputPort("acceleration"))
+    ports = {"roll_pitch": systems[0], "at_rest": systems[0], "free_fall": systems[1],
+             "detection_time": systems[1]}
+    if command_size:
+        ports["slip"] = systems[2]
+    return systems, ports
+
+
+def _compare_outputs(context, fused, separate_ports, seen):
+    """Every estimator output of ``fused`` against the separate systems' (slip: 0 when
+    they have no slip detector); the detection time is the sample's, OFFSET earlier."""
+    fused_context = fused.GetMyContextFromRoot(context)
+    for name in ESTIMATES:
+        have = np.array(fused.GetOutputPort(name).Eval(fused_context))
+        system = separate_ports.get(name)
+        want = (np.zeros(1) if system is None else
+                np.array(system.GetOutputPort(name).Eval(system.GetMyContextFromRoot(context))))
+        if name == "detection_time":
+            assert np.isnan(have[0]) == np.isnan(want[0]), (name, want, have)
+            if not np.isnan(want[0]):
+                assert have[0] == pytest.approx(want[0] - OFFSET, abs=1e-12), (want, have)
+                seen["detected"] = seen.get("detected", 0) + 1
+            continue
+        assert np.array_equal(want, have), (name, want, have)
+        assert np.array_equal(np.signbit(want), np.signbit(have)), (name, want, have)
+        seen.setdefault(name, set()).add(tuple(np.round(want, 6)))
+
+
+def _compare_states(context, fused, separate):
+    """The state behind the outputs too: samples taken, the last samples, the free-fall
+    counter and the slip detector's counters, reference and last command."""
+    def state(system):
+        return system.GetMyContextFromRoot(context).get_discrete_state(0).get_value()
+
+    est: InstrumentEstimators = fused.estimators
+    o = fused._device_size
+    x = state(fused)
+    tail = x[o + 3 * est._n:]
+    for system in separate:
+        y = state(system)
+        m = system._n
+        assert y[3 * m] == tail[0]
+        k = min(m, int(tail[0]))
+        assert np.array_equal(est._recent(x, o, k), system._recent(y, k))
+        extra = y[3 * m + 1:]
+        if isinstance(system, FreeFallDetector):
+            assert extra[0] == tail[1]
+        elif isinstance(system, SlipDetector):
+            assert np.array_equal(extra, tail[3:], equal_nan=True), (extra, tail)
+
+
+# ----------------------------------------------------------- scripted samples
+
+
+def _gravity(rng, n, noise_g, rpy=None):
+    rpy = rng.uniform(-0.6, 0.6, 3) if rpy is None else rpy
+    R = RollPitchYaw(rpy).ToRotationMatrix().matrix()
+    return R.T @ [0.0, 0.0, G0] + rng.normal(0.0, noise_g * G0, (n, 3))
+
+
+def _script(rng, params: EstimatorParams) -> tuple[np.ndarray, np.ndarray]:
+    """Accelerations (N, 3) and commands (N, M), one per sample."""
+    parts = [_gravity(rng, 60, 0.005)]
+    # a rotation: gravity's direction turns through 40 samples
+    a, b = rng.uniform(-0.6, 0.6, 3), rng.uniform(-0.6, 0.6, 3)
+    parts.append(np.array([_gravity(rng, 1, 0.002, a + (b - a) * s)[0]
+                           for s in np.linspace(0, 1, 40)]))
+    parts.append(_gravity(rng, 50, 0.0, b))  # noiseless rest
+    # free fall, with magnitudes at and about the threshold
+    thr = params.free_fall_threshold * G0
+    fall = rng.normal(0.0, 0.05 * G0, (12, 3))
+    u = rng.normal(size=(6, 3))
+    fall[::2] = u / np.linalg.norm(u, axis=1)[:, None] * thr
+    fall[1] = [0.0, 0.0, thr]
+    fall[3] = [thr, 0.0, 0.0]
+    fall[5] = [0.0, -thr * (1 + 1e-12), 0.0]
+    parts.append(fall)
+    parts.append(rng.normal(0.0, 5 * G0, (4, 3)))  # impact
+    parts.append(_gravity(rng, 50, 0.003))
+    # slip: the magnitude drops, then the direction turns, then exactly at the tolerances
+    parts.append(0.85 * _gravity(rng, 20, 0.003, b))
+    parts.append(_gravity(rng, 20, 0.003, b + [math.radians(5.0), 0.0, 0.0]))
+    edge = np.zeros((12, 3))
+    edge[:, 2] = G0 * (1 + params.slip_norm_tol * rng.choice([-1.0, 1.0], 12))
+    parts.append(edge)
+    tilt = params.slip_angle_tol
+    parts.append(np.tile(G0 * np.array([0.0, math.sin(tilt), math.cos(tilt)]), (12, 1)))
+    parts.append(_gravity(rng, 40, 0.002, [0.0, 0.0, 0.0]))
+    parts.append(np.tile([0.0, 0.0, -0.0], (6, 1)))  # signed zeros
+    parts.append(_gravity(rng, 80, 0.01))
+    f = np.vstack(parts)
+    n = len(f)
+    # command: still, moves, still with changes within still_tol, a step, still again
+    c = np.tile(rng.normal(size=M), (n, 1))
+    move = slice(n // 3, n // 3 + 30)
+    c[move] += np.linspace(0.0, 0.2, 30)[:, None]
+    c[n // 3 + 30:] += 0.2
+    jitter = slice(n // 3 + 30, 2 * n // 3)
+    c[jitter] += rng.uniform(-0.4, 0.4, (jitter.stop - jitter.start, M)) * params.still_tol
+    c[2 * n // 3 + 40:, 1] += 3 * params.still_tol
+    c[n // 6, 2] = np.nan  # a NaN command is not still (twice: as it comes and goes)
+    return f, c
+
+
+def _compare_scripted(f, c, period, params, with_command=True):
+    builder = DiagramBuilder()
+    fused = builder.AddSystem(_Scripted(period, params, M if with_command else None))
+    builder.ExportInput(fused.GetInputPort("f"), "f")
+    # The separate estimators read the fused system's own acceleration output (the
+    # sample it took) and the same command.
+    separate, ports = _separate(builder, period, params, fused.GetOutputPort("acceleration"),
+                                M if with_command else None)
+    if with_command:
+        builder.ExportInput(fused.GetInputPort("command"), "command")
+        builder.ConnectInput("command", separate[2].GetInputPort("command"))
+    else:
+        assert not fused.HasInputPort("command")
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    seen = {}
+    for k in range(len(f)):
+        diagram.GetInputPort("f").FixValue(context, f[k])
+        if with_command:
+            diagram.GetInputPort("command").FixValue(context, c[k])
+        # sample k: the fused update at k T, the separate ones at k T + OFFSET
+        simulator.AdvanceTo(k * period + OFFSET + period / 2)
+        _compare_outputs(context, fused, ports, seen)
+        _compare_states(context, fused, separate)
+    return seen
+
+
+@pytest.mark.parametrize("seed, period", [(0, 0.008), (1, 0.01), (2, 0.001)])
+def test_fused_estimators_equal_the_separate_ones_exactly(seed, period):
+    params = EstimatorParams()
+    f, c = _script(np.random.default_rng(seed), params)
+    if period < 0.004:  # each sample 4 times: the windows span as many samples
+        f, c = np.repeat(f, 4, axis=0), np.repeat(c, 4, axis=0)
+    seen = _compare_scripted(f, c, period, params)
+    # the script exercises every output: at rest and not, free fall and slip flagged
+    assert seen["at_rest"] == {(0.0,), (1.0,)}
+    assert seen["free_fall"] == {(0.0,), (1.0,)}
+    assert seen["slip"] == {(0.0,), (1.0,)}
+    assert seen["detected"] >= 1  # samples with a free fall detected (and its time)
+
+
+def test_fused_estimators_equal_the_separate_ones_with_other_parameters():
+    # short windows and settle time: the slip test runs on most samples
+    params = EstimatorParams(window=0.02, rest_window=0.05, settle_time=0.03,
+                             slip_duration=0.016, free_fall_duration=0.01,
+                             slip_angle_tol=math.radians(4.0))
+    f, c = _script(np.random.default_rng(3), params)
+    seen = _compare_scripted(f, c, 0.008, params)
+    assert seen["slip"] == {(0.0,), (1.0,)}
+
+
+def test_fused_estimators_without_a_command_have_a_constant_zero_slip():
+    params = EstimatorParams()
+    f, c = _script(np.random.default_rng(4), params)
+    seen = _compare_scripted(f[:150], c[:150], 0.008, params, with_command=False)
+    assert seen["slip"] == {(0.0,)}
+
+
+# ----------------------------------------------------------- the device model
+
+
+def _incline_diagram(profile, seed, params, alpha_deg, mu, drop):
+    """A box released ``drop`` m above a plane inclined by alpha (slides when
+    tan(alpha) > mu), carrying the device twice: alone with the separate estimators
+    behind it, and with the estimators fused. The command: still, a move, still."""
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.001), builder)
+    R = RotationMatrix.MakeXRotation(math.radians(alpha_deg))
+    props = ProximityProperties()
+    AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
+    X_WP = RigidTransform(R, [0, 0, 0])
+    plant.RegisterCollisionGeometry(plant.world_body(), X_WP @ RigidTransform([0, 0, -0.025]),
+                                    Box(2, 2, 0.05), "plane", props)
+    spec = ObjectSpec("cuboid", 0.04, mu=mu, dimensions={"depth": 0.03, "height": 0.02})
+    AddObject(plant, spec, name="object")
+    body = plant.GetBodyByName("base_link")
+    plant.SetDefaultFloatingBaseBodyPose(
+        body, X_WP @ RigidTransform(RollPitchYaw(0.1, -0.2, 0.3).ToRotationMatrix(),
+                                    [0, 0, resting_height(spec) + drop]))
+    plant.Finalize()
+    # Steps half-way between samples: the same value at k T and k T + OFFSET.
+    T = profile.period
+    times = np.array([0.0, 0.1, 0.1 + 0.5 * T, 0.2 + 0.5 * T, 0.25 + 0.5 * T, 2.0])
+    values = np.zeros((M, len(times)))
+    values[0, 2:] = 0.3
+    values[1, 3:] = 0.5
+    values[2, 4:] = 0.5 + 0.5 * params.still_tol  # within still_tol: still
+    command = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(times,
+                                                                                   values)))
+    X_BS = RigidTransform(RollPitchYaw(0.2, 0.1, -0.4).ToRotationMatrix(), [0.01, -0.005, 0.004])
+    alone = AddObjectAccelerometer(builder, plant, body, X_BS, profile, seed=seed,
+                                   name="alone")
+    fused = AddObjectAccelerometer(builder, plant, body, X_BS, profile, seed=seed,
+                                   name="fused", estimators=params,
+                                   command=command.get_output_port())
+    separate, ports = _separate(builder, T, params, alone.GetOutputPort("acceleration"), M)
+    builder.Connect(command.get_output_port(), separate[2].GetInputPort("command"))
+    return builder.Build(), alone, fused, separate, ports
+
+
+@pytest.mark.parametrize("device, seed, params, alpha, mu", [
+    ("joywarrior24f14", 0, EstimatorParams(), 30.0, 0.2),
+    ("wiimote", 3, EstimatorParams(settle_time=0.1, rest_window=0.08), 10.0, 0.8),
+    ("ideal", 1, EstimatorParams(settle_time=0.05, slip_norm_tol=0.05, window=0.01), 30.0, 0.2),
+])
+def test_fused_device_equals_the_device_and_separate_estimators(device, seed, params, alpha, mu):
+    profile = get_profile(device)
+    diagram, alone, fused, separate, ports = _incline_diagram(profile, seed, params, alpha, mu,
+                                                              drop=0.08)
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    T = profile.period
+    seen = {}
+    for k in range(int(round(0.7 / T))):
+        simulator.AdvanceTo(k * T + OFFSET + T / 2)
+        for name in ("counts", "acceleration"):
+            want = alone.GetOutputPort(name).Eval(alone.GetMyContextFromRoot(context))
+            have = fused.GetOutputPort(name).Eval(fused.GetMyContextFromRoot(context))
+            assert np.array_equal(want, have), (k, name, want, have)
+        _compare_outputs(context, fused, ports, seen)
+        _compare_states(context, fused, separate)
+    # the run exercises the flags: it falls (free fall), lands, rests or slides
+    assert seen["free_fall"] == {(0.0,), (1.0,)}
+    assert (1.0,) in seen["at_rest"] or alpha > 20
+    assert (1.0,) in seen["slip"] or mu > 0.5
+    assert len(seen["roll_pitch"]) > 10
+
+
+def test_the_device_noise_is_the_profiles_sample_noise():
+    profile = get_profile("wiimote")
+    device = DeviceAccelerometer(profile, seed=5)
+    for index in (0, 1, 1023, 1024, 1025, 5000, 3, 2047):  # across noise blocks
+        assert device._noise(index) == sample_noise(profile, 5, index).tolist()
+    assert DeviceAccelerometer("ideal")._noise(7) == [0.0, 0.0, 0.0]
+
+
+def test_fused_estimators_bad_parameters():
+    with pytest.raises(ValueError, match="command_size"):
+        InstrumentEstimators(0.008, None, 0)
+    with pytest.raises(ValueError, match="period"):
+        InstrumentEstimators(0.0)
+    from pydrake.systems.framework import DiagramBuilder as Builder
+
+    from handle_drake.instruments.accelerometer import ExportInstrumentPorts
+
+    builder = Builder()
+    device = builder.AddSystem(DeviceAccelerometer("wiimote"))
+    with pytest.raises(ValueError, match="no estimators"):
+        ExportInstrumentPorts(builder, device)
