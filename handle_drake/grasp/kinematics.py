@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Box, Cylinder, ProximityProperties, Sphere
+from pydrake.geometry import Box, Capsule, Cylinder, ProximityProperties, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.parsing import Parser
@@ -84,9 +84,23 @@ class ContactTarget:
     spread: float = 0.0
 
 
-def contact_layout(name) -> tuple[ContactTarget, ...]:
-    """The contact layout of a grasp class in the grasp frame G (symmetric about O)."""
+def contact_layout(name, shape: str | None = None, dims=None) -> tuple[ContactTarget, ...]:
+    """The contact layout of a grasp class in the grasp frame G (symmetric about O).
+
+    With the object (``shape``, ``dims``): the parallel extension on a sphere
+    keeps only the fingers of its row that fit on the sphere, centred on it (one
+    finger per finger spacing of diameter, at least one): four extended fingers
+    side by side span 66 mm and cannot all touch a ball, the way a hand holds a
+    marble flat between the thumb and one finger.
+    """
     info = grasp_info(name)
+    if (info.grasp_class is GraspClass.PARALLEL_EXTENSION and shape == "sphere"
+            and dims is not None):
+        k = int(np.clip(np.floor(float(np.atleast_1d(dims)[0]) / FINGER_SPACING), 1, 4))
+        row = ("mf",) if k == 1 else ("ff", "mf", "rf", "lf")[:k]
+        return (ContactTarget("th", "pad", (0.0, 0.0, 1.0)),) + tuple(
+            ContactTarget(f, "pad", (0.0, 0.0, -1.0), (0.5 * (k - 1) - i) * FINGER_SPACING)
+            for i, f in enumerate(row))
     cls = info.grasp_class
     w = FINGER_SPACING
     up, down, below = (0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (-1.0, 0.0, 0.0)
@@ -181,6 +195,35 @@ def _widest_cylinder(plant, inspector, body) -> tuple[float, tuple[np.ndarray, n
     return cylinder.radius(), (X_BG @ -half, X_BG @ half)
 
 
+def _clearance_points(plant, inspector, model, skip=()) -> tuple:
+    """``((body frame, points (k, 3), radius), ...)``: the hand's collision shapes as points
+    in their body frames, each shape lying within ``radius`` of its points' convex hull
+    (exact for a capsule's axis ends and a sphere's centre; a box's corners with radius 0;
+    a cylinder's axis ends with its radius, which over-covers its rims)."""
+    out = []
+    for index in plant.GetBodyIndices(model):
+        body = plant.get_body(index)
+        if body in skip:
+            continue
+        for g in plant.GetCollisionGeometriesForBody(body):
+            shape, X_BG = inspector.GetShape(g), inspector.GetPoseInFrame(g)
+            if isinstance(shape, Capsule | Cylinder):
+                half = 0.5 * shape.length()
+                p_G, radius = np.array([[0.0, 0.0, -half], [0.0, 0.0, half]]), shape.radius()
+            elif isinstance(shape, Sphere):
+                p_G, radius = np.zeros((1, 3)), shape.radius()
+            elif isinstance(shape, Box):
+                h = 0.5 * np.array([shape.width(), shape.depth(), shape.height()])
+                p_G = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                                for sz in (-1, 1)]) * h
+                radius = 0.0
+            else:  # pragma: no cover - the shipped hands use only these shapes
+                raise NotImplementedError(f"{body.name()}: no clearance points for "
+                                          f"{type(shape).__name__}")
+            out.append((body.body_frame(), (X_BG @ p_G.T).T, float(radius)))
+    return tuple(out)
+
+
 class GraspKinematics:
     """Kinematics of the Shadow hand for grasp synthesis and analysis (see module doc)."""
 
@@ -252,6 +295,10 @@ class GraspKinematics:
         # flat drove it 40 mm into the table top).
         self.forearm_radius, self.forearm_axis_B = _widest_cylinder(
             plant, scene_graph.model_inspector(), self.forearm.body())
+        # Every other collision shape of the hand, as points with a radius: a
+        # posture clears the table when each point is its radius above it.
+        self.clearance_points = _clearance_points(
+            plant, scene_graph.model_inspector(), self.hand, skip=(self.forearm.body(),))
         self.object_frame = self.object_body.body_frame()
         self.q_index = np.array(
             [plant.GetJointByName(n, self.hand).position_start() for n in self.spec.joint_names]
@@ -334,6 +381,7 @@ class GraspKinematics:
         approach_P=None,
         max_approach_angle: float = np.deg2rad(30.0),
         table_clearance: float = 0.004,
+        hand_clearance: float | None = 0.0,
         contact_height: float = 0.0,
         X_PO_guess: RigidTransform | None = None,
     ) -> GraspSolution:
@@ -356,7 +404,10 @@ class GraspKinematics:
           in from above the table.
         table_clearance: with a support, every fingertip stays this far (m)
           above the table; contact_height: the class's contacts at least this
-          much (m) higher still.
+          much (m) higher still. hand_clearance: with a support, every other
+          collision shape of the hand (phalanges, knuckles, palm) stays this far
+          (m) above the table (None: unchecked; before, a pinch on a small sphere
+          put the middle phalanx 18 mm into the table top).
         X_PO_guess: initial guess of the object pose in the palm frame (e.g. a
           solution without the table), instead of the centre guess.
         """
@@ -366,7 +417,7 @@ class GraspKinematics:
         rng = rng or np.random.default_rng(0)
         r = 0.5 * dims[0]
         plant = self.plant
-        layout = contact_layout(info.grasp_class)
+        layout = contact_layout(info.grasp_class, shape, dims)
         jitters = [target_jitter * rng.normal(size=3) if target_jitter > 0 else np.zeros(3)
                    for _ in layout]
         if p_PO_guess is None:
@@ -432,6 +483,13 @@ class GraspKinematics:
                     ik.AddPositionConstraint(self.distal[t.finger], p_B, self.up_frame,
                                              [-big, -big, floor + contact_height],
                                              [big, big, big])
+                if hand_clearance is not None:
+                    hand_floor = -self.support[1] + float(hand_clearance)
+                    for frame, points, radius in self.clearance_points:
+                        for p_B in points:
+                            ik.AddPositionConstraint(frame, p_B, self.up_frame,
+                                                     [-big, -big, hand_floor + radius],
+                                                     [big, big, big])
                 # The forearm too: both ends of its axis a radius above the table
                 # (exact for a level forearm, a radius to spare for an upright one).
                 for p_B in self.forearm_axis_B:
@@ -513,6 +571,48 @@ class GraspKinematics:
             lo[axis] = hi[axis] = sign * face
             ik.AddPositionConstraint(frame, p_B, O, lo, hi)
 
+    def table_clearance(self) -> tuple[float, str]:
+        """``(height, body name)`` of the hand's lowest collision shape above the table
+        (m; negative: into it) at the posture and object pose now in :attr:`context`
+        (after :meth:`solve_grasp`, or :meth:`set_posture`). Needs a support."""
+        if self.support is None:
+            raise ValueError("table_clearance needs a support (table) in the constructor")
+        lowest, name = np.inf, ""
+        for frame, points, radius in self.clearance_points:
+            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
+            z = min((X_UB @ points.T)[2]) - radius
+            if z < lowest:
+                lowest, name = z, frame.body().name()
+        return float(lowest + self.support[1]), name
+
+    def collisions(self, max_penetration: float, table_tolerance: float) -> set[str]:
+        """Names of the hand bodies that reach more than ``max_penetration`` (m) into
+        the object or another hand body, or more than ``table_tolerance`` into the
+        table, at the posture and object pose now in :attr:`context`. Needs the
+        object's shape and a support."""
+        if self.support is None or self.shape is None:
+            raise ValueError("collisions needs the object shape and a support (table)")
+        query = self.plant.get_geometry_query_input_port().Eval(self.context)
+        inspector = query.inspector()
+        names = set()
+        for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.0):
+            if pair.distance < -max_penetration:
+                for g in (pair.id_A, pair.id_B):
+                    body = self.plant.GetBodyFromFrameId(inspector.GetFrameId(g))
+                    if body.model_instance() == self.hand:
+                        names.add(body.name())
+        for frame, points, radius in self.clearance_points:
+            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
+            if min((X_UB @ points.T)[2]) - radius + self.support[1] < -table_tolerance:
+                names.add(frame.body().name())
+        return names
+
+    def set_posture(self, q, X_PO: RigidTransform) -> None:
+        """Puts the hand at posture q (24,) and the object at ``X_PO`` (palm frame)."""
+        self._set(self._check_q(q))
+        X_WP = self.palm.CalcPoseInWorld(self.context)
+        self.plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ X_PO)
+
     def contact_jacobian(self, q, finger: str, part: str = "pad") -> tuple[np.ndarray, np.ndarray]:
         """Position ``p_PC`` (3,) of a finger contact point and its Jacobian (3, 24).
 
@@ -534,8 +634,10 @@ class GraspKinematics:
         return p, J
 
     def surface_error(self, q, name, shape, dims, X_PO: RigidTransform) -> float:
-        """Largest distance (m) of a class contact point from the object surface."""
-        pts = self.contact_points(q, name)
+        """Largest distance (m) of a class contact point (of its layout on this object,
+        :func:`contact_layout`) from the object surface."""
+        used = {t.finger for t in contact_layout(name, shape, dims)}
+        pts = {f: p for f, p in self.contact_points(q, name).items() if f in used}
         X_OP = X_PO.inverse()
         errs = []
         r = 0.5 * dims[0]

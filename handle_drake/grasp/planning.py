@@ -98,14 +98,23 @@ MAX_APPROACH_ANGLE = np.deg2rad(45.0)  # approach vector from straight down
 PRESHAPE_OPENING = 0.025  # m, contacts moved out along their normals for the pre-shape
 CLOSING_SQUEEZE = 0.020  # m, and pushed in for the closing command
 PRESHAPE_LIFT = 0.010  # m, contacts raised (world up) in the pre-shape
+TABLE_TOLERANCE = 0.001  # m, how far any part of the hand may reach into the table in a plan
+# (opening, lift) of the pre-shape's contacts (m), tried in turn until no part of the
+# hand reaches into the table (see _preshape_and_close).
+PRESHAPE_STEPS = ((PRESHAPE_OPENING, PRESHAPE_LIFT), (PRESHAPE_OPENING, 0.020),
+                  (PRESHAPE_OPENING, 0.030), (0.018, 0.030), (0.012, 0.030), (0.008, 0.030))
 CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
 # Joints the planner sets in every posture prior of a class: the fingers a
 # class does not use are kept out of the way (report section 3.3: during the
 # reach only the class's fingers may meet the object). Tripod: ring and
 # little fingers extended (curled, they pass a few mm from a small sphere and
 # hit it in the reach), the thumb abducted to oppose the first and middle finger.
+# Adduction grip: ring and little fingers curled into the palm, so the middle
+# finger can open away from the first finger (extended beside it, the ring
+# finger left it no room: the pre-shape pressed them together at 600 N).
 PLANNER_POSTURES: dict[GraspClass, dict[str, float]] = {
     GraspClass.TRIPOD: {"RFJ3": 0.0, "RFJ2": 0.0, "LFJ3": 0.0, "LFJ2": 0.0, "THJ4": 1.1},
+    GraspClass.ADDUCTION_GRIP: {"RFJ3": 1.4, "RFJ2": 1.4, "LFJ3": 1.4, "LFJ2": 1.4},
 }
 WRIST_RANGE = 2.0  # m, travel of the floating wrist's prismatic joints (station.py)
 _SPEC = get_hand_spec("shadow")
@@ -399,7 +408,9 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
         return False
     X_UB = kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, kin.forearm)
     forearm = min((X_UB @ p_B)[2] for p_B in kin.forearm_axis_B) + kin.support[1]
-    return forearm > kin.forearm_radius - 0.002
+    if forearm <= kin.forearm_radius - 0.002:
+        return False
+    return kin.table_clearance()[0] > -TABLE_TOLERANCE
 
 
 def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)
@@ -685,18 +696,54 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
     Opening and squeezing act in the horizontal plane (the outward contact
     normal with its vertical part removed), and the opening also lifts the
     contacts a little: a pre-shape that swings a fingertip down would hit the
-    table the plan keeps it clear of.
+    table the plan keeps it clear of. A contact finger whose opened posture
+    reaches into the table (a thumb opened off a small sphere swings its tip
+    down), into the object, or into a neighbouring finger (the adduction grip's
+    middle finger opened towards the ring finger) is lifted higher, then opened
+    less, step by step (``PRESHAPE_STEPS``), the other fingers keeping theirs.
     """
     R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
-    moves_open, moves_close = {}, {}
-    for t in contact_layout(grasp_class):
+    normals = {}
+    for t in contact_layout(grasp_class, kin.shape, kin.dims):
         n = R_PG @ np.asarray(t.normal, dtype=float)
         n_h = n - (n @ up_P) * up_P
-        n_h = n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2 else n
-        moves_open[t.finger] = (t.part, PRESHAPE_OPENING * n_h + PRESHAPE_LIFT * up_P)
-        moves_close[t.finger] = (t.part, -CLOSING_SQUEEZE * n_h)
-    q_pre = move_contacts(kin, sol.q, moves_open, coupling_ratio)
+        normals[t.finger] = (t.part, n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2
+                             else n)
+    # The class's fingers left out of the layout on this object (a parallel
+    # extension's row beyond a small sphere) open and close with their row.
+    row = next((normals[t.finger] for t in contact_layout(grasp_class, kin.shape, kin.dims)
+                if t.normal[2] < 0), None)
+    for spec in grasp_info(grasp_class).contacts:
+        if spec.finger not in normals and row is not None:
+            normals[spec.finger] = (spec.part, row[1])
+    moves_close = {f: (part, -CLOSING_SQUEEZE * n) for f, (part, n) in normals.items()}
+
+    def pre_shape(step):
+        moves = {}
+        for f, (part, n) in normals.items():
+            opening, lift = PRESHAPE_STEPS[step[f]]
+            moves[f] = (part, opening * n + lift * up_P)
+        q = move_contacts(kin, sol.q, moves, coupling_ratio)
+        kin.set_posture(q, sol.X_PO)
+        return q, {name[:2] for name in kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)}
+
+    step = dict.fromkeys(normals, 0)
+    clean = {}  # finger -> its first step that collides with nothing
+    for i in range(len(PRESHAPE_STEPS)):
+        q_pre, hit = pre_shape(step)
+        for f in normals:
+            if f not in hit and f not in clean:
+                clean[f] = step[f]
+        if len(clean) == len(normals) or i + 1 == len(PRESHAPE_STEPS):
+            break
+        step = {f: clean.get(f, i + 1) for f in normals}
+    # A finger no step frees (pressed against a neighbour whichever way it opens)
+    # keeps the first pre-shape.
+    final = {f: clean.get(f, 0) for f in normals}
+    if final != step:
+        q_pre, _ = pre_shape(final)
+    kin.set_posture(sol.q, sol.X_PO)
     q_close = move_contacts(kin, sol.q, moves_close, coupling_ratio)
     return q_pre, q_close
 
