@@ -25,15 +25,17 @@ def lateral_plan():
     return plan_grasp("lateral", ("cuboid", 0.028), resting_pose("cuboid", 0.028))
 
 
-def _station_contacts(plan):
-    """Contact points in world, from the *station's* plant posed at X_WB, q_grasp."""
+def _posed_station(plan, command):
+    """(station, plant, its context in the station's context) with the hand base at
+    the plan's X_WB and the hand at ``command`` (20 actuated angles)."""
     scenario = plan.to_scenario()
     station = MakeHandStation(scenario)
     plant = GetPlant(station)
-    context = plant.CreateDefaultContext()
+    station_context = station.CreateDefaultContext()
+    context = plant.GetMyMutableContextFromRoot(station_context)
     hand = plant.GetModelInstanceByName("hand")
     wrist = plant.GetModelInstanceByName("wrist")
-    q = actuated_to_joint_positions(SPEC, plan.grasp_command, 1.0)
+    q = actuated_to_joint_positions(SPEC, command, 1.0)
     for name, value in zip(SPEC.joint_names, q, strict=True):
         plant.GetJointByName(name, hand).set_angle(context, value)
     pose6 = np.array(plan.wrist(plan.X_WB))
@@ -44,6 +46,13 @@ def _station_contacts(plan):
         wrist_q[joint.position_start() - plant.GetJointByName(WRIST_JOINTS[0], wrist)
                 .position_start()] = value
     plant.SetPositions(context, wrist, wrist_q)
+    return station, plant, context
+
+
+def _station_contacts(plan):
+    """Contact points in world, from the *station's* plant posed at X_WB, q_grasp."""
+    _, plant, context = _posed_station(plan, plan.grasp_command)
+    hand = plant.GetModelInstanceByName("hand")
     out = {}
     for t in contact_layout(plan.grasp_class):
         p_B, _ = CONTACT_POINTS[(t.finger, t.part)]
@@ -177,3 +186,34 @@ def test_the_planned_forearm_stays_above_the_table(grasp_class, diameter):
                       - shape.radius() * np.sqrt(max(0.0, 1.0 - axis[2] ** 2)))
     assert len(lowest) == 2  # the forearm and its neck
     assert min(lowest) > plan.table_height - 1e-3, lowest
+
+
+@pytest.mark.parametrize("grasp_class, diameter", [("lateral", 0.017),
+                                                   ("writing_tripod", 0.024)])
+def test_no_part_of_the_planned_hand_reaches_into_the_table(grasp_class, diameter):
+    """Every hand collision shape (phalanges, knuckles, palm, not only the
+    fingertips) clears the table top at the grasp and in the pre-shape the hand
+    reaches with, measured by the station's own SceneGraph. These small-sphere
+    grasps were planned with the first finger's middle phalanx 18 mm inside the
+    table (the IK bounded only the fingertips): the reach then pressed the
+    sphere into the table and the grasp closed on nothing."""
+    plan = plan_grasp(grasp_class, ("sphere", diameter), resting_pose("sphere", diameter))
+    for command in (plan.grasp_command, plan.preshape_command):
+        station, plant, context = _posed_station(plan, command)
+        query = plant.get_geometry_query_input_port().Eval(context)
+        inspector = query.inspector()
+        hand = plant.GetModelInstanceByName("hand")
+        table = {g for g in inspector.GetAllGeometryIds()
+                 if inspector.GetName(g).endswith("top_collision")}
+        assert table
+        depths = []
+        for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.05):
+            ids = {pair.id_A, pair.id_B}
+            if not ids & table:
+                continue
+            other = (ids - table).pop()
+            body = plant.GetBodyFromFrameId(inspector.GetFrameId(other))
+            if body.model_instance() == hand:
+                depths.append((pair.distance, body.name()))
+        assert depths, "no hand geometry within 5 cm of the table: the hand is not there"
+        assert min(depths)[0] > -1.5e-3, min(depths)
