@@ -84,8 +84,14 @@ class ContactTarget:
     spread: float = 0.0
 
 
-def contact_layout(name, shape: str | None = None, dims=None) -> tuple[ContactTarget, ...]:
+def contact_layout(name, shape: str | None = None, dims=None, on_table: bool = False
+                   ) -> tuple[ContactTarget, ...]:
     """The contact layout of a grasp class in the grasp frame G (symmetric about O).
+
+    on_table: the object rests on a table under it (``x_G`` up). The writing
+    tripod's middle finger then supports the object from its ulnar side (the
+    ``-y_G`` face, its radial side against it) instead of from below (``-x_G``,
+    the face on the table, where no finger fits).
 
     With the object (``shape``, ``dims``): the parallel extension on a sphere
     keeps only the fingers of its row that fit on the sphere, centred on it (one
@@ -112,7 +118,7 @@ def contact_layout(name, shape: str | None = None, dims=None) -> tuple[ContactTa
                 ContactTarget("mf", "pad", down, -0.5 * w))
     if cls is GraspClass.WRITING_TRIPOD:
         return (ContactTarget("th", c["th"], up), ContactTarget("ff", c["ff"], down),
-                ContactTarget("mf", c["mf"], below))
+                ContactTarget("mf", c["mf"], (0.0, -1.0, 0.0) if on_table else below))
     if cls is GraspClass.LATERAL_TRIPOD:
         # The radial sides of the first and middle fingers side by side against
         # the thumb pad. (The middle-finger pad from below, x_G, is unreachable
@@ -417,7 +423,8 @@ class GraspKinematics:
         rng = rng or np.random.default_rng(0)
         r = 0.5 * dims[0]
         plant = self.plant
-        layout = contact_layout(info.grasp_class, shape, dims)
+        layout = contact_layout(info.grasp_class, shape, dims,
+                                on_table=self.support is not None)
         jitters = [target_jitter * rng.normal(size=3) if target_jitter > 0 else np.zeros(3)
                    for _ in layout]
         if p_PO_guess is None:
@@ -585,27 +592,29 @@ class GraspKinematics:
                 lowest, name = z, frame.body().name()
         return float(lowest + self.support[1]), name
 
-    def collisions(self, max_penetration: float, table_tolerance: float) -> set[str]:
-        """Names of the hand bodies that reach more than ``max_penetration`` (m) into
-        the object or another hand body, or more than ``table_tolerance`` into the
-        table, at the posture and object pose now in :attr:`context`. Needs the
-        object's shape and a support."""
+    def collisions(self, max_penetration: float, table_tolerance: float
+                   ) -> tuple[set[str], set[str]]:
+        """``(into the table, into the object or the hand)``: names of the hand bodies
+        that reach more than ``table_tolerance`` (m) into the table, and of those that
+        reach more than ``max_penetration`` into the object or another hand body, at
+        the posture and object pose now in :attr:`context`. Needs the object's shape
+        and a support."""
         if self.support is None or self.shape is None:
             raise ValueError("collisions needs the object shape and a support (table)")
         query = self.plant.get_geometry_query_input_port().Eval(self.context)
         inspector = query.inspector()
-        names = set()
+        table, others = set(), set()
         for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.0):
             if pair.distance < -max_penetration:
                 for g in (pair.id_A, pair.id_B):
                     body = self.plant.GetBodyFromFrameId(inspector.GetFrameId(g))
                     if body.model_instance() == self.hand:
-                        names.add(body.name())
+                        others.add(body.name())
         for frame, points, radius in self.clearance_points:
             X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
             if min((X_UB @ points.T)[2]) - radius + self.support[1] < -table_tolerance:
-                names.add(frame.body().name())
-        return names
+                table.add(frame.body().name())
+        return table, others
 
     def set_posture(self, q, X_PO: RigidTransform) -> None:
         """Puts the hand at posture q (24,) and the object at ``X_PO`` (palm frame)."""
@@ -636,7 +645,8 @@ class GraspKinematics:
     def surface_error(self, q, name, shape, dims, X_PO: RigidTransform) -> float:
         """Largest distance (m) of a class contact point (of its layout on this object,
         :func:`contact_layout`) from the object surface."""
-        used = {t.finger for t in contact_layout(name, shape, dims)}
+        used = {t.finger for t in contact_layout(name, shape, dims,
+                                                 on_table=self.support is not None)}
         pts = {f: p for f, p in self.contact_points(q, name).items() if f in used}
         X_OP = X_PO.inverse()
         errs = []

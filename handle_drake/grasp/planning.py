@@ -699,21 +699,22 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
     table the plan keeps it clear of. A contact finger whose opened posture
     reaches into the table (a thumb opened off a small sphere swings its tip
     down), into the object, or into a neighbouring finger (the adduction grip's
-    middle finger opened towards the ring finger) is lifted higher, then opened
-    less, step by step (``PRESHAPE_STEPS``), the other fingers keeping theirs.
+    middle finger opened towards the ring finger) takes the first of
+    ``PRESHAPE_STEPS`` (lifted higher, then opened less) that touches nothing,
+    else the first that clears the table; each finger chooses on its own.
     """
     R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
     normals = {}
-    for t in contact_layout(grasp_class, kin.shape, kin.dims):
+    layout = contact_layout(grasp_class, kin.shape, kin.dims, on_table=True)
+    for t in layout:
         n = R_PG @ np.asarray(t.normal, dtype=float)
         n_h = n - (n @ up_P) * up_P
         normals[t.finger] = (t.part, n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2
                              else n)
     # The class's fingers left out of the layout on this object (a parallel
     # extension's row beyond a small sphere) open and close with their row.
-    row = next((normals[t.finger] for t in contact_layout(grasp_class, kin.shape, kin.dims)
-                if t.normal[2] < 0), None)
+    row = next((normals[t.finger] for t in layout if t.normal[2] < 0), None)
     for spec in grasp_info(grasp_class).contacts:
         if spec.finger not in normals and row is not None:
             normals[spec.finger] = (spec.part, row[1])
@@ -726,23 +727,27 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
             moves[f] = (part, opening * n + lift * up_P)
         q = move_contacts(kin, sol.q, moves, coupling_ratio)
         kin.set_posture(q, sol.X_PO)
-        return q, {name[:2] for name in kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)}
+        table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
+        return q, {name[:2] for name in table}, {name[:2] for name in others}
 
-    step = dict.fromkeys(normals, 0)
-    clean = {}  # finger -> its first step that collides with nothing
+    # Every step for every finger (the fingers move independently; a collision is
+    # charged to the fingers whose bodies it involves).
+    table_free = {f: [] for f in normals}
+    clean = {f: [] for f in normals}
     for i in range(len(PRESHAPE_STEPS)):
-        q_pre, hit = pre_shape(step)
+        _, table, others = pre_shape(dict.fromkeys(normals, i))
         for f in normals:
-            if f not in hit and f not in clean:
-                clean[f] = step[f]
-        if len(clean) == len(normals) or i + 1 == len(PRESHAPE_STEPS):
-            break
-        step = {f: clean.get(f, i + 1) for f in normals}
-    # A finger no step frees (pressed against a neighbour whichever way it opens)
-    # keeps the first pre-shape.
-    final = {f: clean.get(f, 0) for f in normals}
-    if final != step:
-        q_pre, _ = pre_shape(final)
+            table_free[f].append(f not in table)
+            clean[f].append(f not in table and f not in others)
+    # Per finger: its first step that touches nothing; else (pressed against a
+    # neighbour whichever way it opens) its first step that clears the table.
+    final = {}
+    for f in normals:
+        for ok in (clean[f], table_free[f], [True]):
+            if any(ok):
+                final[f] = ok.index(True)
+                break
+    q_pre, _, _ = pre_shape(final)
     kin.set_posture(sol.q, sol.X_PO)
     q_close = move_contacts(kin, sol.q, moves_close, coupling_ratio)
     return q_pre, q_close
