@@ -554,6 +554,8 @@ def plan_grasp(
     X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
         kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
         row_O)
+    q_grasp = _clear_idle_fingers(kin, sol, info.grasp_class, up, coupling_ratio)
+    sol = dc.replace(sol, q=q_grasp)
     q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up, coupling_ratio)
     grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
     return GraspPlan(
@@ -690,7 +692,61 @@ def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
     return X_WG, X_WP, X_WB, X_WB_pre, approach_W
 
 
-def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
+# Postures an idle finger (not one of the class's) may take to keep out of the
+# working fingers' way: (J3, J2) of its flexion joints, J1 following J2.
+IDLE_POSTURES = ((0.0, 0.0), (1.4, 1.4), (0.8, 0.4))
+
+
+def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray:
+    """The IK posture with each idle finger (one the class does not use) moved out of
+    the way when, in the grasp, the pre-shape or the closing command, it touches a
+    working finger, the object or the table.
+
+    The IK keeps the fingers apart only in the grasp posture (and allows a few
+    mm): the pre-shape and the close then drove a tip pinch's first finger
+    into the middle finger at several hundred newtons. An idle finger that
+    collides keeps the first of its own posture, extended, curled
+    (``IDLE_POSTURES``) that collides with nothing in all three postures.
+    """
+    spec = kin.spec
+    used = {t.finger for t in contact_layout(grasp_class, kin.shape, kin.dims, on_table=True)}
+    used |= {c.finger for c in grasp_info(grasp_class).contacts}
+    idle = [f for f in spec.fingers if f not in used and f != "th"]
+    if not idle:
+        return sol.q
+
+    def postures(q):
+        q_pre, q_close = _preshape_and_close(kin, dc.replace(sol, q=q), grasp_class, up,
+                                             coupling_ratio, steps=PRESHAPE_STEPS[:1])
+        return q, q_pre, q_close
+
+    def hits(qs, finger):
+        for q in qs:
+            kin.set_posture(q, sol.X_PO)
+            table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
+            if any(name[:2] == finger for name in table | others):
+                return True
+        return False
+
+    q = np.array(sol.q, dtype=float)
+    base = postures(q)
+    for finger in idle:
+        if not hits(base, finger):
+            continue
+        for j3, j2 in IDLE_POSTURES:
+            trial = _with_joints(q, {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2},
+                                 coupling_ratio)
+            others = [_with_joints(p, {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2},
+                                   coupling_ratio) for p in base[1:]]
+            if not hits([trial, *others], finger):
+                q = trial
+                base = (q, *others)
+                break
+    kin.set_posture(sol.q, sol.X_PO)
+    return q
+
+
+def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
     """Postures (24,) of the pre-shape (open) and the closing command, along the contact normals.
 
     Opening and squeezing act in the horizontal plane (the outward contact
@@ -702,6 +758,7 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
     middle finger opened towards the ring finger) takes the first of
     ``PRESHAPE_STEPS`` (lifted higher, then opened less) that touches nothing,
     else the first that clears the table; each finger chooses on its own.
+    ``steps``: try only the first ``steps`` of them (``_clear_idle_fingers``).
     """
     R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
@@ -734,7 +791,7 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
     # charged to the fingers whose bodies it involves).
     table_free = {f: [] for f in normals}
     clean = {f: [] for f in normals}
-    for i in range(len(PRESHAPE_STEPS)):
+    for i in range(len(PRESHAPE_STEPS) if steps is None else len(steps)):
         _, table, others = pre_shape(dict.fromkeys(normals, i))
         for f in normals:
             table_free[f].append(f not in table)
