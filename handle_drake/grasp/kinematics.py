@@ -84,8 +84,8 @@ class ContactTarget:
     spread: float = 0.0
 
 
-def contact_layout(name, shape: str | None = None, dims=None, on_table: bool = False
-                   ) -> tuple[ContactTarget, ...]:
+def contact_layout(name, shape: str | None = None, dims=None, on_table: bool = False,
+                   row_fingers: int | None = None) -> tuple[ContactTarget, ...]:
     """The contact layout of a grasp class in the grasp frame G (symmetric about O).
 
     on_table: the object rests on a table under it (``x_G`` up). The writing
@@ -97,12 +97,19 @@ def contact_layout(name, shape: str | None = None, dims=None, on_table: bool = F
     keeps only the fingers of its row that fit on the sphere, centred on it (one
     finger per finger spacing of diameter, at least one): four extended fingers
     side by side span 66 mm and cannot all touch a ball, the way a hand holds a
-    marble flat between the thumb and one finger.
+    marble flat between the thumb and one finger. ``row_fingers`` (1-4) sets
+    how many of the parallel extension's row fingers touch, centred on the
+    object (the planner drops the outer ones when the whole row has no
+    solution, e.g. on a cuboid narrower than the row).
     """
     info = grasp_info(name)
-    if (info.grasp_class is GraspClass.PARALLEL_EXTENSION and shape == "sphere"
-            and dims is not None):
-        k = int(np.clip(np.floor(float(np.atleast_1d(dims)[0]) / FINGER_SPACING), 1, 4))
+    if row_fingers is not None and not (isinstance(row_fingers, int | np.integer)
+                                        and 1 <= row_fingers <= 4):
+        raise ValueError(f"row_fingers must be an int in 1..4, got {row_fingers!r}")
+    if info.grasp_class is GraspClass.PARALLEL_EXTENSION and (
+            row_fingers is not None or (shape == "sphere" and dims is not None)):
+        k = row_fingers if row_fingers is not None else int(
+            np.clip(np.floor(float(np.atleast_1d(dims)[0]) / FINGER_SPACING), 1, 4))
         row = ("mf",) if k == 1 else ("ff", "mf", "rf", "lf")[:k]
         return (ContactTarget("th", "pad", (0.0, 0.0, 1.0)),) + tuple(
             ContactTarget(f, "pad", (0.0, 0.0, -1.0), (0.5 * (k - 1) - i) * FINGER_SPACING)
@@ -186,6 +193,7 @@ class GraspSolution:
     X_PO: RigidTransform
     success: bool
     contact_error: float  # m, worst distance of a contact point from its surface
+    layout: tuple = ()  # the ContactTargets solved for (contact_layout)
 
 
 def _widest_cylinder(plant, inspector, body) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
@@ -390,6 +398,7 @@ class GraspKinematics:
         hand_clearance: float | None = 0.0,
         contact_height: float = 0.0,
         X_PO_guess: RigidTransform | None = None,
+        row_fingers: int | None = None,
     ) -> GraspSolution:
         """Postures of class ``name`` holding a (shape, dims) object (see module doc).
 
@@ -416,6 +425,7 @@ class GraspKinematics:
           put the middle phalanx 18 mm into the table top).
         X_PO_guess: initial guess of the object pose in the palm frame (e.g. a
           solution without the table), instead of the centre guess.
+        row_fingers: see :func:`contact_layout`.
         """
         info = grasp_info(name)
         dims = _check_dims(shape, dims)
@@ -424,7 +434,7 @@ class GraspKinematics:
         r = 0.5 * dims[0]
         plant = self.plant
         layout = contact_layout(info.grasp_class, shape, dims,
-                                on_table=self.support is not None)
+                                on_table=self.support is not None, row_fingers=row_fingers)
         jitters = [target_jitter * rng.normal(size=3) if target_jitter > 0 else np.zeros(3)
                    for _ in layout]
         if p_PO_guess is None:
@@ -542,8 +552,8 @@ class GraspKinematics:
         plant.SetPositions(self.context, q_sol)
         q = q_sol[self.q_index]
         X_PO = plant.CalcRelativeTransform(self.context, self.palm, self.object_frame)
-        err = self.surface_error(q, name, shape, dims, X_PO)
-        return GraspSolution(q, X_PO, bool(result.is_success()), err)
+        err = self.surface_error(q, name, shape, dims, X_PO, layout)
+        return GraspSolution(q, X_PO, bool(result.is_success()), err, layout)
 
     def _add_surface_constraint(self, ik, t, p_B, normal, shape, dims, r, tol, jitter):
         frame = self.distal[t.finger]
@@ -642,11 +652,12 @@ class GraspKinematics:
         J[:, self._wrist] = 0.0
         return p, J
 
-    def surface_error(self, q, name, shape, dims, X_PO: RigidTransform) -> float:
-        """Largest distance (m) of a class contact point (of its layout on this object,
-        :func:`contact_layout`) from the object surface."""
-        used = {t.finger for t in contact_layout(name, shape, dims,
-                                                 on_table=self.support is not None)}
+    def surface_error(self, q, name, shape, dims, X_PO: RigidTransform, layout=None) -> float:
+        """Largest distance (m) of a class contact point (of ``layout``, default its
+        layout on this object, :func:`contact_layout`) from the object surface."""
+        if layout is None:
+            layout = contact_layout(name, shape, dims, on_table=self.support is not None)
+        used = {t.finger for t in layout}
         pts = {f: p for f, p in self.contact_points(q, name).items() if f in used}
         X_OP = X_PO.inverse()
         errs = []

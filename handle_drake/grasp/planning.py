@@ -611,6 +611,27 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
                     coupling_ratio):
     """``(solution, up_G, centre source, kinematics)`` of the first acceptable IK, or None.
 
+    The parallel extension first with its whole row of fingers on the object
+    (on a sphere, the fingers that fit: ``contact_layout``), then, while there
+    is no solution, with one outer finger fewer (a cuboid narrower than the
+    66 mm row, as a hand holds a thin card between the thumb and two fingers).
+    """
+    rows = [None]
+    if info.grasp_class is GraspClass.PARALLEL_EXTENSION:
+        k = sum(1 for t in contact_layout(info.grasp_class, shape, dims) if t.normal[2] < 0)
+        rows = list(range(k, 0, -1))
+    for row_fingers in rows:
+        found = _solve_layout(info, kind, shape, dims, height, priors, priors_refine,
+                              c_table1, a_P, coupling_ratio, row_fingers)
+        if found is not None:
+            return found
+    return None
+
+
+def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
+                  coupling_ratio, row_fingers):
+    """:func:`_solve_contacts` for one layout (``row_fingers``: ``contact_layout``).
+
     Canonical attempts first: the hand comes in along its Table 2 approach
     within a narrow cone, with the grasp frame guessed from the palm
     (x_G = up = -a_P, the thumb on the proximal side, z_G ~ -z_P). Seeded
@@ -632,7 +653,7 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
         sol = kin_canonical.solve_grasp(
             info.grasp_class, shape, dims, prior, approach_P=a_P, X_PO_guess=X_PG_guess,
             min_distance=-MAX_PENETRATION, max_approach_angle=CANONICAL_APPROACH_ANGLE,
-            centre_prior_weight=100.0, p_PO_guess=c_table1)
+            centre_prior_weight=100.0, p_PO_guess=c_table1, row_fingers=row_fingers)
         if _acceptable(kin_canonical, sol):
             source = "table1" if np.linalg.norm(sol.X_PO.translation() - c_table1) < 1e-3 \
                 else "refined"
@@ -642,7 +663,8 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
     for prior, source in attempts:
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
             centre_prior_weight=100.0, p_PO_guess=c_table1)
-        free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None, **kw)
+        free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None,
+                                    row_fingers=row_fingers, **kw)
         if not (free.success and free.contact_error < 1.5e-3):
             continue
         up = _up_in_grasp_frame(kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
@@ -650,7 +672,8 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
                           height)
         sol = kin.solve_grasp(info.grasp_class, shape, dims, free.q, approach_P=a_P,
                               X_PO_guess=free.X_PO, min_distance=-MAX_PENETRATION,
-                              max_approach_angle=MAX_APPROACH_ANGLE, **kw)
+                              max_approach_angle=MAX_APPROACH_ANGLE, row_fingers=row_fingers,
+                              **kw)
         if _acceptable(kin, sol):
             return sol, up, source, kin
     return None
@@ -709,7 +732,7 @@ def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray
     (``IDLE_POSTURES``) that collides with nothing in all three postures.
     """
     spec = kin.spec
-    used = {t.finger for t in contact_layout(grasp_class, kin.shape, kin.dims, on_table=True)}
+    used = {t.finger for t in sol.layout}
     used |= {c.finger for c in grasp_info(grasp_class).contacts}
     idle = [f for f in spec.fingers if f not in used and f != "th"]
     if not idle:
@@ -763,7 +786,7 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
     R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
     normals = {}
-    layout = contact_layout(grasp_class, kin.shape, kin.dims, on_table=True)
+    layout = sol.layout
     for t in layout:
         n = R_PG @ np.asarray(t.normal, dtype=float)
         n_h = n - (n @ up_P) * up_P
