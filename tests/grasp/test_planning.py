@@ -217,3 +217,42 @@ def test_no_part_of_the_planned_hand_reaches_into_the_table(grasp_class, diamete
                 depths.append((pair.distance, body.name()))
         assert depths, "no hand geometry within 5 cm of the table: the hand is not there"
         assert min(depths)[0] > -1.5e-3, min(depths)
+
+
+def _finger(body_name: str) -> str:
+    return body_name[:2]
+
+
+@pytest.mark.parametrize("grasp_class, kind, width", [("adduction_grip", "cuboid", 0.013),
+                                                      ("tip_pinch", "sphere", 0.0155)])
+def test_the_pre_shape_keeps_the_fingers_apart(grasp_class, kind, width):
+    """In the pre-shape the hand reaches with, no two fingers overlap by more than the
+    plan's 4 mm (station SceneGraph). The adduction grip's middle finger once opened
+    into the ring finger, and a tip pinch's first finger into the middle finger, at
+    600-800 N in simulation: the grasp then closed on nothing."""
+    size = width / 0.6 if kind == "cuboid" else width
+    plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
+    _, plant, context = _posed_station(plan, plan.preshape_command)
+    query = plant.get_geometry_query_input_port().Eval(context)
+    inspector = query.inspector()
+    hand = plant.GetModelInstanceByName("hand")
+    overlaps = []
+    for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.0):
+        a, b = (plant.GetBodyFromFrameId(inspector.GetFrameId(g)) for g in (pair.id_A, pair.id_B))
+        if a.model_instance() == hand == b.model_instance() and _finger(a.name()) != _finger(
+                b.name()):
+            overlaps.append((pair.distance, a.name(), b.name()))
+    assert not overlaps or min(overlaps)[0] > -4.5e-3, min(overlaps)
+
+
+@pytest.mark.parametrize("grasp_class, kind, width", [("writing_tripod", "cuboid", 0.024),
+                                                      ("parallel_extension", "cuboid", 0.025)])
+def test_classes_that_had_no_plan_on_a_table_now_hold(grasp_class, kind, width):
+    """The writing tripod's middle finger once had to reach under a cuboid standing
+    on the table, and the parallel extension's four-finger row (66 mm) had to fit on
+    a 42 mm cuboid face: neither had a plan. Now the middle finger supports the
+    ulnar face and the row drops its outer fingers; the grasps hold through the lift."""
+    size = width / 0.6
+    plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
+    result = ScenarioRunner(plan.to_scenario()).run()
+    assert held_through_lift(result), result.object_lift()
