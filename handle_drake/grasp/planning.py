@@ -103,6 +103,7 @@ TABLE_TOLERANCE = 0.001  # m, how far any part of the hand may reach into the ta
 # hand reaches into the table (see _preshape_and_close).
 PRESHAPE_STEPS = ((PRESHAPE_OPENING, PRESHAPE_LIFT), (PRESHAPE_OPENING, 0.020),
                   (PRESHAPE_OPENING, 0.030), (0.018, 0.030), (0.012, 0.030), (0.008, 0.030))
+CLOSE_LIFTS = (0.0, 0.005, 0.010, 0.015, 0.020)  # m, upward part of a finger's closing move, in turn
 CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
 # Joints the planner sets in every posture prior of a class: the fingers a
 # class does not use are kept out of the way (report section 3.3: during the
@@ -798,7 +799,6 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
     for spec in grasp_info(grasp_class).contacts:
         if spec.finger not in normals and row is not None:
             normals[spec.finger] = (spec.part, row[1])
-    moves_close = {f: (part, -CLOSING_SQUEEZE * n) for f, (part, n) in normals.items()}
 
     def pre_shape(step):
         moves = {}
@@ -828,8 +828,21 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
                 final[f] = ok.index(True)
                 break
     q_pre, _, _ = pre_shape(final)
+    # The closing command likewise: a finger whose squeeze past the object swings it
+    # down into the table (a lateral tripod's middle finger on a small sphere
+    # pressed the table at 20 N before it reached the sphere) closes a little upward.
+    lifts = dict.fromkeys(normals, CLOSE_LIFTS[0])
+    for lift in CLOSE_LIFTS:
+        moves = {f: (part, -CLOSING_SQUEEZE * n + lifts[f] * up_P)
+                 for f, (part, n) in normals.items()}
+        q_close = move_contacts(kin, sol.q, moves, coupling_ratio)
+        kin.set_posture(q_close, sol.X_PO)
+        low = {name[:2] for name in kin.collisions(np.inf, TABLE_TOLERANCE)[0]} & set(normals)
+        if not low or lift == CLOSE_LIFTS[-1]:
+            break
+        for f in low:
+            lifts[f] = CLOSE_LIFTS[CLOSE_LIFTS.index(lift) + 1]
     kin.set_posture(sol.q, sol.X_PO)
-    q_close = move_contacts(kin, sol.q, moves_close, coupling_ratio)
     return q_pre, q_close
 
 
