@@ -14,11 +14,14 @@ on the floating-wrist station, and count a success when the object held
 through the 13 cm lift (``demo.held_through_lift``: >= 10 cm higher and
 steady at the end). A plan that raises (no IK solution) fails both.
 
-Run: ``python benchmarks/bench_grasp_classes.py [--workers 2] [--executor dask://HOST:PORT]``
+Run: ``python benchmarks/bench_grasp_classes.py [--workers 2] [--executor dask://HOST:PORT]
+[--reactive NAME=VALUE ...]``
 (``--executor``: ``local`` process pool, default, ``dask`` LocalCluster or a running
 Dask scheduler, ``handle_drake.learning.cluster``); prints a table and writes
 ``benchmarks/results/grasp_classes.json``. Under HANDLE_DRAKE_REDUCED=1 it runs
-two sizes of two classes on cuboids only.
+two sizes of two classes on cuboids only. ``--reactive NAME=VALUE`` overrides a
+``ReactiveGraspParams`` field of the reactive runs (e.g. ``close_shift_speed=0``
+switches the centring close off); the results file name then carries it.
 
 Perceived against true object (report sections 3.3 and 4: the object is not
 where the plan thinks): ``--offset MM [--directions N]`` plans on the object
@@ -48,11 +51,12 @@ RESULTS = Path(__file__).resolve().parent / "results" / "grasp_classes.json"
 
 
 def trial(args):
-    grasp_class, kind, width, error = args if len(args) == 4 else (*args, None)
+    grasp_class, kind, width, error, *rest = args if len(args) >= 4 else (*args, None)
+    overrides = rest[0] if rest else {}
     from pydrake.common.schema import Transform
 
     from handle_drake.demo import held_through_lift
-    from handle_drake.grasp.execution import ReactiveGraspRunner
+    from handle_drake.grasp.execution import ReactiveGraspRunner, plan_params
     from handle_drake.grasp.planning import plan_grasp, resting_pose
     from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import ObjectConfig
@@ -77,7 +81,8 @@ def trial(args):
                     plan_time=time.perf_counter() - start)
     plan_time = time.perf_counter() - start
     open_loop = ScenarioRunner(plan.to_scenario(world_object=world_object)).run()
-    runner = ReactiveGraspRunner(plan, world_object=world_object)
+    runner = ReactiveGraspRunner(plan, world_object=world_object,
+                                 params=plan_params(plan, **overrides))
     reactive = runner.run()
     return dict(grasp_class=grasp_class, kind=kind, width=width, size=size, planned=True,
                 offset=[dx, dy], size_factor=size_factor, yaw_error=yaw,
@@ -107,10 +112,28 @@ def main(argv=None) -> int:
     parser.add_argument("--classes", default=None,
                         help="comma-separated grasp classes (default: all eight)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--reactive", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a ReactiveGraspParams field (repeatable), "
+                             "e.g. close_shift_speed=0")
     add_executor_arguments(parser)
     args = parser.parse_args(argv)
     if args.directions < 1 or not 0 <= args.offset < 100 or not -0.5 < args.size_error < 0.5:
         raise SystemExit("need --directions >= 1, 0 <= --offset < 100 mm, |--size-error| < 0.5")
+    import dataclasses
+
+    from handle_drake.systems.reactive_grasp import ReactiveGraspParams
+
+    fields = {f.name for f in dataclasses.fields(ReactiveGraspParams)}
+    overrides = {}
+    for item in args.reactive:
+        name, _, value = item.partition("=")
+        if name not in fields or not value:
+            raise SystemExit(f"--reactive {item!r}: expected NAME=VALUE with NAME one of "
+                             f"{sorted(fields)}")
+        try:
+            overrides[name] = float(value)
+        except ValueError:
+            raise SystemExit(f"--reactive {item!r}: {value!r} is not a number") from None
     small = reduced()
     classes = list(GRASP_CLASSES.values())[:2] if small else list(GRASP_CLASSES.values())
     if args.classes:
@@ -137,7 +160,7 @@ def main(argv=None) -> int:
         lo, hi = info.size_range_m
         # Inset from the range ends, where the IK is least likely to succeed.
         widths = np.linspace(lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo), n_sizes)
-        jobs += [(info.name, kind, float(w), e) for kind in kinds for w in widths
+        jobs += [(info.name, kind, float(w), e, overrides) for kind in kinds for w in widths
                  for e in errors]
     start = time.perf_counter()
     rows = [None] * len(jobs)
@@ -183,10 +206,12 @@ def main(argv=None) -> int:
     print(f"\noverall: open loop {total}/{n} held ({total / n:.0%}), reactive {total_r}/{n} "
           f"({total_r / n:.0%}); ratio reactive/open loop {total_r / max(total, 1):.2f}; "
           "* = held")
+    label += "".join(f"_{name}{value:g}" for name, value in sorted(overrides.items()))
     out = RESULTS.with_name(f"grasp_classes{label}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(dict(reduced=small, wall_time_s=wall, summary=summary,
                                    held_open_loop=total, held_reactive=total_r,
+                                   reactive_overrides=overrides,
                                    error=dict(offset_mm=args.offset, directions=args.directions,
                                               size_error=args.size_error,
                                               yaw_error_deg=args.yaw_error),

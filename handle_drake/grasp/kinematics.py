@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Box, Cylinder, ProximityProperties, Sphere
+from pydrake.geometry import Box, Capsule, Cylinder, ProximityProperties, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.parsing import Parser
@@ -84,9 +84,36 @@ class ContactTarget:
     spread: float = 0.0
 
 
-def contact_layout(name) -> tuple[ContactTarget, ...]:
-    """The contact layout of a grasp class in the grasp frame G (symmetric about O)."""
+def contact_layout(name, shape: str | None = None, dims=None, on_table: bool = False,
+                   row_fingers: int | None = None) -> tuple[ContactTarget, ...]:
+    """The contact layout of a grasp class in the grasp frame G (symmetric about O).
+
+    on_table: the object rests on a table under it (``x_G`` up). The writing
+    tripod's middle finger then supports the object from its ulnar side (the
+    ``-y_G`` face, its radial side against it) instead of from below (``-x_G``,
+    the face on the table, where no finger fits).
+
+    With the object (``shape``, ``dims``): the parallel extension on a sphere
+    keeps only the fingers of its row that fit on the sphere, centred on it (one
+    finger per finger spacing of diameter, at least one): four extended fingers
+    side by side span 66 mm and cannot all touch a ball, the way a hand holds a
+    marble flat between the thumb and one finger. ``row_fingers`` (1-4) sets
+    how many of the parallel extension's row fingers touch, centred on the
+    object (the planner drops the outer ones when the whole row has no
+    solution, e.g. on a cuboid narrower than the row).
+    """
     info = grasp_info(name)
+    if row_fingers is not None and not (isinstance(row_fingers, int | np.integer)
+                                        and 1 <= row_fingers <= 4):
+        raise ValueError(f"row_fingers must be an int in 1..4, got {row_fingers!r}")
+    if info.grasp_class is GraspClass.PARALLEL_EXTENSION and (
+            row_fingers is not None or (shape == "sphere" and dims is not None)):
+        k = row_fingers if row_fingers is not None else int(
+            np.clip(np.floor(float(np.atleast_1d(dims)[0]) / FINGER_SPACING), 1, 4))
+        row = ("mf",) if k == 1 else ("ff", "mf", "rf", "lf")[:k]
+        return (ContactTarget("th", "pad", (0.0, 0.0, 1.0)),) + tuple(
+            ContactTarget(f, "pad", (0.0, 0.0, -1.0), (0.5 * (k - 1) - i) * FINGER_SPACING)
+            for i, f in enumerate(row))
     cls = info.grasp_class
     w = FINGER_SPACING
     up, down, below = (0.0, 0.0, 1.0), (0.0, 0.0, -1.0), (-1.0, 0.0, 0.0)
@@ -98,7 +125,7 @@ def contact_layout(name) -> tuple[ContactTarget, ...]:
                 ContactTarget("mf", "pad", down, -0.5 * w))
     if cls is GraspClass.WRITING_TRIPOD:
         return (ContactTarget("th", c["th"], up), ContactTarget("ff", c["ff"], down),
-                ContactTarget("mf", c["mf"], below))
+                ContactTarget("mf", c["mf"], (0.0, -1.0, 0.0) if on_table else below))
     if cls is GraspClass.LATERAL_TRIPOD:
         # The radial sides of the first and middle fingers side by side against
         # the thumb pad. (The middle-finger pad from below, x_G, is unreachable
@@ -166,6 +193,7 @@ class GraspSolution:
     X_PO: RigidTransform
     success: bool
     contact_error: float  # m, worst distance of a contact point from its surface
+    layout: tuple = ()  # the ContactTargets solved for (contact_layout)
 
 
 def _widest_cylinder(plant, inspector, body) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
@@ -179,6 +207,35 @@ def _widest_cylinder(plant, inspector, body) -> tuple[float, tuple[np.ndarray, n
     cylinder, X_BG = max(found, key=lambda f: f[0].radius())
     half = np.array([0.0, 0.0, cylinder.length() / 2])
     return cylinder.radius(), (X_BG @ -half, X_BG @ half)
+
+
+def _clearance_points(plant, inspector, model, skip=()) -> tuple:
+    """``((body frame, points (k, 3), radius), ...)``: the hand's collision shapes as points
+    in their body frames, each shape lying within ``radius`` of its points' convex hull
+    (exact for a capsule's axis ends and a sphere's centre; a box's corners with radius 0;
+    a cylinder's axis ends with its radius, which over-covers its rims)."""
+    out = []
+    for index in plant.GetBodyIndices(model):
+        body = plant.get_body(index)
+        if body in skip:
+            continue
+        for g in plant.GetCollisionGeometriesForBody(body):
+            shape, X_BG = inspector.GetShape(g), inspector.GetPoseInFrame(g)
+            if isinstance(shape, Capsule | Cylinder):
+                half = 0.5 * shape.length()
+                p_G, radius = np.array([[0.0, 0.0, -half], [0.0, 0.0, half]]), shape.radius()
+            elif isinstance(shape, Sphere):
+                p_G, radius = np.zeros((1, 3)), shape.radius()
+            elif isinstance(shape, Box):
+                h = 0.5 * np.array([shape.width(), shape.depth(), shape.height()])
+                p_G = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                                for sz in (-1, 1)]) * h
+                radius = 0.0
+            else:  # pragma: no cover - the shipped hands use only these shapes
+                raise NotImplementedError(f"{body.name()}: no clearance points for "
+                                          f"{type(shape).__name__}")
+            out.append((body.body_frame(), (X_BG @ p_G.T).T, float(radius)))
+    return tuple(out)
 
 
 class GraspKinematics:
@@ -252,6 +309,10 @@ class GraspKinematics:
         # flat drove it 40 mm into the table top).
         self.forearm_radius, self.forearm_axis_B = _widest_cylinder(
             plant, scene_graph.model_inspector(), self.forearm.body())
+        # Every other collision shape of the hand, as points with a radius: a
+        # posture clears the table when each point is its radius above it.
+        self.clearance_points = _clearance_points(
+            plant, scene_graph.model_inspector(), self.hand, skip=(self.forearm.body(),))
         self.object_frame = self.object_body.body_frame()
         self.q_index = np.array(
             [plant.GetJointByName(n, self.hand).position_start() for n in self.spec.joint_names]
@@ -334,8 +395,10 @@ class GraspKinematics:
         approach_P=None,
         max_approach_angle: float = np.deg2rad(30.0),
         table_clearance: float = 0.004,
+        hand_clearance: float | None = 0.0,
         contact_height: float = 0.0,
         X_PO_guess: RigidTransform | None = None,
+        row_fingers: int | None = None,
     ) -> GraspSolution:
         """Postures of class ``name`` holding a (shape, dims) object (see module doc).
 
@@ -356,9 +419,13 @@ class GraspKinematics:
           in from above the table.
         table_clearance: with a support, every fingertip stays this far (m)
           above the table; contact_height: the class's contacts at least this
-          much (m) higher still.
+          much (m) higher still. hand_clearance: with a support, every other
+          collision shape of the hand (phalanges, knuckles, palm) stays this far
+          (m) above the table (None: unchecked; before, a pinch on a small sphere
+          put the middle phalanx 18 mm into the table top).
         X_PO_guess: initial guess of the object pose in the palm frame (e.g. a
           solution without the table), instead of the centre guess.
+        row_fingers: see :func:`contact_layout`.
         """
         info = grasp_info(name)
         dims = _check_dims(shape, dims)
@@ -366,7 +433,8 @@ class GraspKinematics:
         rng = rng or np.random.default_rng(0)
         r = 0.5 * dims[0]
         plant = self.plant
-        layout = contact_layout(info.grasp_class)
+        layout = contact_layout(info.grasp_class, shape, dims,
+                                on_table=self.support is not None, row_fingers=row_fingers)
         jitters = [target_jitter * rng.normal(size=3) if target_jitter > 0 else np.zeros(3)
                    for _ in layout]
         if p_PO_guess is None:
@@ -432,6 +500,13 @@ class GraspKinematics:
                     ik.AddPositionConstraint(self.distal[t.finger], p_B, self.up_frame,
                                              [-big, -big, floor + contact_height],
                                              [big, big, big])
+                if hand_clearance is not None:
+                    hand_floor = -self.support[1] + float(hand_clearance)
+                    for frame, points, radius in self.clearance_points:
+                        for p_B in points:
+                            ik.AddPositionConstraint(frame, p_B, self.up_frame,
+                                                     [-big, -big, hand_floor + radius],
+                                                     [big, big, big])
                 # The forearm too: both ends of its axis a radius above the table
                 # (exact for a level forearm, a radius to spare for an upright one).
                 for p_B in self.forearm_axis_B:
@@ -477,8 +552,8 @@ class GraspKinematics:
         plant.SetPositions(self.context, q_sol)
         q = q_sol[self.q_index]
         X_PO = plant.CalcRelativeTransform(self.context, self.palm, self.object_frame)
-        err = self.surface_error(q, name, shape, dims, X_PO)
-        return GraspSolution(q, X_PO, bool(result.is_success()), err)
+        err = self.surface_error(q, name, shape, dims, X_PO, layout)
+        return GraspSolution(q, X_PO, bool(result.is_success()), err, layout)
 
     def _add_surface_constraint(self, ik, t, p_B, normal, shape, dims, r, tol, jitter):
         frame = self.distal[t.finger]
@@ -513,6 +588,50 @@ class GraspKinematics:
             lo[axis] = hi[axis] = sign * face
             ik.AddPositionConstraint(frame, p_B, O, lo, hi)
 
+    def table_clearance(self) -> tuple[float, str]:
+        """``(height, body name)`` of the hand's lowest collision shape above the table
+        (m; negative: into it) at the posture and object pose now in :attr:`context`
+        (after :meth:`solve_grasp`, or :meth:`set_posture`). Needs a support."""
+        if self.support is None:
+            raise ValueError("table_clearance needs a support (table) in the constructor")
+        lowest, name = np.inf, ""
+        for frame, points, radius in self.clearance_points:
+            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
+            z = min((X_UB @ points.T)[2]) - radius
+            if z < lowest:
+                lowest, name = z, frame.body().name()
+        return float(lowest + self.support[1]), name
+
+    def collisions(self, max_penetration: float, table_tolerance: float
+                   ) -> tuple[set[str], set[str]]:
+        """``(into the table, into the object or the hand)``: names of the hand bodies
+        that reach more than ``table_tolerance`` (m) into the table, and of those that
+        reach more than ``max_penetration`` into the object or another hand body, at
+        the posture and object pose now in :attr:`context`. Needs the object's shape
+        and a support."""
+        if self.support is None or self.shape is None:
+            raise ValueError("collisions needs the object shape and a support (table)")
+        query = self.plant.get_geometry_query_input_port().Eval(self.context)
+        inspector = query.inspector()
+        table, others = set(), set()
+        for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.0):
+            if pair.distance < -max_penetration:
+                for g in (pair.id_A, pair.id_B):
+                    body = self.plant.GetBodyFromFrameId(inspector.GetFrameId(g))
+                    if body.model_instance() == self.hand:
+                        others.add(body.name())
+        for frame, points, radius in self.clearance_points:
+            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
+            if min((X_UB @ points.T)[2]) - radius + self.support[1] < -table_tolerance:
+                table.add(frame.body().name())
+        return table, others
+
+    def set_posture(self, q, X_PO: RigidTransform) -> None:
+        """Puts the hand at posture q (24,) and the object at ``X_PO`` (palm frame)."""
+        self._set(self._check_q(q))
+        X_WP = self.palm.CalcPoseInWorld(self.context)
+        self.plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ X_PO)
+
     def contact_jacobian(self, q, finger: str, part: str = "pad") -> tuple[np.ndarray, np.ndarray]:
         """Position ``p_PC`` (3,) of a finger contact point and its Jacobian (3, 24).
 
@@ -533,9 +652,13 @@ class GraspKinematics:
         J[:, self._wrist] = 0.0
         return p, J
 
-    def surface_error(self, q, name, shape, dims, X_PO: RigidTransform) -> float:
-        """Largest distance (m) of a class contact point from the object surface."""
-        pts = self.contact_points(q, name)
+    def surface_error(self, q, name, shape, dims, X_PO: RigidTransform, layout=None) -> float:
+        """Largest distance (m) of a class contact point (of ``layout``, default its
+        layout on this object, :func:`contact_layout`) from the object surface."""
+        if layout is None:
+            layout = contact_layout(name, shape, dims, on_table=self.support is not None)
+        used = {t.finger for t in layout}
+        pts = {f: p for f, p in self.contact_points(q, name).items() if f in used}
         X_OP = X_PO.inverse()
         errs = []
         r = 0.5 * dims[0]

@@ -98,14 +98,24 @@ MAX_APPROACH_ANGLE = np.deg2rad(45.0)  # approach vector from straight down
 PRESHAPE_OPENING = 0.025  # m, contacts moved out along their normals for the pre-shape
 CLOSING_SQUEEZE = 0.020  # m, and pushed in for the closing command
 PRESHAPE_LIFT = 0.010  # m, contacts raised (world up) in the pre-shape
+TABLE_TOLERANCE = 0.001  # m, how far any part of the hand may reach into the table in a plan
+# (opening, lift) of the pre-shape's contacts (m), tried in turn until no part of the
+# hand reaches into the table (see _preshape_and_close).
+PRESHAPE_STEPS = ((PRESHAPE_OPENING, PRESHAPE_LIFT), (PRESHAPE_OPENING, 0.020),
+                  (PRESHAPE_OPENING, 0.030), (0.018, 0.030), (0.012, 0.030), (0.008, 0.030))
+CLOSE_LIFTS = (0.0, 0.005, 0.010, 0.015, 0.020)  # m, upward part of a finger's closing move, in turn
 CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
 # Joints the planner sets in every posture prior of a class: the fingers a
 # class does not use are kept out of the way (report section 3.3: during the
 # reach only the class's fingers may meet the object). Tripod: ring and
 # little fingers extended (curled, they pass a few mm from a small sphere and
 # hit it in the reach), the thumb abducted to oppose the first and middle finger.
+# Adduction grip: ring and little fingers curled into the palm, so the middle
+# finger can open away from the first finger (extended beside it, the ring
+# finger left it no room: the pre-shape pressed them together at 600 N).
 PLANNER_POSTURES: dict[GraspClass, dict[str, float]] = {
     GraspClass.TRIPOD: {"RFJ3": 0.0, "RFJ2": 0.0, "LFJ3": 0.0, "LFJ2": 0.0, "THJ4": 1.1},
+    GraspClass.ADDUCTION_GRIP: {"RFJ3": 1.4, "RFJ2": 1.4, "LFJ3": 1.4, "LFJ2": 1.4},
 }
 WRIST_RANGE = 2.0  # m, travel of the floating wrist's prismatic joints (station.py)
 _SPEC = get_hand_spec("shadow")
@@ -399,7 +409,9 @@ def _acceptable(kin: GraspKinematics, sol) -> bool:
         return False
     X_UB = kin.plant.CalcRelativeTransform(kin.context, kin.up_frame, kin.forearm)
     forearm = min((X_UB @ p_B)[2] for p_B in kin.forearm_axis_B) + kin.support[1]
-    return forearm > kin.forearm_radius - 0.002
+    if forearm <= kin.forearm_radius - 0.002:
+        return False
+    return kin.table_clearance()[0] > -TABLE_TOLERANCE
 
 
 def _world_grasp_frame(kind: str, X_WO: RigidTransform, up_G=None, row_O=(1.0, 0.0, 0.0)
@@ -543,6 +555,8 @@ def plan_grasp(
     X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
         kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
         row_O)
+    q_grasp = _clear_idle_fingers(kin, sol, info.grasp_class, up, coupling_ratio)
+    sol = dc.replace(sol, q=q_grasp)
     q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up, coupling_ratio)
     grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
     return GraspPlan(
@@ -598,6 +612,27 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
                     coupling_ratio):
     """``(solution, up_G, centre source, kinematics)`` of the first acceptable IK, or None.
 
+    The parallel extension first with its whole row of fingers on the object
+    (on a sphere, the fingers that fit: ``contact_layout``), then, while there
+    is no solution, with one outer finger fewer (a cuboid narrower than the
+    66 mm row, as a hand holds a thin card between the thumb and two fingers).
+    """
+    rows = [None]
+    if info.grasp_class is GraspClass.PARALLEL_EXTENSION:
+        k = sum(1 for t in contact_layout(info.grasp_class, shape, dims) if t.normal[2] < 0)
+        rows = list(range(k, 0, -1))
+    for row_fingers in rows:
+        found = _solve_layout(info, kind, shape, dims, height, priors, priors_refine,
+                              c_table1, a_P, coupling_ratio, row_fingers)
+        if found is not None:
+            return found
+    return None
+
+
+def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
+                  coupling_ratio, row_fingers):
+    """:func:`_solve_contacts` for one layout (``row_fingers``: ``contact_layout``).
+
     Canonical attempts first: the hand comes in along its Table 2 approach
     within a narrow cone, with the grasp frame guessed from the palm
     (x_G = up = -a_P, the thumb on the proximal side, z_G ~ -z_P). Seeded
@@ -619,7 +654,7 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
         sol = kin_canonical.solve_grasp(
             info.grasp_class, shape, dims, prior, approach_P=a_P, X_PO_guess=X_PG_guess,
             min_distance=-MAX_PENETRATION, max_approach_angle=CANONICAL_APPROACH_ANGLE,
-            centre_prior_weight=100.0, p_PO_guess=c_table1)
+            centre_prior_weight=100.0, p_PO_guess=c_table1, row_fingers=row_fingers)
         if _acceptable(kin_canonical, sol):
             source = "table1" if np.linalg.norm(sol.X_PO.translation() - c_table1) < 1e-3 \
                 else "refined"
@@ -629,7 +664,8 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
     for prior, source in attempts:
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
             centre_prior_weight=100.0, p_PO_guess=c_table1)
-        free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None, **kw)
+        free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None,
+                                    row_fingers=row_fingers, **kw)
         if not (free.success and free.contact_error < 1.5e-3):
             continue
         up = _up_in_grasp_frame(kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
@@ -637,7 +673,8 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
                           height)
         sol = kin.solve_grasp(info.grasp_class, shape, dims, free.q, approach_P=a_P,
                               X_PO_guess=free.X_PO, min_distance=-MAX_PENETRATION,
-                              max_approach_angle=MAX_APPROACH_ANGLE, **kw)
+                              max_approach_angle=MAX_APPROACH_ANGLE, row_fingers=row_fingers,
+                              **kw)
         if _acceptable(kin, sol):
             return sol, up, source, kin
     return None
@@ -679,25 +716,133 @@ def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
     return X_WG, X_WP, X_WB, X_WB_pre, approach_W
 
 
-def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
+# Postures an idle finger (not one of the class's) may take to keep out of the
+# working fingers' way: (J3, J2) of its flexion joints, J1 following J2.
+IDLE_POSTURES = ((0.0, 0.0), (1.4, 1.4), (0.8, 0.4))
+
+
+def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray:
+    """The IK posture with each idle finger (one the class does not use) moved out of
+    the way when, in the grasp, the pre-shape or the closing command, it touches a
+    working finger, the object or the table.
+
+    The IK keeps the fingers apart only in the grasp posture (and allows a few
+    mm): the pre-shape and the close then drove a tip pinch's first finger
+    into the middle finger at several hundred newtons. An idle finger that
+    collides keeps the first of its own posture, extended, curled
+    (``IDLE_POSTURES``) that collides with nothing in all three postures.
+    """
+    spec = kin.spec
+    used = {t.finger for t in sol.layout}
+    used |= {c.finger for c in grasp_info(grasp_class).contacts}
+    idle = [f for f in spec.fingers if f not in used and f != "th"]
+    if not idle:
+        return sol.q
+
+    def postures(q):
+        q_pre, q_close = _preshape_and_close(kin, dc.replace(sol, q=q), grasp_class, up,
+                                             coupling_ratio, steps=PRESHAPE_STEPS[:1])
+        return q, q_pre, q_close
+
+    def hits(qs, finger):
+        for q in qs:
+            kin.set_posture(q, sol.X_PO)
+            table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
+            if any(name[:2] == finger for name in table | others):
+                return True
+        return False
+
+    q = np.array(sol.q, dtype=float)
+    base = postures(q)
+    for finger in idle:
+        if not hits(base, finger):
+            continue
+        for j3, j2 in IDLE_POSTURES:
+            trial = _with_joints(q, {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2},
+                                 coupling_ratio)
+            others = [_with_joints(p, {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2},
+                                   coupling_ratio) for p in base[1:]]
+            if not hits([trial, *others], finger):
+                q = trial
+                base = (q, *others)
+                break
+    kin.set_posture(sol.q, sol.X_PO)
+    return q
+
+
+def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
     """Postures (24,) of the pre-shape (open) and the closing command, along the contact normals.
 
     Opening and squeezing act in the horizontal plane (the outward contact
     normal with its vertical part removed), and the opening also lifts the
     contacts a little: a pre-shape that swings a fingertip down would hit the
-    table the plan keeps it clear of.
+    table the plan keeps it clear of. A contact finger whose opened posture
+    reaches into the table (a thumb opened off a small sphere swings its tip
+    down), into the object, or into a neighbouring finger (the adduction grip's
+    middle finger opened towards the ring finger) takes the first of
+    ``PRESHAPE_STEPS`` (lifted higher, then opened less) that touches nothing,
+    else the first that clears the table; each finger chooses on its own.
+    ``steps``: try only the first ``steps`` of them (``_clear_idle_fingers``).
     """
     R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
-    moves_open, moves_close = {}, {}
-    for t in contact_layout(grasp_class):
+    normals = {}
+    layout = sol.layout
+    for t in layout:
         n = R_PG @ np.asarray(t.normal, dtype=float)
         n_h = n - (n @ up_P) * up_P
-        n_h = n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2 else n
-        moves_open[t.finger] = (t.part, PRESHAPE_OPENING * n_h + PRESHAPE_LIFT * up_P)
-        moves_close[t.finger] = (t.part, -CLOSING_SQUEEZE * n_h)
-    q_pre = move_contacts(kin, sol.q, moves_open, coupling_ratio)
-    q_close = move_contacts(kin, sol.q, moves_close, coupling_ratio)
+        normals[t.finger] = (t.part, n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2
+                             else n)
+    # The class's fingers left out of the layout on this object (a parallel
+    # extension's row beyond a small sphere) open and close with their row.
+    row = next((normals[t.finger] for t in layout if t.normal[2] < 0), None)
+    for spec in grasp_info(grasp_class).contacts:
+        if spec.finger not in normals and row is not None:
+            normals[spec.finger] = (spec.part, row[1])
+
+    def pre_shape(step):
+        moves = {}
+        for f, (part, n) in normals.items():
+            opening, lift = PRESHAPE_STEPS[step[f]]
+            moves[f] = (part, opening * n + lift * up_P)
+        q = move_contacts(kin, sol.q, moves, coupling_ratio)
+        kin.set_posture(q, sol.X_PO)
+        table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
+        return q, {name[:2] for name in table}, {name[:2] for name in others}
+
+    # Every step for every finger (the fingers move independently; a collision is
+    # charged to the fingers whose bodies it involves).
+    table_free = {f: [] for f in normals}
+    clean = {f: [] for f in normals}
+    for i in range(len(PRESHAPE_STEPS) if steps is None else len(steps)):
+        _, table, others = pre_shape(dict.fromkeys(normals, i))
+        for f in normals:
+            table_free[f].append(f not in table)
+            clean[f].append(f not in table and f not in others)
+    # Per finger: its first step that touches nothing; else (pressed against a
+    # neighbour whichever way it opens) its first step that clears the table.
+    final = {}
+    for f in normals:
+        for ok in (clean[f], table_free[f], [True]):
+            if any(ok):
+                final[f] = ok.index(True)
+                break
+    q_pre, _, _ = pre_shape(final)
+    # The closing command likewise: a finger whose squeeze past the object swings it
+    # down into the table (a lateral tripod's middle finger on a small sphere
+    # pressed the table at 20 N before it reached the sphere) closes a little upward.
+    lifts = dict.fromkeys(normals, CLOSE_LIFTS[0])
+    for lift in CLOSE_LIFTS:
+        moves = {f: (part, -CLOSING_SQUEEZE * n + lifts[f] * up_P)
+                 for f, (part, n) in normals.items()}
+        q_close = move_contacts(kin, sol.q, moves, coupling_ratio)
+        kin.set_posture(q_close, sol.X_PO)
+        low = {name[:2] for name in kin.collisions(np.inf, TABLE_TOLERANCE)[0]} & set(normals)
+        if not low or lift == CLOSE_LIFTS[-1]:
+            break
+        for f in low:
+            lifts[f] = CLOSE_LIFTS[CLOSE_LIFTS.index(lift) + 1]
+    kin.set_posture(sol.q, sol.X_PO)
     return q_pre, q_close
 
 

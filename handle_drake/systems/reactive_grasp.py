@@ -53,7 +53,12 @@ Modes (abstract state, :class:`ReactiveGraspMode`):
   later). Finger ``i``'s command is ``preshape + s_i (closed - preshape)`` on
   its joints; ``s_i`` grows at ``close_rate`` (1/s) until its fingertip force
   exceeds ``contact_threshold`` (it then stays where it was) or it reaches
-  ``max_closing``.
+  ``max_closing``. While some grasp fingers touch and others do not, the
+  wrist shifts sideways at ``close_shift_speed`` (up to ``max_close_shift``)
+  along the contact normals into the hand: the hand centres itself on an
+  object that is not where the plan put it, bringing the open fingers to it,
+  instead of the first finger shoving it towards the others (which is what
+  the open-loop close does).
 - ``SQUEEZE``: every grasp finger touches (or is at ``max_closing``): each
   grasp finger's ``s_i`` ramps by ``squeeze`` over ``squeeze_time``.
 - ``LIFT``: ``hold_time`` after the squeeze, the wrist rises ``lift_height``
@@ -114,6 +119,8 @@ class ReactiveGraspParams:
     lift_speed: float = 0.2  # m/s
     arrival_tolerance: float = 0.004  # m, measured vs commanded wrist position on arrival
     arrival_timeout: float = 0.3  # s, close anyway this long after the travel is complete
+    close_shift_speed: float = 0.03  # m/s, sideways wrist shift while only some fingers touch
+    max_close_shift: float = 0.015  # m, largest shift in the close (on top of the approach's)
 
     def validate(self) -> None:
         for f in dc.fields(self):
@@ -127,7 +134,7 @@ class ReactiveGraspParams:
                 raise ValueError(f"ReactiveGraspParams.{name} must be > 0, "
                                  f"got {getattr(self, name)}")
         for name in ("shift_speed", "max_shift", "contact_threshold", "squeeze", "hold_time",
-                     "lift_height", "arrival_timeout"):
+                     "lift_height", "arrival_timeout", "close_shift_speed", "max_close_shift"):
             if getattr(self, name) < 0:
                 raise ValueError(f"ReactiveGraspParams.{name} must be >= 0, "
                                  f"got {getattr(self, name)}")
@@ -396,7 +403,7 @@ class ReactiveGrasp(LeafSystem):
                             or now - t_arrived >= p.arrival_timeout):
                         new_mode = ReactiveGraspMode.CLOSE
         elif mode is ReactiveGraspMode.CLOSE:
-            tips, _, _ = self._touching(context)
+            tips, _, direction_W = self._touching(context)
             for i in np.flatnonzero(self._grasp):
                 if touched[i]:
                     continue
@@ -405,6 +412,12 @@ class ReactiveGrasp(LeafSystem):
                 else:
                     s[i] = min(s[i] + p.close_rate * h, p.max_closing)
             done = (touched > 0) | (s >= p.max_closing)
+            if p.close_shift_speed > 0 and tips[self._grasp].any() and not np.all(
+                    done[self._grasp]):
+                d = self._shift_direction(context, tips & self._grasp, direction_W)
+                moved = shift + p.close_shift_speed * h * d
+                if np.linalg.norm(moved) <= p.max_shift + p.max_close_shift:
+                    shift = moved
             if np.all(done[self._grasp]):
                 new_mode = ReactiveGraspMode.SQUEEZE
                 squeeze_from = s.copy()
