@@ -20,8 +20,8 @@ Run: ``python benchmarks/bench_grasp_classes.py [--workers 2] [--executor dask:/
 Dask scheduler, ``handle_drake.learning.cluster``); prints a table and writes
 ``benchmarks/results/grasp_classes.json``. Under HANDLE_DRAKE_REDUCED=1 it runs
 two sizes of two classes on cuboids only. ``--reactive NAME=VALUE`` overrides a
-``ReactiveGraspParams`` field of the reactive runs (e.g. ``close_shift_speed=0``
-switches the centring close off); the results file name then carries it.
+``ReactiveGraspParams`` field of the reactive runs (e.g. ``close_shift_speed=0.03``
+switches the centring close on); the results file name then carries it.
 
 Perceived against true object (report sections 3.3 and 4: the object is not
 where the plan thinks): ``--offset MM [--directions N]`` plans on the object
@@ -114,7 +114,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--reactive", action="append", default=[], metavar="NAME=VALUE",
                         help="override a ReactiveGraspParams field (repeatable), "
-                             "e.g. close_shift_speed=0")
+                             "e.g. close_shift_speed=0.03")
     add_executor_arguments(parser)
     args = parser.parse_args(argv)
     if args.directions < 1 or not 0 <= args.offset < 100 or not -0.5 < args.size_error < 0.5:

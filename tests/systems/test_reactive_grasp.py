@@ -169,6 +169,32 @@ def test_an_early_contact_slows_and_shifts_the_approach():
     np.testing.assert_allclose(b["hand"], preshape)  # fingers stay in the pre-shape
 
 
+def test_the_optional_centring_close_shifts_the_wrist_while_only_some_fingers_touch():
+    """close_shift_speed > 0: from the first grasp finger's contact until every
+    grasp finger touches, the wrist moves along the touching finger's outward
+    direction at close_shift_speed, capped at max_shift + max_close_shift; off
+    (the default), the wrist stays where the approach left it."""
+    preshape, closed = _hand()
+    pose = np.zeros(6)
+    outward = np.zeros((5, 3))
+    outward[FF] = [0.0, 1.0, 0.0]
+    forces = _force_script([0.105, 0.255, None, None, 0.3549])  # FF, then MF, then TH
+    p = ReactiveGraspParams(close_rate=1.0, close_shift_speed=0.02, max_shift=0.0,
+                            max_close_shift=0.003)
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params=p,
+                          finger_directions_B=outward, period=H)
+    at, _ = _simulate(grasp, forces)
+    out = at(0.2049)  # updates at 0.11 ... 0.20 s saw FF alone
+    assert out["mode"] is ReactiveGraspMode.CLOSE
+    np.testing.assert_allclose(out["wrist"][:3], [0.0, 0.02 * H * 10, 0.0], atol=1e-12)
+    out = at(0.5)  # capped at 3 mm, and still there after every finger touched
+    np.testing.assert_allclose(out["wrist"][:3], [0.0, 0.003, 0.0], atol=1e-12)
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, period=H,
+                          finger_directions_B=outward)
+    at, _ = _simulate(grasp, forces)
+    np.testing.assert_allclose(at(0.5)["wrist"], pose)
+
+
 def test_multiple_unexpected_contacts_stop_the_approach():
     preshape, closed = _hand()
     p = ReactiveGraspParams(approach_speed=0.1, slow_factor=0.5)
