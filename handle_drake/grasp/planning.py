@@ -27,7 +27,17 @@ floating-wrist station needs to grasp and lift the object:
    along the approach; the pre-shape opens each contact finger 25 mm out
    along its contact normal and the closing command pushes it 20 mm in (damped
    least-squares steps on the contact Jacobian, so the position-controlled
-   fingers press with a force set by their PD gains).
+   fingers press with a force set by their PD gains). Both are collision
+   checked, not only the IK posture: a finger whose opened posture reaches
+   into the table, the object or another finger is lifted, then opened less
+   (``PRESHAPE_STEPS``); one whose closing command dips into the table closes
+   a little upward (``CLOSE_LIFTS``); an idle finger in the way is extended or
+   curled (``IDLE_POSTURES``).
+
+The whole hand, not only the fingertips and the forearm, stays above the
+table in the IK (every collision shape of the model, ``hand_clearance``):
+before, small-sphere pinches were planned with a middle phalanx 18 mm inside
+the table top.
 
 :meth:`GraspPlan.to_script` / :meth:`GraspPlan.to_scenario` write keyframes
 (reach from the stand-off, close, lift) for a ``!FloatingWrist`` scenario.
@@ -103,7 +113,8 @@ TABLE_TOLERANCE = 0.001  # m, how far any part of the hand may reach into the ta
 # hand reaches into the table (see _preshape_and_close).
 PRESHAPE_STEPS = ((PRESHAPE_OPENING, PRESHAPE_LIFT), (PRESHAPE_OPENING, 0.020),
                   (PRESHAPE_OPENING, 0.030), (0.018, 0.030), (0.012, 0.030), (0.008, 0.030))
-CLOSE_LIFTS = (0.0, 0.005, 0.010, 0.015, 0.020)  # m, upward part of a finger's closing move, in turn
+# m, upward part of a finger's closing move, tried in turn (see _preshape_and_close)
+CLOSE_LIFTS = (0.0, 0.005, 0.010, 0.015, 0.020)
 CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
 # Joints the planner sets in every posture prior of a class: the fingers a
 # class does not use are kept out of the way (report section 3.3: during the
