@@ -752,7 +752,7 @@ def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray
 
     def postures(q):
         q_pre, q_close = _preshape_and_close(kin, dc.replace(sol, q=q), grasp_class, up,
-                                             coupling_ratio, steps=PRESHAPE_STEPS[:1])
+                                             coupling_ratio, n_steps=1)
         return q, q_pre, q_close
 
     def hits(qs, finger):
@@ -781,7 +781,7 @@ def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray
     return q
 
 
-def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
+def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, n_steps: int | None = None):
     """Postures (24,) of the pre-shape (open) and the closing command, along the contact normals.
 
     Opening and squeezing act in the horizontal plane (the outward contact
@@ -793,7 +793,7 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
     middle finger opened towards the ring finger) takes the first of
     ``PRESHAPE_STEPS`` (lifted higher, then opened less) that touches nothing,
     else the first that clears the table; each finger chooses on its own.
-    ``steps``: try only the first ``steps`` of them (``_clear_idle_fingers``).
+    ``n_steps``: try only the first ``n_steps`` of them (``_clear_idle_fingers``).
     """
     R_PG = sol.X_PO.rotation().matrix()
     up_P = R_PG @ up
@@ -825,7 +825,7 @@ def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, steps=None):
     # charged to the fingers whose bodies it involves).
     table_free = {f: [] for f in normals}
     clean = {f: [] for f in normals}
-    for i in range(len(PRESHAPE_STEPS) if steps is None else len(steps)):
+    for i in range(len(PRESHAPE_STEPS) if n_steps is None else n_steps):
         _, table, others = pre_shape(dict.fromkeys(normals, i))
         for f in normals:
             table_free[f].append(f not in table)
