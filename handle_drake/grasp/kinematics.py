@@ -588,43 +588,55 @@ class GraspKinematics:
             lo[axis] = hi[axis] = sign * face
             ik.AddPositionConstraint(frame, p_B, O, lo, hi)
 
+    def _heights_above_table(self) -> dict[str, float]:
+        """Body name -> height (m) of its lowest collision shape above the table, at the
+        posture and object pose now in :attr:`context` (the forearm's is
+        ``forearm_axis_B`` / ``forearm_radius``). Needs a support."""
+        if self.support is None:
+            raise ValueError("the table clearance needs a support (table) in the constructor")
+        heights: dict[str, float] = {}
+        for frame, points, radius in self.clearance_points:
+            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
+            z = float(min((X_UB @ points.T)[2]) - radius + self.support[1])
+            name = frame.body().name()
+            heights[name] = min(z, heights.get(name, np.inf))
+        return heights
+
     def table_clearance(self) -> tuple[float, str]:
         """``(height, body name)`` of the hand's lowest collision shape above the table
         (m; negative: into it) at the posture and object pose now in :attr:`context`
         (after :meth:`solve_grasp`, or :meth:`set_posture`). Needs a support."""
-        if self.support is None:
-            raise ValueError("table_clearance needs a support (table) in the constructor")
-        lowest, name = np.inf, ""
-        for frame, points, radius in self.clearance_points:
-            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
-            z = min((X_UB @ points.T)[2]) - radius
-            if z < lowest:
-                lowest, name = z, frame.body().name()
-        return float(lowest + self.support[1]), name
+        heights = self._heights_above_table()
+        name = min(heights, key=heights.get)
+        return heights[name], name
 
-    def collisions(self, max_penetration: float, table_tolerance: float
-                   ) -> tuple[set[str], set[str]]:
-        """``(into the table, into the object or the hand)``: names of the hand bodies
-        that reach more than ``table_tolerance`` (m) into the table, and of those that
-        reach more than ``max_penetration`` into the object or another hand body, at
-        the posture and object pose now in :attr:`context`. Needs the object's shape
-        and a support."""
-        if self.support is None or self.shape is None:
-            raise ValueError("collisions needs the object shape and a support (table)")
+    def bodies_in_table(self, tolerance: float) -> set[str]:
+        """Names of the hand bodies reaching more than ``tolerance`` (m) into the table
+        (see :meth:`table_clearance`)."""
+        return {name for name, z in self._heights_above_table().items() if z < -tolerance}
+
+    def bodies_in_contact(self, max_penetration: float) -> set[str]:
+        """Names of the hand bodies reaching more than ``max_penetration`` (m) into the
+        object or another hand body, at the posture and object pose now in
+        :attr:`context`. Needs the object's shape."""
+        if self.shape is None:
+            raise ValueError("bodies_in_contact needs the object shape in the constructor")
         query = self.plant.get_geometry_query_input_port().Eval(self.context)
         inspector = query.inspector()
-        table, others = set(), set()
+        names = set()
         for pair in query.ComputeSignedDistancePairwiseClosestPoints(0.0):
             if pair.distance < -max_penetration:
                 for g in (pair.id_A, pair.id_B):
                     body = self.plant.GetBodyFromFrameId(inspector.GetFrameId(g))
                     if body.model_instance() == self.hand:
-                        others.add(body.name())
-        for frame, points, radius in self.clearance_points:
-            X_UB = self.plant.CalcRelativeTransform(self.context, self.up_frame, frame)
-            if min((X_UB @ points.T)[2]) - radius + self.support[1] < -table_tolerance:
-                table.add(frame.body().name())
-        return table, others
+                        names.add(body.name())
+        return names
+
+    def collisions(self, max_penetration: float, table_tolerance: float
+                   ) -> tuple[set[str], set[str]]:
+        """``(into the table, into the object or the hand)``:
+        :meth:`bodies_in_table` and :meth:`bodies_in_contact`."""
+        return self.bodies_in_table(table_tolerance), self.bodies_in_contact(max_penetration)
 
     def set_posture(self, q, X_PO: RigidTransform) -> None:
         """Puts the hand at posture q (24,) and the object at ``X_PO`` (palm frame)."""

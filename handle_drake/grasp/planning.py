@@ -110,10 +110,10 @@ CLOSING_SQUEEZE = 0.020  # m, and pushed in for the closing command
 PRESHAPE_LIFT = 0.010  # m, contacts raised (world up) in the pre-shape
 TABLE_TOLERANCE = 0.001  # m, how far any part of the hand may reach into the table in a plan
 # (opening, lift) of the pre-shape's contacts (m), tried in turn until no part of the
-# hand reaches into the table (see _preshape_and_close).
+# hand reaches into the table (see _preshape).
 PRESHAPE_STEPS = ((PRESHAPE_OPENING, PRESHAPE_LIFT), (PRESHAPE_OPENING, 0.020),
                   (PRESHAPE_OPENING, 0.030), (0.018, 0.030), (0.012, 0.030), (0.008, 0.030))
-# m, upward part of a finger's closing move, tried in turn (see _preshape_and_close)
+# m, upward part of a finger's closing move, tried in turn (see _closing)
 CLOSE_LIFTS = (0.0, 0.005, 0.010, 0.015, 0.020)
 CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
 # Joints the planner sets in every posture prior of a class: the fingers a
@@ -566,9 +566,9 @@ def plan_grasp(
     X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
         kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
         row_O)
-    q_grasp = _clear_idle_fingers(kin, sol, info.grasp_class, up, coupling_ratio)
+    q_grasp, q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up,
+                                                  coupling_ratio)
     sol = dc.replace(sol, q=q_grasp)
-    q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up, coupling_ratio)
     grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
     return GraspPlan(
         grasp_class=info.grasp_class, object_spec=spec, grasp_size=size, X_WO=X_WO,
@@ -727,15 +727,97 @@ def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
     return X_WG, X_WP, X_WB, X_WB_pre, approach_W
 
 
+def _finger(body_name: str) -> str:
+    """The finger (``ff``, ``mf``, ``rf``, ``lf``, ``th``) a hand body belongs to, from its
+    name (``ffmiddle``, ``lfmetacarpal``, ``thbase``...; ``palm`` gives ``pa``)."""
+    return body_name[:2]
+
+
+def _contact_moves(sol, grasp_class, up) -> tuple[dict, np.ndarray]:
+    """``({finger: (part, outward direction in P)}, up in P)``: the directions along which
+    the pre-shape opens and the close squeezes each of the class's fingers.
+
+    Opening and squeezing act in the horizontal plane (the outward contact
+    normal with its vertical part removed). The class's fingers left out of the
+    layout on this object (a parallel extension's row beyond a small sphere)
+    open and close with their row.
+    """
+    R_PG = sol.X_PO.rotation().matrix()
+    up_P = R_PG @ up
+    normals = {}
+    for t in sol.layout:
+        n = R_PG @ np.asarray(t.normal, dtype=float)
+        n_h = n - (n @ up_P) * up_P
+        normals[t.finger] = (t.part, n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2
+                             else n)
+    row = next((normals[t.finger] for t in sol.layout if t.normal[2] < 0), None)
+    for spec in grasp_info(grasp_class).contacts:
+        if spec.finger not in normals and row is not None:
+            normals[spec.finger] = (spec.part, row[1])
+    return normals, up_P
+
+
+def _opened(kin, sol, normals, up_P, coupling_ratio, step: dict):
+    """``(posture, fingers in the table, fingers into the object or the hand)`` of the
+    pre-shape with each finger at its ``PRESHAPE_STEPS[step[finger]]``."""
+    moves = {}
+    for f, (part, n) in normals.items():
+        opening, lift = PRESHAPE_STEPS[step[f]]
+        moves[f] = (part, opening * n + lift * up_P)
+    q = move_contacts(kin, sol.q, moves, coupling_ratio)
+    kin.set_posture(q, sol.X_PO)
+    table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
+    return q, {_finger(n) for n in table}, {_finger(n) for n in others}
+
+
+def _preshape(kin, sol, normals, up_P, coupling_ratio) -> np.ndarray:
+    """The pre-shape: each contact finger at the first of ``PRESHAPE_STEPS`` (lifted
+    higher, then opened less) that touches nothing, else the first that clears the
+    table (pressed against a neighbour whichever way it opens), else the first;
+    each finger chooses on its own (a collision is charged to the fingers whose
+    bodies it involves)."""
+    tried = {}  # step -> (posture, table fingers, other fingers), every finger at it
+    for i in range(len(PRESHAPE_STEPS)):
+        tried[i] = _opened(kin, sol, normals, up_P, coupling_ratio, dict.fromkeys(normals, i))
+    final = {}
+    for f in normals:
+        clean = [i for i, (_, table, others) in tried.items() if f not in table | others]
+        clear = [i for i, (_, table, _) in tried.items() if f not in table]
+        final[f] = (clean or clear or [0])[0]
+    steps = set(final.values())
+    if len(steps) == 1:
+        return tried[steps.pop()][0]
+    return _opened(kin, sol, normals, up_P, coupling_ratio, final)[0]
+
+
+def _closing(kin, sol, normals, up_P, coupling_ratio) -> np.ndarray:
+    """The closing command, ``CLOSING_SQUEEZE`` in along each finger's direction; a
+    finger whose squeeze past the object swings it down into the table (a lateral
+    tripod's middle finger on a small sphere pressed the table at 20 N before it
+    reached the sphere) closes a little upward, ``CLOSE_LIFTS`` in turn."""
+    lifts = dict.fromkeys(normals, CLOSE_LIFTS[0])
+    for k in range(len(CLOSE_LIFTS)):
+        moves = {f: (part, -CLOSING_SQUEEZE * n + lifts[f] * up_P)
+                 for f, (part, n) in normals.items()}
+        q_close = move_contacts(kin, sol.q, moves, coupling_ratio)
+        kin.set_posture(q_close, sol.X_PO)
+        low = {_finger(n) for n in kin.bodies_in_table(TABLE_TOLERANCE)} & set(normals)
+        if not low or k + 1 == len(CLOSE_LIFTS):
+            break
+        for f in low:
+            lifts[f] = CLOSE_LIFTS[k + 1]
+    return q_close
+
+
 # Postures an idle finger (not one of the class's) may take to keep out of the
 # working fingers' way: (J3, J2) of its flexion joints, J1 following J2.
 IDLE_POSTURES = ((0.0, 0.0), (1.4, 1.4), (0.8, 0.4))
 
 
-def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray:
+def _clear_idle_fingers(kin, sol, normals, up_P, coupling_ratio) -> np.ndarray:
     """The IK posture with each idle finger (one the class does not use) moved out of
-    the way when, in the grasp, the pre-shape or the closing command, it touches a
-    working finger, the object or the table.
+    the way when, in the grasp, the first pre-shape or the closing command, it
+    touches a working finger, the object or the table.
 
     The IK keeps the fingers apart only in the grasp posture (and allows a few
     mm): the pre-shape and the close then drove a tip pinch's first finger
@@ -743,118 +825,50 @@ def _clear_idle_fingers(kin, sol, grasp_class, up, coupling_ratio) -> np.ndarray
     collides keeps the first of its own posture, extended, curled
     (``IDLE_POSTURES``) that collides with nothing in all three postures.
     """
-    spec = kin.spec
-    used = {t.finger for t in sol.layout}
-    used |= {c.finger for c in grasp_info(grasp_class).contacts}
-    idle = [f for f in spec.fingers if f not in used and f != "th"]
+    idle = [f for f in kin.spec.fingers if f not in normals and f != "th"]
     if not idle:
         return sol.q
-
-    def postures(q):
-        q_pre, q_close = _preshape_and_close(kin, dc.replace(sol, q=q), grasp_class, up,
-                                             coupling_ratio, n_steps=1)
-        return q, q_pre, q_close
 
     def hits(qs, finger):
         for q in qs:
             kin.set_posture(q, sol.X_PO)
-            table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
-            if any(name[:2] == finger for name in table | others):
+            if finger in {_finger(n) for n in set().union(
+                    *kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE))}:
                 return True
         return False
 
-    q = np.array(sol.q, dtype=float)
-    base = postures(q)
+    first = dict.fromkeys(normals, 0)
+    base = (sol.q, _opened(kin, sol, normals, up_P, coupling_ratio, first)[0],
+            _closing(kin, sol, normals, up_P, coupling_ratio))
     for finger in idle:
         if not hits(base, finger):
             continue
         for j3, j2 in IDLE_POSTURES:
-            trial = _with_joints(q, {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2},
-                                 coupling_ratio)
-            others = [_with_joints(p, {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2},
-                                   coupling_ratio) for p in base[1:]]
-            if not hits([trial, *others], finger):
-                q = trial
-                base = (q, *others)
+            joints = {f"{finger.upper()}J3": j3, f"{finger.upper()}J2": j2}
+            moved = tuple(_with_joints(q, joints, coupling_ratio) for q in base)
+            if not hits(moved, finger):
+                base = moved
                 break
     kin.set_posture(sol.q, sol.X_PO)
-    return q
+    return base[0]
 
 
-def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio, n_steps: int | None = None):
-    """Postures (24,) of the pre-shape (open) and the closing command, along the contact normals.
+def _preshape_and_close(kin, sol, grasp_class, up, coupling_ratio):
+    """Postures (24,) of the pre-shape (open) and the closing command, along the contact
+    normals (:func:`_contact_moves`), and the IK posture with the idle fingers out of
+    the way (:func:`_clear_idle_fingers`): ``(q_grasp, q_pre, q_close)``.
 
-    Opening and squeezing act in the horizontal plane (the outward contact
-    normal with its vertical part removed), and the opening also lifts the
-    contacts a little: a pre-shape that swings a fingertip down would hit the
-    table the plan keeps it clear of. A contact finger whose opened posture
-    reaches into the table (a thumb opened off a small sphere swings its tip
-    down), into the object, or into a neighbouring finger (the adduction grip's
-    middle finger opened towards the ring finger) takes the first of
-    ``PRESHAPE_STEPS`` (lifted higher, then opened less) that touches nothing,
-    else the first that clears the table; each finger chooses on its own.
-    ``n_steps``: try only the first ``n_steps`` of them (``_clear_idle_fingers``).
+    The opening also lifts the contacts a little: a pre-shape that swings a
+    fingertip down would hit the table the plan keeps it clear of. Both
+    postures are collision checked (:func:`_preshape`, :func:`_closing`).
     """
-    R_PG = sol.X_PO.rotation().matrix()
-    up_P = R_PG @ up
-    normals = {}
-    layout = sol.layout
-    for t in layout:
-        n = R_PG @ np.asarray(t.normal, dtype=float)
-        n_h = n - (n @ up_P) * up_P
-        normals[t.finger] = (t.part, n_h / np.linalg.norm(n_h) if np.linalg.norm(n_h) > 0.2
-                             else n)
-    # The class's fingers left out of the layout on this object (a parallel
-    # extension's row beyond a small sphere) open and close with their row.
-    row = next((normals[t.finger] for t in layout if t.normal[2] < 0), None)
-    for spec in grasp_info(grasp_class).contacts:
-        if spec.finger not in normals and row is not None:
-            normals[spec.finger] = (spec.part, row[1])
-
-    def pre_shape(step):
-        moves = {}
-        for f, (part, n) in normals.items():
-            opening, lift = PRESHAPE_STEPS[step[f]]
-            moves[f] = (part, opening * n + lift * up_P)
-        q = move_contacts(kin, sol.q, moves, coupling_ratio)
-        kin.set_posture(q, sol.X_PO)
-        table, others = kin.collisions(MAX_PENETRATION, TABLE_TOLERANCE)
-        return q, {name[:2] for name in table}, {name[:2] for name in others}
-
-    # Every step for every finger (the fingers move independently; a collision is
-    # charged to the fingers whose bodies it involves).
-    table_free = {f: [] for f in normals}
-    clean = {f: [] for f in normals}
-    for i in range(len(PRESHAPE_STEPS) if n_steps is None else n_steps):
-        _, table, others = pre_shape(dict.fromkeys(normals, i))
-        for f in normals:
-            table_free[f].append(f not in table)
-            clean[f].append(f not in table and f not in others)
-    # Per finger: its first step that touches nothing; else (pressed against a
-    # neighbour whichever way it opens) its first step that clears the table.
-    final = {}
-    for f in normals:
-        for ok in (clean[f], table_free[f], [True]):
-            if any(ok):
-                final[f] = ok.index(True)
-                break
-    q_pre, _, _ = pre_shape(final)
-    # The closing command likewise: a finger whose squeeze past the object swings it
-    # down into the table (a lateral tripod's middle finger on a small sphere
-    # pressed the table at 20 N before it reached the sphere) closes a little upward.
-    lifts = dict.fromkeys(normals, CLOSE_LIFTS[0])
-    for lift in CLOSE_LIFTS:
-        moves = {f: (part, -CLOSING_SQUEEZE * n + lifts[f] * up_P)
-                 for f, (part, n) in normals.items()}
-        q_close = move_contacts(kin, sol.q, moves, coupling_ratio)
-        kin.set_posture(q_close, sol.X_PO)
-        low = {name[:2] for name in kin.collisions(np.inf, TABLE_TOLERANCE)[0]} & set(normals)
-        if not low or lift == CLOSE_LIFTS[-1]:
-            break
-        for f in low:
-            lifts[f] = CLOSE_LIFTS[CLOSE_LIFTS.index(lift) + 1]
+    normals, up_P = _contact_moves(sol, grasp_class, up)
+    q_grasp = _clear_idle_fingers(kin, sol, normals, up_P, coupling_ratio)
+    sol = dc.replace(sol, q=q_grasp)
+    q_pre = _preshape(kin, sol, normals, up_P, coupling_ratio)
+    q_close = _closing(kin, sol, normals, up_P, coupling_ratio)
     kin.set_posture(sol.q, sol.X_PO)
-    return q_pre, q_close
+    return q_grasp, q_pre, q_close
 
 
 def _command(q) -> np.ndarray:
