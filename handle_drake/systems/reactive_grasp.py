@@ -151,6 +151,12 @@ class ReactiveGraspParams:
                              f"got {self.multiple_contacts}")
 
 
+def _capped(shift: np.ndarray, cap: float) -> np.ndarray:
+    """``shift`` scaled down to length ``cap`` if it is longer."""
+    norm = np.linalg.norm(shift)
+    return shift * (cap / norm) if norm > cap else shift
+
+
 def finger_command_groups(hand_kind: str) -> list[list[int]]:
     """Indices into the hand command of the joints each tactile channel's finger closes:
     ``HandSpec.finger_joints`` (shadow: the J4..J2, LFJ5, THJ5..THJ1 of each finger;
@@ -393,10 +399,7 @@ class ReactiveGrasp(LeafSystem):
                 if touching.any() or others:
                     new_mode = ReactiveGraspMode.SLOW_APPROACH
                     d = self._shift_direction(context, touching, direction_W)
-                    shift = shift + p.shift_speed * h * d
-                    norm = np.linalg.norm(shift)
-                    if norm > p.max_shift:
-                        shift *= p.max_shift / norm
+                    shift = _capped(shift + p.shift_speed * h * d, p.max_shift)
                 slow = new_mode is ReactiveGraspMode.SLOW_APPROACH
                 speed = p.approach_speed * (p.slow_factor if slow else 1.0)
                 travel = min(travel + speed * h, self._length)
@@ -420,10 +423,8 @@ class ReactiveGrasp(LeafSystem):
             if p.close_shift_speed > 0 and tips[self._grasp].any() and not np.all(
                     done[self._grasp]):
                 d = self._shift_direction(context, tips & self._grasp, direction_W)
-                shift = shift + p.close_shift_speed * h * d
-                cap, norm = p.max_shift + p.max_close_shift, np.linalg.norm(shift)
-                if norm > cap:
-                    shift *= cap / norm
+                shift = _capped(shift + p.close_shift_speed * h * d,
+                                p.max_shift + p.max_close_shift)
             if np.all(done[self._grasp]):
                 new_mode = ReactiveGraspMode.SQUEEZE
                 squeeze_from = s.copy()
