@@ -404,10 +404,9 @@ class InstrumentEstimators:
         self.command_size = 0 if command_size is None else int(command_size)
         # The separate systems' windows (samples): RollPitchEstimator's mean and ring
         # (its at-rest window), SlipDetector's ring (its mean).
-        self._n_mean = p.samples(p.window, period)
+        self._n_mean = p.samples(p.window, period)  # also SlipDetector's mean
         self._n_rest = max(self._n_mean, p.samples(p.rest_window, period), 2)
-        self._n_slip = p.samples(p.window, period)
-        self._n = max(self._n_rest, self._n_slip)
+        self._n = self._n_rest  # the ring: the longest window
         self._fall_need = p.samples(p.free_fall_duration, period)
         self._settle = p.samples(p.settle_time, period)
         self._slip_need = p.samples(p.slip_duration, period)
@@ -472,9 +471,9 @@ class InstrumentEstimators:
         if tail[3] < self._settle:
             return
         if tail[3] == self._settle:  # the reference: once per still spell, as numpy does it
-            tail[5:8] = self._recent(x, offset, self._n_slip, taken).mean(axis=0).tolist()
+            tail[5:8] = self._recent(x, offset, self._n_mean, taken).mean(axis=0).tolist()
         # The mean of the last samples, in order (the ring slots, oldest first).
-        n, k = self._n, min(self._n_slip, taken, self._n)
+        n, k = self._n, min(self._n_mean, taken, self._n)
         first = (taken - k) % n
         if first + k <= n:
             window = x[offset + 3 * first:offset + 3 * (first + k)].tolist()
@@ -494,7 +493,7 @@ class InstrumentEstimators:
             flagged = off > self._norm_tol or cos < self._cos_tol
         else:  # near a threshold (or not finite): SlipDetector's own expression
             p = self.params
-            flagged = bool(slip_indicator(self._recent(x, offset, self._n_slip, taken)
+            flagged = bool(slip_indicator(self._recent(x, offset, self._n_mean, taken)
                                           .mean(axis=0), np.array(tail[5:8]),
                                           p.slip_norm_tol, p.slip_angle_tol))
         tail[4] = tail[4] + 1 if flagged else 0.0
