@@ -1,9 +1,11 @@
 """Trials per second on the local process pool and on Dask, 1 and 2 workers, side by side.
 
 Workloads (each case once per round, ``--rounds`` rounds; the executors are
-opened once and warmed up, so every worker has built its diagram before the
-clock starts; within a round each workload runs on the four executors back to
-back, local and Dask alternating, in the reverse order every other round:
+opened afresh every round (new worker processes: the same trials' CPU time
+differs by about 15 % from one process to another here) and warmed up, so
+every worker has built its diagram before the clock starts; within a round
+each workload runs on the four executors back to back, local and Dask
+alternating, in the reverse order every other round:
 local x1, Dask x1, local x2, Dask x2, then Dask x2, local x2, Dask x1, local x1):
 
 - ``random``: a random-search run of real grasp trials (Barrett hand,
@@ -325,6 +327,27 @@ def _order(round_index: int) -> list:
     return order if round_index % 2 == 0 else order[::-1]
 
 
+def _open_executors(stack, objective, bounds) -> dict:
+    """The four executors of a round (closed with ``stack``, in reverse order: each
+    Dask executor holds its Dask settings while open), warmed up: every worker has
+    built its diagram before the clock starts."""
+    opened = {}
+    for kind in EXECUTORS:
+        for workers in WORKERS:
+            # The local pool with 1 worker too (not the inline executor that
+            # `--executor local --workers 1` gives): the same costs as with 2.
+            if kind == "local":
+                executor = LocalPool(workers)
+                stack.callback(executor.shutdown, wait=True, cancel_futures=True)
+            else:
+                executor = stack.enter_context(trial_executor("dask", workers))
+            opened[(kind, workers)] = executor
+            _pso_iterations(executor, objective, bounds, 2 * workers, 2, seed=99)
+            _inhand_pso(executor, 2 * workers, 1, seed=99)
+            _bare_noop(executor, 20)
+    return opened
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer trials and rounds")
@@ -361,26 +384,15 @@ def main(argv=None) -> int:
     loads: dict[tuple, list] = {}
     busy: dict[tuple, list] = {}
     waits: dict[tuple, list] = {}
-    opened = {}
-    # Closed in reverse order: each Dask executor holds its Dask settings while open.
-    with contextlib.ExitStack() as stack:
-        for kind in EXECUTORS:
-            for workers in WORKERS:
-                # The local pool with 1 worker too (not the inline executor that
-                # `--executor local --workers 1` gives): the same costs as with 2.
-                if kind == "local":
-                    executor = LocalPool(workers)
-                    stack.callback(executor.shutdown, wait=True, cancel_futures=True)
-                else:
-                    executor = stack.enter_context(trial_executor("dask", workers))
-                opened[(kind, workers)] = executor
-                # Warm-up: every worker builds its diagram (a few trials each).
-                _pso_iterations(executor, objective, bounds, 2 * workers, 2, seed=99)
-                _inhand_pso(executor, 2 * workers, 1, seed=99)
-                _bare_noop(executor, 20)
-        floor_xs = np.random.default_rng(7).uniform(
-            bounds[:, 0], bounds[:, 1], size=(max(4, n_random // 4), len(bounds)))
-        for r in range(rounds):
+    floor_xs = np.random.default_rng(7).uniform(
+        bounds[:, 0], bounds[:, 1], size=(max(4, n_random // 4), len(bounds)))
+    for r in range(rounds):
+        # Fresh worker processes every round: the same trials' CPU time moves by
+        # about 15 % from one process to the next on this VM (a paired probe), so
+        # executors kept for the whole run would pair the same two processes in
+        # every round and the per-round ratios would not average that out.
+        with contextlib.ExitStack() as stack:
+            opened = _open_executors(stack, objective, bounds)
             for workers in WORKERS:
                 before = _load()
                 value = _hardware(workers, floor_xs)

@@ -9,7 +9,7 @@ Every command that runs trials takes the same ``--executor`` option
 - ``dask``: a ``distributed.LocalCluster`` of ``--workers N`` worker
   processes with one thread each (BLAS pinned by Dask's nanny and again by
   the first trial a worker runs), scheduler on loopback, no dashboard, and
-  no profiler or fast event-loop tick in the workers (:data:`QUIET_WORKER`);
+  no profiler, fast event-loop tick or fast monitors in the workers (:data:`QUIET_WORKER`);
 - ``dask://HOST:PORT``: an existing ``dask scheduler`` and the ``dask worker``
   processes that joined it, on any number of machines.
 
@@ -87,10 +87,17 @@ _LOG_LEVEL = logging.ERROR
 # (which we do not start) 150 times a second: the statistical profiler every
 # 10 ms and the event-loop tick every 20 ms. Measured on a 1-thread worker
 # running grasp trials: its event-loop thread used 5.8 % of a core (other
-# threads' CPU ~28 ms per 0.3 s trial), 2.0 % without them (~8 ms). Passed on
-# to the workers by the nannies; `dask worker`s are told in the README.
+# threads' CPU ~28 ms per 0.3 s trial), 2.0 % without them (~8 ms). The
+# memory monitor (every 100 ms) and the system monitor (every 500 ms) poll
+# psutil on the same loop: at 1 s and 2 s the other threads' CPU fell from 9.0
+# to 6.8 ms per trial and the trial's wait for the GIL from 1.5 to 1.2 % (two
+# paired runs); memory is still checked every second (a trial's diagram takes
+# a few hundred MB once, not per second). Passed on to the workers by the
+# nannies; `dask worker`s are told in the README.
 QUIET_WORKER = {"distributed.worker.profile.enabled": False,
-                "distributed.admin.tick.interval": "1s"}
+                "distributed.admin.tick.interval": "1s",
+                "distributed.worker.memory.monitor-interval": "1s",
+                "distributed.admin.system-monitor.interval": "2s"}
 
 _ADDRESS = re.compile(r"^dask://(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+)(:(?P<port>[^/]*))?$")
 

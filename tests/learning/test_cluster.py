@@ -197,18 +197,21 @@ def test_each_worker_keeps_the_objective_it_received_once_and_runs_one_blas_thre
 
 def test_our_cluster_workers_run_without_the_profiler_and_the_fast_tick(dask_executor):
     """A worker's event loop shares the GIL with its trial: our LocalCluster's workers run
-    neither Dask's statistical profiler (every 10 ms) nor the 20 ms event-loop tick, nor
-    do the workers the nannies restart after the deaths of earlier tests."""
+    neither Dask's statistical profiler (every 10 ms) nor the 20 ms event-loop tick, and
+    poll memory every 1 s and the system every 2 s (not 100 and 500 ms), nor do the
+    workers the nannies restart after the deaths of earlier tests."""
 
     def settings(dask_worker):
         import dask
 
         return ("profile" in dask_worker.periodic_callbacks,
-                dask.config.get("distributed.admin.tick.interval"))
+                dask.config.get("distributed.admin.tick.interval"),
+                dask.config.get("distributed.worker.memory.monitor-interval"),
+                dask.config.get("distributed.admin.system-monitor.interval"))
 
     dask_executor.client.wait_for_workers(2, timeout=120)  # one may be restarting
     seen = dask_executor.client.run(settings)
-    assert len(seen) == 2 and set(seen.values()) == {(False, "1s")}
+    assert len(seen) == 2 and set(seen.values()) == {(False, "1s", "1s", "2s")}
 
 
 class InFlight(ThreadPoolExecutor):
