@@ -8,7 +8,9 @@ ReactiveGrasp` controller (report section 3.3) in one diagram:
   grasp pose ``X_WB`` with the fingers in the pre-shape; a fingertip (or other
   hand) contact slows it and shifts it sideways, several stop it;
 - each finger of the class then closes from the pre-shape towards the plan's
-  closing command and stops at its own tactile contact; once all of them
+  closing command and stops at its own tactile contact (the first touch
+  locates the object: if it is not where planned, the fingers reopen, the
+  hand moves onto it and closes again; :func:`object_estimate`); once all of them
   touch, all close a further ``squeeze`` (by default the plan's own squeeze:
   ``CLOSING_SQUEEZE`` out of the ``PRESHAPE_OPENING + CLOSING_SQUEEZE`` stroke);
 - the hand lifts the plan's ``lift_height``.
@@ -26,15 +28,16 @@ import numpy as np
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, GraspPlan
 from handle_drake.hands import get_hand_spec
 from handle_drake.harness import DEFAULT_LOG, RunResult, TrialHarness
-from handle_drake.station import GetPlant
+from handle_drake.station import OBJECT_INSTANCE, GetPlant
 from handle_drake.systems.reactive_grasp import (
+    ObjectEstimate,
     ReactiveGrasp,
     ReactiveGraspMode,
     ReactiveGraspParams,
     finger_command_groups,
 )
 
-__all__ = ["ReactiveGraspRunner", "plan_params", "run_plan"]
+__all__ = ["ReactiveGraspRunner", "object_estimate", "plan_params", "run_plan"]
 
 SETTLE = 0.5  # s simulated after the lift completes (held_through_lift looks at 0.3 s)
 
@@ -45,6 +48,21 @@ def plan_params(plan: GraspPlan, **overrides) -> ReactiveGraspParams:
                 lift_height=plan.lift_height)
     base.update(overrides)
     return ReactiveGraspParams(**base)
+
+
+def object_estimate(plan: GraspPlan) -> ObjectEstimate | None:
+    """The plan's object as the reactive close's re-centring sees it (its planned pose
+    and shape), or None for shapes it cannot locate from a touch (meshes, devices)."""
+    from handle_drake.objects import ObjectSpec, dimensions
+
+    spec = plan.object_spec
+    if getattr(spec, "kind", None) not in ("sphere", "cylinder", "cuboid"):
+        return None
+    d = dimensions(ObjectSpec(spec.kind, spec.size))
+    if spec.kind == "cuboid":
+        return ObjectEstimate("box", plan.X_WO,
+                              half_extents=0.5 * np.array([d["width"], d["depth"], d["height"]]))
+    return ObjectEstimate(spec.kind, plan.X_WO, radius=0.5 * d["diameter"])
 
 
 class ReactiveGraspRunner:
@@ -85,7 +103,9 @@ class ReactiveGraspRunner:
         c = builder.AddNamedSystem("reactive_grasp", ReactiveGrasp(
             plan.wrist(plan.X_WB_pregrasp), plan.wrist(plan.X_WB), plan.preshape_command,
             plan.close_command, finger_command_groups(spec.name), params=self._params,
-            hand_bodies=plant.GetBodyIndices(hand), fingertip_bodies=tips))
+            hand_bodies=plant.GetBodyIndices(hand), fingertip_bodies=tips,
+            planned_object=object_estimate(plan),
+            object_bodies=plant.GetBodyIndices(plant.GetModelInstanceByName(OBJECT_INSTANCE))))
         s = station
         builder.Connect(s.GetOutputPort("hand.tactile"), c.get_tactile_input_port())
         builder.Connect(s.GetOutputPort("wrist.pose_measured"),
@@ -102,7 +122,8 @@ class ReactiveGraspRunner:
         length = float(np.linalg.norm(self.plan.X_WB.translation()
                                       - self.plan.X_WB_pregrasp.translation()))
         slowed = length / (p.approach_speed * p.slow_factor) - length / p.approach_speed
-        return self.controller.nominal_duration() + slowed + p.arrival_timeout + SETTLE
+        return (self.controller.nominal_duration() + self.controller.recentre_duration()
+                + slowed + p.arrival_timeout + SETTLE)
 
     def _finished(self, root_context) -> str | None:
         mode = self.controller.get_mode(self._controller_context)
