@@ -399,6 +399,7 @@ class GraspKinematics:
         contact_height: float = 0.0,
         X_PO_guess: RigidTransform | None = None,
         row_fingers: int | None = None,
+        max_pad_tilt: float | None = None,
     ) -> GraspSolution:
         """Postures of class ``name`` holding a (shape, dims) object (see module doc).
 
@@ -426,6 +427,13 @@ class GraspKinematics:
         X_PO_guess: initial guess of the object pose in the palm frame (e.g. a
           solution without the table), instead of the centre guess.
         row_fingers: see :func:`contact_layout`.
+        max_pad_tilt: on a sphere or a cylinder, each contact's pad lies
+          tangent to the surface within this angle (rad): the point one radius
+          out along the pad's normal stays within ``r sin(max_pad_tilt)`` of the
+          centre (sphere) or the axis (cylinder). Without it only the angle to
+          the layout's direction was bounded (``max_pad_angle``), and a pad
+          touching a small ball away from that direction met it with its edge
+          (a 25 mm ball: a pad 6 mm in it and no collision-free IK). None: off.
         """
         info = grasp_info(name)
         dims = _check_dims(shape, dims)
@@ -482,6 +490,18 @@ class GraspKinematics:
                 p_B, n_B = CONTACT_POINTS[(t.finger, t.part)]
                 normal = np.asarray(t.normal, dtype=float)
                 self._add_surface_constraint(ik, t, p_B, normal, shape, dims, r, tolerance, jitter)
+                if max_pad_tilt is not None and shape in ("sphere", "cylinder"):
+                    # The centre of curvature the pad sees, one radius out along its normal.
+                    p_BC = p_B + r * np.asarray(n_B, dtype=float)
+                    slack = r * np.sin(float(max_pad_tilt))
+                    if shape == "sphere":
+                        ik.AddPointToPointDistanceConstraint(
+                            self.distal[t.finger], p_BC, self.object_frame, np.zeros(3), 0.0,
+                            slack)
+                    else:
+                        ik.AddPointToLineDistanceConstraint(
+                            self.distal[t.finger], p_BC, self.object_frame, np.zeros(3),
+                            np.array([0.0, 1.0, 0.0]), 0.0, slack)
                 ik.AddAngleBetweenVectorsConstraint(
                     self.distal[t.finger], n_B, self.object_frame, -normal, 0.0, max_pad_angle
                 )

@@ -115,6 +115,7 @@ PRESHAPE_STEPS = ((PRESHAPE_OPENING, PRESHAPE_LIFT), (PRESHAPE_OPENING, 0.020),
                   (PRESHAPE_OPENING, 0.030), (0.018, 0.030), (0.012, 0.030), (0.008, 0.030))
 # m, upward part of a finger's closing move, tried in turn (see _closing)
 CLOSE_LIFTS = (0.0, 0.005, 0.010, 0.015, 0.020)
+PAD_TILT = np.deg2rad(15.0)  # the second pass's pads on a round object (GraspKinematics)
 CANONICAL_APPROACH_ANGLE = np.deg2rad(15.0)  # cone of the first (palm-along-approach) attempts
 # Joints the planner sets in every posture prior of a class: the fingers a
 # class does not use are kept out of the way (report section 3.3: during the
@@ -632,16 +633,22 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
     if info.grasp_class is GraspClass.PARALLEL_EXTENSION:
         k = sum(1 for t in contact_layout(info.grasp_class, shape, dims) if t.normal[2] < 0)
         rows = list(range(k, 0, -1))
-    for row_fingers in rows:
-        found = _solve_layout(info, kind, shape, dims, height, priors, priors_refine,
-                              c_table1, a_P, coupling_ratio, row_fingers)
-        if found is not None:
-            return found
+    # On a round object, a second pass with each pad tangent to the surface
+    # (``max_pad_tilt``): it finds grasps of small balls the first pass cannot
+    # (a pad meeting the ball with its edge), and the first pass keeps the
+    # plans it always made.
+    tilts = (None, PAD_TILT) if shape in ("sphere", "cylinder") else (None,)
+    for pad_tilt in tilts:
+        for row_fingers in rows:
+            found = _solve_layout(info, kind, shape, dims, height, priors, priors_refine,
+                                  c_table1, a_P, coupling_ratio, row_fingers, pad_tilt)
+            if found is not None:
+                return found
     return None
 
 
 def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
-                  coupling_ratio, row_fingers):
+                  coupling_ratio, row_fingers, pad_tilt=None):
     """:func:`_solve_contacts` for one layout (``row_fingers``: ``contact_layout``).
 
     Canonical attempts first: the hand comes in along its Table 2 approach
@@ -665,7 +672,8 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
         sol = kin_canonical.solve_grasp(
             info.grasp_class, shape, dims, prior, approach_P=a_P, X_PO_guess=X_PG_guess,
             min_distance=-MAX_PENETRATION, max_approach_angle=CANONICAL_APPROACH_ANGLE,
-            centre_prior_weight=100.0, p_PO_guess=c_table1, row_fingers=row_fingers)
+            centre_prior_weight=100.0, p_PO_guess=c_table1, row_fingers=row_fingers,
+            max_pad_tilt=pad_tilt)
         if _acceptable(kin_canonical, sol):
             source = "table1" if np.linalg.norm(sol.X_PO.translation() - c_table1) < 1e-3 \
                 else "refined"
@@ -676,7 +684,7 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
             centre_prior_weight=100.0, p_PO_guess=c_table1)
         free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None,
-                                    row_fingers=row_fingers, **kw)
+                                    row_fingers=row_fingers, max_pad_tilt=pad_tilt, **kw)
         if not (free.success and free.contact_error < 1.5e-3):
             continue
         up = _up_in_grasp_frame(kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
@@ -685,6 +693,7 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
         sol = kin.solve_grasp(info.grasp_class, shape, dims, free.q, approach_P=a_P,
                               X_PO_guess=free.X_PO, min_distance=-MAX_PENETRATION,
                               max_approach_angle=MAX_APPROACH_ANGLE, row_fingers=row_fingers,
+                              max_pad_tilt=pad_tilt,
                               **kw)
         if _acceptable(kin, sol):
             return sol, up, source, kin
