@@ -256,3 +256,28 @@ def test_classes_that_had_no_plan_on_a_table_now_hold(grasp_class, kind, width):
     plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
     result = ScenarioRunner(plan.to_scenario()).run()
     assert held_through_lift(result), result.object_lift()
+
+
+def test_a_16mm_ball_is_pinched_with_the_pads_tangent_to_it():
+    """The palmar pinch of a 16 mm ball on a table had no plan: every posture the
+    first pass found met the ball with the edge of a pad (6 mm into it). The
+    second pass on round objects keeps each pad tangent to the surface within
+    15 deg: the ray out along the pad's normal passes through the ball's centre
+    (geometry of the planned posture in the station), and the grasp holds."""
+    from handle_drake.grasp.execution import ReactiveGraspRunner
+
+    size = 0.016
+    plan = plan_grasp("palmar_pinch", ("sphere", size), resting_pose("sphere", size))
+    _, plant, context = _posed_station(plan, plan.grasp_command)
+    hand = plant.GetModelInstanceByName("hand")
+    centre = plan.X_WO.translation()
+    for finger in ("th", "ff"):
+        X_WB = plant.GetBodyByName(f"{finger}distal", hand).EvalPoseInWorld(context)
+        p_B, n_B = CONTACT_POINTS[(finger, "pad")]
+        ray = X_WB.rotation().matrix() @ n_B
+        to_centre = centre - X_WB @ p_B
+        angle = np.degrees(np.arccos(ray @ to_centre / np.linalg.norm(to_centre)))
+        assert angle < 16.0, (finger, angle)
+        # ...and the pad is on the ball's surface (within the plan's contact error).
+        assert abs(np.linalg.norm(to_centre) - size / 2) < 2.5e-3, (finger, to_centre)
+    assert held_through_lift(ReactiveGraspRunner(plan).run())
