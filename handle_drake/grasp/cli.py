@@ -73,6 +73,13 @@ def register(subparsers) -> None:
     p.add_argument("--perceived", action="store_true",
                    help="plan on what the tabletop Kinect sees (pose and size from "
                         "handle_drake.perception), execute on the true object")
+    p.add_argument("--pose-error", type=float, nargs=2, default=None, metavar=("DX", "DY"),
+                   help="plan on the object at --xy, execute on it DX DY (m) further: a "
+                        "position error the reactive controller has to cope with")
+    p.add_argument("--recentre", action="store_true",
+                   help="reactive close: the first touch locates the object and the hand "
+                        "moves onto it (ReactiveGraspParams.max_recentres = 1; off by default; "
+                        "implies --reactive)")
     p.set_defaults(func=_cmd_grasp)
 
     s = subparsers.add_parser("synergies", help="fit synergies to recorded grasps, error vs k")
@@ -85,7 +92,8 @@ def register(subparsers) -> None:
 
 def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=None,
               save_scenario=None, reactive: bool | None = None, xy=(0.0, 0.0),
-              yaw: float = 0.0, perceived: bool = False):
+              yaw: float = 0.0, perceived: bool = False, pose_error=None,
+              recentre: bool = False):
     """Plan, simulate, lift; returns ``(plan, result, held)``.
 
     kind: a catalogue kind with its ``size`` (m), or a ``MeshObjectSpec``
@@ -96,11 +104,32 @@ def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=Non
     size as the tabletop camera estimates them
     (:func:`handle_drake.perception.grasping.perceive_object`), execute on the
     true object; the returned plan then carries ``plan.perception``.
+    pose_error: ``(dx, dy)`` (m): the plan sees the object at ``xy``, the
+    world holds it at ``xy + pose_error`` (a catalogue object). recentre: the
+    reactive close re-centres on the object its first touch locates
+    (``max_recentres=1``; reactive execution, which it implies when
+    ``reactive`` is None).
     """
+    import numpy as np
+
     from handle_drake.demo import held_through_lift
     from handle_drake.grasp.execution import run_plan
     from handle_drake.grasp.planning import plan_grasp, resting_pose
 
+    if recentre and reactive is False:
+        raise ValueError("--recentre: the re-centring is part of the reactive close; it does "
+                         "not apply to --open-loop")
+    if pose_error is not None:
+        error = np.asarray(pose_error, dtype=float)
+        if error.shape != (2,) or not np.isfinite(error).all() or np.abs(error).max() > 0.1:
+            raise ValueError(f"--pose-error: expected two finite offsets of at most 0.1 m, got "
+                             f"{pose_error}")
+        if perceived:
+            raise ValueError("--pose-error: with --perceived the error is the camera's own; "
+                             "give one or the other")
+        if getattr(kind, "kind", None) == "mesh":
+            raise ValueError("--pose-error: moves a catalogue object (--object); a --mesh "
+                             "object is not supported")
     world_object = perception = None
     if perceived:
         from pydrake.common.schema import Transform
@@ -115,13 +144,30 @@ def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=Non
     else:
         obj = kind if getattr(kind, "kind", None) == "mesh" else (kind, size)
         plan = plan_grasp(grasp_class, obj, resting_pose(kind, size, xy=xy, yaw=yaw))
+        if pose_error is not None:
+            from pydrake.common.schema import Transform
+
+            from handle_drake.scenario import ObjectConfig
+
+            true_xy = np.asarray(xy, dtype=float) + np.asarray(pose_error, dtype=float)
+            world_object = ObjectConfig(
+                kind=kind, size=size, on_table=False,
+                X_WO=Transform(resting_pose(kind, size, xy=true_xy, yaw=yaw)))
     plan.perception = perception
     if save_scenario is not None:
         Path(save_scenario).parent.mkdir(parents=True, exist_ok=True)
         Path(save_scenario).write_text(plan.to_scenario_override())
-    reactive = DEFAULT_REACTIVE if reactive is None else bool(reactive)
+    if reactive is None:
+        reactive = True if recentre else DEFAULT_REACTIVE
+    reactive = bool(reactive)
+    params = None
+    if recentre:
+        from handle_drake.grasp.execution import plan_params
+
+        params = plan_params(plan, max_recentres=1)
     result = run_plan(plan, reactive=reactive, meshcat=meshcat,
-                      html=html if meshcat is not None else None, world_object=world_object)
+                      html=html if meshcat is not None else None, world_object=world_object,
+                      params=params)
     return plan, result, held_through_lift(result)
 
 
@@ -158,7 +204,8 @@ def _cmd_grasp(args) -> int:
     plan, result, held = run_grasp(args.grasp_class, obj, args.size, meshcat,
                                    args.html, args.save_scenario, args.reactive,
                                    xy=tuple(args.xy), yaw=math.radians(args.yaw),
-                                   perceived=args.perceived)
+                                   perceived=args.perceived, pose_error=args.pose_error,
+                                   recentre=args.recentre)
     if plan.perception is not None:
         e = plan.perception.errors()
         yaw = "n/a (sphere)" if e["yaw_deg"] is None else f"{e['yaw_deg']:+.1f} deg"
@@ -166,8 +213,12 @@ def _cmd_grasp(args) -> int:
               f"(true {args.size * 100:.2f}); error xy {e['xy_mm']:.1f} mm, "
               f"z {e['z_mm']:+.1f} mm, yaw {yaw}")
     print(plan.summary())
-    reactive = DEFAULT_REACTIVE if args.reactive is None else args.reactive
-    print(f"execution: {'reactive (tactile)' if reactive else 'open loop (keyframes)'}")
+    reactive = (args.recentre or DEFAULT_REACTIVE) if args.reactive is None else args.reactive
+    print(f"execution: {'reactive (tactile)' if reactive else 'open loop (keyframes)'}"
+          + (", re-centring on the first touch" if args.recentre else ""))
+    if args.pose_error is not None:
+        print(f"the object is {args.pose_error[0] * 1e3:+.1f}, {args.pose_error[1] * 1e3:+.1f} mm "
+              "from where the plan thinks")
     if plan.amplitudes is not None:
         print(f"synergy pre-shape amplitudes: {[round(float(a), 3) for a in plan.amplitudes]}")
     print(f"{'HELD' if held else 'DROPPED'}: object rose {result.object_lift() * 100:.1f} cm "
