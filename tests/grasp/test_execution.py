@@ -160,3 +160,19 @@ def test_recentring_is_checked_up_front(tripod_plan):
     with pytest.raises(TypeError, match="ObjectEstimate"):
         ReactiveGrasp(pose, pose, q, q + 0.1, [[0], [1]], planned_object="sphere",
                       hand_bodies=[1, 2], fingertip_bodies=[1, 2], object_bodies=[3])
+
+
+def test_side_grips_squeeze_at_most_half_the_grasp_width():
+    """The adduction grip and the lateral tripod hold their object between the sides
+    of the fingers: their squeeze pushes past the contact by at most half the grasp
+    width (20 mm into a 19 mm ball pressed it out between the fingers); the other
+    classes keep the plan's 20 mm. Both 19 mm balls hold reactively."""
+    stroke = PRESHAPE_OPENING + CLOSING_SQUEEZE
+    for grasp_class, size in (("adduction_grip", 0.0186), ("lateral_tripod", 0.019)):
+        plan = plan_grasp(grasp_class, ("sphere", size), resting_pose("sphere", size))
+        assert plan_params(plan).squeeze == pytest.approx(0.5 * size / stroke)
+        assert held_through_lift(ReactiveGraspRunner(plan).run()), grasp_class
+    wide = plan_grasp("lateral_tripod", ("sphere", 0.04), resting_pose("sphere", 0.04))
+    assert plan_params(wide).squeeze == pytest.approx(CLOSING_SQUEEZE / stroke)
+    small = plan_grasp("tip_pinch", ("sphere", 0.0155), resting_pose("sphere", 0.0155))
+    assert plan_params(small).squeeze == pytest.approx(CLOSING_SQUEEZE / stroke)
