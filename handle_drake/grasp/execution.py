@@ -12,7 +12,8 @@ ReactiveGrasp` controller (report section 3.3) in one diagram:
   locates the object: if it is not where planned, the fingers reopen, the
   hand moves onto it and closes again; :func:`object_estimate`); once all of them
   touch, all close a further ``squeeze`` (by default the plan's own squeeze:
-  ``CLOSING_SQUEEZE`` out of the ``PRESHAPE_OPENING + CLOSING_SQUEEZE`` stroke);
+  ``CLOSING_SQUEEZE`` out of the ``PRESHAPE_OPENING + CLOSING_SQUEEZE`` stroke,
+  at most half the grasp width for the side grips: :func:`plan_params`);
 - the hand lifts the plan's ``lift_height``.
 
 The open-loop alternative is the plan's keyframe script (``plan.to_scenario()``
