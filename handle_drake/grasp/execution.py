@@ -8,9 +8,10 @@ ReactiveGrasp` controller (report section 3.3) in one diagram:
   grasp pose ``X_WB`` with the fingers in the pre-shape; a fingertip (or other
   hand) contact slows it and shifts it sideways, several stop it;
 - each finger of the class then closes from the pre-shape towards the plan's
-  closing command and stops at its own tactile contact (the first touch
-  locates the object: if it is not where planned, the fingers reopen, the
-  hand moves onto it and closes again; :func:`object_estimate`); once all of them
+  closing command and stops at its own tactile contact (optionally, with
+  ``max_recentres``, the first touch locates the object and, if it is not
+  where planned, the hand moves onto it before the close goes on:
+  :func:`object_estimate`); once all of them
   touch, all close a further ``squeeze`` (by default the plan's own squeeze:
   ``CLOSING_SQUEEZE`` out of the ``PRESHAPE_OPENING + CLOSING_SQUEEZE`` stroke,
   at most half the grasp width for the side grips: :func:`plan_params`);
