@@ -75,12 +75,12 @@ def plan_params(plan: GraspPlan, **overrides) -> ReactiveGraspParams:
 def object_estimate(plan: GraspPlan) -> ObjectEstimate | None:
     """The plan's object as the reactive close's re-centring sees it (its planned pose
     and shape), or None for shapes it cannot locate from a touch (meshes, devices)."""
-    from handle_drake.objects import ObjectSpec, dimensions
+    from handle_drake.objects import dimensions
 
     spec = plan.object_spec
     if getattr(spec, "kind", None) not in ("sphere", "cylinder", "cuboid"):
         return None
-    d = dimensions(ObjectSpec(spec.kind, spec.size))
+    d = dimensions(spec)  # with the spec's own dimension overrides
     if spec.kind == "cuboid":
         return ObjectEstimate("box", plan.X_WO,
                               half_extents=0.5 * np.array([d["width"], d["depth"], d["height"]]))

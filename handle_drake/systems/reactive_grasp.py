@@ -512,13 +512,21 @@ class ReactiveGrasp(LeafSystem):
         norm = np.linalg.norm(d)
         return d / norm if norm > 1e-9 else np.zeros(3)
 
+    def _settled(self, context, travel, shift, waited) -> bool:
+        """The wrist has reached its command at ``travel``/``shift`` (within
+        ``arrival_tolerance``), or ``waited`` (s) has reached ``arrival_timeout``."""
+        p = self.params
+        measured = self._pose_measured.Eval(context)[:3]
+        command = self._wrist_command(travel, shift, 0.0)[:3]
+        return (np.linalg.norm(measured - command) <= p.arrival_tolerance
+                or waited >= p.arrival_timeout)
+
     def _recentring(self, new_touches, tip_contacts, recentres) -> np.ndarray | None:
         """The wrist shift (m, world, horizontal) that re-centres the hand on the object
         located by the strongest of this step's first touches (``new_touches``),
         or None: no planned object, no re-centring left, or the object where planned."""
         p = self.params
-        if (self._object is None or recentres >= p.max_recentres or p.shift_speed == 0
-                or not new_touches.any()):
+        if self._object is None or recentres >= p.max_recentres or p.shift_speed == 0:
             return None
         located = [tip_contacts[i] for i in np.flatnonzero(new_touches) if i in tip_contacts]
         if not located:
@@ -564,10 +572,7 @@ class ReactiveGrasp(LeafSystem):
                 travel = min(travel + speed * h, self._length)
                 if travel >= self._length:
                     t_arrived = min(t_arrived, now)
-                    measured = self._pose_measured.Eval(context)[:3]
-                    command = self._wrist_command(travel, shift, 0.0)[:3]
-                    if (np.linalg.norm(measured - command) <= p.arrival_tolerance
-                            or now - t_arrived >= p.arrival_timeout):
+                    if self._settled(context, travel, shift, now - t_arrived):
                         new_mode = ReactiveGraspMode.CLOSE
         elif mode is ReactiveGraspMode.CLOSE:
             tips, _, direction_W, tip_contacts = self._touching(context)
@@ -594,17 +599,14 @@ class ReactiveGrasp(LeafSystem):
                     new_mode = ReactiveGraspMode.SQUEEZE
                     squeeze_from = s.copy()
         elif mode is ReactiveGraspMode.RECENTRE:
-            # Reopen to the pre-shape, then shift, then settle, then close again.
+            # Undo recentre_reopen of the closing, then shift, then settle, then close on.
             floor = (1.0 - p.recentre_reopen) * recentre_from
             s = np.where(self._grasp, np.maximum(s - 2 * p.close_rate * h, floor), s)
             if not np.any(s[self._grasp] > floor[self._grasp]):
                 shift = shift + _capped(target - shift, p.shift_speed * h)
                 if np.linalg.norm(target - shift) < 1e-9:
                     t_recentred = min(t_recentred, now)
-                    measured = self._pose_measured.Eval(context)[:3]
-                    command = self._wrist_command(travel, shift, 0.0)[:3]
-                    if (np.linalg.norm(measured - command) <= p.arrival_tolerance
-                            or now - t_recentred >= p.arrival_timeout):
+                    if self._settled(context, travel, shift, now - t_recentred):
                         new_mode = ReactiveGraspMode.CLOSE
                         touched[:] = 0.0
         elif mode is ReactiveGraspMode.SQUEEZE:
