@@ -85,18 +85,11 @@ def footprint_radius(obj: SceneObject) -> float:
 
 
 def true_extent(obj: SceneObject) -> np.ndarray:
-    """What the detector should report as ``extent`` (m): the footprint's
-    length and width (the cup's diameter for a mug: its handle is no part of
-    the cylinder) and the height."""
-    from handle_drake.objects import dimensions, total_height
+    """What the detector should report as ``extent`` (m), see
+    :func:`handle_drake.perception.perceive.true_extent`."""
+    from handle_drake.perception.perceive import true_extent as extent
 
-    spec = obj.spec()
-    d = dimensions(spec)
-    if obj.kind in ("cuboid", "rotated_cuboid"):
-        length, width = sorted((d["width"], d["depth"]), reverse=True)
-    else:
-        length = width = d["diameter"]
-    return np.array([length, width, total_height(spec)])
+    return extent(obj.spec())
 
 
 def random_scene(seed: int, count: int | None = None, kinds=SCENE_KINDS,
@@ -137,9 +130,11 @@ class TabletopScene:
     """``objects`` on the table of ``diagrams/tabletop_perception.yaml`` (its
     camera, made a ``profile`` camera; noise seeded by ``seed``), without the
     hand. :meth:`frame` renders the camera's depth frame at ``time`` (each
-    time a new noise draw)."""
+    time a new noise draw). ``extra``: more bodies as ``(ObjectSpec, X_WO)``
+    pairs (any pose, e.g. a cylinder lying on its side), not scored."""
 
-    def __init__(self, objects, profile: str = "kinect_v1", seed: int = 0, camera=None):
+    def __init__(self, objects, profile: str = "kinect_v1", seed: int = 0, camera=None,
+                 extra=()):
         from pydrake.math import RigidTransform
         from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
         from pydrake.systems.framework import DiagramBuilder
@@ -166,6 +161,10 @@ class TabletopScene:
             instance = AddObject(plant, obj.spec(), name=f"object_{i}")
             body = plant.get_body(plant.GetBodyIndices(instance)[0])
             plant.WeldFrames(plant.world_frame(), body.body_frame(), obj.X_WO(self.table_top))
+        for i, (spec, X_WO) in enumerate(extra):  # any ObjectSpec at any pose
+            instance = AddObject(plant, spec, name=f"extra_{i}")
+            body = plant.get_body(plant.GetBodyIndices(instance)[0])
+            plant.WeldFrames(plant.world_frame(), body.body_frame(), X_WO)
         plant.Finalize()
         AddCameras(builder, plant, scene_graph,
                    SimpleNamespace(cameras=[camera], random_seed=int(seed), hand=None))
