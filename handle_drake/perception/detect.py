@@ -352,9 +352,11 @@ def _describe(cluster: np.ndarray, plane: TablePlane) -> Detection:
     b_res = _box_residual((local[:, :2] - centre_xy) @ R.T, local[:, 2],
                           np.array([length, width]) / 2, height)
     residuals = {"sphere": s_res, "cylinder": c_res, "box": b_res}
-    # A sphere must also look like one: resting on the table, as tall as wide.
+    # A sphere must also look like one: resting on the table, as tall as its
+    # fitted diameter, and as long (a low star prism's top fits a sphere's cap).
     if not (abs(s_centre[2] - s_radius) < 0.25 * s_radius + 0.003
-            and abs(2 * s_radius - height) < 0.25 * height + 0.003):
+            and abs(2 * s_radius - height) < 0.25 * height + 0.003
+            and abs(2 * s_radius - length) < 0.15 * length + 0.003):
         residuals["sphere"] = math.inf
     kind = min(residuals, key=residuals.get)
     if kind != "sphere":
@@ -459,9 +461,11 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
     - a part that does not reach down to the table (a mug's handle, seen
       apart from the cup): its lowest point is more than 4 mm above the
       points cut off as table (9 mm above the table; a 60 mm mug's handle
-      starts 12 mm up); it joins the nearest larger cluster (horizontally),
-      if one is within 2 cm. (A glass's bowl, larger than its foot, takes the
-      foot by the first rule.)
+      starts 12 mm up) and it has less than a third of the points of a
+      cluster within 2 cm (horizontally), the nearest of which it joins (a
+      ball's lowest visible point can be 12 mm up too, but a ball is no
+      small part of its neighbour). The first rule is applied first: a glass's bowl,
+      larger than its foot, takes the foot and so reaches the table.
 
     Objects that merely stand close (a ball 2 cm from a box) stay apart.
     Objects on a table do not stack here."""
@@ -495,24 +499,36 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
         distance = flats[i][:, :2] @ hulls[j][:, :2].T + hulls[j][:, 2]  # <= 0 inside
         return np.mean(distance.max(axis=1) <= 0) > 0.5
 
+    # First the parts within another's footprint (a glass's foot and stem
+    # under its bowl), so that a bowl with its foot reaches the table.
     for i, fi in enumerate(flats):
-        if np.min(fi[:, 2]) > params.min_height + 0.004:  # off the table: a part
-            near = [j for j in range(len(flats)) if j != i and len(flats[j]) > len(fi)
-                    and boxes[j][0] - 0.02 < boxes[i][2] and boxes[i][0] < boxes[j][2] + 0.02
-                    and boxes[j][1] - 0.02 < boxes[i][3] and boxes[i][1] < boxes[j][3] + 0.02]
-            gaps = [cKDTree(flats[j][:, :2]).query(fi[:, :2], distance_upper_bound=0.02)[0].min()
-                    for j in near]
-            if gaps and min(gaps) < 0.02:
-                owner[find(i)] = find(near[int(np.argmin(gaps))])
-                continue
         for j, fj in enumerate(flats):
             if i != j and len(fi) <= len(fj) and inside(i, j):
                 owner[find(i)] = find(j)
                 break
-    groups: dict[int, list[np.ndarray]] = {}
+    groups: dict[int, list[int]] = {}
+    for i in range(len(clusters)):
+        groups.setdefault(find(i), []).append(i)
+    members = list(groups.values())
+    flats = [np.vstack([flats[i] for i in m]) for m in members]
+    clusters = [np.vstack([clusters[i] for i in m]) for m in members]
+    boxes = np.array([[*f[:, :2].min(axis=0), *f[:, :2].max(axis=0)] for f in flats])
+    owner = list(range(len(clusters)))
+    # Then the small parts off the table (a mug's handle), to the nearest large one.
+    for i, fi in enumerate(flats):
+        if np.min(fi[:, 2]) <= params.min_height + 0.004:
+            continue  # it reaches the table: an object of its own
+        near = [j for j in range(len(flats)) if j != i and len(flats[j]) > 3 * len(fi)
+                and boxes[j][0] - 0.02 < boxes[i][2] and boxes[i][0] < boxes[j][2] + 0.02
+                and boxes[j][1] - 0.02 < boxes[i][3] and boxes[i][1] < boxes[j][3] + 0.02]
+        gaps = [cKDTree(flats[j][:, :2]).query(fi[:, :2], distance_upper_bound=0.02)[0].min()
+                for j in near]
+        if gaps and min(gaps) < 0.02:
+            owner[find(i)] = find(near[int(np.argmin(gaps))])
+    merged: dict[int, list[np.ndarray]] = {}
     for i, c in enumerate(clusters):
-        groups.setdefault(find(i), []).append(c)
-    return [np.vstack(g) for g in groups.values()]
+        merged.setdefault(find(i), []).append(c)
+    return [np.vstack(g) for g in merged.values()]
 
 
 def detect_objects(points, params: DetectorParams | None = None,
