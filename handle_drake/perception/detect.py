@@ -324,10 +324,17 @@ def _table_frame(plane: TablePlane):
     return plane.offset * n, np.column_stack([x_axis, y_axis, n])
 
 
+#: The most points of a cluster the primitive fits use.
+DESCRIBE_POINTS = 800
+
+
 def _describe(cluster: np.ndarray, plane: TablePlane) -> Detection:
     # Table frame: origin on the plane under the world origin, z = normal.
     origin, R_WT = _table_frame(plane)
-    local = (np.asarray(cluster, dtype=float) - origin) @ R_WT
+    # At most DESCRIBE_POINTS points (evenly through the cluster, already
+    # thinned to a 3 mm grid): the fits' cost stays bounded per object.
+    step = -(-len(cluster) // DESCRIBE_POINTS)
+    local = (np.asarray(cluster[::step], dtype=float) - origin) @ R_WT
     height = float(np.percentile(local[:, 2], 99.5))
     centre_xy, (length, width), angle = min_area_rectangle(local[:, :2])
 
@@ -413,6 +420,11 @@ def _grid_clusters(points: np.ndarray, cell: float) -> np.ndarray:
     return labels[inverse.ravel()]
 
 
+#: A footprint filling at least this share of its convex hull is one object
+#: (no split is searched for).
+SOLID = 0.92
+
+
 def _split_touching(cluster: np.ndarray, plane: TablePlane, cell: float) -> list[np.ndarray]:
     """Objects that touch (or stand closer than the clustering reach) make one
     cluster; their footprints (points projected on the table) make a shape
@@ -424,6 +436,7 @@ def _split_touching(cluster: np.ndarray, plane: TablePlane, cell: float) -> list
     goes to its nearest core. An elongated box's footprint has no waist, and
     a mug's handle (7 mm thick) no core of its own."""
     from scipy import ndimage
+    from scipy.spatial import ConvexHull, QhullError
 
     if len(cluster) < 20:
         return [cluster]
@@ -433,6 +446,16 @@ def _split_touching(cluster: np.ndarray, plane: TablePlane, cell: float) -> list
     grid = np.zeros(ij.max(axis=0) + 3, dtype=bool)
     grid[ij[:, 0], ij[:, 1]] = True
     grid = ndimage.binary_fill_holes(ndimage.binary_closing(grid, iterations=1))
+    # A footprint that fills its convex hull has no waist: one object (most
+    # clusters; a box, a ball, a can). The cut search below is for the rest.
+    occupied = np.argwhere(grid)
+    try:
+        hull = ConvexHull(occupied)
+    except (QhullError, ValueError):
+        return [cluster]
+    # Cells inside a convex polygon through cell centres: area + perimeter / 2.
+    if len(occupied) >= SOLID * (hull.volume + 0.5 * hull.area):
+        return [cluster]
     dist = ndimage.distance_transform_edt(grid) * cell
     if dist.max() < 2 * 0.006:
         return [cluster]  # too small to hold two objects of 12 mm
