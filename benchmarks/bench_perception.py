@@ -23,7 +23,9 @@ Per round, side by side in one process:
 
 Every round renders a new frame (the context's time moves, so the caches and
 the noise are new). The garbage collector's runs are counted per step (a
-``gc.callbacks`` hook) so that a slow round can be told from a collection.
+``gc.callbacks`` hook; column ``gc``) and ``max@gc`` says whether the
+slowest round of a step had a collection in it, so that a spike can be told
+from a collection.
 ``--repeats R`` runs the whole measurement R times (the machine is shared:
 the spread across repeats shows the noise); medians and p90 are reported per
 repeat, with the load average beside them.
@@ -98,6 +100,7 @@ def measure(args, baseline) -> dict:
              "detect (plane per scene)"] + (["baseline detect"] if baseline else [])
     times = {k: [] for k in steps}
     gc_runs = {k: 0 for k in steps}
+    gc_rounds = {k: [] for k in steps}  # per round: did a collection run in the step
     found = {k: [] for k in steps if k.endswith("detect") or k.startswith("detect")}
     detector = TabletopDetector()
     counter = _GcCounter()
@@ -126,6 +129,7 @@ def measure(args, baseline) -> dict:
                 results[step] = baseline(cloud)[1]
             times[step].append(time.perf_counter() - start)
             gc_runs[step] += counter.runs - before
+            gc_rounds[step].append(counter.runs > before)
         for step, detections in results.items():
             found[step].append(len(detections))
     gc.callbacks.remove(counter)
@@ -137,7 +141,10 @@ def measure(args, baseline) -> dict:
         rows[step] = {"median_ms": 1000 * median, "p90_ms": 1000 * p90,
                       "max_ms": 1000 * float(np.max(values)),
                       "over_depth_render": median / floor, "p90_over_median": p90 / median,
-                      "gc_runs": gc_runs[step]}
+                      "gc_runs": gc_runs[step],
+                      "slowest_round_had_gc": bool(gc_rounds[step][int(np.argmax(values))]),
+                      "times_ms": [round(1000 * v, 3) for v in values],
+                      "gc_in_round": gc_rounds[step]}
         if step in found:
             rows[step]["frames_all_found"] = sum(n == expected for n in found[step])
     return {"rows": rows, "rounds": args.rounds, "objects": expected,
@@ -169,12 +176,13 @@ def main(argv=None) -> int:
               f"{run['load_average'][1]:.1f}, table plane fitted {run['plane_fits']}x "
               f"by the per-scene detector")
         print(f"{'step':26s} {'median ms':>9s} {'p90 ms':>7s} {'max ms':>7s} "
-              f"{'x depth':>7s} {'p90/med':>7s} {'gc':>3s} {'found':>6s}")
+              f"{'x depth':>7s} {'p90/med':>7s} {'gc':>3s} {'max@gc':>6s} {'found':>6s}")
         for step, r in run["rows"].items():
             found = f"{r['frames_all_found']}/{args.rounds}" if "frames_all_found" in r else ""
             print(f"{step:26s} {r['median_ms']:9.1f} {r['p90_ms']:7.1f} {r['max_ms']:7.1f} "
                   f"{r['over_depth_render']:7.2f} {r['p90_over_median']:7.2f} "
-                  f"{r['gc_runs']:3d} {found:>6s}")
+                  f"{r['gc_runs']:3d} {'yes' if r['slowest_round_had_gc'] else 'no':>6s} "
+                  f"{found:>6s}")
     ratios = [run["rows"]["detect (plane per scene)"]["over_depth_render"] for run in runs]
     print(f"\ndetect (plane per scene) / render (depth + cloud): "
           f"{', '.join(f'{r:.2f}' for r in ratios)} over {args.repeats} repeat(s) "

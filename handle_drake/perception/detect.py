@@ -317,11 +317,17 @@ BOX_FILL = 0.88
 
 
 def _table_frame(plane: TablePlane):
-    n = plane.normal
-    x_axis = np.cross([0.0, 1.0, 0.0], n)
-    x_axis /= np.linalg.norm(x_axis)
-    y_axis = np.cross(n, x_axis)
-    return plane.offset * n, np.column_stack([x_axis, y_axis, n])
+    """``(origin, R_WT)``: the table frame (origin on the plane under the world
+    origin, z = the normal), computed once per plane."""
+    cached = plane.__dict__.get("_frame")
+    if cached is None:
+        n = plane.normal
+        x_axis = np.cross([0.0, 1.0, 0.0], n)
+        x_axis /= np.linalg.norm(x_axis)
+        y_axis = np.cross(n, x_axis)
+        cached = plane.__dict__["_frame"] = (plane.offset * n,
+                                             np.column_stack([x_axis, y_axis, n]))
+    return cached
 
 
 #: The most points of a cluster the primitive fits use.
@@ -459,7 +465,7 @@ def _split_touching(cluster: np.ndarray, plane: TablePlane, cell: float) -> list
     dist = ndimage.distance_transform_edt(grid) * cell
     if dist.max() < 2 * 0.006:
         return [cluster]  # too small to hold two objects of 12 mm
-    for cut in np.arange(0.003, 0.6 * dist.max(), cell / 2):
+    for cut in np.arange(0.003, 0.6 * dist.max(), cell):
         cores, count = ndimage.label(dist > cut)
         if count < 2:
             continue
