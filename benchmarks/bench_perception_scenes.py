@@ -8,7 +8,9 @@ the scene's seed) and detects (:func:`handle_drake.perception.detect.detect`,
 the depth frame alone). Detections are matched to objects one-to-one
 (Hungarian on xy distance, 5 cm at most). Per object: found within 1 cm (xy),
 kind right (the primitive a catalogue kind should be seen as:
-``CATALOGUE_PRIMITIVE``), extent error; per scene: phantoms (detections of
+``CATALOGUE_PRIMITIVE``), extent error, and the share of it the camera sees
+(its pixels in the label image over its pixels alone on the table: the
+truth, for reading the failures only); per scene: phantoms (detections of
 nothing) and whether every object was found within 1 cm.
 
 Targets (issue 33): every object found within 1 cm, kinds right >= 95 %.
@@ -68,11 +70,14 @@ def main(argv=None) -> int:
         detections = detect(frame)
         detect_s = time.perf_counter() - t
         score = match_detections(detections, objects)
+        for entry, visible in zip(score["objects"], scene.visible_fraction(), strict=True):
+            entry["visible"] = round(float(visible), 3)
         ok = all(o["xy_mm"] is not None and o["xy_mm"] <= 10 for o in score["objects"])
         scenes.append({"seed": seed, "objects": [o.as_dict() for o in objects],
                        "detections": [d.as_dict() for d in detections],
                        "score": score, "all_found_1cm": ok, "detect_s": detect_s})
-        bad = [f"{o['kind']} {o['xy_mm']} mm as {o['kind_detected']}"
+        bad = [f"{o['kind']} {o['xy_mm']} mm as {o['kind_detected']}, "
+               f"{100 * o['visible']:.0f} % visible"
                for o in score["objects"]
                if o["xy_mm"] is None or o["xy_mm"] > 10 or not o["kind_ok"]]
         print(f"seed {seed:3d}: {len(objects)} objects, {len(detections)} detections, "
@@ -91,6 +96,12 @@ def main(argv=None) -> int:
                 row["found_1cm"] += o["xy_mm"] <= 10
             row["kind_ok"] += bool(o["kind_ok"])
     total = {k: sum(r[k] for r in per_kind.values()) for k in ("objects", "found_1cm", "kind_ok")}
+    # The same over the objects the camera sees at least half of (the rest
+    # stand mostly behind others: a fact of the view, not of the detector).
+    seen = [o for s in scenes for o in s["score"]["objects"] if o["visible"] >= 0.5]
+    total_seen = {"objects": len(seen),
+                  "found_1cm": sum(o["xy_mm"] is not None and o["xy_mm"] <= 10 for o in seen),
+                  "kind_ok": sum(bool(o["kind_ok"]) for o in seen)}
     print(f"\n{len(seeds)} scenes (seeds {args.seeds}), {args.profile}, {wall:.0f} s, "
           f"load average {os.getloadavg()[0]:.1f}")
     print(f"{'kind':12s} {'objects':>7s} {'found<=1cm':>10s} {'kind ok':>8s} "
@@ -108,6 +119,8 @@ def main(argv=None) -> int:
           f"({100 * total['kind_ok'] / max(total['objects'], 1):.1f} %); scenes with every "
           f"object within 1 cm: {scenes_ok}/{len(scenes)}; phantoms: {phantoms}; detect median "
           f"{1000 * np.median([s['detect_s'] for s in scenes]):.1f} ms")
+    print(f"objects at least half visible: {total_seen['objects']}; found within 1 cm: "
+          f"{total_seen['found_1cm']}; kinds right: {total_seen['kind_ok']}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     for r in per_kind.values():
         r["xy_mm_median"] = float(np.median(r["xy_mm"])) if r["xy_mm"] else None
@@ -115,6 +128,7 @@ def main(argv=None) -> int:
     args.out.write_text(json.dumps({
         "benchmark": "perception_scenes", "seeds": seeds, "profile": args.profile,
         "wall_time_s": wall, "per_kind": per_kind, "total": total,
+        "total_at_least_half_visible": total_seen,
         "scenes_all_found_1cm": scenes_ok, "phantoms": phantoms,
         "load_average": os.getloadavg(), "machine": platform.platform(),
         "cpus": os.cpu_count(), "scenes": scenes}, indent=1))

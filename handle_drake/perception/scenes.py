@@ -157,10 +157,12 @@ class TabletopScene:
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
         AddTable(plant, top_height=self.table_top, size=(base.table.size_x, base.table.size_y))
+        self._bodies = []  # each object's body index: its render label
         for i, obj in enumerate(self.objects):
             instance = AddObject(plant, obj.spec(), name=f"object_{i}")
             body = plant.get_body(plant.GetBodyIndices(instance)[0])
             plant.WeldFrames(plant.world_frame(), body.body_frame(), obj.X_WO(self.table_top))
+            self._bodies.append(int(body.index()))
         for i, (spec, X_WO) in enumerate(extra):  # any ObjectSpec at any pose
             instance = AddObject(plant, spec, name=f"extra_{i}")
             body = plant.get_body(plant.GetBodyIndices(instance)[0])
@@ -175,6 +177,8 @@ class TabletopScene:
         self._depth = self.diagram.GetOutputPort(f"{camera.name}.depth")
         self._pose = self.diagram.GetOutputPort(f"{camera.name}.pose")
         self._cloud = self.diagram.GetOutputPort(f"{camera.name}.point_cloud")
+        self._label = self.diagram.GetOutputPort(f"{camera.name}.label")
+        self._profile, self._seed, self._camera = profile, seed, camera
         self.X_WC = RigidTransform(self._pose.Eval(self.context)).GetAsMatrix4()
 
     def frame(self, time: float = 0.0):
@@ -183,6 +187,20 @@ class TabletopScene:
         self.context.SetTime(float(time))
         depth = np.array(self._depth.Eval(self.context).data)[:, :, 0]
         return DepthFrame(depth=depth, K=self.K, X_WC=self.X_WC)
+
+    def pixels(self) -> np.ndarray:
+        """Pixels of each object in the camera's label image (the truth:
+        for scoring only)."""
+        labels = np.asarray(self._label.Eval(self.context).data)[:, :, 0]
+        counts = np.bincount(labels[labels >= 0].ravel(), minlength=max(self._bodies) + 1)
+        return np.array([counts[b] for b in self._bodies])
+
+    def visible_fraction(self) -> np.ndarray:
+        """Per object: its pixels in this scene over its pixels alone on the
+        table (1: not occluded by the others; the truth, for scoring only)."""
+        alone = np.array([TabletopScene([obj], self._profile, self._seed, self._camera)
+                          .pixels()[0] for obj in self.objects])
+        return self.pixels() / np.maximum(alone, 1)
 
     def cloud(self, time: float = 0.0) -> np.ndarray:
         """Drake's world-frame point cloud of the frame at ``time`` (N x 3,
