@@ -26,6 +26,9 @@ the noise are new). The garbage collector's runs are counted per step (a
 ``gc.callbacks`` hook; column ``gc``) and ``max@gc`` says whether the
 slowest round of a step had a collection in it, so that a spike can be told
 from a collection.
+``--gc-freeze`` calls ``gc.freeze()`` once the diagram is built: a
+collection then skips everything allocated so far (Drake's diagrams, the
+modules), so a collection that lands in a frame no longer scans the heap.
 ``--repeats R`` runs the whole measurement R times (the machine is shared:
 the spread across repeats shows the noise); medians and p90 are reported per
 repeat, with the load average beside them.
@@ -110,6 +113,20 @@ def measure(args, baseline) -> dict:
     detect_objects(cloud)
     if baseline:
         baseline(cloud)
+    # What a full collection costs here (every object of Drake's diagrams and
+    # the imported modules is scanned), then, with --gc-freeze, the same
+    # after gc.freeze() (the heap built so far moved to a permanent
+    # generation that collections skip: what a long-running loop should do
+    # once its diagrams are built).
+    start = time.perf_counter()
+    gc.collect()
+    full_gc_ms = 1000 * (time.perf_counter() - start)
+    frozen_gc_ms = None
+    if args.gc_freeze:
+        gc.freeze()
+        start = time.perf_counter()
+        gc.collect()
+        frozen_gc_ms = 1000 * (time.perf_counter() - start)
     load_before = os.getloadavg()[0]
     for i in range(args.rounds):
         context.SetTime(0.01 * (i + 1))
@@ -133,6 +150,8 @@ def measure(args, baseline) -> dict:
         for step, detections in results.items():
             found[step].append(len(detections))
     gc.callbacks.remove(counter)
+    if args.gc_freeze:
+        gc.unfreeze()
     floor = float(np.median(times["render depth + cloud"]))
     rows = {}
     for step, values in times.items():
@@ -148,6 +167,8 @@ def measure(args, baseline) -> dict:
         if step in found:
             rows[step]["frames_all_found"] = sum(n == expected for n in found[step])
     return {"rows": rows, "rounds": args.rounds, "objects": expected,
+            "gc_freeze": bool(args.gc_freeze), "full_gc_ms": full_gc_ms,
+            "full_gc_after_freeze_ms": frozen_gc_ms,
             "plane_fits": detector.refits,
             "load_average": [load_before, os.getloadavg()[0]]}
 
@@ -157,6 +178,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--scene-seed", type=int, default=None)
+    parser.add_argument("--gc-freeze", action="store_true",
+                        help="gc.freeze() once the diagram is built (collections then skip it)")
     parser.add_argument("--baseline", type=Path, default=None,
                         help="another detect.py to time on the same clouds")
     parser.add_argument("--out", type=Path,
@@ -174,7 +197,9 @@ def main(argv=None) -> int:
         print(f"\nrepeat {repeat + 1}/{args.repeats}: {args.rounds} frames, "
               f"{run['objects']} object(s), load average {run['load_average'][0]:.1f} -> "
               f"{run['load_average'][1]:.1f}, table plane fitted {run['plane_fits']}x "
-              f"by the per-scene detector")
+              f"by the per-scene detector; a full gc.collect() {run['full_gc_ms']:.0f} ms"
+              + ("" if run["full_gc_after_freeze_ms"] is None else
+                 f", after gc.freeze() {run['full_gc_after_freeze_ms']:.1f} ms"))
         print(f"{'step':26s} {'median ms':>9s} {'p90 ms':>7s} {'max ms':>7s} "
               f"{'x depth':>7s} {'p90/med':>7s} {'gc':>3s} {'max@gc':>6s} {'found':>6s}")
         for step, r in run["rows"].items():
