@@ -102,13 +102,22 @@ class DeviceAccelerometer(InstrumentSystem):
     new sample in the same update (:class:`~handle_drake.instruments.estimators.
     InstrumentSystem`: their outputs and, with ``command_size``, the ``command``
     input); without, it is the device alone.
+
+    With ``calibration`` (:class:`~handle_drake.instruments.calibration.
+    AccelerometerCalibration`, e.g. the device's six-position calibration) the
+    ``acceleration`` output, and what the estimators read, is the calibrated
+    reading ``(counts * lsb - offset) / scale``; ``counts`` stay the device's own.
     """
 
     def __init__(self, profile: DeviceProfile | str, seed: int = 0, averaging: bool = False,
                  X_BS: RigidTransform | None = None, gravity_W=None,
-                 estimators: EstimatorParams | None = None, command_size: int | None = None):
+                 estimators: EstimatorParams | None = None, command_size: int | None = None,
+                 calibration=None):
         super().__init__()
         self.profile = get_profile(profile)
+        self.calibration = calibration
+        self._offset = list(calibration.offset) if calibration is not None else [0.0] * 3
+        self._scale = list(calibration.scale) if calibration is not None else [1.0] * 3
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
             raise TypeError(f"seed must be an int, got {type(seed).__name__}")
         self.seed = int(seed)
@@ -178,14 +187,19 @@ class DeviceAccelerometer(InstrumentSystem):
                   for i in range(3)]
         x[:3] = counts
         state[:19] = x
-        return [c * lsb for c in counts]
+        if self.calibration is None:
+            return [c * lsb for c in counts]
+        offset, scale = self._offset, self._scale
+        return [(counts[i] * lsb - offset[i]) / scale[i] for i in range(3)]
 
     def _calc_counts(self, context, output: BasicVector):
         output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
 
     def _calc_acceleration(self, context, output: BasicVector):
-        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
-                             * self._lsb)
+        a = context.get_discrete_state(self._state).get_value()[:3] * self._lsb
+        if self.calibration is not None:
+            a = self.calibration.apply(a)
+        output.SetFromVector(a)
 
 
 def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:
@@ -255,7 +269,8 @@ def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> N
 def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
                            profile: DeviceProfile | str, seed: int = 0,
                            name: str = "object_accelerometer", averaging: bool = True,
-                           estimators: EstimatorParams | None = None, command=None):
+                           estimators: EstimatorParams | None = None, command=None,
+                           calibration=None):
     """Adds Drake's ``Accelerometer`` on ``body`` at ``X_BS`` (with the plant's
     gravity) and a :class:`DeviceAccelerometer` behind it (averaging over its
     period by default); returns the device system (outputs ``counts``,
@@ -266,7 +281,7 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
     device's; :func:`ExportInstrumentPorts` exports them); ``command`` is the
     output port whose stillness enables the slip detector (the hand and wrist
     command); without it the slip output is a constant 0 (nothing tells whether
-    the hand moves)."""
+    the hand moves). ``calibration``: the device's (see :class:`DeviceAccelerometer`)."""
     ideal = builder.AddNamedSystem(
         f"{name}_ideal",
         Accelerometer(body, X_BS, plant.gravity_field().gravity_vector()))
@@ -285,7 +300,8 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
         raise ValueError("command: the slip detector's command needs estimators")
     device = builder.AddNamedSystem(name, DeviceAccelerometer(
         profile, seed, averaging=averaging, X_BS=X_BS, gravity_W=gravity,
-        estimators=estimators, command_size=None if command is None else command.size()))
+        estimators=estimators, command_size=None if command is None else command.size(),
+        calibration=calibration))
     builder.Connect(ideal.get_measurement_output_port(), device.GetInputPort("specific_force"))
     if averaging:
         builder.Connect(plant.get_state_output_port(instance), device.GetInputPort("body_state"))

@@ -22,15 +22,21 @@ accelerometer output at the device rate:
   total measured acceleration is zero in this case".
 * **slip** (:func:`slip_indicator`), the method stated: while the hand's
   command is still, a held object is static. After the command has been still
-  for ``settle_time``, the window's mean specific force is the reference; slip
-  is flagged when, for ``slip_duration``, the mean over the last ``window`` s
-  (vibration of a held object averages out) is off: (a) its magnitude departs
-  from 1 g by
-  more than ``norm_tol`` (a static object feels exactly 1 g; one sliding on an
-  incline of angle alpha with friction mu feels only the contact force,
-  ``g0 cos(alpha) sqrt(1 + mu^2)``), or (b) its direction turns away from the
-  reference by more than ``angle_tol`` (the object rotates in the grasp). While
-  the command moves, the detector is idle (0) and forgets its reference.
+  for ``settle_time``, the reference is taken at the first sample where the
+  object is at rest (the :func:`at_rest` test over the last ``rest_window``
+  s): the window's mean specific force. Until then every sample counts as
+  slipping (the hand is still and settled, so an object that is not at rest
+  moves in the grasp: a slide already under way when the hand stops, whose
+  steady specific force would otherwise become the reference). With a
+  reference, slip is flagged when, for ``slip_duration``, the mean over the
+  last ``window`` s (vibration of a held object averages out) is off: (a) its
+  magnitude departs from 1 g by more than ``norm_tol`` (a static object feels
+  exactly 1 g; one sliding on an incline of angle alpha with friction mu feels
+  only the contact force, ``g0 cos(alpha) sqrt(1 + mu^2)``), or (b) its
+  direction turns away from the reference by more than ``angle_tol`` (the
+  object rotates in the grasp, or starts to slide down a slope: the contact
+  force tilts by atan(mu) from the slope's normal). While the command moves,
+  the detector is idle (0) and forgets its reference.
 
 Thresholds are parameters (:class:`EstimatorParams`) with the defaults above.
 
@@ -331,10 +337,13 @@ class SlipDetector(_Sampled):
         self._m = int(command_size)
         self._settle = self.params.samples(self.params.settle_time, period)
         self._need = self.params.samples(self.params.slip_duration, period)
-        # extra state: [still samples, samples flagged, reference (3), previous command (m),
-        #               have previous command]
-        super().__init__(period, self.params.samples(self.params.window, period),
-                         np.zeros(2 + 3 + self._m + 1))
+        p = self.params
+        self._n_mean = p.samples(p.window, period)
+        self._n_rest = max(self._n_mean, p.samples(p.rest_window, period), 2)
+        # extra state: [still samples, samples flagged, reference (3; NaN: none yet),
+        #               previous command (m), have previous command]
+        super().__init__(period, self._n_rest,
+                         np.r_[0.0, 0.0, np.full(3, np.nan), np.zeros(self._m + 1)])
         self._command = self.DeclareVectorInputPort("command", self._m)
         self.DeclareVectorOutputPort("slip", 1, self._calc_slip,
                                      {self.discrete_state_ticket(self._state)})
@@ -349,14 +358,20 @@ class SlipDetector(_Sampled):
         extra[-1] = 1.0
         if not still:
             extra[0] = extra[1] = 0.0
-            extra[2:5] = 0.0
+            extra[2:5] = np.nan
             return
         extra[0] += 1
         if extra[0] < self._settle:
             return
-        mean = self._recent(x, self._n).mean(axis=0)
-        if extra[0] == self._settle:
-            extra[2:5] = mean
+        mean = self._recent(x, self._n_mean).mean(axis=0)
+        if np.isnan(extra[2]):  # no reference yet: one at rest, or this sample slips
+            if int(x[3 * self._n]) >= self._n_rest and at_rest(
+                    self._recent(x, self._n_rest), p.rest_norm_tol, p.rest_std_tol,
+                    p.rest_angle_tol):
+                extra[2:5] = mean
+            else:
+                extra[1] += 1
+                return
         flagged = slip_indicator(mean, extra[2:5], p.slip_norm_tol, p.slip_angle_tol)
         extra[1] = extra[1] + 1 if flagged else 0.0
 
@@ -374,8 +389,8 @@ class InstrumentEstimators:
     :class:`InstrumentSystem` holds it). The state is the separate systems'
     state in one vector: one ring of the last samples (as many as the longest
     window needs), then ``[samples taken, low samples, free-fall detection time]``
-    and, with a command, ``[still samples, samples flagged, reference (3),
-    previous command (m), have previous command]``.
+    and, with a command, ``[still samples, samples flagged, reference (3; NaN
+    until taken), previous command (m), have previous command]``.
 
     :meth:`step` works on plain Python floats (tiny numpy arrays cost more per
     operation than the arithmetic) and writes only the new sample's ring slot
@@ -416,7 +431,8 @@ class InstrumentEstimators:
         self._cos_tol = math.cos(p.slip_angle_tol) if p.slip_angle_tol < math.pi else -math.inf
         self._tail = 3 * self._n
         m = self.command_size
-        self._initial_tail = [0.0, 0.0, math.nan] + ([0.0] * (2 + 3 + m + 1) if m else [])
+        self._initial_tail = [0.0, 0.0, math.nan] + (
+            [0.0, 0.0] + [math.nan] * 3 + [0.0] * (m + 1) if m else [])
         self._tail_end = self._tail + len(self._initial_tail)
 
     def initial_state(self) -> list[float]:
@@ -465,13 +481,20 @@ class InstrumentEstimators:
         tail[8:8 + m] = command
         tail[-1] = 1.0
         if not still:
-            tail[3:8] = [0.0] * 5
+            tail[3:8] = [0.0, 0.0, math.nan, math.nan, math.nan]
             return
         tail[3] += 1
         if tail[3] < self._settle:
             return
-        if tail[3] == self._settle:  # the reference: once per still spell, as numpy does it
-            tail[5:8] = self._recent(x, offset, self._n_mean, taken).mean(axis=0).tolist()
+        if math.isnan(tail[5]):  # no reference yet: one at rest (as numpy does it), or slip
+            p = self.params
+            if taken >= self._n_rest and at_rest(
+                    self._recent(x, offset, self._n_rest, taken), p.rest_norm_tol,
+                    p.rest_std_tol, p.rest_angle_tol):
+                tail[5:8] = self._recent(x, offset, self._n_mean, taken).mean(axis=0).tolist()
+            else:
+                tail[4] += 1
+                return
         # The mean of the last samples, in order (the ring slots, oldest first).
         n, k = self._n, min(self._n_mean, taken, self._n)
         first = (taken - k) % n

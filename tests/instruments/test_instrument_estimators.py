@@ -79,7 +79,7 @@ def _incline(alpha_deg: float, mu: float, duration: float = 0.6):
     thickness = 0.05
     X_WP = RigidTransform(R, [0, 0, 0])  # plane frame: its top surface through the origin
     X_WG = X_WP @ RigidTransform([0, 0, -thickness / 2])
-    plant.RegisterCollisionGeometry(plant.world_body(), X_WG, Box(2, 2, thickness), "plane",
+    plant.RegisterCollisionGeometry(plant.world_body(), X_WG, Box(4, 4, thickness), "plane",
                                     props)
     spec = ObjectSpec("cuboid", 0.04, mu=mu, dimensions={"depth": 0.03, "height": 0.02})
     AddObject(plant, spec, name="object")
@@ -121,6 +121,21 @@ def test_a_box_sliding_down_an_incline_triggers_slip_a_resting_one_does_not():
     assert travel < 1e-3
     assert not slip.any()
     np.testing.assert_allclose(np.linalg.norm(f[t > 0.2], axis=1), G, rtol=1e-3)
+
+
+def test_a_slide_under_way_when_the_hand_settles_is_flagged():
+    # tan 25 deg = 0.47 > 0.25: the box slides from its release, before the detector's
+    # settle time is over. Its specific force, g cos(alpha) sqrt(1 + mu^2) = 0.934 g,
+    # is within slip_norm_tol (0.08 g) of 1 g and steady in direction: a reference
+    # taken during the slide saw nothing. Settled and not at rest is slip.
+    alpha, mu = 25.0, 0.25
+    t, f, slip, travel = _incline(alpha, mu, duration=1.1)
+    assert travel > 1.0  # a = g (sin - mu cos) = 1.93 m/s^2 (point contact: a bit more)
+    expected = G * math.cos(math.radians(alpha)) * math.sqrt(1 + mu ** 2)
+    np.testing.assert_allclose(np.linalg.norm(f[t > 0.2], axis=1), expected, rtol=0.02)
+    assert abs(expected / G - 1) < EstimatorParams().slip_norm_tol  # the magnitude alone misses
+    detected = t > EstimatorParams().settle_time + EstimatorParams().slip_duration + 0.02
+    assert slip[detected].all()
 
 
 def test_slip_detector_is_idle_while_the_command_moves():
