@@ -123,7 +123,6 @@ class DeviceAccelerometer(InstrumentSystem):
         self.seed = int(seed)
         self.averaging = bool(averaging)
         self._bias = device_bias(self.profile, self.seed).tolist()
-        self._noise_rows = (None, None)  # (block, that block's noise rows as floats)
         # The profile's derived numbers, once (properties computed per access).
         self._rate = self.profile.rate_hz
         self._inv_T2 = self.profile.rate_hz ** 2
@@ -146,12 +145,7 @@ class DeviceAccelerometer(InstrumentSystem):
         if self.profile.noise_std_g == 0.0:
             return [0.0, 0.0, 0.0]
         block, row = divmod(index, _NOISE_BLOCK)
-        cached, rows = self._noise_rows
-        if cached != block:
-            rows = (_noise_block(self.seed, block)
-                    * (self.profile.noise_std_g * STANDARD_GRAVITY)).tolist()
-            self._noise_rows = (block, rows)
-        return rows[row]
+        return _noise_rows(self.seed, block, self.profile.noise_std_g * STANDARD_GRAVITY)[row]
 
     def _sample(self, context, state) -> list[float]:
         # Plain Python floats: a sample is a few dozen scalar operations, and tiny numpy
@@ -200,6 +194,13 @@ class DeviceAccelerometer(InstrumentSystem):
         if self.calibration is not None:
             a = self.calibration.apply(a)
         output.SetFromVector(a)
+
+
+@lru_cache(maxsize=64)
+def _noise_rows(seed: int, block: int, scale: float) -> tuple[list[float], ...]:
+    """A block of :func:`~handle_drake.instruments.profiles.sample_noise` as floats (the
+    same products), cached: no state of the system changes outside its context."""
+    return tuple((_noise_block(seed, block) * scale).tolist())
 
 
 def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:

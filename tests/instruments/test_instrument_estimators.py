@@ -15,7 +15,7 @@ from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 from handle_drake.instruments.accelerometer import AddObjectAccelerometer
 from handle_drake.instruments.estimators import (
     EstimatorParams,
-    SlipDetector,
+    EstimatorSystem,
     at_rest,
     free_fall,
     roll_pitch,
@@ -147,7 +147,7 @@ def test_slip_detector_is_idle_while_the_command_moves():
     command = builder.AddSystem(TrajectorySource(
         PiecewisePolynomial.FirstOrderHold([0.0, 0.5, 1.0], [[0.0, 1.0, 1.0]])))
     params = EstimatorParams()
-    detector = builder.AddSystem(SlipDetector(0.008, 1, params))
+    detector = builder.AddSystem(EstimatorSystem(0.008, params, command_size=1))
     builder.Connect(accel.get_output_port(), detector.GetInputPort("acceleration"))
     builder.Connect(command.get_output_port(), detector.GetInputPort("command"))
     diagram = builder.Build()
@@ -167,6 +167,6 @@ def test_bad_estimator_parameters():
     with pytest.raises(ValueError, match="estimators.window"):
         EstimatorParams(window=0.0)
     with pytest.raises(ValueError, match="command_size"):
-        SlipDetector(0.008, 0)
+        EstimatorSystem(0.008, command_size=0)
     with pytest.raises(ValueError, match="period"):
-        SlipDetector(-1.0, 3)
+        EstimatorSystem(-1.0, command_size=3)
