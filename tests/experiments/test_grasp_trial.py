@@ -1,7 +1,6 @@
 """Simulated grasp trials score what physics and geometry say they should."""
 
 import pickle
-
 import re
 
 import numpy as np
