@@ -285,6 +285,12 @@ def test_device_with_estimators_equals_the_device_and_the_plain_functions(
     for want, have in zip(_reference(np.array(f), np.array(c), params, T), outputs,
                           strict=True):
         _compare_outputs(fused, context, want, seen, have)
+    # the device's state, by name: the samples it averaged over, its last counts
+    state = fused.device_state(fused.GetMyContextFromRoot(context))
+    assert state.samples == n
+    np.testing.assert_array_equal([state.counts_x, state.counts_y, state.counts_z],
+                                  fused.GetOutputPort("counts").Eval(
+                                      fused.GetMyContextFromRoot(context)))
     # the run exercises the flags: it falls (free fall), lands, rests or slides
     assert seen["free_fall"] == {(0.0,), (1.0,)}
     assert (1.0,) in seen["at_rest"] or alpha > 20
