@@ -116,6 +116,7 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
     pin_blas(force=False)  # before the imports below load numpy
+    from handle_drake.extras import MissingExtraError
     from handle_drake.learning import TrialLogError
     from handle_drake.learning.cluster import ExecutorError
     from handle_drake.paths import check_outputs
@@ -130,7 +131,8 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
             warnings.filterwarnings("always", category=ScenarioDeprecationWarning)
             check_outputs(args)  # before minutes of work, not after
             return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError,
+            MissingExtraError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:

@@ -47,7 +47,7 @@ from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.learning import TrialResult
 from handle_drake.objects import DEFAULT_SIZE, KINDS, ObjectSpec, total_height
 from handle_drake.quality import NO_CONTACT
-from handle_drake.run import ScenarioRunner
+from handle_drake.run import ScenarioRunner, placed
 from handle_drake.scenario import (
     DumpScenario,
     FloatingWrist,
@@ -425,8 +425,12 @@ class GraspTrial:
         values, touched = [], False
         # The stencil's first placement (the planned one when K == 1) gives the
         # outcome's scenario, contacts and hold samples; the metric is the mean.
-        for k, placement in enumerate(placement_stencil(c.placement_error, c.placement_samples)):
-            run_scenario = self.scenario(x, placement)
+        stencil = placement_stencil(c.placement_error, c.placement_samples)
+        trial_scenario = self.scenario(x)
+        for k, placement in enumerate(stencil):
+            # as ``handle-drake simulate`` runs the stored scenario's metric.placements
+            run_scenario = placed(trial_scenario, placement) if c.placement_samples > 1 \
+                else trial_scenario
             run_score = runner.run(scenario=run_scenario).score
             values.append(run_score.value)
             touched = touched or np.isfinite(controller.GetOutputPort("contact_time").Eval(
@@ -440,9 +444,11 @@ class GraspTrial:
             metric=float(noisy), metric_noiseless=value, metric_samples=score.samples,
             force_closure=score.force_closure, contacts=score.contacts,
             touched=bool(touched or score.contacts),
-            scenario=self._scenario_text(scenario, x) + (
-                f"# robust objective: this is placement 1 of {c.placement_samples} within "
-                f"{c.placement_error} m; metric = their mean\n" if c.placement_samples > 1
-                else ""),
+            scenario=self._scenario_text(scenario, x) if c.placement_samples == 1 else
+            self._scenario_text(dc.replace(trial_scenario, metric=dc.replace(
+                trial_scenario.metric, placements=stencil.tolist())), x) + (
+                f"# robust objective: metric.placements holds the {c.placement_samples} "
+                f"start placements within {c.placement_error} m; simulate runs each and "
+                "reports their mean (the trial's noiseless metric)\n"),
             wall_time=time.perf_counter() - start_wall,
         )

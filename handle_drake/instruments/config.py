@@ -12,6 +12,7 @@ types (see ``handle_drake.scenario``).
         X_OS: {translation: [0, 0, 0.05], rotation: !Rpy {deg: [0, 0, 90]}}
         # range_g: 4.0  bits: 12  rate_hz: 50   (override the profile)
         # noise: false                (no noise and bias; still sampled and quantised)
+        # calibrated: false           (raw readings: no six-position calibration first)
         # seed: 3                     (default: the scenario's random_seed)
         # estimators: {free_fall_threshold: 0.25}
         # evdev_device: /dev/input/event5   (hardware=True: the real device)
@@ -40,6 +41,9 @@ class AccelerometerConfig:
     bits: int | None = None
     rate_hz: float | None = None
     noise: bool = True  # False: no noise, no bias
+    # True: the six-position calibration from the device's own rest readings first
+    # (instruments.calibration), as a real experiment does; False: raw readings.
+    calibrated: bool = True
     seed: int | None = None  # None: the scenario's random_seed
     # EstimatorParams fields by name (window, free_fall_threshold, slip_angle_tol, ...).
     estimators: dict[str, float] = dc.field(default_factory=dict)
@@ -60,7 +64,12 @@ class AccelerometerConfig:
             changes.update(noise_std_g=0.0, bias_std_g=0.0, bias_g=None)
         return profile.replace(**changes) if changes else profile
 
-    def estimator_params(self):
+    def estimator_params(self, kind: str | None = None, calibrated: bool | None = None):
+        """The estimators' thresholds: those given in ``estimators``, the others at least
+        what the device's noise and (residual) bias need
+        (:func:`~handle_drake.instruments.calibration.device_estimator_params`).
+        ``calibrated``: whether the readings are (default: ``self.calibrated``)."""
+        from handle_drake.instruments.calibration import device_estimator_params
         from handle_drake.instruments.estimators import EstimatorParams
 
         known = {f.name for f in dc.fields(EstimatorParams)}
@@ -68,7 +77,20 @@ class AccelerometerConfig:
             if key not in known:
                 raise ValueError(f"estimators: unknown parameter {key!r}; "
                                  f"expected some of {sorted(known)}")
-        return EstimatorParams(**self.estimators)
+        return device_estimator_params(self.profile(kind),
+                                       self.calibrated if calibrated is None else calibrated,
+                                       self.estimators)
+
+    def calibration(self, kind: str | None, seed: int):
+        """The device's six-position calibration from its own rest readings, or None
+        (``calibrated: false``, or a device without bias and noise)."""
+        from handle_drake.instruments.calibration import calibrate_device
+
+        profile = self.profile(kind)
+        if not self.calibrated or (profile.noise_std_g == 0 and profile.bias_std_g == 0
+                                   and profile.bias_g is None):
+            return None
+        return calibrate_device(profile, seed)
 
     def validate(self, kind: str) -> None:
         """Raises ValueError naming the field (without the ``object.accelerometer.`` prefix)."""
@@ -81,4 +103,4 @@ class AccelerometerConfig:
         if self.seed is not None and not 0 <= self.seed < 2**32:
             raise ValueError(f"seed: expected an integer in [0, 2**32), got {self.seed!r}")
         self.profile(kind)
-        self.estimator_params()
+        self.estimator_params(kind)

@@ -105,7 +105,9 @@ def open_device(name_or_path: str, axes=(ABS_X, ABS_Y, ABS_Z)):
     """Opens an evdev device by path (``/dev/input/eventN``) or by a part of its name
     (e.g. ``"JoyWarrior"``), removes the kernel deadband ("flat") of the axes and
     returns a :class:`LiveEvents`."""
-    import evdev
+    from handle_drake.extras import require_extra
+
+    evdev = require_extra("evdev")  # the joywarrior extra
 
     if not isinstance(name_or_path, str) or not name_or_path:
         raise ValueError(f"evdev_device: expected a device path or name, got {name_or_path!r}")
