@@ -65,6 +65,8 @@ def _listener(kind):
 
 @pytest.mark.parametrize("kind", ["silent", "one", "garbage", "http"])
 def test_a_hostile_listener_as_dask_address_fails_within_the_connect_timeout(kind, tmp_path):
+    import distributed  # noqa: F401 - loaded before the clock starts (seconds on a busy host)
+
     from handle_drake.learning.cluster import ExecutorError, trial_executor
 
     server, held = _listener(kind)
@@ -241,7 +243,7 @@ def test_evdev_device_dev_zero_is_a_value_error_naming_the_field():
 
     with pytest.raises(ValueError, match="evdev_device: /dev/zero is not an input event device"):
         open_device("/dev/zero")
-    with pytest.raises(ValueError, match="evdev_device: expected an input event device"):
+    with pytest.raises(ValueError, match="evdev_device: /tmp is not an input event device"):
         open_device("/tmp")
 
 
@@ -332,7 +334,7 @@ def test_a_mapping_naming_controls_the_device_lacks_is_refused(tmp_path):
     "babble --trials 2 --plot /proc/x.png --db {tmp}/b.sqlite",
     "instruments --quick --plot /proc/x.png",
     "instruments --quick --json /proc/x.json",
-    "inhand --html /proc/x.html --db {tmp}/i.sqlite",
+    "inhand --trials 1 --html /proc/x.html --db {tmp}/i.sqlite",
     "report --reduced --out /proc/report",
     "perceive --frame {tmp}/cam.json --save-frames /proc/frames",
     "grasp --class tripod --size 0.05 --save-scenario /proc/s.yaml",
@@ -412,8 +414,9 @@ def test_pool_workers_die_with_a_parent_killed_with_sigkill():
 ])
 def test_refusals_say_why(argv, words, tmp_path, capsys):
     args = argv.split(" ")
-    code, err = _cli([*args, "--db", str(tmp_path / "x.sqlite")] if args[0] == "babble"
-                     else args, capsys)
+    if args[0] == "babble":  # bounded on code that would run it
+        args += ["--trials", "1", "--no-plot", "--no-progress", "--db", str(tmp_path / "x.sqlite")]
+    code, err = _cli(args, capsys)
     assert code == 2, err
     for word in words:
         assert word in err, (word, err)

@@ -36,7 +36,6 @@ INSTANCE = "midi_controller"
 def validate_midi_controller(config) -> None:
     """Checks a ``MidiControllerConfig``; raises ``ScenarioError`` naming the field."""
     from handle_drake.scenario import ScenarioError
-
     from handle_drake.scenario_checks import check_pose
 
     check_pose("midi_controller.X_WC", config.X_WC)  # names a NaN angle or axis

@@ -132,6 +132,13 @@ def save_frame(path: str | Path, frame: DepthFrame, depth_scale: float = 0.001) 
     return json_path
 
 
+def _has_non_number(value) -> bool:
+    """True for text, booleans or null anywhere in nested lists (numpy reads "1" and true)."""
+    if isinstance(value, list):
+        return any(_has_non_number(v) for v in value)
+    return isinstance(value, bool) or not isinstance(value, int | float)
+
+
 def _sidecar_number(path, meta, key, integer=False):
     value = meta[key]
     kind = "an integer" if integer else "a number"
@@ -209,8 +216,17 @@ def load_frame(path: str | Path) -> DepthFrame:
         raise ValueError(f"frame {path}: image is {units.shape[1]} x {units.shape[0]}, the "
                          f"sidecar says {width} x {height}")
     depth = np.where(units > 0, units.astype(np.float64) * scale, np.inf)
+    matrices = {}
+    for key, shape in (("K", (3, 3)), ("X_WC", (4, 4))):
+        value = meta[key]
+        try:
+            if _has_non_number(value):
+                raise TypeError
+            matrices[key] = np.array(value, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            raise ValueError(f"frame {path}: {key}: expected a {shape[0]} x {shape[1]} matrix "
+                             f"of numbers, got {value!r}"[:300]) from None
     try:
-        return DepthFrame(depth=depth, K=np.array(meta["K"], dtype=float),
-                          X_WC=np.array(meta["X_WC"], dtype=float))
+        return DepthFrame(depth=depth, **matrices)
     except (TypeError, ValueError) as error:
         raise ValueError(f"frame {path}: {error}") from None
