@@ -891,7 +891,7 @@ def probe_third_wave(tmp):
                      "{angle_deg: 3, axis: [.nan, 0, 1]}}}}"))),
             ("port 0", _api(["1..65535"], lambda: LoadScenario(
                 data="driver: !CanHandDriver {port: 0}")))):
-        cases.append(("messages", name, 60, body))
+        cases.append(("messages", name, 15 if "can-server" in name else 60, body))
 
     def comment_only():  # as an empty file: the defaults
         try:
