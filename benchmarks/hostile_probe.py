@@ -593,9 +593,13 @@ def _api(words, call):
     return body
 
 
+BASELINE = {"s": 0.0}  # s: a command refused before any work, on this machine now
+
+
 def _cmd(argv, words, cwd=None, quick=None, absent=()):
     """A probe body: ``handle-drake argv`` must exit 2 with one line naming ``words``,
-    within ``quick`` s if given (before any work), leaving the ``absent`` paths unwritten."""
+    within ``quick`` s (plus the run's :data:`BASELINE`: the machine is shared and its
+    speed changes) if given, leaving the ``absent`` paths unwritten."""
     def body():
         from handle_drake.cli import main
 
@@ -613,7 +617,7 @@ def _cmd(argv, words, cwd=None, quick=None, absent=()):
             return "traceback", text[-300:]
         written = [str(p) for p in absent if Path(p).exists()]
         ok = (code == 2 and all(w in text for w in words) and len(text) < 2000
-              and (quick is None or took < quick) and not written)
+              and (quick is None or took < quick + BASELINE["s"]) and not written)
         return ("clean" if ok else "wrong",
                 f"exit {code} in {took:.1f} s, wrote {written}: {text.strip()[-200:]}")
     return body
@@ -729,6 +733,13 @@ def probe_third_wave(tmp):
     if not (tmp / "fifo").exists():
         os.mkfifo(tmp / "fifo")
     cases = []  # (part, name, limit, body)
+
+    def baseline():  # refused by the output check, before any work, on every version
+        start = time.monotonic()
+        _cmd(["babble", "--db", str(tmp / "dir"), "--trials", "1"], [])()
+        return "clean", str(time.monotonic() - start)
+    BASELINE["s"] = max(float(_forked(120, baseline)[1]) for _ in range(2))
+    print(f"baseline (a command refused before work): {BASELINE['s']:.1f} s", file=sys.stderr)
 
     # --executor dask:// against hostile local listeners
     servers = []

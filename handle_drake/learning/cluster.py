@@ -452,6 +452,10 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         return
+    if spec.address is not None:  # a bounded look first: Client trusts whatever answers
+        from handle_drake.learning.dask_probe import probe_scheduler
+
+        probe_scheduler(spec.address, connect_timeout)
     try:
         # distributed loads its defaults into dask.config on import: *before* the
         # settings below, since set() on a missing "distributed" subtree records it as

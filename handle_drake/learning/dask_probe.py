@@ -17,7 +17,7 @@ handshake before it reads the client's), all within one deadline:
 A greeting longer than :data:`MAX_GREETING` bytes, fewer bytes than announced,
 silence or anything else is an :class:`ExecutorError` naming the address and
 what it sent. :func:`connect_client` then opens the ``Client`` in a thread and
-waits for it no longer than what is left of the deadline.
+waits for it no longer than the timeout.
 """
 
 from __future__ import annotations
@@ -114,13 +114,11 @@ def probe_scheduler(address: str, timeout: float) -> None:
 
 
 def connect_client(address: str, timeout: float):
-    """:func:`probe_scheduler`, then ``distributed.Client(address)``, all within
-    ``timeout`` s (a Client still connecting then is left to its daemon thread)."""
+    """``distributed.Client(address)`` within ``timeout`` s (a Client still
+    connecting then is left to its daemon thread). Call :func:`probe_scheduler` first."""
     from distributed import Client
 
-    start = time.monotonic()
-    probe_scheduler(address, timeout)
-    left = max(0.5, timeout - (time.monotonic() - start))
+    left = timeout
     box: dict = {}
 
     def connect():
