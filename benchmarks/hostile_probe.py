@@ -58,6 +58,8 @@ def time_limit(seconds):
 def record(part, outcome, probe):
     RESULTS.setdefault(part, {"tried": 0, "clean": 0, "traceback": 0, "hang": 0, "wrong": 0,
                               "failures": []})
+    if part in ("kill -9",) or probe.startswith("Ctrl-C"):  # measured: keep the figures
+        RESULTS[part].setdefault("measured", []).append(f"{outcome}: {probe}")
     RESULTS[part]["tried"] += 1
     RESULTS[part][outcome] += 1
     if outcome != "clean":

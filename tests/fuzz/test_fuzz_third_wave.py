@@ -170,9 +170,20 @@ def frames(draw):
                "depth_scale": 0.001, "width": width, "height": height,
                "K": [[5.0, 0, width / 2], [0, 5.0, height / 2], [0, 0, 1]],
                "X_WC": np.eye(4).tolist()}
+    hostile = st.sampled_from([True, False, None, "64", "0.001", 99, 0, -1, 1e-300, 1e300,
+                               12000, 48.0, 1.5])
     for key in draw(st.lists(st.sampled_from(FRAME_FIELDS), max_size=3)):
-        sidecar[key] = draw(st.one_of(values, st.lists(st.lists(numbers, min_size=3,
-                                                                max_size=4), max_size=4)))
+        sidecar[key] = draw(st.one_of(hostile, values, st.lists(st.lists(
+            numbers, min_size=3, max_size=4), min_size=3, max_size=4)))
+    if draw(st.booleans()):  # one entry of K or X_WC out of range, the rest a camera's
+        key = draw(st.sampled_from(["K", "X_WC"]))
+        matrix = [list(row) for row in sidecar[key]] if isinstance(sidecar[key], list) and \
+            all(isinstance(r, list) for r in sidecar[key]) else None
+        if matrix and matrix[0]:
+            i = draw(st.integers(0, len(matrix) - 1))
+            if matrix[i]:
+                matrix[i][draw(st.integers(0, len(matrix[i]) - 1))] = draw(hostile)
+            sidecar[key] = matrix
     return dtype, (height, width), fmt, sidecar, draw(st.integers(0, 2**16))
 
 
@@ -200,7 +211,17 @@ def test_depth_frames_load_or_are_refused(frame):
             loaded = load_frame(path)
         except (ValueError, TypeError, FileNotFoundError):
             return
+    # what loads is a camera: a 16-bit PNG, numbers of the right kind, intrinsics and a
+    # pose a camera can have
     assert isinstance(loaded, DepthFrame) and loaded.depth.dtype == np.float32
+    assert fmt == "PNG" and dtype in ("uint16", "int32")
+    assert sidecar["version"] == 1 and not isinstance(sidecar["depth_scale"], bool)
+    assert 1e-6 <= sidecar["depth_scale"] <= 0.01
+    assert all(type(sidecar[k]) is int for k in ("width", "height"))
+    K, X = loaded.K, loaded.X_WC
+    assert 1 <= K[0, 0] <= 1e5 and 1 <= K[1, 1] <= 1e5
+    assert 0 <= K[0, 2] <= shape[1] and 0 <= K[1, 2] <= shape[0]
+    assert np.all(X[3] == (0, 0, 0, 1)) and np.linalg.norm(X[:3, 3]) <= 100
     points = loaded.points()
     assert np.all(np.isfinite(points)) and np.all(np.abs(points) < 1e4)
 
@@ -210,8 +231,9 @@ ESTIMATOR_KEYS = ["window", "rest_window", "free_fall_threshold", "free_fall_dur
                   "slip_angle_tol", "still_tol", "settle_time", "bogus"]
 
 
-@given(settings_=st.dictionaries(st.sampled_from(ESTIMATOR_KEYS), scalars, max_size=3),
-       device=st.one_of(st.just(""), st.text(max_size=10)))
+@given(settings_=st.dictionaries(st.sampled_from(ESTIMATOR_KEYS), st.one_of(
+    st.sampled_from([0.5, 1.5, 7.0, 100.0, 1e9, 1e300]), scalars), max_size=3),
+       device=st.sampled_from(["", "", "", "joywarrior24f14", "nope"]))
 def test_accelerometer_settings_load_or_are_refused(settings_, device):
     import yaml
 
@@ -238,16 +260,25 @@ def test_event_recordings_load_or_are_refused(data):
         path.write_bytes(data)
         try:
             events = load_events(path)
-        except ValueError:
+        except UnicodeError as error:  # a ValueError, but not naming the recording
+            raise AssertionError(f"undecoded: {error}") from None
+        except ValueError as error:
+            assert "\n" not in str(error).strip()
             return
     events.read_events(1e9)
 
 
 # -- meshes ----------------------------------------------------------------------------------
 @_examples(25)
-@given(vertices=st.lists(st.tuples(*[st.one_of(st.floats(-0.05, 0.05), numbers)] * 3),
-                         min_size=0, max_size=8),
-       faces=st.lists(st.tuples(*[st.integers(-10, 10)] * 3), max_size=12),
+@given(vertices=st.one_of(
+    st.just([(0, 0, 0), (0.05, 0, 0), (0, 0.05, 0), (0, 0, 0.05)]),  # a tetrahedron
+    st.lists(st.tuples(*[st.one_of(st.floats(-0.05, 0.05), numbers)] * 3), max_size=8)),
+       faces=st.one_of(
+           st.just([(1, 3, 2), (1, 2, 4), (1, 4, 3), (2, 3, 4)]).flatmap(  # closed, then spoilt
+               lambda closed: st.lists(st.tuples(*[st.one_of(st.just(0), st.integers(-4, 4))]
+                                                 * 3), min_size=1, max_size=2).map(
+                   lambda extra: closed + extra)),
+           st.lists(st.tuples(*[st.integers(-10, 10)] * 3), max_size=12)),
        slashes=st.booleans())
 def test_obj_meshes_load_or_are_refused(vertices, faces, slashes):
     from handle_drake.objects.mesh import MeshObjectSpec
@@ -262,16 +293,21 @@ def test_obj_meshes_load_or_are_refused(vertices, faces, slashes):
             MeshObjectSpec(file=str(path))
         except (ValueError, TypeError):
             return
+    assert all(0 not in face for face in faces)  # OBJ counts from 1: index 0 is no vertex
 
 
 # -- MIDI mappings ------------------------------------------------------------------------
 @_examples(25)
-@given(controls=st.lists(st.fixed_dictionaries({}, optional={
-    "name": st.one_of(st.sampled_from(["fader1", "knob3", "jog", "mode", "slider1", ""]),
-                      scalars),
-    "kind": st.one_of(st.sampled_from(["fader", "knob", "jog", "button", "pad"]), scalars),
-    "channel": st.one_of(st.integers(-2, 17), scalars),
-    "number": st.one_of(st.integers(-2, 130), scalars)}), max_size=4))
+@given(controls=st.lists(st.one_of(
+    st.fixed_dictionaries({  # well-typed: the name and kind decide
+        "name": st.sampled_from(["fader1", "knob3", "jog", "mode", "slider1", "button2"]),
+        "kind": st.sampled_from(["fader", "knob", "jog", "button"]),
+        "channel": st.just(0), "number": st.integers(0, 127)}),
+    st.fixed_dictionaries({}, optional={
+        "name": st.one_of(st.sampled_from(["fader1", "slider1", ""]), scalars),
+        "kind": st.one_of(st.sampled_from(["fader", "pad"]), scalars),
+        "channel": st.one_of(st.integers(-2, 17), scalars),
+        "number": st.one_of(st.integers(-2, 130), scalars)})), max_size=3))
 def test_midi_mappings_load_or_are_refused(controls):
     import yaml
 
