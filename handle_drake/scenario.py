@@ -55,6 +55,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -62,6 +63,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from handle_drake.can_hand.config import CanHandDriverConfig
 from handle_drake.instruments.config import AccelerometerConfig
 from handle_drake.scenario_checks import (
+    check_pose,
     check_ranges,
     check_yaml_text,
     read_text_file,
@@ -391,6 +393,8 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
         return defaults
     text = translate_deprecated_keys(text, source)
     check_yaml_text(text, Scenario, source)
+    if yaml.compose(text, Loader=yaml.SafeLoader) is None:  # comments only: as empty
+        return defaults
     try:
         return yaml_load_typed(schema=Scenario, data=text, defaults=defaults)
     except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError
@@ -401,6 +405,7 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
 def _check_transform(name: str, transform: Transform) -> None:
     if not transform.IsDeterministic():  # GetDeterministicValue would abort the process
         raise ScenarioError(f"{name}: expected a deterministic pose, got a random one")
+    check_pose(name, transform)  # names a NaN angle or axis (Drake: "NaN is detected ...")
     try:
         X = transform.GetDeterministicValue()
     except Exception as error:

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from handle_drake.cli_support import (
     add_mesh_arguments,
+    non_empty,
     non_negative_float,
     non_negative_int,
     positive_float,
@@ -90,7 +91,7 @@ def register(subparsers) -> None:
                         "otherwise, and random search runs as many trials at once as the "
                         "cluster has workers")
     add_executor_arguments(p)
-    p.add_argument("--run-id", default=None, help="name of the run in the log")
+    p.add_argument("--run-id", type=non_empty, default=None, help="name of the run in the log")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="figure of the run: metric per trial with the best so far, and the "
                         "GP's map of the parameter space (default: <db folder>/<run id>.png)")
@@ -197,7 +198,10 @@ def _cmd_babble(args) -> int:
     print(f"trials: {result.n_done} done, {result.n_failed} failed"
           + (" (BO stopped: expected improvement below threshold)" if result.converged else ""))
     if result.best_x is None:
-        print("no successful trial")
+        failed = [r for r in result.trials if r.status == "failed" and r.error]
+        reason = (f": trial {failed[0].index} failed: {' '.join(str(failed[0].error).split())}"
+                  if failed else "")
+        print(f"no successful trial{reason}"[:600])
         return 1
     names = _PARAMETER_NAMES[space]
     params = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, result.best_x, strict=True))

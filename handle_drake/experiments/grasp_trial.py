@@ -80,6 +80,8 @@ BABBLING_SIZES = {
     "sphere": 0.07, "cylinder": 0.06, "cuboid": 0.06, "rotated_cuboid": 0.06,
     "mug": 0.08, "wine_glass": 0.07, "star_prism": 0.09,
 }
+#: m: the object sizes a grasp trial takes (a hand-held object; 1e300 m failed every trial).
+SIZE_RANGE = (0.01, 0.5)
 
 
 @dc.dataclass(frozen=True)
@@ -126,6 +128,11 @@ class GraspTrialConfig:
                              f"{KINDS + ('mesh',)}")
         elif self.object_file is not None:
             raise ValueError(f"object_file: only object 'mesh' reads a file, got {self.object!r}")
+        if self.size is not None and not (isinstance(self.size, int | float)
+                                          and not isinstance(self.size, bool)
+                                          and SIZE_RANGE[0] <= self.size <= SIZE_RANGE[1]):
+            raise ValueError(f"size: expected an object size in [{SIZE_RANGE[0]:g}, "
+                             f"{SIZE_RANGE[1]:g}] m (held in one hand), got {self.size!r}")
         if self.space not in PARAMETER_SPACES:
             raise ValueError(f"space: expected one of {PARAMETER_SPACES}, got {self.space!r}")
         if self.space == "synergy" and self.hand != "shadow":

@@ -27,10 +27,22 @@ the object's own device for an instrumented object, else the JoyWarrior.
 
 import dataclasses as dc
 import math
+import numbers
 
 from pydrake.common.schema import Transform
 
-__all__ = ["AccelerometerConfig"]
+__all__ = ["AccelerometerConfig", "ESTIMATOR_MAXIMA"]
+
+#: The largest value of each estimator threshold that still means something (all > 0):
+#: durations (s) up to a minute, magnitudes (g) up to 1 g for the free-fall threshold
+#: (at or above 1 g an object at rest is "falling") and 16 g (the largest accelerometer
+#: range) for the others, angles (rad) up to pi, the command's stillness up to 1 rad or m.
+ESTIMATOR_MAXIMA = {
+    "window": 60.0, "rest_window": 60.0, "free_fall_duration": 60.0, "slip_duration": 60.0,
+    "settle_time": 60.0, "free_fall_threshold": 1.0, "rest_norm_tol": 16.0,
+    "rest_std_tol": 16.0, "slip_norm_tol": 16.0, "rest_angle_tol": math.pi,
+    "slip_angle_tol": math.pi, "still_tol": 1.0,
+}
 
 
 @dc.dataclass
@@ -77,6 +89,11 @@ class AccelerometerConfig:
             if key not in known:
                 raise ValueError(f"estimators: unknown parameter {key!r}; "
                                  f"expected some of {sorted(known)}")
+            value, high = self.estimators[key], ESTIMATOR_MAXIMA.get(key)
+            if high is not None and isinstance(value, numbers.Real) \
+                    and not isinstance(value, bool) and value > high:
+                raise ValueError(f"estimators.{key}: expected a value in (0, {high:g}], "
+                                 f"got {value!r}")
         return device_estimator_params(self.profile(kind),
                                        self.calibrated if calibrated is None else calibrated,
                                        self.estimators)
