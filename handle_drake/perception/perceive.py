@@ -33,7 +33,7 @@ import numpy as np
 from handle_drake.perception.detect import Detection, DetectorParams, TablePlane, detect_objects
 from handle_drake.perception.frames import DepthFrame, load_frame, save_frame
 
-__all__ = ["CameraView", "render_views", "perceive_frame", "detection_error",
+__all__ = ["CameraView", "render_views", "perceive_frame", "detection_error", "true_extent",
            "CATALOGUE_PRIMITIVE", "register"]
 
 #: The primitive a catalogue object should be recognised as.
@@ -141,9 +141,33 @@ def _true_yaw(kind: str, R_WO: np.ndarray) -> float | None:
     return yaw + (ROTATED_CUBOID_YAW if kind == "rotated_cuboid" else 0.0)
 
 
+def true_extent(spec, R_WO: np.ndarray | None = None) -> np.ndarray | None:
+    """What a detection's ``extent`` should read for a catalogue object
+    standing upright (m): the footprint's length and width (a box's two
+    horizontal edges, longer first; a round object's diameter, a mug's cup
+    without its handle) and the height. None for a mesh or an object not
+    upright (``R_WO`` tilted)."""
+    from handle_drake.objects import dimensions, total_height
+
+    if spec.kind not in CATALOGUE_PRIMITIVE:
+        return None
+    if R_WO is not None and abs(float(np.asarray(R_WO)[2, 2]) - 1.0) > 1e-6:
+        return None
+    d = dimensions(spec)
+    if CATALOGUE_PRIMITIVE[spec.kind] == "box":
+        length, width = sorted((d["width"], d["depth"]), reverse=True)
+    else:
+        length = width = d["diameter"]
+    return np.array([length, width, total_height(spec)])
+
+
 def detection_error(detection: Detection, scenario) -> dict:
-    """Errors of a detection against the scenario's object (its initial pose)."""
-    from handle_drake.station import object_initial_pose
+    """Errors of a detection against the scenario's object (its initial pose):
+    position (mm; ``xy_mm`` horizontal, ``z_mm``), yaw (deg, boxes),
+    ``extent_mm`` (detected minus true length, width, height, mm; None for a
+    mesh or a tilted object, see :func:`true_extent`) and whether the kind is
+    right."""
+    from handle_drake.station import object_initial_pose, object_spec
 
     X_WO = object_initial_pose(scenario)
     delta = detection.position - X_WO.translation()
@@ -157,10 +181,13 @@ def detection_error(detection: Detection, scenario) -> dict:
     # A mesh (or an instrumented device) is no primitive: its detected kind
     # cannot be right or wrong (kind_expected and kind_ok are None).
     expected = CATALOGUE_PRIMITIVE.get(kind)
+    extent = true_extent(object_spec(scenario), X_WO.rotation().matrix())
     return {"position_mm": [round(float(v) * 1000, 2) for v in delta],
             "xy_mm": round(float(np.linalg.norm(delta[:2])) * 1000, 2),
             "z_mm": round(float(delta[2]) * 1000, 2),
             "yaw_deg": None if yaw_error is None else round(yaw_error, 2),
+            "extent_mm": None if extent is None else
+            [round(float(v) * 1000, 2) for v in np.asarray(detection.extent) - extent],
             "kind_expected": expected,
             "kind_ok": None if expected is None else detection.kind == expected}
 
@@ -204,8 +231,10 @@ def _print_report(report: dict) -> None:
             else:
                 kind = (f"{'ok' if err['kind_ok'] else 'WRONG'} "
                         f"(expected {err['kind_expected']})")
+            extent = ("n/a" if err["extent_mm"] is None else
+                      " x ".join(f"{v:+.0f}" for v in err["extent_mm"]) + " mm")
             print(f"  error against the truth: xy {err['xy_mm']:.1f} mm, z {err['z_mm']:+.1f} mm, "
-                  f"yaw {yaw}, kind {kind}")
+                  f"yaw {yaw}, extent {extent}, kind {kind}")
     if not report["objects"]:
         print("no object detected")
 
