@@ -107,8 +107,9 @@ def render_views(scenario, params: DetectorParams | None = None, time: float = 0
 
 
 def robot_labels(station) -> np.ndarray:
-    """The render labels of the hand's and wrist's geometry in ``station``
-    (read from each perception geometry's ``("label", "id")`` property)."""
+    """The render labels of the hand's, wrist's and arm's geometry in ``station``,
+    and of the sorting box (a known fixture, as the robot is known), read from
+    each perception geometry's ``("label", "id")`` property."""
     from pydrake.geometry import Role
 
     from handle_drake.station import HAND_INSTANCE, WRIST_INSTANCE
@@ -116,7 +117,7 @@ def robot_labels(station) -> np.ndarray:
     plant = station.GetSubsystemByName("plant")
     inspector = station.GetSubsystemByName("scene_graph").model_inspector()
     labels = set()
-    for name in (HAND_INSTANCE, WRIST_INSTANCE):
+    for name in (HAND_INSTANCE, WRIST_INSTANCE, "arm", "sorting_box"):
         if not plant.HasModelInstanceNamed(name):
             continue
         for body_index in plant.GetBodyIndices(plant.GetModelInstanceByName(name)):

@@ -107,11 +107,14 @@ def validate_scene(scenario, validate_single, error) -> None:
 
 
 def _footprints(scenario):
-    """(name, centre xy, radius) of each free object's bounding circle."""
+    """(name, centre xy, radius) of the bounding circle of each object standing on the
+    table (an object placed in the air, ``on_table: false``, is the user's to place)."""
     from handle_drake.scene.plant import footprint_radius, initial_pose, spec_of
 
     out = []
     for name, o in scene_objects(scenario):
+        if not o.on_table:
+            continue
         X = initial_pose(o, scenario.table)
         out.append((name, X.translation()[:2], footprint_radius(spec_of(o))))
     return out
