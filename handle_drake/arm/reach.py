@@ -54,6 +54,7 @@ class ArmReach:
         mount = scenario.hand.mount
         self.spec = get_arm_spec(mount.kind)
         self.hand_spec = get_hand_spec(scenario.hand.kind)
+        self.coupling_ratio = scenario.hand.coupling_ratio
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(
             MultibodyPlantConfig(time_step=0.001, discrete_contact_approximation="sap"),
