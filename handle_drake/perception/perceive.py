@@ -143,12 +143,16 @@ def _true_yaw(kind: str, R_WO: np.ndarray) -> float | None:
 
 
 def detection_error(detection: Detection, scenario) -> dict:
-    """Errors of a detection against the scenario's object (its initial pose)."""
-    from handle_drake.station import object_initial_pose
+    """Errors of a detection against the scenario's object (its initial pose); with
+    several objects (``objects:``), against the one nearest to it on the table."""
+    from handle_drake.scene.config import scene_objects
+    from handle_drake.scene.plant import initial_pose
 
-    X_WO = object_initial_pose(scenario)
+    truth = [(o, initial_pose(o, scenario.table)) for _, o in scene_objects(scenario)]
+    obj, X_WO = min(truth, key=lambda t: float(np.linalg.norm(
+        t[1].translation()[:2] - detection.position[:2])))
     delta = detection.position - X_WO.translation()
-    kind = scenario.object.kind
+    kind = obj.kind
     yaw_true = _true_yaw(kind, X_WO.rotation().matrix())
     yaw_error = None
     if yaw_true is not None and detection.kind == "box":
@@ -177,7 +181,7 @@ def _report(views, scenario=None) -> dict:
                            "height": float(view.plane.offset / max(view.plane.normal[2], 1e-9))})
         for detection in view.detections:
             entry = {"camera": view.camera, **detection.as_dict()}
-            if scenario is not None and scenario.object is not None:
+            if scenario is not None and (scenario.object is not None or scenario.objects):
                 entry["error"] = detection_error(detection, scenario)
             objects.append(entry)
     return {"objects": objects, "tables": tables, "messages": messages}
