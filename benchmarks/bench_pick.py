@@ -71,6 +71,9 @@ def main(argv=None) -> int:
             rows.append(result)
             print(f"seed {seed:2d} {mode:9s} {result.get('true_kind', '-'):7s} "
                   f"{result.get('grasp_class', '-'):18s} {result['outcome']}", flush=True)
+            partial = Path(args.out) / "pick_partial.json"
+            partial.parent.mkdir(parents=True, exist_ok=True)
+            partial.write_text(json.dumps(rows, indent=1, default=str))  # survives a stop
     print("\nmode       in the box   sphere   cuboid")
     summary = {}
     for mode in args.modes.split(","):
