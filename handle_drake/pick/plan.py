@@ -84,9 +84,9 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
     centre = hole_centres(scenario)[kind]
     z = centre[2] + resting_height(spec) + DROP_HEIGHT
     yaw0 = _yaw(X_WO.rotation())
-    if kind == "cuboid":
+    if kind == "cuboid":  # its square hole takes it at every quarter turn
         box_yaw = _yaw(box_pose(scenario).rotation())
-        yaws = [box_yaw, box_yaw + math.pi]
+        yaws = [box_yaw + k * math.pi / 2 for k in range(4)]
     else:
         yaws = [yaw0 + k * math.pi / 2 for k in (0, 1, -1, 2)]
     yaws.sort(key=lambda y: abs((y - yaw0 + math.pi) % (2 * math.pi) - math.pi))

@@ -31,8 +31,8 @@ __all__ = ["Hole", "SortingBoxConfig", "HOLE_SHAPES", "validate_scene", "scene_o
            "object_instance_name"]
 
 #: The hole each catalogue kind passes through.
-HOLE_SHAPES = {"sphere": "circle", "cylinder": "circle", "cuboid": "rectangle",
-               "rotated_cuboid": "rectangle", "star_prism": "star"}
+HOLE_SHAPES = {"sphere": "circle", "cylinder": "circle", "cuboid": "square",
+               "rotated_cuboid": "square", "star_prism": "star"}
 
 
 @dc.dataclass

@@ -1,7 +1,7 @@
 """The scene's further objects and the toy-sorting box in a plant.
 
 The box's lid is cut by shaped holes. Each hole is a polygon star-shaped about
-its centre (a circle as a 24-gon, a rectangle, a five-pointed star); the lid
+its centre (a circle as a 24-gon, a square, a five-pointed star); the lid
 around it is tiled by convex prisms, one per polygon edge: the part of the
 hole's cell between the edge and the cell's border inside the wedge the edge
 spans from the hole's centre (the intersection of the wedge, the cell and the
@@ -75,9 +75,11 @@ def hole_polygon(hole) -> np.ndarray:
         r = (d["diameter"] / 2 + c) / math.cos(math.pi / _CIRCLE_SIDES)
         a = 2 * math.pi * (np.arange(_CIRCLE_SIDES) + 0.5) / _CIRCLE_SIDES
         return r * np.column_stack([np.cos(a), np.sin(a)])
-    if shape == "rectangle":
-        hx, hy = d["width"] / 2 + c, d["depth"] / 2 + c
-        return np.array([[hx, -hy], [hx, hy], [-hx, hy], [-hx, -hy]])
+    if shape == "square":
+        # The toy's square hole: the cuboid's footprint (width x depth) fits at every
+        # quarter turn.
+        h = max(d["width"], d["depth"]) / 2 + c
+        return np.array([[h, -h], [h, h], [-h, h], [-h, -h]])
     # A star: the prism's outline grown by the clearance along each vertex's ray.
     r_out, r_in = d["diameter"] / 2 + c, d["inner_diameter"] / 2 + c
     angles = math.pi * np.arange(10) / 5

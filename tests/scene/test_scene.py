@@ -47,8 +47,8 @@ def test_hole_matches_its_object_with_the_clearance():
     circle = hole_polygon(Hole("cylinder", 0.05, clearance=0.01))
     # The polygon is circumscribed about the circle of the diameter plus clearance.
     assert np.min(np.linalg.norm(circle, axis=1)) >= 0.035 - 1e-12
-    rect = hole_polygon(Hole("cuboid", 0.06, clearance=0.01))
-    np.testing.assert_allclose(np.ptp(rect, axis=0), [0.06 + 0.02, 0.036 + 0.02])
+    square = hole_polygon(Hole("cuboid", 0.06, clearance=0.01))
+    np.testing.assert_allclose(np.ptp(square, axis=0), [0.06 + 0.02, 0.06 + 0.02])
     star = hole_polygon(Hole("star_prism", 0.08, clearance=0.01))
     np.testing.assert_allclose(np.max(np.linalg.norm(star, axis=1)), 0.05)
 
