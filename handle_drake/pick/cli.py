@@ -172,6 +172,8 @@ def _cmd_pick(args) -> int:
         raise ValueError("pick: the scenario has no camera to perceive with; add one or "
                          "give --true-poses")
     if args.scene_seed is not None:
+        if args.scene_seed < 0:
+            raise ValueError(f"--scene-seed: expected an integer >= 0, got {args.scene_seed}")
         from handle_drake.pick.scenes import random_scene
 
         scenario = random_scene(scenario, args.scene_seed)

@@ -89,6 +89,8 @@ def test_pick_command_puts_the_sphere_in_the_box(capsys):
     (["--override", "sorting_box: null"], "--place box: the scenario has no sorting_box"),
     (["--override", "cameras: []"], "no camera to perceive with"),
     (["--true-poses", "--object", "9"], "--object: 9 is not one of the 4 objects"),
+    (["--true-poses", "--object", "-1"], "--object: -1 is not one of the 4 objects"),
+    (["--scene-seed", "-3"], "--scene-seed: expected an integer >= 0"),
 ])
 def test_pick_refuses_bad_input_with_exit_2(args, message, capsys):
     code = main(["pick", str(PATH), *args])
