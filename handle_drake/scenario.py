@@ -55,6 +55,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -64,6 +65,7 @@ from handle_drake.can_hand.config import CanHandDriverConfig
 from handle_drake.instruments.config import AccelerometerConfig
 from handle_drake.scene.config import Hole, SortingBoxConfig
 from handle_drake.scenario_checks import (
+    check_pose,
     check_ranges,
     check_yaml_text,
     read_text_file,
@@ -269,6 +271,11 @@ class GraspMetric:
     contact surface model of radius ``surface_radius``, moments scaled by half the
     object size), averaged over ``hold_samples`` instants spread over the last
     ``hold_window`` seconds of the run (its last one at ``simulation_duration``).
+
+    ``placements`` (the robust objective of ``babble --placement-error``): sideways
+    moves ``[dx, dy]`` (m) of the guarded grasp's ``start_pose``; the run is made once
+    per placement and the metric is the mean of their metrics. Empty: one run, the
+    scenario as it is.
     """
 
     hold_samples: int = 8
@@ -276,6 +283,7 @@ class GraspMetric:
     surface_radius: float = 0.004  # m; 0: raw mean contacts
     gamma: float = 0.002  # m, torsional friction
     num_edges: int = 8  # friction-cone edges
+    placements: list[list[float]] = dc.field(default_factory=list)  # [[dx, dy], ...] m
 
 
 @dc.dataclass
@@ -396,6 +404,8 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
         return defaults
     text = translate_deprecated_keys(text, source)
     check_yaml_text(text, Scenario, source)
+    if yaml.compose(text, Loader=yaml.SafeLoader) is None:  # comments only: as empty
+        return defaults
     try:
         return yaml_load_typed(schema=Scenario, data=text, defaults=defaults)
     except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError
@@ -406,6 +416,7 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
 def _check_transform(name: str, transform: Transform) -> None:
     if not transform.IsDeterministic():  # GetDeterministicValue would abort the process
         raise ScenarioError(f"{name}: expected a deterministic pose, got a random one")
+    check_pose(name, transform)  # names a NaN angle or axis (Drake: "NaN is detected ...")
     try:
         X = transform.GetDeterministicValue()
     except Exception as error:
@@ -716,3 +727,15 @@ def _validate_metric(scenario: Scenario) -> None:
             raise ScenarioError(f"metric.{name} must be finite and >= 0, got {value}")
     if m.num_edges < 3:
         raise ScenarioError(f"metric.num_edges: expected >= 3, got {m.num_edges}")
+    if m.placements:
+        if not isinstance(scenario.controller, GuardedGraspController):
+            raise ScenarioError("metric.placements: moving the start placement needs a "
+                                "controller: !GuardedGraspController (its start_pose)")
+        if len(m.placements) > 64:
+            raise ScenarioError(f"metric.placements: expected at most 64 placements, got "
+                                f"{len(m.placements)}")
+        for i, placement in enumerate(m.placements):
+            if len(placement) != 2 or not all(math.isfinite(v) and abs(v) <= 0.05
+                                              for v in placement):
+                raise ScenarioError(f"metric.placements[{i}]: expected [dx, dy] within "
+                                    f"+-0.05 m, got {short(placement)}")
