@@ -92,7 +92,7 @@ def main(argv=None) -> int:
                     qs.append(result.q)
                     seed = result.q
                 if not reason:
-                    for a, b in zip(qs, qs[1:]):
+                    for a, b in zip(qs, qs[1:], strict=False):
                         if not reach.path_is_free(a, b, q_pre):
                             reason = "straight joint path collides"
                 row.update(reachable=not reason, reason=reason, ik_s=ik_s)

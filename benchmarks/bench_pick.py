@@ -89,7 +89,8 @@ def main(argv=None) -> int:
     if planned:
         for key in ("grasp", "ik", "path"):
             values = [r["planning_s"][key] for r in planned]
-            print(f"planning {key:5s}: median {np.median(values):.2f} s, max {np.max(values):.2f} s")
+            print(f"planning {key:5s}: median {np.median(values):.2f} s, "
+                  f"max {np.max(values):.2f} s")
         ik_path = [r["planning_s"]["ik"] + r["planning_s"]["path"] for r in planned]
         print(f"IK + paths: median {np.median(ik_path):.2f} s, max {np.max(ik_path):.2f} s")
     simulated = [r for r in rows if "sim_s" in r]

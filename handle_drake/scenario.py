@@ -63,7 +63,6 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from handle_drake.arm.config import Arm
 from handle_drake.can_hand.config import CanHandDriverConfig
 from handle_drake.instruments.config import AccelerometerConfig
-from handle_drake.scene.config import Hole, SortingBoxConfig
 from handle_drake.scenario_checks import (
     check_pose,
     check_ranges,
@@ -72,6 +71,7 @@ from handle_drake.scenario_checks import (
     short,
     translate_deprecated_keys,
 )
+from handle_drake.scene.config import Hole, SortingBoxConfig
 
 __all__ = [
     "AccelerometerConfig",

@@ -44,7 +44,7 @@ def _timeline(plan, velocity):
     """(times, arm knots, hand knots, labels->time)."""
     times, arm, hand, marks = [0.0], [plan.waypoints[0].q], [plan.waypoints[0].hand], {}
     t = 0.0
-    for a, b in zip(plan.waypoints, plan.waypoints[1:]):
+    for a, b in zip(plan.waypoints, plan.waypoints[1:], strict=False):
         points = [*(b.path or []), b.q]
         previous = a.q
         for q in points:

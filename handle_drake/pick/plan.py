@@ -108,9 +108,9 @@ def free_path(reach, q_from, q_to, q_hand, num_control_points: int = 8, samples:
     configurations, ends excluded) by Drake's ``KinematicTrajectoryOptimization``
     (B-spline, minimum duration + length, joint position and velocity limits,
     the minimum-distance constraint at ``samples`` points), or None."""
+    from pydrake.multibody.inverse_kinematics import MinimumDistanceLowerBoundConstraint
     from pydrake.planning import KinematicTrajectoryOptimization
     from pydrake.solvers import SnoptSolver, Solve
-    from pydrake.multibody.inverse_kinematics import MinimumDistanceLowerBoundConstraint
 
     plant = reach.plant
     n = plant.num_positions()
@@ -119,8 +119,8 @@ def free_path(reach, q_from, q_to, q_hand, num_control_points: int = 8, samples:
     prog = trajopt.get_mutable_prog()
     trajopt.AddDurationCost(1.0)
     trajopt.AddPathLengthCost(1.0)
-    lower = np.where(np.isfinite(plant.GetPositionLowerLimits()), plant.GetPositionLowerLimits(), -10)
-    upper = np.where(np.isfinite(plant.GetPositionUpperLimits()), plant.GetPositionUpperLimits(), 10)
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    lower, upper = np.where(np.isfinite(lower), lower, -10), np.where(np.isfinite(upper), upper, 10)
     lower[reach._hand_q] = upper[reach._hand_q] = q_hand
     trajopt.AddPositionBounds(lower, upper)
     velocity = np.full(n, 10.0)
@@ -148,7 +148,8 @@ def free_path(reach, q_from, q_to, q_hand, num_control_points: int = 8, samples:
     times = np.linspace(trajectory.start_time(), trajectory.end_time(), samples)
     path = [trajectory.value(t).ravel()[reach._arm_q] for t in times[1:-1]]
     points = [np.asarray(q_from)] + path + [np.asarray(q_to)]
-    if not all(reach.path_is_free(p, q, q_hand, clearance=0.0) for p, q in zip(points, points[1:])):
+    segments = zip(points, points[1:], strict=False)
+    if not all(reach.path_is_free(p, q, q_hand, clearance=0.0) for p, q in segments):
         return None
     return path
 
@@ -232,7 +233,7 @@ def _connect(reach, waypoints, seconds) -> str:
     start = time.perf_counter()
     hand = get_hand_spec(reach.hand_spec.name)
     try:
-        for a, b in zip(waypoints, waypoints[1:]):
+        for a, b in zip(waypoints, waypoints[1:], strict=False):
             if np.allclose(a.q, b.q):
                 continue
             # The posture held while the arm moves from a to b is a's command.

@@ -101,8 +101,9 @@ def sdf_text() -> str:
     for i, (joint, parent, axis, offset, lo, hi, velocity, effort, mass) in enumerate(JOINTS):
         child = f"link{i + 1}"
         z_in_world += offset
-        parts.append(_link(child, mass).replace(
-            f'<link name="{child}">', f'<link name="{child}">\n      <pose>0 0 {z_in_world:.4f} 0 0 0</pose>'))
+        pose = f"\n      <pose>0 0 {z_in_world:.4f} 0 0 0</pose>"
+        parts.append(_link(child, mass).replace(f'<link name="{child}">',
+                                                f'<link name="{child}">{pose}'))
         parts += [f'    <joint name="{joint}" type="revolute">',
                   f"      <parent>{parent}</parent>", f"      <child>{child}</child>",
                   "      <axis>", f"        <xyz>{axis}</xyz>",
@@ -111,7 +112,7 @@ def sdf_text() -> str:
                   f"<velocity>{velocity:.6f}</velocity><effort>{effort}</effort></limit>",
                   "      </axis>", "    </joint>"]
     flange_z = BASE_TO_SHOULDER + UPPER_ARM + FOREARM + WRIST_TO_FLANGE
-    parts += [f'    <frame name="flange" attached_to="link6">',
+    parts += ['    <frame name="flange" attached_to="link6">',
               f"      <pose relative_to=\"__model__\">0 0 {flange_z:.4f} 0 0 0</pose>",
               "    </frame>", "  </model>", "</sdf>", ""]
     return "\n".join(parts)

@@ -5,7 +5,6 @@ import warnings
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
@@ -37,9 +36,9 @@ def _arm_plant():
 def _flange_closed_form(q):
     """Flange pose from the link lengths: Rz(S1) Tz(L0) Ry(S2) Tz(L1) Ry(E1) Rz(E2) Tz(L2)
     Ry(W1) Rz(W2) Tz(L3)."""
-    def T(R=np.eye(3), p=(0, 0, 0)):
+    def T(R=None, p=(0, 0, 0)):
         out = np.eye(4)
-        out[:3, :3], out[:3, 3] = R, p
+        out[:3, :3], out[:3, 3] = np.eye(3) if R is None else R, p
         return out
 
     def rz(a):
@@ -117,7 +116,8 @@ def _scenario(hand="shadow", initial=HOME, extra=""):
     return LoadScenario(data=f"""
 hand:
   kind: {hand}
-  mount: !Arm {{kind: pa10, X_WB: {{translation: [-0.55, 0, 0]}}, initial_position: {list(initial)}}}
+  mount: !Arm {{kind: pa10, X_WB: {{translation: [-0.55, 0, 0]}},
+                initial_position: {list(initial)}}}
 object: {{kind: cylinder, size: 0.05}}
 simulation_duration: 0.4
 {extra}""")
