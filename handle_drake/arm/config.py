@@ -65,8 +65,9 @@ def validate_arm(arm: Arm, error) -> None:
                         f"({', '.join(spec.joint_names)}), got {list(values)[:8]}")
         if name != "initial_position" and any(v <= 0 for v in values):
             raise error(f"hand.mount.{name}: expected values > 0, got {list(values)}")
+    # An empty initial_position (the default, all 0) has nothing to check.
     for i, (q, lo, hi) in enumerate(zip(arm.initial_position, spec.lower, spec.upper,
-                                            strict=True)):
+                                        strict=False)):
         if not lo <= q <= hi:
             raise error(f"hand.mount.initial_position[{i}] ({spec.joint_names[i]}): "
                         f"{q:g} rad is outside the joint's range [{lo:.4f}, {hi:.4f}]")
