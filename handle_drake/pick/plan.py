@@ -102,12 +102,21 @@ def _raised(X: RigidTransform, dz: float) -> RigidTransform:
     return RigidTransform(X.rotation(), X.translation() + [0, 0, dz])
 
 
-def free_path(reach, q_from, q_to, q_hand, num_control_points: int = 8, samples: int = 16,
-              clearance: float = 0.002):
+def free_path(reach, q_from, q_to, q_hand, clearance: float = 0.002):
     """A collision-free joint path from ``q_from`` to ``q_to`` (list of arm
     configurations, ends excluded) by Drake's ``KinematicTrajectoryOptimization``
     (B-spline, minimum duration + length, joint position and velocity limits,
-    the minimum-distance constraint at ``samples`` points), or None."""
+    the minimum-distance constraint at sample points; 10 control points and 20
+    samples, then 14 and 28), or None. The result is checked densely
+    (:meth:`ArmReach.path_is_free` between consecutive samples)."""
+    for num_control_points, samples in ((10, 20), (14, 28)):
+        path = _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearance)
+        if path is not None:
+            return path
+    return None
+
+
+def _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearance):
     from pydrake.multibody.inverse_kinematics import MinimumDistanceLowerBoundConstraint
     from pydrake.planning import KinematicTrajectoryOptimization
     from pydrake.solvers import SnoptSolver, Solve

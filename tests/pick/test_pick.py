@@ -96,3 +96,30 @@ def test_pick_refuses_bad_input_with_exit_2(args, message, capsys):
     code = main(["pick", str(PATH), *args])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
+    """Hand low over the table on either side of the sorting box: the straight joint
+    segment drives it through the box; KinematicTrajectoryOptimization finds a way."""
+    import dataclasses as dc
+
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from handle_drake.pick.plan import free_path
+
+    reach = ArmReach(dc.replace(hamburg, cameras=[]))
+    hand = np.zeros(len(reach.hand_spec.joint_names))
+    ready = np.array(hamburg.hand.mount.initial_position)
+    a = reach.solve_from_seeds(RigidTransform(RollPitchYaw(np.pi / 2, 0, np.pi / 2),
+                                              [-0.4, -0.03, 0.13]), [ready], hand)
+    b = reach.solve_from_seeds(RigidTransform(RollPitchYaw(np.pi / 2, 0, np.pi / 2),
+                                              [-0.4, 0.6, 0.13]), [a.q], hand)
+    assert a.ok and b.ok
+    assert not reach.path_is_free(a.q, b.q, hand)
+    path = free_path(reach, a.q, b.q, hand)
+    assert path is not None and len(path) > 2
+    points = [a.q, *path, b.q]
+    for p, q in zip(points, points[1:], strict=False):
+        assert reach.path_is_free(p, q, hand)
+        assert np.all(q >= np.array(reach.spec.lower) - 1e-6)
+        assert np.all(q <= np.array(reach.spec.upper) + 1e-6)
