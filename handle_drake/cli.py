@@ -28,6 +28,7 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.inhand.cli",
     "handle_drake.perception.perceive",
     "handle_drake.midi.cli",
+    "handle_drake.pick.cli",
 )
 
 

@@ -60,6 +60,7 @@ from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 
+from handle_drake.arm.config import Arm
 from handle_drake.can_hand.config import CanHandDriverConfig
 from handle_drake.instruments.config import AccelerometerConfig
 from handle_drake.scenario_checks import (
@@ -70,9 +71,13 @@ from handle_drake.scenario_checks import (
     short,
     translate_deprecated_keys,
 )
+from handle_drake.scene.config import Hole, SortingBoxConfig
 
 __all__ = [
     "AccelerometerConfig",
+    "Arm",
+    "Hole",
+    "SortingBoxConfig",
     "CONTACT_MODELS",
     "CameraConfig",
     "CanHandDriver",
@@ -143,7 +148,8 @@ class HandConfig:
     # Shadow: xFJ1 = coupling_ratio * xFJ2 (1.0 for the C6 hand, 1.1 for the C5
     # hand). None takes the hand's default; the Barrett distal ratio is fixed.
     coupling_ratio: float | None = None
-    mount: FixedMount | FloatingWrist = dc.field(default_factory=FixedMount)
+    # Or !Arm: the hand bolted to a robot arm's flange (handle_drake.arm).
+    mount: FixedMount | FloatingWrist | Arm = dc.field(default_factory=FixedMount)
     # Initial joint positions (rad) by actuated joint name; others start at 0.
     initial_position: dict[str, float] = dc.field(default_factory=dict)
 
@@ -325,6 +331,11 @@ def default_plant_config(**fields) -> MultibodyPlantConfig:
 class Scenario:
     hand: HandConfig = dc.field(default_factory=HandConfig)
     object: ObjectConfig | None = dc.field(default_factory=ObjectConfig)
+    # Further objects on the table (instances object_1, object_2, ...; see
+    # handle_drake.scene.config); single-object commands act on ``object``.
+    objects: list[ObjectConfig] = dc.field(default_factory=list)
+    # The toy-sorting box, a fixed body with shaped holes (handle_drake.scene).
+    sorting_box: SortingBoxConfig | None = None
     table: TableConfig | None = dc.field(default_factory=TableConfig)
     # The plant (Drake's own config; AddMultibodyPlant reads it).
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
@@ -436,6 +447,10 @@ def validate_scenario(scenario: Scenario) -> None:
         except ValueError as error:
             raise ScenarioError(f"hand.coupling_ratio: {error}") from None
     _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
+    if isinstance(scenario.hand.mount, Arm):
+        from handle_drake.arm.config import validate_arm
+
+        validate_arm(scenario.hand.mount, ScenarioError)
     for name, value in scenario.hand.initial_position.items():
         if name not in spec.actuated_joint_names:
             raise ScenarioError(
@@ -501,6 +516,10 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError("driver.max_joint_velocity must be finite and >= 0")
         _check_positive("driver.control_period", scenario.driver.control_period)
     check_ranges(scenario)
+    if scenario.objects or scenario.sorting_box is not None:
+        from handle_drake.scene.config import validate_scene
+
+        validate_scene(scenario, validate_scenario, ScenarioError)
 
 
 def _validate_plant_config(config) -> None:

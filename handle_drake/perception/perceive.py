@@ -107,8 +107,9 @@ def render_views(scenario, params: DetectorParams | None = None, time: float = 0
 
 
 def robot_labels(station) -> np.ndarray:
-    """The render labels of the hand's and wrist's geometry in ``station``
-    (read from each perception geometry's ``("label", "id")`` property)."""
+    """The render labels of the hand's, wrist's and arm's geometry in ``station``,
+    and of the sorting box (a known fixture, as the robot is known), read from
+    each perception geometry's ``("label", "id")`` property."""
     from pydrake.geometry import Role
 
     from handle_drake.station import HAND_INSTANCE, WRIST_INSTANCE
@@ -116,7 +117,7 @@ def robot_labels(station) -> np.ndarray:
     plant = station.GetSubsystemByName("plant")
     inspector = station.GetSubsystemByName("scene_graph").model_inspector()
     labels = set()
-    for name in (HAND_INSTANCE, WRIST_INSTANCE):
+    for name in (HAND_INSTANCE, WRIST_INSTANCE, "arm", "sorting_box"):
         if not plant.HasModelInstanceNamed(name):
             continue
         for body_index in plant.GetBodyIndices(plant.GetModelInstanceByName(name)):
@@ -162,16 +163,20 @@ def true_extent(spec, R_WO: np.ndarray | None = None) -> np.ndarray | None:
 
 
 def detection_error(detection: Detection, scenario) -> dict:
-    """Errors of a detection against the scenario's object (its initial pose):
+    """Errors of a detection against the scenario's object (its initial pose); with
+    several objects (``objects:``), against the one nearest to it on the table:
     position (mm; ``xy_mm`` horizontal, ``z_mm``), yaw (deg, boxes),
     ``extent_mm`` (detected minus true length, width, height, mm; None for a
     mesh or a tilted object, see :func:`true_extent`) and whether the kind is
     right."""
-    from handle_drake.station import object_initial_pose, object_spec
+    from handle_drake.scene.config import scene_objects
+    from handle_drake.scene.plant import initial_pose, spec_of
 
-    X_WO = object_initial_pose(scenario)
+    truth = [(o, initial_pose(o, scenario.table)) for _, o in scene_objects(scenario)]
+    obj, X_WO = min(truth, key=lambda t: float(np.linalg.norm(
+        t[1].translation()[:2] - detection.position[:2])))
     delta = detection.position - X_WO.translation()
-    kind = scenario.object.kind
+    kind = obj.kind
     yaw_true = _true_yaw(kind, X_WO.rotation().matrix())
     yaw_error = None
     if yaw_true is not None and detection.kind == "box":
@@ -181,7 +186,7 @@ def detection_error(detection: Detection, scenario) -> dict:
     # A mesh (or an instrumented device) is no primitive: its detected kind
     # cannot be right or wrong (kind_expected and kind_ok are None).
     expected = CATALOGUE_PRIMITIVE.get(kind)
-    extent = true_extent(object_spec(scenario), X_WO.rotation().matrix())
+    extent = true_extent(spec_of(obj), X_WO.rotation().matrix())
     return {"position_mm": [round(float(v) * 1000, 2) for v in delta],
             "xy_mm": round(float(np.linalg.norm(delta[:2])) * 1000, 2),
             "z_mm": round(float(delta[2]) * 1000, 2),
@@ -203,7 +208,7 @@ def _report(views, scenario=None) -> dict:
                            "height": float(view.plane.offset / max(view.plane.normal[2], 1e-9))})
         for detection in view.detections:
             entry = {"camera": view.camera, **detection.as_dict()}
-            if scenario is not None and scenario.object is not None:
+            if scenario is not None and (scenario.object is not None or scenario.objects):
                 entry["error"] = detection_error(detection, scenario)
             objects.append(entry)
     return {"objects": objects, "tables": tables, "messages": messages}
