@@ -26,7 +26,7 @@ import argparse
 import json
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas()
 
@@ -36,18 +36,18 @@ from pydrake.systems.analysis import Simulator  # noqa: E402
 from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink  # noqa: E402
 
-from handle_drake.instruments.accelerometer import DeviceAccelerometer  # noqa: E402
-from handle_drake.instruments.calibration import (  # noqa: E402
+from handle_drake.devices.accelerometer.calibration import (  # noqa: E402
     calibrate_device,
     device_estimator_params,
     residual_bias,
 )
-from handle_drake.instruments.estimators import EstimatorParams, true_roll_pitch  # noqa: E402
-from handle_drake.instruments.profiles import (  # noqa: E402
+from handle_drake.devices.accelerometer.estimators import EstimatorParams, true_roll_pitch  # noqa: E402
+from handle_drake.devices.accelerometer.profiles import (  # noqa: E402
     PROFILES,
     STANDARD_GRAVITY,
     device_bias,
 )
+from handle_drake.devices.accelerometer.sensor import DeviceAccelerometer  # noqa: E402
 
 ORIENTATIONS = [(0.0, 0.0, 0.0), (25.0, -15.0, 40.0), (-70.0, 50.0, -120.0)]
 SETUPS = ("raw, default thresholds", "raw, device thresholds", "calibrated")

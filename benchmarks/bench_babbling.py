@@ -69,13 +69,13 @@ import warnings
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.experiments.babbling import (  # noqa: E402
+from handle_drake.apps.babbling.babbling import (  # noqa: E402
     FRACTIONS,
     GridSurrogate,
     _config_key,
@@ -87,8 +87,7 @@ from handle_drake.experiments.babbling import (  # noqa: E402
     run_history,
     trials_to_within,
 )
-from handle_drake.experiments.grasp_trial import GraspTrial  # noqa: E402
-from handle_drake.experiments.report import (  # noqa: E402
+from handle_drake.apps.babbling.report import (  # noqa: E402
     OBJECT_ORDER,
     REPORT_TABLE3,
     ReportSettings,
@@ -96,13 +95,14 @@ from handle_drake.experiments.report import (  # noqa: E402
     _random_spec,
     _table3_spec,
 )
-from handle_drake.learning.bayesopt import (  # noqa: E402
+from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
+from handle_drake.learning.optim.bo import (  # noqa: E402
     BO_DEFAULTS_VERSION,
     _derived_seed,
     make_optimizer,
     v1_options,
 )
-from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
+from handle_drake.trial.grasp_trial import GraspTrial  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "babbling.json"
 

@@ -36,7 +36,7 @@ import sys
 import time
 import warnings
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
@@ -48,8 +48,8 @@ from handle_drake.learning.acquisition import (  # noqa: E402
     expected_improvement_point,
     maximize_acquisition,
 )
-from handle_drake.learning.bayesopt import BayesianOptimizer, RandomSearch  # noqa: E402
 from handle_drake.learning.gp import GaussianProcess  # noqa: E402
+from handle_drake.learning.optim.bo import BayesianOptimizer, RandomSearch  # noqa: E402
 from handle_drake.learning.test_functions import Branin, Hartmann3, Hartmann6  # noqa: E402
 
 RESULTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results", "bayesopt.json")

@@ -20,7 +20,7 @@ for both frame formats: ``classic`` (8-byte CAN 2.0 frames: Shadow 6 setpoint
 frame, one feedback frame). The table also gives the bus time one cycle
 would take on a real bus (classic 1 Mbit/s; FD 1 Mbit/s arbitration, 5 Mbit/s
 data; unstuffed .. worst-case stuffing). With ``--baseline REV`` the classic
-cases also run on ``handle_drake/can_hand`` as of git revision REV
+cases also run on ``handle_drake/devices/can_hand`` as of git revision REV
 ("before"), interleaved with the working tree ("after").
 
 The floor, with no project code, measured in the same run:
@@ -72,7 +72,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CODE = Path(os.environ.get("BENCH_CAN_CODE", ROOT))  # the handle_drake tree under test
 sys.path.insert(0, str(CODE))
 
-from handle_drake.testing import pick  # noqa: E402
+from handle_drake.base.testing import pick  # noqa: E402
 
 RATE = 1000.0  # Hz: command rate, server commit limit and firmware cycle
 DURATION = pick(4.0, 1.0)  # s per case
@@ -177,11 +177,11 @@ def _bus_kwargs(frame_format: str | None) -> dict:
 
 
 def case_inproc(kind: str, frame_format: str | None) -> dict:
-    from handle_drake.can_hand.client import CanHandClient
-    from handle_drake.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
-    from handle_drake.can_hand.firmware import SimulatedHandFirmware
-    from handle_drake.can_hand.layout import hand_layout
-    from handle_drake.can_hand.server import CanBusServer
+    from handle_drake.devices.can_hand.client import CanHandClient
+    from handle_drake.devices.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
+    from handle_drake.devices.can_hand.firmware import SimulatedHandFirmware
+    from handle_drake.devices.can_hand.layout import hand_layout
+    from handle_drake.devices.can_hand.server import CanBusServer
 
     layout = hand_layout(kind)
     bus = BusConfig("virtual", f"bench-{uuid.uuid4().hex}", **_bus_kwargs(frame_format))
@@ -203,7 +203,7 @@ def _spawn(args, module=True) -> subprocess.Popen:
     """A child on the code under test that prints a line with ``ready``."""
     env = dict(os.environ, PYTHONPATH=str(CODE), BENCH_CAN_CODE=str(CODE),
                OPENBLAS_NUM_THREADS="1")
-    command = ([sys.executable, "-m", "handle_drake.can_hand.cli"] if module
+    command = ([sys.executable, "-m", "handle_drake.devices.can_hand.cli"] if module
                else [sys.executable, str(Path(__file__).resolve())])
     process = subprocess.Popen([*command, *args], stdout=subprocess.PIPE,
                                stderr=subprocess.DEVNULL, text=True, env=env, cwd=CODE)
@@ -235,8 +235,8 @@ def _stop(processes) -> None:
 
 
 def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0) -> dict:
-    from handle_drake.can_hand.client import CanHandClient
-    from handle_drake.can_hand.layout import hand_layout
+    from handle_drake.devices.can_hand.client import CanHandClient
+    from handle_drake.devices.can_hand.layout import hand_layout
 
     layout = hand_layout(kind)
     group, bus_port = random_group()
@@ -254,7 +254,7 @@ def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0) -> dic
                                  "--max-rate", str(RATE), "--max-step", "0.5"]))
         rt = {"realtime_priority": rt_priority} if rt_priority else {}
         if rt_priority:  # the commanding thread too: it holds the GIL the client thread needs
-            from handle_drake.can_hand.bus import use_realtime_priority
+            from handle_drake.devices.can_hand.bus import use_realtime_priority
 
             use_realtime_priority(rt_priority)
         with CanHandClient(layout, "127.0.0.1", port, record_latency=True, **rt) as client:
@@ -373,8 +373,8 @@ def case_floor_tcp() -> dict:
 
 def bus_time_us(kind: str, frame_format: str) -> tuple[float, float]:
     """Bus time (us) of one command + one hand cycle: unstuffed, worst-case stuffing."""
-    from handle_drake.can_hand.layout import hand_layout
-    from handle_drake.can_hand.messages import cycle_bus_time, make_codec
+    from handle_drake.devices.can_hand.layout import hand_layout
+    from handle_drake.devices.can_hand.messages import cycle_bus_time, make_codec
 
     codec = make_codec(hand_layout(kind), frame_format)
     return (1e6 * cycle_bus_time(codec), 1e6 * cycle_bus_time(codec, worst_case_stuffing=True))
@@ -406,7 +406,7 @@ def baseline_tree(revision: str, directory: Path) -> Path:
     shutil.copytree(ROOT / "handle_drake", tree / "handle_drake",
                     ignore=shutil.ignore_patterns("__pycache__", "can_hand"))
     (tree / "models").symlink_to(ROOT / "models")
-    archive = subprocess.run(["git", "archive", revision, "handle_drake/can_hand"], cwd=ROOT,
+    archive = subprocess.run(["git", "archive", revision, "handle_drake/devices/can_hand"], cwd=ROOT,
                              capture_output=True, check=True).stdout
     subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
     return tree

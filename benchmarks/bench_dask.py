@@ -61,18 +61,18 @@ import time
 from concurrent.futures import wait
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.experiments.babbling import CachedTrial  # noqa: E402
-from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig  # noqa: E402
-from handle_drake.inhand.experiment import run_inhand  # noqa: E402
+from handle_drake.apps.babbling.babbling import CachedTrial  # noqa: E402
+from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.learning import run_experiment  # noqa: E402
 from handle_drake.learning.cluster import LocalPool, trial_executor  # noqa: E402
 from handle_drake.learning.executors import TrialResult, _evaluate  # noqa: E402
+from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig  # noqa: E402
 
 CONFIG = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
 EXECUTORS = ("local", "dask")

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor
 
 pin_blas(force=False)
@@ -55,11 +55,11 @@ def trial(args):
     overrides = rest[0] if rest else {}
     from pydrake.common.schema import Transform
 
-    from handle_drake.demo import held_through_lift
-    from handle_drake.grasp.execution import ReactiveGraspRunner, plan_params
+    from handle_drake.apps.demo import held_through_lift
+    from handle_drake.apps.planning.execution import ReactiveGraspRunner, plan_params
     from handle_drake.grasp.planning import plan_grasp, resting_pose
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import ObjectConfig
+    from handle_drake.trial.simulate import ScenarioRunner
 
     size = width / 0.6 if kind == "cuboid" else width  # cuboid depth = 0.6 * size
     # The plan sees the object at the origin with the perceived size; the
@@ -95,8 +95,8 @@ def trial(args):
 
 
 def main(argv=None) -> int:
+    from handle_drake.base.testing import reduced
     from handle_drake.grasp.taxonomy import GRASP_CLASSES
-    from handle_drake.testing import reduced
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", type=int, default=2)

@@ -32,17 +32,17 @@ import sys
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
-from handle_drake.inhand.gist import frames  # noqa: E402
-from handle_drake.inhand.optimizers import INHAND_OPTIMIZERS  # noqa: E402
-from handle_drake.inhand.task import EVALUATIONS, TASKS, InHandTask, InHandTrial  # noqa: E402
+from handle_drake.apps.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
+from handle_drake.apps.inhand.gist import frames  # noqa: E402
+from handle_drake.apps.inhand.task import EVALUATIONS, TASKS, InHandTask, InHandTrial  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
+from handle_drake.learning.optim.population import INHAND_OPTIMIZERS  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
@@ -55,7 +55,7 @@ def _bare_plant(trial: InHandTrial, x):
     from pydrake.systems.primitives import TrajectorySource
     from pydrake.trajectories import PiecewisePolynomial
 
-    from handle_drake.hands import actuated_to_joint_positions, get_hand_spec
+    from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
     from handle_drake.station import AddPlantModels
 
     scenario = trial.scenario()
@@ -128,7 +128,7 @@ def speed(rounds: int) -> dict:
 
 
 def _fresh(trial, x):
-    from handle_drake.inhand import task as task_module
+    from handle_drake.apps.inhand import task as task_module
 
     start = time.perf_counter()
     task_module._BUILD_CACHE.pop((trial.config, False), None)  # this trial's diagram only

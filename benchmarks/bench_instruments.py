@@ -21,7 +21,7 @@ Target (issue 11): at most 5 % slower than the station without it.
 reports where the sensor's time goes: the time inside Drake's ``AdvanceTo``
 itself (event dispatch, the plant; the profiler's own overhead inflates the
 Python side, so compare cases, not absolute figures), the Python callbacks of
-``handle_drake.instruments`` that Drake calls (per device sample), and how many
+``handle_drake.devices.accelerometer`` that Drake calls (per device sample), and how many
 of them run per sample (the instrument's events: 1 since the estimators run in
 the device's update; 4 before, at two instants).
 
@@ -36,13 +36,13 @@ import statistics
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
-from handle_drake.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
-from handle_drake.run import ScenarioRunner  # noqa: E402
+from handle_drake.apps.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
+from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 
 TRIAL_SECONDS = 2.0
 CASES = {
@@ -106,7 +106,7 @@ def profile() -> list[dict]:
         own = sum(stats[key][2] for key in advance)
         # Instrument functions Drake calls itself (their caller is AdvanceTo).
         callbacks = {key: value for key, value in stats.items()
-                     if "handle_drake/instruments/" in key[0].replace("\\", "/")
+                     if "handle_drake/devices/accelerometer/" in key[0].replace("\\", "/")
                      and any(caller in value[4] for caller in advance)}
         config = runner.scenario.object.accelerometer
         samples = (round(TRIAL_SECONDS * config.profile(runner.scenario.object.kind).rate_hz)

@@ -3,7 +3,7 @@
 Side by side in one process (ratios count on a shared machine):
 
 1. **Decomposition** of the generated torus, L-bracket and bowl
-   (``handle_drake.objects.mesh_examples``) and of the catalogue mug's cup wall
+   (``handle_drake.geometry.objects.mesh_examples``) and of the catalogue mug's cup wall
    re-meshed as one closed solid of revolution: CoACD as ``mesh_objects``
    runs it (cold, into an empty cache), the cached read, and the floor, one
    qhull hull (``scipy.spatial.ConvexHull``, what a single ``Convex`` would
@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
@@ -39,8 +39,8 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial import ConvexHull, Delaunay, QhullError  # noqa: E402
 
-from handle_drake.objects import ObjectSpec, mesh_examples  # noqa: E402
-from handle_drake.objects import mesh as mesh_objects  # noqa: E402
+from handle_drake.geometry.objects import ObjectSpec, mesh_examples  # noqa: E402
+from handle_drake.geometry.objects import mesh as mesh_objects  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -125,7 +125,7 @@ def decomposition(files: dict, n_points: int, vhacd: bool) -> list[dict]:
 
 
 def trial_times(files: dict, trials: int) -> list[dict]:
-    from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+    from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
     rows = []
     rng = np.random.default_rng(1)

@@ -48,10 +48,10 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from handle_drake.midi.hand_control import BuildMidiHandControl
-from handle_drake.midi.ports import in_process_pair
+from handle_drake.apps.figure9.hand_control import BuildMidiHandControl
+from handle_drake.base.testing import reduced
+from handle_drake.devices.midi.ports import in_process_pair
 from handle_drake.scenario import LoadScenario
-from handle_drake.testing import reduced
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = """
@@ -179,8 +179,8 @@ def update_cost(kind: str, updates: int, busy: bool) -> float:
         def send(value):
             source.put(value)
     else:
-        from handle_drake.midi.mapping import LoadMidiMapping
-        from handle_drake.midi.systems import MidiHandControl
+        from handle_drake.devices.midi.mapping import LoadMidiMapping
+        from handle_drake.devices.midi.systems import MidiHandControl
 
         device, host = in_process_pair()
         builder.AddSystem(MidiHandControl("shadow", LoadMidiMapping(), port=host, period=period,
@@ -210,7 +210,7 @@ def main() -> None:
              ("floor-queue-1ms", "floor", 0.001, None)]
     skipped = {}
     try:
-        from handle_drake.midi.ports import device_port_names
+        from handle_drake.devices.midi.ports import device_port_names
 
         device_port_names()
         cases.append(("midi-rtmidi-virtual-5ms", "midi", 0.005, "rtmidi"))

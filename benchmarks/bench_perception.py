@@ -6,7 +6,7 @@ Run: ``python benchmarks/bench_perception.py [--rounds N] [--repeats R]
 
 The scenario is ``diagrams/tabletop_perception.yaml`` (a Kinect v1, 640 x 480,
 1 m from a cuboid on the table); ``--scene-seed S`` renders instead a seeded
-cluttered table (2-5 objects, :func:`handle_drake.perception.scenes.random_scene`).
+cluttered table (2-5 objects, :func:`handle_drake.apps.perception.scenes.random_scene`).
 Per round, side by side in one process:
 
 * ``render rgb``: the colour image (RenderEngineVtk).
@@ -18,7 +18,7 @@ Per round, side by side in one process:
 * ``detect (plane per scene)``: :class:`TabletopDetector`: the plane fitted
   on the first frame and kept (checked on a sample of each frame).
 * ``baseline detect`` (with ``--baseline FILE``): ``detect_objects`` of another
-  version of ``detect.py`` (e.g. ``git show main:handle_drake/perception/detect.py``),
+  version of ``detect.py`` (e.g. ``git show main:handle_drake/geometry/detect.py``),
   on the same cloud, for a before/after in one run.
 
 Every round renders a new frame (the context's time moves, so the caches and
@@ -46,14 +46,14 @@ import sys
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.demo import diagrams_dir  # noqa: E402
-from handle_drake.perception.detect import TabletopDetector, detect_objects  # noqa: E402
+from handle_drake.apps.demo import diagrams_dir  # noqa: E402
+from handle_drake.geometry.detect import TabletopDetector, detect_objects  # noqa: E402
 
 
 class _GcCounter:
@@ -86,7 +86,7 @@ def _ports(args):
         diagram = MakeHandStation(scenario)
         expected = 1
     else:
-        from handle_drake.perception.scenes import TabletopScene, random_scene
+        from handle_drake.apps.perception.scenes import TabletopScene, random_scene
 
         objects = random_scene(args.scene_seed)
         diagram = TabletopScene(objects, seed=args.scene_seed).diagram

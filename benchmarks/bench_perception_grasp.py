@@ -1,6 +1,6 @@
 """Grasps planned from the camera against grasps planned from the truth.
 
-For every grasp class's object of ``handle_drake.grasp.cli.CLASS_OBJECTS``
+For every grasp class's object of ``handle_drake.apps.planning.cli.CLASS_OBJECTS``
 (cuboids and spheres, the kinds the planner grasps upright), at ``--poses``
 seeded table poses each (anywhere within 10 cm of the table's centre, any
 yaw): the tabletop Kinect (``diagrams/tabletop_perception.yaml``) perceives
@@ -21,7 +21,7 @@ import json
 import math
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
@@ -36,10 +36,10 @@ def trial(case):
     grasp_class, kind, size, x, y, yaw, seed = case
     from pydrake.common.schema import Transform
 
-    from handle_drake.demo import held_through_lift
-    from handle_drake.grasp.execution import run_plan
+    from handle_drake.apps.demo import held_through_lift
+    from handle_drake.apps.perception.grasping import perceive_object
+    from handle_drake.apps.planning.execution import run_plan
     from handle_drake.grasp.planning import plan_grasp, resting_pose
-    from handle_drake.perception.grasping import perceive_object
     from handle_drake.scenario import ObjectConfig
 
     out = dict(grasp_class=grasp_class, kind=kind, size=size, x=x, y=y, yaw=yaw)
@@ -69,7 +69,7 @@ def trial(case):
 
 
 def main(argv=None) -> int:
-    from handle_drake.grasp.cli import CLASS_OBJECTS
+    from handle_drake.apps.planning.cli import CLASS_OBJECTS
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=3)

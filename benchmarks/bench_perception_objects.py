@@ -8,7 +8,7 @@ yaw), the tabletop Kinect (``diagrams/tabletop_perception.yaml``) perceives
 it, and the babbling grasp trial (Barrett, guarded approach from above,
 close, BW metric over the hold; the BW metric is signed) runs with the hand centred on the perceived
 centre, turned with the perceived yaw where the footprint gives one
-(:func:`handle_drake.perception.grasping.perceived_grasp_trial`). From the
+(:func:`handle_drake.apps.perception.grasping.perceived_grasp_trial`). From the
 truth the same grasp is the trial at zero offset. Success = force closure.
 
 Run: ``python benchmarks/bench_perception_objects.py [--poses 5] [--seed 0]``;
@@ -25,7 +25,7 @@ import platform
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
@@ -35,9 +35,9 @@ RESULTS = Path(__file__).resolve().parent / "results" / "perception_objects.json
 
 
 def main(argv=None) -> int:
-    from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
-    from handle_drake.experiments.report import OBJECT_ORDER
-    from handle_drake.perception.grasping import perceived_grasp_trial
+    from handle_drake.apps.babbling.report import OBJECT_ORDER
+    from handle_drake.apps.perception.grasping import perceived_grasp_trial
+    from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--poses", type=int, default=5)

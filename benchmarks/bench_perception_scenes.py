@@ -1,10 +1,10 @@
 """Cluttered tables: seeded random scenes of 2-5 catalogue objects seen by the
 tabletop Kinect, every object scored against the truth.
 
-Each seed draws a scene (:func:`handle_drake.perception.scenes.random_scene`:
+Each seed draws a scene (:func:`handle_drake.apps.perception.scenes.random_scene`:
 kinds, sizes, yaws and positions within 16 cm of the table's centre,
 footprints at least 3 mm apart), renders one Kinect v1 frame (noise seeded by
-the scene's seed) and detects (:func:`handle_drake.perception.detect.detect`,
+the scene's seed) and detects (:func:`handle_drake.geometry.detect.detect`,
 the depth frame alone). Detections are matched to objects one-to-one
 (Hungarian on xy distance, 5 cm at most). Per object: found within 1 cm (xy),
 kind right (the primitive a catalogue kind should be seen as:
@@ -28,7 +28,7 @@ import platform
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
@@ -49,8 +49,8 @@ def _seeds(text: str) -> list[int]:
 
 
 def main(argv=None) -> int:
-    from handle_drake.perception.detect import detect
-    from handle_drake.perception.scenes import TabletopScene, match_detections, random_scene
+    from handle_drake.apps.perception.scenes import TabletopScene, match_detections, random_scene
+    from handle_drake.geometry.detect import detect
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="0-29", help="e.g. 0-29 or 100-119,7")

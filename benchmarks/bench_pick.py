@@ -1,9 +1,9 @@
 """Pick and place on seeded random scenes of the Hamburg table (issue 33 targets).
 
 For each seed (``--seeds``, default 0-19) the scene of 2-5 objects
-(:func:`handle_drake.pick.scenes.random_scene`) is picked once from perception
+(:func:`handle_drake.apps.pick.scenes.random_scene`) is picked once from perception
 and once from the true poses (``--modes``), the nearest pickable object each
-time, through :func:`handle_drake.pick.cli.pick`. Prints the success table
+time, through :func:`handle_drake.apps.pick.cli.pick`. Prints the success table
 (per mode and per kind), the planning times (grasp planner, arm IK, joint
 paths), the simulation's real-time rate next to a floor measured in the same
 run (the bare station, arm and hand only, no objects or box), and the load;
@@ -53,9 +53,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)
 
-    from handle_drake.demo import diagrams_dir
-    from handle_drake.pick.cli import pick
-    from handle_drake.pick.scenes import random_scene
+    from handle_drake.apps.demo import diagrams_dir
+    from handle_drake.apps.pick.cli import pick
+    from handle_drake.apps.pick.scenes import random_scene
     from handle_drake.scenario import LoadScenario
 
     base = LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml")

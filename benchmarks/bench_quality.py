@@ -30,7 +30,7 @@ import platform
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from pydrake.solvers import ClarabelSolver, MathematicalProgram  # noqa: E402
 from scipy.spatial import ConvexHull, QhullError  # noqa: E402
 
-from handle_drake.quality import (  # noqa: E402
+from handle_drake.geometry.quality import (  # noqa: E402
     ContactParams,
     bw_metric_batch,
     grasp_quality,

@@ -24,13 +24,13 @@ import statistics
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
-from handle_drake.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
-from handle_drake.run import ScenarioRunner  # noqa: E402
+from handle_drake.apps.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
+from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 
 TRIAL_SECONDS = 2.0
 
@@ -94,10 +94,10 @@ def _plant_case(variant: str) -> _Case:
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import MatrixGain, TrajectorySource
 
-    from handle_drake.hands import get_hand_spec
-    from handle_drake.run import script_trajectories
+    from handle_drake.base.hands import get_hand_spec
     from handle_drake.station import AddPlantModels, hand_initial_command, object_body
     from handle_drake.systems.hand_driver import WRIST_JOINTS, actuated_order
+    from handle_drake.trial.simulate import script_trajectories
 
     scenario = _scenario("point", 0.001)
     if variant == "no_contact":

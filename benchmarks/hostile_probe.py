@@ -192,7 +192,7 @@ def probe_cli(tmp):
 
 
 def probe_quality():
-    from handle_drake.quality import ContactParams, grasp_quality, quality_from_wrenches
+    from handle_drake.geometry.quality import ContactParams, grasp_quality, quality_from_wrenches
 
     P = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) / np.sqrt(3) * 0.05
     N = -P / 0.05
@@ -282,16 +282,16 @@ def probe_trial_log(tmp):
 def probe_can(tmp):
     import msgpack
 
-    from handle_drake.can_hand import protocol as P
+    from handle_drake.devices.can_hand import protocol as P
 
     group = f"239.255.{random.randint(0, 255)}.{random.randint(1, 254)}"
     bus_port = random.randint(20000, 60000)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     bus = ["--bus", "udp_multicast", "--channel", group, "--bus-port", str(bus_port)]
-    sim = subprocess.Popen([sys.executable, "-m", "handle_drake.can_hand.cli", "can-sim",
+    sim = subprocess.Popen([sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-sim",
                             "--hand", "barrett", "--rate", "200", *bus],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    server = subprocess.Popen([sys.executable, "-m", "handle_drake.can_hand.cli", "can-server",
+    server = subprocess.Popen([sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-server",
                                "--hand", "barrett", "--listen", "127.0.0.1:0",
                                "--hello-timeout", "1", *bus],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
@@ -660,7 +660,7 @@ def _listen(kind):
 def _frames(tmp):
     from PIL import Image
 
-    from handle_drake.perception.frames import DepthFrame, save_frame
+    from handle_drake.devices.camera.frames import DepthFrame, save_frame
 
     folder = tmp / "frames"
     folder.mkdir(exist_ok=True)
@@ -727,7 +727,7 @@ def probe_third_wave(tmp):
     """Issue 31's surfaces: dask:// listeners, glove files, depth frames, accelerometer,
     meshes, MIDI mappings, output paths, kill -9 of a pool's parent, messages."""
     import handle_drake.cli  # noqa: F401 - loaded once, before the forks
-    from handle_drake.inhand.glove import GLOVE_SENSORS, load_glove
+    from handle_drake.apps.inhand.glove import GLOVE_SENSORS, load_glove
     from handle_drake.scenario import LoadScenario
 
     tmp = Path(tmp)
@@ -791,8 +791,8 @@ def probe_third_wave(tmp):
         path.write_text(json.dumps(document))
 
         def use():
-            from handle_drake.inhand.gist import extract_gist
-            from handle_drake.inhand.mapping import glove_to_shadow
+            from handle_drake.apps.inhand.gist import extract_gist
+            from handle_drake.apps.inhand.mapping import glove_to_shadow
 
             recording = load_glove(path)
             extract_gist(recording.time, glove_to_shadow(recording))
@@ -815,7 +815,7 @@ def probe_third_wave(tmp):
                       _cmd(["perceive", "--frame", str(path)], [word], cwd=tmp)))
 
     # accelerometer: evdev paths, recordings, estimator thresholds
-    from handle_drake.instruments import evdev_driver
+    from handle_drake.devices.accelerometer import evdev_driver
 
     binary = tmp / "binary.rec"
     binary.write_bytes(os.urandom(300) + b"\xff\xfe")
@@ -838,7 +838,7 @@ def probe_third_wave(tmp):
     # meshes
     import trimesh
 
-    from handle_drake.objects.mesh import MeshObjectSpec
+    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     box = trimesh.creation.box((0.05, 0.05, 0.05))
     lines = [f"v {x} {y} {z}" for x, y, z in box.vertices]
@@ -982,7 +982,7 @@ def _probe_ctrl_c(tmp):
     torus = tmp / "torus.obj"
     trimesh.creation.torus(0.05, 0.015, major_sections=500, minor_sections=150).export(torus)
     code = ("import numpy as np, trimesh, sys\n"
-            "from handle_drake.objects.mesh import convex_decomposition\n"
+            "from handle_drake.geometry.objects.mesh import convex_decomposition\n"
             f"m = trimesh.load({str(torus)!r}, force='mesh')\n"
             "print('start', flush=True)\n"
             "try:\n    convex_decomposition(m.vertices, m.faces, directory=sys.argv[1])\n"

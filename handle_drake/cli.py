@@ -16,19 +16,19 @@ import importlib
 import sys
 from pathlib import Path
 
-from handle_drake.blas import pin_blas
-from handle_drake.cli_support import check_hardware_server, run_command, start_meshcat
+from handle_drake.apps.cli_support import check_hardware_server, run_command, start_meshcat
+from handle_drake.base.blas import pin_blas
 
 # Modules that add their own sub-commands with ``register(subparsers)``.
 AREA_COMMANDS: tuple[str, ...] = (
-    "handle_drake.grasp.cli",
-    "handle_drake.experiments.cli",
-    "handle_drake.can_hand.cli",
-    "handle_drake.instruments.cli",
-    "handle_drake.inhand.cli",
-    "handle_drake.perception.perceive",
-    "handle_drake.midi.cli",
-    "handle_drake.pick.cli",
+    "handle_drake.apps.planning.cli",
+    "handle_drake.apps.babbling.cli",
+    "handle_drake.devices.can_hand.cli",
+    "handle_drake.apps.figure8.cli",
+    "handle_drake.apps.inhand.cli",
+    "handle_drake.apps.perception.perceive",
+    "handle_drake.apps.figure9.cli",
+    "handle_drake.apps.pick.cli",
 )
 
 
@@ -56,9 +56,9 @@ def _add_demo(subparsers) -> None:
 
 
 def _cmd_simulate(args) -> int:
-    from handle_drake.harness import DEFAULT_LOG
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.harness import DEFAULT_LOG
+    from handle_drake.trial.simulate import ScenarioRunner
 
     scenario = LoadScenario(filename=args.scenario, data=args.override)
     if args.duration is not None:
@@ -69,7 +69,7 @@ def _cmd_simulate(args) -> int:
     instrumented = scenario.object is not None and scenario.object.accelerometer is not None
     log = DEFAULT_LOG
     if instrumented:
-        from handle_drake.instruments.station import INSTRUMENT_LOG
+        from handle_drake.devices.accelerometer.wiring import INSTRUMENT_LOG
 
         log = DEFAULT_LOG + INSTRUMENT_LOG
     # A MIDI controller model on the table (simulation): a receiver counts what its MIDI
@@ -77,7 +77,7 @@ def _cmd_simulate(args) -> int:
     midi = (scenario.midi_controller is not None and not args.hardware
             and scenario.controller is None)
     if midi:
-        from handle_drake.midi.experiments import MidiScenarioRunner
+        from handle_drake.apps.figure9.experiments import MidiScenarioRunner
 
         runner = MidiScenarioRunner(scenario, meshcat, log=log)
     else:
@@ -99,7 +99,7 @@ def _cmd_simulate(args) -> int:
               f"({'force closure' if score.force_closure else 'not in force closure'}); "
               f"touching: {', '.join(sorted(score.contacts)) or 'nothing'}")
     if instrumented:
-        from handle_drake.instruments.station import describe_instruments
+        from handle_drake.devices.accelerometer.wiring import describe_instruments
 
         X_WO = None
         if runner.station.HasOutputPort("object.pose"):
@@ -107,7 +107,7 @@ def _cmd_simulate(args) -> int:
                 runner.station.GetMyContextFromRoot(runner.context))
         print(describe_instruments(scenario, runner.harness.logs(), X_WO))
     if midi:
-        from handle_drake.midi.experiments import describe_midi
+        from handle_drake.apps.figure9.experiments import describe_midi
 
         print(describe_midi(runner.midi_result(result.wall_time), runner.mapping))
     if args.quality:
@@ -148,7 +148,7 @@ def _check_duration(duration: float, scenario) -> None:
 
 
 def _cmd_demo(args) -> int:
-    from handle_drake.demo import run_demo
+    from handle_drake.apps.demo import run_demo
 
     meshcat = start_meshcat(args.meshcat or not args.no_html)
     report = run_demo(meshcat=meshcat, html=None if args.no_html else args.html)

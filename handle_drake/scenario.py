@@ -42,7 +42,7 @@ properties (the table is rigid hydroelastic) and falls back to point contact
 elsewhere. The old top-level keys
 ``contact_model`` (``hydroelastic`` meant ``hydroelastic_with_fallback``),
 ``time_step`` and ``contact_approximation`` are still read, moved into
-``plant_config`` with a :class:`~handle_drake.scenario_checks.ScenarioDeprecationWarning`.
+``plant_config`` with a :class:`~handle_drake.base.checks.ScenarioDeprecationWarning`.
 
 Units are SI (m, rad, kg, s). Poses are ``pydrake.common.schema.Transform``
 (``translation`` in m, ``rotation`` as ``!Rpy {deg: [...]}`` or
@@ -60,10 +60,7 @@ from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 
-from handle_drake.arm.config import Arm
-from handle_drake.can_hand.config import CanHandDriverConfig
-from handle_drake.instruments.config import AccelerometerConfig
-from handle_drake.scenario_checks import (
+from handle_drake.base.checks import (
     check_pose,
     check_ranges,
     check_yaml_text,
@@ -71,6 +68,9 @@ from handle_drake.scenario_checks import (
     short,
     translate_deprecated_keys,
 )
+from handle_drake.devices.accelerometer.config import AccelerometerConfig
+from handle_drake.devices.arm.config import Arm
+from handle_drake.devices.can_hand.config import CanHandDriverConfig
 from handle_drake.scene.config import Hole, SortingBoxConfig
 
 __all__ = [
@@ -148,7 +148,7 @@ class HandConfig:
     # Shadow: xFJ1 = coupling_ratio * xFJ2 (1.0 for the C6 hand, 1.1 for the C5
     # hand). None takes the hand's default; the Barrett distal ratio is fixed.
     coupling_ratio: float | None = None
-    # Or !Arm: the hand bolted to a robot arm's flange (handle_drake.arm).
+    # Or !Arm: the hand bolted to a robot arm's flange (handle_drake.devices.arm).
     mount: FixedMount | FloatingWrist | Arm = dc.field(default_factory=FixedMount)
     # Initial joint positions (rad) by actuated joint name; others start at 0.
     initial_position: dict[str, float] = dc.field(default_factory=dict)
@@ -156,12 +156,12 @@ class HandConfig:
 
 @dc.dataclass
 class ObjectConfig:
-    """The object to grasp; see ``handle_drake.objects`` for kinds and sizes."""
+    """The object to grasp; see ``handle_drake.geometry.objects`` for kinds and sizes."""
 
     kind: str = "sphere"  # a catalogue kind, or "mesh" (then file, scale, density)
     size: float = 0.06  # m, the kind's characteristic length (mesh: derived, ignored)
     # Optional overrides (m) of the kind's other dimensions, e.g. {depth: 0.01}
-    # for a thin box; see handle_drake.objects.PROPORTIONS.
+    # for a thin box; see handle_drake.geometry.objects.PROPORTIONS.
     dimensions: dict[str, float] = dc.field(default_factory=dict)
     mass: float | None = None  # kg; None derives it from the kind's density
     mu: float = 0.8  # Coulomb friction coefficient (static = dynamic)
@@ -175,11 +175,11 @@ class ObjectConfig:
     # kind "mesh": the mesh file (OBJ, STL, PLY, ...; relative paths are taken
     # from the scenario file's folder, else the working directory), the scale
     # from file units to m, and the density (kg/m^3) used when mass is None.
-    # See handle_drake.objects.mesh.
+    # See handle_drake.geometry.objects.mesh.
     file: str = ""
     scale: float = 1.0
     density: float | None = None
-    # An accelerometer on the object (see handle_drake.instruments.config): the
+    # An accelerometer on the object (see handle_drake.devices.accelerometer.config): the
     # station then exports object.acceleration, .roll_pitch, .free_fall, .slip, ...
     accelerometer: AccelerometerConfig | None = None
 
@@ -193,7 +193,7 @@ class TableConfig:
 
 @dc.dataclass
 class MidiControllerConfig:
-    """The iControls Pro MIDI controller model (``handle_drake.midi``) in the scene.
+    """The iControls Pro MIDI controller model (``handle_drake.devices.midi``) in the scene.
 
     ``X_WC`` places the controller frame C (bottom centre of its base, x along
     the channel strips, y away from the user); with ``on_table`` its z is the
@@ -291,14 +291,14 @@ class CanHandDriver(CanHandDriverConfig):
     """A real (or simulated-firmware) CAN hand behind the CAN bus server.
 
     Fields (host, port, timeouts, rates) are those of
-    :class:`handle_drake.can_hand.config.CanHandDriverConfig`.
+    :class:`handle_drake.devices.can_hand.config.CanHandDriverConfig`.
     """
 
 
 @dc.dataclass
 class CameraConfig:
     """A depth camera rendered by Drake's ``RgbdSensor`` (see
-    ``handle_drake.perception``).
+    ``handle_drake.devices.camera``).
 
     The camera frame C follows Drake's convention: +z along the optical axis,
     +x to the right of the image, +y down. ``X_PC`` is its pose in the parent:
@@ -309,7 +309,7 @@ class CameraConfig:
     """
 
     name: str = "camera"
-    profile: str = "kinect_v1"  # see handle_drake.perception.PROFILES
+    profile: str = "kinect_v1"  # see handle_drake.devices.camera.PROFILES
     parent: str = "world"  # world | wrist
     X_PC: Transform = dc.field(default_factory=Transform)
     target: list[float] = dc.field(default_factory=list)
@@ -432,7 +432,7 @@ def _check_positive(name: str, value: float) -> None:
 
 def validate_scenario(scenario: Scenario) -> None:
     """Checks values the YAML schema cannot; raises :class:`ScenarioError`."""
-    from handle_drake.hands import HAND_SPECS
+    from handle_drake.base.hands import HAND_SPECS
 
     if scenario.hand.kind not in HAND_SPECS:
         raise ScenarioError(
@@ -448,7 +448,7 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError(f"hand.coupling_ratio: {error}") from None
     _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
     if isinstance(scenario.hand.mount, Arm):
-        from handle_drake.arm.config import validate_arm
+        from handle_drake.devices.arm.config import validate_arm
 
         validate_arm(scenario.hand.mount, ScenarioError)
     for name, value in scenario.hand.initial_position.items():
@@ -462,7 +462,7 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
     elif scenario.object is not None:
-        from handle_drake.objects import KINDS
+        from handle_drake.geometry.objects import KINDS
 
         if scenario.object.kind not in KINDS:
             raise ScenarioError(
@@ -470,7 +470,7 @@ def validate_scenario(scenario: Scenario) -> None:
                 f"expected one of {list(KINDS) + ['mesh']}"
             )
         _check_positive("object.size", scenario.object.size)
-        from handle_drake.objects import ObjectSpec
+        from handle_drake.geometry.objects import ObjectSpec
 
         try:
             ObjectSpec(kind=scenario.object.kind, size=scenario.object.size,
@@ -502,7 +502,7 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.metric is not None:
         _validate_metric(scenario)
     if scenario.midi_controller is not None:
-        from handle_drake.midi.station import validate_midi_controller
+        from handle_drake.devices.midi.wiring import validate_midi_controller
 
         validate_midi_controller(scenario.midi_controller)
     if isinstance(scenario.driver, CanHandDriver):
@@ -554,8 +554,8 @@ def _validate_plant_config(config) -> None:
 
 
 def _validate_accelerometer(scenario: Scenario) -> None:
-    from handle_drake.instruments.accelerometer import check_sensor_pose
-    from handle_drake.instruments.station import instrument_X_OS
+    from handle_drake.devices.accelerometer.sensor import check_sensor_pose
+    from handle_drake.devices.accelerometer.wiring import instrument_X_OS
     from handle_drake.station import object_spec
 
     config = scenario.object.accelerometer
@@ -586,7 +586,7 @@ def _validate_mesh_object(o: ObjectConfig) -> None:
     if o.size != ObjectConfig.size:
         import warnings
 
-        from handle_drake.objects.mesh import MeshObjectWarning
+        from handle_drake.geometry.objects.mesh import MeshObjectWarning
 
         warnings.warn(f"object.size: ignored for a mesh (its size comes from its file and "
                       f"scale), got {short(o.size)}", MeshObjectWarning, stacklevel=3)
@@ -599,8 +599,8 @@ def _validate_mesh_object(o: ObjectConfig) -> None:
 
 
 def mesh_object_spec(o: ObjectConfig):
-    """The :class:`~handle_drake.objects.mesh.MeshObjectSpec` of a kind-"mesh" object."""
-    from handle_drake.objects.mesh import MeshObjectSpec
+    """The :class:`~handle_drake.geometry.objects.mesh.MeshObjectSpec` of a kind-"mesh" object."""
+    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     return MeshObjectSpec(file=o.file, scale=o.scale, mass=o.mass, density=o.density, mu=o.mu)
 
@@ -635,7 +635,7 @@ CAMERA_PARENTS = ("world", "wrist")
 
 
 def _validate_cameras(scenario: Scenario) -> None:
-    from handle_drake.perception.camera import get_profile
+    from handle_drake.devices.camera.profiles import get_profile
 
     names = set()
     for i, camera in enumerate(scenario.cameras):

@@ -35,7 +35,7 @@ port                              dir    size                      units / frame
 ================================  =====  ========================  ==========================
 
 (*) only with an ``object.accelerometer`` in the scenario (also on hardware,
-read through evdev); see ``handle_drake.instruments``.
+read through evdev); see ``handle_drake.devices.accelerometer``.
 
 The diagram's subsystems are named ``plant``, ``scene_graph``, ``hand_driver``,
 ``wrist_driver``, ``tactile`` and ``object_pose``; :func:`GetPlant` returns the
@@ -56,13 +56,13 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.hands import (
+from handle_drake.base.hands import (
     AddHand,
     actuated_position_limits,
     actuated_to_joint_positions,
     get_hand_spec,
 )
-from handle_drake.ports import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
+from handle_drake.base.port_names import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
 from handle_drake.scenario import (
     Arm,
     CanHandDriver,
@@ -73,7 +73,7 @@ from handle_drake.scenario import (
     validate_scenario,
 )
 from handle_drake.systems.hand_driver import WRIST_JOINTS, PdHandDriver, WristDriver, rpy_pose6
-from handle_drake.systems.sensors import BodyPoseSelector, FingertipTactile
+from handle_drake.systems.tactile import BodyPoseSelector, FingertipTactile
 
 __all__ = [
     "MakeHandStation",
@@ -108,7 +108,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
             )
         station = MakeHardwareStation(scenario, meshcat=meshcat)
         if scenario.object is not None and scenario.object.accelerometer is not None:
-            from handle_drake.instruments.station import WithHardwareInstruments
+            from handle_drake.devices.accelerometer.wiring import WithHardwareInstruments
 
             station = WithHardwareInstruments(station, scenario)
         return station
@@ -147,13 +147,13 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     tactile = builder.AddNamedSystem("tactile", FingertipTactile(plant, tips))
     builder.Connect(plant.get_contact_results_output_port(),
                     tactile.get_contact_results_input_port())
-    # The port contract (handle_drake.ports), as the hardware branch exports it.
+    # The port contract (handle_drake.base.port_names), as the hardware branch exports it.
     for signal in HAND_SIGNALS:
         source = tactile if signal == "tactile" else driver
         builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
     if isinstance(scenario.hand.mount, Arm):
-        from handle_drake.arm.model import AddArmDriver
+        from handle_drake.devices.arm.model import AddArmDriver
 
         AddArmDriver(builder, plant, scenario.hand.mount)
     if scenario.objects:
@@ -183,7 +183,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
         builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
         if scenario.object.accelerometer is not None:
-            from handle_drake.instruments.station import AddSimulatedInstruments
+            from handle_drake.devices.accelerometer.wiring import AddSimulatedInstruments
 
             AddSimulatedInstruments(builder, plant, scenario, object_body(plant))
 
@@ -193,12 +193,12 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
 
     if scenario.cameras:
-        from handle_drake.perception.sensors import AddCameras
+        from handle_drake.devices.camera.sensors import AddCameras
 
         AddCameras(builder, plant, scene_graph, scenario, hand)
 
     if scenario.midi_controller is not None:
-        from handle_drake.midi.station import AddMidiControllerSystems
+        from handle_drake.devices.midi.wiring import AddMidiControllerSystems
 
         AddMidiControllerSystems(builder, plant, scenario)
 
@@ -220,7 +220,7 @@ def AddPlantModels(plant, scenario: Scenario):
     if isinstance(mount, FixedMount):
         plant.WeldFrames(plant.world_frame(), base_frame, mount.X_WB.GetDeterministicValue())
     elif isinstance(mount, Arm):
-        from handle_drake.arm.model import AddArm
+        from handle_drake.devices.arm.model import AddArm
 
         AddArm(plant, mount, base_frame)
         plant.set_gravity_enabled(hand, False)
@@ -229,12 +229,12 @@ def AddPlantModels(plant, scenario: Scenario):
         plant.set_gravity_enabled(hand, False)
 
     if scenario.table is not None:
-        from handle_drake.objects import AddTable
+        from handle_drake.geometry.objects import AddTable
 
         AddTable(plant, top_height=scenario.table.top_height,
                  size=(scenario.table.size_x, scenario.table.size_y))
     if scenario.object is not None:
-        from handle_drake.objects import AddObject
+        from handle_drake.geometry.objects import AddObject
 
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.plant_config.contact_model != "point")
@@ -249,14 +249,14 @@ def AddPlantModels(plant, scenario: Scenario):
 
         AddSceneModels(plant, scenario)
     if scenario.midi_controller is not None:
-        from handle_drake.midi.station import AddMidiControllerModel
+        from handle_drake.devices.midi.wiring import AddMidiControllerModel
 
         AddMidiControllerModel(plant, scenario)
     return hand
 
 
 def object_spec(scenario: Scenario):
-    from handle_drake.objects import ObjectSpec
+    from handle_drake.geometry.objects import ObjectSpec
 
     o = scenario.object
     if o.kind == "mesh":
@@ -272,7 +272,7 @@ def object_initial_pose(scenario: Scenario) -> RigidTransform:
     X_WO = scenario.object.X_WO.GetDeterministicValue()
     if scenario.object.on_table:
         top = scenario.table.top_height if scenario.table is not None else 0.0
-        from handle_drake.objects import resting_height
+        from handle_drake.geometry.objects import resting_height
 
         height = resting_height(object_spec(scenario))
         p = X_WO.translation().copy()
@@ -354,16 +354,16 @@ def GetPlant(station):
 def MakeHardwareStation(scenario: Scenario, meshcat=None):
     """The hardware station for ``scenario`` (its driver must be a ``!CanHandDriver``):
     the CAN hand behind the bus server, with the simulated station's ``hand.*``
-    ports (:mod:`handle_drake.ports`; the simulation-only ports do not exist here).
+    ports (:mod:`handle_drake.base.port_names`; the simulation-only ports do not exist here).
     With a Meshcat, a plant of the hand is built only to draw the measured joints.
 
     The driver's TCP client starts connecting at once; the diagram's
     ``hand_driver`` subsystem reports the link on ``connection_state``.
     Only a fixed mount is supported: the CAN hand has no wrist actuator.
     """
-    from handle_drake.can_hand.config import driver_config
-    from handle_drake.can_hand.driver import AddCanHandDriver
-    from handle_drake.can_hand.layout import hand_layout
+    from handle_drake.devices.can_hand.config import driver_config
+    from handle_drake.devices.can_hand.driver import AddCanHandDriver
+    from handle_drake.devices.can_hand.layout import hand_layout
 
     if not isinstance(scenario.hand.mount, FixedMount):
         raise ValueError(
@@ -405,7 +405,7 @@ def _add_hardware_visualization(builder, driver, scenario, spec, meshcat) -> Non
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
                      scenario.hand.mount.X_WB.GetDeterministicValue())
     plant.Finalize()
-    from handle_drake.systems.sensors import HandJointsToPlantPositions
+    from handle_drake.systems.tactile import HandJointsToPlantPositions
 
     scatter = builder.AddNamedSystem(
         "visualization_positions", HandJointsToPlantPositions(plant, hand, spec.joint_names))

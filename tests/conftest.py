@@ -1,7 +1,7 @@
 import os
 import tempfile
 
-from handle_drake.blas import pin_blas  # light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # light: loads neither numpy nor Drake
 
 # Threaded BLAS on 2 cores makes small solves much slower under load.
 pin_blas(force=False)

@@ -1,4 +1,4 @@
-"""Hand models and handle_drake.hands, against the public reference sheet.
+"""Hand models and handle_drake.base.hands, against the public reference sheet.
 
 The joint tables below are typed in from /work/shared/reference/hand_kinematics.md
 (sections 1 and 2), independently of the generators, and the fingertip
@@ -29,7 +29,7 @@ from pydrake.multibody.tree import JointActuatorIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.hands import (
+from handle_drake.base.hands import (
     HAND_SPECS,
     AddHand,
     actuated_position_limits,
@@ -39,7 +39,7 @@ from handle_drake.hands import (
     joint_to_actuated_positions,
     pad_geometry_ids,
 )
-from handle_drake.models import models_dir
+from handle_drake.base.models import models_dir
 
 PI = math.pi
 HALF_PI = PI / 2

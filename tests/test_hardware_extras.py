@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
+from handle_drake.base.extras import MissingExtraError, require_extra
 from handle_drake.cli import main
-from handle_drake.extras import MissingExtraError, require_extra
 
 
 @pytest.fixture
@@ -48,7 +48,7 @@ def test_midi_without_a_device_needs_no_rtmidi(no_rtmidi):
     # The in-process port and the decoder are mido alone.
     import mido
 
-    from handle_drake.midi.ports import in_process_pair
+    from handle_drake.devices.midi.ports import in_process_pair
 
     device, host = in_process_pair()
     device.send(mido.Message("control_change", control=60, value=3))
@@ -56,7 +56,7 @@ def test_midi_without_a_device_needs_no_rtmidi(no_rtmidi):
 
 
 def test_a_real_joywarrior_names_the_joywarrior_extra(no_evdev, capsys, tmp_path):
-    from handle_drake.instruments.evdev_driver import open_device
+    from handle_drake.devices.accelerometer.evdev_driver import open_device
 
     with pytest.raises(MissingExtraError, match=r"pip install 'handle_drake\[joywarrior\]'"):
         open_device("/dev/input/event0")

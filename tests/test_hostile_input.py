@@ -13,8 +13,8 @@ import stat
 
 import pytest
 
+from handle_drake.base.paths import check_output
 from handle_drake.cli import main
-from handle_drake.paths import check_output
 from handle_drake.scenario import LoadScenario, ScenarioError
 
 WRIST = "hand: {mount: !FloatingWrist {}}\n"

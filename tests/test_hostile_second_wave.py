@@ -16,7 +16,7 @@ import pytest
 import trimesh
 
 from handle_drake.cli import main
-from handle_drake.objects.mesh import MeshObjectWarning
+from handle_drake.geometry.objects.mesh import MeshObjectWarning
 from handle_drake.scenario import LoadScenario, ScenarioError
 
 CASES = [

@@ -118,7 +118,7 @@ def test_connect_timeout_without_a_dask_address_is_refused(command, tmp_path, ca
 
 # ---------------------------------------------------------------------- glove files
 def _glove(time_stamps, raw=None):
-    from handle_drake.inhand.glove import GLOVE_SENSORS
+    from handle_drake.apps.inhand.glove import GLOVE_SENSORS
 
     n = len(time_stamps)
     return {"format": "handle_drake.glove", "version": 1, "sensors": list(GLOVE_SENSORS),
@@ -128,7 +128,7 @@ def _glove(time_stamps, raw=None):
 
 @pytest.mark.parametrize("step", [1e-9, 1e-12])
 def test_glove_time_stamps_closer_than_the_sample_rate_cap_are_refused(step, tmp_path):
-    from handle_drake.inhand.glove import MAX_SAMPLE_RATE, GloveFormatError, load_glove
+    from handle_drake.apps.inhand.glove import MAX_SAMPLE_RATE, GloveFormatError, load_glove
     path = tmp_path / "fast.json"
     path.write_text(json.dumps(_glove([i * step for i in range(200)])))
     start = time.monotonic()
@@ -143,7 +143,7 @@ def test_glove_time_stamps_closer_than_the_sample_rate_cap_are_refused(step, tmp
 @pytest.mark.parametrize("field,value", [("time", ["0", "1", "2"]), ("time", [0, True, 2]),
                                          ("raw", [["1"] * 22] * 3)])
 def test_glove_strings_or_booleans_as_numbers_are_refused(field, value, tmp_path):
-    from handle_drake.inhand.glove import GloveFormatError, load_glove
+    from handle_drake.apps.inhand.glove import GloveFormatError, load_glove
 
     document = _glove([0.0, 0.01, 0.02])
     document[field] = value
@@ -155,7 +155,7 @@ def test_glove_strings_or_booleans_as_numbers_are_refused(field, value, tmp_path
 
 # --------------------------------------------------------------------- depth frames
 def _frame(tmp_path, **changes):
-    from handle_drake.perception.frames import DepthFrame, save_frame
+    from handle_drake.devices.camera.frames import DepthFrame, save_frame
 
     depth = np.full((48, 64), 0.8)
     K = [[60.0, 0, 32.0], [0, 60.0, 24.0], [0, 0, 1]]
@@ -196,7 +196,7 @@ FRAME_CASES = {
 
 @pytest.mark.parametrize("case", FRAME_CASES, ids=list(FRAME_CASES))
 def test_a_depth_frame_sidecar_out_of_range_is_refused_naming_the_field(case, tmp_path):
-    from handle_drake.perception.frames import load_frame
+    from handle_drake.devices.camera.frames import load_frame
 
     changes, word = FRAME_CASES[case]
     with pytest.raises(ValueError, match=word):
@@ -204,7 +204,7 @@ def test_a_depth_frame_sidecar_out_of_range_is_refused_naming_the_field(case, tm
 
 
 def test_an_8_bit_png_or_a_32_bit_tiff_is_refused_as_depth(tmp_path):
-    from handle_drake.perception.frames import load_frame
+    from handle_drake.devices.camera.frames import load_frame
 
     path = _frame(tmp_path)
     png = path.with_suffix(".png")
@@ -217,7 +217,7 @@ def test_an_8_bit_png_or_a_32_bit_tiff_is_refused_as_depth(tmp_path):
 
 
 def test_a_depth_image_above_the_pixel_cap_is_refused_before_decoding(tmp_path):
-    from handle_drake.perception.frames import MAX_PIXELS, load_frame
+    from handle_drake.devices.camera.frames import MAX_PIXELS, load_frame
 
     path = _frame(tmp_path, width=12000, height=9000)  # 108 Mpx, as the sidecar says
     with pytest.raises(ValueError, match="width, height"):
@@ -239,7 +239,7 @@ def test_the_perceive_command_refuses_a_bad_frame_with_exit_2(tmp_path, capsys):
 # -------------------------------------------------------------------- accelerometer
 def test_evdev_device_dev_zero_is_a_value_error_naming_the_field():
     pytest.importorskip("evdev")
-    from handle_drake.instruments.evdev_driver import open_device
+    from handle_drake.devices.accelerometer.evdev_driver import open_device
 
     with pytest.raises(ValueError, match="evdev_device: /dev/zero is not an input event device"):
         open_device("/dev/zero")
@@ -248,7 +248,7 @@ def test_evdev_device_dev_zero_is_a_value_error_naming_the_field():
 
 
 def test_a_recording_that_is_binary_a_directory_a_fifo_or_a_device_is_refused(tmp_path):
-    from handle_drake.instruments.evdev_driver import load_events
+    from handle_drake.devices.accelerometer.evdev_driver import load_events
 
     binary = tmp_path / "binary.txt"
     binary.write_bytes(np.random.default_rng(0).bytes(200) + b"\xff")
@@ -274,7 +274,7 @@ def test_estimator_thresholds_beyond_their_meaning_are_refused(name, value):
 
 # ------------------------------------------------------------------------------ meshes
 def test_an_obj_face_index_0_is_refused(tmp_path):
-    from handle_drake.objects.mesh import MeshObjectSpec
+    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     path = tmp_path / "zero.obj"
     box = trimesh.creation.box((0.05, 0.05, 0.05))
@@ -291,7 +291,7 @@ def test_an_obj_face_index_0_is_refused(tmp_path):
 
 
 def test_a_mesh_above_the_triangle_cap_is_refused(tmp_path, monkeypatch):
-    from handle_drake.objects import mesh
+    from handle_drake.geometry.objects import mesh
 
     path = tmp_path / "ball.stl"
     trimesh.creation.icosphere(subdivisions=2, radius=0.03).export(path)  # 320 triangles
@@ -306,7 +306,7 @@ def test_ctrl_c_stops_an_isolated_decomposition_promptly():
     """The decomposition runs in a child process that ignores SIGINT; the parent
     kills it on KeyboardInterrupt. Before: the parent waited for the child's end
     (a 200k-triangle torus: still decomposing 10 s after SIGINT)."""
-    from handle_drake.objects.mesh import _isolated
+    from handle_drake.geometry.objects.mesh import _isolated
 
     timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
     start = time.monotonic()
@@ -439,7 +439,7 @@ def test_a_comment_only_scenario_is_an_empty_one():
 
 
 def test_port_0_is_refused_with_the_range_that_applies():
-    from handle_drake.can_hand.config import CanHandDriverConfig
+    from handle_drake.devices.can_hand.config import CanHandDriverConfig
 
     with pytest.raises(ValueError, match=r"port: expected an integer port in 1\.\.65535, got 0"):
         CanHandDriverConfig(port=0).validate()

@@ -1,4 +1,4 @@
-"""Mesh files as grasp objects (handle_drake.objects.mesh).
+"""Mesh files as grasp objects (handle_drake.geometry.objects.mesh).
 
 Independent truths: catalogue objects written as mesh files behave like the
 catalogue objects (mass properties within the facet error, resting height,
@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from handle_drake import objects
-from handle_drake.objects import mesh as mesh_objects
-from handle_drake.objects import mesh_examples
-from handle_drake.objects.mesh import MeshObjectSpec, MeshObjectWarning
+from handle_drake.geometry import objects
+from handle_drake.geometry.objects import mesh as mesh_objects
+from handle_drake.geometry.objects import mesh_examples
+from handle_drake.geometry.objects.mesh import MeshObjectSpec, MeshObjectWarning
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -118,7 +118,7 @@ def test_ray_casts_agree_with_the_exact_catalogue_ray_cast_within_the_facet_erro
 
 
 def test_contact_surface_model_on_the_mesh_matches_the_catalogue(files):
-    from handle_drake.quality.surface import ObjectSurface, contact_surface
+    from handle_drake.geometry.quality.surface import ObjectSurface, contact_surface
 
     cat = objects.ObjectSpec("cylinder", 0.05)
     mesh = MeshObjectSpec(str(files["cylinder"]))
@@ -134,8 +134,8 @@ def test_contact_surface_model_on_the_mesh_matches_the_catalogue(files):
 
 def test_resting_height_in_simulation_matches_the_catalogue_object(files, tmp_path):
     """The mesh dropped 1 cm onto the table settles where the catalogue cuboid does."""
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.simulate import ScenarioRunner
 
     ends = {}
     for name, obj in (("catalogue", "{kind: cuboid, size: 0.028}"),
@@ -153,10 +153,10 @@ simulation_duration: 0.5
 
 
 def test_a_grasp_that_holds_the_catalogue_cuboid_holds_the_mesh(files):
-    from handle_drake.demo import held_through_lift
+    from handle_drake.apps.demo import held_through_lift
     from handle_drake.grasp.planning import grasp_dims, plan_grasp, resting_pose
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import ObjectConfig
+    from handle_drake.trial.simulate import ScenarioRunner
 
     mesh = MeshObjectSpec(str(files["cuboid"]))
     cat = objects.ObjectSpec("cuboid", 0.028)
@@ -258,9 +258,9 @@ simulation_duration: 0.4
 
 
 def test_hydroelastic_contact_uses_the_same_pieces(files):
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
     from handle_drake.station import GetPlant
+    from handle_drake.trial.simulate import ScenarioRunner
 
     scenario = LoadScenario(data=f"""
 hand: {{kind: barrett, mount: !FixedMount {{X_WB: {{translation: [0.3, 0, 0.4]}}}}}}
@@ -280,7 +280,7 @@ simulation_duration: 0.3
 
 @pytest.mark.parametrize("name", ["torus", "l_bracket", "bowl"])
 def test_short_babble_on_generated_meshes(files, tmp_path, capsys, name):
-    from handle_drake.experiments.cli import main
+    from handle_drake.apps.babbling.cli import main
     from handle_drake.learning import TrialLog
 
     db = tmp_path / "b.sqlite"
@@ -414,7 +414,7 @@ def test_scenario_and_cli_errors_name_the_field(files, tmp_path, capsys):
     scenario.write_text("object: {kind: mesh, file: nowhere.stl}\n")
     assert main(["simulate", str(scenario)]) == 2
     assert "object.file: mesh file not found" in capsys.readouterr().err
-    from handle_drake.experiments.cli import main as learning_main
+    from handle_drake.apps.babbling.cli import main as learning_main
 
     assert learning_main(["babble", "--mesh", str(tmp_path / "none.obj"), "--trials", "1",
                           "--db", str(tmp_path / "b.sqlite"), "--no-progress"]) == 2
@@ -490,8 +490,8 @@ def test_a_mesh_object_renders_for_the_cameras_and_is_detected_as_its_catalogue_
     # them. The exported cuboid (28 x 16.8 x 42 mm, objects.PROPORTIONS) is
     # found where it stands, with its catalogue dimensions; a mesh is no
     # primitive, so its detected kind is not judged.
-    from handle_drake.demo import diagrams_dir
-    from handle_drake.perception.perceive import detection_error, render_views
+    from handle_drake.apps.demo import diagrams_dir
+    from handle_drake.apps.perception.perceive import detection_error, render_views
     from handle_drake.scenario import LoadScenario
 
     data = (f"object: {{kind: mesh, file: '{files['cuboid']}', X_WO: {{translation: "
@@ -511,7 +511,7 @@ def test_an_accelerometer_on_a_mesh_object_reads_gravity_and_off_it_is_refused(f
     from pydrake.math import RollPitchYaw
     from pydrake.systems.analysis import Simulator
 
-    from handle_drake.instruments.profiles import get_profile
+    from handle_drake.devices.accelerometer.profiles import get_profile
     from handle_drake.scenario import LoadScenario, ScenarioError
     from handle_drake.station import MakeHandStation
 

@@ -16,8 +16,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from scipy.spatial import ConvexHull
 
-from handle_drake import objects
-from handle_drake.objects import (
+from handle_drake.geometry import objects
+from handle_drake.geometry.objects import (
     BODY_NAME,
     DEFAULT_SIZE,
     KINDS,
@@ -414,7 +414,7 @@ def test_committed_models_are_up_to_date_and_table_top_is_at_zero(tmp_path):
     assert generated, "export wrote nothing"
     for relative in generated:
         assert (committed / relative).read_text() == (tmp_path / relative).read_text(), (
-            f"models/objects/{relative} is stale: run python -m handle_drake.objects export "
+            f"models/objects/{relative} is stale: run python -m handle_drake.geometry.objects export "
             "models/objects"
         )
     objects_plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), DiagramBuilder())

@@ -5,7 +5,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from handle_drake.models import add_package, model_path, models_dir, package_url
+from handle_drake.base.models import add_package, model_path, models_dir, package_url
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -46,8 +46,8 @@ def test_wheel_contains_models_scenarios_and_data(tmp_path):
                      "handle_drake/_models/shadow_hand/shadow_hand_right.sdf",
                      "handle_drake/_models/barrett_hand/bh8_280.sdf",
                      "handle_drake/_diagrams/shadow_sphere_grasp.yaml",
-                     "handle_drake/can_hand/hand.dbc",
-                     "handle_drake/midi/icontrols_pro.yaml",
+                     "handle_drake/devices/can_hand/hand.dbc",
+                     "handle_drake/devices/midi/icontrols_pro.yaml",
                      "handle_drake/_diagrams/midi_jog_pinch.yaml",
                      "handle_drake/grasp/data/synthetic_grasps.csv"):
         assert required in names, required

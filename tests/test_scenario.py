@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlantConfig
 
-from handle_drake.demo import diagrams_dir
+from handle_drake.apps.demo import diagrams_dir
+from handle_drake.base.checks import ScenarioDeprecationWarning
 from handle_drake.scenario import (
     CanHandDriver,
     DumpScenario,
@@ -16,7 +17,6 @@ from handle_drake.scenario import (
     SimHandDriver,
     default_plant_config,
 )
-from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
 SCENARIO_FILES = sorted(diagrams_dir().glob("*.yaml"))
 

@@ -4,12 +4,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from handle_drake.demo import diagrams_dir
-from handle_drake.hands import get_hand_spec
-from handle_drake.objects import KINDS
-from handle_drake.run import ScenarioRunner
+from handle_drake.apps.demo import diagrams_dir
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.geometry.objects import KINDS
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
+from handle_drake.trial.simulate import ScenarioRunner
 
 SCENARIO_FILES = sorted(diagrams_dir().glob("*.yaml"))
 
@@ -194,7 +194,7 @@ def test_tactile_reads_the_weight_of_a_body_at_rest(contact_model):
     from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
     from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
-    from handle_drake.systems.sensors import FingertipTactile
+    from handle_drake.systems.tactile import FingertipTactile
 
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(

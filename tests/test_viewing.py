@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from handle_drake.viewing import MARGIN, MIN_RADIUS, VERTICAL_FOV, camera_framing
+from handle_drake.base.viewing import MARGIN, MIN_RADIUS, VERTICAL_FOV, camera_framing
 
 
 def test_framing_puts_the_bounding_sphere_just_inside_the_field_of_view():

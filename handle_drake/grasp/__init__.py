@@ -10,5 +10,5 @@ Modules:
 - :mod:`~handle_drake.grasp.kinematics`: grasp IK on the Shadow model.
 - :mod:`~handle_drake.grasp.planning`: ``plan_grasp`` (class + object + pose ->
   pre-shape, hand pose, stand-off, keyframes for a floating-wrist scenario).
-- :mod:`~handle_drake.grasp.cli`: ``handle-drake grasp`` and ``handle-drake synergies``.
+- :mod:`~handle_drake.apps.planning.cli`: ``handle-drake grasp`` and ``handle-drake synergies``.
 """

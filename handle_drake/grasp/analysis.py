@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.grasp.kinematics import GraspKinematics
 from handle_drake.grasp.recordings import GraspRecords
 from handle_drake.grasp.synergies import Coupling, Synergies, fit_synergies
 from handle_drake.grasp.taxonomy import GRASP_CLASSES, GraspClass, palm_to_report_mm
-from handle_drake.hands import get_hand_spec
 
 __all__ = ["grasp_centres", "rederive_table1", "fit_record_synergies", "table1_markdown"]
 

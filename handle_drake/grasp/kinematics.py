@@ -40,9 +40,9 @@ from pydrake.multibody.tree import JacobianWrtVariable, SpatialInertia
 from pydrake.solvers import SnoptSolver, Solve, SolverOptions
 from pydrake.systems.framework import DiagramBuilder
 
+from handle_drake.base.hands import actuated_position_limits, get_hand_spec
+from handle_drake.base.models import add_package, model_path
 from handle_drake.grasp.taxonomy import OBJECT_SHAPES, GraspClass, grasp_centre_palm, grasp_info
-from handle_drake.hands import actuated_position_limits, get_hand_spec
-from handle_drake.models import add_package, model_path
 
 __all__ = [
     "CONTACT_POINTS",

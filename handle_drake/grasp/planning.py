@@ -43,16 +43,16 @@ the table top.
 (reach from the stand-off, close, lift) for a ``!FloatingWrist`` scenario.
 
 Object conventions. Kinds ``sphere``, ``cylinder`` and ``cuboid`` of the
-catalogue (:mod:`handle_drake.objects`). The *grasp size* (Table 1's object
+catalogue (:mod:`handle_drake.geometry.objects`). The *grasp size* (Table 1's object
 size, the distance between the opposing fingers) is the diameter of a sphere
 or cylinder and the **depth** (``0.6 * size``, the thin horizontal edge) of a
 cuboid. The planner grasps a sphere anywhere, a cylinder lying on its side
 (axis horizontal) and a cuboid standing upright (its z axis vertical); use
 :func:`resting_pose`.
 
-Mesh objects (``MeshObjectSpec``, :mod:`handle_drake.objects.mesh`) are planned
+Mesh objects (``MeshObjectSpec``, :mod:`handle_drake.geometry.objects.mesh`) are planned
 like a cuboid standing upright: the IK's proxy is the mesh's bounding box in O
-(:func:`~handle_drake.objects.mesh.grasp_extents`), the fingers close across
+(:func:`~handle_drake.geometry.objects.mesh.grasp_extents`), the fingers close across
 its narrower horizontal axis, and the Table 1 grasp size is the mesh's extent
 along that axis (the distance between the planes the opposing fingers close
 on). The contacts are planned on the proxy; the closing squeeze (20 mm past
@@ -60,7 +60,7 @@ it) brings the fingers onto the real surface, which is what the simulation
 collides with. A mesh whose opposing faces are not the bounding box's (a
 torus, a bowl) is therefore grasped at its outer extent. The instrumented
 devices (``joywarrior``, ``wiimote``, ``nunchuk``, ``sixaxis``;
-:mod:`handle_drake.instruments.catalogue`) are planned the same way on their
+:mod:`handle_drake.geometry.objects.instrumented`) are planned the same way on their
 bounding box, lying in their natural resting pose (buttons up).
 
 Frames: W world, O object, G grasp frame of the IK (``x_G`` up, ``y_G`` finger
@@ -76,6 +76,8 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 from handle_drake.grasp.kinematics import GraspKinematics, contact_layout, move_contacts
 from handle_drake.grasp.synergies import ClassSynergies, default_synergies
 from handle_drake.grasp.taxonomy import (
@@ -85,8 +87,6 @@ from handle_drake.grasp.taxonomy import (
     grasp_centre_palm,
     grasp_info,
 )
-from handle_drake.hands import get_hand_spec
-from handle_drake.instruments.catalogue import DEVICE_OBJECTS
 
 __all__ = [
     "PLANNABLE_KINDS",
@@ -143,8 +143,8 @@ class GraspPlanningError(ValueError):
 
 
 def _object_spec(obj):
-    from handle_drake.objects import ObjectSpec
-    from handle_drake.objects.mesh import MeshObjectSpec
+    from handle_drake.geometry.objects import ObjectSpec
+    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     if isinstance(obj, MeshObjectSpec):
         return obj
@@ -178,7 +178,7 @@ def _on_bounding_box(kind: str) -> bool:
 
 def _extents(spec) -> tuple[float, float, float]:
     """Bounding-box edges (x, y, z) in O (m) of a mesh or an instrumented device."""
-    from handle_drake.objects import surface_mesh  # a mesh's: the mesh in O
+    from handle_drake.geometry.objects import surface_mesh  # a mesh's: the mesh in O
 
     return tuple(float(e) for e in surface_mesh(spec).extents)
 
@@ -190,7 +190,7 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
     upright: (opposition, row, height) extents, the fingers closing across the
     narrower horizontal edge (as ``objects.mesh.grasp_extents`` gives a mesh's).
     """
-    from handle_drake.objects import dimensions
+    from handle_drake.geometry.objects import dimensions
 
     if _on_bounding_box(spec.kind):
         ex, ey, ez = _extents(spec)
@@ -214,7 +214,7 @@ def resting_pose(kind, size: float | None = None, xy=(0.0, 0.0), yaw: float = 0.
     lowest point; an instrumented device lies in its resting pose (``size``
     None: its catalogue size).
     """
-    from handle_drake.objects import ObjectSpec, dimensions, resting_height
+    from handle_drake.geometry.objects import ObjectSpec, dimensions, resting_height
 
     if getattr(kind, "kind", None) == "mesh":
         spec, d = kind, None
@@ -290,7 +290,7 @@ class GraspPlan:
     lift_height: float = 0.13
     coupling_ratio: float = 1.0
     # What perception made of the object, when the plan was made on it
-    # (handle_drake.perception.grasping.PerceivedObject), else None.
+    # (handle_drake.apps.perception.grasping.PerceivedObject), else None.
     perception: object = None
 
     @property

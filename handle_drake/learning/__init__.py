@@ -6,7 +6,7 @@ declares its batching; :mod:`.bayesopt`: BO, random search), trial storage
 (:mod:`.log`), where trials run (:mod:`.executors`), the resumable runner
 (:mod:`.runner`) and synthetic test problems (:mod:`.test_functions`) are
 separate modules; the names below are the public surface. Nothing here knows
-about grasps: the grasp experiments are :mod:`handle_drake.experiments`.
+about grasps: the grasp experiments are :mod:`handle_drake.apps.babbling`.
 
 Defaults of :class:`BayesianOptimizer` (version 2, ``BO_DEFAULTS_VERSION``):
 10 scrambled Sobol points before the first GP proposal (``max(10, d + 1)``),
@@ -23,7 +23,12 @@ from handle_drake.learning.acquisition import (
     expected_improvement_point,
     maximize_acquisition,
 )
-from handle_drake.learning.bayesopt import (
+from handle_drake.learning.executors import InlineExecutor, TrialResult
+from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern32
+from handle_drake.learning.log import RunInfo, TrialLog, TrialLogError, TrialRecord
+from handle_drake.learning.loop import ExperimentResult, TrialRunner, replay, run_experiment
+from handle_drake.learning.optim.base import Optimizer
+from handle_drake.learning.optim.bo import (
     BayesianOptimizer,
     Best,
     OptimizationResult,
@@ -33,11 +38,6 @@ from handle_drake.learning.bayesopt import (
     maximize,
     v1_options,
 )
-from handle_drake.learning.executors import InlineExecutor, TrialResult
-from handle_drake.learning.gp import GaussianProcess, Hyperparameters, matern32
-from handle_drake.learning.log import RunInfo, TrialLog, TrialLogError, TrialRecord
-from handle_drake.learning.optimizer import Optimizer
-from handle_drake.learning.runner import ExperimentResult, TrialRunner, replay, run_experiment
 
 __all__ = [
     "BayesianOptimizer",

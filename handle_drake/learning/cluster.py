@@ -13,7 +13,7 @@ Every command that runs trials takes the same ``--executor`` option
 - ``dask://HOST:PORT``: an existing ``dask scheduler`` and the ``dask worker``
   processes that joined it, on any number of machines.
 
-In Python, :class:`TrialRunner <handle_drake.learning.runner.TrialRunner>` and
+In Python, :class:`TrialRunner <handle_drake.learning.loop.TrialRunner>` and
 ``run_experiment`` accept a ``distributed.Client`` or its ``get_executor()``
 wherever they accept an executor (:func:`as_executor` wraps it).
 
@@ -38,7 +38,7 @@ Failures:
   through the runner. Either way the client records the trial once.
 - A lost scheduler: :class:`ExecutorError` says so; the trials that were
   running stay ``running`` in the log and run again when the command is
-  repeated (the resume of :mod:`handle_drake.learning.runner`).
+  repeated (the resume of :mod:`handle_drake.learning.loop`).
 - An address where no scheduler answers, or a scheduler without workers:
   :class:`ExecutorError` within ``connect_timeout`` seconds.
 """
@@ -59,7 +59,7 @@ from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from handle_drake.blas import pin_blas
+from handle_drake.base.blas import pin_blas
 
 __all__ = [
     "WORKER_DEATHS",
@@ -281,7 +281,7 @@ class LocalPool(Executor):
 
     def submit(self, fn, /, *args, **kwargs):
         if self._pool is None:
-            from handle_drake.orphans import init_worker
+            from handle_drake.base.orphans import init_worker
 
             # Workers die with this process, even when it is killed with kill -9.
             self._pool = ProcessPoolExecutor(

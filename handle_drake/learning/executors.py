@@ -22,7 +22,7 @@ from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from typing import Any
 
-from handle_drake.blas import pin_blas
+from handle_drake.base.blas import pin_blas
 from handle_drake.learning.cluster import LocalPool
 
 

@@ -6,7 +6,7 @@ full scenario text, the metric, the contacts, the wall time, the trial seed,
 the status and the error text. A run's settings (strategy, bounds, seed,
 objective name, optimiser options) are in a table of their own. A row goes
 ``pending`` -> ``running`` -> ``done`` | ``failed``, one transaction each
-(see :mod:`handle_drake.learning.runner` for how a run resumes from it).
+(see :mod:`handle_drake.learning.loop` for how a run resumes from it).
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from urllib.parse import quote
 
 import numpy as np
 
-from handle_drake.learning.bayesopt import check_bounds
-from handle_drake.scenario_checks import short as _short
+from handle_drake.base.checks import short as _short
+from handle_drake.learning.optim.bo import check_bounds
 
 STATUSES = ("pending", "running", "done", "failed")
 _FORMAT = "handle_drake.trial_log"

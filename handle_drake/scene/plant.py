@@ -34,7 +34,7 @@ def spec_of(o):
         from handle_drake.scenario import mesh_object_spec
 
         return mesh_object_spec(o)
-    from handle_drake.objects import ObjectSpec
+    from handle_drake.geometry.objects import ObjectSpec
 
     return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu,
                       dimensions=o.dimensions or None, density=o.density)
@@ -44,7 +44,7 @@ def initial_pose(o, table) -> RigidTransform:
     """``X_WO`` at the start (``on_table`` puts the object on the table top)."""
     X_WO = o.X_WO.GetDeterministicValue()
     if o.on_table:
-        from handle_drake.objects import resting_height
+        from handle_drake.geometry.objects import resting_height
 
         top = table.top_height if table is not None else 0.0
         p = X_WO.translation().copy()
@@ -55,7 +55,7 @@ def initial_pose(o, table) -> RigidTransform:
 
 def footprint_radius(spec) -> float:
     """Radius (m) of the smallest circle about the object's axis holding its footprint."""
-    from handle_drake.objects import surface_mesh
+    from handle_drake.geometry.objects import surface_mesh
 
     vertices = np.asarray(surface_mesh(spec).vertices)
     return float(np.max(np.linalg.norm(vertices[:, :2], axis=1)))
@@ -63,7 +63,7 @@ def footprint_radius(spec) -> float:
 
 def hole_polygon(hole) -> np.ndarray:
     """The hole's outline (n, 2), counter-clockwise about its centre (m, lid frame)."""
-    from handle_drake.objects import DEFAULT_SIZE, ObjectSpec, dimensions
+    from handle_drake.geometry.objects import DEFAULT_SIZE, ObjectSpec, dimensions
     from handle_drake.scene.config import HOLE_SHAPES
 
     size = hole.size or DEFAULT_SIZE[hole.kind]
@@ -197,7 +197,7 @@ def AddSortingBox(plant, scenario):
 
 def AddSceneModels(plant, scenario) -> None:
     """Adds ``scenario.objects`` (instances ``object_1``...) and the sorting box."""
-    from handle_drake.objects import AddObject
+    from handle_drake.geometry.objects import AddObject
     from handle_drake.scene.config import object_instance_name
 
     hydroelastic = scenario.plant_config.contact_model != "point"
@@ -218,7 +218,7 @@ def ExportSceneObjects(builder, plant, scenario) -> None:
     """Exports ``object_<i>.pose`` / ``.spatial_velocity`` / ``.position`` of the
     further objects (as ``object.*`` for the first)."""
     from handle_drake.scene.config import object_instance_name
-    from handle_drake.systems.sensors import BodyPoseSelector
+    from handle_drake.systems.tactile import BodyPoseSelector
 
     for i in range(len(scenario.objects)):
         name = object_instance_name(i + 1)

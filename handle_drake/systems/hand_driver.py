@@ -3,7 +3,7 @@
 Both sit between the station's exported command ports and the plant's
 PD-controlled actuators (MultibodyPlant's ``desired_state`` input, SAP solver),
 and translate the plant's full state into the hand's measured signals in the
-joint order of :class:`handle_drake.hands.HandSpec`.
+joint order of :class:`handle_drake.base.hands.HandSpec`.
 """
 
 from __future__ import annotations

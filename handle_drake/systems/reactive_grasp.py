@@ -258,7 +258,7 @@ def finger_command_groups(hand_kind: str) -> list[list[int]]:
     """Indices into the hand command of the joints each tactile channel's finger closes:
     ``HandSpec.finger_joints`` (shadow: the J4..J2, LFJ5, THJ5..THJ1 of each finger;
     barrett: each finger's proximal flexion, the shared spread stays at the pre-shape)."""
-    from handle_drake.hands import get_hand_spec
+    from handle_drake.base.hands import get_hand_spec
 
     return get_hand_spec(hand_kind).finger_command_indices()
 

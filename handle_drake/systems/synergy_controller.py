@@ -38,7 +38,7 @@ discrete command state and every update moves it by at most
 command ramps from where it is to the new mode's target.
 
 Every output command lies within the command limits of
-:func:`handle_drake.hands.actuated_position_limits` (which keep each coupled
+:func:`handle_drake.base.hands.actuated_position_limits` (which keep each coupled
 distal joint ``J1 = ratio * J2`` inside its own limits).
 """
 
@@ -51,8 +51,12 @@ import numpy as np
 from pydrake.common.value import AbstractValue, Value
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
+from handle_drake.base.hands import (
+    actuated_position_limits,
+    actuated_to_joint_positions,
+    get_hand_spec,
+)
 from handle_drake.grasp.synergies import Synergies
-from handle_drake.hands import actuated_position_limits, actuated_to_joint_positions, get_hand_spec
 
 __all__ = ["ControlMode", "SynergyController"]
 

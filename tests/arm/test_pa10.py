@@ -10,8 +10,8 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.arm.model import ARM_SPECS
-from handle_drake.models import add_package, package_url
+from handle_drake.base.models import add_package, package_url
+from handle_drake.devices.arm.model import ARM_SPECS
 from handle_drake.scenario import LoadScenario, ScenarioError
 from handle_drake.station import GetPlant, MakeHandStation
 
@@ -143,7 +143,7 @@ def test_arm_station_simulates_without_warnings_and_holds_its_pose(hand):
     # The hand is bolted to the flange: its base is the flange frame.
     plant = GetPlant(station)
     plant_context = plant.GetMyContextFromRoot(context)
-    from handle_drake.hands import get_hand_spec
+    from handle_drake.base.hands import get_hand_spec
 
     X_WF = plant.GetFrameByName("flange").CalcPoseInWorld(plant_context)
     X_WH = plant.GetFrameByName(get_hand_spec(hand).base_body).CalcPoseInWorld(plant_context)

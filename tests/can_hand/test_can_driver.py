@@ -11,17 +11,17 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from handle_drake.can_hand.client import DISCONNECTED, STREAMING
-from handle_drake.can_hand.config import (
+from handle_drake.devices.can_hand.client import DISCONNECTED, STREAMING
+from handle_drake.devices.can_hand.config import (
     BusConfig,
     CanFirmwareConfig,
     CanHandDriverConfig,
     CanServerConfig,
 )
-from handle_drake.can_hand.driver import STATION_SIGNALS, AddCanHandDriver, CanHandProxy
-from handle_drake.can_hand.firmware import SimulatedHandFirmware
-from handle_drake.can_hand.layout import hand_layout
-from handle_drake.can_hand.server import CanBusServer
+from handle_drake.devices.can_hand.driver import STATION_SIGNALS, AddCanHandDriver, CanHandProxy
+from handle_drake.devices.can_hand.firmware import SimulatedHandFirmware
+from handle_drake.devices.can_hand.layout import hand_layout
+from handle_drake.devices.can_hand.server import CanBusServer
 
 # The station contract (docs/ARCHITECTURE.md, "Station ports"): nq, nu, fingertips.
 SIZES = {"shadow": (24, 20, 5), "barrett": (8, 4, 3)}

@@ -24,11 +24,11 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from handle_drake.can_hand.bus import socketcan_available
-from handle_drake.can_hand.client import DISCONNECTED, STREAMING
-from handle_drake.can_hand.config import CanHandDriverConfig
-from handle_drake.can_hand.driver import AddCanHandDriver
-from handle_drake.can_hand.layout import hand_layout
+from handle_drake.devices.can_hand.bus import socketcan_available
+from handle_drake.devices.can_hand.client import DISCONNECTED, STREAMING
+from handle_drake.devices.can_hand.config import CanHandDriverConfig
+from handle_drake.devices.can_hand.driver import AddCanHandDriver
+from handle_drake.devices.can_hand.layout import hand_layout
 
 ROOT = Path(__file__).resolve().parents[2]
 NATURAL_FREQUENCY = 5.0  # Hz, the simulated firmware's joint loops (critically damped)
@@ -58,7 +58,7 @@ class Process:
     def __init__(self, *args, timeout=30.0):
         env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
         self.popen = subprocess.Popen(
-            [sys.executable, "-m", "handle_drake.can_hand.cli", *args],
+            [sys.executable, "-m", "handle_drake.devices.can_hand.cli", *args],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
         self.ready_line = self._read_ready(timeout)
 
@@ -251,15 +251,15 @@ def test_cli_processes_stop_cleanly_on_sigint_and_sigterm(processes):
 def test_cli_reports_bad_arguments(processes):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     result = subprocess.run(
-        [sys.executable, "-m", "handle_drake.can_hand.cli", "can-server", "--listen", "nope"],
+        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-server", "--listen", "nope"],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "expected HOST:PORT" in result.stderr
     result = subprocess.run(
-        [sys.executable, "-m", "handle_drake.can_hand.cli", "can-sim", "--bus", "socketcan",
+        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-sim", "--bus", "socketcan",
          "--channel", "nosuchcan7"], capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "no network interface 'nosuchcan7'" in result.stderr
     result = subprocess.run(
-        [sys.executable, "-m", "handle_drake.can_hand.cli", "can-sim", "--frame-format", "canfd"],
+        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-sim", "--frame-format", "canfd"],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "invalid choice: 'canfd'" in result.stderr
 
@@ -273,7 +273,7 @@ def test_socketcan_chain_streams(processes):
     processes.append(Process("can-sim", "--bus", "socketcan", "--channel", "vcan0"))
     processes.append(Process("can-server", "--listen", f"127.0.0.1:{port}", "--bus", "socketcan",
                              "--channel", "vcan0"))
-    from handle_drake.can_hand.client import CanHandClient
+    from handle_drake.devices.can_hand.client import CanHandClient
 
     with CanHandClient(hand_layout("shadow"), "127.0.0.1", port) as client:
         assert client.wait_for_state(10.0)
@@ -281,10 +281,10 @@ def test_socketcan_chain_streams(processes):
 
 def test_same_scenario_runs_on_the_can_hand_and_in_simulation(processes):
     """diagrams/shadow_can_hand.yaml: one file, two drivers, the same closed hand."""
-    from handle_drake.demo import diagrams_dir
-    from handle_drake.hands import get_hand_spec
-    from handle_drake.run import ScenarioRunner
+    from handle_drake.apps.demo import diagrams_dir
+    from handle_drake.base.hands import get_hand_spec
     from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.simulate import ScenarioRunner
 
     group, bus_port = random_bus()
     port = free_port()

@@ -17,8 +17,8 @@ import msgpack
 import pytest
 from test_can_end_to_end import ROOT, Process, bus_args, free_port, random_bus
 
-from handle_drake.can_hand import protocol as P
-from handle_drake.can_hand.layout import hand_layout
+from handle_drake.devices.can_hand import protocol as P
+from handle_drake.devices.can_hand.layout import hand_layout
 
 SIM_RATE = 200.0  # Hz: the hand cycle rate the good client should keep seeing
 
@@ -53,7 +53,7 @@ class _ServerProcess(Process):
             env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep
                        + os.environ.get("PYTHONPATH", ""))
             self.popen = subprocess.Popen(
-                [sys.executable, "-m", "handle_drake.can_hand.cli", *args],
+                [sys.executable, "-m", "handle_drake.devices.can_hand.cli", *args],
                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT,
                 preexec_fn=preexec_fn)
             self.ready_line = self._read_ready(30.0)

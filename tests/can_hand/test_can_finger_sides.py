@@ -19,21 +19,21 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from handle_drake.can_hand.config import (
+from handle_drake.base.hands import AddHand, get_hand_spec
+from handle_drake.devices.can_hand.config import (
     BusConfig,
     CanFirmwareConfig,
     CanHandDriverConfig,
     CanServerConfig,
 )
-from handle_drake.can_hand.driver import AddCanHandDriver
-from handle_drake.can_hand.firmware import SimulatedHandFirmware
-from handle_drake.can_hand.frames import load_database
-from handle_drake.can_hand.layout import hand_layout
-from handle_drake.can_hand.server import CanBusServer
-from handle_drake.hands import AddHand, get_hand_spec
+from handle_drake.devices.can_hand.driver import AddCanHandDriver
+from handle_drake.devices.can_hand.firmware import SimulatedHandFirmware
+from handle_drake.devices.can_hand.frames import load_database
+from handle_drake.devices.can_hand.layout import hand_layout
+from handle_drake.devices.can_hand.server import CanBusServer
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation
-from handle_drake.systems.sensors import HandJointsToPlantPositions
+from handle_drake.systems.tactile import HandJointsToPlantPositions
 
 FINGERS = ("f1", "f2", "f3")
 F1_FLEXION = 1.0  # rad

@@ -10,10 +10,10 @@ from test_can_end_to_end import (  # noqa: F401 - processes is a fixture
     start_sim,
 )
 
-from handle_drake.hands import get_hand_spec
-from handle_drake.inhand.gist import frames
-from handle_drake.inhand.replay import replay_motion
-from handle_drake.inhand.task import InHandTrial
+from handle_drake.apps.inhand.gist import frames
+from handle_drake.apps.inhand.replay import replay_motion
+from handle_drake.apps.inhand.task import InHandTrial
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.scenario import LoadScenario
 
 

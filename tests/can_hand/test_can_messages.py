@@ -7,8 +7,8 @@ import struct
 import numpy as np
 import pytest
 
-from handle_drake.can_hand.layout import HandLayout, hand_layout
-from handle_drake.can_hand.messages import (
+from handle_drake.devices.can_hand.layout import HandLayout, hand_layout
+from handle_drake.devices.can_hand.messages import (
     COMMIT_ID,
     POSITION_BASE_ID,
     POSITION_SCALE,

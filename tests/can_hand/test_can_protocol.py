@@ -5,7 +5,7 @@ import struct
 import numpy as np
 import pytest
 
-from handle_drake.can_hand import protocol as P
+from handle_drake.devices.can_hand import protocol as P
 
 
 def test_header_layout_is_the_documented_one():

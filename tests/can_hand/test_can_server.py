@@ -16,17 +16,17 @@ import can
 import numpy as np
 import pytest
 
-from handle_drake.can_hand import protocol as P
-from handle_drake.can_hand.client import DISCONNECTED, CanHandClient
-from handle_drake.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
-from handle_drake.can_hand.firmware import SimulatedHandFirmware
-from handle_drake.can_hand.layout import hand_layout
-from handle_drake.can_hand.messages import (
+from handle_drake.devices.can_hand import protocol as P
+from handle_drake.devices.can_hand.client import DISCONNECTED, CanHandClient
+from handle_drake.devices.can_hand.config import BusConfig, CanFirmwareConfig, CanServerConfig
+from handle_drake.devices.can_hand.firmware import SimulatedHandFirmware
+from handle_drake.devices.can_hand.layout import hand_layout
+from handle_drake.devices.can_hand.messages import (
     COMMIT_ID,
     POSITION_BASE_ID,
     STATUS_ID,
 )
-from handle_drake.can_hand.server import (
+from handle_drake.devices.can_hand.server import (
     CanBusServer,
     CommitSchedule,
     VelocityEstimator,
@@ -169,7 +169,7 @@ def test_configs_reject_unknown_frame_formats_and_priorities():
 def test_realtime_priority_applies_to_the_calling_thread_only():
     import os
 
-    from handle_drake.can_hand.bus import use_realtime_priority
+    from handle_drake.devices.can_hand.bus import use_realtime_priority
 
     assert use_realtime_priority(0) is False
     result = {}

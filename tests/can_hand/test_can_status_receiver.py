@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from handle_drake.can_hand.client import CONNECTED, STREAMING
-from handle_drake.can_hand.driver import CanHandStatusReceiver, feedback_layout
-from handle_drake.can_hand.layout import hand_layout
+from handle_drake.devices.can_hand.client import CONNECTED, STREAMING
+from handle_drake.devices.can_hand.driver import CanHandStatusReceiver, feedback_layout
+from handle_drake.devices.can_hand.layout import hand_layout
 
 PORTS = ("position_commanded", "position_measured", "velocity_estimated", "state_estimated",
          "tactile", "connection_state")

@@ -7,10 +7,10 @@ import sqlite3
 import numpy as np
 import pytest
 
-from handle_drake.experiments import grasp_trial
-from handle_drake.experiments.cli import main
-from handle_drake.experiments.grasp_trial import GraspTrial
+from handle_drake.apps.babbling.cli import main
 from handle_drake.learning import TrialLog
+from handle_drake.trial import grasp_trial
+from handle_drake.trial.grasp_trial import GraspTrial
 
 ARGS = ["babble", "--object", "sphere", "--dims", "2", "--trials", "5", "--seed", "3",
         "--noise", "0.01", "--no-progress"]
@@ -167,7 +167,7 @@ def test_babble_refuses_a_corrupt_database_and_leaves_it_alone(tmp_path, capsys)
 
 
 def test_report_in_reduced_mode_writes_figures_and_table(tmp_path, capsys):
-    from handle_drake.objects.mesh_examples import l_bracket
+    from handle_drake.geometry.objects.mesh_examples import l_bracket
 
     out = tmp_path / "report"
     # a mesh object in millimetres, as CAD exports it: one more row
@@ -289,7 +289,7 @@ def test_the_shared_argument_types(parse, text, value, error):
     """One set of argparse types for every sub-command (babble, report, inhand)."""
     import argparse
 
-    from handle_drake import cli_support
+    from handle_drake.apps import cli_support
 
     function = getattr(cli_support, parse)
     if error is None:

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.experiments.babbling import (
+from handle_drake.apps.babbling.babbling import (
     RunSpec,
     best_so_far,
     grid_points,
@@ -15,7 +15,7 @@ from handle_drake.experiments.babbling import (
     run_history,
     trials_to_within,
 )
-from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
+from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
 
 def test_trials_to_within_counts_the_first_trial_in_each_band():
@@ -75,8 +75,8 @@ def test_replayed_optimizer_proposes_the_logged_next_trial(tmp_path):
 
 def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
     """A grid cached by other simulation code must not be read back as current."""
-    from handle_drake.experiments import babbling
-    from handle_drake.experiments.grasp_trial import GraspTrialConfig
+    from handle_drake.apps.babbling import babbling
+    from handle_drake.trial.grasp_trial import GraspTrialConfig
 
     config = GraspTrialConfig(hand="barrett", object="sphere")
     key = babbling._config_key(config)
@@ -87,7 +87,7 @@ def test_grid_cache_key_changes_with_the_simulation_code(monkeypatch):
 
 def test_run_ids_follow_the_code_not_its_comments_or_docstrings():
     """Editing a docstring or a comment keeps a run resumable; changing code does not."""
-    from handle_drake.experiments.babbling import code_digest
+    from handle_drake.apps.babbling.babbling import code_digest
 
     code = 'def f(x):\n    """Doubles x."""\n    return 2 * x\n'
     reworded = ('"""A module doc."""\n\n\ndef f(x):  # the factor is 2\n'
@@ -113,9 +113,9 @@ def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():
     import sys
     from pathlib import Path
 
-    from handle_drake.experiments.babbling import simulation_sources
+    from handle_drake.apps.babbling.babbling import simulation_sources
 
-    code = ("import sys\nfrom handle_drake.experiments.grasp_trial import GraspTrial, "
+    code = ("import sys\nfrom handle_drake.trial.grasp_trial import GraspTrial, "
             "GraspTrialConfig\ntrial = GraspTrial(GraspTrialConfig(object='wiimote'))\n"
             "trial(trial.bounds.mean(axis=1))\n"
             "print('\\n'.join(m.__file__ for n, m in sys.modules.items() "
@@ -132,7 +132,7 @@ def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():
 
 def test_run_id_changes_with_the_trial_settings_and_simulation_code(monkeypatch):
     """A logged run is resumed or read back only by the same trial on the same code."""
-    from handle_drake.experiments import babbling
+    from handle_drake.apps.babbling import babbling
 
     config = GraspTrialConfig(hand="barrett", object="sphere", noise=0.01)
     spec = RunSpec(config, "bo", 3, 10)
@@ -157,7 +157,7 @@ def _sunflower(error, samples):
 
 
 def test_grid_surrogate_interpolates_and_averages_over_the_placement_stencil():
-    from handle_drake.experiments.babbling import GridSurrogate
+    from handle_drake.apps.babbling.babbling import GridSurrogate
 
     axes = [np.linspace(-0.04, 0.04, 5), np.array([-0.03, -0.01, 0.0, 0.02, 0.03])]
     X, Y = np.meshgrid(*axes, indexing="ij")
@@ -189,7 +189,7 @@ def test_grid_surrogate_interpolates_and_averages_over_the_placement_stencil():
 
 
 def test_grid_surrogate_robust_optimum_leaves_a_spike_for_a_plateau():
-    from handle_drake.experiments.babbling import GridSurrogate
+    from handle_drake.apps.babbling.babbling import GridSurrogate
 
     # A one-cell spike of 1.0 at (-0.02, 0) and a plateau of 0.8 around (0.02, 0),
     # cells of 1 mm: the nominal maximum is the spike, the robust one (2 mm) the plateau.
@@ -207,7 +207,7 @@ def test_grid_surrogate_robust_optimum_leaves_a_spike_for_a_plateau():
 
 
 def test_grid_surrogate_refuses_bad_grids_and_settings():
-    from handle_drake.experiments.babbling import GridSurrogate
+    from handle_drake.apps.babbling.babbling import GridSurrogate
 
     axes = [np.linspace(0, 1, 3), np.linspace(0, 1, 4)]
     with pytest.raises(ValueError, match=r"values: expected shape \(3, 4\)"):

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from handle_drake.experiments.babbling import GridSurrogate, trials_to_within
-from handle_drake.learning.bayesopt import _derived_seed
+from handle_drake.apps.babbling.babbling import GridSurrogate, trials_to_within
+from handle_drake.learning.optim.bo import _derived_seed
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_babbling.py"
 
@@ -85,7 +85,7 @@ def test_bo_verdicts_compare_medians_and_reached_seeds(bench):
 
 def test_validation_compares_simulated_trials_with_the_surrogate_and_caches_them(
         bench, tmp_path, monkeypatch):
-    from handle_drake.experiments.grasp_trial import GraspTrialConfig, placement_stencil
+    from handle_drake.trial.grasp_trial import GraspTrialConfig, placement_stencil
 
     def simulated(x, y):  # a "simulation" that is not bilinear: the interpolant errs
         return 0.5 + 40.0 * x * x + 10.0 * y

@@ -6,13 +6,13 @@ import re
 import numpy as np
 import pytest
 
-from handle_drake.experiments.grasp_trial import (
+from handle_drake.geometry.objects import KINDS
+from handle_drake.trial.grasp_trial import (
     NO_CONTACT,
     GraspTrial,
     GraspTrialConfig,
     placement_stencil,
 )
-from handle_drake.objects import KINDS
 
 
 @pytest.fixture(scope="module")
@@ -105,8 +105,8 @@ def test_a_logged_trial_replays_to_its_metric_through_simulate(tmp_path, capsys)
     diagram built from the text) scores exactly the logged noiseless metric."""
     from handle_drake.cli import main
     from handle_drake.learning import InlineExecutor, TrialLog, run_experiment
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.simulate import ScenarioRunner
 
     trial = GraspTrial(hand="barrett", object="cuboid", space="offset", noise=0.05)
     result = run_experiment(trial, trial.bounds, strategy="random", n_trials=2, seed=4,
@@ -131,9 +131,9 @@ def test_a_trial_logged_with_the_old_plant_keys_replays_to_the_same_metric(barre
     contact_approximation) still replay, bit for bit, to what the trial scores now."""
     import re
 
-    from handle_drake.run import ScenarioRunner
+    from handle_drake.base.checks import ScenarioDeprecationWarning
     from handle_drake.scenario import LoadScenario
-    from handle_drake.scenario_checks import ScenarioDeprecationWarning
+    from handle_drake.trial.simulate import ScenarioRunner
 
     x = [0.004, -0.012]
     text = barrett_sphere.scenario_for(x)
@@ -148,7 +148,7 @@ def test_a_trial_logged_with_the_old_plant_keys_replays_to_the_same_metric(barre
 
 
 def test_a_runner_refuses_a_scenario_it_was_not_built_for(barrett_sphere):
-    from handle_drake.run import ScenarioRunner
+    from handle_drake.trial.simulate import ScenarioRunner
 
     runner = ScenarioRunner(barrett_sphere.base_scenario())
     other = GraspTrial(hand="barrett", object="mug", space="offset").scenario([0.0, 0.0])

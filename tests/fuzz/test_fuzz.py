@@ -103,7 +103,7 @@ def scenario_texts(draw):
 
 # -- scenario loader -------------------------------------------------------------------
 @pytest.mark.filterwarnings(  # the deprecated plant keys it draws on purpose
-    "ignore::handle_drake.scenario_checks.ScenarioDeprecationWarning")
+    "ignore::handle_drake.base.checks.ScenarioDeprecationWarning")
 @given(text=scenario_texts())
 def test_scenario_loader_accepts_or_refuses_cleanly(text):
     from handle_drake.scenario import LoadScenario, Scenario, validate_scenario
@@ -123,8 +123,8 @@ HEAVY = ("demo", "grasp", "synergies", "babble", "report")
 @pytest.fixture(scope="module")
 def cli(tmp_path_factory):
     """``run(argv) -> (code, stderr)`` with the long-running work stubbed."""
-    import handle_drake.can_hand.cli as can_cli
-    import handle_drake.run as run_module
+    import handle_drake.devices.can_hand.cli as can_cli
+    import handle_drake.trial.simulate as run_module
     from handle_drake import cli as top
 
     tmp = tmp_path_factory.mktemp("fuzzcli")
@@ -244,7 +244,7 @@ params = st.fixed_dictionaries({}, optional={
 @given(points=arrays, normals=arrays, options=params,
        method=st.sampled_from(["fast", "drake", "magic"]))
 def test_quality_api_returns_a_finite_value_or_refuses_cleanly(points, normals, options, method):
-    from handle_drake.quality import ContactParams, grasp_quality
+    from handle_drake.geometry.quality import ContactParams, grasp_quality
 
     try:
         q = grasp_quality(points, normals, ContactParams(**options), method=method)
@@ -256,7 +256,7 @@ def test_quality_api_returns_a_finite_value_or_refuses_cleanly(points, normals, 
 @given(W=st.one_of(st.lists(st.lists(numbers, min_size=6, max_size=6), max_size=12), values),
        method=st.sampled_from(["fast", "drake"]))
 def test_quality_from_wrenches_returns_a_finite_value_or_refuses_cleanly(W, method):
-    from handle_drake.quality import quality_from_wrenches
+    from handle_drake.geometry.quality import quality_from_wrenches
 
     try:
         q = quality_from_wrenches(W, method=method)
@@ -268,7 +268,7 @@ def test_quality_from_wrenches_returns_a_finite_value_or_refuses_cleanly(W, meth
 # -- CAN protocol and frames -------------------------------------------------------------
 @given(chunks=st.lists(st.binary(max_size=64), max_size=6))
 def test_protocol_stream_reader_and_payload_decoders(chunks):
-    from handle_drake.can_hand import protocol as P
+    from handle_drake.devices.can_hand import protocol as P
 
     reader = P.FrameReader()
     info = P.HandInfo("shadow", 24, 20, 5)
@@ -294,8 +294,8 @@ def test_protocol_stream_reader_and_payload_decoders(chunks):
 
 @pytest.fixture(scope="module")
 def codecs():
-    from handle_drake.can_hand.layout import hand_layout
-    from handle_drake.can_hand.messages import make_codec
+    from handle_drake.devices.can_hand.layout import hand_layout
+    from handle_drake.devices.can_hand.messages import make_codec
 
     return [make_codec(hand_layout(kind), fmt) for kind in ("shadow", "barrett")
             for fmt in ("classic", "fd")]
@@ -304,7 +304,7 @@ def codecs():
 @given(frames=st.lists(st.tuples(st.one_of(st.integers(0, 0x7FF), st.integers(-5, 2**32)),
                                  st.binary(max_size=70), st.booleans()), max_size=12))
 def test_frame_decoders_return_or_raise_can_frame_errors(codecs, frames):
-    from handle_drake.can_hand.messages import CanFrameError
+    from handle_drake.devices.can_hand.messages import CanFrameError
 
     for codec in codecs:
         receivers = (codec.feedback_receiver(), codec.setpoint_receiver())
@@ -324,8 +324,8 @@ def test_frame_decoders_return_or_raise_can_frame_errors(codecs, frames):
     "is_error_frame": st.one_of(st.booleans(), scalars),
     "is_remote_frame": st.one_of(st.booleans(), scalars)}))
 def test_received_frame_check_takes_any_field_types(codecs, fields):
-    from handle_drake.can_hand.bus import check_frame
-    from handle_drake.can_hand.messages import CanFrameError
+    from handle_drake.devices.can_hand.bus import check_frame
+    from handle_drake.devices.can_hand.messages import CanFrameError
 
     try:
         arbitration_id, data, is_fd = check_frame(SimpleNamespace(**fields))

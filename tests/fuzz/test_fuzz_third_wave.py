@@ -119,7 +119,7 @@ def test_executor_text_parses_or_is_refused(text):
 # -- glove recordings ---------------------------------------------------------------------
 @st.composite
 def glove_documents(draw):
-    from handle_drake.inhand.glove import GLOVE_SENSORS
+    from handle_drake.apps.inhand.glove import GLOVE_SENSORS
 
     n = draw(st.integers(0, 12))
     step = draw(st.sampled_from([1e-12, 1e-9, 1e-6, 1e-5, 1e-4, 0.01, 1.0, 1e300, -0.01]))
@@ -138,9 +138,9 @@ def glove_documents(draw):
 
 @given(document=glove_documents())
 def test_glove_files_load_or_are_refused(document):
-    from handle_drake.inhand.gist import extract_gist
-    from handle_drake.inhand.glove import load_glove
-    from handle_drake.inhand.mapping import glove_to_shadow
+    from handle_drake.apps.inhand.gist import extract_gist
+    from handle_drake.apps.inhand.glove import load_glove
+    from handle_drake.apps.inhand.mapping import glove_to_shadow
 
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "glove.json"
@@ -191,7 +191,7 @@ def frames(draw):
 def test_depth_frames_load_or_are_refused(frame):
     from PIL import Image
 
-    from handle_drake.perception.frames import DepthFrame, load_frame
+    from handle_drake.devices.camera.frames import DepthFrame, load_frame
 
     dtype, shape, fmt, sidecar, value = frame
     if dtype == "rgb":
@@ -253,7 +253,7 @@ def test_accelerometer_settings_load_or_are_refused(settings_, device):
     numbers, st.integers(-5, 70000), st.integers(-5, 70000), numbers), max_size=6).map(
     lambda rows: "\n".join(" ".join(str(v) for v in row) for row in rows).encode())))
 def test_event_recordings_load_or_are_refused(data):
-    from handle_drake.instruments.evdev_driver import load_events
+    from handle_drake.devices.accelerometer.evdev_driver import load_events
 
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "events.txt"
@@ -281,7 +281,7 @@ def test_event_recordings_load_or_are_refused(data):
            st.lists(st.tuples(*[st.integers(-10, 10)] * 3), max_size=12)),
        slashes=st.booleans())
 def test_obj_meshes_load_or_are_refused(vertices, faces, slashes):
-    from handle_drake.objects.mesh import MeshObjectSpec
+    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     lines = [f"v {x} {y} {z}" for x, y, z in vertices]
     lines += [("f " + " ".join(f"{i}/{i}/{i}" if slashes else str(i) for i in face))
@@ -320,7 +320,7 @@ def test_midi_mappings_load_or_are_refused(controls):
             LoadScenario(data=f"midi_controller: {{mapping: '{path}'}}")
         except (ValueError, TypeError, FileNotFoundError):
             return
-    from handle_drake.midi.device import control_layout
+    from handle_drake.devices.midi.device import control_layout
 
     layout = {c.name: c.kind for c in control_layout()}
     for control in controls:  # what loads is on the device, with its kind

@@ -4,8 +4,8 @@ through its modes in order, and each grasp finger closes until its own contact."
 
 import pytest
 
-from handle_drake.demo import held_through_lift
-from handle_drake.grasp.execution import ReactiveGraspRunner, plan_params, run_plan
+from handle_drake.apps.demo import held_through_lift
+from handle_drake.apps.planning.execution import ReactiveGraspRunner, plan_params, run_plan
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, plan_grasp, resting_pose
 from handle_drake.systems.reactive_grasp import ReactiveGraspMode
 

@@ -5,12 +5,12 @@ from datetime import datetime
 import numpy as np
 import pytest
 
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.grasp.analysis import rederive_table1
 from handle_drake.grasp.kinematics import GraspKinematics, object_dims_for
 from handle_drake.grasp.recordings import GraspRecords
 from handle_drake.grasp.synthetic import posture_prior
 from handle_drake.grasp.taxonomy import GraspClass, grasp_centre_palm, palm_to_report_mm
-from handle_drake.hands import get_hand_spec
 
 NAMES = get_hand_spec("shadow").joint_names
 

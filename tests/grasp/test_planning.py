@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
-from handle_drake.demo import held_through_lift
+from handle_drake.apps.demo import held_through_lift
+from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.grasp.kinematics import CONTACT_POINTS, contact_layout
 from handle_drake.grasp.planning import GraspPlanningError, plan_grasp, resting_pose
 from handle_drake.grasp.taxonomy import approach_palm
-from handle_drake.hands import actuated_to_joint_positions, get_hand_spec
-from handle_drake.run import ScenarioRunner
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation
 from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
+from handle_drake.trial.simulate import ScenarioRunner
 
 SPEC = get_hand_spec("shadow")
 DISTAL = {"th": "thdistal", "ff": "ffdistal", "mf": "mfdistal", "rf": "rfdistal", "lf": "lfdistal"}
@@ -162,7 +162,7 @@ def test_the_planned_forearm_stays_above_the_table(grasp_class, diameter):
     from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
     from pydrake.systems.framework import DiagramBuilder
 
-    from handle_drake.models import add_package, model_path
+    from handle_drake.base.models import add_package, model_path
 
     plan = plan_grasp(grasp_class, ("sphere", diameter), resting_pose("sphere", diameter))
     spec = get_hand_spec("shadow")
@@ -264,7 +264,7 @@ def test_a_16mm_ball_is_pinched_with_the_pads_tangent_to_it():
     second pass on round objects keeps each pad tangent to the surface within
     15 deg: the ray out along the pad's normal passes through the ball's centre
     (geometry of the planned posture in the station), and the grasp holds."""
-    from handle_drake.grasp.execution import ReactiveGraspRunner
+    from handle_drake.apps.planning.execution import ReactiveGraspRunner
 
     size = 0.016
     plan = plan_grasp("palmar_pinch", ("sphere", size), resting_pose("sphere", size))

@@ -5,6 +5,7 @@ from datetime import UTC, datetime
 import numpy as np
 import pytest
 
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.grasp.recordings import (
     SHADOW_JOINT_NAMES,
     GraspRecords,
@@ -12,7 +13,6 @@ from handle_drake.grasp.recordings import (
     save_grasps,
 )
 from handle_drake.grasp.taxonomy import GraspClass
-from handle_drake.hands import get_hand_spec
 
 
 def _records(n=4, seed=0):

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.grasp.synergies import (
     Coupling,
     SizeRegression,
@@ -11,7 +12,6 @@ from handle_drake.grasp.synergies import (
     fit_synergies,
     reconstruction_error_vs_k,
 )
-from handle_drake.hands import get_hand_spec
 
 SPEC = get_hand_spec("shadow")
 NAMES = SPEC.joint_names

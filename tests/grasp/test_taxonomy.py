@@ -5,6 +5,8 @@ import pytest
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.base.models import add_package, model_path
 from handle_drake.grasp.taxonomy import (
     GRASP_CLASSES,
     GraspClass,
@@ -17,8 +19,6 @@ from handle_drake.grasp.taxonomy import (
     palm_to_report_mm,
     report_mm_to_palm,
 )
-from handle_drake.hands import get_hand_spec
-from handle_drake.models import add_package, model_path
 
 
 def test_eight_classes_with_report_ids():

@@ -6,8 +6,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import VectorLogSink
 
-from handle_drake.hands import get_hand_spec
-from handle_drake.inhand.gist import (
+from handle_drake.apps.inhand.gist import (
     ActionGist,
     GistMotionSource,
     MetaMotion,
@@ -15,7 +14,8 @@ from handle_drake.inhand.gist import (
     frames,
     parameter_dimension,
 )
-from handle_drake.inhand.task import task_gist
+from handle_drake.apps.inhand.task import task_gist
+from handle_drake.base.hands import get_hand_spec
 
 NAMES = list(get_hand_spec("shadow").actuated_joint_names)
 

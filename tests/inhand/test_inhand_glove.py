@@ -5,16 +5,16 @@ import json
 import numpy as np
 import pytest
 
-from handle_drake.hands import actuated_position_limits, get_hand_spec
-from handle_drake.inhand.glove import (
+from handle_drake.apps.inhand.glove import (
     GLOVE_SENSORS,
     GloveFormatError,
     GloveRecording,
     load_glove,
     save_glove,
 )
-from handle_drake.inhand.mapping import glove_to_shadow
-from handle_drake.inhand.synthetic import DATA_DIR, screw_cap_rotation, star_rotation
+from handle_drake.apps.inhand.mapping import glove_to_shadow
+from handle_drake.apps.inhand.synthetic import DATA_DIR, screw_cap_rotation, star_rotation
+from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 
 NAMES = list(get_hand_spec("shadow").actuated_joint_names)
 S = {name: i for i, name in enumerate(GLOVE_SENSORS)}

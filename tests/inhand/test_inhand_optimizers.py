@@ -5,14 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.inhand.evaluation import incremental_score
-from handle_drake.inhand.optimizers import (
+from handle_drake.apps.inhand.evaluation import incremental_score
+from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
+from handle_drake.learning.optim.population import (
     CMAES,
     INHAND_OPTIMIZERS,
     IncrementalPSO,
     make_inhand_optimizer,
 )
-from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
 
 TARGET = np.array([0.8, 0.2, 0.5, 0.5, 0.3, 0.9])
 DIMS = np.array([2, 2, 2])

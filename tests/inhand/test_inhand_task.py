@@ -5,9 +5,9 @@ import re
 import numpy as np
 import pytest
 
+from handle_drake.apps.inhand.experiment import learning_curve, replay_best, run_inhand
+from handle_drake.apps.inhand.task import InHandTask, InHandTrial
 from handle_drake.cli import main as cli_main
-from handle_drake.inhand.experiment import learning_curve, replay_best, run_inhand
-from handle_drake.inhand.task import InHandTask, InHandTrial
 
 
 def _stroke(trial):

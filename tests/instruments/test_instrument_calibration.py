@@ -11,8 +11,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 
-from handle_drake.instruments.accelerometer import DeviceAccelerometer
-from handle_drake.instruments.calibration import (
+from handle_drake.devices.accelerometer.calibration import (
     SIX_POSITIONS,
     AccelerometerCalibration,
     calibrate_device,
@@ -21,9 +20,10 @@ from handle_drake.instruments.calibration import (
     residual_bias,
     six_position_calibration,
 )
-from handle_drake.instruments.config import AccelerometerConfig
-from handle_drake.instruments.estimators import EstimatorParams, true_roll_pitch
-from handle_drake.instruments.profiles import PROFILES, STANDARD_GRAVITY, device_bias
+from handle_drake.devices.accelerometer.config import AccelerometerConfig
+from handle_drake.devices.accelerometer.estimators import EstimatorParams, true_roll_pitch
+from handle_drake.devices.accelerometer.profiles import PROFILES, STANDARD_GRAVITY, device_bias
+from handle_drake.devices.accelerometer.sensor import DeviceAccelerometer
 
 G0 = STANDARD_GRAVITY
 NOISY = [name for name, p in PROFILES.items() if p.bias_std_g > 0]
@@ -139,8 +139,8 @@ def test_thresholds_given_in_the_scenario_are_kept_and_defaults_follow_the_devic
 
 
 def test_a_resting_wiimote_scenario_is_calibrated_unless_it_says_not(tmp_path):
-    from handle_drake.run import ScenarioRunner
     from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.simulate import ScenarioRunner
 
     base = ("hand: {mount: !FixedMount {X_WB: {translation: [0, 0, 1.5]}}}\n"
             "random_seed: 13\nsimulation_duration: 1.2\n")

@@ -12,8 +12,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 
-from handle_drake.instruments.accelerometer import AddObjectAccelerometer
-from handle_drake.instruments.estimators import (
+from handle_drake.devices.accelerometer.estimators import (
     EstimatorParams,
     EstimatorSystem,
     at_rest,
@@ -22,8 +21,9 @@ from handle_drake.instruments.estimators import (
     slip_indicator,
     true_roll_pitch,
 )
-from handle_drake.instruments.profiles import get_profile
-from handle_drake.objects import AddObject, ObjectSpec, resting_height
+from handle_drake.devices.accelerometer.profiles import get_profile
+from handle_drake.devices.accelerometer.sensor import AddObjectAccelerometer
+from handle_drake.geometry.objects import AddObject, ObjectSpec, resting_height
 
 G = 9.81
 

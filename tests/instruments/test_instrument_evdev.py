@@ -12,9 +12,8 @@ from pydrake.math import RollPitchYaw
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.instruments.accelerometer import INSTRUMENT_SIGNALS, ExportInstrumentPorts
-from handle_drake.instruments.estimators import EstimatorParams
-from handle_drake.instruments.evdev_driver import (
+from handle_drake.devices.accelerometer.estimators import EstimatorParams
+from handle_drake.devices.accelerometer.evdev_driver import (
     ABS_X,
     ABS_Y,
     ABS_Z,
@@ -25,7 +24,8 @@ from handle_drake.instruments.evdev_driver import (
     load_events,
     save_events,
 )
-from handle_drake.instruments.profiles import get_profile
+from handle_drake.devices.accelerometer.profiles import get_profile
+from handle_drake.devices.accelerometer.sensor import INSTRUMENT_SIGNALS, ExportInstrumentPorts
 
 PROFILE = get_profile("joywarrior24f14")
 CENTRE = 2 ** 13  # the JoyWarrior's raw 14-bit readings are unsigned around 8192
@@ -156,7 +156,7 @@ def test_virtual_uinput_joystick():  # pragma: no cover - needs the uinput modul
     import evdev
     from evdev import AbsInfo, UInput
 
-    from handle_drake.instruments.evdev_driver import open_device
+    from handle_drake.devices.accelerometer.evdev_driver import open_device
 
     info = AbsInfo(value=CENTRE, min=0, max=2 ** 14 - 1, fuzz=0, flat=0, resolution=0)
     capabilities = {evdev.ecodes.EV_ABS: [(ABS_X, info), (ABS_Y, info), (ABS_Z, info)]}
@@ -208,14 +208,14 @@ def _fake_evdev(monkeypatch, devices):
     by_path = {d.path: d for d in devices}
     monkeypatch.setattr(evdev, "list_devices", lambda: list(by_path))
     monkeypatch.setattr(evdev, "InputDevice", lambda path: by_path[path])
-    monkeypatch.setattr("handle_drake.instruments.evdev_driver.Path.exists",
+    monkeypatch.setattr("handle_drake.devices.accelerometer.evdev_driver.Path.exists",
                         lambda self: str(self) in by_path)
 
 
 def test_live_device_found_by_name_deadband_cleared_and_read(monkeypatch):
     from evdev import InputEvent
 
-    from handle_drake.instruments.evdev_driver import LiveEvents, open_device
+    from handle_drake.devices.accelerometer.evdev_driver import LiveEvents, open_device
 
     mouse = _FakeInputDevice("/dev/input/event3", name="USB Optical Mouse")
     joy = _FakeInputDevice("/dev/input/event7")
@@ -244,7 +244,7 @@ def test_live_device_found_by_name_deadband_cleared_and_read(monkeypatch):
 
 
 def test_live_device_errors_and_a_read_only_device(monkeypatch):
-    from handle_drake.instruments.evdev_driver import open_device
+    from handle_drake.devices.accelerometer.evdev_driver import open_device
 
     joy = _FakeInputDevice("/dev/input/event7", writable=False)
     _fake_evdev(monkeypatch, [joy])

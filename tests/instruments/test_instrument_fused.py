@@ -23,8 +23,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from handle_drake.instruments.accelerometer import AddObjectAccelerometer, DeviceAccelerometer
-from handle_drake.instruments.estimators import (
+from handle_drake.devices.accelerometer.estimators import (
     EstimatorParams,
     EstimatorState,
     EstimatorSystem,
@@ -33,9 +32,10 @@ from handle_drake.instruments.estimators import (
     roll_pitch,
     slip_indicator,
 )
-from handle_drake.instruments.profiles import STANDARD_GRAVITY as G0
-from handle_drake.instruments.profiles import get_profile, sample_noise
-from handle_drake.objects import AddObject, ObjectSpec, resting_height
+from handle_drake.devices.accelerometer.profiles import STANDARD_GRAVITY as G0
+from handle_drake.devices.accelerometer.profiles import get_profile, sample_noise
+from handle_drake.devices.accelerometer.sensor import AddObjectAccelerometer, DeviceAccelerometer
+from handle_drake.geometry.objects import AddObject, ObjectSpec, resting_height
 
 M = 4  # command size
 ESTIMATES = ("roll_pitch", "at_rest", "free_fall", "detection_time", "slip")
@@ -315,7 +315,7 @@ def test_estimators_bad_parameters():
         EstimatorSystem(-1.0)
     from pydrake.systems.framework import DiagramBuilder as Builder
 
-    from handle_drake.instruments.accelerometer import ExportInstrumentPorts
+    from handle_drake.devices.accelerometer.sensor import ExportInstrumentPorts
 
     builder = Builder()
     device = builder.AddSystem(DeviceAccelerometer("wiimote"))

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
+from handle_drake.apps.demo import diagrams_dir
 from handle_drake.cli import main
-from handle_drake.demo import diagrams_dir
-from handle_drake.instruments.accelerometer import check_sensor_pose
-from handle_drake.instruments.station import instrument_X_OS
-from handle_drake.objects import ObjectSpec, dimensions
+from handle_drake.devices.accelerometer.sensor import check_sensor_pose
+from handle_drake.devices.accelerometer.wiring import instrument_X_OS
+from handle_drake.geometry.objects import ObjectSpec, dimensions
 from handle_drake.scenario import LoadScenario, ScenarioError
 from handle_drake.station import MakeHandStation, object_spec
 

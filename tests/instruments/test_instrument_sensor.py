@@ -11,10 +11,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from handle_drake.instruments.accelerometer import DeviceAccelerometer, device_reading, sensor_pose
-from handle_drake.instruments.catalogue import DEVICE_OBJECTS
-from handle_drake.instruments.estimators import true_roll_pitch
-from handle_drake.instruments.profiles import (
+from handle_drake.devices.accelerometer.estimators import true_roll_pitch
+from handle_drake.devices.accelerometer.profiles import (
     PROFILES,
     STANDARD_GRAVITY,
     DeviceProfile,
@@ -22,7 +20,13 @@ from handle_drake.instruments.profiles import (
     get_profile,
     to_counts,
 )
-from handle_drake.objects import ObjectSpec, dimensions, mass_properties, total_height
+from handle_drake.devices.accelerometer.sensor import (
+    DeviceAccelerometer,
+    device_reading,
+    sensor_pose,
+)
+from handle_drake.geometry.objects import ObjectSpec, dimensions, mass_properties, total_height
+from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 from handle_drake.scenario import LoadScenario, ScenarioError
 from handle_drake.station import MakeHandStation
 
@@ -167,14 +171,14 @@ def test_profiles_match_their_sources():
 ])
 def test_instrumented_objects_have_their_published_size_and_mass(kind, dims_mm, mass):
     spec = ObjectSpec.default(kind)
-    from handle_drake.objects import surface_mesh
+    from handle_drake.geometry.objects import surface_mesh
 
     extent = np.ptp(surface_mesh(spec).vertices, axis=0)
     np.testing.assert_allclose(extent * 1000, dims_mm, atol=1e-6)
     assert total_height(spec) == pytest.approx(dims_mm[2] / 1000)
     assert mass_properties(spec).mass == pytest.approx(mass)
     assert dimensions(spec)  # the named dimensions exist
-    from handle_drake.instruments.accelerometer import check_sensor_pose
+    from handle_drake.devices.accelerometer.sensor import check_sensor_pose
 
     check_sensor_pose(spec, sensor_pose(kind, spec.size), tolerance=0.0)  # inside
 
@@ -219,7 +223,7 @@ def test_a_sensor_glued_on_the_surface_is_accepted_and_off_it_refused():
 
 
 def test_stations_without_an_accelerometer_export_no_instrument_ports():
-    from handle_drake.instruments.accelerometer import INSTRUMENT_SIGNALS
+    from handle_drake.devices.accelerometer.sensor import INSTRUMENT_SIGNALS
 
     station = MakeHandStation(LoadScenario(data=HAND_AWAY + "object: {kind: wiimote}"))
     assert not any(station.HasOutputPort(f"object.{s}") for s in INSTRUMENT_SIGNALS)
@@ -229,8 +233,8 @@ def test_stations_without_an_accelerometer_export_no_instrument_ports():
 
 
 def test_instrumented_kinds_are_accepted_where_object_kinds_are():
-    from handle_drake.experiments.grasp_trial import GraspTrialConfig
-    from handle_drake.objects import DEFAULT_SIZE, KINDS
+    from handle_drake.geometry.objects import DEFAULT_SIZE, KINDS
+    from handle_drake.trial.grasp_trial import GraspTrialConfig
 
     for kind in DEVICE_OBJECTS:
         assert kind in KINDS

@@ -1,4 +1,4 @@
-"""handle_drake.blas: the one place BLAS is pinned to one thread per process."""
+"""handle_drake.base.blas: the one place BLAS is pinned to one thread per process."""
 
 import json
 import os
@@ -7,7 +7,7 @@ import sys
 
 CHECK = """
 import json, os, sys
-from handle_drake.blas import BLAS_VARIABLES, pin_blas
+from handle_drake.base.blas import BLAS_VARIABLES, pin_blas
 mode = sys.argv[1]
 if mode == "late":  # numpy (and its BLAS) loaded first, as in a worker process
     import numpy

@@ -266,7 +266,7 @@ def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
 
 
 def test_a_wrong_scheduler_address_fails_fast_with_a_clear_message(tmp_path, capsys):
-    from handle_drake.experiments.cli import main
+    from handle_drake.apps.babbling.cli import main
 
     address = f"127.0.0.1:{_free_port()}"  # nothing listens there
     outcome = {}
@@ -366,8 +366,8 @@ def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
 def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path):
     """The real grasp trial: ``babble --executor dask`` (2 worker processes) logs each
     trial once, and each metric is what the same simulation gives in this process."""
-    from handle_drake.experiments.cli import main
-    from handle_drake.experiments.grasp_trial import GraspTrial
+    from handle_drake.apps.babbling.cli import main
+    from handle_drake.trial.grasp_trial import GraspTrial
 
     db = tmp_path / "babble.sqlite"
     assert main(["babble", "--object", "sphere", "--dims", "2", "--strategy", "random",
@@ -388,8 +388,8 @@ def test_inhand_pso_on_a_dask_cluster_equals_the_run_in_process(tmp_path, capsys
     """``handle-drake inhand --executor dask://HOST:PORT`` (the module's 2-process
     LocalCluster): two iterations of Algorithm 2 (4 particles) log the same particles and
     scores, trial for trial, as the same run simulated in this process."""
+    from handle_drake.apps.inhand.experiment import run_inhand
     from handle_drake.cli import main as cli_main
-    from handle_drake.inhand.experiment import run_inhand
 
     db = tmp_path / "inhand.sqlite"
     address = "dask://" + dask_executor.address.removeprefix("tcp://")
@@ -419,8 +419,8 @@ def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path,
     the workers (the client writes the cache) and a batch of runs driven by client threads
     give the values and trials of the same grid and runs in this process. The grid gets a
     bare ``distributed.Client``."""
-    from handle_drake.experiments.babbling import RunSpec, grid_values, run_batch
-    from handle_drake.experiments.grasp_trial import GraspTrialConfig
+    from handle_drake.apps.babbling.babbling import RunSpec, grid_values, run_batch
+    from handle_drake.trial.grasp_trial import GraspTrialConfig
 
     config = GraspTrialConfig(hand="barrett", object="sphere", space="offset")
     _, on_dask = grid_values(config, 2, tmp_path / "grids", executor=dask_executor.client)
@@ -441,7 +441,7 @@ def test_babble_bo_on_a_running_cluster_proposes_batches_of_its_worker_count(
     """``babble --strategy bo --executor dask://HOST:PORT`` without --workers (the README's
     cluster command): BO proposes batches of the cluster's workers (2 here), not one trial
     at a time; --workers 1 still asks for the sequential BO."""
-    from handle_drake.experiments.cli import main
+    from handle_drake.apps.babbling.cli import main
 
     address = "dask://" + dask_executor.address.removeprefix("tcp://")
     db = tmp_path / "babble.sqlite"

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import mido
 
+from handle_drake.apps.demo import diagrams_dir
 from handle_drake.cli import main
-from handle_drake.demo import diagrams_dir
-from handle_drake.midi import ports
-from handle_drake.midi.ports import ALSA_SEQUENCER
+from handle_drake.devices.midi import ports
+from handle_drake.devices.midi.ports import ALSA_SEQUENCER
 from handle_drake.scenario import DumpScenario, LoadScenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -71,7 +71,7 @@ def test_write_scenarios_writes_files_that_load_back_to_the_shipped_ones(
     # Planning the jog pinch takes ~10 s; the shipped file stands in for the
     # plan (test_shipped_scenarios_match_what_the_planner_writes checks the
     # fader plan against its file). What is tested: the written text.
-    import handle_drake.midi.experiments as experiments
+    import handle_drake.apps.figure9.experiments as experiments
 
     shipped = {name: LoadScenario(filename=diagrams_dir() / name)
                for name in ("midi_jog_pinch.yaml", "midi_fader_push.yaml")}

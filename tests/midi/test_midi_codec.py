@@ -6,7 +6,7 @@ import mido
 import numpy as np
 import pytest
 
-from handle_drake.midi.codec import (
+from handle_drake.devices.midi.codec import (
     ControlCounts,
     ControlEncoder,
     MidiDecoder,
@@ -15,7 +15,7 @@ from handle_drake.midi.codec import (
     encode_relative,
     fader_value,
 )
-from handle_drake.midi.mapping import LoadMidiMapping
+from handle_drake.devices.midi.mapping import LoadMidiMapping
 
 
 @pytest.fixture(scope="module")

@@ -11,9 +11,9 @@ import re
 import numpy as np
 import pytest
 
-from handle_drake.demo import diagrams_dir
-from handle_drake.midi.codec import fader_value
-from handle_drake.midi.experiments import fader_push_scenario, run_midi_scenario
+from handle_drake.apps.demo import diagrams_dir
+from handle_drake.apps.figure9.experiments import fader_push_scenario, run_midi_scenario
+from handle_drake.devices.midi.codec import fader_value
 from handle_drake.scenario import LoadScenario
 
 
@@ -75,7 +75,7 @@ def _wrist_yaws(scenario) -> np.ndarray:
 def clockwise_pinch():
     """The pinch turning the wheel clockwise past the wrist's yaw of -180 degrees
     (the planned grasp's yaw is -144 deg: -75 then 25 further is -244 deg)."""
-    from handle_drake.midi.experiments import jog_pinch_scenario
+    from handle_drake.apps.figure9.experiments import jog_pinch_scenario
 
     return jog_pinch_scenario(turn_deg=-75, back_deg=25)
 
@@ -86,7 +86,7 @@ def test_a_clockwise_turn_past_180_degrees_keeps_the_wrist_yaw_continuous(clockw
     assert np.abs(np.diff(yaws)).max() < 10.0
     assert yaws.min() < -180.0
     # the turn the script makes: -75, then 25 further the same way
-    from handle_drake.midi.experiments import commanded_wrist_turn_deg
+    from handle_drake.apps.figure9.experiments import commanded_wrist_turn_deg
 
     scenario = clockwise_pinch
     assert commanded_wrist_turn_deg(scenario, 0.0, scenario.simulation_duration) == \
@@ -119,7 +119,7 @@ def test_midi_jog_fails_when_the_wheel_does_not_follow_the_wrist(clockwise_pinch
 
 
 def test_a_turn_without_a_back_turn_is_a_valid_scenario():
-    from handle_drake.midi.experiments import jog_pinch_scenario
+    from handle_drake.apps.figure9.experiments import jog_pinch_scenario
     from handle_drake.scenario import DumpScenario
 
     scenario = jog_pinch_scenario(turn_deg=25, back_deg=0)

@@ -19,9 +19,9 @@ import mido
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from handle_drake.hands import get_hand_spec
-from handle_drake.midi.hand_control import BuildMidiHandControl
-from handle_drake.midi.ports import in_process_pair
+from handle_drake.apps.figure9.hand_control import BuildMidiHandControl
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.devices.midi.ports import in_process_pair
 from handle_drake.scenario import LoadScenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -40,7 +40,7 @@ def can_hand():
     group = f"239.255.{rng.randint(0, 255)}.{rng.randint(1, 254)}"
     env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     process = subprocess.Popen(
-        [sys.executable, "-m", "handle_drake.can_hand.cli", "can-server", "--with-sim",
+        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-server", "--with-sim",
          "--listen", f"127.0.0.1:{port}", "--bus", "udp_multicast", "--channel", group,
          "--bus-port", str(rng.randint(20000, 60000))],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)

@@ -6,8 +6,8 @@ import mido
 import pytest
 from pydrake.geometry import Meshcat
 
-from handle_drake.midi.mapping import DEFAULT_MAPPING_FILE, LoadMidiMapping
-from handle_drake.midi.ports import (
+from handle_drake.devices.midi.mapping import DEFAULT_MAPPING_FILE, LoadMidiMapping
+from handle_drake.devices.midi.ports import (
     MeshcatFaderPort,
     MidiPortError,
     in_process_pair,

@@ -10,13 +10,13 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.hands import actuated_position_limits, get_hand_spec
-from handle_drake.midi.codec import REJECT_REASONS, fader_value
-from handle_drake.midi.device import AddMidiController, ControllerGeometry, control_layout
-from handle_drake.midi.hand_control import BuildMidiHandControl
-from handle_drake.midi.mapping import LoadMidiMapping
-from handle_drake.midi.ports import MeshcatFaderPort, in_process_pair
-from handle_drake.midi.systems import (
+from handle_drake.apps.figure9.hand_control import BuildMidiHandControl
+from handle_drake.base.hands import actuated_position_limits, get_hand_spec
+from handle_drake.devices.midi.codec import REJECT_REASONS, fader_value
+from handle_drake.devices.midi.device import AddMidiController, ControllerGeometry, control_layout
+from handle_drake.devices.midi.mapping import LoadMidiMapping
+from handle_drake.devices.midi.ports import MeshcatFaderPort, in_process_pair
+from handle_drake.devices.midi.systems import (
     JOINT_MODE,
     SYNERGY_MODE,
     MidiControllerEncoder,
@@ -76,7 +76,7 @@ def test_free_base_rests_flat_on_a_table():
     # Point contact, SAP, 2 ms (the experiments' settings). Box-on-box point
     # contact has a single contact point: without its corner feet the base
     # sank 12 mm into the table.
-    from handle_drake.objects.plant import AddTable
+    from handle_drake.geometry.objects.plant import AddTable
 
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
@@ -298,7 +298,7 @@ def test_meshcat_sliders_drive_the_hand():
 
 
 def test_bad_arguments_name_the_field():
-    from handle_drake.midi.systems import MidiHandControl
+    from handle_drake.devices.midi.systems import MidiHandControl
 
     with pytest.raises(ValueError, match="fader_joints"):
         MidiHandControl("shadow", MAPPING, fader_joints=["XXJ9"])

@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from handle_drake.perception.camera import (
+from handle_drake.devices.camera.frames import DepthFrame, load_frame, points_from_depth, save_frame
+from handle_drake.devices.camera.profiles import (
     PROFILES,
     CameraProfile,
     apply_depth_model,
     disparity_step,
     get_profile,
 )
-from handle_drake.perception.frames import DepthFrame, load_frame, points_from_depth, save_frame
 
 
 def test_kinect_profile_matches_the_sensor_sheet_and_khoshelham_2012():

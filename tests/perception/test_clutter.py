@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.perception.detect import Detection, TabletopDetector, detect
-from handle_drake.perception.scenes import (
+from handle_drake.apps.perception.scenes import (
     SceneObject,
     TabletopScene,
     match_detections,
     random_scene,
 )
+from handle_drake.geometry.detect import Detection, TabletopDetector, detect
 
 
 def _detect(objects, seed=0, time=0.0):
@@ -99,7 +99,7 @@ def test_seeded_random_scenes_every_object_within_1_cm(seed):
 
 
 def test_random_scenes_are_seeded_and_leave_room():
-    from handle_drake.perception.scenes import footprint_radius
+    from handle_drake.apps.perception.scenes import footprint_radius
 
     assert random_scene(5) == random_scene(5) and random_scene(5) != random_scene(6)
     for seed in range(20):

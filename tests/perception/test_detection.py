@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from handle_drake.demo import diagrams_dir
-from handle_drake.perception.detect import detect_objects, min_area_rectangle
-from handle_drake.perception.perceive import CATALOGUE_PRIMITIVE, detection_error, render_views
+from handle_drake.apps.demo import diagrams_dir
+from handle_drake.apps.perception.perceive import CATALOGUE_PRIMITIVE, detection_error, render_views
+from handle_drake.geometry.detect import detect_objects, min_area_rectangle
 from handle_drake.scenario import LoadScenario, ScenarioError
 from handle_drake.station import GetPlant, MakeHandStation, object_body, object_initial_pose
 
@@ -170,8 +170,8 @@ def test_perceive_cli_json_and_recorded_frame_round_trip(tmp_path):
 def test_the_hand_in_view_is_filtered_out_by_its_render_labels(capsys):
     """A hand hovering over the table is a cluster of its own (a false object
     'standing' there); its render labels take it out of the cloud."""
+    from handle_drake.apps.perception.perceive import robot_labels
     from handle_drake.cli import main
-    from handle_drake.perception.perceive import robot_labels
 
     hand = ("hand: {kind: shadow, mount: !FixedMount {X_WB: {translation: [-0.25, 0.0, 0.3], "
             "rotation: !Rpy {deg: [90, 0, 90]}}}}")

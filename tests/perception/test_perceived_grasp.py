@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from pydrake.common.schema import Transform
 
+from handle_drake.apps.perception.grasping import perceive_object, planner_input
+from handle_drake.geometry.detect import Detection
 from handle_drake.grasp.planning import plan_grasp, resting_pose
-from handle_drake.perception.detect import Detection
-from handle_drake.perception.grasping import perceive_object, planner_input
 from handle_drake.scenario import ObjectConfig
 
 
@@ -58,8 +58,8 @@ def test_the_object_planned_on_is_chosen_by_the_request_not_by_the_truth():
     told to look near the second cuboid, it is the one planned on (the truth,
     the first, is not consulted); the sphere, nearer the commanded spot but
     not of the requested size, is passed over."""
-    from handle_drake.perception.grasping import select_detection
-    from handle_drake.perception.scenes import SceneObject
+    from handle_drake.apps.perception.grasping import select_detection
+    from handle_drake.apps.perception.scenes import SceneObject
 
     other = SceneObject("cuboid", 0.075, (-0.08, 0.08), math.radians(10))
     ball = SceneObject("sphere", 0.04, (-0.10, -0.02))

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.experiments.grasp_trial import GraspTrial, GraspTrialConfig
-from handle_drake.perception.grasping import aimed_trial_scenario, perceived_grasp_trial
+from handle_drake.apps.perception.grasping import aimed_trial_scenario, perceived_grasp_trial
+from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
 
 def test_aimed_scenario_turns_the_hand_about_its_aim_point():

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.arm.reach import ArmReach
+from handle_drake.apps.demo import diagrams_dir
+from handle_drake.apps.pick.plan import DROP_HEIGHT, plan_pick
+from handle_drake.apps.pick.reach import ArmReach
+from handle_drake.apps.pick.scenes import GAP, REGION, random_scene
 from handle_drake.cli import main
-from handle_drake.demo import diagrams_dir
-from handle_drake.pick.plan import DROP_HEIGHT, plan_pick
-from handle_drake.pick.scenes import GAP, REGION, random_scene
 from handle_drake.scenario import LoadScenario, validate_scenario
 from handle_drake.scene.config import scene_objects
 from handle_drake.scene.plant import (
@@ -105,7 +105,7 @@ def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
 
     from pydrake.math import RigidTransform, RollPitchYaw
 
-    from handle_drake.pick.plan import free_path
+    from handle_drake.apps.pick.plan import free_path
 
     reach = ArmReach(dc.replace(hamburg, cameras=[]))
     hand = np.zeros(len(reach.hand_spec.joint_names))

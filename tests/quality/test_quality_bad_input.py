@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from handle_drake.quality import (
+from handle_drake.geometry.quality import (
     ClosurePrograms,
     ContactParams,
     bw_metric,
@@ -134,8 +134,8 @@ def test_closure_grasp_stays_in_closure_up_to_the_largest_accepted_mu():
     """Four contacts of a regular tetrahedron are in closure for any mu > 0; for mu >> 1
     the cone edges (length mu) dominate the unit normal, so the largest ball grows in
     proportion to mu (mu = 1e9 used to read as not in closure, 1e6 raised LinAlgError)."""
-    from handle_drake.quality import ContactParams, grasp_quality
-    from handle_drake.quality.contact import MAX_MU
+    from handle_drake.geometry.quality import ContactParams, grasp_quality
+    from handle_drake.geometry.quality.contact import MAX_MU
 
     P, N = _tetrahedron()
     values = {mu: grasp_quality(P, N, ContactParams(mu=mu, characteristic_length=0.05))
@@ -147,7 +147,7 @@ def test_closure_grasp_stays_in_closure_up_to_the_largest_accepted_mu():
 @pytest.mark.parametrize("params,field", [
     (dict(mu=1e9), "mu"), (dict(num_edges=10000), "num_edges"), (dict(gamma=1e6), "gamma")])
 def test_extreme_friction_parameters_are_refused_naming_the_field(params, field):
-    from handle_drake.quality import ContactParams, grasp_quality
+    from handle_drake.geometry.quality import ContactParams, grasp_quality
 
     P, N = _tetrahedron()
     with pytest.raises(ValueError, match=field):
@@ -155,7 +155,7 @@ def test_extreme_friction_parameters_are_refused_naming_the_field(params, field)
 
 
 def test_points_far_beyond_the_characteristic_length_are_refused():
-    from handle_drake.quality import ContactParams, grasp_quality
+    from handle_drake.geometry.quality import ContactParams, grasp_quality
 
     P, N = _tetrahedron()
     with pytest.raises(ValueError, match="points: expected coordinates within"):
@@ -163,7 +163,7 @@ def test_points_far_beyond_the_characteristic_length_are_refused():
 
 
 def test_complex_input_is_refused_not_truncated():
-    from handle_drake.quality import ContactParams, grasp_quality, quality_from_wrenches
+    from handle_drake.geometry.quality import ContactParams, grasp_quality, quality_from_wrenches
 
     P, N = _tetrahedron()
     with pytest.raises(TypeError, match="points: expected real numbers, got complex"):
@@ -175,7 +175,7 @@ def test_complex_input_is_refused_not_truncated():
 
 
 def test_drake_method_refuses_more_wrenches_than_its_dense_lp_holds():
-    from handle_drake.quality import quality_from_wrenches
+    from handle_drake.geometry.quality import quality_from_wrenches
 
     W = np.random.default_rng(0).normal(size=(160000, 6))
     with pytest.raises(ValueError, match="at most 4000 wrenches .* method='fast'"):
@@ -187,7 +187,7 @@ def test_the_metric_scales_with_the_wrenches(scale):
     """Scaling every wrench by s scales the BW value by s (a homogeneous geometric
     quantity); absolute tolerances used to call a closure set at s = 1e8 open, and a
     single wrench of 4.5e15 made NNLS return zero weights."""
-    from handle_drake.quality import min_norm_point, quality_from_wrenches
+    from handle_drake.geometry.quality import min_norm_point, quality_from_wrenches
 
     W = np.random.default_rng(1).normal(size=(40, 6))
     base = quality_from_wrenches(W)

@@ -6,7 +6,8 @@ import itertools
 import numpy as np
 import pytest
 
-from handle_drake.quality import (
+from handle_drake.base.testing import pick
+from handle_drake.geometry.quality import (
     ClosurePrograms,
     ContactParams,
     bw_metric,
@@ -23,7 +24,6 @@ from handle_drake.quality import (
     quality_from_wrenches,
     transform_wrenches,
 )
-from handle_drake.testing import pick
 
 R_SPHERE = 0.05
 

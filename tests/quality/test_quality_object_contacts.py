@@ -13,7 +13,7 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.quality import ContactParams, ObjectContacts, grasp_quality
+from handle_drake.geometry.quality import ContactParams, ObjectContacts, grasp_quality
 
 R_OBJ, R_TIP, PEN = 0.04, 0.01, 1e-3
 X_WO = RigidTransform(RollPitchYaw(0.4, -0.3, 1.1), [0.1, -0.2, 0.3])

@@ -5,8 +5,8 @@ import pytest
 import trimesh
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from handle_drake import objects
-from handle_drake.quality import (
+from handle_drake.geometry import objects
+from handle_drake.geometry.quality import (
     BoxSurface,
     ContactParams,
     CylinderSurface,
@@ -17,7 +17,7 @@ from handle_drake.quality import (
     grasp_quality,
     mean_contact,
 )
-from handle_drake.quality.surface import ObjectSurface
+from handle_drake.geometry.quality.surface import ObjectSurface
 
 
 def cloud_at(p, n, spread=0.002, count=5, seed=0):

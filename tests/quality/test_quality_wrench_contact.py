@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from handle_drake.quality import (
+from handle_drake.geometry.quality import (
     ContactParams,
     GraspContacts,
     contact_frames,

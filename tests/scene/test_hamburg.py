@@ -5,8 +5,8 @@ import warnings
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from handle_drake.demo import diagrams_dir
-from handle_drake.perception.perceive import render_views
+from handle_drake.apps.demo import diagrams_dir
+from handle_drake.apps.perception.perceive import render_views
 from handle_drake.scenario import LoadScenario
 from handle_drake.scene.config import scene_objects
 from handle_drake.scene.plant import in_box, initial_pose
@@ -50,7 +50,7 @@ def test_the_kinect_sees_the_four_objects_and_not_the_arm_or_the_box():
 def test_perceive_judges_each_detection_against_its_own_object():
     """With several objects, a detection's error is against the object it stands for
     (before: always against ``object``, so three of four read 18-27 cm off)."""
-    from handle_drake.perception.perceive import detection_error
+    from handle_drake.apps.perception.perceive import detection_error
 
     scenario = LoadScenario(filename=PATH)
     (view,) = render_views(scenario)

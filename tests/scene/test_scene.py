@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from handle_drake.objects import ObjectSpec, resting_height
+from handle_drake.geometry.objects import ObjectSpec, resting_height
 from handle_drake.scenario import LoadScenario, ScenarioError
 from handle_drake.scene.config import Hole, scene_objects
 from handle_drake.scene.plant import hole_centres, hole_polygon, in_box, lid_pieces

@@ -6,7 +6,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.systems.sensors import BodyPoseSelector
+from handle_drake.systems.tactile import BodyPoseSelector
 
 
 def test_selector_outputs_the_chosen_body_of_the_plant():

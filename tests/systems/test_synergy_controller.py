@@ -8,10 +8,10 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
+from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 from handle_drake.grasp.analysis import fit_record_synergies
 from handle_drake.grasp.recordings import load_grasps
 from handle_drake.grasp.synthetic import DATA_FILE
-from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.systems.synergy_controller import ControlMode, SynergyController
 
 SPEC = get_hand_spec("shadow")

@@ -1,0 +1,136 @@
+"""``handle-drake inhand``: in-hand manipulation by action-gist guided motor babbling.
+
+Examples::
+
+    handle-drake inhand --task cylinder_rotation --optimizer ipso --trials 1000 --seed 0
+    handle-drake inhand --task star_rotation --optimizer cmaes --trials 100 --workers 2 \\
+        --db out/inhand/star.sqlite
+    handle-drake inhand --optimizer ipso --trials 1000 --executor dask://head:8786
+
+Every trial goes to the SQLite log ``--db``; running the same command again
+resumes the run. The particles of one iteration run in parallel on
+``--executor`` (as for ``handle-drake babble``: ``local`` processes, a ``dask``
+LocalCluster of ``--workers`` processes, or ``dask://HOST:PORT``, the workers
+of a running ``dask scheduler``); a run depends only on its seed, not on where
+its trials ran. The run stops when a trial reaches the target (held at the
+end, rotated by ``--target-deg``) or after ``--trials``. It writes the learning
+curve (best score per iteration, Figure 34) and an HTML replay of the best
+trial next to the log. Scores are maximised. Bad arguments exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from handle_drake.apps.cli_support import non_negative_int, positive_int
+from handle_drake.apps.cli_support import positive_float as _positive_float
+from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
+from handle_drake.devices.accelerometer.profiles import PROFILES
+from handle_drake.learning.cluster import add_executor_arguments
+from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
+
+__all__ = ["register", "main"]
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "inhand", help="learn an in-hand rotation by action-gist guided babbling (PSO & co.)",
+        description=__doc__.split("\n\n")[0])
+    p.add_argument("--task", choices=sorted(TASKS), default="cylinder_rotation")
+    p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
+                   help="ipso: Algorithm 2 (incremental PSO); pso: standard PSO; cmaes: CMA-ES; "
+                        "random: random search")
+    p.add_argument("--trials", type=positive_int, default=200,
+                   help="budget of trials (the run stops earlier at the target)")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="worker processes of 'local' and 'dask' (default 1: trials run in this "
+                        "process); the particles of one iteration run in parallel. With "
+                        "dask://, the cluster's workers")
+    add_executor_arguments(p)
+    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--particles", type=positive_int, default=10,
+                   help="particles per iteration (CMA-ES: population)")
+    p.add_argument("--target-deg", type=_positive_float, default=30.0,
+                   help="rotation the object must reach, held, at the end (deg)")
+    p.add_argument("--evaluation", choices=EVALUATIONS, default="incremental",
+                   help="incremental: eqs. 47-49 with early stop; old: held time + rotation")
+    p.add_argument("--accelerometer", choices=sorted(PROFILES), default=None, metavar="DEVICE",
+                   help="make the object the report's instrumented object: this accelerometer "
+                        f"({', '.join(sorted(PROFILES))}) at its origin also measures the "
+                        "rotation (logged per trial; valid at rest)")
+    p.add_argument("--db", type=Path, default=Path("out/inhand/inhand.sqlite"))
+    p.add_argument("--plot", type=Path, default=None, metavar="PNG",
+                   help="learning curve (default <db folder>/<run id>.png)")
+    p.add_argument("--html", type=Path, default=None,
+                   help="HTML replay of the best trial (default <db folder>/<run id>.html)")
+    p.add_argument("--no-plot", action="store_true")
+    p.add_argument("--no-html", action="store_true")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=_cmd_inhand)
+
+
+def _cmd_inhand(args) -> int:
+    from handle_drake.apps.inhand.experiment import plot_learning_curve, replay_best, run_inhand
+    from handle_drake.learning.cluster import trial_executor
+    from handle_drake.learning.log import TrialLog, TrialLogError
+
+    for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
+        if path is not None and path.suffix.lower() != suffix:
+            raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
+    args.db.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
+    except TrialLogError as error:
+        raise ValueError(f"--db: {error}") from None
+    print(f"inhand: {args.task}, {args.optimizer}, seed {args.seed}, up to {args.trials} trials "
+          f"in {args.db} ({args.executor} executor)", flush=True)
+    options = dict(progress=not args.no_progress, target_deg=args.target_deg,
+                   evaluation=args.evaluation)
+    if args.accelerometer:
+        options["accelerometer"] = args.accelerometer
+    if args.executor.kind == "local":  # run_inhand's own pool: workers build the trial first
+        run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed,
+                         args.db, args.particles, **options)
+    else:  # dask: as many trials at once as the cluster has workers
+        with trial_executor(args.executor, args.workers,
+                            connect_timeout=args.connect_timeout) as executor:
+            run = run_inhand(args.task, args.optimizer, args.trials, None, args.seed,
+                             args.db, args.particles, executor=executor, **options)
+    s = run.summary()
+    print(f"trials: {s['done']} done, {s['failed']} failed")
+    if "best_score" not in s:
+        print("no successful trial")
+        return 1
+    reached = (f"target reached at trial {s['trials_to_target']}" if s["trials_to_target"]
+               else "target not reached")
+    print(f"best score {s['best_score']:.4g} (target score {s['target_score']:g}), trial "
+          f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, "
+          f"{'held' if s['best_held'] else 'not held'} at the end; {reached}; "
+          f"{100 * s['share_held']:.0f} % of trials held")
+    if not args.no_plot:
+        path = args.plot or args.db.parent / f"{run.run_id}.png"
+        print(f"learning curve: {plot_learning_curve([run], path)}")
+    if not args.no_html:
+        html = args.html or args.db.parent / f"{run.run_id}.html"
+        logged, outcome = replay_best(run, html)
+        print(f"replay of the best trial: {html} (score {outcome.score:.4g}, logged "
+              f"{logged:.4g})")
+        if outcome.accelerometer_rotation_deg_series:
+            print(f"its rotation at the end: {outcome.rotation_deg:.1f} deg (plant), "
+                  f"{outcome.accelerometer_rotation_deg_series[-1]:.1f} deg "
+                  f"({args.accelerometer} accelerometer)")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    from handle_drake.cli import run_command
+
+    parser = argparse.ArgumentParser(prog="handle-drake")
+    register(parser.add_subparsers(dest="command", required=True, metavar="COMMAND"))
+    return run_command(parser, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

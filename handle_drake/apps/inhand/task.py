@@ -1,0 +1,481 @@
+"""The in-hand trial: a stable grasp, the replayed frames, checks and the score.
+
+Task design (decided by a physics check before any optimisation): the Shadow
+hand is fixed palm up (fingers along world +x, palm normal up), the object
+lies across the palm with its axis along world y, cradled against the
+slightly flexed first, middle and ring fingers (under gravity the wrist's PD
+joint sags a little, so the object settles against the finger bases). The
+hand is fixed and the object is already in the hand, as the report assumes
+(5.4, 5.6). Flexing the fingers rolls the object towards the wrist: rotation
+about its own axis. A hand-written stroke (J3 +1.0 rad, J2 +0.9 rad on the
+three fingers over 1 s) turns the 4 cm cylinder by about 50 deg and it stays on
+the palm, so 30 deg held is physically reachable
+(``tests/inhand/test_inhand_task.py`` replays it).
+
+The grasp is settled once per process (``settle_time`` of simulation with the
+initial command) and every trial starts from a copy of that context: time 0,
+the settled state, the trial's parameters on the :class:`GistMotionSource`.
+The trial samples every ``sample_period``: object pose (rotation about its
+axis from the plant, unwrapped; positive = the direction the flexing fingers
+roll it; with ``accelerometer`` set, the object is the report's instrumented
+object (2.4): the station's ``object.acceleration`` port, the device model of
+:mod:`handle_drake.devices.accelerometer` at the object's origin, gives the same rotation
+from the gravity direction, valid at rest), held (the object has not dropped more
+than ``drop`` below nor moved more than ``max_travel`` from its start, and
+touched the hand at a sample within the last ``contact_window``: a rolled
+object hops off the palm for a few ms), the hand bodies and fingertips
+touching it. Checks after each of ``n_checks`` equal parts of the motion (the
+last one at the end of the hold) compare with the benchmark: held, rotation at
+least ``target * benchmark[k] - tolerance_deg`` (the tolerance absorbs the
+object's sub-degree rocking in the cradle). The incremental evaluation
+stops at the first failed check, the old one when the object drops.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import json
+import time
+from functools import cached_property
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from handle_drake.apps.inhand.evaluation import (
+    incremental_score,
+    old_score,
+    part_dimensions,
+    target_score,
+)
+from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist
+from handle_drake.apps.inhand.glove import load_glove
+from handle_drake.apps.inhand.mapping import ABDUCTION_RULES, glove_to_shadow
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.learning.executors import TrialResult
+from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
+from handle_drake.station import object_body
+from handle_drake.trial.harness import TrialHarness
+
+__all__ = ["TASKS", "InHandTask", "InHandTrial", "TrialOutcome", "EVALUATIONS", "task_gist"]
+
+DATA_DIR = Path(__file__).parent / "data"
+EVALUATIONS = ("incremental", "old")
+
+# Hand pose: forearm frame F with z_F -> world +x (fingers), -y_F (palmar) -> world +z.
+_HAND_RPY_DEG = (-90.0, 0.0, -90.0)
+# The cradle: first, middle and ring fingers slightly flexed.
+_CRADLE = {f"{f}J{j}": 0.3 for f in ("FF", "MF", "RF") for j in (3, 2)}
+
+
+@dc.dataclass(frozen=True)
+class TaskSpec:
+    demonstration: str  # file in inhand/data
+    object_kind: str
+    size: float  # m
+    dimensions: tuple  # (("height", m),)
+    X_WO_xyz: tuple  # m, initial object position before settling
+
+
+TASKS: dict[str, TaskSpec] = {
+    "cylinder_rotation": TaskSpec("screw_cap_rotation.json", "cylinder", 0.04,
+                                  (("height", 0.07),), (0.326, 0.0, 0.043)),
+    "star_rotation": TaskSpec("star_rotation.json", "star_prism", 0.05,
+                              (("height", 0.06),), (0.322, 0.0, 0.048)),
+}
+
+
+def task_gist(task: str) -> ActionGist:
+    """The action gist of the task's (synthetic) demonstration, mapped by the four rules."""
+    spec = TASKS[task]
+    recording = load_glove(DATA_DIR / spec.demonstration)
+    commands = glove_to_shadow(recording)
+    return extract_gist(recording.time, commands, name=task)
+
+
+@dc.dataclass(frozen=True)
+class InHandTask:
+    """Settings of one in-hand trial (all times in s, angles in rad unless ``_deg``)."""
+
+    task: str = "cylinder_rotation"
+    evaluation: str = "incremental"
+    target_deg: float = 30.0
+    motion_duration: float = 1.0
+    hold: float = 0.4  # s after the motion; the last check is at its end
+    n_frames: int = 50
+    n_checks: int = 4
+    benchmark: tuple = (0.0, 0.5, 1.0, 1.0)  # rotation / target required at each check
+    tolerance_deg: float = 2.0  # a check or sample passes within this much below the benchmark
+    sample_period: float = 0.05
+    time_step: float = 0.002
+    settle_time: float = 1.0
+    drop: float = 0.015  # m below the start: dropped
+    max_travel: float = 0.04  # m from the start: left the hand
+    contact_window: float = 0.15  # s: touching the hand at some sample this recent
+    mu: float = 0.8
+    # "" or an accelerometer profile (handle_drake.devices.accelerometer.PROFILES) in the object
+    accelerometer: str = ""
+
+    def __post_init__(self):
+        if self.task not in TASKS:
+            raise ValueError(f"task: expected one of {sorted(TASKS)}, got {self.task!r}")
+        if self.evaluation not in EVALUATIONS:
+            raise ValueError(f"evaluation: expected one of {EVALUATIONS}, got "
+                             f"{self.evaluation!r}")
+        for name in ("target_deg", "motion_duration", "sample_period", "time_step", "drop",
+                     "max_travel", "mu", "settle_time", "contact_window"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        from handle_drake.base.checks import LIMITS
+
+        for name, (low, high) in (("target_deg", (0.0, 360.0)), ("time_step", LIMITS["time_step"]),
+                                  ("mu", LIMITS["mu"])):
+            if not low < getattr(self, name) <= high:  # one turn; what the station accepts
+                raise ValueError(f"{name}: expected a value in ({low:g}, {high:g}], got "
+                                 f"{getattr(self, name)!r}")
+        if not (np.isfinite(self.tolerance_deg) and self.tolerance_deg >= 0):
+            raise ValueError(f"tolerance_deg: expected a finite value >= 0, got "
+                             f"{self.tolerance_deg!r}")
+        if not (np.isfinite(self.hold) and self.hold >= 0):
+            raise ValueError(f"hold: expected a finite value >= 0, got {self.hold!r}")
+        for name in ("n_frames", "n_checks"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+        if self.accelerometer:
+            from handle_drake.devices.accelerometer.profiles import get_profile
+
+            try:
+                get_profile(self.accelerometer)
+            except ValueError as error:
+                raise ValueError(f"accelerometer: {error}") from None
+        if len(self.benchmark) != self.n_checks:
+            raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
+                             f"{len(self.benchmark)}")
+
+    @property
+    def total_time(self) -> float:
+        return self.motion_duration + self.hold
+
+    @property
+    def target(self) -> float:
+        return float(np.radians(self.target_deg))
+
+    def check_times(self) -> np.ndarray:
+        k = np.arange(1, self.n_checks + 1)
+        times = k / self.n_checks * self.motion_duration
+        times[-1] = self.total_time
+        return times
+
+    def sample_times(self) -> np.ndarray:
+        n = int(round(self.total_time / self.sample_period))
+        return np.arange(1, n + 1) * self.total_time / n
+
+    def benchmark_at(self, t) -> np.ndarray:
+        """Rotation (rad) the benchmark expects at times ``t``: linear between the checks."""
+        return self.target * np.interp(t, np.r_[0.0, self.check_times()],
+                                       np.r_[0.0, self.benchmark])
+
+
+@dc.dataclass
+class TrialOutcome:
+    score: float
+    rotation_deg: float  # at the end (or at the early stop)
+    max_rotation_deg: float
+    held: bool  # at the end of the trial (False if it stopped early)
+    held_time: float  # s
+    checks_passed: int
+    completed: bool  # ran to the end (no early stop)
+    reached_target: bool
+    s_b: float | None
+    s_a: float | None
+    times: list  # sample times, s
+    rotation_deg_series: list
+    # the same from the object's accelerometer (gravity direction; valid at rest);
+    # empty without InHandTask.accelerometer
+    accelerometer_rotation_deg_series: list
+    contacts: list  # per sample, hand bodies touching the object
+    sim_time: float
+    wall_time: float
+
+    def as_dict(self) -> dict:
+        return dc.asdict(self)
+
+
+_BUILD_CACHE: dict = {}
+
+
+class InHandTrial:
+    """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
+
+    The diagram (station + :class:`GistMotionSource`) is built once per
+    process and kept in a process-wide cache keyed by the settings, so
+    executors that ship the objective with every call (Dask) still reuse it.
+    """
+
+    def __init__(self, config: InHandTask | None = None, **kwargs):
+        self.config = config if config is not None else InHandTask(**kwargs)
+
+    def __getstate__(self):
+        return {"config": self.config}
+
+    def __setstate__(self, state):
+        self.config = state["config"]
+
+    @property
+    def name(self) -> str:
+        c = self.config
+        return f"inhand-{c.task}-{c.evaluation}-{c.target_deg:g}deg"
+
+    @cached_property
+    def gist(self) -> ActionGist:
+        return task_gist(self.config.task)
+
+    @property
+    def dimension(self) -> int:
+        return self.gist.dimension
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.gist.bounds()
+
+    @property
+    def dims_per_part(self) -> np.ndarray:
+        g = self.gist
+        return part_dimensions([m.start for m in g.motions],
+                               [1 + len(m.joints) for m in g.motions], self.config.n_checks)
+
+    @property
+    def target_score(self) -> float:
+        return target_score(self.dimension, self.config.evaluation)
+
+    def initial_command(self) -> np.ndarray:
+        """The grasp's command: the cradle, abductions from the demonstration (rule 2)."""
+        names = get_hand_spec("shadow").actuated_joint_names
+        recording = load_glove(DATA_DIR / TASKS[self.config.task].demonstration)
+        mapped = glove_to_shadow(recording)[0]
+        q0 = np.zeros(len(names))
+        for joint in ABDUCTION_RULES:
+            if joint.startswith(("FF", "MF", "RF", "LF")):
+                q0[names.index(joint)] = mapped[names.index(joint)]
+        for joint, value in _CRADLE.items():
+            q0[names.index(joint)] = value
+        return q0
+
+    def scenario(self) -> Scenario:
+        c, spec = self.config, TASKS[self.config.task]
+        x, y, z = spec.X_WO_xyz
+        dims = ", ".join(f"{k}: {v}" for k, v in spec.dimensions)
+        q0 = self.initial_command()
+        names = get_hand_spec("shadow").actuated_joint_names
+        initial = ", ".join(f"{n}: {float(v)!r}" for n, v in zip(names, q0, strict=True) if v != 0)
+        # the sensor frame is the object's origin (the default X_OS of a plain object)
+        sensor = f"\n  accelerometer: {{device: {c.accelerometer}, seed: 0}}" \
+            if c.accelerometer else ""
+        return LoadScenario(data=f"""
+hand:
+  kind: shadow
+  coupling_ratio: 1.0
+  mount: !FixedMount
+    X_WB: {{translation: [0, 0, 0], rotation: !Rpy {{deg: {list(_HAND_RPY_DEG)}}}}}
+  initial_position: {{{initial}}}
+object:
+  kind: {spec.object_kind}
+  size: {spec.size}
+  dimensions: {{{dims}}}
+  mu: {c.mu}
+  X_WO: {{translation: [{x}, {y}, {z}], rotation: !Rpy {{deg: [-90, 0, 0]}}}}
+  on_table: false{sensor}
+table: null
+plant_config: {{time_step: {c.time_step}, contact_model: point}}
+driver: !SimHandDriver {{max_joint_velocity: 4.0}}
+simulation_duration: {c.settle_time + c.total_time}
+""")
+
+    def scenario_for(self, x) -> str:
+        return DumpScenario(self.scenario()) + (
+            f"# in-hand trial {self.name}, Algorithm 1 over {self.config.n_frames} frames in "
+            f"{self.config.motion_duration} s; parameters (eq. 45): "
+            f"{json.dumps([float(v) for v in np.asarray(x).reshape(-1)])}\n")
+
+    # ------------------------------------------------------------ building
+    def _build(self, meshcat=None):
+        key = (self.config, meshcat is not None)
+        if meshcat is None and key in _BUILD_CACHE:
+            return _BUILD_CACHE[key]
+        c = self.config
+        q0 = self.initial_command()
+
+        def add_motion(builder, station):
+            source = builder.AddNamedSystem("motion", GistMotionSource(
+                self.gist, q0, c.motion_duration, c.n_frames))
+            builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
+            return source
+
+        harness = TrialHarness(self.scenario(), add_motion, log=(), meshcat=meshcat)
+        plant, source = harness.plant, harness.controller
+        hand = plant.GetModelInstanceByName("hand")
+        hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
+                       for i in plant.GetBodyIndices(hand)}
+        # Settle the grasp once: hold the initial command (all variations zero).
+        still = self.gist.initial_parameters().copy()
+        for sl in self.gist.slices():
+            still[sl][1:] = 0.0
+        harness.reset()
+        source.set_parameters(harness.controller_context(), still)
+        harness.initialize()
+        harness.advance(c.settle_time)
+        # Trials start from this context, not from the scenario's default one.
+        settled = harness.context.Clone()
+        settled.SetTime(0.0)
+        station = harness.station
+        built = dict(harness=harness, settled=settled, body=object_body(plant),
+                     hand_bodies=hand_bodies,
+                     accelerometer=station.GetOutputPort("object.acceleration")
+                     if c.accelerometer else None)
+        if meshcat is None:
+            _BUILD_CACHE[key] = built
+        return built
+
+    def _check(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.dimension:
+            raise ValueError(f"parameters: expected {self.dimension} values (eq. 45), got "
+                             f"{x.size}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError("parameters: expected finite values")
+        return x
+
+    # -------------------------------------------------------------- trial
+    def __call__(self, x, seed: int = 0) -> TrialResult:
+        outcome = self.evaluate(x)
+        detail = outcome.as_dict()
+        for key in ("times",):
+            detail.pop(key)
+        return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario_for(x))
+
+    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> TrialOutcome:
+        """Runs one trial (deterministic: the simulation has no noise; ``seed`` is unused).
+
+        ``early_stop=False`` runs the whole motion whatever the checks say (to
+        see how a motion ends; the score is still that of the evaluation with
+        its stop, computed from the checks passed in a row).
+        """
+        x = self._check(x)
+        c = self.config
+        built = self._build(meshcat)
+        harness = built["harness"]
+        start_wall = time.perf_counter()
+        context, plant = harness.context, harness.plant
+        context.SetTimeStateAndParametersFrom(built["settled"])
+        harness.controller.set_parameters(harness.controller_context(), x)
+        plant_context = harness.plant_context()
+        body = built["body"]
+        X0 = plant.EvalBodyPoseInWorld(plant_context, body)
+        R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
+        harness.initialize()
+        if html is not None:
+            early_stop = False  # a replay shows the whole motion (the score is the same)
+
+        samples = c.sample_times()
+        checks = c.check_times()
+        step = 1e-3 * c.time_step
+        tolerance = float(np.radians(c.tolerance_deg))
+        accelerometer = built["accelerometer"]
+        station_context = harness.station.GetMyContextFromRoot(context)
+        contacts_port = plant.get_contact_results_output_port()
+        matches = np.zeros(samples.size, dtype=bool)
+        rotations, accel_rotations, contacts_log = [], [], []
+        # failed: a check failed, no later check counts (the checks pass in a row)
+        st = SimpleNamespace(i=0, next_check=0, angle=0.0, previous=0.0, held_time=0.0,
+                             held=True, passed=0, stopped=False, failed=False,
+                             last_touch=0.0, acc_prev=None, acc_angle=0.0)
+        if accelerometer is not None:  # the reading at the start of the trial (settled)
+            up_O = accelerometer.Eval(station_context)
+            st.acc_prev = float(np.arctan2(up_O[1], up_O[0]))
+
+        def sample():
+            i, t = st.i, float(samples[st.i])
+            st.i += 1
+            X = plant.EvalBodyPoseInWorld(plant_context, body)
+            R = (R0_inv @ X.rotation()).matrix()
+            raw = -np.arctan2(R[1, 0], R[0, 0])  # about the object axis, task direction > 0
+            st.angle += (raw - st.previous + np.pi) % (2 * np.pi) - np.pi
+            st.previous = raw
+            touching = _touching(contacts_port.Eval(plant_context), body, built["hand_bodies"])
+            p = X.translation()
+            if touching:
+                st.last_touch = t
+            # A rolling object hops off the palm for a few ms: it counts as
+            # touching the hand if it did so within the last contact_window.
+            st.held = bool(p[2] - p0[2] > -c.drop and np.linalg.norm(p - p0) < c.max_travel
+                           and t - st.last_touch <= c.contact_window + 1e-9)
+            if st.held:
+                st.held_time = t
+            if accelerometer is not None:
+                # The instrumented object (report 2.4): its accelerometer (sensor frame =
+                # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
+                # "up" in the object frame, whose angle about the object axis gives the
+                # rotation (the task direction turns "up" the other way round).
+                up_O = accelerometer.Eval(station_context)
+                raw_acc = float(np.arctan2(up_O[1], up_O[0]))
+                st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
+                st.acc_prev = raw_acc
+                accel_rotations.append(float(np.degrees(st.acc_angle)))
+            rotations.append(float(np.degrees(st.angle)))
+            contacts_log.append(touching)
+            matches[i] = st.held and st.angle >= c.benchmark_at(t) - tolerance
+            if st.next_check < checks.size and t >= checks[st.next_check] - step:
+                ok = st.held and st.angle >= c.target * c.benchmark[st.next_check] - tolerance
+                if ok and not st.failed:
+                    st.passed += 1
+                st.failed = st.failed or not ok
+                st.next_check += 1
+                if st.failed and c.evaluation == "incremental" and early_stop:
+                    raise _EarlyStop
+            if not st.held and c.evaluation == "old" and early_stop:
+                raise _EarlyStop
+
+        try:
+            harness.advance(samples, html=html if meshcat is not None else None,
+                            at_each=sample)
+        except _EarlyStop:
+            st.stopped = True
+        sim_time = float(samples[len(rotations) - 1])
+        angle, passed = st.angle, st.passed
+        held_end = st.held and not st.stopped
+        # The target itself is strict (the checks' tolerance lets a run stop within
+        # tolerance_deg of it; such a trial does not count as reaching it).
+        reached = bool(held_end and passed == c.n_checks and angle >= c.target)
+        if c.evaluation == "incremental":
+            if st.failed:  # the samples after the first failed check count as not matching
+                matches[samples > checks[passed] + step] = False
+            score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches)
+        else:
+            score = old_score(st.held_time, c.total_time, angle if held_end else 0.0, c.target)
+            s_b = s_a = None
+        return TrialOutcome(
+            score=float(score), rotation_deg=rotations[-1], max_rotation_deg=max(rotations),
+            held=held_end, held_time=st.held_time, checks_passed=passed,
+            completed=not st.stopped, reached_target=reached, s_b=s_b, s_a=s_a,
+            times=samples[: len(rotations)].tolist(), rotation_deg_series=rotations,
+            accelerometer_rotation_deg_series=accel_rotations, contacts=contacts_log,
+            sim_time=sim_time, wall_time=time.perf_counter() - start_wall)
+
+
+class _EarlyStop(Exception):
+    """A check failed (incremental) or the object dropped (old): the trial ends here."""
+
+
+def _touching(results, body, hand_bodies) -> list[str]:
+    index = int(body.index())
+    names = set()
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        if a == index and b in hand_bodies:
+            names.add(hand_bodies[b])
+        elif b == index and a in hand_bodies:
+            names.add(hand_bodies[a])
+    return sorted(names)

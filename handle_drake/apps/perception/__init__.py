@@ -1,0 +1,1 @@
+"""Grasps planned from what the camera sees, and ``handle-drake perceive``."""

@@ -1,0 +1,224 @@
+"""Opening a python-can bus from a :class:`BusConfig` (the thin transport).
+
+- ``virtual``: python-can's in-process bus (all ends in one process).
+- ``udp_multicast``: frames as UDP multicast datagrams, across processes on
+  one host (loopback, TTL 1). A socket also receives its own frames, so every
+  node ignores the ids it sends itself. python-can (4.x) offers only the
+  group, port and hop limit: its socket is bound to ``("", port)`` (every
+  interface, so also unicast datagrams sent to any local address at that
+  port, and, with Linux's default ``IP_MULTICAST_ALL``, other groups'
+  traffic on that port) and joins the group on ``INADDR_ANY``. For an IPv4
+  group we therefore replace that socket with one bound to ``(group, port)``
+  (only datagrams addressed to the group), joined and sending on
+  ``BusConfig.multicast_interface`` (127.0.0.1 by default: the bus never
+  leaves the host), TTL 1 and ``IP_MULTICAST_ALL`` off. ``multicast_interface
+  = ""`` keeps python-can's socket (any interface); IPv6 groups keep it too
+  (with a warning).
+- ``socketcan``: a Linux CAN interface (``can0``, or ``vcan0`` for a virtual
+  kernel bus); needs the interface to exist, and for the fd frame format an
+  FD-capable one (MTU 72).
+
+The bus is opened able to receive CAN FD frames whenever the interface can,
+also for the classic layout: a frame of the wrong format then reaches the
+node and is rejected and counted instead of vanishing inside python-can.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import struct
+
+import can
+
+from handle_drake.devices.can_hand.config import BusConfig
+
+__all__ = ["open_bus", "receive", "check_frame", "ErrorLog", "socketcan_available",
+           "socketcan_fd_capable", "use_realtime_priority"]
+
+log = logging.getLogger(__name__)
+
+_CANFD_MTU = 72  # struct canfd_frame; a CAN 2.0 interface has MTU 16
+_IP_MULTICAST_ALL = getattr(socket, "IP_MULTICAST_ALL", 49)  # Linux only
+_SO_TIMESTAMPNS = 35  # what python-can's udp_multicast recv expects when it asked for it
+
+
+def socketcan_available(channel: str) -> bool:
+    """True when the Linux network interface ``channel`` exists (e.g. ``vcan0``)."""
+    return os.path.exists(f"/sys/class/net/{channel}")
+
+
+def socketcan_fd_capable(channel: str) -> bool:
+    """True when the SocketCAN interface ``channel`` carries CAN FD frames (MTU 72)."""
+    try:
+        with open(f"/sys/class/net/{channel}/mtu") as f:
+            return int(f.read()) >= _CANFD_MTU
+    except (OSError, ValueError):
+        return False
+
+
+def use_realtime_priority(priority: int) -> bool:
+    """Runs the calling thread under ``SCHED_FIFO`` at ``priority`` (1..99); 0 does nothing.
+
+    A 1 kHz loop on a shared machine waits for the CPU behind every runnable
+    normal-priority process; a real-time thread preempts them (the kernel's
+    RT throttling still leaves them 5 % of each second). Needs CAP_SYS_NICE
+    or an ``rtprio`` limit (``ulimit -r``); returns False with a warning when
+    the OS refuses, and the thread carries on at normal priority.
+    """
+    if priority == 0:
+        return False
+    try:
+        # On Linux, pid 0 is the calling thread, not the whole process.
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError, AttributeError) as error:
+        log.warning("cannot use real-time priority %d (%s); running at normal priority",
+                    priority, error)
+        return False
+    return True
+
+
+def open_bus(config: BusConfig) -> can.BusABC:
+    """A python-can bus for ``config``; ValueError naming the problem otherwise."""
+    config.validate()
+    if config.interface == "virtual":
+        # The virtual bus carries any frame; ``protocol`` only labels it.
+        protocol = can.CanProtocol.CAN_FD if config.frame_format == "fd" else can.CanProtocol.CAN_20
+        return can.Bus(interface="virtual", channel=config.channel, receive_own_messages=False,
+                       protocol=protocol)
+    if config.interface == "udp_multicast":
+        bus = can.Bus(interface="udp_multicast", channel=config.channel, port=config.port,
+                      hop_limit=1, fd=True)
+        if config.multicast_interface:
+            try:
+                _scope_multicast(bus, config)
+            except BaseException:
+                bus.shutdown()
+                raise
+        return bus
+    if not socketcan_available(config.channel):
+        raise ValueError(
+            f"socketcan: no network interface {config.channel!r}; create it first "
+            f"(e.g. `ip link add dev {config.channel} type vcan && "
+            f"ip link set {config.channel} mtu 72 && ip link set up {config.channel}`)"
+        )
+    fd = socketcan_fd_capable(config.channel)
+    if config.frame_format == "fd" and not fd:
+        raise ValueError(
+            f"socketcan: {config.channel!r} is not CAN FD capable (MTU < 72); use "
+            f"--frame-format classic, or `ip link set {config.channel} mtu 72` (vcan) / "
+            f"`ip link set {config.channel} type can bitrate 1000000 dbitrate 5000000 fd on`")
+    return can.Bus(interface="socketcan", channel=config.channel, fd=fd)
+
+
+def _scope_multicast(bus: can.BusABC, config: BusConfig) -> None:
+    """Replaces python-can's any-interface socket by one scoped to the group and interface.
+
+    See the module docstring. Uses python-can's private ``_multicast._socket``
+    (checked; with another python-can the bus stays unscoped, with a warning).
+    """
+    multicast = getattr(bus, "_multicast", None)
+    old = getattr(multicast, "_socket", None)
+    if not isinstance(old, socket.socket) or old.family != socket.AF_INET:
+        log.warning("udp_multicast: cannot scope the bus socket to %s (IPv6 group or another "
+                    "python-can); it listens on every interface", config.multicast_interface)
+        return
+    group = socket.inet_aton(config.channel)
+    interface = socket.inet_aton(config.multicast_interface)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        if hasattr(socket, "SO_REUSEPORT"):
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEPORT, 1)
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, struct.pack("@I", 1))
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_LOOP, 1)
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_IF, interface)
+        if getattr(multicast, "timestamp_nanosecond", False):
+            sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMPNS, 1)
+        try:
+            sock.setsockopt(socket.IPPROTO_IP, _IP_MULTICAST_ALL, 0)
+        except OSError:  # not Linux: binding to the group already filters
+            pass
+        sock.bind((config.channel, config.port))
+        sock.setsockopt(socket.IPPROTO_IP, socket.IP_ADD_MEMBERSHIP, group + interface)
+    except OSError as error:
+        sock.close()
+        raise ValueError(f"multicast_interface: cannot join {config.channel} on "
+                         f"{config.multicast_interface}: {error.strerror}") from None
+    multicast._socket = sock
+    multicast._last_send_timeout = None
+    old.close()
+
+
+#: ``receive`` outcomes other than a frame or a timeout (the counter names).
+GARBAGE, BUS_ERROR = "garbage_frames", "bus_rx_errors"
+
+
+def receive(bus: can.BusABC, timeout: float) -> tuple[can.Message | None, str | None]:
+    """One ``bus.recv``: ``(message, None)``, ``(None, None)`` on timeout, or ``(None, why)``.
+
+    ``why`` is :data:`GARBAGE` for a datagram python-can could not decode
+    (udp_multicast raises ``CanOperationError("could not unpack ...")`` for
+    it; any other exception python-can lets out while decoding counts the
+    same) and :data:`BUS_ERROR` for a failing socket or interface. Garbage
+    costs only its decoding: callers go on at once, and wait (back off) only
+    on bus errors.
+    """
+    try:
+        return bus.recv(timeout), None
+    except can.CanOperationError as error:
+        if isinstance(error.__cause__, OSError) or "unpack" not in str(error):
+            return None, BUS_ERROR
+        return None, GARBAGE
+    except (can.CanError, OSError):
+        return None, BUS_ERROR
+    except Exception:  # python-can decoding a hostile datagram  # noqa: BLE001
+        return None, GARBAGE
+
+
+def check_frame(message) -> tuple[int, bytes, bool]:
+    """``(arbitration_id, data, is_fd)`` of a received frame with checked types.
+
+    A frame from udp_multicast is whatever the sender packed (python-can checks
+    ranges, not types: an id ``300.5`` or a flag ``"yes"`` pass it). Raises
+    :class:`~handle_drake.devices.can_hand.messages.MalformedFrameError` unless the id is
+    an ``int`` of the frame's id range, the flags are ``bool`` and the data
+    are at most 64 bytes.
+    """
+    from handle_drake.devices.can_hand.messages import MalformedFrameError
+
+    arbitration_id = getattr(message, "arbitration_id", None)
+    flags = [getattr(message, name, None) for name in
+             ("is_extended_id", "is_fd", "is_error_frame", "is_remote_frame")]
+    if type(arbitration_id) is not int or not 0 <= arbitration_id < (1 << 29):
+        raise MalformedFrameError(
+            f"arbitration_id: expected an integer in 0..2**29-1, got {_short(arbitration_id)}")
+    if any(type(flag) is not bool for flag in flags):
+        raise MalformedFrameError(f"frame flags: expected booleans, got {_short(flags)}")
+    data = getattr(message, "data", None)
+    if not isinstance(data, (bytes, bytearray)) or len(data) > 64:
+        raise MalformedFrameError(f"data: expected at most 64 bytes, got {_short(data)}")
+    return arbitration_id, bytes(data), flags[1]
+
+
+def _short(value, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + f"... ({len(text)} chars)"
+
+
+class ErrorLog:
+    """Logs contained exceptions without flooding: the first ``first`` of each kind, then
+    every ``every``-th (with the count). A loop that must survive any input counts every
+    exception and logs through this."""
+
+    def __init__(self, logger: logging.Logger, first: int = 5, every: int = 1000):
+        self._log, self._first, self._every = logger, first, every
+        self._seen: dict[str, int] = {}
+
+    def __call__(self, kind: str, error: BaseException) -> None:
+        n = self._seen.get(kind, 0) + 1
+        self._seen[kind] = n
+        if n <= self._first or n % self._every == 0:
+            self._log.warning("%s #%d contained: %s: %s", kind, n, type(error).__name__,
+                              _short(str(error), 200))

@@ -1,0 +1,269 @@
+"""A simulated CAN-bus hand: joint position loops, noisy sensors, a virtual object.
+
+It speaks the hand's side of the configured layout (``config.bus.frame_format``),
+reading the bus once per cycle (at the cycle's start, like a firmware reading
+its receive FIFO).
+FD (``hand_fd.dbc``): it applies each ``<HAND>_SETPOINT`` frame on receipt
+and, ``rate`` times a second, publishes one ``<HAND>_FEEDBACK`` frame (which
+acknowledges the last applied setpoint). Classic (``hand.dbc``): it applies
+SETPOINT frames on each SETPOINT_COMMIT and publishes POSITION, TACTILE and
+then STATUS. With the bus server it lets the whole chain run without hardware
+(``handle-drake can-sim``).
+
+Joint model (each actuated joint, see :class:`CanFirmwareConfig`): a
+second-order position loop ``q'' = wn^2 (q_sp - q) - 2 zeta wn q'`` with
+``wn = 2 pi natural_frequency``, velocity saturated at ``max_velocity``,
+stopped at the command limits; coupled joints follow their leader
+(``q_f = ratio * q_l``). A critically damped loop follows a ramp of slope
+``s`` with a constant lag of ``2 zeta s / wn`` rad (``2 zeta / wn`` seconds),
+which the tests check against.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+
+import can
+import numpy as np
+
+from handle_drake.devices.can_hand.bus import (
+    GARBAGE,
+    ErrorLog,
+    check_frame,
+    open_bus,
+    receive,
+    use_realtime_priority,
+)
+from handle_drake.devices.can_hand.config import CanFirmwareConfig
+from handle_drake.devices.can_hand.layout import HandLayout, hand_layout
+from handle_drake.devices.can_hand.messages import (
+    STATE_OK,
+    ForeignFrameError,
+    FrameFormatError,
+    MalformedFrameError,
+    make_codec,
+)
+
+__all__ = ["HandJointModel", "SimulatedHandFirmware"]
+
+log = logging.getLogger(__name__)
+
+_MAX_SUBSTEP = 0.001  # s; keeps the explicit integration stable for wn * dt << 1
+_MAX_FRAMES_PER_CYCLE = 4096  # a flood of frames cannot stop the cycle from publishing
+
+
+class HandJointModel:
+    """The hand's joint dynamics and sensors without any bus (pure, steppable).
+
+    Attributes ``q``, ``v`` (nu, actuated order) and ``setpoint`` are public
+    so tests can read the true state.
+    """
+
+    def __init__(self, layout: HandLayout, config: CanFirmwareConfig, initial_position=None):
+        self.layout = layout
+        self.config = config
+        nu = layout.nu
+        q0 = np.zeros(nu) if initial_position is None else np.asarray(initial_position, float)
+        if q0.shape != (nu,):
+            raise ValueError(f"initial_position: expected {nu} values, got shape {q0.shape}")
+        self.lower, self.upper = layout.command_lower, layout.command_upper
+        self.q = np.clip(q0, self.lower, self.upper)
+        self.v = np.zeros(nu)
+        self.setpoint = self.q.copy()
+        self._wn = 2 * np.pi * config.natural_frequency
+        self._rng = np.random.default_rng(config.seed)
+        index = {n: i for i, n in enumerate(layout.actuated_joint_names)}
+        self._pads = [np.array([index[n] for n in pad], dtype=int) for pad in layout.closing_joints]
+        # Per-cycle work as matrix products: pad sums (nt x nu, 0/1) and the
+        # coupling map of layout.joint_positions (nq x nu, linear: its columns).
+        self._pad_matrix = np.zeros((len(self._pads), nu))
+        for k, pad in enumerate(self._pads):
+            self._pad_matrix[k, pad] = 1.0
+        self._joint_map = np.stack([layout.joint_positions(e) for e in np.eye(nu)], axis=1)
+        closing = self._pad_matrix.any(axis=0)
+        if config.object_closure is None:
+            self.stop = np.full(nu, np.inf)
+        else:
+            stop = self.lower + config.object_closure * (self.upper - self.lower)
+            self.stop = np.where(closing, stop, np.inf)
+
+    def apply(self, setpoint) -> None:
+        """A new setpoint (the hand enforces its own limits too)."""
+        self.setpoint = np.clip(np.asarray(setpoint, dtype=float), self.lower, self.upper)
+
+    def step(self, dt: float) -> None:
+        if not dt > 0:
+            return
+        n = max(1, int(np.ceil(dt / _MAX_SUBSTEP)))
+        h = dt / n
+        wn, zeta, vmax = self._wn, self.config.damping_ratio, self.config.max_velocity
+        upper = np.minimum(self.upper, self.stop)
+        for _ in range(n):
+            a = wn * wn * (self.setpoint - self.q) - 2 * zeta * wn * self.v
+            self.v = np.clip(self.v + h * a, -vmax, vmax)
+            self.q = self.q + h * self.v
+            low, high = self.q < self.lower, self.q > upper
+            self.q = np.clip(self.q, self.lower, upper)
+            self.v[low] = np.maximum(self.v[low], 0.0)
+            self.v[high] = np.minimum(self.v[high], 0.0)
+
+    def measured_positions(self) -> np.ndarray:
+        """All joints (nq) with sensor noise."""
+        q = self._joint_map @ self.q
+        if self.config.position_noise > 0:
+            q = q + self._rng.normal(0.0, self.config.position_noise, q.shape)
+        return q
+
+    def tactile(self) -> np.ndarray:
+        """Normal force (N) on each fingertip: stiffness times setpoint past the object."""
+        press = np.maximum(0.0, self.setpoint - self.stop)
+        press[~np.isfinite(press)] = 0.0
+        force = self.config.contact_stiffness * (self._pad_matrix @ press)
+        if self.config.tactile_noise > 0:
+            force = force + self._rng.normal(0.0, self.config.tactile_noise, force.shape)
+        return np.maximum(force, 0.0)
+
+
+class SimulatedHandFirmware:
+    """Runs a :class:`HandJointModel` on a CAN bus in a background thread."""
+
+    def __init__(self, config: CanFirmwareConfig, bus: can.BusABC | None = None,
+                 layout: HandLayout | None = None, initial_position=None):
+        if not isinstance(config, CanFirmwareConfig):
+            raise TypeError(f"config: expected a CanFirmwareConfig, got {type(config).__name__}")
+        config.validate()
+        self.config = config
+        self.layout = layout or hand_layout(config.hand_kind, config.coupling_ratio)
+        self.codec = make_codec(self.layout, config.bus.frame_format)
+        self.model = HandJointModel(self.layout, config, initial_position)
+        self._assembler = self.codec.setpoint_receiver()
+        self._bus = bus
+        self._owns_bus = bus is None
+        self._stop = threading.Event()
+        self._thread = None
+        self._lock = threading.Lock()
+        self.counters = collections.Counter()
+        self._seq_ack = 0
+        self._counter = 0
+        self._t0 = time.monotonic()
+        self.silent = threading.Event()  # set: stop publishing (a test's "hand unplugged")
+        self._errors = ErrorLog(log)
+
+    def start(self) -> SimulatedHandFirmware:
+        if self._thread is not None:
+            raise RuntimeError("firmware already started")
+        if self._bus is None:
+            self._bus = open_bus(self.config.bus)
+        self._thread = threading.Thread(target=self._loop, name="can-sim", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+        if self._owns_bus and self._bus is not None:
+            self._bus.shutdown()
+            self._bus = None
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def is_alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def _handle(self, message: can.Message) -> None:
+        self.counters["frames_rx"] += 1
+        try:
+            arbitration_id, data, is_fd = check_frame(message)
+        except MalformedFrameError:
+            self.counters["malformed_frames"] += 1
+            return
+        if arbitration_id in self.codec.hand_to_host_ids:
+            self.counters["echo_frames"] += 1  # our own feedback looped back
+            return
+        if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
+            self.counters["foreign_frames"] += 1
+            return
+        try:
+            applied = self._assembler.feed(arbitration_id, data, is_fd)
+        except ForeignFrameError:
+            self.counters["foreign_frames"] += 1
+            return
+        except FrameFormatError:
+            self.counters["wrong_format_frames"] += 1
+            return
+        except MalformedFrameError:
+            self.counters["malformed_frames"] += 1
+            return
+        if applied is not None:
+            seq, setpoint = applied
+            with self._lock:
+                self.model.apply(setpoint)
+                self._seq_ack = seq
+            self.counters["commits_applied"] += 1
+        self.counters["rejected_commits"] = self._assembler.rejected_commits
+
+    def _loop(self) -> None:
+        use_realtime_priority(self.config.realtime_priority)
+        period = 1.0 / self.config.rate
+        last = time.monotonic()
+        deadline = last + period
+        bus = self._bus
+        while not self._stop.is_set():
+            # One wake-up per cycle, like a firmware that reads its CAN receive FIFO at
+            # the start of each control cycle: sleep to the deadline, then take every
+            # frame that arrived meanwhile. (Waking for each frame as well would double
+            # the context switches per cycle and gain nothing: the acknowledgement goes
+            # out with this cycle's feedback either way.)
+            remaining = deadline - time.monotonic()
+            if remaining > 0 and self._stop.wait(remaining):
+                break
+            for _ in range(_MAX_FRAMES_PER_CYCLE):
+                message, why = receive(bus, 0.0)
+                if why == GARBAGE:  # undecodable datagram: counted, next one at once
+                    self.counters["frames_rx"] += 1
+                    self.counters[GARBAGE] += 1
+                    continue
+                if why is not None:
+                    self.counters[why] += 1
+                    self._errors(why, RuntimeError("firmware bus receive failed"))
+                    break
+                if message is None:
+                    break
+                try:
+                    self._handle(message)
+                except Exception as error:  # one frame never stops the hand
+                    self.counters["frame_errors"] += 1
+                    self._errors("frame_errors", error)
+            now = time.monotonic()
+            with self._lock:
+                self.model.step(min(now - last, 0.05))
+                q, tactile, seq_ack = (self.model.measured_positions(), self.model.tactile(),
+                                       self._seq_ack)
+            last = now
+            deadline += period
+            if deadline < now - 10 * period:  # fell far behind (a stall): do not burst
+                deadline = now + period
+            if self.silent.is_set():
+                continue
+            frames = self.codec.encode_feedback(q, tactile, seq_ack, self._counter, STATE_OK,
+                                                now - self._t0)
+            self._counter = (self._counter + 1) % 256
+            fd = self.codec.is_fd
+            try:
+                for arbitration_id, data in frames:
+                    self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
+                                               is_extended_id=False, is_fd=fd,
+                                               bitrate_switch=fd), timeout=0.01)
+                self.counters["cycles"] += 1
+            except (can.CanError, OSError) as error:
+                self.counters["bus_tx_errors"] += 1
+                log.warning("firmware bus send failed: %s", error)

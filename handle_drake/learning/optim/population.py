@@ -1,0 +1,276 @@
+"""Ask/tell optimisers for the in-hand trials (scores are maximised).
+
+- :class:`IncrementalPSO`: Algorithm 2 of the report (5.5). Particles start
+  uniformly in the action-gist box (start times in [0, 1], one direction per
+  joint variation, ``[0, A_lim]``), velocities in ``U(-|b_up - b_lo|, |b_up -
+  b_lo|)``. Each iteration particle ``i`` updates only its first
+  ``floor(f(p_i))`` dimensions (2*: the activated parameters, at least
+  ``min_active``), with ``v <- w v + phi_p r_p (p - x) + phi_c r_c (c - x)``
+  where ``c`` is the centre of the best-solution cluster (the mean of the
+  ``cluster_size`` best personal bests); ``w = phi_p = phi_c = 0.4``. The
+  report leaves the unproved dimensions' positions open; we freeze them
+  ("we should not modify any unproved parameters", 5.5.2), or let them drift
+  with their old velocity (``freeze_inactive=False``, the literal line 19).
+  The report minimises a cost but its score grows with success: here every
+  score is maximised. Particles of one iteration are evaluated as one batch
+  (a synchronous swarm: the report updates ``g`` particle by particle), so the
+  trials of an iteration run in parallel and a run depends only on its seed.
+  Positions leaving the box are clipped to it and that velocity component is
+  set to zero.
+- standard PSO (``make_inhand_optimizer("pso")``): the same swarm with every
+  dimension updated, global best (cluster of one) and Clerc's constriction
+  coefficients ``w = 0.7298, phi_p = phi_c = 1.49618``, so the comparison
+  isolates what Algorithm 2 changes. It is this class rather than a library
+  PSO because a library's initialisation and bound handling would differ too.
+- :class:`CMAES`: the ``cma`` package's CMA-ES in the unit cube (mean at the
+  centre, sigma 0.3, population = particles), ask/tell per individual.
+- random search: :class:`handle_drake.learning.RandomSearch`.
+
+All stop once a told score reaches ``stop_score`` (the task's target score)
+and are rebuilt exactly by replaying their tells (the trial log's resume).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from handle_drake.learning.optim.base import Optimizer, _derived_seed
+from handle_drake.learning.optim.bo import RandomSearch
+
+__all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "make_inhand_optimizer",
+           "INHAND_OPTIMIZERS"]
+
+INHAND_OPTIMIZERS = ("ipso", "pso", "cmaes", "random")
+
+
+def _positive_int(name, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+    return int(value)
+
+
+def _non_negative(name, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not (
+            math.isfinite(value) and value >= 0):
+        raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
+    return float(value)
+
+
+class _StopMixin:
+    stop_score: float | None = None
+
+    def _check_stop(self, y):
+        if self.stop_score is not None and y >= self.stop_score:
+            self.converged = True
+
+
+class _Generational(_StopMixin, Optimizer):
+    """A population asked as one batch and told in the order asked."""
+
+    synchronous = True
+
+    def __init__(self, bounds, seed, batch_size, stop_score):
+        super().__init__(bounds, seed)
+        self.batch_size = _positive_int("n_particles", batch_size)
+        self.stop_score = None if stop_score is None else float(stop_score)
+        self.generation = 0
+        self._population = None  # (N, d) unit-cube points of this generation
+        self._asked = 0
+        self._scores: list[float] = []
+
+    def _new_population(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _end_generation(self, scores: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _ensure_population(self):
+        if self._population is None:
+            self._population = self._new_population()
+            self._asked = 0
+            self._scores = []
+
+    @property
+    def batch_room(self) -> int:
+        """Members of the current generation not asked yet (what a batch may hold now)."""
+        return self.batch_size if self._population is None else self.batch_size - self._asked
+
+    def ask(self) -> np.ndarray:
+        self._ensure_population()
+        if self._asked >= self.batch_size:
+            raise RuntimeError(
+                f"{type(self).__name__}: all {self.batch_size} members of generation "
+                f"{self.generation} are asked; tell their results first")
+        u = self._population[self._asked]
+        self._asked += 1
+        return self._register(u)
+
+    def resume_pending(self, x) -> None:
+        self._ensure_population()
+        super().resume_pending(x)
+        self._asked = max(self._asked, len(self._scores) + self.n_pending)
+
+    def _record(self, x, y):
+        self._ensure_population()
+        k = len(self._scores)
+        u = self.to_unit(np.asarray(x, dtype=float))
+        if not np.allclose(u, self._population[k], rtol=0.0, atol=1e-9):
+            raise ValueError(
+                f"{type(self).__name__}: told x is not member {k} of generation "
+                f"{self.generation} (members are told in the order they were asked)")
+        self._scores.append(y)
+        self._asked = max(self._asked, len(self._scores))
+        if len(self._scores) == self.batch_size:
+            scores = np.array(self._scores, dtype=float)
+            self._end_generation(scores)
+            self.generation += 1
+            self._population = None
+
+    def tell(self, x, y) -> None:
+        super().tell(x, y)
+        self._check_stop(float(y))
+        self._record(x, float(y))
+
+    def tell_failure(self, x, error: str = "") -> None:
+        super().tell_failure(x, error)
+        self._record(x, -math.inf)
+
+
+class IncrementalPSO(_Generational):
+    """Algorithm 2 (see the module doc). ``incremental=False`` updates every dimension."""
+
+    strategy = "ipso"
+
+    def __init__(self, bounds, seed: int = 0, n_particles: int = 10, w: float = 0.4,
+                 phi_p: float = 0.4, phi_c: float = 0.4, incremental: bool = True,
+                 min_active: int = 1, cluster_size: int | None = None,
+                 freeze_inactive: bool = True, stop_score: float | None = None):
+        super().__init__(bounds, seed, n_particles, stop_score)
+        self.w = _non_negative("w", w)
+        self.phi_p = _non_negative("phi_p", phi_p)
+        self.phi_c = _non_negative("phi_c", phi_c)
+        self.incremental = bool(incremental)
+        self.min_active = min(_positive_int("min_active", min_active), self.dim)
+        self.cluster_size = max(1, math.ceil(self.batch_size / 5)) if cluster_size is None \
+            else _positive_int("cluster_size", cluster_size)
+        if self.cluster_size > self.batch_size:
+            raise ValueError(f"cluster_size: expected <= n_particles ({self.batch_size}), got "
+                             f"{self.cluster_size}")
+        self.freeze_inactive = bool(freeze_inactive)
+        rng = np.random.default_rng([self.seed, 0x15A0])  # own stream: not random search's
+        self.x = rng.random((self.batch_size, self.dim))  # U(b_lo, b_up) in the unit cube
+        self.v = rng.uniform(-1.0, 1.0, (self.batch_size, self.dim))
+        self.p = self.x.copy()
+        self.f_p = np.full(self.batch_size, -math.inf)
+        self.active = np.full(self.batch_size, self.dim if not incremental else self.min_active)
+
+    def _new_population(self) -> np.ndarray:
+        return self.x.copy()
+
+    def active_dimensions(self, score: float) -> int:
+        """How many leading dimensions a particle with personal best ``score`` updates (2*)."""
+        if not self.incremental:
+            return self.dim
+        if not math.isfinite(score):
+            return self.min_active
+        return int(min(self.dim, max(self.min_active, math.floor(score))))
+
+    @property
+    def cluster_centre(self) -> np.ndarray:
+        order = np.argsort(-self.f_p, kind="stable")[: self.cluster_size]
+        return self.p[order].mean(axis=0)
+
+    def _end_generation(self, scores):
+        better = scores > self.f_p
+        self.p[better] = self.x[better]
+        self.f_p[better] = scores[better]
+        c = self.cluster_centre
+        for i in range(self.batch_size):
+            m = self.active_dimensions(self.f_p[i])
+            self.active[i] = m
+            rng = np.random.default_rng([self.seed, 0x15A0, self.generation + 1, i])
+            r_p, r_c = rng.random(m), rng.random(m)
+            self.v[i, :m] = (self.w * self.v[i, :m] + self.phi_p * r_p * (self.p[i, :m]
+                             - self.x[i, :m]) + self.phi_c * r_c * (c[:m] - self.x[i, :m]))
+            moving = slice(None) if not self.freeze_inactive else slice(0, m)
+            new = self.x[i, moving] + self.v[i, moving]
+            clipped = np.clip(new, 0.0, 1.0)
+            self.v[i, moving] = np.where(clipped != new, 0.0, self.v[i, moving])
+            self.x[i, moving] = clipped
+
+
+class CMAES(_Generational):
+    """CMA-ES from the ``cma`` package behind the same ask/tell (unit cube, maximising)."""
+
+    strategy = "cmaes"
+
+    def __init__(self, bounds, seed: int = 0, n_particles: int = 10, sigma0: float = 0.3,
+                 stop_score: float | None = None):
+        import cma
+
+        super().__init__(bounds, seed, n_particles, stop_score)
+        if not (isinstance(sigma0, int | float) and 0 < sigma0 <= 1):
+            raise ValueError(f"sigma0: expected a number in (0, 1], got {sigma0!r}")
+        self.sigma0 = float(sigma0)
+        state = np.random.get_state()  # cma seeds numpy's global generator: restore it
+        try:
+            self._es = cma.CMAEvolutionStrategy(
+                np.full(self.dim, 0.5), self.sigma0,
+                {"bounds": [0.0, 1.0], "popsize": self.batch_size,
+                 "seed": _derived_seed(seed, 1), "verbose": -9, "verb_log": 0, "verb_disp": 0})
+        finally:
+            np.random.set_state(state)
+        self._raw = None
+
+    def _new_population(self) -> np.ndarray:
+        # cma samples from numpy's global generator: seed it per generation and
+        # restore it, so a run depends only on its seed and tells.
+        state = np.random.get_state()
+        try:
+            np.random.seed(_derived_seed(self.seed, 2, self.generation))
+            self._raw = self._es.ask()
+        finally:
+            np.random.set_state(state)
+        return np.clip(np.array(self._raw), 0.0, 1.0)
+
+    def _end_generation(self, scores):
+        ok = np.isfinite(scores)
+        worst = scores[ok].min() - 1.0 if ok.any() else 0.0  # a failure: below every success
+        state = np.random.get_state()
+        try:
+            self._es.tell(self._raw, list(-np.where(ok, scores, worst)))  # cma minimises
+        finally:
+            np.random.set_state(state)
+
+
+class StoppingRandomSearch(_StopMixin, RandomSearch):
+    """:class:`RandomSearch` that stops once a score reaches ``stop_score``."""
+
+    def __init__(self, bounds, seed: int = 0, stop_score: float | None = None):
+        super().__init__(bounds, seed)
+        self.stop_score = None if stop_score is None else float(stop_score)
+
+    def tell(self, x, y) -> None:
+        super().tell(x, y)
+        self._check_stop(float(y))
+
+
+def make_inhand_optimizer(name: str, bounds, seed: int = 0, n_particles: int = 10,
+                          stop_score: float | None = None, min_active: int = 1):
+    """``ipso`` (Algorithm 2), ``pso`` (standard), ``cmaes`` or ``random`` with the same box."""
+    if name == "ipso":
+        return IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
+                              stop_score=stop_score)
+    if name == "pso":
+        opt = IncrementalPSO(bounds, seed, n_particles, w=0.7298, phi_p=1.49618,
+                             phi_c=1.49618, incremental=False, cluster_size=1,
+                             stop_score=stop_score)
+        opt.strategy = "pso"
+        return opt
+    if name == "cmaes":
+        return CMAES(bounds, seed, n_particles, stop_score=stop_score)
+    if name == "random":
+        return StoppingRandomSearch(bounds, seed, stop_score=stop_score)
+    raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {name!r}")

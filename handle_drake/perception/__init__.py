@@ -1,6 +1,0 @@
-"""Seeing the table: simulated depth cameras, recorded frames, tabletop object
-detection (report section 2.3)."""
-
-from handle_drake.perception.camera import PROFILES, CameraProfile, apply_depth_model, get_profile
-
-__all__ = ["PROFILES", "CameraProfile", "apply_depth_model", "get_profile"]

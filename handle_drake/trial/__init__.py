@@ -1,0 +1,1 @@
+"""Trials: the harness (build once, reset per trial, score) and the scenario runner."""
