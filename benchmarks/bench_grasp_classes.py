@@ -55,11 +55,10 @@ def trial(args):
     overrides = rest[0] if rest else {}
     from pydrake.common.schema import Transform
 
-    from handle_drake.apps.demo import held_through_lift
     from handle_drake.apps.planning.execution import ReactiveGraspRunner, plan_params
     from handle_drake.grasp.planning import plan_grasp, resting_pose
     from handle_drake.scenario import ObjectConfig
-    from handle_drake.trial.simulate import ScenarioRunner
+    from handle_drake.trial.simulate import ScenarioRunner, held_through_lift
 
     size = width / 0.6 if kind == "cuboid" else width  # cuboid depth = 0.6 * size
     # The plan sees the object at the origin with the perceived size; the

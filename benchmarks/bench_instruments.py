@@ -40,7 +40,8 @@ from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither
 
 pin_blas(force=False)
 
-from handle_drake.apps.demo import DEMO_SCENARIO, diagrams_dir  # noqa: E402
+from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
+from handle_drake.base.models import diagrams_dir  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
 from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 

@@ -52,7 +52,7 @@ pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.apps.demo import diagrams_dir  # noqa: E402
+from handle_drake.base.models import diagrams_dir  # noqa: E402
 from handle_drake.geometry.detect import TabletopDetector, detect_objects  # noqa: E402
 
 

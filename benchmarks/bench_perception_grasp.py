@@ -36,11 +36,11 @@ def trial(case):
     grasp_class, kind, size, x, y, yaw, seed = case
     from pydrake.common.schema import Transform
 
-    from handle_drake.apps.demo import held_through_lift
     from handle_drake.apps.perception.grasping import perceive_object
     from handle_drake.apps.planning.execution import run_plan
     from handle_drake.grasp.planning import plan_grasp, resting_pose
     from handle_drake.scenario import ObjectConfig
+    from handle_drake.trial.simulate import held_through_lift
 
     out = dict(grasp_class=grasp_class, kind=kind, size=size, x=x, y=y, yaw=yaw)
     X_WO_true = resting_pose(kind, size, (x, y), yaw)

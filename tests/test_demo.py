@@ -7,9 +7,10 @@ import sys
 import numpy as np
 import pytest
 
-from handle_drake.apps.demo import REQUIRED_LIFT, diagrams_dir, held_through_lift, run_demo
+from handle_drake.apps.demo import run_demo
+from handle_drake.base.models import diagrams_dir
 from handle_drake.scenario import LoadScenario
-from handle_drake.trial.simulate import ScenarioRunner
+from handle_drake.trial.simulate import REQUIRED_LIFT, ScenarioRunner, held_through_lift
 
 
 def test_demo_grasp_holds_the_sphere_through_a_10cm_lift(tmp_path):

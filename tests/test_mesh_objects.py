@@ -153,10 +153,9 @@ simulation_duration: 0.5
 
 
 def test_a_grasp_that_holds_the_catalogue_cuboid_holds_the_mesh(files):
-    from handle_drake.apps.demo import held_through_lift
     from handle_drake.grasp.planning import grasp_dims, plan_grasp, resting_pose
     from handle_drake.scenario import ObjectConfig
-    from handle_drake.trial.simulate import ScenarioRunner
+    from handle_drake.trial.simulate import ScenarioRunner, held_through_lift
 
     mesh = MeshObjectSpec(str(files["cuboid"]))
     cat = objects.ObjectSpec("cuboid", 0.028)
@@ -490,8 +489,8 @@ def test_a_mesh_object_renders_for_the_cameras_and_is_detected_as_its_catalogue_
     # them. The exported cuboid (28 x 16.8 x 42 mm, objects.PROPORTIONS) is
     # found where it stands, with its catalogue dimensions; a mesh is no
     # primitive, so its detected kind is not judged.
-    from handle_drake.apps.demo import diagrams_dir
     from handle_drake.apps.perception.perceive import detection_error, render_views
+    from handle_drake.base.models import diagrams_dir
     from handle_drake.scenario import LoadScenario
 
     data = (f"object: {{kind: mesh, file: '{files['cuboid']}', X_WO: {{translation: "

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlantConfig
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.base.checks import ScenarioDeprecationWarning
+from handle_drake.base.models import diagrams_dir
 from handle_drake.scenario import (
     CanHandDriver,
     DumpScenario,

@@ -4,8 +4,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.base.models import diagrams_dir
 from handle_drake.geometry.objects import KINDS
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body

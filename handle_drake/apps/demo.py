@@ -10,24 +10,11 @@ from __future__ import annotations
 import dataclasses as dc
 from pathlib import Path
 
-import numpy as np
-
+from handle_drake.base.models import diagrams_dir
 from handle_drake.scenario import LoadScenario
-from handle_drake.trial.simulate import RunResult, ScenarioRunner
+from handle_drake.trial.simulate import REQUIRED_LIFT, RunResult, ScenarioRunner, held_through_lift
 
-__all__ = ["DEMO_SCENARIO", "DemoReport", "run_demo", "held_through_lift", "diagrams_dir"]
-
-REQUIRED_LIFT = 0.10  # m
-
-
-def diagrams_dir() -> Path:
-    """``diagrams/`` of a checkout, or its installed copy ``handle_drake/_diagrams``."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "diagrams", here / "_diagrams"):
-        if candidate.is_dir():
-            return candidate
-    raise FileNotFoundError(f"no diagrams/ directory next to {here}")
-
+__all__ = ["DEMO_SCENARIO", "DemoReport", "run_demo"]
 
 DEMO_SCENARIO = "shadow_sphere_grasp.yaml"
 
@@ -62,15 +49,6 @@ class DemoReport:
         if self.html:
             lines.append(f"replay: {self.html} (open in a browser)")
         return "\n".join(lines)
-
-
-def held_through_lift(result: RunResult, required_lift: float = REQUIRED_LIFT,
-                      settle: float = 0.3) -> bool:
-    """True if the object ends at least ``required_lift`` higher and did not
-    fall during the last ``settle`` seconds (it moved by less than 1 cm)."""
-    z = result.object_position[:, 2]
-    late = result.times >= result.times[-1] - settle
-    return bool(z[-1] - z[0] >= required_lift and np.ptp(z[late]) < 0.01)
 
 
 def run_demo(meshcat=None, html: str | Path | None = None,

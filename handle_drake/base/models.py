@@ -14,10 +14,14 @@ from pathlib import Path
 PACKAGE_NAME = "handle_drake_models"
 
 
+# The package's own folder (handle_drake/), wherever this module sits inside it.
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+
+
 @cache
 def models_dir() -> Path:
     """The directory holding ``package.xml`` of ``handle_drake_models``."""
-    here = Path(__file__).resolve().parent
+    here = PACKAGE_DIR
     for candidate in (here.parent / "models", here / "_models"):
         if (candidate / "package.xml").is_file():
             return candidate
@@ -25,6 +29,15 @@ def models_dir() -> Path:
         f"handle_drake models not found: looked for package.xml in {here.parent / 'models'} "
         f"and {here / '_models'}; reinstall handle_drake (pip install .)"
     )
+
+
+def diagrams_dir() -> Path:
+    """``diagrams/`` of a checkout, or its installed copy ``handle_drake/_diagrams``."""
+    here = PACKAGE_DIR
+    for candidate in (here.parent / "diagrams", here / "_diagrams"):
+        if candidate.is_dir():
+            return candidate
+    raise FileNotFoundError(f"no diagrams/ directory next to {here}")
 
 
 def model_path(relative: str) -> Path:

@@ -36,7 +36,20 @@ __all__ = [
     "script_trajectories",
     "advance_recording",
     "LOG_PERIOD",
+    "REQUIRED_LIFT",
+    "held_through_lift",
 ]
+
+REQUIRED_LIFT = 0.10  # m: how far a held object rises with the hand in the lift scenarios
+
+
+def held_through_lift(result: RunResult, required_lift: float = REQUIRED_LIFT,
+                      settle: float = 0.3) -> bool:
+    """True if the object ends at least ``required_lift`` higher and did not
+    fall during the last ``settle`` seconds (it moved by less than 1 cm)."""
+    z = result.object_position[:, 2]
+    late = result.times >= result.times[-1] - settle
+    return bool(z[-1] - z[0] >= required_lift and np.ptp(z[late]) < 0.01)
 
 
 def placed(scenario: Scenario, placement) -> Scenario:

@@ -281,8 +281,8 @@ def test_socketcan_chain_streams(processes):
 
 def test_same_scenario_runs_on_the_can_hand_and_in_simulation(processes):
     """diagrams/shadow_can_hand.yaml: one file, two drivers, the same closed hand."""
-    from handle_drake.apps.demo import diagrams_dir
     from handle_drake.base.hands import get_hand_spec
+    from handle_drake.base.models import diagrams_dir
     from handle_drake.scenario import LoadScenario
     from handle_drake.trial.simulate import ScenarioRunner
 

@@ -102,8 +102,8 @@ def test_run_ids_follow_the_code_not_its_comments_or_docstrings():
 # What a grasp trial loads that cannot change its metric: the learning engine, validation
 # and port names, settings of drivers and sensors it does not use, where models live (the
 # model files themselves are hashed).
-_NOT_SIMULATION = ("blas", "learning/", "scenario_checks", "ports", "models", "can_hand/",
-                   "instruments/config", "perception/camera", "__init__")
+_NOT_SIMULATION = ("base/blas", "learning/", "base/checks", "base/port_names", "base/models",
+                   "can_hand/", "accelerometer/config", "camera/profiles", "__init__")
 
 
 def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():
@@ -114,6 +114,7 @@ def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():
     from pathlib import Path
 
     from handle_drake.apps.babbling.babbling import simulation_sources
+    from handle_drake.base.models import PACKAGE_DIR
 
     code = ("import sys\nfrom handle_drake.trial.grasp_trial import GraspTrial, "
             "GraspTrialConfig\ntrial = GraspTrial(GraspTrialConfig(object='wiimote'))\n"
@@ -122,9 +123,9 @@ def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():
             "if n.startswith('handle_drake') and getattr(m, '__file__', None)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=600).stdout
-    root = Path(simulation_sources()[0]).parents[1]
+    root = PACKAGE_DIR
     loaded = {Path(line).relative_to(root).as_posix() for line in out.split()}
-    assert "instruments/catalogue.py" in loaded and "systems/guarded_grasp.py" in loaded
+    assert "geometry/objects/instrumented.py" in loaded and "systems/guarded_grasp.py" in loaded
     hashed = {p.relative_to(root).as_posix() for p in simulation_sources()}
     unhashed = sorted(f for f in loaded - hashed if not any(k in f for k in _NOT_SIMULATION))
     assert unhashed == []

@@ -4,10 +4,10 @@ through its modes in order, and each grasp finger closes until its own contact."
 
 import pytest
 
-from handle_drake.apps.demo import held_through_lift
 from handle_drake.apps.planning.execution import ReactiveGraspRunner, plan_params, run_plan
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, plan_grasp, resting_pose
 from handle_drake.systems.reactive_grasp import ReactiveGraspMode
+from handle_drake.trial.simulate import held_through_lift
 
 FF, MF, RF, LF, TH = range(5)
 

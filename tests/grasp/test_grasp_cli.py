@@ -4,11 +4,11 @@ import argparse
 
 import pytest
 
-from handle_drake.apps.demo import diagrams_dir, held_through_lift
 from handle_drake.apps.planning import cli
+from handle_drake.base.models import diagrams_dir
 from handle_drake.grasp.taxonomy import GRASP_CLASSES
 from handle_drake.scenario import LoadScenario
-from handle_drake.trial.simulate import ScenarioRunner
+from handle_drake.trial.simulate import ScenarioRunner, held_through_lift
 
 
 def _parse(argv):

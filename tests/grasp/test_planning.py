@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
-from handle_drake.apps.demo import held_through_lift
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.grasp.kinematics import CONTACT_POINTS, contact_layout
 from handle_drake.grasp.planning import GraspPlanningError, plan_grasp, resting_pose
@@ -13,7 +12,7 @@ from handle_drake.grasp.taxonomy import approach_palm
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation
 from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
-from handle_drake.trial.simulate import ScenarioRunner
+from handle_drake.trial.simulate import ScenarioRunner, held_through_lift
 
 SPEC = get_hand_spec("shadow")
 DISTAL = {"th": "thdistal", "ff": "ffdistal", "mf": "mfdistal", "rf": "rfdistal", "lf": "lfdistal"}

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.apps.figure8.experiments import figure8_scenario
+from handle_drake.base.models import diagrams_dir
 from handle_drake.cli import main
 from handle_drake.devices.accelerometer.estimators import EstimatorParams
 from handle_drake.devices.accelerometer.profiles import get_profile

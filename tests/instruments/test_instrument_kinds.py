@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from handle_drake.apps.demo import diagrams_dir
+from handle_drake.base.models import diagrams_dir
 from handle_drake.cli import main
 from handle_drake.devices.accelerometer.sensor import check_sensor_pose
 from handle_drake.devices.accelerometer.wiring import instrument_X_OS

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import mido
 
-from handle_drake.apps.demo import diagrams_dir
+from handle_drake.base.models import diagrams_dir
 from handle_drake.cli import main
 from handle_drake.devices.midi import ports
 from handle_drake.devices.midi.ports import ALSA_SEQUENCER

@@ -11,8 +11,8 @@ import re
 import numpy as np
 import pytest
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.apps.figure9.experiments import fader_push_scenario, run_midi_scenario
+from handle_drake.base.models import diagrams_dir
 from handle_drake.devices.midi.codec import fader_value
 from handle_drake.scenario import LoadScenario
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.apps.perception.perceive import CATALOGUE_PRIMITIVE, detection_error, render_views
+from handle_drake.base.models import diagrams_dir
 from handle_drake.geometry.detect import detect_objects, min_area_rectangle
 from handle_drake.scenario import LoadScenario, ScenarioError
 from handle_drake.station import GetPlant, MakeHandStation, object_body, object_initial_pose

@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.base.models import PACKAGE_DIR, models_dir
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.cluster import LocalPool, as_executor, executor_workers
 from handle_drake.learning.optim.bo import BO_DEFAULTS_VERSION, make_optimizer
@@ -154,13 +155,13 @@ def simulation_sources() -> list[Path]:
     included), drivers, controllers and grasp quality. What else a trial loads
     cannot change its metric: the learning engine, validation, port names, other
     drivers' settings (``tests/experiments/test_babbling.py`` keeps this true)."""
-    root = Path(__file__).resolve().parents[1]
+    root = PACKAGE_DIR
     return sorted([
-        root / "experiments" / "grasp_trial.py", root / "harness.py", root / "run.py",
-        root / "station.py", root / "scenario.py", root / "hands.py",
-        root / "instruments" / "catalogue.py",
-        *(root / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
-        *(root / "quality").glob("*.py"),
+        root / "trial" / "grasp_trial.py", root / "trial" / "harness.py",
+        root / "trial" / "simulate.py",
+        root / "station.py", root / "scenario.py", root / "base" / "hands.py",
+        *(root / "geometry" / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
+        *(root / "geometry" / "quality").glob("*.py"),
     ])
 
 
@@ -176,9 +177,8 @@ def simulation_fingerprint() -> str:
     files as they were when first asked, i.e. the code this process runs."""
     from importlib.metadata import version
 
-    from handle_drake.base.models import models_dir
 
-    root = Path(__file__).resolve().parents[1]
+    root = PACKAGE_DIR
     digest = hashlib.sha1(f"drake {version('drake')}".encode())
     for path in simulation_sources():
         digest.update(path.relative_to(root).as_posix().encode())

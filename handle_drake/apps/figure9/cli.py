@@ -76,7 +76,7 @@ def _add_run_arguments(q, default_file: str) -> None:
 
 
 def _load(args, default_file: str):
-    from handle_drake.apps.demo import diagrams_dir
+    from handle_drake.base.models import diagrams_dir
     from handle_drake.scenario import LoadScenario
 
     path = args.scenario or diagrams_dir() / default_file

@@ -82,8 +82,8 @@ def _tabletop_view(object_config, profile: str, seed: int):
     """``(scenario, view)``: ``object_config`` on the table of
     ``diagrams/tabletop_perception.yaml``, rendered through its camera (made a
     ``profile`` camera) with the scenario's noise seed ``seed``, and detected."""
-    from handle_drake.apps.demo import diagrams_dir
     from handle_drake.apps.perception.perceive import render_views
+    from handle_drake.base.models import diagrams_dir
     from handle_drake.scenario import CameraConfig, LoadScenario
 
     scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml")

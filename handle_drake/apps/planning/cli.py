@@ -112,9 +112,9 @@ def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=Non
     """
     import numpy as np
 
-    from handle_drake.apps.demo import held_through_lift
     from handle_drake.apps.planning.execution import run_plan
     from handle_drake.grasp.planning import plan_grasp, resting_pose
+    from handle_drake.trial.simulate import held_through_lift
 
     if recentre and reactive is False:
         raise ValueError("--recentre: the re-centring is part of the reactive close; it does "
