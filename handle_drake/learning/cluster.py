@@ -49,17 +49,20 @@ import argparse
 import hashlib
 import logging
 import math
-import multiprocessing
-import os
 import pickle
 import re
 import threading
-from concurrent.futures import CancelledError, Executor, Future, ProcessPoolExecutor
-from concurrent.futures.process import BrokenProcessPool
+from concurrent.futures import CancelledError, Executor, Future
 from contextlib import contextmanager
 from dataclasses import dataclass
 
 from handle_drake.base.blas import pin_blas
+from handle_drake.learning.executors import (
+    InlineExecutor,
+    LocalPool,
+    _check_local_workers,
+    max_local_workers,
+)
 
 __all__ = [
     "WORKER_DEATHS",
@@ -69,6 +72,7 @@ __all__ = [
     "ExecutorSpec",
     "DaskExecutor",
     "LocalPool",
+    "max_local_workers",
     "add_executor_arguments",
     "check_executor_arguments",
     "as_executor",
@@ -247,60 +251,6 @@ class _ShippedOnce:
 
 
 # ------------------------------------------------------------------- pools
-def max_local_workers() -> int:
-    """Most worker processes one machine runs: 4 per CPU core (at least 8).
-
-    Trials are CPU-bound simulations: more processes than that only add
-    memory (each imports Drake, ~250 MB), and ``--workers 100000`` would
-    start processes until the machine runs out of memory.
-    """
-    return max(8, 4 * (os.cpu_count() or 1))
-
-
-def _check_local_workers(workers) -> None:
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
-    if workers > max_local_workers():
-        raise ValueError(f"workers: expected at most {max_local_workers()} worker processes "
-                         f"on this machine (4 per CPU core), got {workers}")
-
-
-class LocalPool(Executor):
-    """A spawn process pool (one BLAS thread per worker) that replaces itself once broken.
-
-    A worker that dies breaks a ``ProcessPoolExecutor`` for good; the runner
-    re-runs the trials it lost (:data:`WORKER_DEATHS`), so the next
-    :meth:`submit` starts a fresh pool.
-    """
-
-    def __init__(self, max_workers: int, initializer=pin_blas, initargs=()):
-        _check_local_workers(max_workers)
-        self.max_workers = max_workers
-        self._initializer, self._initargs = initializer, initargs
-        self._pool = None
-
-    def submit(self, fn, /, *args, **kwargs):
-        if self._pool is None:
-            from handle_drake.base.orphans import init_worker
-
-            # Workers die with this process, even when it is killed with kill -9.
-            self._pool = ProcessPoolExecutor(
-                max_workers=self.max_workers, mp_context=multiprocessing.get_context("spawn"),
-                initializer=init_worker,
-                initargs=(os.getpid(), self._initializer, self._initargs))
-        try:
-            return self._pool.submit(fn, *args, **kwargs)
-        except BrokenProcessPool:  # a worker died: this pool takes no more work
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
-            return self.submit(fn, *args, **kwargs)
-
-    def shutdown(self, wait=True, *, cancel_futures=False):
-        if self._pool is not None:
-            self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
-            self._pool = None
-
-
 class DaskExecutor(Executor):
     """A ``distributed.Client`` as the trial runner's executor.
 
@@ -430,8 +380,6 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     open: close several in the reverse order of opening (nested ``with``
     blocks or a ``contextlib.ExitStack`` do).
     """
-    from handle_drake.learning.executors import InlineExecutor
-
     spec = ExecutorSpec.parse(executor)
     if spec.address is None:  # processes on this machine
         _check_local_workers(workers)

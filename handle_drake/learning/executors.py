@@ -8,7 +8,7 @@ the objective once (the objective may build its simulation diagram on its
 first call and reuse it). ``KeyboardInterrupt`` and ``SystemExit`` are not
 caught; a worker process that dies breaks the pool: :class:`LocalPool`
 replaces itself and the runner re-runs the trials (``WORKER_DEATHS``).
-Executors for more processes and machines (Dask): :mod:`.cluster`.
+The executor chosen by name, and Dask for more machines: :mod:`.cluster`.
 """
 
 from __future__ import annotations
@@ -16,14 +16,16 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import multiprocessing
+import os
 import time
 import traceback
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from typing import Any
 
 from handle_drake.base.blas import pin_blas
-from handle_drake.learning.cluster import LocalPool
 
 
 @dataclass
@@ -101,3 +103,54 @@ def _evaluate_in_worker(x, seed, pass_seed):
 
 def _default_pool(objective, max_workers):
     return LocalPool(max_workers, initializer=_init_worker, initargs=(objective,))
+
+
+# ------------------------------------------------------------------- pools
+def max_local_workers() -> int:
+    """Most worker processes one machine runs: 4 per CPU core (at least 8).
+
+    Trials are CPU-bound simulations: more processes than that only add
+    memory (each imports Drake, ~250 MB), and ``--workers 100000`` would
+    start processes until the machine runs out of memory.
+    """
+    return max(8, 4 * (os.cpu_count() or 1))
+
+
+def _check_local_workers(workers) -> None:
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if workers > max_local_workers():
+        raise ValueError(f"workers: expected at most {max_local_workers()} worker processes "
+                         f"on this machine (4 per CPU core), got {workers}")
+
+
+class LocalPool(Executor):
+    """A spawn process pool (one BLAS thread per worker) that replaces itself once broken.
+
+    A worker that dies breaks a ``ProcessPoolExecutor`` for good; the runner
+    re-runs the trials it lost (:data:`WORKER_DEATHS`), so the next
+    :meth:`submit` starts a fresh pool.
+    """
+
+    def __init__(self, max_workers: int, initializer=pin_blas, initargs=()):
+        _check_local_workers(max_workers)
+        self.max_workers = max_workers
+        self._initializer, self._initargs = initializer, initargs
+        self._pool = None
+
+    def submit(self, fn, /, *args, **kwargs):
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(
+                max_workers=self.max_workers, mp_context=multiprocessing.get_context("spawn"),
+                initializer=self._initializer, initargs=self._initargs)
+        try:
+            return self._pool.submit(fn, *args, **kwargs)
+        except BrokenProcessPool:  # a worker died: this pool takes no more work
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+            return self.submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait=True, *, cancel_futures=False):
+        if self._pool is not None:
+            self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+            self._pool = None
