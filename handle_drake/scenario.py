@@ -61,6 +61,7 @@ from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from handle_drake.base.checks import (
+    ScenarioError,
     check_pose,
     check_ranges,
     check_yaml_text,
@@ -110,10 +111,6 @@ CONTACT_SURFACE_REPRESENTATIONS = ("triangle", "polygon")
 # ignores the PD actuators and coupler constraints the hands need (the joints
 # silently never move).
 CONTACT_APPROXIMATIONS = ("sap", "similar", "lagged")
-
-
-class ScenarioError(ValueError):
-    """A scenario that cannot be built; the message names the field."""
 
 
 @dc.dataclass

@@ -1,7 +1,8 @@
 """Checks of scenario text and values before anything reaches Drake.
 
-Two layers, both raising :class:`~handle_drake.scenario.ScenarioError` with a
-message that names the field, what was expected and what was got (shortened):
+Two layers, both raising :class:`ScenarioError` (re-exported by
+:mod:`handle_drake.scenario`) with a message that names the field, what was
+expected and what was got (shortened):
 
 - :func:`check_yaml_text` walks the YAML *node graph* (PyYAML ``compose``, no
   construction) against the :class:`~handle_drake.scenario.Scenario` dataclass
@@ -37,6 +38,11 @@ import yaml
 __all__ = ["DEPRECATED_KEYS", "LIMITS", "ScenarioDeprecationWarning", "check_input_file",
            "check_yaml_text", "check_ranges", "read_text_file", "short", "short_path",
            "translate_deprecated_keys"]
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be built; the message names the field."""
+
 
 #: (low, high) accepted for each bounded quantity, SI units.
 LIMITS = {
@@ -123,8 +129,6 @@ def read_text_file(filename, what: str, max_bytes: int = 16 << 20) -> str:
 
 
 def _error(path: str, expected: str, got) -> Exception:
-    from handle_drake.scenario import ScenarioError
-
     return ScenarioError(f"{path or 'scenario'}: expected {expected}, got {got}")
 
 
@@ -320,8 +324,6 @@ def _is_transform(kind) -> bool:
 def check_yaml_text(text: str, schema, source: str, what: str = "scenario") -> None:
     """Refuses YAML (a scenario, or ``what`` of dataclass ``schema``) the typed
     reader would misread; see the module docstring."""
-    from handle_drake.scenario import ScenarioError
-
     try:
         documents = list(yaml.compose_all(text, Loader=_LOADER))
     except yaml.YAMLError as error:
@@ -369,8 +371,6 @@ def translate_deprecated_keys(text: str, source: str, what: str = "scenario") ->
     """
     import warnings
 
-    from handle_drake.scenario import ScenarioError
-
     if not any(key in text for key in DEPRECATED_KEYS):
         return text
     try:
@@ -413,8 +413,6 @@ def translate_deprecated_keys(text: str, source: str, what: str = "scenario") ->
 
 
 def _in(path: str, value, key: str, unit: str = "") -> None:
-    from handle_drake.scenario import ScenarioError
-
     low, high = LIMITS[key]
     ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(
         value, bool) and math.isfinite(value) and low <= value <= high
@@ -430,8 +428,6 @@ def check_pose(path: str, transform) -> None:
 
 
 def _check_pose(path: str, transform) -> None:
-    from handle_drake.scenario import ScenarioError
-
     if not transform.IsDeterministic():
         raise ScenarioError(f"{path}: expected a deterministic pose, got a random one")
     rotation = transform.rotation.value
@@ -453,11 +449,9 @@ def _check_pose(path: str, transform) -> None:
 
 def check_ranges(scenario) -> None:
     """Bounds every physical quantity of ``scenario`` (see :data:`LIMITS`)."""
-    from handle_drake.scenario import CanHandDriver, FloatingWrist, ScenarioError
-
     hand = scenario.hand
     _check_pose("hand.mount.X_WB", hand.mount.X_WB)
-    if isinstance(hand.mount, FloatingWrist):
+    if hasattr(hand.mount, "translation_kp"):  # a floating wrist: its PD gains
         for name in ("translation_kp", "translation_kd", "rotation_kp", "rotation_kd"):
             _in(f"hand.mount.{name}", getattr(hand.mount, name), "gain")
     for name, value in hand.initial_position.items():
@@ -489,7 +483,7 @@ def check_ranges(scenario) -> None:
             not 0 <= scenario.random_seed < 2**32:
         raise ScenarioError(f"random_seed: expected an integer in [0, 2**32), got "
                             f"{short(scenario.random_seed)}")
-    if not isinstance(scenario.driver, CanHandDriver):
+    if hasattr(scenario.driver, "max_joint_velocity"):  # the simulated driver
         _in("driver.max_joint_velocity", scenario.driver.max_joint_velocity,
             "joint_velocity", " rad/s")
         _in("driver.control_period", scenario.driver.control_period, "control_period", " s")
