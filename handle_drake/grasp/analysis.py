@@ -16,7 +16,7 @@ import numpy as np
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.grasp.kinematics import GraspKinematics
 from handle_drake.grasp.recordings import GraspRecords
-from handle_drake.grasp.synergies import Coupling, Synergies, fit_synergies
+from handle_drake.grasp.synergies import fit_record_synergies, reconstruction_error_vs_k
 from handle_drake.grasp.taxonomy import GRASP_CLASSES, GraspClass, palm_to_report_mm
 
 __all__ = ["grasp_centres", "rederive_table1", "fit_record_synergies", "table1_markdown"]
@@ -68,29 +68,8 @@ def table1_markdown(derived: dict[GraspClass, dict]) -> str:
     return "\n".join(lines)
 
 
-def fit_record_synergies(records: GraspRecords, k: int | None = None, variance: float = 0.95,
-                         grasp_class=None, coupling_ratio: float | None = None) -> Synergies:
-    """PCA synergies of recorded Shadow postures over the 20 command joints.
-
-    grasp_class: fit only that class's grasps (per-class synergies).
-    coupling_ratio: J1/J2 ratio used when mapping back (default 1.0, C6 hand).
-    """
-    spec = get_hand_spec("shadow")
-    if grasp_class is not None:
-        records = records.of_class(grasp_class)
-    ratio = 1.0 if coupling_ratio is None else float(coupling_ratio)
-    couplings = tuple(Coupling(f, l, ratio) for f, l, _ in spec.couplings)
-    return fit_synergies(
-        records.q, spec.joint_names, spec.joint_lower_limits, spec.joint_upper_limits,
-        synergy_joint_names=spec.actuated_joint_names, couplings=couplings, k=k,
-        variance=variance,
-    )  # fmt: skip
-
-
 def reconstruction_table(records: GraspRecords, k_max: int = 8) -> str:
     """Markdown table of the reconstruction error (rad RMS) against k, global synergies."""
-    from handle_drake.grasp.synergies import reconstruction_error_vs_k
-
     spec = get_hand_spec("shadow")
     res = reconstruction_error_vs_k(records.q, spec.joint_names, spec.actuated_joint_names,
                                     k_max=k_max)

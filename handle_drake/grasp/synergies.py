@@ -28,6 +28,9 @@ import numpy as np
 from sklearn.decomposition import PCA
 from sklearn.model_selection import KFold
 
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.grasp.recordings import GraspRecords, load_grasps
+from handle_drake.grasp.synthetic import DATA_FILE
 from handle_drake.grasp.taxonomy import GraspClass, grasp_info
 
 __all__ = [
@@ -413,6 +416,25 @@ class SizeRegression:
 # ---------------------------------------------------------------- per grasp class
 
 
+def fit_record_synergies(records: GraspRecords, k: int | None = None, variance: float = 0.95,
+                         grasp_class=None, coupling_ratio: float | None = None) -> Synergies:
+    """PCA synergies of recorded Shadow postures over the 20 command joints.
+
+    grasp_class: fit only that class's grasps (per-class synergies).
+    coupling_ratio: J1/J2 ratio used when mapping back (default 1.0, C6 hand).
+    """
+    spec = get_hand_spec("shadow")
+    if grasp_class is not None:
+        records = records.of_class(grasp_class)
+    ratio = 1.0 if coupling_ratio is None else float(coupling_ratio)
+    couplings = tuple(Coupling(f, l, ratio) for f, l, _ in spec.couplings)
+    return fit_synergies(
+        records.q, spec.joint_names, spec.joint_lower_limits, spec.joint_upper_limits,
+        synergy_joint_names=spec.actuated_joint_names, couplings=couplings, k=k,
+        variance=variance,
+    )  # fmt: skip
+
+
 @dataclass
 class ClassSynergies:
     """Global synergies plus, per class, the amplitude-vs-size regression."""
@@ -433,8 +455,6 @@ class ClassSynergies:
     @classmethod
     def fit(cls, records, k: int | None = None, variance: float = 0.95) -> ClassSynergies:
         """Fit from :class:`~handle_drake.grasp.recordings.GraspRecords`."""
-        from handle_drake.grasp.analysis import fit_record_synergies
-
         syn = fit_record_synergies(records, k=k, variance=variance)
         regs = {}
         for gc in GraspClass:
@@ -447,7 +467,4 @@ class ClassSynergies:
 @lru_cache(maxsize=1)
 def default_synergies() -> ClassSynergies:
     """Synergies and size regressions fitted on the shipped grasp data set."""
-    from handle_drake.grasp.recordings import load_grasps
-    from handle_drake.grasp.synthetic import DATA_FILE
-
     return ClassSynergies.fit(load_grasps(DATA_FILE))
