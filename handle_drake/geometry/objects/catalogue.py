@@ -9,6 +9,7 @@ An :class:`ObjectSpec` names the kind and one characteristic length ``size``
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -31,6 +32,7 @@ DEFAULT_SIZE = {
     "mug": 0.08,
     "wine_glass": 0.08,
     "star_prism": 0.08,
+    **{kind: device.default_size for kind, device in DEVICE_OBJECTS.items()},
 }
 
 #: Default density (kg/m^3): wood/plastic for the primitives, ceramic mug, glass.
@@ -42,6 +44,7 @@ DENSITY = {
     "mug": 2000.0,
     "wine_glass": 2500.0,
     "star_prism": 500.0,
+    **{kind: device.density for kind, device in DEVICE_OBJECTS.items()},
 }
 
 #: Every dimension of a kind as a multiple of ``size``. The first entry is
@@ -77,6 +80,7 @@ PROPORTIONS: dict[str, dict[str, float]] = {
         "inner_diameter": 0.45,  # circle through the notches between arms
         "height": 0.5,  # extrusion along z
     },
+    **{kind: dict(device.proportions) for kind, device in DEVICE_OBJECTS.items()},
 }
 
 #: The rotated cuboid is the cuboid turned by this angle (rad) about the object z axis,
@@ -96,28 +100,21 @@ _COLORS = {
     "mug": (0.90, 0.88, 0.82, 1.0),
     "wine_glass": (0.70, 0.85, 0.95, 0.6),
     "star_prism": (0.95, 0.75, 0.10, 1.0),
+    **{kind: device.color for kind, device in DEVICE_OBJECTS.items()},
 }
 
 _TABLE_COLOR = (0.55, 0.40, 0.25, 1.0)
 
-# The instrumented objects (report section 2.4): boxes with their published size and
-# mass; no dimension overrides (their shape is the device's).
-for _kind, _device in DEVICE_OBJECTS.items():
-    DEFAULT_SIZE[_kind] = _device.default_size
-    DENSITY[_kind] = _device.density
-    PROPORTIONS[_kind] = dict(_device.proportions)
-    _COLORS[_kind] = _device.color
-
-
 def _mesh_module(spec):
-    """:mod:`handle_drake.geometry.objects.mesh` when ``spec`` is a mesh object (kind "mesh"), else None.
+    """The module of a mesh object's spec (kind "mesh"), else None.
 
-    The catalogue's functions hand mesh objects (``MeshObjectSpec``) to that module.
+    The catalogue's functions hand mesh objects (``MeshObjectSpec``, defined in
+    :mod:`handle_drake.geometry.objects.mesh`) to the module that defines their type,
+    so the catalogue needs no import of it (a mesh spec exists only once that module is
+    imported).
     """
     if getattr(spec, "kind", None) == "mesh":
-        from handle_drake.geometry.objects import mesh
-
-        return mesh
+        return sys.modules[type(spec).__module__]
     return None
 
 
