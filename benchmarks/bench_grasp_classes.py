@@ -44,6 +44,7 @@ import numpy as np
 
 from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor
+from handle_drake.trial.plans import plan_scenario
 
 pin_blas(force=False)
 
@@ -79,7 +80,7 @@ def trial(args):
                     lift_reactive=0.0, error=str(error)[:120],
                     plan_time=time.perf_counter() - start)
     plan_time = time.perf_counter() - start
-    open_loop = ScenarioRunner(plan.to_scenario(world_object=world_object)).run()
+    open_loop = ScenarioRunner(plan_scenario(plan, world_object=world_object)).run()
     runner = ReactiveGraspRunner(plan, world_object=world_object,
                                  params=plan_params(plan, **overrides))
     reactive = runner.run()

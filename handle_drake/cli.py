@@ -56,7 +56,7 @@ def _add_demo(subparsers) -> None:
 
 
 def _cmd_simulate(args) -> int:
-    from handle_drake.scenario import LoadScenario
+    from handle_drake.scenario import LoadScenario, object_spec
     from handle_drake.trial.harness import DEFAULT_LOG
     from handle_drake.trial.simulate import ScenarioRunner
 
@@ -105,7 +105,7 @@ def _cmd_simulate(args) -> int:
         if runner.station.HasOutputPort("object.pose"):
             X_WO = runner.station.GetOutputPort("object.pose").Eval(
                 runner.station.GetMyContextFromRoot(runner.context))
-        print(describe_instruments(scenario, runner.harness.logs(), X_WO))
+        print(describe_instruments(scenario, object_spec(scenario), runner.harness.logs(), X_WO))
     if midi:
         from handle_drake.apps.figure9.experiments import describe_midi
 

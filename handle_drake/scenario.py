@@ -69,9 +69,16 @@ from handle_drake.base.checks import (
     short,
     translate_deprecated_keys,
 )
+from handle_drake.base.hands import HAND_SPECS
 from handle_drake.devices.accelerometer.config import AccelerometerConfig
+from handle_drake.devices.accelerometer.sensor import check_sensor_pose
+from handle_drake.devices.accelerometer.wiring import instrument_X_OS
 from handle_drake.devices.arm.config import Arm
+from handle_drake.devices.camera.profiles import get_profile
 from handle_drake.devices.can_hand.config import CanHandDriverConfig
+from handle_drake.devices.midi.wiring import validate_midi_controller
+from handle_drake.geometry.objects import KINDS, ObjectSpec
+from handle_drake.geometry.objects.mesh import MeshObjectSpec, MeshObjectWarning
 from handle_drake.scene.config import Hole, SortingBoxConfig
 
 __all__ = [
@@ -98,6 +105,8 @@ __all__ = [
     "default_plant_config",
     "TableConfig",
     "DumpScenario",
+    "object_spec",
+    "mesh_object_spec",
 ]
 
 # Drake's contact models this station builds ("hydroelastic", Drake's strict
@@ -429,7 +438,6 @@ def _check_positive(name: str, value: float) -> None:
 
 def validate_scenario(scenario: Scenario) -> None:
     """Checks values the YAML schema cannot; raises :class:`ScenarioError`."""
-    from handle_drake.base.hands import HAND_SPECS
 
     if scenario.hand.kind not in HAND_SPECS:
         raise ScenarioError(
@@ -459,7 +467,6 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
     elif scenario.object is not None:
-        from handle_drake.geometry.objects import KINDS
 
         if scenario.object.kind not in KINDS:
             raise ScenarioError(
@@ -467,7 +474,6 @@ def validate_scenario(scenario: Scenario) -> None:
                 f"expected one of {list(KINDS) + ['mesh']}"
             )
         _check_positive("object.size", scenario.object.size)
-        from handle_drake.geometry.objects import ObjectSpec
 
         try:
             ObjectSpec(kind=scenario.object.kind, size=scenario.object.size,
@@ -499,7 +505,6 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.metric is not None:
         _validate_metric(scenario)
     if scenario.midi_controller is not None:
-        from handle_drake.devices.midi.wiring import validate_midi_controller
 
         validate_midi_controller(scenario.midi_controller)
     if isinstance(scenario.driver, CanHandDriver):
@@ -551,9 +556,6 @@ def _validate_plant_config(config) -> None:
 
 
 def _validate_accelerometer(scenario: Scenario) -> None:
-    from handle_drake.devices.accelerometer.sensor import check_sensor_pose
-    from handle_drake.devices.accelerometer.wiring import instrument_X_OS
-    from handle_drake.station import object_spec
 
     config = scenario.object.accelerometer
     try:
@@ -567,7 +569,8 @@ def _validate_accelerometer(scenario: Scenario) -> None:
             raise ScenarioError(f"object.accelerometer.X_OS.translation: expected values in "
                                 f"[-1, 1] m (a point on the object), got {short(p.tolist())}")
     try:
-        check_sensor_pose(object_spec(scenario), instrument_X_OS(scenario))
+        spec = object_spec(scenario)
+        check_sensor_pose(spec, instrument_X_OS(scenario, spec))
     except ValueError as error:
         raise ScenarioError(f"object.accelerometer.{error}") from None
 
@@ -583,7 +586,6 @@ def _validate_mesh_object(o: ObjectConfig) -> None:
     if o.size != ObjectConfig.size:
         import warnings
 
-        from handle_drake.geometry.objects.mesh import MeshObjectWarning
 
         warnings.warn(f"object.size: ignored for a mesh (its size comes from its file and "
                       f"scale), got {short(o.size)}", MeshObjectWarning, stacklevel=3)
@@ -595,9 +597,18 @@ def _validate_mesh_object(o: ObjectConfig) -> None:
         raise ScenarioError(f"object.{error}") from None
 
 
+def object_spec(scenario: Scenario):
+    """The :class:`~handle_drake.geometry.objects.ObjectSpec` (or mesh spec) of the
+    scenario's object: the one place a scenario's object becomes geometry."""
+    o = scenario.object
+    if o.kind == "mesh":
+        return mesh_object_spec(o)
+    return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu,
+                      dimensions=o.dimensions or None, density=o.density)
+
+
 def mesh_object_spec(o: ObjectConfig):
     """The :class:`~handle_drake.geometry.objects.mesh.MeshObjectSpec` of a kind-"mesh" object."""
-    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     return MeshObjectSpec(file=o.file, scale=o.scale, mass=o.mass, density=o.density, mu=o.mu)
 
@@ -632,7 +643,6 @@ CAMERA_PARENTS = ("world", "wrist")
 
 
 def _validate_cameras(scenario: Scenario) -> None:
-    from handle_drake.devices.camera.profiles import get_profile
 
     names = set()
     for i, camera in enumerate(scenario.cameras):

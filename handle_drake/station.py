@@ -63,6 +63,16 @@ from handle_drake.base.hands import (
     get_hand_spec,
 )
 from handle_drake.base.port_names import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
+from handle_drake.devices.accelerometer.wiring import (
+    AddSimulatedInstruments,
+    WithHardwareInstruments,
+)
+from handle_drake.devices.camera.sensors import AddCameras
+from handle_drake.devices.can_hand.config import driver_config
+from handle_drake.devices.can_hand.driver import AddCanHandDriver
+from handle_drake.devices.can_hand.layout import hand_layout
+from handle_drake.devices.midi.wiring import AddMidiControllerModel, AddMidiControllerSystems
+from handle_drake.geometry.objects import AddObject, AddTable, resting_height
 from handle_drake.scenario import (
     Arm,
     CanHandDriver,
@@ -70,10 +80,15 @@ from handle_drake.scenario import (
     FloatingWrist,
     Scenario,
     SimHandDriver,
+    object_spec,
     validate_scenario,
 )
 from handle_drake.systems.hand_driver import WRIST_JOINTS, PdHandDriver, WristDriver, rpy_pose6
-from handle_drake.systems.tactile import BodyPoseSelector, FingertipTactile
+from handle_drake.systems.tactile import (
+    BodyPoseSelector,
+    FingertipTactile,
+    HandJointsToPlantPositions,
+)
 
 __all__ = [
     "MakeHandStation",
@@ -108,7 +123,6 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
             )
         station = MakeHardwareStation(scenario, meshcat=meshcat)
         if scenario.object is not None and scenario.object.accelerometer is not None:
-            from handle_drake.devices.accelerometer.wiring import WithHardwareInstruments
 
             station = WithHardwareInstruments(station, scenario)
         return station
@@ -183,9 +197,9 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
         builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
         if scenario.object.accelerometer is not None:
-            from handle_drake.devices.accelerometer.wiring import AddSimulatedInstruments
 
-            AddSimulatedInstruments(builder, plant, scenario, object_body(plant))
+            AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
+                                    object_spec(scenario))
 
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
@@ -193,12 +207,10 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
 
     if scenario.cameras:
-        from handle_drake.devices.camera.sensors import AddCameras
 
         AddCameras(builder, plant, scene_graph, scenario, hand)
 
     if scenario.midi_controller is not None:
-        from handle_drake.devices.midi.wiring import AddMidiControllerSystems
 
         AddMidiControllerSystems(builder, plant, scenario)
 
@@ -229,12 +241,10 @@ def AddPlantModels(plant, scenario: Scenario):
         plant.set_gravity_enabled(hand, False)
 
     if scenario.table is not None:
-        from handle_drake.geometry.objects import AddTable
 
         AddTable(plant, top_height=scenario.table.top_height,
                  size=(scenario.table.size_x, scenario.table.size_y))
     if scenario.object is not None:
-        from handle_drake.geometry.objects import AddObject
 
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.plant_config.contact_model != "point")
@@ -249,22 +259,9 @@ def AddPlantModels(plant, scenario: Scenario):
 
         AddSceneModels(plant, scenario)
     if scenario.midi_controller is not None:
-        from handle_drake.devices.midi.wiring import AddMidiControllerModel
 
         AddMidiControllerModel(plant, scenario)
     return hand
-
-
-def object_spec(scenario: Scenario):
-    from handle_drake.geometry.objects import ObjectSpec
-
-    o = scenario.object
-    if o.kind == "mesh":
-        from handle_drake.scenario import mesh_object_spec
-
-        return mesh_object_spec(o)
-    return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu,
-                      dimensions=o.dimensions or None, density=o.density)
 
 
 def object_initial_pose(scenario: Scenario) -> RigidTransform:
@@ -272,7 +269,6 @@ def object_initial_pose(scenario: Scenario) -> RigidTransform:
     X_WO = scenario.object.X_WO.GetDeterministicValue()
     if scenario.object.on_table:
         top = scenario.table.top_height if scenario.table is not None else 0.0
-        from handle_drake.geometry.objects import resting_height
 
         height = resting_height(object_spec(scenario))
         p = X_WO.translation().copy()
@@ -361,9 +357,6 @@ def MakeHardwareStation(scenario: Scenario, meshcat=None):
     ``hand_driver`` subsystem reports the link on ``connection_state``.
     Only a fixed mount is supported: the CAN hand has no wrist actuator.
     """
-    from handle_drake.devices.can_hand.config import driver_config
-    from handle_drake.devices.can_hand.driver import AddCanHandDriver
-    from handle_drake.devices.can_hand.layout import hand_layout
 
     if not isinstance(scenario.hand.mount, FixedMount):
         raise ValueError(
@@ -405,7 +398,6 @@ def _add_hardware_visualization(builder, driver, scenario, spec, meshcat) -> Non
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
                      scenario.hand.mount.X_WB.GetDeterministicValue())
     plant.Finalize()
-    from handle_drake.systems.tactile import HandJointsToPlantPositions
 
     scatter = builder.AddNamedSystem(
         "visualization_positions", HandJointsToPlantPositions(plant, hand, spec.joint_names))

@@ -22,6 +22,7 @@ from handle_drake.geometry import objects
 from handle_drake.geometry.objects import mesh as mesh_objects
 from handle_drake.geometry.objects import mesh_examples
 from handle_drake.geometry.objects.mesh import MeshObjectSpec, MeshObjectWarning
+from handle_drake.trial.plans import plan_scenario
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -164,12 +165,12 @@ def test_a_grasp_that_holds_the_catalogue_cuboid_holds_the_mesh(files):
     np.testing.assert_allclose(grasp_dims(mesh)[1], grasp_dims(cat)[1], rtol=1e-6)
     assert resting_pose(mesh).IsNearlyEqualTo(resting_pose("cuboid", 0.028), 1e-9)
     plan = plan_grasp("lateral", ("cuboid", 0.028), resting_pose("cuboid", 0.028))
-    assert held_through_lift(ScenarioRunner(plan.to_scenario()).run())  # the catalogue object
+    assert held_through_lift(ScenarioRunner(plan_scenario(plan)).run())  # the catalogue object
     # The planner, given the mesh, plans the same grasp; its scenario names the file.
     mesh_plan = plan_grasp("lateral", mesh, resting_pose(mesh))
     assert mesh_plan.grasp_size == pytest.approx(plan.grasp_size, rel=1e-6)
     assert mesh_plan.X_WB.IsNearlyEqualTo(plan.X_WB, 1e-4)
-    scenario = mesh_plan.to_scenario()
+    scenario = plan_scenario(mesh_plan)
     assert scenario.object == ObjectConfig(kind="mesh", file=mesh.file, mu=mesh.mu,
                                            X_WO=scenario.object.X_WO, on_table=False)
     result = ScenarioRunner(scenario).run()

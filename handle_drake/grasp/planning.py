@@ -39,8 +39,8 @@ table in the IK (every collision shape of the model, ``hand_clearance``):
 before, small-sphere pinches were planned with a middle phalanx 18 mm inside
 the table top.
 
-:meth:`GraspPlan.to_script` / :meth:`GraspPlan.to_scenario` write keyframes
-(reach from the stand-off, close, lift) for a ``!FloatingWrist`` scenario.
+:func:`handle_drake.trial.plans.plan_script` / :func:`~handle_drake.trial.plans.plan_scenario`
+write keyframes (reach from the stand-off, close, lift) for a ``!FloatingWrist`` scenario.
 
 Object conventions. Kinds ``sphere``, ``cylinder`` and ``cuboid`` of the
 catalogue (:mod:`handle_drake.geometry.objects`). The *grasp size* (Table 1's object
@@ -73,13 +73,15 @@ import dataclasses as dc
 from functools import lru_cache
 
 import numpy as np
-from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.geometry.objects import ObjectSpec, dimensions, resting_height, surface_mesh
 from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
+from handle_drake.geometry.objects.mesh import MeshObjectSpec
 from handle_drake.grasp.kinematics import GraspKinematics, contact_layout, move_contacts
 from handle_drake.grasp.synergies import ClassSynergies, default_synergies
+from handle_drake.grasp.synthetic import posture_prior
 from handle_drake.grasp.taxonomy import (
     GraspClass,
     approach_palm,
@@ -143,8 +145,6 @@ class GraspPlanningError(ValueError):
 
 
 def _object_spec(obj):
-    from handle_drake.geometry.objects import ObjectSpec
-    from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
     if isinstance(obj, MeshObjectSpec):
         return obj
@@ -178,7 +178,6 @@ def _on_bounding_box(kind: str) -> bool:
 
 def _extents(spec) -> tuple[float, float, float]:
     """Bounding-box edges (x, y, z) in O (m) of a mesh or an instrumented device."""
-    from handle_drake.geometry.objects import surface_mesh  # a mesh's: the mesh in O
 
     return tuple(float(e) for e in surface_mesh(spec).extents)
 
@@ -190,7 +189,6 @@ def grasp_dims(spec) -> tuple[str, tuple[float, ...]]:
     upright: (opposition, row, height) extents, the fingers closing across the
     narrower horizontal edge (as ``objects.mesh.grasp_extents`` gives a mesh's).
     """
-    from handle_drake.geometry.objects import dimensions
 
     if _on_bounding_box(spec.kind):
         ex, ey, ez = _extents(spec)
@@ -214,7 +212,6 @@ def resting_pose(kind, size: float | None = None, xy=(0.0, 0.0), yaw: float = 0.
     lowest point; an instrumented device lies in its resting pose (``size``
     None: its catalogue size).
     """
-    from handle_drake.geometry.objects import ObjectSpec, dimensions, resting_height
 
     if getattr(kind, "kind", None) == "mesh":
         spec, d = kind, None
@@ -237,16 +234,6 @@ def resting_pose(kind, size: float | None = None, xy=(0.0, 0.0), yaw: float = 0.
     else:
         z = 0.5 * d["height"]
     return RigidTransform(R, [xy[0], xy[1], table_height + z])
-
-
-def _object_config(spec, **fields):
-    """The scenario's ``ObjectConfig`` of a planned object (catalogue or mesh)."""
-    from handle_drake.scenario import ObjectConfig
-
-    if spec.kind == "mesh":
-        return ObjectConfig(kind="mesh", file=spec.file, scale=spec.scale, mass=spec.mass,
-                            density=spec.density, mu=spec.mu, **fields)
-    return ObjectConfig(kind=spec.kind, size=spec.size, mu=spec.mu, **fields)
 
 
 # ---------------------------------------------------------------- the plan
@@ -309,65 +296,6 @@ class GraspPlan:
     def lifted(self) -> RigidTransform:
         return RigidTransform(self.X_WB.rotation(),
                               self.X_WB.translation() + [0.0, 0.0, self.lift_height])
-
-    def to_script(self, reach: float = 0.5, close: float = 0.5, hold: float = 0.3,
-                  lift: float = 0.7):
-        """Keyframes (durations in s): reach from the stand-off, close, hold, lift."""
-        from handle_drake.scenario import Keyframe
-
-        for name, v in (("reach", reach), ("close", close), ("hold", hold), ("lift", lift)):
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"{name} must be a positive duration (s), got {v}")
-        t1 = reach
-        t2 = t1 + 0.1
-        t3 = t2 + close
-        t4 = t3 + hold
-        t5 = t4 + lift
-        return [
-            Keyframe(time=0.0, hand=self.command_dict(self.preshape_command),
-                     wrist=self.wrist(self.X_WB_pregrasp)),
-            Keyframe(time=t1, wrist=self.wrist(self.X_WB)),
-            Keyframe(time=t2),
-            Keyframe(time=t3, hand=self.command_dict(self.close_command)),
-            Keyframe(time=t4),
-            Keyframe(time=t5, wrist=self.wrist(self.lifted())),
-        ]
-
-    def to_scenario(self, settle: float = 0.5, world_object=None):
-        """A complete simulated ``Scenario`` (floating wrist, object, table,
-        script). ``world_object`` (an ``ObjectConfig``) replaces the planned
-        object: the plan then runs on the object that is really there."""
-        from handle_drake.scenario import (
-            FloatingWrist,
-            HandConfig,
-            Scenario,
-            SimHandDriver,
-            TableConfig,
-            default_plant_config,
-        )
-
-        script = self.to_script()
-        spec = self.object_spec
-        return Scenario(
-            hand=HandConfig(
-                kind="shadow", coupling_ratio=self.coupling_ratio,
-                mount=FloatingWrist(X_WB=Transform(self.X_WB_pregrasp)),
-                initial_position=self.command_dict(self.preshape_command),
-            ),
-            object=world_object if world_object is not None else _object_config(
-                spec, X_WO=Transform(self.X_WO), on_table=False),
-            table=TableConfig(top_height=self.table_height),
-            plant_config=default_plant_config(time_step=0.001),
-            driver=SimHandDriver(max_joint_velocity=4.0),
-            simulation_duration=script[-1].time + settle,
-            script=script,
-        )
-
-    def to_scenario_override(self) -> str:
-        """The scenario as YAML text (``LoadScenario(data=...)`` or a file)."""
-        from handle_drake.scenario import DumpScenario
-
-        return DumpScenario(self.to_scenario())
 
     def summary(self) -> str:
         p = self.X_WB.translation()
@@ -604,7 +532,6 @@ def _posture_priors(grasp_class, synergies: ClassSynergies, amplitudes, coupling
     """IK seeds: the synergy pre-shape (if the class has data) and the class prior; for the
     refined (free-centre) attempts also two perturbed class priors. The planner's own
     joint settings of the class (``PLANNER_POSTURES``) apply to all."""
-    from handle_drake.grasp.synthetic import posture_prior
 
     class_prior = posture_prior(grasp_class, coupling_ratio)
     priors = []

@@ -12,6 +12,7 @@ from handle_drake.grasp.taxonomy import approach_palm
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation
 from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
+from handle_drake.trial.plans import plan_scenario, plan_scenario_yaml, plan_script
 from handle_drake.trial.simulate import ScenarioRunner, held_through_lift
 
 SPEC = get_hand_spec("shadow")
@@ -27,7 +28,7 @@ def lateral_plan():
 def _posed_station(plan, command):
     """(station, plant, its context in the station's context) with the hand base at
     the plan's X_WB and the hand at ``command`` (20 actuated angles)."""
-    scenario = plan.to_scenario()
+    scenario = plan_scenario(plan)
     station = MakeHandStation(scenario)
     plant = GetPlant(station)
     station_context = station.CreateDefaultContext()
@@ -81,18 +82,18 @@ def test_planned_contacts_lie_on_the_box_faces_in_the_station(lateral_plan):
 
 
 def test_script_reaches_from_straight_above_then_lifts(lateral_plan):
-    script = lateral_plan.to_script()
+    script = plan_script(lateral_plan)
     pre, grasp, lift = (np.array(k.wrist) for k in (script[0], script[1], script[-1]))
     np.testing.assert_allclose(pre[:2], grasp[:2], atol=1e-12)
     assert pre[2] - grasp[2] == pytest.approx(0.06)
     assert lift[2] - grasp[2] == pytest.approx(0.13)
     # Scenario text round-trips through the loader.
-    scenario = LoadScenario(data=lateral_plan.to_scenario_override())
+    scenario = LoadScenario(data=plan_scenario_yaml(lateral_plan))
     assert scenario.script[-1].wrist == pytest.approx(list(lift))
 
 
 def test_lateral_grasp_on_a_thin_box_holds_through_a_lift(lateral_plan):
-    result = ScenarioRunner(lateral_plan.to_scenario()).run()
+    result = ScenarioRunner(plan_scenario(lateral_plan)).run()
     assert held_through_lift(result), result.object_position[::25, 2]
 
 
@@ -117,7 +118,7 @@ def test_tripod_plan_on_a_sphere_opposes_the_thumb_from_above(tripod_sphere_plan
 
 
 def test_tripod_grasp_on_a_4cm_sphere_holds_through_a_lift(tripod_sphere_plan):
-    result = ScenarioRunner(tripod_sphere_plan.to_scenario()).run()
+    result = ScenarioRunner(plan_scenario(tripod_sphere_plan)).run()
     assert held_through_lift(result), result.object_position[::25, 2]
     # Held by the class's three fingers: thumb, first and middle finger press on
     # it at the end; ring and little fingers stay off.
@@ -253,7 +254,7 @@ def test_classes_that_had_no_plan_on_a_table_now_hold(grasp_class, kind, width):
     ulnar face and the row drops its outer fingers; the grasps hold through the lift."""
     size = width / 0.6
     plan = plan_grasp(grasp_class, (kind, size), resting_pose(kind, size))
-    result = ScenarioRunner(plan.to_scenario()).run()
+    result = ScenarioRunner(plan_scenario(plan)).run()
     assert held_through_lift(result), result.object_lift()
 
 

@@ -44,7 +44,7 @@ def test_a_mug_carries_an_accelerometer_glued_inside_its_wall():
     scenario = LoadScenario(data=HAND_AWAY + "object: {kind: mug, size: 0.08, "
                                              "accelerometer: {noise: false}}")
     spec = object_spec(scenario)
-    X_OS = instrument_X_OS(scenario)
+    X_OS = instrument_X_OS(scenario, object_spec(scenario))
     # The mug's origin is in its cavity: the nearest surface is the inner wall, at the
     # inner radius (diameter / 2 - wall) from the axis, at mid-height.
     d = dimensions(ObjectSpec("mug", 0.08))
@@ -69,7 +69,7 @@ def test_a_mesh_object_accelerometer_is_validated_like_any_other():
     path = diagrams_dir() / "barrett_mesh_bracket_grasp.yaml"
     scenario = LoadScenario(filename=path, data="object: {accelerometer: {}}")
     # The L bracket's bounding-box centre is off its arms: the sensor moves to its surface.
-    X_OS = instrument_X_OS(scenario)
+    X_OS = instrument_X_OS(scenario, object_spec(scenario))
     assert np.linalg.norm(X_OS.translation()) > 0.005
     check_sensor_pose(object_spec(scenario), X_OS, tolerance=1e-4)
     with pytest.raises(ScenarioError, match=r"object\.accelerometer\.X_OS: .* off the mesh"):

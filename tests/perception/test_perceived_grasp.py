@@ -10,6 +10,7 @@ from handle_drake.apps.perception.grasping import perceive_object, planner_input
 from handle_drake.geometry.detect import Detection
 from handle_drake.grasp.planning import plan_grasp, resting_pose
 from handle_drake.scenario import ObjectConfig
+from handle_drake.trial.plans import plan_scenario
 
 
 def _detection(position, extent, yaw, kind):
@@ -45,11 +46,11 @@ def test_a_perceived_cuboid_is_close_enough_to_plan_on():
     # Executed on the truth: the scenario holds the true object, not the estimate.
     truth = ObjectConfig(kind="cuboid", size=0.075, X_WO=Transform(perceived.true_X_WO),
                          on_table=False)
-    scenario = plan.to_scenario(world_object=truth)
+    scenario = plan_scenario(plan, world_object=truth)
     assert scenario.object.size == 0.075
     np.testing.assert_allclose(scenario.object.X_WO.GetDeterministicValue().translation(),
                                perceived.true_X_WO.translation())
-    assert plan.to_scenario().object.size == pytest.approx(perceived.size)
+    assert plan_scenario(plan).object.size == pytest.approx(perceived.size)
 
 
 def test_the_object_planned_on_is_chosen_by_the_request_not_by_the_truth():

@@ -40,7 +40,14 @@ from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.framework import LeafSystem
 
+from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.estimators import angle_difference, true_roll_pitch
+from handle_drake.devices.accelerometer.wiring import instrument_X_OS
+from handle_drake.geometry.objects import ObjectSpec, dimensions
+from handle_drake.grasp.planning import plan_grasp
+from handle_drake.scenario import DumpScenario, Keyframe, object_spec, validate_scenario
+from handle_drake.trial.plans import plan_scenario
+from handle_drake.trial.simulate import ScenarioRunner
 
 __all__ = [
     "Figure8Setup",
@@ -125,10 +132,6 @@ class _Phases:
 
 def figure8_scenario(device="joywarrior", rotations=ROTATIONS_DEG, seed: int = 0):
     """The planned scenario (with the device's accelerometer) and its phases."""
-    from handle_drake.devices.accelerometer.config import AccelerometerConfig
-    from handle_drake.geometry.objects import ObjectSpec, dimensions
-    from handle_drake.grasp.planning import plan_grasp
-    from handle_drake.scenario import Keyframe, validate_scenario
 
     setup = _setup(device)
     rotations = [tuple(float(a) for a in r) for r in rotations]
@@ -139,7 +142,7 @@ def figure8_scenario(device="joywarrior", rotations=ROTATIONS_DEG, seed: int = 0
     box = ObjectSpec("cuboid", width, dimensions={"depth": depth, "height": height})
     X_WP = RigidTransform([0.0, 0.0, height / 2])  # the planner's box on the table
     plan = plan_grasp(setup.grasp_class, box, X_WP)
-    scenario = plan.to_scenario()
+    scenario = plan_scenario(plan)
     spec = ObjectSpec.default(setup.device)
     d = dimensions(spec)
     R_PD = RollPitchYaw(np.radians(setup.R_PD_rpy_deg)).ToRotationMatrix()
@@ -300,15 +303,13 @@ class Figure8Result:
 def _runner_class():
     """A ScenarioRunner (the scenario's script on the trial harness) that also adds the
     experiment's recorder to the diagram it builds once."""
-    from handle_drake.devices.accelerometer.wiring import instrument_X_OS
-    from handle_drake.trial.simulate import ScenarioRunner
 
     class Figure8Runner(ScenarioRunner):
         def add_driver(self, builder, station):
             driver = super().add_driver(builder, station)
             profile = self.scenario.object.accelerometer.profile(self.scenario.object.kind)
-            self.recorder = builder.AddNamedSystem(
-                "recorder", _Recorder(profile.period, instrument_X_OS(self.scenario)))
+            X_OS = instrument_X_OS(self.scenario, object_spec(self.scenario))
+            self.recorder = builder.AddNamedSystem("recorder", _Recorder(profile.period, X_OS))
             for name in ("roll_pitch", "at_rest", "free_fall", "slip", "acceleration"):
                 builder.Connect(station.GetOutputPort(f"object.{name}"),
                                 self.recorder.inputs[name])
@@ -397,7 +398,6 @@ def plot_figure8(results, path) -> Path:
 
 def write_scenarios(directory, seed: int = 0) -> list[Path]:
     """Writes ``instrumented_<device>_<class>.yaml`` for each setup; returns the paths."""
-    from handle_drake.scenario import DumpScenario
 
     out = []
     for key, setup in SETUPS.items():

@@ -22,6 +22,7 @@ import argparse
 from pathlib import Path
 
 from handle_drake.apps.cli_support import add_mesh_arguments
+from handle_drake.trial.plans import plan_scenario_yaml
 
 __all__ = ["DEFAULT_REACTIVE", "register", "run_grasp", "write_class_scenarios"]
 
@@ -156,7 +157,7 @@ def run_grasp(grasp_class: str, kind, size: float | None, meshcat=None, html=Non
     plan.perception = perception
     if save_scenario is not None:
         Path(save_scenario).parent.mkdir(parents=True, exist_ok=True)
-        Path(save_scenario).write_text(plan.to_scenario_override())
+        Path(save_scenario).write_text(plan_scenario_yaml(plan))
     if reactive is None:
         reactive = True if recentre else DEFAULT_REACTIVE
     reactive = bool(reactive)
@@ -285,7 +286,7 @@ def write_class_scenarios(directory: Path) -> list[Path]:
         header = (f"# Planned by handle_drake.grasp.planning (python -m handle_drake.apps.planning.cli "
                   f"--write-scenarios diagrams):\n# {plan.summary()}\n"
                   f"# Run: handle-drake simulate {path.name}\n")
-        path.write_text(header + plan.to_scenario_override())
+        path.write_text(header + plan_scenario_yaml(plan))
         out.append(path)
     return out
 

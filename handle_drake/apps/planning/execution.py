@@ -17,7 +17,7 @@ ReactiveGrasp` controller (report section 3.3) in one diagram:
   at most half the grasp width for the side grips: :func:`plan_params`);
 - the hand lifts the plan's ``lift_height``.
 
-The open-loop alternative is the plan's keyframe script (``plan.to_scenario()``
+The open-loop alternative is the plan's keyframe script (``plan_scenario(plan)``
 run by :class:`~handle_drake.trial.simulate.ScenarioRunner`). Both return a
 :class:`~handle_drake.trial.simulate.RunResult`, so :func:`handle_drake.apps.demo.held_through_lift`
 judges either.
@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.geometry.objects import dimensions
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, GraspPlan
 from handle_drake.grasp.taxonomy import GraspClass
 from handle_drake.station import OBJECT_INSTANCE, GetPlant
@@ -39,6 +40,8 @@ from handle_drake.systems.reactive_grasp import (
     finger_command_groups,
 )
 from handle_drake.trial.harness import DEFAULT_LOG, RunResult, TrialHarness
+from handle_drake.trial.plans import plan_scenario
+from handle_drake.trial.simulate import ScenarioRunner
 
 __all__ = ["ReactiveGraspRunner", "object_estimate", "plan_params", "run_plan"]
 
@@ -75,7 +78,6 @@ def plan_params(plan: GraspPlan, **overrides) -> ReactiveGraspParams:
 def object_estimate(plan: GraspPlan) -> ObjectEstimate | None:
     """The plan's object as the reactive close's re-centring sees it (its planned pose
     and shape), or None for shapes it cannot locate from a touch (meshes, devices)."""
-    from handle_drake.geometry.objects import dimensions
 
     spec = plan.object_spec
     if getattr(spec, "kind", None) not in ("sphere", "cylinder", "cuboid"):
@@ -102,7 +104,7 @@ class ReactiveGraspRunner:
             raise TypeError(f"plan must be a GraspPlan, got {type(plan).__name__}")
         self.plan = plan
         self.meshcat = meshcat
-        self.scenario = plan.to_scenario(world_object=world_object)
+        self.scenario = plan_scenario(plan, world_object=world_object)
         self.scenario.script = []  # the controller drives the station, not keyframes
         self._params = params if params is not None else plan_params(plan)
         self.harness = TrialHarness(self.scenario, self._add_controller, meshcat=meshcat,
@@ -202,6 +204,5 @@ def run_plan(plan: GraspPlan, reactive: bool = True, meshcat=None, html=None,
         return ReactiveGraspRunner(plan, meshcat, params, world_object).run(html=html)
     if params is not None:
         raise ValueError("params apply to the reactive execution only (reactive=True)")
-    from handle_drake.trial.simulate import ScenarioRunner
 
-    return ScenarioRunner(plan.to_scenario(world_object=world_object), meshcat).run(html=html)
+    return ScenarioRunner(plan_scenario(plan, world_object=world_object), meshcat).run(html=html)

@@ -17,12 +17,20 @@ estimators used to sample 0.1 ms after the device, after those updates).
 
 from __future__ import annotations
 
+from handle_drake.devices.accelerometer.estimators import true_roll_pitch
+from handle_drake.devices.accelerometer.evdev_driver import (
+    EvdevAccelerometer,
+    load_events,
+    open_device,
+)
+from handle_drake.devices.accelerometer.profiles import STANDARD_GRAVITY
 from handle_drake.devices.accelerometer.sensor import (
     AddObjectAccelerometer,
     ExportInstrumentPorts,
     default_sensor_pose,
     sensor_pose,
 )
+from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 
 __all__ = ["AddSimulatedInstruments", "WithHardwareInstruments", "instrument_X_OS",
            "instrument_seed", "RECORDING_PREFIX", "INSTRUMENT_LOG", "flag_intervals",
@@ -32,21 +40,19 @@ __all__ = ["AddSimulatedInstruments", "WithHardwareInstruments", "instrument_X_O
 RECORDING_PREFIX = "recording:"
 
 
-def instrument_X_OS(scenario):
-    """The sensor pose ``X_OS`` of the scenario's object accelerometer: ``X_OS`` if
-    given, else an instrumented device's named sensor frame, else
+def instrument_X_OS(scenario, spec):
+    """The sensor pose ``X_OS`` of the scenario's object accelerometer (``spec``: the
+    object's spec, ``scenario.object_spec``): ``X_OS`` if given, else an instrumented
+    device's named sensor frame, else
     :func:`~handle_drake.devices.accelerometer.sensor.default_sensor_pose` (the object
     frame, or the surface point nearest to it when the origin is off the object)."""
-    from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 
     config = scenario.object.accelerometer
     if config.X_OS is not None:
         return config.X_OS.GetDeterministicValue()
     if scenario.object.kind in DEVICE_OBJECTS:
         return sensor_pose(scenario.object.kind, scenario.object.size)
-    from handle_drake.station import object_spec
-
-    return default_sensor_pose(object_spec(scenario))
+    return default_sensor_pose(spec)
 
 
 #: The instrument ports ``handle-drake simulate`` records (every ``harness.LOG_PERIOD``).
@@ -65,20 +71,19 @@ def flag_intervals(times, flag) -> list[tuple[float, float]]:
                                                                    strict=True)]
 
 
-def describe_instruments(scenario, logs, X_WO=None) -> str:
+def describe_instruments(scenario, spec, logs, X_WO=None) -> str:
     """What the object's accelerometer said over a run, for ``handle-drake simulate``:
     the last reading and its roll/pitch (and the plant's true roll/pitch of the
     sensor frame, given the object pose ``X_WO`` at the end), and when free fall and
     slip were flagged. ``logs``: the ``VectorLog`` of each :data:`INSTRUMENT_LOG`
-    port (a flag shorter than the log period may fall between two samples)."""
+    port (a flag shorter than the log period may fall between two samples); ``spec``:
+    the object's spec (``scenario.object_spec``)."""
     import numpy as np
 
-    from handle_drake.devices.accelerometer.estimators import true_roll_pitch
-    from handle_drake.devices.accelerometer.profiles import STANDARD_GRAVITY
 
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)
-    X_OS = instrument_X_OS(scenario)
+    X_OS = instrument_X_OS(scenario, spec)
     times = logs["object.acceleration"].sample_times()
     lines = [f"object accelerometer ({profile.name}, {profile.rate_hz:g} Hz, +-{profile.range_g:g}"
              f" g, {profile.bits} bit) at X_OS = "
@@ -122,13 +127,13 @@ def _command_port(builder):
     return mux.get_output_port()
 
 
-def AddSimulatedInstruments(builder, plant, scenario, body) -> dict:
-    """Adds the scenario's object accelerometer on ``body``, with its estimators, to the
+def AddSimulatedInstruments(builder, plant, scenario, body, spec) -> dict:
+    """Adds the scenario's object accelerometer on ``body`` (object spec ``spec``), with its estimators, to the
     station's builder (after the hand driver); exports the instrument ports."""
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)
     seed = instrument_seed(scenario)
-    device = AddObjectAccelerometer(builder, plant, body, instrument_X_OS(scenario), profile,
+    device = AddObjectAccelerometer(builder, plant, body, instrument_X_OS(scenario, spec), profile,
                                     seed=seed,
                                     estimators=config.estimator_params(scenario.object.kind),
                                     command=_command_port(builder),
@@ -149,11 +154,6 @@ def WithHardwareInstruments(station, scenario, source=None):
     ``recording:FILE``)."""
     from pydrake.systems.framework import DiagramBuilder
 
-    from handle_drake.devices.accelerometer.evdev_driver import (
-        EvdevAccelerometer,
-        load_events,
-        open_device,
-    )
 
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)

@@ -19,8 +19,10 @@ import math
 import numpy as np
 from pydrake.math import RigidTransform
 
+from handle_drake.base.checks import ScenarioError, check_pose
 from handle_drake.devices.midi.device import AddMidiController
 from handle_drake.devices.midi.mapping import LoadMidiMapping
+from handle_drake.devices.midi.systems import MidiControllerEncoder
 
 __all__ = [
     "INSTANCE",
@@ -35,9 +37,6 @@ INSTANCE = "midi_controller"
 
 def validate_midi_controller(config) -> None:
     """Checks a ``MidiControllerConfig``; raises ``ScenarioError`` naming the field."""
-    from handle_drake.base.checks import check_pose
-    from handle_drake.scenario import ScenarioError
-
     check_pose("midi_controller.X_WC", config.X_WC)  # names a NaN angle or axis
     try:
         X = config.X_WC.GetDeterministicValue()
@@ -76,7 +75,6 @@ def AddMidiControllerModel(plant, scenario):
 
 def AddMidiControllerSystems(builder, plant, scenario):
     """Adds the encoder and exports the controller's ports; returns the encoder."""
-    from handle_drake.devices.midi.systems import MidiControllerEncoder
 
     config = scenario.midi_controller
     mapping = LoadMidiMapping(config.mapping or None)
