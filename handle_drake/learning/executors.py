@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from handle_drake.base.blas import pin_blas
+from handle_drake.base.orphans import init_worker
 
 
 @dataclass
@@ -140,9 +141,11 @@ class LocalPool(Executor):
 
     def submit(self, fn, /, *args, **kwargs):
         if self._pool is None:
+            # Workers die with this process, even when it is killed with kill -9.
             self._pool = ProcessPoolExecutor(
                 max_workers=self.max_workers, mp_context=multiprocessing.get_context("spawn"),
-                initializer=self._initializer, initargs=self._initargs)
+                initializer=init_worker,
+                initargs=(os.getpid(), self._initializer, self._initargs))
         try:
             return self._pool.submit(fn, *args, **kwargs)
         except BrokenProcessPool:  # a worker died: this pool takes no more work
