@@ -15,8 +15,9 @@ import numpy as np
 
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.grasp.kinematics import GraspKinematics
-from handle_drake.grasp.recordings import GraspRecords
+from handle_drake.grasp.recordings import GraspRecords, load_grasps
 from handle_drake.grasp.synergies import fit_record_synergies, reconstruction_error_vs_k
+from handle_drake.grasp.synthetic import DATA_FILE
 from handle_drake.grasp.taxonomy import GRASP_CLASSES, GraspClass, palm_to_report_mm
 
 __all__ = ["grasp_centres", "rederive_table1", "fit_record_synergies", "table1_markdown"]
@@ -85,8 +86,6 @@ def main(argv=None) -> int:
     """``python -m handle_drake.grasp.analysis [FILE]``: tables for a recording file."""
     import argparse
 
-    from handle_drake.grasp.recordings import load_grasps
-    from handle_drake.grasp.synthetic import DATA_FILE
 
     parser = argparse.ArgumentParser(description="Synergy and grasp-centre tables of recordings")
     parser.add_argument("file", nargs="?", default=str(DATA_FILE))

@@ -54,7 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from handle_drake.learning.cluster import WORKER_DEATHS, LocalPool
+from handle_drake.learning.cluster import WORKER_DEATHS, LocalPool, as_executor, executor_workers
 from handle_drake.learning.executors import (
     InlineExecutor,
     _accepts_seed,
@@ -139,7 +139,6 @@ class TrialRunner:
         info = log.get_run(run_id)
         if info is None:
             raise ValueError(f"run {run_id!r} does not exist in {log.path}")
-        from handle_drake.learning.cluster import as_executor, executor_workers
 
         executor = as_executor(executor)
         # BO and swarms (an optimiser with ``synchronous = True``) run in batches.

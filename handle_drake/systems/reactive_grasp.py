@@ -94,6 +94,8 @@ from pydrake.math import RollPitchYaw
 from pydrake.multibody.plant import ContactResults
 from pydrake.systems.framework import LeafSystem
 
+from handle_drake.base.hands import get_hand_spec
+
 __all__ = ["ObjectEstimate", "ReactiveGrasp", "ReactiveGraspMode", "ReactiveGraspParams",
            "ReactiveGraspProgress", "finger_command_groups"]
 
@@ -258,7 +260,6 @@ def finger_command_groups(hand_kind: str) -> list[list[int]]:
     """Indices into the hand command of the joints each tactile channel's finger closes:
     ``HandSpec.finger_joints`` (shadow: the J4..J2, LFJ5, THJ5..THJ1 of each finger;
     barrett: each finger's proximal flexion, the shared spread stays at the pre-shape)."""
-    from handle_drake.base.hands import get_hand_spec
 
     return get_hand_spec(hand_kind).finger_command_indices()
 

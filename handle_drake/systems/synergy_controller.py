@@ -56,6 +56,7 @@ from handle_drake.base.hands import (
     actuated_to_joint_positions,
     get_hand_spec,
 )
+from handle_drake.grasp.kinematics import GraspKinematics
 from handle_drake.grasp.synergies import Synergies
 
 __all__ = ["ControlMode", "SynergyController"]
@@ -95,7 +96,6 @@ class _Scratch:
 def _fingertip_kinematics(coupling_ratio: float):
     """The Shadow model's fingertip kinematics (an immutable, finalized plant), built once
     per process and ratio, on the first Cartesian use."""
-    from handle_drake.grasp.kinematics import GraspKinematics
 
     return GraspKinematics(coupling_ratio)
 

@@ -45,6 +45,7 @@ from pydrake.common.schema import Rotation, Transform
 
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 from handle_drake.geometry.objects import DEFAULT_SIZE, KINDS, ObjectSpec, total_height
+from handle_drake.geometry.objects.mesh import MeshObjectSpec
 from handle_drake.geometry.quality import NO_CONTACT
 from handle_drake.learning import TrialResult
 from handle_drake.scenario import (
@@ -186,7 +187,6 @@ class GraspTrialConfig:
     def object_spec(self):
         """The trial's object: an ``ObjectSpec``, or a ``MeshObjectSpec`` for "mesh"."""
         if self.object == "mesh":
-            from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
             return MeshObjectSpec(self.object_file, scale=self.object_scale, mu=self.mu)
         return ObjectSpec(self.object, self.object_size, mu=self.mu)

@@ -42,8 +42,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import VectorLogSink
 
+from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
+from handle_drake.base.viewing import frame_hand_and_object
+from handle_drake.geometry.quality import ObjectContacts, score_contacts
 from handle_drake.scenario import Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
+from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
 
 __all__ = ["TrialHarness", "RunResult", "HoldScore", "LOG_PERIOD", "DEFAULT_LOG",
            "advance_recording"]
@@ -101,7 +105,6 @@ def advance_recording(simulator, t_final, station, meshcat=None,
     if meshcat is not None and station.HasOutputPort("body_poses"):
         # Open the view framed on the hand and object (simulation only: the
         # hardware station has no plant to read poses from).
-        from handle_drake.base.viewing import frame_hand_and_object
 
         plant = GetPlant(station)
         plant_context = plant.GetMyContextFromRoot(simulator.get_context())
@@ -174,7 +177,6 @@ class TrialHarness:
                     break
         self._object_contacts = None
         if object_contacts:
-            from handle_drake.geometry.quality import ObjectContacts
 
             hand = self.plant.GetModelInstanceByName("hand")
             bodies = [self.plant.get_body(i) for i in self.plant.GetBodyIndices(hand)]
@@ -236,14 +238,12 @@ class TrialHarness:
 
     def place_wrist(self, pose6) -> None:
         """Sets the floating wrist's joints to ``[x y z roll pitch yaw]`` in the context."""
-        from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
 
         self._set_joint_positions("wrist", WRIST_JOINTS, pose_to_wrist_joints(pose6))
 
     def place_hand(self, command) -> None:
         """Sets the hand's joints to the posture of an actuated ``command`` (nu) in the context,
         and the simulated driver's initial command to it (so the hand holds there)."""
-        from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 
         spec = get_hand_spec(self.scenario.hand.kind)
         self._set_joint_positions("hand", spec.joint_names,
@@ -269,7 +269,6 @@ class TrialHarness:
 
     def grasp_quality(self, params, surface, surface_radius: float):
         """``score_contacts`` of :meth:`contacts`: ``(BW value, force closure, contacts)``."""
-        from handle_drake.geometry.quality import score_contacts
 
         return score_contacts(self.contacts(), params, surface, surface_radius)
 

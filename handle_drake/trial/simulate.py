@@ -17,8 +17,11 @@ from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.geometry.quality import ContactParams
+from handle_drake.geometry.quality.surface import ObjectSurface
 from handle_drake.scenario import DumpScenario, FloatingWrist, Scenario
-from handle_drake.station import hand_initial_command
+from handle_drake.station import GetPlant, hand_initial_command, object_body, object_spec
+from handle_drake.systems.guarded_grasp import GuardedGrasp
 from handle_drake.systems.hand_driver import rpy_pose6
 from handle_drake.trial.harness import (
     DEFAULT_LOG,
@@ -238,9 +241,6 @@ class ScenarioRunner:
         return first
 
     def _metric_model(self, scenario: Scenario):
-        from handle_drake.geometry.quality import ContactParams
-        from handle_drake.geometry.quality.surface import ObjectSurface
-        from handle_drake.station import object_spec
 
         m = scenario.metric
         spec = object_spec(scenario)
@@ -257,9 +257,6 @@ class ScenarioRunner:
         """
         if self.hardware or self.scenario.object is None:
             raise ValueError("grasp_quality needs a simulated scenario with an object")
-        from handle_drake.geometry.quality import ContactParams
-        from handle_drake.geometry.quality.surface import ObjectSurface
-        from handle_drake.station import object_spec
 
         spec = object_spec(self.scenario)
         params = ContactParams(model="soft_finger", mu=spec.mu, gamma=gamma,
@@ -298,8 +295,6 @@ def _structure(scenario: Scenario) -> str:
 
 def _add_guarded_grasp(builder, station, scenario: Scenario):
     """The scenario's :class:`~handle_drake.systems.guarded_grasp.GuardedGrasp`, connected."""
-    from handle_drake.station import GetPlant, object_body
-    from handle_drake.systems.guarded_grasp import GuardedGrasp
 
     c = scenario.controller
     names = get_hand_spec(scenario.hand.kind).actuated_joint_names

@@ -25,9 +25,25 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
+from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.devices.midi.codec import fader_value
 from handle_drake.devices.midi.device import ControllerGeometry, control_layout
 from handle_drake.devices.midi.mapping import LoadMidiMapping
+from handle_drake.devices.midi.systems import MidiReceiver
+from handle_drake.geometry.objects import ObjectSpec
+from handle_drake.grasp.kinematics import GraspKinematics
+from handle_drake.grasp.planning import plan_grasp
+from handle_drake.grasp.taxonomy import GraspClass
+from handle_drake.scenario import (
+    FloatingWrist,
+    HandConfig,
+    Keyframe,
+    MidiControllerConfig,
+    Scenario,
+    SimHandDriver,
+    TableConfig,
+    default_plant_config,
+)
 from handle_drake.trial.harness import DEFAULT_LOG
 from handle_drake.trial.simulate import ScenarioRunner
 
@@ -53,15 +69,6 @@ def _control(name: str):
 
 def _base_scenario(X_WB: RigidTransform, initial: dict, script, duration: float,
                    X_WC=(0.0, 0.0)):
-    from handle_drake.scenario import (
-        FloatingWrist,
-        HandConfig,
-        MidiControllerConfig,
-        Scenario,
-        SimHandDriver,
-        TableConfig,
-        default_plant_config,
-    )
 
     return Scenario(
         hand=HandConfig(kind="shadow", coupling_ratio=1.0,
@@ -92,10 +99,6 @@ def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
     clockwise seen from above, the jog joint's positive direction) over
     ``turn_time`` s, then back by ``back_deg``, then lets go and lifts.
     """
-    from handle_drake.geometry.objects import ObjectSpec
-    from handle_drake.grasp.planning import plan_grasp
-    from handle_drake.grasp.taxonomy import GraspClass
-    from handle_drake.scenario import Keyframe
 
     for name, value in (("turn_deg", turn_deg), ("back_deg", back_deg)):
         if not (isinstance(value, int | float) and math.isfinite(value)
@@ -207,7 +210,6 @@ def fader_push_scenario(fader: str = "fader5", push: float = 0.040):
     curled, lowers the first finger's tip behind the cap of ``fader`` and
     moves the wrist ``push`` m along the slot (``+y_C``), then lifts.
     """
-    from handle_drake.scenario import Keyframe
 
     g = _geometry()
     names = [c.name for c in control_layout(g) if c.kind == "fader"]
@@ -241,8 +243,6 @@ def fader_push_scenario(fader: str = "fader5", push: float = 0.040):
 
 def _fingertip_offset(command: dict) -> np.ndarray:
     """p_BT: the first finger's tip frame in the hand base frame for a command."""
-    from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
-    from handle_drake.grasp.kinematics import GraspKinematics
 
     spec = get_hand_spec("shadow")
     kin = GraspKinematics(1.0)
@@ -312,7 +312,6 @@ class MidiScenarioRunner(ScenarioRunner):
         super().__init__(scenario, meshcat, log=tuple(dict.fromkeys(self.LOG + tuple(log))))
 
     def add_driver(self, builder, station):
-        from handle_drake.devices.midi.systems import MidiReceiver
 
         super().add_driver(builder, station)
         receiver = builder.AddNamedSystem("midi_receiver", MidiReceiver(

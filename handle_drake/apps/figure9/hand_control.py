@@ -12,6 +12,9 @@ import dataclasses as dc
 
 from handle_drake.devices.midi.mapping import LoadMidiMapping, MidiMapping
 from handle_drake.devices.midi.systems import MidiHandControl
+from handle_drake.grasp.planning import default_synergies
+from handle_drake.station import hand_initial_command
+from handle_drake.systems.hand_driver import rpy_pose6
 from handle_drake.trial.harness import TrialHarness
 
 __all__ = ["MidiHandControlDiagram", "BuildMidiHandControl"]
@@ -41,7 +44,6 @@ def BuildMidiHandControl(scenario, port=None, feedback_port=None,
             grasp data; Shadow hand only), a ``Synergies`` or None (joint mode only).
         control_options: passed on to :class:`MidiHandControl`.
     """
-    from handle_drake.station import hand_initial_command
 
     mapping = LoadMidiMapping() if mapping is None else mapping
     if isinstance(synergies, str):
@@ -50,7 +52,6 @@ def BuildMidiHandControl(scenario, port=None, feedback_port=None,
                              f"{synergies!r}")
         synergies = None
         if scenario.hand.kind == "shadow":
-            from handle_drake.grasp.planning import default_synergies
 
             synergies = default_synergies().synergies
     control_options.setdefault("initial_command", hand_initial_command(scenario))
@@ -65,7 +66,6 @@ def BuildMidiHandControl(scenario, port=None, feedback_port=None,
         if station.HasInputPort("wrist.pose"):
             from pydrake.systems.primitives import ConstantVectorSource
 
-            from handle_drake.systems.hand_driver import rpy_pose6
 
             pose = rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue())
             builder.Connect(builder.AddSystem(ConstantVectorSource(pose)).get_output_port(),

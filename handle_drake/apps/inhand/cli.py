@@ -24,7 +24,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from handle_drake.apps.cli_support import non_negative_int, positive_int
+from handle_drake.apps.cli_support import non_negative_int, positive_int, run_command
 from handle_drake.apps.cli_support import positive_float as _positive_float
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
@@ -125,8 +125,6 @@ def _cmd_inhand(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from handle_drake.cli import run_command
-
     parser = argparse.ArgumentParser(prog="handle-drake")
     register(parser.add_subparsers(dest="command", required=True, metavar="COMMAND"))
     return run_command(parser, argv)

@@ -180,7 +180,6 @@ def load_glove(path) -> GloveRecording:
     not JSON, another format, missing or extra sensors, NaN values, time not
     increasing, a calibration of the wrong size.
     """
-    from handle_drake.base.checks import check_input_file
 
     path = check_input_file(path, "glove recording")
     try:

@@ -51,7 +51,9 @@ from handle_drake.apps.inhand.evaluation import (
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import ABDUCTION_RULES, glove_to_shadow
+from handle_drake.base.checks import LIMITS
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.devices.accelerometer.profiles import get_profile
 from handle_drake.learning.executors import TrialResult
 from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
 from handle_drake.station import object_body
@@ -127,7 +129,6 @@ class InHandTask:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
-        from handle_drake.base.checks import LIMITS
 
         for name, (low, high) in (("target_deg", (0.0, 360.0)), ("time_step", LIMITS["time_step"]),
                                   ("mu", LIMITS["mu"])):
@@ -144,7 +145,6 @@ class InHandTask:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
         if self.accelerometer:
-            from handle_drake.devices.accelerometer.profiles import get_profile
 
             try:
                 get_profile(self.accelerometer)

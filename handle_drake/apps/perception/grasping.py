@@ -28,7 +28,14 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RotationMatrix
 
+from handle_drake.apps.perception.perceive import detection_error, render_views
+from handle_drake.base.models import diagrams_dir
 from handle_drake.geometry.detect import Detection
+from handle_drake.geometry.objects import KINDS
+from handle_drake.grasp.planning import resting_pose
+from handle_drake.scenario import CameraConfig, LoadScenario, ObjectConfig
+from handle_drake.station import object_initial_pose
+from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
 __all__ = ["PerceivedObject", "perceive_object", "planner_input", "PLANNABLE", "PerceivedTrial",
            "aimed_trial_scenario", "perceived_grasp_trial", "select_detection"]
@@ -64,7 +71,6 @@ def planner_input(kind: str, detection: Detection, table_height: float = 0.0
                   ) -> tuple[float, RigidTransform]:
     """``(size, X_WO)`` for ``plan_grasp`` from a detection of a ``kind``
     object (see the module doc)."""
-    from handle_drake.grasp.planning import resting_pose
 
     if kind not in PLANNABLE:
         raise ValueError(f"kind: the planner grasps {list(PLANNABLE)}, got {kind!r}")
@@ -82,9 +88,6 @@ def _tabletop_view(object_config, profile: str, seed: int):
     """``(scenario, view)``: ``object_config`` on the table of
     ``diagrams/tabletop_perception.yaml``, rendered through its camera (made a
     ``profile`` camera) with the scenario's noise seed ``seed``, and detected."""
-    from handle_drake.apps.perception.perceive import render_views
-    from handle_drake.base.models import diagrams_dir
-    from handle_drake.scenario import CameraConfig, LoadScenario
 
     scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml")
     scenario.object = object_config
@@ -192,7 +195,6 @@ def aimed_trial_scenario(trial, offset_O, yaw_error: float = 0.0):
     ``yaw_error`` (rad) about the vertical through its aim point: the grasp
     a perception error of that size produces, the object staying where the
     trial has it."""
-    from handle_drake.trial.grasp_trial import GraspTrial
 
     if not isinstance(trial, GraspTrial) or trial.config.space != "offset":
         raise ValueError("trial: expected a GraspTrial in the 'offset' space")
@@ -224,11 +226,6 @@ def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str 
     error is carried into its frame; from the truth the same trial scores
     ``trial.evaluate([0, 0])``. ``trial``: a
     ``GraspTrial`` of that kind to reuse (its diagram is built once)."""
-    from handle_drake.apps.perception.perceive import detection_error
-    from handle_drake.geometry.objects import KINDS
-    from handle_drake.scenario import ObjectConfig
-    from handle_drake.station import object_initial_pose
-    from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {list(KINDS)}, got {kind!r}")

@@ -64,8 +64,6 @@ class AccelerometerConfig:
 
     def profile(self, kind: str | None = None):
         """The device profile with this config's overrides (validated)."""
-        from handle_drake.devices.accelerometer.profiles import get_profile
-        from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 
         name = self.device or (DEVICE_OBJECTS[kind].device if kind in DEVICE_OBJECTS
                                else "joywarrior24f14")

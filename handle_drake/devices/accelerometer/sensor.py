@@ -46,6 +46,9 @@ from handle_drake.devices.accelerometer.profiles import (
     sample_noise,
     to_counts,
 )
+from handle_drake.geometry.objects import sample_surface
+from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
+from handle_drake.geometry.objects.queries import _halfspaces, _inside
 
 __all__ = [
     "DeviceAccelerometer",
@@ -238,7 +241,6 @@ def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:
 def sensor_pose(kind: str, size: float) -> RigidTransform:
     """``X_OS``: the named sensor frame of an instrumented catalogue object, or the
     object frame itself for any other kind."""
-    from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 
     device = DEVICE_OBJECTS.get(kind)
     if device is None:
@@ -250,7 +252,6 @@ def sensor_pose(kind: str, size: float) -> RigidTransform:
 def _in_object(spec, p, tolerance: float) -> bool:
     """True when the point ``p`` (O) is in one of the object's convex pieces (a mesh's
     convex decomposition) or within ``tolerance`` m of it."""
-    from handle_drake.geometry.objects.queries import _halfspaces, _inside
 
     p = np.asarray(p, dtype=float).reshape(1, 3)
     return any(_inside(desc, p, tolerance)[0] for desc in _halfspaces(spec))
@@ -271,7 +272,6 @@ def _default_sensor_position(spec) -> tuple[float, float, float]:
     station and its recorders all ask (the surface sampling takes tens of ms)."""
     if _in_object(spec, np.zeros(3), 0.0):
         return (0.0, 0.0, 0.0)
-    from handle_drake.geometry.objects import sample_surface
 
     points, _ = sample_surface(spec, 4096, rng=0)
     return tuple(float(v) for v in points[np.argmin(np.linalg.norm(points, axis=1))])

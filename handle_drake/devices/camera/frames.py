@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.base.checks import check_input_file, read_text_file
+
 __all__ = ["DepthFrame", "points_from_depth", "save_frame", "load_frame", "FORMAT"]
 
 FORMAT = "handle_drake-depth-frame"

@@ -33,6 +33,7 @@ from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, PixelType, RgbdSensor
 
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.camera.profiles import CameraProfile, apply_depth_model, get_profile
 
 __all__ = ["AddCameras", "camera_info", "look_at", "DepthModel", "RENDERER"]
@@ -107,7 +108,6 @@ def AddCameras(builder, plant, scene_graph, scenario, hand_instance=None) -> Non
             if camera.target:
                 X_PC = look_at(X_PC.translation(), camera.target)
         else:
-            from handle_drake.base.hands import get_hand_spec
 
             spec = get_hand_spec(scenario.hand.kind)
             base = plant.GetBodyByName(spec.base_body, hand_instance)

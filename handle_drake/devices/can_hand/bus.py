@@ -33,6 +33,7 @@ import struct
 import can
 
 from handle_drake.devices.can_hand.config import BusConfig
+from handle_drake.devices.can_hand.messages import MalformedFrameError
 
 __all__ = ["open_bus", "receive", "check_frame", "ErrorLog", "socketcan_available",
            "socketcan_fd_capable", "use_realtime_priority"]
@@ -186,7 +187,6 @@ def check_frame(message) -> tuple[int, bytes, bool]:
     an ``int`` of the frame's id range, the flags are ``bool`` and the data
     are at most 64 bytes.
     """
-    from handle_drake.devices.can_hand.messages import MalformedFrameError
 
     arbitration_id = getattr(message, "arbitration_id", None)
     flags = [getattr(message, name, None) for name in

@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 from handle_drake.devices.can_hand import protocol as P
+from handle_drake.devices.can_hand.bus import use_realtime_priority
 from handle_drake.devices.can_hand.layout import HandLayout
 
 __all__ = ["DISCONNECTED", "CONNECTED", "STREAMING", "CanHandClient"]
@@ -214,9 +215,6 @@ class CanHandClient:
 
     # -- the I/O thread --------------------------------------------------------------
     def _loop(self) -> None:
-        from handle_drake.devices.can_hand.bus import (
-            use_realtime_priority,  # python-can on first use
-        )
 
         use_realtime_priority(self.realtime_priority)
         while not self._stop.is_set():

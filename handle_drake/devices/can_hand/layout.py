@@ -14,6 +14,8 @@ import dataclasses as dc
 
 import numpy as np
 
+from handle_drake.base.hands import HandSpec, actuated_position_limits, get_hand_spec
+
 __all__ = ["HAND_KIND_CODES", "HandLayout", "hand_layout"]
 
 # The STATUS frame's KIND nibble (declared in hand.dbc).
@@ -122,7 +124,6 @@ def hand_layout(kind_or_spec, coupling_ratio: float | None = None) -> HandLayout
     ratio * xFJ2``: 1.0 for the C6 hand, 1.1 for the C5 hand). Limits are
     read from the hand's model file through :mod:`handle_drake.base.hands`.
     """
-    from handle_drake.base.hands import HandSpec, actuated_position_limits, get_hand_spec
 
     if isinstance(kind_or_spec, str):
         spec = get_hand_spec(kind_or_spec)

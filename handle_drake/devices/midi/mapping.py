@@ -15,6 +15,8 @@ from pathlib import Path
 
 from pydrake.common.yaml import yaml_load_typed
 
+from handle_drake.base.checks import check_yaml_text, read_text_file
+
 __all__ = [
     "CONTROL_KINDS",
     "DEFAULT_MAPPING_FILE",
@@ -150,7 +152,6 @@ def LoadMidiMapping(filename: str | Path | None = None, data: str | None = None)
         FileNotFoundError: no such file.
         ValueError: malformed YAML, an unknown field, or an invalid value.
     """
-    from handle_drake.base.checks import check_yaml_text, read_text_file
 
     path = DEFAULT_MAPPING_FILE if filename is None else Path(filename)
     mapping = MidiMapping()

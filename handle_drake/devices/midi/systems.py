@@ -44,6 +44,7 @@ import numpy as np
 from pydrake.common.value import Value
 from pydrake.systems.framework import LeafSystem
 
+from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 from handle_drake.devices.midi.codec import (
     REJECT_REASONS,
     ControlCounts,
@@ -326,7 +327,6 @@ class MidiHandControl(LeafSystem, _MidiInput):
                  radians_per_tick: float = np.pi / 48, mode_button: str = "mode",
                  coupling_ratio: float | None = None, max_messages_per_update: int = 256):
         LeafSystem.__init__(self)
-        from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 
         spec = get_hand_spec(hand)
         self._spec = spec

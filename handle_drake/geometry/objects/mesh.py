@@ -81,6 +81,15 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
+from handle_drake.base.checks import check_input_file
+from handle_drake.base.testing import reduced
+from handle_drake.geometry.objects import MassProperties, Piece
+from handle_drake.geometry.objects import surface_mesh as catalogue_surface
+from handle_drake.geometry.objects.catalogue import BODY_NAME
+from handle_drake.geometry.objects.plant import _object_proximity
+from handle_drake.geometry.objects.queries import RayHits, _rays
+from handle_drake.geometry.quality.surface import MeshSurface
+
 __all__ = [
     "MESH_KIND",
     "CACHE_ENV",
@@ -180,7 +189,6 @@ class MeshObjectSpec:
     def __post_init__(self):
         if not isinstance(self.file, str | os.PathLike):
             raise TypeError(f"file: expected a path, got {type(self.file).__name__}")
-        from handle_drake.base.checks import check_input_file
 
         if not str(self.file):
             raise ValueError("file: expected a mesh file path, got an empty string")
@@ -452,7 +460,6 @@ def convex_decomposition(vertices, faces, threshold: float = 0.05, max_pieces: i
                          f"{faces.shape}")
     import coacd
 
-    from handle_drake.base.testing import reduced
 
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     # CoACD's manifold remeshing (its "preprocess") is for open or non-manifold
@@ -570,7 +577,6 @@ def _isolated_child(send, parent_pid, function, args):
 @lru_cache(maxsize=64)
 def pieces(spec: MeshObjectSpec) -> tuple:
     """The convex pieces (``objects.Piece``, shape "convex", vertices in O) of the mesh."""
-    from handle_drake.geometry.objects import Piece
 
     g = _geometry(spec)
     parts = [p for v, f in g.solids
@@ -602,7 +608,6 @@ def spatial_inertia(spec: MeshObjectSpec) -> SpatialInertia:
 
 def mass_properties(spec: MeshObjectSpec):
     """``objects.MassProperties`` of the mesh (see the module doc for fallbacks)."""
-    from handle_drake.geometry.objects import MassProperties
 
     g = _geometry(spec)
     density = _density(spec)
@@ -686,7 +691,6 @@ def sample_surface(spec: MeshObjectSpec, n: int, rng=None) -> tuple[np.ndarray, 
 
 @lru_cache(maxsize=64)
 def _surface(spec: MeshObjectSpec):
-    from handle_drake.geometry.quality.surface import MeshSurface
 
     return MeshSurface(_geometry(spec).mesh)
 
@@ -726,7 +730,6 @@ def ray_cast(spec: MeshObjectSpec, p_OA, d_O):
     the true shape the error is the mesh's facet error. Raises ValueError for
     an origin inside a closed mesh.
     """
-    from handle_drake.geometry.objects.queries import RayHits, _rays
 
     o, d = _rays(p_OA, d_O)
     if _geometry(spec).watertight:
@@ -770,7 +773,6 @@ def write_mesh(spec, path) -> Path:
     wine glass, star prism) keep the faces their pieces share, so read back
     they are not one closed surface (the parts fallback of the mass properties).
     """
-    from handle_drake.geometry.objects import surface_mesh as catalogue_surface
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -798,8 +800,6 @@ def AddMeshObject(plant, spec: MeshObjectSpec, name: str = "object", hydroelasti
     ``mu``, compliant hydroelastic when ``hydroelastic``; under point contact
     also :func:`contact_feet`. Visual: the real mesh. Returns the model instance.
     """
-    from handle_drake.geometry.objects.catalogue import BODY_NAME
-    from handle_drake.geometry.objects.plant import _object_proximity
 
     if not isinstance(spec, MeshObjectSpec):
         raise TypeError(f"spec: expected a MeshObjectSpec, got {type(spec).__name__}")

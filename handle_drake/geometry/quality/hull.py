@@ -40,6 +40,8 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import ConvexHull, QhullError
 
+from handle_drake.geometry.quality.contact import real_array
+
 __all__ = [
     "min_norm_point",
     "largest_ball_radius",
@@ -58,7 +60,6 @@ EPA_STATS = {"calls": 0, "fallbacks": 0}
 
 
 def _check_wrenches(W) -> np.ndarray:
-    from handle_drake.geometry.quality.contact import real_array
 
     W = real_array("wrenches", W)
     if W.ndim != 2 or W.shape[1] != DIM:

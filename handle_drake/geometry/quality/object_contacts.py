@@ -19,6 +19,8 @@ from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.framework import LeafSystem
 
 from .contact import GraspContacts
+from .metrics import grasp_quality
+from .surface import contact_surface
 
 __all__ = ["FingertipContacts", "ObjectContacts", "NO_CONTACT", "score_contacts"]
 
@@ -247,9 +249,6 @@ def score_contacts(contacts: FingertipContacts, params, surface=None,
     ``detail`` maps body name -> ``{"p_O", "n_O", "f_O"}`` lists (JSON-ready).
     Nothing touching scores :data:`NO_CONTACT`.
     """
-    from .metrics import grasp_quality
-    from .surface import contact_surface
-
     idx = np.flatnonzero(contacts.in_contact)
     if len(idx) == 0:
         return NO_CONTACT, False, {}

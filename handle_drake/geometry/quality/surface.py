@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from handle_drake.geometry import objects
+
 __all__ = [
     "SphereSurface",
     "BoxSurface",
@@ -237,7 +239,6 @@ class ObjectSurface:
     """
 
     def __init__(self, spec):
-        from handle_drake.geometry import objects  # local: objects is another module's area
 
         if not isinstance(spec, objects.ObjectSpec) and getattr(spec, "kind", None) != "mesh":
             raise TypeError(f"spec: expected an ObjectSpec or a MeshObjectSpec, got "
