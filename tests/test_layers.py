@@ -1,0 +1,164 @@
+"""The gate of the package's layers (docs/ARCHITECTURE.md, "Layers").
+
+Every module of ``handle_drake`` is parsed (not imported) and each import of another
+``handle_drake`` module is checked:
+
+- it runs downwards: to a lower layer, or inside its own unit (one layer package; one
+  device of ``devices/``; one application of ``apps/``); never sideways to a peer of the
+  same rank, never upwards;
+- it sits at the top of the module, not inside a function, except in the command-line
+  modules (``cli.py``, ``__main__.py``, ``apps/perception/perceive.py``), which import
+  an area's code only when its sub-command runs.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "handle_drake"
+
+# (module prefix, rank). Longest prefix wins; equal ranks are peers that may not import
+# each other.
+LAYERS: tuple[tuple[str, float], ...] = (
+    ("handle_drake.base", 0),
+    ("handle_drake.geometry", 1),
+    ("handle_drake.learning", 1),
+    ("handle_drake.grasp", 2),
+    ("handle_drake.devices", 3),
+    ("handle_drake.systems", 3),
+    ("handle_drake.scenario", 4),
+    ("handle_drake.station", 5),
+    ("handle_drake.trial", 6),
+    ("handle_drake.apps.cli_support", 6.5),  # what every command shares
+    # the camera's estimate of a tabletop object, which the planning command's --perceived
+    # plans on: below the other applications
+    ("handle_drake.apps.perception", 6.8),
+    ("handle_drake.apps", 7),
+    ("handle_drake.cli", 8),
+)
+# Layers whose sub-packages are units of their own (one device, one application).
+SPLIT = ("handle_drake.devices", "handle_drake.apps")
+CLI_MODULES = ("handle_drake.cli", "handle_drake.apps.perception.perceive")
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def layer_of(module: str) -> tuple[str, float] | None:
+    best = None
+    for prefix, rank in LAYERS:
+        if module == prefix or module.startswith(prefix + "."):
+            if best is None or len(prefix) > len(best[0]):
+                best = (prefix, rank)
+    return best
+
+
+def unit_of(module: str) -> str | None:
+    layer = layer_of(module)
+    if layer is None:
+        return None
+    prefix = layer[0]
+    if prefix in SPLIT and module != prefix:
+        return ".".join(module.split(".")[: prefix.count(".") + 2])
+    return prefix
+
+
+def is_cli(module: str) -> bool:
+    last = module.rsplit(".", 1)[-1]
+    return last in ("cli", "__main__") or module in CLI_MODULES
+
+
+def package_imports(path: Path):
+    """(imported module, line, inside a function) of every handle_drake import."""
+    module = module_name(path)
+    is_pkg = path.name == "__init__.py"
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+
+    def visit(node, in_function):
+        for child in ast.iter_child_nodes(node):
+            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                      ast.Lambda))
+            if isinstance(child, ast.Import):
+                found.extend((a.name, child.lineno, in_function) for a in child.names
+                             if a.name.split(".")[0] == "handle_drake")
+            elif isinstance(child, ast.ImportFrom):
+                base = child.module or ""
+                if child.level:
+                    parts = module.split(".")[: None if is_pkg else -1]
+                    parts = parts[: len(parts) - (child.level - 1)]
+                    base = ".".join(parts + ([base] if base else []))
+                if base.split(".")[0] == "handle_drake":
+                    for a in child.names:
+                        sub = f"{base}.{a.name}"
+                        target = sub if _is_module(sub) else base
+                        found.append((target, child.lineno, in_function))
+            visit(child, inner)
+
+    visit(tree, False)
+    return found
+
+
+def _is_module(name: str) -> bool:
+    rel = Path(*name.split(".")[1:])
+    return (PACKAGE / rel).with_suffix(".py").is_file() or (PACKAGE / rel / "__init__.py").is_file()
+
+
+def violations() -> tuple[list[str], list[str]]:
+    upward, in_function = [], []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        module = module_name(path)
+        layer, unit = layer_of(module), unit_of(module)
+        for target, line, in_func in package_imports(path):
+            where = f"{path.relative_to(PACKAGE.parent)}:{line}: {module} -> {target}"
+            if in_func and not is_cli(module):
+                in_function.append(where)
+            target_layer = layer_of(target)
+            if layer is None or target_layer is None:
+                if target != "handle_drake" and module != "handle_drake":
+                    upward.append(where + " (module in no layer)")
+                continue
+            if unit_of(target) == unit:
+                continue
+            if target_layer[1] >= layer[1]:
+                upward.append(where)
+    return upward, in_function
+
+
+def test_every_module_is_in_a_layer():
+    loose = [module_name(p) for p in PACKAGE.rglob("*.py")
+             if layer_of(module_name(p)) is None and module_name(p) != "handle_drake"]
+    assert loose == []
+
+
+def test_imports_run_downwards_only():
+    upward, _ = violations()
+    assert upward == [], f"{len(upward)} imports that are not downwards:\n" + "\n".join(upward)
+
+
+def test_no_imports_inside_functions_outside_the_commands():
+    _, in_function = violations()
+    assert in_function == [], (f"{len(in_function)} imports inside functions:\n"
+                               + "\n".join(in_function))
+
+
+@pytest.mark.parametrize(("importer", "imported", "allowed"), [
+    ("handle_drake.station", "handle_drake.scenario", True),
+    ("handle_drake.scenario", "handle_drake.station", False),
+    ("handle_drake.geometry.objects.plant", "handle_drake.learning.gp", False),  # peers
+    ("handle_drake.devices.midi.codec", "handle_drake.devices.midi.mapping", True),
+    ("handle_drake.devices.midi.codec", "handle_drake.devices.can_hand.config", False),
+    ("handle_drake.apps.inhand.task", "handle_drake.apps.cli_support", True),
+    ("handle_drake.apps.inhand.task", "handle_drake.apps.figure9.cli", False),
+])
+def test_the_rule_itself(importer, imported, allowed):
+    """The rule the gate applies, on known cases (so that the gate cannot pass vacuously)."""
+    same_unit = unit_of(importer) == unit_of(imported)
+    assert (same_unit or layer_of(imported)[1] < layer_of(importer)[1]) == allowed
