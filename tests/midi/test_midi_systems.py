@@ -111,6 +111,26 @@ def test_known_wheel_rotation_gives_known_ticks_in_the_diagram(turns):
     assert abs(values["jog"] - turns * n) < 1.0
 
 
+def test_the_encoder_keeps_its_levels_in_the_context_not_in_the_system():
+    """A scan changes only the context's state: the system (shared by every context of the
+    diagram) is the same after a simulation, and a fresh context starts from the rest."""
+    simulator, plant, receiver = controller_diagram()
+    diagram = simulator.get_system()
+    encoder = next(s for s in diagram.GetSystems() if isinstance(s, MidiControllerEncoder))
+    before = list(encoder._encoder.levels)
+    context = simulator.get_mutable_context()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    jog = plant.GetJointByName("jog")
+    for k, fraction in enumerate(np.linspace(0, 1, 20)):
+        jog.set_angle(plant_context, 2 * math.pi * fraction)
+        jog.set_angular_rate(plant_context, 0.0)
+        simulator.AdvanceTo(0.002 * (k + 1))
+    assert receiver.control_values(receiver.GetMyContextFromRoot(context))["jog"] != 0
+    assert list(encoder._encoder.levels) == before
+    fresh = encoder.GetMyContextFromRoot(diagram.CreateDefaultContext())
+    assert list(fresh.get_discrete_state(0).value()) == before
+
+
 def test_fader_position_gives_its_midi_value():
     simulator, plant, receiver = controller_diagram()
     context = simulator.get_mutable_context()

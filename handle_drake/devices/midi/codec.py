@@ -208,8 +208,15 @@ class ControlEncoder:
     def messages(self, positions) -> list:
         """The messages for a change from the last positions to ``positions``
         (non-finite positions keep their control's last level)."""
+        levels, out = self.encode(self.levels, positions)
+        self.levels = [int(v) for v in levels]
+        return out
+
+    def encode(self, previous, positions) -> tuple[np.ndarray, list]:
+        """Pure: the levels at ``positions`` and the messages for the change from the
+        levels ``previous`` (non-finite positions keep their control's level)."""
         positions = np.asarray(positions, dtype=float)
-        previous = np.asarray(self.levels, dtype=np.int64)
+        previous = np.asarray(previous, dtype=np.int64)
         finite = np.isfinite(positions)
         levels = np.where(finite, self._levels(np.where(finite, positions, 0.0), previous),
                           previous)
@@ -226,8 +233,7 @@ class ControlEncoder:
                     change -= chunk
             else:
                 out.append(control_message(control, int(levels[i]), encoding))
-        self.levels = [int(v) for v in levels]
-        return out
+        return levels, out
 
 
 class MidiDecoder:

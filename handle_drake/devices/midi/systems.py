@@ -148,12 +148,11 @@ class MidiControllerEncoder(LeafSystem):
 
     def _scan(self, context, state):
         positions = self._plant_state.Eval(context)[self._q_index]
-        self._encoder.levels = [int(v) for v in context.get_discrete_state(self._levels).value()]
-        messages = self._encoder.messages(positions)
+        previous = context.get_discrete_state(self._levels).value().astype(np.int64)
+        levels, messages = self._encoder.encode(previous, positions)  # pure: no system member
         if not messages:
             return
-        state.get_mutable_discrete_state(self._levels).SetFromVector(
-            np.array(self._encoder.levels, dtype=float))
+        state.get_mutable_discrete_state(self._levels).SetFromVector(levels.astype(float))
         previous = context.get_abstract_state(int(self._batch)).get_value()
         state.get_mutable_abstract_state(int(self._batch)).set_value(
             MidiBatch(previous.seq + 1, tuple(messages)))
