@@ -212,7 +212,22 @@ def load_grasps(
     body = [(no, ln) for no, ln in body if ln.strip()]
     if not body:
         raise ValueError(f"{path}: no header line after the magic line")
-    header_no, header_line = body[0]
+    header, col = _read_header(path, *body[0])
+    rows = [_read_row(f"{path}:{line_no}", line, header, col, unit)
+            for line_no, line in body[1:]]
+    if not rows:
+        raise ValueError(f"{path}: the file holds a header but no grasps")
+    stamps, who_all, classes, shapes, dims_all, q_rows = (list(c) for c in zip(*rows,
+                                                                                 strict=True))
+    q_all = np.array(q_rows)
+    if joint_limits is not None:
+        _check_limits(q_all, joint_limits, limit_tolerance,
+                      [f"{path}:{line_no}" for line_no, _ in body[1:]])
+    return GraspRecords(q_all, classes, shapes, dims_all, who_all, stamps)
+
+
+def _read_header(path: Path, header_no: int, header_line: str) -> tuple[list[str], dict]:
+    """The header's column names and each name's index; a bad header is an error."""
     header = next(csv.reader([header_line]))
     header = [h.strip() for h in header]
     expected = set(_META_COLUMNS) | set(SHADOW_JOINT_NAMES)
@@ -225,66 +240,64 @@ def load_grasps(
             f"{unknown}, duplicated columns {duplicate}; expected {len(expected)} columns: "
             f"{', '.join(_META_COLUMNS)} and the 24 Shadow joint names"
         )
-    col = {name: header.index(name) for name in header}
-    joint_cols = [col[n] for n in SHADOW_JOINT_NAMES]
-    q_rows, classes, shapes, dims_all, who_all, stamps = [], [], [], [], [], []
-    for line_no, line in body[1:]:
-        where = f"{path}:{line_no}"
-        row = next(csv.reader([line]))
-        if len(row) != len(header):
-            raise ValueError(f"{where}: expected {len(header)} fields, got {len(row)}")
+    return header, {name: header.index(name) for name in header}
+
+
+def _read_row(where: str, line: str, header: list[str], col: dict, unit: str):
+    """One grasp line: (timestamp, experimenter, class, shape, dims, q in rad)."""
+    row = next(csv.reader([line]))
+    if len(row) != len(header):
+        raise ValueError(f"{where}: expected {len(header)} fields, got {len(row)}")
+    try:
+        stamp = datetime.fromisoformat(row[col["timestamp"]].strip())
+    except ValueError as err:
+        raise ValueError(f"{where}: timestamp is not ISO 8601: {err}") from None
+    who = row[col["experimenter"]].strip()
+    _check_experimenter(who, where)
+    try:
+        cls = grasp_class(row[col["grasp_class"]])
+    except ValueError as err:
+        raise ValueError(f"{where}: grasp_class: {err}") from None
+    shape = row[col["object_shape"]].strip().lower()
+    try:
+        dims = tuple(float(v) for v in row[col["object_dims_m"]].split())
+    except ValueError:
+        raise ValueError(
+            f"{where}: object_dims_m must be space-separated numbers, "
+            f"got {row[col['object_dims_m']]!r}"
+        ) from None
+    _check_object(shape, dims, where)
+    q = np.empty(len(SHADOW_JOINT_NAMES))
+    for j, name in enumerate(SHADOW_JOINT_NAMES):
+        c = col[name]
         try:
-            stamps.append(datetime.fromisoformat(row[col["timestamp"]].strip()))
-        except ValueError as err:
-            raise ValueError(f"{where}: timestamp is not ISO 8601: {err}") from None
-        who = row[col["experimenter"]].strip()
-        _check_experimenter(who, where)
-        who_all.append(who)
-        try:
-            classes.append(grasp_class(row[col["grasp_class"]]))
-        except ValueError as err:
-            raise ValueError(f"{where}: grasp_class: {err}") from None
-        shape = row[col["object_shape"]].strip().lower()
-        try:
-            dims = tuple(float(v) for v in row[col["object_dims_m"]].split())
+            q[j] = float(row[c])
         except ValueError:
-            raise ValueError(
-                f"{where}: object_dims_m must be space-separated numbers, "
-                f"got {row[col['object_dims_m']]!r}"
-            ) from None
-        _check_object(shape, dims, where)
-        shapes.append(shape)
-        dims_all.append(dims)
-        q = np.empty(len(SHADOW_JOINT_NAMES))
-        for j, (name, c) in enumerate(zip(SHADOW_JOINT_NAMES, joint_cols, strict=True)):
-            try:
-                q[j] = float(row[c])
-            except ValueError:
-                raise ValueError(f"{where}: {name} is not a number: {row[c]!r}") from None
-            if not np.isfinite(q[j]):
-                raise ValueError(f"{where}: {name} must be finite, got {row[c]!r}")
-        if unit == "deg":
-            q = np.deg2rad(q)
-        q_rows.append(q)
-    if not q_rows:
-        raise ValueError(f"{path}: the file holds a header but no grasps")
-    q_all = np.array(q_rows)
-    if joint_limits is not None:
-        lower, upper = (np.asarray(v, dtype=float) for v in joint_limits)
-        if lower.shape != (24,) or upper.shape != (24,):
-            raise ValueError(
-                f"joint_limits: expected two arrays of shape (24,), got "
-                f"{lower.shape}, {upper.shape}"
-            )
-        bad = (q_all < lower - limit_tolerance) | (q_all > upper + limit_tolerance)
-        if np.any(bad):
-            r, j = np.argwhere(bad)[0]
-            raise ValueError(
-                f"{path}:{body[1 + r][0]}: {SHADOW_JOINT_NAMES[j]} = {q_all[r, j]:.4f} rad is "
-                f"outside its limits [{lower[j]:.4f}, {upper[j]:.4f}] (tolerance "
-                f"{limit_tolerance} rad)"
-            )
-    return GraspRecords(q_all, classes, shapes, dims_all, who_all, stamps)
+            raise ValueError(f"{where}: {name} is not a number: {row[c]!r}") from None
+        if not np.isfinite(q[j]):
+            raise ValueError(f"{where}: {name} must be finite, got {row[c]!r}")
+    if unit == "deg":
+        q = np.deg2rad(q)
+    return stamp, who, cls, shape, dims, q
+
+
+def _check_limits(q_all: np.ndarray, joint_limits, limit_tolerance: float,
+                  where: list[str]) -> None:
+    """Every angle within the limits (+- the tolerance); ``where[r]``: row r's file:line."""
+    lower, upper = (np.asarray(v, dtype=float) for v in joint_limits)
+    if lower.shape != (24,) or upper.shape != (24,):
+        raise ValueError(
+            f"joint_limits: expected two arrays of shape (24,), got "
+            f"{lower.shape}, {upper.shape}"
+        )
+    bad = (q_all < lower - limit_tolerance) | (q_all > upper + limit_tolerance)
+    if np.any(bad):
+        r, j = np.argwhere(bad)[0]
+        raise ValueError(
+            f"{where[r]}: {SHADOW_JOINT_NAMES[j]} = {q_all[r, j]:.4f} rad is "
+            f"outside its limits [{lower[j]:.4f}, {upper[j]:.4f}] (tolerance "
+            f"{limit_tolerance} rad)"
+        )
 
 
 def save_grasps(path: str | Path, records: GraspRecords) -> Path:
