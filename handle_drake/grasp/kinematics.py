@@ -185,6 +185,31 @@ def _object_geometry(shape: str, dims):
     return RigidTransform(), Box(h, d, w)
 
 
+@dataclass(frozen=True)
+class _GraspProblem:
+    """The checked arguments of one :meth:`GraspKinematics.solve_grasp`."""
+
+    shape: str
+    dims: tuple
+    r: float
+    q_prior: np.ndarray
+    layout: list
+    jitters: list
+    tolerance: float
+    max_pad_angle: float
+    max_pad_tilt: float | None
+    min_distance: float | None
+    check_collisions: bool
+    table_clearance: float
+    contact_height: float
+    hand_clearance: float | None
+    approach: np.ndarray | None
+    max_approach_angle: float
+    centre_prior_weight: float
+    p_PO0: np.ndarray
+    fix_p_PO: np.ndarray | None
+
+
 @dataclass
 class GraspSolution:
     """A solved grasp: all joints (rad), the object pose in the palm frame, success."""
@@ -435,12 +460,55 @@ class GraspKinematics:
           touching a small ball away from that direction met it with its edge
           (a 25 mm ball: a pad 6 mm in it and no collision-free IK). None: off.
         """
+        g = self._grasp_problem(
+            name, shape, dims, q_prior, rng, target_jitter, tolerance, max_pad_angle,
+            p_PO_guess, fix_p_PO, centre_prior_weight, min_distance, approach_P,
+            max_approach_angle, table_clearance, hand_clearance, contact_height, row_fingers,
+            max_pad_tilt)
+        return self._solve(name, g, X_PO_guess)
+
+    def _solve(self, name, g: _GraspProblem, X_PO_guess) -> GraspSolution:
+        """Two-stage IK of a checked grasp problem from the prior posture."""
+        plant = self.plant
+        # Initial guess: the prior posture, the object at its expected centre.
+        q0 = plant.GetPositions(self.context).copy()
+        q0[self.q_index] = np.clip(g.q_prior, self.lower, self.upper)
+        self._set(q0[self.q_index])
+        X_WP = self.palm.CalcPoseInWorld(self.context)
+        if X_PO_guess is not None:
+            X_PO0 = X_PO_guess
+        else:
+            X_PO0 = RigidTransform(g.fix_p_PO if g.fix_p_PO is not None else g.p_PO0)
+        plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ X_PO0)
+        q0 = plant.GetPositions(self.context).copy()
+        # Stage 1 without collision constraints (smooth, fast); stage 2 adds
+        # them, starting from stage 1 (the distance constraint is hard to
+        # satisfy from a guess where the object overlaps the hand).
+        options = SolverOptions()
+        # Fail fast: a grasp that needs more iterations is almost always infeasible.
+        options.SetOption(SnoptSolver.id(), "Major iterations limit", 400)
+        prog, qv = self._build_ik(g, False)
+        result = Solve(prog, q0, options)
+        if g.check_collisions and result.is_success():
+            q1 = result.GetSolution(qv)
+            prog, qv = self._build_ik(g, True)
+            result = Solve(prog, q1, options)
+        q_sol = result.GetSolution(qv)
+        plant.SetPositions(self.context, q_sol)
+        q = q_sol[self.q_index]
+        X_PO = plant.CalcRelativeTransform(self.context, self.palm, self.object_frame)
+        err = self.surface_error(q, name, g.shape, g.dims, X_PO, g.layout)
+        return GraspSolution(q, X_PO, bool(result.is_success()), err, g.layout)
+
+    def _grasp_problem(self, name, shape, dims, q_prior, rng, target_jitter, tolerance,
+                       max_pad_angle, p_PO_guess, fix_p_PO, centre_prior_weight, min_distance,
+                       approach_P, max_approach_angle, table_clearance, hand_clearance,
+                       contact_height, row_fingers, max_pad_tilt) -> _GraspProblem:
+        """:meth:`solve_grasp`'s arguments checked, with the contact layout and jitters."""
         info = grasp_info(name)
         dims = _check_dims(shape, dims)
         q_prior = self._check_q(q_prior)
         rng = rng or np.random.default_rng(0)
-        r = 0.5 * dims[0]
-        plant = self.plant
         layout = contact_layout(info.grasp_class, shape, dims,
                                 on_table=self.support is not None, row_fingers=row_fingers)
         jitters = [target_jitter * rng.normal(size=3) if target_jitter > 0 else np.zeros(3)
@@ -467,113 +535,101 @@ class GraspKinematics:
                 f"this GraspKinematics holds a {self.shape} {self.dims}, asked for a "
                 f"{shape} {dims}; build one per object to check collisions"
             )
+        return _GraspProblem(
+            shape=shape, dims=dims, r=0.5 * dims[0], q_prior=q_prior, layout=layout,
+            jitters=jitters, tolerance=tolerance, max_pad_angle=max_pad_angle,
+            max_pad_tilt=max_pad_tilt, min_distance=min_distance,
+            check_collisions=check_collisions, table_clearance=table_clearance,
+            contact_height=contact_height, hand_clearance=hand_clearance, approach=approach,
+            max_approach_angle=max_approach_angle, centre_prior_weight=centre_prior_weight,
+            p_PO0=p_PO0, fix_p_PO=fix_p_PO)
 
-        big = 10.0
-
-        def build(with_collisions: bool):
-            ik = InverseKinematics(plant, self.context, with_joint_limits=True)
-            prog = ik.get_mutable_prog()
-            qv = ik.q()
-            for i in self._wrist_indices():
-                prog.AddBoundingBoxConstraint(0.0, 0.0, qv[i])
-            for follower, leader, _ in self.spec.couplings:
-                i = self.q_index[self.spec.joint_names.index(follower)]
-                j = self.q_index[self.spec.joint_names.index(leader)]
-                prog.AddLinearEqualityConstraint(
-                    np.array([[1.0, -self.coupling_ratio]]), np.zeros(1), [qv[i], qv[j]]
-                )
-            fingers = [k for k in range(len(self.q_index)) if k not in self._wrist]
-            prog.AddQuadraticErrorCost(
-                np.eye(len(fingers)), q_prior[fingers], qv[self.q_index[fingers]]
+    def _build_ik(self, g: _GraspProblem, with_collisions: bool):
+        """The grasp's InverseKinematics program (``with_collisions``: stage 2)."""
+        ik = InverseKinematics(self.plant, self.context, with_joint_limits=True)
+        prog = ik.get_mutable_prog()
+        qv = ik.q()
+        for i in self._wrist_indices():
+            prog.AddBoundingBoxConstraint(0.0, 0.0, qv[i])
+        for follower, leader, _ in self.spec.couplings:
+            i = self.q_index[self.spec.joint_names.index(follower)]
+            j = self.q_index[self.spec.joint_names.index(leader)]
+            prog.AddLinearEqualityConstraint(
+                np.array([[1.0, -self.coupling_ratio]]), np.zeros(1), [qv[i], qv[j]]
             )
-            for t, jitter in zip(layout, jitters, strict=True):
-                p_B, n_B = CONTACT_POINTS[(t.finger, t.part)]
-                normal = np.asarray(t.normal, dtype=float)
-                self._add_surface_constraint(ik, t, p_B, normal, shape, dims, r, tolerance, jitter)
-                if max_pad_tilt is not None and shape in ("sphere", "cylinder"):
-                    # The centre of curvature the pad sees, one radius out along its normal.
-                    p_BC = p_B + r * np.asarray(n_B, dtype=float)
-                    slack = r * np.sin(float(max_pad_tilt))
-                    if shape == "sphere":
-                        ik.AddPointToPointDistanceConstraint(
-                            self.distal[t.finger], p_BC, self.object_frame, np.zeros(3), 0.0,
-                            slack)
-                    else:
-                        ik.AddPointToLineDistanceConstraint(
-                            self.distal[t.finger], p_BC, self.object_frame, np.zeros(3),
-                            np.array([0.0, 1.0, 0.0]), 0.0, slack)
-                ik.AddAngleBetweenVectorsConstraint(
-                    self.distal[t.finger], n_B, self.object_frame, -normal, 0.0, max_pad_angle
-                )
-            if with_collisions:
-                ik.AddMinimumDistanceLowerBoundConstraint(min_distance, 0.01)
-            if self.support is not None:
-                # Fingertips (tip frame and the end of the distal capsule) and
-                # the finger contacts at least table_clearance above the table.
-                floor = -self.support[1] + table_clearance
-                for frame in self.tip_frames:
-                    for p_B in (np.zeros(3), np.array([0.0, 0.0, 0.006])):
-                        ik.AddPositionConstraint(frame, p_B, self.up_frame,
-                                                 [-big, -big, floor], [big, big, big])
-                for t in layout:
-                    p_B, _ = CONTACT_POINTS[(t.finger, t.part)]
-                    ik.AddPositionConstraint(self.distal[t.finger], p_B, self.up_frame,
-                                             [-big, -big, floor + contact_height],
-                                             [big, big, big])
-                if hand_clearance is not None:
-                    hand_floor = -self.support[1] + float(hand_clearance)
-                    for frame, points, radius in self.clearance_points:
-                        for p_B in points:
-                            ik.AddPositionConstraint(frame, p_B, self.up_frame,
-                                                     [-big, -big, hand_floor + radius],
-                                                     [big, big, big])
-                # The forearm too: both ends of its axis a radius above the table
-                # (exact for a level forearm, a radius to spare for an upright one).
-                for p_B in self.forearm_axis_B:
-                    ik.AddPositionConstraint(self.forearm, p_B, self.up_frame,
-                                             [-big, -big, floor + self.forearm_radius],
-                                             [big, big, big])
-            if approach is not None:
-                ik.AddAngleBetweenVectorsConstraint(
-                    self.palm, approach, self.object_frame, -self.support[0], 0.0,
-                    float(max_approach_angle))
-            if centre_prior_weight > 0:
-                ik.AddPositionCost(self.palm, p_PO0, self.object_frame, np.zeros(3),
-                                   centre_prior_weight * np.eye(3))
-            if fix_p_PO is not None:
-                ik.AddPositionConstraint(self.object_frame, np.zeros(3), self.palm,
-                                         fix_p_PO - 1e-4, fix_p_PO + 1e-4)
-            return prog, qv
+        fingers = [k for k in range(len(self.q_index)) if k not in self._wrist]
+        prog.AddQuadraticErrorCost(
+            np.eye(len(fingers)), g.q_prior[fingers], qv[self.q_index[fingers]]
+        )
+        self._add_contacts(ik, g)
+        if with_collisions:
+            ik.AddMinimumDistanceLowerBoundConstraint(g.min_distance, 0.01)
+        if self.support is not None:
+            self._add_table_clearances(ik, g)
+        if g.approach is not None:
+            ik.AddAngleBetweenVectorsConstraint(
+                self.palm, g.approach, self.object_frame, -self.support[0], 0.0,
+                float(g.max_approach_angle))
+        if g.centre_prior_weight > 0:
+            ik.AddPositionCost(self.palm, g.p_PO0, self.object_frame, np.zeros(3),
+                               g.centre_prior_weight * np.eye(3))
+        if g.fix_p_PO is not None:
+            ik.AddPositionConstraint(self.object_frame, np.zeros(3), self.palm,
+                                     g.fix_p_PO - 1e-4, g.fix_p_PO + 1e-4)
+        return prog, qv
 
-        # Initial guess: the prior posture, the object at its expected centre.
-        q0 = plant.GetPositions(self.context).copy()
-        q0[self.q_index] = np.clip(q_prior, self.lower, self.upper)
-        self._set(q0[self.q_index])
-        X_WP = self.palm.CalcPoseInWorld(self.context)
-        if X_PO_guess is not None:
-            X_PO0 = X_PO_guess
-        else:
-            X_PO0 = RigidTransform(fix_p_PO if fix_p_PO is not None else p_PO0)
-        plant.SetFreeBodyPose(self.context, self.object_body, X_WP @ X_PO0)
-        q0 = plant.GetPositions(self.context).copy()
-        # Stage 1 without collision constraints (smooth, fast); stage 2 adds
-        # them, starting from stage 1 (the distance constraint is hard to
-        # satisfy from a guess where the object overlaps the hand).
-        options = SolverOptions()
-        # Fail fast: a grasp that needs more iterations is almost always infeasible.
-        options.SetOption(SnoptSolver.id(), "Major iterations limit", 400)
-        prog, qv = build(False)
-        result = Solve(prog, q0, options)
-        if check_collisions and result.is_success():
-            q1 = result.GetSolution(qv)
-            prog, qv = build(True)
-            result = Solve(prog, q1, options)
-        q_sol = result.GetSolution(qv)
-        plant.SetPositions(self.context, q_sol)
-        q = q_sol[self.q_index]
-        X_PO = plant.CalcRelativeTransform(self.context, self.palm, self.object_frame)
-        err = self.surface_error(q, name, shape, dims, X_PO, layout)
-        return GraspSolution(q, X_PO, bool(result.is_success()), err, layout)
+    def _add_contacts(self, ik, g: _GraspProblem) -> None:
+        """Each contact of the layout on the surface, its pad facing the object."""
+        shape, r = g.shape, g.r
+        for t, jitter in zip(g.layout, g.jitters, strict=True):
+            p_B, n_B = CONTACT_POINTS[(t.finger, t.part)]
+            normal = np.asarray(t.normal, dtype=float)
+            self._add_surface_constraint(ik, t, p_B, normal, shape, g.dims, r, g.tolerance,
+                                         jitter)
+            if g.max_pad_tilt is not None and shape in ("sphere", "cylinder"):
+                # The centre of curvature the pad sees, one radius out along its normal.
+                p_BC = p_B + r * np.asarray(n_B, dtype=float)
+                slack = r * np.sin(float(g.max_pad_tilt))
+                if shape == "sphere":
+                    ik.AddPointToPointDistanceConstraint(
+                        self.distal[t.finger], p_BC, self.object_frame, np.zeros(3), 0.0,
+                        slack)
+                else:
+                    ik.AddPointToLineDistanceConstraint(
+                        self.distal[t.finger], p_BC, self.object_frame, np.zeros(3),
+                        np.array([0.0, 1.0, 0.0]), 0.0, slack)
+            ik.AddAngleBetweenVectorsConstraint(
+                self.distal[t.finger], n_B, self.object_frame, -normal, 0.0, g.max_pad_angle
+            )
+
+    def _add_table_clearances(self, ik, g: _GraspProblem) -> None:
+        """Fingertips, contacts, the rest of the hand and the forearm above the table."""
+        big = 10.0
+        # Fingertips (tip frame and the end of the distal capsule) and
+        # the finger contacts at least table_clearance above the table.
+        floor = -self.support[1] + g.table_clearance
+        for frame in self.tip_frames:
+            for p_B in (np.zeros(3), np.array([0.0, 0.0, 0.006])):
+                ik.AddPositionConstraint(frame, p_B, self.up_frame,
+                                         [-big, -big, floor], [big, big, big])
+        for t in g.layout:
+            p_B, _ = CONTACT_POINTS[(t.finger, t.part)]
+            ik.AddPositionConstraint(self.distal[t.finger], p_B, self.up_frame,
+                                     [-big, -big, floor + g.contact_height],
+                                     [big, big, big])
+        if g.hand_clearance is not None:
+            hand_floor = -self.support[1] + float(g.hand_clearance)
+            for frame, points, radius in self.clearance_points:
+                for p_B in points:
+                    ik.AddPositionConstraint(frame, p_B, self.up_frame,
+                                             [-big, -big, hand_floor + radius],
+                                             [big, big, big])
+        # The forearm too: both ends of its axis a radius above the table
+        # (exact for a level forearm, a radius to spare for an upright one).
+        for p_B in self.forearm_axis_B:
+            ik.AddPositionConstraint(self.forearm, p_B, self.up_frame,
+                                     [-big, -big, floor + self.forearm_radius],
+                                     [big, big, big])
 
     def _add_surface_constraint(self, ik, t, p_B, normal, shape, dims, r, tol, jitter):
         frame = self.distal[t.finger]
