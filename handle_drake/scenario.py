@@ -467,7 +467,6 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
     elif scenario.object is not None:
-
         if scenario.object.kind not in KINDS:
             raise ScenarioError(
                 f"object.kind: unknown object {short(scenario.object.kind)}; "
@@ -505,7 +504,6 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.metric is not None:
         _validate_metric(scenario)
     if scenario.midi_controller is not None:
-
         validate_midi_controller(scenario.midi_controller)
     if isinstance(scenario.driver, CanHandDriver):
         try:

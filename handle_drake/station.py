@@ -123,7 +123,6 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
             )
         station = MakeHardwareStation(scenario, meshcat=meshcat)
         if scenario.object is not None and scenario.object.accelerometer is not None:
-
             station = WithHardwareInstruments(station, scenario)
         return station
     if not isinstance(scenario.driver, SimHandDriver):
@@ -197,7 +196,6 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
         builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
         if scenario.object.accelerometer is not None:
-
             AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
                                     object_spec(scenario))
 
@@ -207,11 +205,9 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")
 
     if scenario.cameras:
-
         AddCameras(builder, plant, scene_graph, scenario, hand)
 
     if scenario.midi_controller is not None:
-
         AddMidiControllerSystems(builder, plant, scenario)
 
     if meshcat is not None:
@@ -241,11 +237,9 @@ def AddPlantModels(plant, scenario: Scenario):
         plant.set_gravity_enabled(hand, False)
 
     if scenario.table is not None:
-
         AddTable(plant, top_height=scenario.table.top_height,
                  size=(scenario.table.size_x, scenario.table.size_y))
     if scenario.object is not None:
-
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.plant_config.contact_model != "point")
         if scenario.object.fixed:
@@ -259,7 +253,6 @@ def AddPlantModels(plant, scenario: Scenario):
 
         AddSceneModels(plant, scenario)
     if scenario.midi_controller is not None:
-
         AddMidiControllerModel(plant, scenario)
     return hand
 

@@ -149,7 +149,6 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:
-
         where = f": {short_path(error.filename)}" if error.filename else ""
         print(f"handle-drake {args.command}: error: {error.strerror or error}{where}",
               file=sys.stderr)

@@ -187,7 +187,6 @@ class GraspTrialConfig:
     def object_spec(self):
         """The trial's object: an ``ObjectSpec``, or a ``MeshObjectSpec`` for "mesh"."""
         if self.object == "mesh":
-
             return MeshObjectSpec(self.object_file, scale=self.object_scale, mu=self.mu)
         return ObjectSpec(self.object, self.object_size, mu=self.mu)
 

@@ -177,7 +177,6 @@ class TrialHarness:
                     break
         self._object_contacts = None
         if object_contacts:
-
             hand = self.plant.GetModelInstanceByName("hand")
             bodies = [self.plant.get_body(i) for i in self.plant.GetBodyIndices(hand)]
             self._object_contacts = builder.AddNamedSystem("object_contacts", ObjectContacts(

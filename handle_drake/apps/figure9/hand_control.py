@@ -52,7 +52,6 @@ def BuildMidiHandControl(scenario, port=None, feedback_port=None,
                              f"{synergies!r}")
         synergies = None
         if scenario.hand.kind == "shadow":
-
             synergies = default_synergies().synergies
     control_options.setdefault("initial_command", hand_initial_command(scenario))
     control_options.setdefault("coupling_ratio", scenario.hand.coupling_ratio)

@@ -145,7 +145,6 @@ class InHandTask:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
         if self.accelerometer:
-
             try:
                 get_profile(self.accelerometer)
             except ValueError as error:

@@ -108,7 +108,6 @@ def AddCameras(builder, plant, scene_graph, scenario, hand_instance=None) -> Non
             if camera.target:
                 X_PC = look_at(X_PC.translation(), camera.target)
         else:
-
             spec = get_hand_spec(scenario.hand.kind)
             base = plant.GetBodyByName(spec.base_body, hand_instance)
             parent_id = plant.GetBodyFrameIdOrThrow(base.index())
