@@ -67,6 +67,7 @@ from handle_drake.devices.accelerometer.wiring import (
     AddSimulatedInstruments,
     WithHardwareInstruments,
 )
+from handle_drake.devices.arm.model import AddArmDriver
 from handle_drake.devices.camera.sensors import AddCameras
 from handle_drake.devices.can_hand.config import driver_config
 from handle_drake.devices.can_hand.driver import AddCanHandDriver
@@ -83,6 +84,7 @@ from handle_drake.scenario import (
     object_spec,
     validate_scenario,
 )
+from handle_drake.scene.plant import ExportSceneObjects
 from handle_drake.systems.hand_driver import WRIST_JOINTS, PdHandDriver, WristDriver, rpy_pose6
 from handle_drake.systems.tactile import (
     BodyPoseSelector,
@@ -136,10 +138,35 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     # Drake's config as the scenario gives it (scenario.default_plant_config:
     # SAP, point contact, outputs computed on demand).
     plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
-    spec = get_hand_spec(scenario.hand.kind)
     hand = AddPlantModels(plant, scenario)
     plant.Finalize()
+    _add_hand_systems(builder, plant, hand, scenario)
+    if isinstance(scenario.hand.mount, Arm):
+        AddArmDriver(builder, plant, scenario.hand.mount)
+    if scenario.objects:
+        ExportSceneObjects(builder, plant, scenario)
+    if isinstance(scenario.hand.mount, FloatingWrist):
+        _add_wrist_driver(builder, plant, scenario)
+    if scenario.object is not None:
+        _add_object_systems(builder, plant, scenario)
+    builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+    builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
+    builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
+    builder.ExportOutput(plant.get_state_output_port(), "plant_state")
+    if scenario.cameras:
+        AddCameras(builder, plant, scene_graph, scenario, hand)
+    if scenario.midi_controller is not None:
+        AddMidiControllerSystems(builder, plant, scenario)
+    if meshcat is not None:
+        _add_visualization(builder, plant, scene_graph, meshcat, scenario)
+    diagram = builder.Build()
+    diagram.set_name("hand_station")
+    return diagram
 
+
+def _add_hand_systems(builder, plant, hand, scenario: Scenario) -> None:
+    """The simulated hand driver and the fingertip sensors; exports the ``hand.*`` ports."""
+    spec = get_hand_spec(scenario.hand.kind)
     lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
     initial = hand_initial_command(scenario)
     _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
@@ -165,57 +192,34 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         source = tactile if signal == "tactile" else driver
         builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
-    if isinstance(scenario.hand.mount, Arm):
-        from handle_drake.devices.arm.model import AddArmDriver
 
-        AddArmDriver(builder, plant, scenario.hand.mount)
-    if scenario.objects:
-        from handle_drake.scene.plant import ExportSceneObjects
+def _add_wrist_driver(builder, plant, scenario: Scenario) -> None:
+    """The floating wrist's driver; exports ``wrist.pose`` and ``wrist.pose_measured``."""
+    wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
+    wrist_driver = builder.AddNamedSystem(
+        "wrist_driver",
+        WristDriver(plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue()),
+                    control_period=scenario.driver.control_period),
+    )
+    builder.Connect(plant.get_state_output_port(), wrist_driver.get_plant_state_input_port())
+    builder.Connect(wrist_driver.GetOutputPort("desired_state"),
+                    plant.get_desired_state_input_port(wrist))
+    builder.ExportInput(wrist_driver.get_pose_input_port(), "wrist.pose")
+    builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
 
-        ExportSceneObjects(builder, plant, scenario)
 
-    if isinstance(scenario.hand.mount, FloatingWrist):
-        wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
-        wrist_driver = builder.AddNamedSystem(
-            "wrist_driver",
-            WristDriver(plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue()),
-                        control_period=scenario.driver.control_period),
-        )
-        builder.Connect(plant.get_state_output_port(), wrist_driver.get_plant_state_input_port())
-        builder.Connect(wrist_driver.GetOutputPort("desired_state"),
-                        plant.get_desired_state_input_port(wrist))
-        builder.ExportInput(wrist_driver.get_pose_input_port(), "wrist.pose")
-        builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
-
-    if scenario.object is not None:
-        selector = builder.AddNamedSystem("object_pose", BodyPoseSelector(object_body(plant)))
-        builder.Connect(plant.get_body_poses_output_port(), selector.GetInputPort("body_poses"))
-        builder.Connect(plant.get_body_spatial_velocities_output_port(),
-                        selector.GetInputPort("body_spatial_velocities"))
-        builder.ExportOutput(selector.GetOutputPort("pose"), "object.pose")
-        builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
-        builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
-        if scenario.object.accelerometer is not None:
-            AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
-                                    object_spec(scenario))
-
-    builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
-    builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
-    builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
-    builder.ExportOutput(plant.get_state_output_port(), "plant_state")
-
-    if scenario.cameras:
-        AddCameras(builder, plant, scene_graph, scenario, hand)
-
-    if scenario.midi_controller is not None:
-        AddMidiControllerSystems(builder, plant, scenario)
-
-    if meshcat is not None:
-        _add_visualization(builder, plant, scene_graph, meshcat, scenario)
-
-    diagram = builder.Build()
-    diagram.set_name("hand_station")
-    return diagram
+def _add_object_systems(builder, plant, scenario: Scenario) -> None:
+    """The object's pose selector (``object.*`` ports) and its accelerometer, if any."""
+    selector = builder.AddNamedSystem("object_pose", BodyPoseSelector(object_body(plant)))
+    builder.Connect(plant.get_body_poses_output_port(), selector.GetInputPort("body_poses"))
+    builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                    selector.GetInputPort("body_spatial_velocities"))
+    builder.ExportOutput(selector.GetOutputPort("pose"), "object.pose")
+    builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
+    builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
+    if scenario.object.accelerometer is not None:
+        AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
+                                object_spec(scenario))
 
 
 def AddPlantModels(plant, scenario: Scenario):
