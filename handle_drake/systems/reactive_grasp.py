@@ -264,6 +264,87 @@ def finger_command_groups(hand_kind: str) -> list[list[int]]:
     return get_hand_spec(hand_kind).finger_command_indices()
 
 
+@dc.dataclass
+class _Step:
+    """The working copy of :class:`ReactiveGrasp`'s state during one update (plain
+    numbers and arrays, written back to the context's state at the end)."""
+
+    travel: float
+    lift: float
+    t_mode: float
+    t_arrived: float
+    shift: np.ndarray
+    target: np.ndarray
+    recentres: float
+    t_recentred: float
+    s: np.ndarray
+    touched: np.ndarray
+    squeeze_from: np.ndarray
+    recentre_from: np.ndarray
+
+
+def _checked_arguments(start_pose6, goal_pose6, preshape, closed, finger_groups, grasp_fingers,
+                       params, finger_directions_B, hand_bodies, fingertip_bodies,
+                       planned_object, object_bodies, period):
+    """:class:`ReactiveGrasp`'s arguments checked (in this order), as arrays."""
+    start = np.asarray(start_pose6, dtype=float)
+    goal = np.asarray(goal_pose6, dtype=float)
+    for name, v in (("start_pose6", start), ("goal_pose6", goal)):
+        if v.shape != (6,) or not np.isfinite(v).all():
+            raise ValueError(f"{name}: expected 6 finite values, got shape {v.shape}")
+    preshape = np.asarray(preshape, dtype=float)
+    closed = np.asarray(closed, dtype=float)
+    if preshape.ndim != 1 or preshape.shape != closed.shape:
+        raise ValueError(f"preshape and closed: expected equal 1-D sizes, got "
+                         f"{preshape.shape} and {closed.shape}")
+    if not (np.isfinite(preshape).all() and np.isfinite(closed).all()):
+        raise ValueError("preshape and closed must be finite")
+    nu = preshape.size
+    groups = [np.asarray(g, dtype=int) for g in finger_groups]
+    if not groups:
+        raise ValueError("finger_groups: expected at least one finger")
+    seen = np.concatenate(groups)
+    if np.any(seen < 0) or np.any(seen >= nu) or len(set(seen.tolist())) != seen.size:
+        raise ValueError(f"finger_groups: expected disjoint indices in [0, {nu}), got "
+                         f"{[g.tolist() for g in groups]}")
+    n = len(groups)
+    if grasp_fingers is None:
+        grasp = np.array([np.any(closed[g] != preshape[g]) for g in groups])
+    else:
+        grasp = np.asarray(grasp_fingers, dtype=bool)
+        if grasp.shape != (n,):
+            raise ValueError(f"grasp_fingers: expected {n} flags, got shape {grasp.shape}")
+    if not grasp.any():
+        raise ValueError("no grasp finger: closed equals preshape on every finger")
+    params = params if params is not None else ReactiveGraspParams()
+    if not isinstance(params, ReactiveGraspParams):
+        raise TypeError(f"params must be ReactiveGraspParams, got {type(params).__name__}")
+    params.validate()
+    if finger_directions_B is not None:
+        finger_directions_B = np.asarray(finger_directions_B, dtype=float)
+        if finger_directions_B.shape != (n, 3) or not np.isfinite(finger_directions_B).all():
+            raise ValueError(f"finger_directions_B: expected ({n}, 3) finite values, got "
+                             f"shape {finger_directions_B.shape}")
+    if (hand_bodies is None) != (fingertip_bodies is None):
+        raise ValueError("hand_bodies and fingertip_bodies go together (both or neither)")
+    if fingertip_bodies is not None and len(fingertip_bodies) != n:
+        raise ValueError(f"fingertip_bodies: expected {n} (one per tactile channel), "
+                         f"got {len(fingertip_bodies)}")
+    if not (np.isfinite(period) and period > 0):
+        raise ValueError(f"period must be > 0 (s), got {period}")
+    if planned_object is not None:
+        if not isinstance(planned_object, ObjectEstimate):
+            raise TypeError("planned_object must be an ObjectEstimate, got "
+                            f"{type(planned_object).__name__}")
+        if hand_bodies is None:
+            raise ValueError("planned_object needs hand_bodies and fingertip_bodies: the "
+                             "re-centring reads where the fingertips touch")
+        if object_bodies is None or len(object_bodies) == 0:
+            raise ValueError("planned_object needs object_bodies: the re-centring reads "
+                             "where the fingertips touch the object")
+    return start, goal, preshape, closed, groups, grasp, params, finger_directions_B
+
+
 class ReactiveGrasp(LeafSystem):
     """Reactive approach, per-finger tactile closing, squeeze and lift (see module doc).
 
@@ -300,61 +381,12 @@ class ReactiveGrasp(LeafSystem):
                  planned_object: ObjectEstimate | None = None, object_bodies=None,
                  period: float = 0.004):
         super().__init__()
-        start = np.asarray(start_pose6, dtype=float)
-        goal = np.asarray(goal_pose6, dtype=float)
-        for name, v in (("start_pose6", start), ("goal_pose6", goal)):
-            if v.shape != (6,) or not np.isfinite(v).all():
-                raise ValueError(f"{name}: expected 6 finite values, got shape {v.shape}")
-        preshape = np.asarray(preshape, dtype=float)
-        closed = np.asarray(closed, dtype=float)
-        if preshape.ndim != 1 or preshape.shape != closed.shape:
-            raise ValueError(f"preshape and closed: expected equal 1-D sizes, got "
-                             f"{preshape.shape} and {closed.shape}")
-        if not (np.isfinite(preshape).all() and np.isfinite(closed).all()):
-            raise ValueError("preshape and closed must be finite")
-        nu = preshape.size
-        groups = [np.asarray(g, dtype=int) for g in finger_groups]
-        if not groups:
-            raise ValueError("finger_groups: expected at least one finger")
-        seen = np.concatenate(groups)
-        if np.any(seen < 0) or np.any(seen >= nu) or len(set(seen.tolist())) != seen.size:
-            raise ValueError(f"finger_groups: expected disjoint indices in [0, {nu}), got "
-                             f"{[g.tolist() for g in groups]}")
+        (start, goal, preshape, closed, groups, grasp, self.params,
+         finger_directions_B) = _checked_arguments(
+            start_pose6, goal_pose6, preshape, closed, finger_groups, grasp_fingers, params,
+            finger_directions_B, hand_bodies, fingertip_bodies, planned_object, object_bodies,
+            period)
         n = len(groups)
-        if grasp_fingers is None:
-            grasp = np.array([np.any(closed[g] != preshape[g]) for g in groups])
-        else:
-            grasp = np.asarray(grasp_fingers, dtype=bool)
-            if grasp.shape != (n,):
-                raise ValueError(f"grasp_fingers: expected {n} flags, got shape {grasp.shape}")
-        if not grasp.any():
-            raise ValueError("no grasp finger: closed equals preshape on every finger")
-        self.params = params if params is not None else ReactiveGraspParams()
-        if not isinstance(self.params, ReactiveGraspParams):
-            raise TypeError(f"params must be ReactiveGraspParams, got {type(self.params).__name__}")
-        self.params.validate()
-        if finger_directions_B is not None:
-            finger_directions_B = np.asarray(finger_directions_B, dtype=float)
-            if finger_directions_B.shape != (n, 3) or not np.isfinite(finger_directions_B).all():
-                raise ValueError(f"finger_directions_B: expected ({n}, 3) finite values, got "
-                                 f"shape {finger_directions_B.shape}")
-        if (hand_bodies is None) != (fingertip_bodies is None):
-            raise ValueError("hand_bodies and fingertip_bodies go together (both or neither)")
-        if fingertip_bodies is not None and len(fingertip_bodies) != n:
-            raise ValueError(f"fingertip_bodies: expected {n} (one per tactile channel), "
-                             f"got {len(fingertip_bodies)}")
-        if not (np.isfinite(period) and period > 0):
-            raise ValueError(f"period must be > 0 (s), got {period}")
-        if planned_object is not None:
-            if not isinstance(planned_object, ObjectEstimate):
-                raise TypeError("planned_object must be an ObjectEstimate, got "
-                                f"{type(planned_object).__name__}")
-            if hand_bodies is None:
-                raise ValueError("planned_object needs hand_bodies and fingertip_bodies: the "
-                                 "re-centring reads where the fingertips touch")
-            if object_bodies is None or len(object_bodies) == 0:
-                raise ValueError("planned_object needs object_bodies: the re-centring reads "
-                                 "where the fingertips touch the object")
         self._object = planned_object
         self._object_bodies = (set() if object_bodies is None
                                else {int(b) for b in object_bodies})
@@ -371,6 +403,10 @@ class ReactiveGrasp(LeafSystem):
         self._tip_channel = (None if fingertip_bodies is None
                              else {int(b): i for i, b in enumerate(fingertip_bodies)})
 
+        self._declare_ports_and_state(n, start, preshape, hand_bodies)
+
+    def _declare_ports_and_state(self, n: int, start, preshape, hand_bodies) -> None:
+        """Inputs, the discrete state (read through names), the update and the outputs."""
         self._tactile = self.DeclareVectorInputPort("tactile", n)
         self._pose_measured = self.DeclareVectorInputPort("wrist_pose_measured", 6)
         self._contacts = None
@@ -541,93 +577,112 @@ class ReactiveGrasp(LeafSystem):
 
     # ---- update ----------------------------------------------------------------
     def _update(self, context, state):
-        p, h, now = self.params, self._period, context.get_time()
+        now = context.get_time()
         mode = self.get_mode(context)
         progress = self.get_progress(context)
-        travel, lift = progress.travel, progress.lift
-        t_mode, t_arrived = progress.mode_entry_time, progress.arrival_time
-        shift = np.array([progress.shift_x, progress.shift_y, progress.shift_z])
-        target = np.array([progress.target_x, progress.target_y, progress.target_z])
-        recentres, t_recentred = progress.recentres, progress.recentred_time
-        s = context.get_discrete_state(self._s).value().copy()
-        touched = context.get_discrete_state(self._touched).value().copy()
-        squeeze_from = context.get_discrete_state(self._squeeze_from).value().copy()
-        recentre_from = context.get_discrete_state(self._recentre_from).value().copy()
+        w = _Step(
+            travel=progress.travel, lift=progress.lift, t_mode=progress.mode_entry_time,
+            t_arrived=progress.arrival_time,
+            shift=np.array([progress.shift_x, progress.shift_y, progress.shift_z]),
+            target=np.array([progress.target_x, progress.target_y, progress.target_z]),
+            recentres=progress.recentres, t_recentred=progress.recentred_time,
+            s=context.get_discrete_state(self._s).value().copy(),
+            touched=context.get_discrete_state(self._touched).value().copy(),
+            squeeze_from=context.get_discrete_state(self._squeeze_from).value().copy(),
+            recentre_from=context.get_discrete_state(self._recentre_from).value().copy())
         new_mode = mode
-
         if mode in (ReactiveGraspMode.APPROACH, ReactiveGraspMode.SLOW_APPROACH):
-            touching, others, direction_W, _ = self._touching(context)
-            if touching.sum() >= p.multiple_contacts:
-                new_mode = ReactiveGraspMode.STOPPED
-                # Hold where the hand is, not where the command had run ahead to.
-                measured = self._pose_measured.Eval(context)[:3]
-                along = float((measured - self._start[:3] - shift) @ self._direction)
-                travel = float(np.clip(along, 0.0, travel))
-            else:
-                if touching.any() or others:
-                    new_mode = ReactiveGraspMode.SLOW_APPROACH
-                    d = self._shift_direction(context, touching, direction_W)
-                    shift = _capped(shift + p.shift_speed * h * d, p.max_shift)
-                slow = new_mode is ReactiveGraspMode.SLOW_APPROACH
-                speed = p.approach_speed * (p.slow_factor if slow else 1.0)
-                travel = min(travel + speed * h, self._length)
-                if travel >= self._length:
-                    t_arrived = min(t_arrived, now)
-                    if self._settled(context, travel, shift, now - t_arrived):
-                        new_mode = ReactiveGraspMode.CLOSE
+            new_mode = self._step_approach(context, w, now)
         elif mode is ReactiveGraspMode.CLOSE:
-            tips, _, direction_W, tip_contacts = self._touching(context)
-            d = self._recentring(tips & self._grasp & (touched == 0), tip_contacts, recentres)
-            if d is not None:
-                new_mode = ReactiveGraspMode.RECENTRE
-                target, recentres, t_recentred = shift + d, recentres + 1, np.inf
-                recentre_from = s.copy()
-            else:
-                for i in np.flatnonzero(self._grasp):
-                    if touched[i]:
-                        continue
-                    if tips[i]:
-                        touched[i] = 1.0  # this finger stops where it is
-                    else:
-                        s[i] = min(s[i] + p.close_rate * h, p.max_closing)
-                done = (touched > 0) | (s >= p.max_closing)
-                if p.close_shift_speed > 0 and tips[self._grasp].any() and not np.all(
-                        done[self._grasp]):
-                    d = self._shift_direction(context, tips & self._grasp, direction_W)
-                    shift = _capped(shift + p.close_shift_speed * h * d,
-                                    p.max_shift + p.max_close_shift)
-                if np.all(done[self._grasp]):
-                    new_mode = ReactiveGraspMode.SQUEEZE
-                    squeeze_from = s.copy()
+            new_mode = self._step_close(context, w)
         elif mode is ReactiveGraspMode.RECENTRE:
-            # Undo recentre_reopen of the closing, then shift, then settle, then close on.
-            floor = (1.0 - p.recentre_reopen) * recentre_from
-            s = np.where(self._grasp, np.maximum(s - 2 * p.close_rate * h, floor), s)
-            if not np.any(s[self._grasp] > floor[self._grasp]):
-                shift = shift + _capped(target - shift, p.shift_speed * h)
-                if np.linalg.norm(target - shift) < 1e-9:
-                    t_recentred = min(t_recentred, now)
-                    if self._settled(context, travel, shift, now - t_recentred):
-                        new_mode = ReactiveGraspMode.CLOSE
-                        touched[:] = 0.0
+            new_mode = self._step_recentre(context, w, now)
         elif mode is ReactiveGraspMode.SQUEEZE:
-            elapsed = now - t_mode
-            ramp = min(1.0, elapsed / p.squeeze_time)
-            s = np.where(self._grasp, squeeze_from + ramp * p.squeeze, s)
-            if elapsed >= p.squeeze_time + p.hold_time - 1e-9:
+            elapsed = now - w.t_mode
+            ramp = min(1.0, elapsed / self.params.squeeze_time)
+            w.s = np.where(self._grasp, w.squeeze_from + ramp * self.params.squeeze, w.s)
+            if elapsed >= self.params.squeeze_time + self.params.hold_time - 1e-9:
                 new_mode = ReactiveGraspMode.LIFT
         elif mode is ReactiveGraspMode.LIFT:
-            lift = min(lift + p.lift_speed * h, p.lift_height)
-
+            w.lift = min(w.lift + self.params.lift_speed * self._period, self.params.lift_height)
         if new_mode is not mode:
-            t_mode = now
+            w.t_mode = now
         state.get_mutable_discrete_state(self._mode_value).set_value([float(new_mode)])
         state.get_mutable_discrete_state(self._internal).set_value(
-            np.r_[travel, shift, lift, t_mode, t_arrived, target, recentres, t_recentred])
-        state.get_mutable_discrete_state(self._s).set_value(s)
-        state.get_mutable_discrete_state(self._touched).set_value(touched)
-        state.get_mutable_discrete_state(self._squeeze_from).set_value(squeeze_from)
-        state.get_mutable_discrete_state(self._recentre_from).set_value(recentre_from)
+            np.r_[w.travel, w.shift, w.lift, w.t_mode, w.t_arrived, w.target, w.recentres,
+                  w.t_recentred])
+        state.get_mutable_discrete_state(self._s).set_value(w.s)
+        state.get_mutable_discrete_state(self._touched).set_value(w.touched)
+        state.get_mutable_discrete_state(self._squeeze_from).set_value(w.squeeze_from)
+        state.get_mutable_discrete_state(self._recentre_from).set_value(w.recentre_from)
         state.get_mutable_discrete_state(self._wrist).set_value(
-            self._wrist_command(travel, shift, lift))
-        state.get_mutable_discrete_state(self._hand).set_value(self._hand_command(s))
+            self._wrist_command(w.travel, w.shift, w.lift))
+        state.get_mutable_discrete_state(self._hand).set_value(self._hand_command(w.s))
+
+    def _step_approach(self, context, w: _Step, now: float) -> ReactiveGraspMode:
+        """APPROACH / SLOW_APPROACH: advance (slower, shifting away, on an early touch);
+        stop on multiple contacts; close once arrived and settled."""
+        p, h = self.params, self._period
+        new_mode = self.get_mode(context)
+        touching, others, direction_W, _ = self._touching(context)
+        if touching.sum() >= p.multiple_contacts:
+            # Hold where the hand is, not where the command had run ahead to.
+            measured = self._pose_measured.Eval(context)[:3]
+            along = float((measured - self._start[:3] - w.shift) @ self._direction)
+            w.travel = float(np.clip(along, 0.0, w.travel))
+            return ReactiveGraspMode.STOPPED
+        if touching.any() or others:
+            new_mode = ReactiveGraspMode.SLOW_APPROACH
+            d = self._shift_direction(context, touching, direction_W)
+            w.shift = _capped(w.shift + p.shift_speed * h * d, p.max_shift)
+        slow = new_mode is ReactiveGraspMode.SLOW_APPROACH
+        speed = p.approach_speed * (p.slow_factor if slow else 1.0)
+        w.travel = min(w.travel + speed * h, self._length)
+        if w.travel >= self._length:
+            w.t_arrived = min(w.t_arrived, now)
+            if self._settled(context, w.travel, w.shift, now - w.t_arrived):
+                new_mode = ReactiveGraspMode.CLOSE
+        return new_mode
+
+    def _step_close(self, context, w: _Step) -> ReactiveGraspMode:
+        """CLOSE: each grasp finger closes until its fingertip touches; re-centre on an
+        object found elsewhere; squeeze once every grasp finger is done."""
+        p, h = self.params, self._period
+        tips, _, direction_W, tip_contacts = self._touching(context)
+        d = self._recentring(tips & self._grasp & (w.touched == 0), tip_contacts, w.recentres)
+        if d is not None:
+            w.target, w.recentres, w.t_recentred = w.shift + d, w.recentres + 1, np.inf
+            w.recentre_from = w.s.copy()
+            return ReactiveGraspMode.RECENTRE
+        for i in np.flatnonzero(self._grasp):
+            if w.touched[i]:
+                continue
+            if tips[i]:
+                w.touched[i] = 1.0  # this finger stops where it is
+            else:
+                w.s[i] = min(w.s[i] + p.close_rate * h, p.max_closing)
+        done = (w.touched > 0) | (w.s >= p.max_closing)
+        if p.close_shift_speed > 0 and tips[self._grasp].any() and not np.all(
+                done[self._grasp]):
+            d = self._shift_direction(context, tips & self._grasp, direction_W)
+            w.shift = _capped(w.shift + p.close_shift_speed * h * d,
+                              p.max_shift + p.max_close_shift)
+        if np.all(done[self._grasp]):
+            w.squeeze_from = w.s.copy()
+            return ReactiveGraspMode.SQUEEZE
+        return ReactiveGraspMode.CLOSE
+
+    def _step_recentre(self, context, w: _Step, now: float) -> ReactiveGraspMode:
+        """RECENTRE: undo recentre_reopen of the closing, then shift, then settle, then
+        close on."""
+        p, h = self.params, self._period
+        floor = (1.0 - p.recentre_reopen) * w.recentre_from
+        w.s = np.where(self._grasp, np.maximum(w.s - 2 * p.close_rate * h, floor), w.s)
+        if not np.any(w.s[self._grasp] > floor[self._grasp]):
+            w.shift = w.shift + _capped(w.target - w.shift, p.shift_speed * h)
+            if np.linalg.norm(w.target - w.shift) < 1e-9:
+                w.t_recentred = min(w.t_recentred, now)
+                if self._settled(context, w.travel, w.shift, now - w.t_recentred):
+                    w.touched[:] = 0.0
+                    return ReactiveGraspMode.CLOSE
+        return ReactiveGraspMode.RECENTRE
