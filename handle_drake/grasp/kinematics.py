@@ -300,27 +300,7 @@ class GraspKinematics:
             plant.RegisterCollisionGeometry(
                 self.object_body, X, geometry, "grasp_object", ProximityProperties()
             )
-        self.support = None
-        if support is not None:
-            if shape is None:
-                raise ValueError("support needs the object shape and dims")
-            up, height = support
-            up = np.asarray(up, dtype=float)
-            if up.shape != (3,) or not np.isfinite(up).all() or np.linalg.norm(up) < 1e-9:
-                raise ValueError(f"support up_G: expected a non-zero 3-vector, got {up}")
-            height = float(height)
-            if not np.isfinite(height) or height <= 0:
-                raise ValueError(f"support height must be > 0 (m), got {height}")
-            up = up / np.linalg.norm(up)
-            self.support = (up, height)
-            # A frame on the object with z = up: "above the table" becomes a
-            # smooth bound on a point's z in it (a table geometry under the
-            # signed-distance constraint made SNOPT fail on most grasps).
-            from pydrake.multibody.tree import FixedOffsetFrame
-
-            self.up_frame = plant.AddFrame(FixedOffsetFrame(
-                "grasp_object_up", self.object_frame,
-                RigidTransform(RotationMatrix.MakeFromOneVector(up, 2))))
+        self._add_support(plant, shape, support)
         plant.Finalize()
         self.plant = plant
         self.diagram = builder.Build()
@@ -403,6 +383,32 @@ class GraspKinematics:
         }
 
     # ---- inverse kinematics --------------------------------------------------
+    def _add_support(self, plant, shape, support) -> None:
+        """With a support: the table's ``(up_G, height)`` and a frame ``up_frame`` on the
+        object with z = up (see the constructor)."""
+        self.support = None
+        if support is None:
+            return
+        if shape is None:
+            raise ValueError("support needs the object shape and dims")
+        up, height = support
+        up = np.asarray(up, dtype=float)
+        if up.shape != (3,) or not np.isfinite(up).all() or np.linalg.norm(up) < 1e-9:
+            raise ValueError(f"support up_G: expected a non-zero 3-vector, got {up}")
+        height = float(height)
+        if not np.isfinite(height) or height <= 0:
+            raise ValueError(f"support height must be > 0 (m), got {height}")
+        up = up / np.linalg.norm(up)
+        self.support = (up, height)
+        # A frame on the object with z = up: "above the table" becomes a
+        # smooth bound on a point's z in it (a table geometry under the
+        # signed-distance constraint made SNOPT fail on most grasps).
+        from pydrake.multibody.tree import FixedOffsetFrame
+
+        self.up_frame = plant.AddFrame(FixedOffsetFrame(
+            "grasp_object_up", self.object_frame,
+            RigidTransform(RotationMatrix.MakeFromOneVector(up, 2))))
+
     def solve_grasp(
         self,
         name,
