@@ -7,8 +7,9 @@ Every module of ``handle_drake`` is parsed (not imported) and each import of ano
   device of ``devices/``; one application of ``apps/``); never sideways to a peer of the
   same rank, never upwards;
 - it sits at the top of the module, not inside a function, except in the command-line
-  modules (``cli.py``, ``__main__.py``, ``apps/perception/perceive.py``), which import
-  an area's code only when its sub-command runs.
+  modules (``cli.py``, ``__main__.py``, ``apps/cli_support.py``,
+  ``apps/perception/perceive.py``), which import an area's code only when its sub-command
+  runs (``handle-drake`` pins BLAS before any of them loads numpy).
 """
 
 from __future__ import annotations
@@ -41,7 +42,10 @@ LAYERS: tuple[tuple[str, float], ...] = (
 )
 # Layers whose sub-packages are units of their own (one device, one application).
 SPLIT = ("handle_drake.devices", "handle_drake.apps")
-CLI_MODULES = ("handle_drake.cli", "handle_drake.apps.perception.perceive")
+# The commands' shared helpers are command-line code too: `handle-drake` pins BLAS before
+# any area module loads numpy, so what every command imports stays light.
+CLI_MODULES = ("handle_drake.cli", "handle_drake.apps.cli_support",
+               "handle_drake.apps.perception.perceive")
 
 
 def module_name(path: Path) -> str:

@@ -16,11 +16,6 @@ import warnings
 from pathlib import Path
 
 from handle_drake.base.blas import pin_blas
-from handle_drake.base.checks import ScenarioDeprecationWarning, short_path
-from handle_drake.base.paths import check_outputs
-from handle_drake.learning import TrialLogError
-from handle_drake.learning.cluster import ExecutorError
-from handle_drake.scenario import CanHandDriver
 
 __all__ = ["check_hardware_server", "run_command", "start_meshcat", "int_at_least", "positive_int",
            "non_negative_int", "positive_float", "non_negative_float", "add_mesh_arguments",
@@ -42,6 +37,7 @@ def check_hardware_server(scenario) -> None:
     """``--hardware`` needs a !CanHandDriver and its server answering, before anything runs."""
     import socket
 
+    from handle_drake.scenario import CanHandDriver
 
     driver = scenario.driver
     if not isinstance(driver, CanHandDriver):
@@ -149,6 +145,8 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:
+        from handle_drake.base.checks import short_path
+
         where = f": {short_path(error.filename)}" if error.filename else ""
         print(f"handle-drake {args.command}: error: {error.strerror or error}{where}",
               file=sys.stderr)
