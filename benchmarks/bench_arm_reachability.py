@@ -35,14 +35,13 @@ def main(argv=None) -> int:
 
     from pydrake.math import RigidTransform, RollPitchYaw
 
-    from handle_drake.apps.demo import diagrams_dir
     from handle_drake.apps.pick.reach import ArmReach
     from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
+    from handle_drake.base.models import diagrams_dir
     from handle_drake.grasp.planning import plan_grasp
     from handle_drake.grasp.taxonomy import GraspClass
     from handle_drake.scenario import LoadScenario
-    from handle_drake.scene.config import scene_objects
-    from handle_drake.scene.plant import initial_pose, spec_of
+    from handle_drake.scene.config import initial_pose, scene_objects, spec_of
 
     scenario = LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml")
     ratio = scenario.hand.coupling_ratio

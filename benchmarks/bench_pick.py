@@ -53,9 +53,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="out/bench")
     args = parser.parse_args(argv)
 
-    from handle_drake.apps.demo import diagrams_dir
     from handle_drake.apps.pick.cli import pick
     from handle_drake.apps.pick.scenes import random_scene
+    from handle_drake.base.models import diagrams_dir
     from handle_drake.scenario import LoadScenario
 
     base = LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml")

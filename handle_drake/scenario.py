@@ -73,13 +73,13 @@ from handle_drake.base.hands import HAND_SPECS
 from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.sensor import check_sensor_pose
 from handle_drake.devices.accelerometer.wiring import instrument_X_OS
-from handle_drake.devices.arm.config import Arm
+from handle_drake.devices.arm.config import Arm, validate_arm
 from handle_drake.devices.camera.profiles import get_profile
 from handle_drake.devices.can_hand.config import CanHandDriverConfig
 from handle_drake.devices.midi.wiring import validate_midi_controller
 from handle_drake.geometry.objects import KINDS, ObjectSpec
 from handle_drake.geometry.objects.mesh import MeshObjectSpec, MeshObjectWarning
-from handle_drake.scene.config import Hole, SortingBoxConfig
+from handle_drake.scene.config import Hole, SortingBoxConfig, validate_scene
 
 __all__ = [
     "AccelerometerConfig",
@@ -453,7 +453,6 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError(f"hand.coupling_ratio: {error}") from None
     _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
     if isinstance(scenario.hand.mount, Arm):
-        from handle_drake.devices.arm.config import validate_arm
 
         validate_arm(scenario.hand.mount, ScenarioError)
     for name, value in scenario.hand.initial_position.items():
@@ -517,7 +516,6 @@ def validate_scenario(scenario: Scenario) -> None:
         _check_positive("driver.control_period", scenario.driver.control_period)
     check_ranges(scenario)
     if scenario.objects or scenario.sorting_box is not None:
-        from handle_drake.scene.config import validate_scene
 
         validate_scene(scenario, validate_scenario, ScenarioError)
 

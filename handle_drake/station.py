@@ -67,7 +67,7 @@ from handle_drake.devices.accelerometer.wiring import (
     AddSimulatedInstruments,
     WithHardwareInstruments,
 )
-from handle_drake.devices.arm.model import AddArmDriver
+from handle_drake.devices.arm.model import AddArm, AddArmDriver
 from handle_drake.devices.camera.sensors import AddCameras
 from handle_drake.devices.can_hand.config import driver_config
 from handle_drake.devices.can_hand.driver import AddCanHandDriver
@@ -84,7 +84,7 @@ from handle_drake.scenario import (
     object_spec,
     validate_scenario,
 )
-from handle_drake.scene.plant import ExportSceneObjects
+from handle_drake.scene.plant import AddSceneModels, ExportSceneObjects
 from handle_drake.systems.hand_driver import WRIST_JOINTS, PdHandDriver, WristDriver, rpy_pose6
 from handle_drake.systems.tactile import (
     BodyPoseSelector,
@@ -232,7 +232,6 @@ def AddPlantModels(plant, scenario: Scenario):
     if isinstance(mount, FixedMount):
         plant.WeldFrames(plant.world_frame(), base_frame, mount.X_WB.GetDeterministicValue())
     elif isinstance(mount, Arm):
-        from handle_drake.devices.arm.model import AddArm
 
         AddArm(plant, mount, base_frame)
         plant.set_gravity_enabled(hand, False)
@@ -253,7 +252,6 @@ def AddPlantModels(plant, scenario: Scenario):
             plant.SetDefaultFloatingBaseBodyPose(object_body(plant),
                                                  object_initial_pose(scenario))
     if scenario.objects or scenario.sorting_box is not None:
-        from handle_drake.scene.plant import AddSceneModels
 
         AddSceneModels(plant, scenario)
     if scenario.midi_controller is not None:

@@ -57,6 +57,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 from handle_drake.base.blas import pin_blas
+from handle_drake.learning.dask_probe import connect_client, probe_scheduler
 from handle_drake.learning.executors import (
     InlineExecutor,
     LocalPool,
@@ -197,7 +198,6 @@ def check_executor_arguments(args) -> None:
         raise ValueError(f"--connect-timeout: only for --executor dask://HOST:PORT (a running "
                          f"scheduler), got --executor {spec}")
     if spec.address is not None:
-        from handle_drake.learning.dask_probe import probe_scheduler
 
         probe_scheduler(spec.address, CONNECT_TIMEOUT if timeout is None else timeout)
 
@@ -401,7 +401,6 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
             pool.shutdown(wait=True, cancel_futures=True)
         return
     if spec.address is not None:  # a bounded look first: Client trusts whatever answers
-        from handle_drake.learning.dask_probe import probe_scheduler
 
         probe_scheduler(spec.address, connect_timeout)
     try:
@@ -449,7 +448,6 @@ def _connect(spec: ExecutorSpec, workers, connect_timeout):
         except BaseException:
             cluster.close()
             raise
-    from handle_drake.learning.dask_probe import connect_client
 
     try:  # a bounded look at the peer first: Client trusts whatever answers
         client = connect_client(spec.address, connect_timeout)

@@ -27,6 +27,8 @@ import struct
 import threading
 import time
 
+from handle_drake.learning.cluster import ExecutorError
+
 __all__ = ["MAX_GREETING", "probe_scheduler", "connect_client"]
 
 MAX_GREETING = 1 << 16  # bytes: Dask's handshake is ~60 bytes
@@ -34,7 +36,6 @@ _HANDSHAKE_KEYS = {"compression", "python", "pickle-protocol"}
 
 
 def _error(where: str, what: str):
-    from handle_drake.learning.cluster import ExecutorError
 
     return ExecutorError(f"executor dask://{where}: {what}")
 

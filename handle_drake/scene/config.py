@@ -25,10 +25,24 @@ This module must not use ``from __future__ import annotations`` (Drake's
 import dataclasses as dc
 import math
 
+import numpy as np
 from pydrake.common.schema import Transform
+from pydrake.math import RigidTransform
+
+from handle_drake.geometry.objects import (
+    DEFAULT_SIZE,
+    ObjectSpec,
+    dimensions,
+    resting_height,
+    surface_mesh,
+)
+from handle_drake.geometry.objects.mesh import MeshObjectSpec
 
 __all__ = ["Hole", "SortingBoxConfig", "HOLE_SHAPES", "validate_scene", "scene_objects",
-           "object_instance_name"]
+           "object_instance_name", "spec_of", "initial_pose", "footprint_radius", "hole_polygon",
+           "box_pose", "hole_centres", "in_box", "box_footprint_contains"]
+
+_CIRCLE_SIDES = 24
 
 #: The hole each catalogue kind passes through.
 HOLE_SHAPES = {"sphere": "circle", "cylinder": "circle", "cuboid": "square",
@@ -109,7 +123,6 @@ def validate_scene(scenario, validate_single, error) -> None:
 def _footprints(scenario):
     """(name, centre xy, radius) of the bounding circle of each object standing on the
     table (an object placed in the air, ``on_table: false``, is the user's to place)."""
-    from handle_drake.scene.plant import footprint_radius, initial_pose, spec_of
 
     out = []
     for name, o in scene_objects(scenario):
@@ -132,7 +145,6 @@ def _check_overlaps(scenario, error) -> None:
     box = scenario.sorting_box
     if box is None:
         return
-    from handle_drake.scene.plant import box_footprint_contains
 
     for name, p, r in prints:
         if box_footprint_contains(scenario, p, margin=r):
@@ -156,7 +168,6 @@ def _validate_box(scenario, error) -> None:
         raise error("sorting_box.X_WB: expected a deterministic pose, got a random one")
     if not box.holes:
         raise error("sorting_box.holes: expected at least one hole")
-    from handle_drake.scene.plant import hole_polygon
 
     cell = box.size[0] / len(box.holes)
     for i, hole in enumerate(box.holes):
@@ -174,3 +185,94 @@ def _validate_box(scenario, error) -> None:
                         f"({2 * half[0]:.3f} x {2 * half[1]:.3f} m) does not fit its "
                         f"{cell:.3f} x {box.size[1]:.3f} m share of the lid; make the box "
                         f"larger or give fewer holes")
+
+
+def spec_of(o):
+    """The object spec of one ``ObjectConfig``."""
+    if o.kind == "mesh":
+        return MeshObjectSpec(file=o.file, scale=o.scale, mass=o.mass, density=o.density,
+                              mu=o.mu)
+    return ObjectSpec(kind=o.kind, size=o.size, mass=o.mass, mu=o.mu,
+                      dimensions=o.dimensions or None, density=o.density)
+
+
+def initial_pose(o, table) -> RigidTransform:
+    """``X_WO`` at the start (``on_table`` puts the object on the table top)."""
+    X_WO = o.X_WO.GetDeterministicValue()
+    if o.on_table:
+
+        top = table.top_height if table is not None else 0.0
+        p = X_WO.translation().copy()
+        p[2] = top + resting_height(spec_of(o))
+        X_WO = RigidTransform(X_WO.rotation(), p)
+    return X_WO
+
+
+def footprint_radius(spec) -> float:
+    """Radius (m) of the smallest circle about the object's axis holding its footprint."""
+
+    vertices = np.asarray(surface_mesh(spec).vertices)
+    return float(np.max(np.linalg.norm(vertices[:, :2], axis=1)))
+
+
+def hole_polygon(hole) -> np.ndarray:
+    """The hole's outline (n, 2), counter-clockwise about its centre (m, lid frame)."""
+
+    size = hole.size or DEFAULT_SIZE[hole.kind]
+    d = dimensions(ObjectSpec(kind=hole.kind, size=size))
+    c = hole.clearance
+    shape = HOLE_SHAPES[hole.kind]
+    if shape == "circle":
+        # Circumscribed about the circle of the object's diameter plus the clearance.
+        r = (d["diameter"] / 2 + c) / math.cos(math.pi / _CIRCLE_SIDES)
+        a = 2 * math.pi * (np.arange(_CIRCLE_SIDES) + 0.5) / _CIRCLE_SIDES
+        return r * np.column_stack([np.cos(a), np.sin(a)])
+    if shape == "square":
+        # The toy's square hole: the cuboid's footprint (width x depth) fits at every
+        # quarter turn.
+        h = max(d["width"], d["depth"]) / 2 + c
+        return np.array([[h, -h], [h, h], [-h, h], [-h, -h]])
+    # A star: the prism's outline grown by the clearance along each vertex's ray.
+    r_out, r_in = d["diameter"] / 2 + c, d["inner_diameter"] / 2 + c
+    angles = math.pi * np.arange(10) / 5
+    radii = np.where(np.arange(10) % 2 == 0, r_out, r_in)
+    return np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])
+
+
+def box_pose(scenario) -> RigidTransform:
+    """``X_WB`` of the box's bottom centre (``on_table``: on the table top)."""
+    box = scenario.sorting_box
+    X = box.X_WB.GetDeterministicValue()
+    if box.on_table:
+        p = X.translation().copy()
+        p[2] = scenario.table.top_height if scenario.table is not None else 0.0
+        X = RigidTransform(X.rotation(), p)
+    return X
+
+
+def hole_centres(scenario) -> dict[str, np.ndarray]:
+    """World position of each hole's centre on top of the lid, by hole kind."""
+    box = scenario.sorting_box
+    X_WB = box_pose(scenario)
+    cell = box.size[0] / len(box.holes)
+    out = {}
+    for i, hole in enumerate(box.holes):
+        x = -box.size[0] / 2 + cell * (i + 0.5)
+        out.setdefault(hole.kind, X_WB @ np.array([x, 0.0, box.size[2]]))
+    return out
+
+
+def in_box(scenario, p_WO) -> bool:
+    """Whether the point ``p_WO`` (an object's centre) lies inside the box:
+    within the walls, above the floor, below the lid."""
+    box = scenario.sorting_box
+    p_B = box_pose(scenario).inverse() @ np.asarray(p_WO, dtype=float)
+    inner = np.array(box.size[:2]) / 2 - box.wall
+    return bool(np.all(np.abs(p_B[:2]) < inner) and box.wall < p_B[2] < box.size[2] - box.wall)
+
+
+def box_footprint_contains(scenario, p_xy, margin: float = 0.0) -> bool:
+    """Whether the point ``p_xy`` (world) is within ``margin`` of the box's footprint."""
+    box = scenario.sorting_box
+    p = box_pose(scenario).inverse() @ np.array([p_xy[0], p_xy[1], 0.0])
+    return bool(np.all(np.abs(p[:2]) < np.array(box.size[:2]) / 2 + margin))

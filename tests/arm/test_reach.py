@@ -6,8 +6,8 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.analysis import Simulator
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.apps.pick.reach import ArmReach
+from handle_drake.base.models import diagrams_dir
 from handle_drake.devices.arm.model import ARM_SPECS
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import GetPlant, MakeHandStation

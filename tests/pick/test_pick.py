@@ -5,17 +5,17 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.apps.pick.plan import DROP_HEIGHT, plan_pick
 from handle_drake.apps.pick.reach import ArmReach
 from handle_drake.apps.pick.scenes import GAP, REGION, random_scene
+from handle_drake.base.models import diagrams_dir
 from handle_drake.cli import main
 from handle_drake.scenario import LoadScenario, validate_scenario
-from handle_drake.scene.config import scene_objects
-from handle_drake.scene.plant import (
+from handle_drake.scene.config import (
     footprint_radius,
     hole_centres,
     initial_pose,
+    scene_objects,
     spec_of,
 )
 

@@ -5,11 +5,10 @@ import warnings
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from handle_drake.apps.demo import diagrams_dir
 from handle_drake.apps.perception.perceive import render_views
+from handle_drake.base.models import diagrams_dir
 from handle_drake.scenario import LoadScenario
-from handle_drake.scene.config import scene_objects
-from handle_drake.scene.plant import in_box, initial_pose
+from handle_drake.scene.config import in_box, initial_pose, scene_objects
 from handle_drake.station import GetPlant, MakeHandStation
 
 PATH = diagrams_dir() / "hamburg_setup.yaml"

@@ -6,8 +6,8 @@ from pydrake.systems.analysis import Simulator
 
 from handle_drake.geometry.objects import ObjectSpec, resting_height
 from handle_drake.scenario import LoadScenario, ScenarioError
-from handle_drake.scene.config import Hole, scene_objects
-from handle_drake.scene.plant import hole_centres, hole_polygon, in_box, lid_pieces
+from handle_drake.scene.config import Hole, hole_centres, hole_polygon, in_box, scene_objects
+from handle_drake.scene.plant import lid_pieces
 from handle_drake.station import MakeHandStation
 
 HAND_AWAY = ("hand: {kind: barrett, mount: !FixedMount "

@@ -45,7 +45,7 @@ from handle_drake.scenario import (
     default_plant_config,
 )
 from handle_drake.trial.harness import DEFAULT_LOG
-from handle_drake.trial.simulate import ScenarioRunner
+from handle_drake.trial.simulate import ScenarioRunner, script_trajectories
 
 __all__ = [
     "MidiRunResult",
@@ -164,8 +164,6 @@ def commanded_wrist_turn_deg(scenario, t0: float, t1: float) -> float:
     """The wrist's yaw change (deg) from ``t0`` to ``t1`` as the scenario's script plays
     it (linear between keyframes, as :func:`~handle_drake.trial.simulate.script_trajectories`):
     for the jog pinch, the turn the pinched wheel should make."""
-    from handle_drake.base.hands import get_hand_spec
-    from handle_drake.trial.simulate import script_trajectories
 
     spec = get_hand_spec(scenario.hand.kind)
     _, wrist = script_trajectories(scenario, np.zeros(len(spec.actuated_joint_names)))

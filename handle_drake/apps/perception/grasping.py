@@ -29,9 +29,10 @@ from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RotationMatrix
 
 from handle_drake.apps.perception.perceive import detection_error, render_views
+from handle_drake.apps.perception.scenes import TabletopScene
 from handle_drake.base.models import diagrams_dir
-from handle_drake.geometry.detect import Detection
-from handle_drake.geometry.objects import KINDS
+from handle_drake.geometry.detect import Detection, detect
+from handle_drake.geometry.objects import KINDS, ObjectSpec
 from handle_drake.grasp.planning import resting_pose
 from handle_drake.scenario import CameraConfig, LoadScenario, ObjectConfig
 from handle_drake.station import object_initial_pose
@@ -138,8 +139,6 @@ def perceive_object(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
     (:class:`handle_drake.apps.perception.scenes.SceneObject`, standing upright);
     then the table is rendered without the hand
     (:class:`~handle_drake.apps.perception.scenes.TabletopScene`)."""
-    from handle_drake.grasp.planning import resting_pose
-    from handle_drake.scenario import ObjectConfig
 
     if kind not in PLANNABLE:
         raise ValueError(f"kind: the planner grasps {list(PLANNABLE)}, got {kind!r}")
@@ -162,9 +161,6 @@ def perceive_object(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
 def _cluttered_view(kind, size, X_WO, clutter, profile, seed):
     """Detections of the object at ``X_WO`` among ``clutter`` (rendered
     without the hand)."""
-    from handle_drake.apps.perception.scenes import TabletopScene
-    from handle_drake.geometry.detect import detect
-    from handle_drake.geometry.objects import ObjectSpec
 
     scene = TabletopScene(list(clutter), profile=profile, seed=seed,
                           extra=[(ObjectSpec(kind, float(size)), X_WO)])

@@ -169,8 +169,7 @@ def detection_error(detection: Detection, scenario) -> dict:
     ``extent_mm`` (detected minus true length, width, height, mm; None for a
     mesh or a tilted object, see :func:`true_extent`) and whether the kind is
     right."""
-    from handle_drake.scene.config import scene_objects
-    from handle_drake.scene.plant import initial_pose, spec_of
+    from handle_drake.scene.config import initial_pose, scene_objects, spec_of
 
     truth = [(o, initial_pose(o, scenario.table)) for _, o in scene_objects(scenario)]
     obj, X_WO = min(truth, key=lambda t: float(np.linalg.norm(

@@ -27,6 +27,21 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from handle_drake.apps.perception.perceive import CATALOGUE_PRIMITIVE
+from handle_drake.apps.perception.perceive import true_extent as extent
+from handle_drake.base.models import diagrams_dir
+from handle_drake.devices.camera.frames import DepthFrame
+from handle_drake.devices.camera.profiles import get_profile
+from handle_drake.devices.camera.sensors import AddCameras, camera_info
+from handle_drake.geometry.objects import (
+    AddObject,
+    AddTable,
+    ObjectSpec,
+    dimensions,
+    resting_height,
+)
+from handle_drake.scenario import CameraConfig, LoadScenario
+
 __all__ = ["SceneObject", "TabletopScene", "random_scene", "match_detections", "SCENE_KINDS",
            "footprint_radius", "true_extent"]
 
@@ -51,7 +66,6 @@ class SceneObject:
     dimensions: tuple = ()  # (name, metres) overrides, as ObjectSpec takes them
 
     def spec(self):
-        from handle_drake.geometry.objects import ObjectSpec
 
         return ObjectSpec(self.kind, float(self.size), dimensions=dict(self.dimensions) or None)
 
@@ -59,7 +73,6 @@ class SceneObject:
         """The body frame's pose (mid-height on the axis: the catalogue's convention)."""
         from pydrake.math import RigidTransform, RotationMatrix
 
-        from handle_drake.geometry.objects import resting_height
 
         return RigidTransform(RotationMatrix.MakeZRotation(float(self.yaw)),
                               [float(self.xy[0]), float(self.xy[1]),
@@ -74,7 +87,6 @@ class SceneObject:
 def footprint_radius(obj: SceneObject) -> float:
     """Radius (m) of the circle about the object's axis that holds its
     footprint (a mug's handle included; a box's half-diagonal)."""
-    from handle_drake.geometry.objects import dimensions
 
     d = dimensions(obj.spec())
     if obj.kind in ("cuboid", "rotated_cuboid"):
@@ -87,7 +99,6 @@ def footprint_radius(obj: SceneObject) -> float:
 def true_extent(obj: SceneObject) -> np.ndarray:
     """What the detector should report as ``extent`` (m), see
     :func:`handle_drake.apps.perception.perceive.true_extent`."""
-    from handle_drake.apps.perception.perceive import true_extent as extent
 
     return extent(obj.spec())
 
@@ -139,11 +150,6 @@ class TabletopScene:
         from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
         from pydrake.systems.framework import DiagramBuilder
 
-        from handle_drake.apps.demo import diagrams_dir
-        from handle_drake.devices.camera.profiles import get_profile
-        from handle_drake.devices.camera.sensors import AddCameras, camera_info
-        from handle_drake.geometry.objects import AddObject, AddTable
-        from handle_drake.scenario import CameraConfig, LoadScenario
 
         self.objects = list(objects)
         for obj in self.objects:
@@ -182,7 +188,6 @@ class TabletopScene:
         self.X_WC = RigidTransform(self._pose.Eval(self.context)).GetAsMatrix4()
 
     def frame(self, time: float = 0.0):
-        from handle_drake.devices.camera.frames import DepthFrame
 
         self.context.SetTime(float(time))
         depth = np.array(self._depth.Eval(self.context).data)[:, :, 0]
@@ -218,7 +223,6 @@ def match_detections(detections, objects, table_top: float = 0.0) -> dict:
     horizontal distance of the detected centre from the object's axis."""
     from scipy.optimize import linear_sum_assignment
 
-    from handle_drake.apps.perception.perceive import CATALOGUE_PRIMITIVE
 
     truth = np.array([o.xy for o in objects], dtype=float).reshape(-1, 2)
     found = np.array([d.position[:2] for d in detections], dtype=float).reshape(-1, 2)

@@ -110,7 +110,7 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None) -
     base_xy = scenario.hand.mount.X_WB.GetDeterministicValue().translation()[:2]
     truth = scene_objects(scenario)
     if true_poses:
-        from handle_drake.scene.plant import initial_pose
+        from handle_drake.scene.config import initial_pose
 
         seen = [dc.replace(o, X_WO=_transform(initial_pose(o, scenario.table)), on_table=False,
                            fixed=True) for _, o in truth]

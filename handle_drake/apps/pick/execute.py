@@ -19,6 +19,10 @@ import time
 
 import numpy as np
 
+from handle_drake.devices.arm.model import get_arm_spec
+from handle_drake.scene.config import in_box
+from handle_drake.station import MakeHandStation
+
 __all__ = ["PickOutcome", "execute_pick", "MIN_SEGMENT"]
 
 MIN_SEGMENT = 0.4  # s
@@ -74,9 +78,6 @@ def execute_pick(scenario, plan, html=None) -> PickOutcome:
     from pydrake.systems.primitives import TrajectorySource
     from pydrake.trajectories import PiecewisePolynomial
 
-    from handle_drake.devices.arm.model import get_arm_spec
-    from handle_drake.scene.plant import in_box
-    from handle_drake.station import MakeHandStation
 
     scenario = dc.replace(scenario, cameras=[])
     meshcat = None

@@ -28,6 +28,11 @@ import time
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
+from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
+from handle_drake.geometry.objects import ObjectSpec, resting_height
+from handle_drake.grasp.planning import plan_grasp
+from handle_drake.scene.config import box_pose, hole_centres
+
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "free_path"]
 
 #: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
@@ -79,8 +84,6 @@ def _yaw(R) -> float:
 
 def _release_poses(scenario, kind, spec, X_WO, X_OB):
     """Candidate (X_WO_release, X_WB_release), nearest turn first."""
-    from handle_drake.geometry.objects import resting_height
-    from handle_drake.scene.plant import box_pose, hole_centres
 
     centre = hole_centres(scenario)[kind]
     z = centre[2] + resting_height(spec) + DROP_HEIGHT
@@ -168,9 +171,6 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     """Plans picking ``target`` (a ``kind`` of ``size`` at ``X_WO``) into its hole
     (see the module doc). ``reach`` is an :class:`~handle_drake.apps.pick.reach.ArmReach`
     of the scenario ignoring ``target``; ``q_start`` the arm's joints now."""
-    from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
-    from handle_drake.geometry.objects import ObjectSpec
-    from handle_drake.grasp.planning import plan_grasp
 
     if kind not in CLASS_ORDER:
         raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
@@ -237,7 +237,6 @@ def _solve_chain(reach, chain, waypoints, seconds) -> str:
 
 
 def _connect(reach, waypoints, seconds) -> str:
-    from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 
     start = time.perf_counter()
     hand = get_hand_spec(reach.hand_spec.name)

@@ -27,6 +27,9 @@ from pydrake.systems.framework import DiagramBuilder
 
 from handle_drake.base.hands import AddHand, get_hand_spec
 from handle_drake.devices.arm.model import ARM_INSTANCE, AddArm, get_arm_spec
+from handle_drake.geometry.objects import AddObject, AddTable
+from handle_drake.scene.config import initial_pose, scene_objects, spec_of
+from handle_drake.scene.plant import AddSortingBox
 
 __all__ = ["ArmReach", "IkResult"]
 
@@ -48,8 +51,6 @@ class ArmReach:
     """IK for the scenario's ``!Arm`` (see module doc)."""
 
     def __init__(self, scenario, ignore: tuple[str, ...] = ()):
-        from handle_drake.scene.config import scene_objects
-        from handle_drake.scene.plant import AddSortingBox, initial_pose, spec_of
 
         mount = scenario.hand.mount
         self.spec = get_arm_spec(mount.kind)
@@ -63,13 +64,11 @@ class ArmReach:
         base = plant.GetBodyByName(self.hand_spec.base_body, self.hand).body_frame()
         self.arm = AddArm(plant, mount, base, name=ARM_INSTANCE)
         if scenario.table is not None:
-            from handle_drake.geometry.objects import AddTable
 
             AddTable(plant, top_height=scenario.table.top_height,
                      size=(scenario.table.size_x, scenario.table.size_y))
         if scenario.sorting_box is not None:
             AddSortingBox(plant, scenario)
-        from handle_drake.geometry.objects import AddObject
 
         self.objects = {}
         for name, o in scene_objects(scenario):

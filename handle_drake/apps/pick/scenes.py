@@ -16,6 +16,9 @@ import math
 import numpy as np
 from pydrake.common.schema import Transform
 
+from handle_drake.scenario import ObjectConfig
+from handle_drake.scene.config import box_footprint_contains, footprint_radius, spec_of
+
 __all__ = ["random_scene", "REGION", "GAP", "SCENE_KINDS"]
 
 SCENE_KINDS = ("sphere", "cuboid")
@@ -25,8 +28,6 @@ GAP = 0.06
 
 def random_scene(scenario, seed: int):
     """A copy of ``scenario`` whose objects are 2-5 seeded random ones."""
-    from handle_drake.scenario import ObjectConfig
-    from handle_drake.scene.plant import box_footprint_contains, footprint_radius, spec_of
 
     if scenario.sorting_box is None:
         raise ValueError("--scene-seed: the scenario has no sorting_box to place objects around")

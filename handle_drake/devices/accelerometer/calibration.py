@@ -45,6 +45,7 @@ import math
 
 import numpy as np
 
+from handle_drake.devices.accelerometer.estimators import EstimatorParams
 from handle_drake.devices.accelerometer.profiles import (
     STANDARD_GRAVITY,
     DeviceProfile,
@@ -173,7 +174,6 @@ def residual_bias(profile: DeviceProfile | str, calibrated: bool,
 def device_floors(profile: DeviceProfile | str, calibrated: bool, params=None) -> dict:
     """The smallest tolerances (g, rad) the device's own errors allow (module doc):
     ``rest_norm_tol``, ``slip_norm_tol``, ``rest_angle_tol``, ``slip_angle_tol``."""
-    from handle_drake.devices.accelerometer.estimators import EstimatorParams
 
     profile = get_profile(profile)
     p = params or EstimatorParams()
@@ -204,7 +204,6 @@ def device_estimator_params(profile: DeviceProfile | str, calibrated: bool,
     """:class:`~handle_drake.devices.accelerometer.estimators.EstimatorParams` for the device: the
     ``given`` values (the scenario's ``estimators``) as they are, the others at least
     the device's floors (:func:`device_floors`)."""
-    from handle_drake.devices.accelerometer.estimators import EstimatorParams
 
     given = dict(given or {})
     base = EstimatorParams(**given)

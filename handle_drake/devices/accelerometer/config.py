@@ -31,6 +31,9 @@ import numbers
 
 from pydrake.common.schema import Transform
 
+from handle_drake.devices.accelerometer.calibration import calibrate_device, device_estimator_params
+from handle_drake.devices.accelerometer.estimators import EstimatorParams
+
 __all__ = ["AccelerometerConfig", "ESTIMATOR_MAXIMA"]
 
 #: The largest value of each estimator threshold that still means something (all > 0):
@@ -79,8 +82,6 @@ class AccelerometerConfig:
         what the device's noise and (residual) bias need
         (:func:`~handle_drake.devices.accelerometer.calibration.device_estimator_params`).
         ``calibrated``: whether the readings are (default: ``self.calibrated``)."""
-        from handle_drake.devices.accelerometer.calibration import device_estimator_params
-        from handle_drake.devices.accelerometer.estimators import EstimatorParams
 
         known = {f.name for f in dc.fields(EstimatorParams)}
         for key in self.estimators:
@@ -99,7 +100,6 @@ class AccelerometerConfig:
     def calibration(self, kind: str | None, seed: int):
         """The device's six-position calibration from its own rest readings, or None
         (``calibrated: false``, or a device without bias and noise)."""
-        from handle_drake.devices.accelerometer.calibration import calibrate_device
 
         profile = self.profile(kind)
         if not self.calibrated or (profile.noise_std_g == 0 and profile.bias_std_g == 0

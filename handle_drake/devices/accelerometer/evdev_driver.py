@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.framework import BasicVector
 
+from handle_drake.base.checks import read_text_file
+from handle_drake.base.extras import require_extra
 from handle_drake.devices.accelerometer.estimators import EstimatorParams, InstrumentSystem
 from handle_drake.devices.accelerometer.profiles import DeviceProfile, get_profile
 
@@ -105,7 +107,6 @@ def open_device(name_or_path: str, axes=(ABS_X, ABS_Y, ABS_Z)):
     """Opens an evdev device by path (``/dev/input/eventN``) or by a part of its name
     (e.g. ``"JoyWarrior"``), removes the kernel deadband ("flat") of the axes and
     returns a :class:`LiveEvents`."""
-    from handle_drake.base.extras import require_extra
 
     evdev = require_extra("evdev")  # the joywarrior extra
 
@@ -161,7 +162,6 @@ def load_events(path) -> RecordedEvents:
     larger than :data:`MAX_RECORDING_BYTES`, and a line that is not
     ``t type code value``.
     """
-    from handle_drake.base.checks import read_text_file
 
     text = read_text_file(path, "evdev_device: event recording", max_bytes=MAX_RECORDING_BYTES)
     path = Path(path)

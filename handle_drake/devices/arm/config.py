@@ -18,6 +18,8 @@ import math
 
 from pydrake.common.schema import Transform
 
+from handle_drake.devices.arm.model import ARM_SPECS
+
 __all__ = ["Arm", "validate_arm"]
 
 
@@ -48,7 +50,6 @@ class Arm:
 
 def validate_arm(arm: Arm, error) -> None:
     """Checks ``hand.mount`` when it is an :class:`Arm`; raises ``error(message)``."""
-    from handle_drake.devices.arm.model import ARM_SPECS
 
     if arm.kind not in ARM_SPECS:
         raise error(f"hand.mount.kind: unknown arm {arm.kind!r}; expected one of "

@@ -161,7 +161,6 @@ def load_frame(path: str | Path) -> DepthFrame:
     """
     from PIL import Image, UnidentifiedImageError
 
-    from handle_drake.base.checks import check_input_file, read_text_file
 
     text = read_text_file(path, "frame", max_bytes=1 << 20)  # the sidecar is < 1 kB
     path = Path(path)

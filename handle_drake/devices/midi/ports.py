@@ -26,6 +26,7 @@ import threading
 import mido
 import mido.ports
 
+from handle_drake.base.extras import require_extra
 from handle_drake.devices.midi.codec import control_message
 from handle_drake.devices.midi.mapping import MidiMapping
 
@@ -108,7 +109,6 @@ def _check_backend_installed() -> None:
     """mido's default back end (python-rtmidi) is an extra: without it, one line
     naming the extra (:class:`~handle_drake.base.extras.MissingExtraError`)."""
     if mido.backend.name == "mido.backends.rtmidi":
-        from handle_drake.base.extras import require_extra
 
         require_extra("rtmidi")
 

@@ -20,7 +20,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 from handle_drake.base.checks import ScenarioError, check_pose
-from handle_drake.devices.midi.device import AddMidiController
+from handle_drake.devices.midi.device import AddMidiController, check_mapping_on_device
 from handle_drake.devices.midi.mapping import LoadMidiMapping
 from handle_drake.devices.midi.systems import MidiControllerEncoder
 
@@ -47,7 +47,6 @@ def validate_midi_controller(config) -> None:
     if not (math.isfinite(config.scan_period) and config.scan_period > 0):
         raise ScenarioError(
             f"midi_controller.scan_period must be a finite number > 0, got {config.scan_period}")
-    from handle_drake.devices.midi.device import check_mapping_on_device
 
     try:
         check_mapping_on_device(LoadMidiMapping(config.mapping or None))

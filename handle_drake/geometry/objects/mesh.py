@@ -82,6 +82,7 @@ from pydrake.multibody.plant import CoulombFriction
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 
 from handle_drake.base.checks import check_input_file
+from handle_drake.base.orphans import die_with_parent
 from handle_drake.base.testing import reduced
 from handle_drake.geometry.objects import MassProperties, Piece
 from handle_drake.geometry.objects import surface_mesh as catalogue_surface
@@ -562,7 +563,6 @@ def _isolated(function, *args):
 def _isolated_child(send, parent_pid, function, args):
     import signal
 
-    from handle_drake.base.orphans import die_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides (see _isolated)
     die_with_parent(parent_pid)
