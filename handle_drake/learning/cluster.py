@@ -59,6 +59,7 @@ from dataclasses import dataclass
 from handle_drake.base.blas import pin_blas
 from handle_drake.learning.dask_probe import connect_client, probe_scheduler
 from handle_drake.learning.executors import (
+    ExecutorError,
     InlineExecutor,
     LocalPool,
     _check_local_workers,
@@ -106,13 +107,6 @@ QUIET_WORKER = {"distributed.worker.profile.enabled": False,
                 "distributed.admin.system-monitor.interval": "2s"}
 
 _ADDRESS = re.compile(r"^dask://(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+)(:(?P<port>[^/]*))?$")
-
-
-class ExecutorError(RuntimeError):
-    """The executor cannot run trials (no scheduler, no workers, lost scheduler).
-
-    The trial log is intact: the command resumes the run when repeated.
-    """
 
 
 # ----------------------------------------------------------------- choice

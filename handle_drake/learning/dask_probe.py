@@ -27,7 +27,7 @@ import struct
 import threading
 import time
 
-from handle_drake.learning.cluster import ExecutorError
+from handle_drake.learning.executors import ExecutorError
 
 __all__ = ["MAX_GREETING", "probe_scheduler", "connect_client"]
 

@@ -107,6 +107,13 @@ def _default_pool(objective, max_workers):
 
 
 # ------------------------------------------------------------------- pools
+class ExecutorError(RuntimeError):
+    """The executor cannot run trials (no scheduler, no workers, lost scheduler).
+
+    The trial log is intact: the command resumes the run when repeated.
+    """
+
+
 def max_local_workers() -> int:
     """Most worker processes one machine runs: 4 per CPU core (at least 8).
 
