@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.base.checks import check_input_file
+
 __all__ = ["GLOVE_SENSORS", "MAX_SAMPLE_RATE", "GloveRecording", "load_glove", "save_glove",
            "GloveFormatError"]
 

@@ -33,6 +33,8 @@ from pydrake.common.schema import Transform
 
 from handle_drake.devices.accelerometer.calibration import calibrate_device, device_estimator_params
 from handle_drake.devices.accelerometer.estimators import EstimatorParams
+from handle_drake.devices.accelerometer.profiles import get_profile
+from handle_drake.geometry.objects.instrumented import DEVICE_OBJECTS
 
 __all__ = ["AccelerometerConfig", "ESTIMATOR_MAXIMA"]
 
