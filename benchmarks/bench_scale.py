@@ -158,6 +158,8 @@ def _case(executor, folder, workers, seconds, waves) -> dict:
     assert result.n_done == n, result
     return dict(workers=workers, seconds=seconds, trials=n, elapsed=elapsed,
                 efficiency=n * seconds / (elapsed * workers), load=load,
+                # the share of a core this process got: its CPU over the case's wall time
+                core_share=sum(cpu.values()) / elapsed,
                 cpu_per_trial_ms={k: 1e3 * v / n for k, v in cpu.items()})
 
 
@@ -230,24 +232,28 @@ def main(argv=None) -> int:
                         c = case["cpu_per_trial_ms"]
                         print(f"  round {r + 1}: W={workers:4d} T={seconds:5.2f} s: "
                               f"efficiency {case['efficiency']:.3f} ({case['trials']} trials, "
-                              f"{case['elapsed']:.2f} s, load {case['load']}); CPU ms/trial "
+                              f"{case['elapsed']:.2f} s, load {case['load']}, "
+                              f"{case['core_share']:.2f} core); CPU ms/trial "
                               + ", ".join(f"{k} {v:.2f}" for k, v in c.items()), flush=True)
             log_ms.append(_log_only(folder))
 
-    print("\n| workers | trial s | efficiency (median) | rounds | load | client loop ms/trial"
-          " | dask loop | callbacks | trial threads |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("\n| workers | trial s | efficiency (median) | rounds | load | core share |"
+          " client loop ms/trial | dask loop | callbacks | trial threads |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     table = {}
     for w in WORKERS:
         for t in SECONDS:
             mine = [c for c in cases if c["workers"] == w and c["seconds"] == t]
             eff = [c["efficiency"] for c in mine]
             cost = {g: _median([c["cpu_per_trial_ms"][g] for c in mine]) for g in GROUPS}
+            share = _median([c["core_share"] for c in mine])
             table[f"{w}|{t:g}"] = dict(efficiency=_median(eff), rounds=eff,
-                                       load=[c["load"] for c in mine], cpu_per_trial_ms=cost)
+                                       load=[c["load"] for c in mine], core_share=share,
+                                       cpu_per_trial_ms=cost)
             print(f"| {w} | {t:g} | {_median(eff):.3f} | "
                   + " ".join(f"{e:.3f}" for e in eff)
-                  + f" | {'/'.join(str(c['load']) for c in mine)} | {cost['client loop']:.2f} | "
+                  + f" | {'/'.join(str(c['load']) for c in mine)} | {share:.2f} | "
+                    f"{cost['client loop']:.2f} | "
                     f"{cost['dask loop']:.2f} | {cost['dask callbacks']:.2f} | "
                     f"{cost['trial threads']:.2f} |")
     # Per-task costs for the extrapolation: the 128-worker cases (most tasks in flight).
