@@ -324,6 +324,21 @@ class DaskExecutor(Executor):
         task.add_done_callback(self._settle)  # in Dask's one callback thread
         return bridge
 
+    def submit_many(self, fn, *iterables) -> list:
+        """``fn(*args)`` for every ``args`` of ``zip(*iterables)``, sent to the scheduler
+        as one batch (``client.map``: one graph update for all, ~1 ms of the loop per
+        task instead of ~2.7 ms for one ``submit`` each here); their futures in order."""
+        tasks = self.client.map(fn, *iterables, pure=False)
+        bridges = []
+        for task in tasks:
+            bridge = Future()
+            bridge.set_running_or_notify_cancel()
+            with self._lock:
+                self._tasks[task] = bridge
+            task.add_done_callback(self._settle)
+            bridges.append(bridge)
+        return bridges
+
     def _settle(self, task):
         """Hands finished results to their bridges: every task finished by now in one
         gather (one round trip for all, not one each: ~1 ms of the client's and the

@@ -50,6 +50,7 @@ resumed run completes the interrupted batch before asking for the next.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import math
 import os
@@ -257,9 +258,12 @@ class TrialRunner:
                 # generation asks only for that generation's remaining members.
                 room = 0 if in_flight else (len(queue) if queue else
                                              self.optimizer.batch_room)
+            # An executor that takes a batch (Dask) gets the trials of this fill at once.
+            many = None if self._owns_executor else getattr(self._executor, "submit_many", None)
+            batch: list[TrialRecord] = []
             while room > 0 and (queue or (not stop and next_index < n_trials)):
                 if queue and self._deaths.get(queue[0].index):
-                    if in_flight:  # it saw its pool die: it runs alone
+                    if in_flight or batch:  # it saw its pool die: it runs alone
                         break
                     room = 1
                 room -= 1
@@ -276,7 +280,15 @@ class TrialRunner:
                     self.log.add_pending(self.run_id, next_index, x, seed, running=True)
                     record = TrialRecord(self.run_id, next_index, x, "running", seed)
                     next_index += 1
-                in_flight[self._submit(record.parameters, record.seed)] = record
+                if many is None:
+                    in_flight[self._submit(record.parameters, record.seed)] = record
+                else:
+                    batch.append(record)
+            if batch:
+                futures = many(functools.partial(_evaluate, self._shipped),
+                               [r.parameters for r in batch], [r.seed for r in batch],
+                               [self._pass_seed] * len(batch))
+                in_flight.update(zip(futures, batch, strict=True))
             if not in_flight:
                 break
             # Woken when the log's group is due too, so a finished trial is on
