@@ -40,7 +40,8 @@ it). Random search keeps twice as many trials in flight as there are
 workers (one running and one queued per worker), each new trial submitted as
 soon as one finishes. A ``distributed.Client`` (or its
 ``get_executor()``) is accepted as the executor, see
-:mod:`handle_drake.learning.cluster`. Bayesian optimisation runs in synchronous
+:mod:`handle_drake.learning.cluster`; an executor with a ``submit_many``
+(Dask's) gets each fill of trials as one batch. Bayesian optimisation runs in synchronous
 batches of its ``batch_size`` (1, sequential, by default): it proposes a batch,
 waits for all of it and tells the results in trial order, so a run depends
 only on its seed and options (not on which worker finished first) and a
