@@ -12,7 +12,13 @@ Runs side by side in one process (ratios are what count on a noisy machine):
 
 Targets (issue 2): >= 4x real time at 1 ms with point contact; reset <= 5 ms.
 
-Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick]``
+The demo case is also run against the bare plant on the station's own frames
+(``replay``: the drivers' desired states recorded from the station and held
+at every step; the object's trajectory is checked bit-identical), the floor
+that isolates what the station's Python systems and loggers cost; CPU
+seconds of this process are kept beside wall time (the machine is shared).
+
+Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo]``
 """
 
 from __future__ import annotations
@@ -49,28 +55,37 @@ class _Case:
     def __init__(self, simulator, reset, lift):
         self.simulator, self._reset, self._lift = simulator, reset, lift
         self.walls: list[float] = []
+        self.cpus: list[float] = []  # CPU seconds of this process (the machine is shared)
+        self.loads: list[float] = []
         self.lift_cm = float("nan")
+        self.z_final = float("nan")
 
     def run_once(self) -> None:
         self._reset()
         z0 = self._lift()
-        start = time.perf_counter()
+        self.loads.append(os.getloadavg()[0])
+        start, cpu = time.perf_counter(), time.process_time()
         self.simulator.AdvanceTo(TRIAL_SECONDS)
+        self.cpus.append(time.process_time() - cpu)
         self.walls.append(time.perf_counter() - start)
-        self.lift_cm = 100 * (self._lift() - z0)
+        self.z_final = self._lift()
+        self.lift_cm = 100 * (self.z_final - z0)
 
     def row(self, **labels) -> dict:
         wall = statistics.median(self.walls)
         return {**labels, "wall_s_median": wall, "realtime_factor": TRIAL_SECONDS / wall,
                 "realtime_factor_range": [TRIAL_SECONDS / max(self.walls),
                                           TRIAL_SECONDS / min(self.walls)],
+                "cpu_s_median": statistics.median(self.cpus), "cpu_s": self.cpus,
+                "wall_s": self.walls, "load": self.loads,
                 "object_lift_cm_at_2s": self.lift_cm}
 
 
-def _station_case(contact_model, time_step, approximation) -> _Case:
+def _station_case(contact_model, time_step, approximation, log=None) -> _Case:
     from handle_drake.station import GetPlant, object_body
 
-    runner = ScenarioRunner(_scenario(contact_model, time_step, approximation))
+    runner = ScenarioRunner(_scenario(contact_model, time_step, approximation),
+                            **({} if log is None else {"log": log}))
     plant = GetPlant(runner.station)
     body = object_body(plant)
     return _Case(runner.simulator, runner.reset,  # what ScenarioRunner.run does first
@@ -145,25 +160,121 @@ def _plant_case(variant: str) -> _Case:
                      simulator.get_context())).translation()[2])
 
 
+def _replay_case() -> tuple[_Case, float]:
+    """The bare plant on the station's own frames: the desired states the station's
+    hand and wrist drivers hand the plant at every 1 ms step of the demo trial
+    (recorded from one station run, held in ``TrajectorySource`` zero-order holds),
+    from the station's initial plant state. Same plant, same inputs at every step:
+    the object's trajectory must be the station's, bit for bit (its lift is
+    returned by the second value, and the lift of the replay is checked against
+    it), so this floor isolates what the station's Python systems, loggers and
+    diagram add, with none of the physics differing (the ``model`` floor drives
+    the hand without the drivers' rate limit: another motion, other contacts)."""
+    import numpy as np
+    from pydrake.multibody.plant import AddMultibodyPlant
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from handle_drake.station import AddPlantModels, GetPlant, object_body
+
+    scenario = _scenario("point", 0.001)
+    runner = ScenarioRunner(scenario)
+    station, simulator = runner.station, runner.simulator
+    source = GetPlant(station)
+    drivers = {name: station.GetSubsystemByName(name) for name in ("hand_driver", "wrist_driver")}
+    runner.reset()
+    root = simulator.get_context()
+    x0 = source.GetPositionsAndVelocities(source.GetMyContextFromRoot(root)).copy()
+    h = scenario.plant_config.time_step
+    steps = round(TRIAL_SECONDS / h)
+    samples = {name: [] for name in drivers}
+    for j in range(steps + 1):
+        if j:
+            simulator.AdvanceTo(j * h)  # stops before the updates at j h: what the plant reads
+        for name, driver in drivers.items():
+            samples[name].append(driver.GetOutputPort("desired_state").Eval(
+                driver.GetMyContextFromRoot(root)).copy())
+    body = object_body(source)
+    station_lift = body.EvalPoseInWorld(source.GetMyContextFromRoot(root)).translation()[2]
+
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(scenario.plant_config, builder)
+    AddPlantModels(plant, scenario)
+    plant.Finalize()
+    # Sample j is read by the plant's step at j h: held on [j h - h/2, (j + 1) h - h/2).
+    breaks = np.concatenate([[0.0], (np.arange(1, steps + 1) - 0.5) * h, [TRIAL_SECONDS + h]])
+    for name, instance in (("hand_driver", "hand"), ("wrist_driver", "wrist")):
+        values = np.array(samples[name]).T
+        values = np.hstack([values, values[:, -1:]])
+        hold = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(breaks,
+                                                                                    values)))
+        builder.Connect(hold.get_output_port(),
+                        plant.get_desired_state_input_port(plant.GetModelInstanceByName(instance)))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    default = diagram.CreateDefaultContext()
+    plant.SetPositionsAndVelocities(plant.GetMyMutableContextFromRoot(default), x0)
+    body = object_body(plant)
+
+    def reset():
+        simulator.get_mutable_context().SetTimeStateAndParametersFrom(default)
+        simulator.Initialize()
+
+    return _Case(simulator, reset, lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
+        simulator.get_context())).translation()[2]), station_lift
+
+
 STATION_CASES = [(c, t, "sap") for c in ("point", "hydroelastic_with_fallback")
                  for t in (0.001, 0.005)]
 STATION_CASES += [("point", t, a) for a in ("similar", "lagged") for t in (0.001, 0.005)]
 PLANT_VARIANTS = ("model", "no_self_collision", "no_contact")
 
 
-def bench_realtime(repeats: int):
+def _paired(top: _Case, bottom: _Case, what: str) -> dict:
+    """Per-round ratios top/bottom (the two ran back to back), median and range."""
+    values = [a / b for a, b in zip(getattr(top, what), getattr(bottom, what), strict=True)]
+    return {"median": statistics.median(values), "min": min(values), "max": max(values),
+            "rounds": values}
+
+
+def bench_realtime(repeats: int, demo_only: bool = False):
     """Every case once per round, ``repeats`` rounds: the cases see the same
     machine conditions, so their ratios hold even when the machine's speed
     drifts (it does here, by up to 40 % over minutes)."""
-    station = {case: _station_case(*case) for case in STATION_CASES}
-    plant = {variant: _plant_case(variant) for variant in PLANT_VARIANTS}
+    cases = STATION_CASES[:1] if demo_only else STATION_CASES
+    variants = PLANT_VARIANTS[:1] if demo_only else PLANT_VARIANTS
+    station = {case: _station_case(*case) for case in cases}
+    plant = {variant: _plant_case(variant) for variant in variants}
+    replay, station_z = _replay_case()
+    # Where the demo station's time goes: the same station without the tactile
+    # logger (its every sample evaluates the plant's contact results), and without
+    # any logger (run results then lack the logged signals: diagnosis only).
+    ablation = {"no tactile log": _station_case(*STATION_CASES[0], log=(
+                    "hand.position_measured", "object.position")),
+                "no loggers": _station_case(*STATION_CASES[0], log=())}
     for _ in range(repeats):
-        for case in [*station.values(), *plant.values()]:
+        # the demo case and its floors back to back, then the rest
+        first = [station[STATION_CASES[0]], replay, *ablation.values(), plant["model"]]
+        rest = [c for c in [*station.values(), *plant.values()] if c not in first]
+        for case in [*first, *rest]:
             case.run_once()
     rows = [station[(c, t, a)].row(contact_model=c, approximation=a, time_step_ms=t * 1e3)
-            for c, t, a in STATION_CASES]
-    floors = [plant[v].row(variant=v) for v in PLANT_VARIANTS]
-    return rows, floors
+            for c, t, a in cases]
+    floors = [plant[v].row(variant=v) for v in variants]
+    demo = station[STATION_CASES[0]]
+    same = {"station_final_object_z": float(station_z),
+            "replay_final_object_z": float(replay.z_final),
+            "bit_identical": bool(replay.z_final == station_z)}
+    overhead = {"replay": replay.row(variant="replay of the station's frames"),
+                "trajectory": same,
+                "station_over_replay_cpu": _paired(demo, replay, "cpus"),
+                "station_over_replay_wall": _paired(demo, replay, "walls"),
+                "station_over_model_cpu": _paired(demo, plant["model"], "cpus"),
+                "ablation_over_replay_cpu": {k: _paired(c, replay, "cpus")
+                                             for k, c in ablation.items()}}
+    return rows, floors, overhead
 
 
 def bench_reset(repeats: int):
@@ -190,30 +301,49 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="one repeat")
+    parser.add_argument("--demo", action="store_true",
+                        help="only the demo case (point, 1 ms, sap) and its floors")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station.json")
     args = parser.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
-    rows, floors = bench_realtime(repeats)
+    load_before = os.getloadavg()[0]
+    rows, floors, overhead = bench_realtime(repeats, args.demo)
     reset = bench_reset(repeats)
-    print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats}")
-    print(f"{'contact':<28}{'approx.':<9}{'step':>5}{'wall (s)':>10}{'x real time':>13}"
-          f"{'lift@2s (cm)':>14}")
+    print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats} "
+          f"(load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, "
+          f"{os.cpu_count()} cpus)")
+    print(f"{'contact':<28}{'approx.':<9}{'step':>5}{'wall (s)':>10}{'cpu (s)':>9}"
+          f"{'x real time':>13}{'lift@2s (cm)':>14}")
     for r in rows:
         print(f"{r['contact_model']:<28}{r['approximation']:<9}{r['time_step_ms']:>3.0f}ms"
-              f"{r['wall_s_median']:>10.2f}"
+              f"{r['wall_s_median']:>10.2f}{r['cpu_s_median']:>9.2f}"
               f"{r['realtime_factor']:>13.2f}{r['object_lift_cm_at_2s']:>14.1f}")
     print("\nthe plant alone (same script, no Python systems, no loggers), 1 ms, point, sap:")
-    for f in floors:
-        print(f"  {f['variant']:<20}{f['wall_s_median']:>8.2f} s{f['realtime_factor']:>8.2f}x"
+    for f in [overhead["replay"], *floors]:
+        print(f"  {f['variant']:<32}{f['wall_s_median']:>8.2f} s wall {f['cpu_s_median']:>6.2f} s"
+              f" cpu {f['realtime_factor']:>8.2f}x"
               f"  (range {f['realtime_factor_range'][0]:.2f}-{f['realtime_factor_range'][1]:.2f})"
               f"  lift {f['object_lift_cm_at_2s']:.1f} cm")
+    same = overhead["trajectory"]
+    print(f"replay of the station's frames: final object z {same['replay_final_object_z']!r} vs "
+          f"station {same['station_final_object_z']!r}: "
+          f"{'bit-identical' if same['bit_identical'] else 'DIFFERENT'}")
+    for key, label in (("station_over_replay_cpu", "station / replay, CPU"),
+                       ("station_over_replay_wall", "station / replay, wall"),
+                       ("station_over_model_cpu", "station / model plant, CPU")):
+        r = overhead[key]
+        print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+    for name, r in overhead["ablation_over_replay_cpu"].items():
+        print(f"station, {name} / replay, CPU: {r['median']:.3f}x "
+              f"(rounds {r['min']:.3f}-{r['max']:.3f})")
     floor = floors[0]
     print(f"station overhead at 1 ms, point: "
           f"{floor['realtime_factor'] / rows[0]['realtime_factor']:.2f}x slower than the plant")
     point_1ms = rows[0]["realtime_factor"]
-    print(f"point/hydroelastic speed ratio at 1 ms: "
-          f"{point_1ms / rows[2]['realtime_factor']:.1f}x")
+    if len(rows) > 2:
+        print(f"point/hydroelastic speed ratio at 1 ms: "
+              f"{point_1ms / rows[2]['realtime_factor']:.1f}x")
     print(f"\nreset {reset['reset_ms_median']:.2f} ms (max {reset['reset_ms_max']:.2f}) vs "
           f"rebuild {reset['rebuild_ms_median']:.0f} ms: "
           f"{reset['rebuild_over_reset']:.0f}x faster")
@@ -222,6 +352,7 @@ def main(argv=None) -> int:
           f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"realtime": rows, "plant_only": floors, "reset": reset,
+                                    "station_overhead": overhead,
                                     "cpu_count": os.cpu_count(),
                                     "load_average": os.getloadavg()}, indent=2))
     print(f"wrote {args.out}")

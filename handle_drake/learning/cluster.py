@@ -259,7 +259,8 @@ class DaskExecutor(Executor):
 
     def __init__(self, client):
         self.client = client
-        self._tasks: set = set()  # Dask futures not yet settled (a dropped one is cancelled)
+        self._tasks: dict = {}  # Dask future not yet settled -> its bridge (a dropped one
+        # is cancelled)
         self._lock = threading.Lock()
 
     @property
@@ -286,19 +287,65 @@ class DaskExecutor(Executor):
         bridge = Future()
         bridge.set_running_or_notify_cancel()
         with self._lock:
-            self._tasks.add(task)
-        task.add_done_callback(lambda done: self._settle(done, bridge))  # in its own thread
+            self._tasks[task] = bridge
+        task.add_done_callback(self._settle)  # in Dask's one callback thread
         return bridge
 
-    def _settle(self, task, bridge):
-        try:
-            # Blocks while Dask recomputes a result lost with its worker.
-            bridge.set_result(task.result())
-        except BaseException as error:  # noqa: BLE001 - handed to the runner
-            bridge.set_exception(error)
-        finally:
+    def submit_many(self, fn, *iterables) -> list:
+        """``fn(*args)`` for every ``args`` of ``zip(*iterables)``, sent to the scheduler
+        as one batch (``client.map``: one graph update for all, ~1 ms of the loop per
+        task instead of ~2.7 ms for one ``submit`` each here); their futures in order."""
+        tasks = self.client.map(fn, *iterables, pure=False)
+        bridges = []
+        for task in tasks:
+            bridge = Future()
+            bridge.set_running_or_notify_cancel()
             with self._lock:
-                self._tasks.discard(task)
+                self._tasks[task] = bridge
+            task.add_done_callback(self._settle)
+            bridges.append(bridge)
+        return bridges
+
+    def _settle(self, task):
+        """Hands finished results to their bridges: every task finished by now in one
+        gather (one round trip for all, not one each: ~1 ms of the client's and the
+        scheduler's loop per task here, bench_scale), the rest one by one."""
+        with self._lock:
+            if task not in self._tasks:  # settled with an earlier batch
+                return
+            ready = [t for t in self._tasks if t.status == "finished"]
+            if task not in ready:
+                ready.append(task)
+        finished = [t for t in ready if t.status == "finished"]
+        alone = [t for t in ready if t.status != "finished"]
+        if len(finished) > 1:
+            try:
+                results = self.client.gather(finished)
+            except BaseException:  # noqa: BLE001 - e.g. a result lost with its worker
+                alone += finished
+            else:
+                for done, result in zip(finished, results, strict=True):
+                    self._resolve(done, result)
+        else:
+            alone += finished
+        for done in alone:
+            try:
+                # Blocks while Dask recomputes a result lost with its worker.
+                result = done.result()
+            except BaseException as error:  # noqa: BLE001 - handed to the runner
+                self._resolve(done, error=error)
+            else:
+                self._resolve(done, result)
+
+    def _resolve(self, task, result=None, error=None):
+        with self._lock:
+            bridge = self._tasks.pop(task, None)
+        if bridge is None:
+            return
+        if error is None:
+            bridge.set_result(result)
+        else:
+            bridge.set_exception(error)
 
     def ship(self, objective):
         return _ShippedOnce(objective)

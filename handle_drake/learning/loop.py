@@ -2,9 +2,14 @@
 
 Resume semantics (no trial lost, none repeated):
 
-1. Before a trial is evaluated its row is written as ``pending`` (parameters
-   and trial seed), then ``running`` when handed to the executor, then
-   ``done`` (metric) or ``failed`` (error) in one transaction each.
+1. Before a trial is evaluated its row is written as ``running`` when handed
+   to the executor (parameters and trial seed; ``pending`` first for a
+   re-run one), then
+   ``done`` (metric) or ``failed`` (error). The writes are committed in
+   groups (:meth:`TrialLog.grouped`: every ``commit_every`` finished trials or
+   ``commit_seconds`` after the group's first write, whichever comes first),
+   so the file always holds a prefix of the writes: a kill -9 loses at most
+   the last group, whose trials rows 2-3 below run again.
 2. On resume the optimiser is rebuilt by replaying ``tell``/``tell_failure``
    of the ``done``/``failed`` rows in trial order into a fresh optimiser with
    the run's seed and options (its state is a function of exactly that, see
@@ -35,7 +40,8 @@ it). Random search keeps twice as many trials in flight as there are
 workers (one running and one queued per worker), each new trial submitted as
 soon as one finishes. A ``distributed.Client`` (or its
 ``get_executor()``) is accepted as the executor, see
-:mod:`handle_drake.learning.cluster`. Bayesian optimisation runs in synchronous
+:mod:`handle_drake.learning.cluster`; an executor with a ``submit_many``
+(Dask's) gets each fill of trials as one batch. Bayesian optimisation runs in synchronous
 batches of its ``batch_size`` (1, sequential, by default): it proposes a batch,
 waits for all of it and tells the results in trial order, so a run depends
 only on its seed and options (not on which worker finished first) and a
@@ -44,6 +50,8 @@ resumed run completes the interrupted batch before asking for the next.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import json
 import math
 import os
@@ -62,9 +70,14 @@ from handle_drake.learning.executors import (
     _evaluate,
     _evaluate_in_worker,
 )
-from handle_drake.learning.log import TrialLog, TrialLogError, TrialRecord
+from handle_drake.learning.log import TrialLog, TrialLogError, TrialRecord, check_group
 from handle_drake.learning.optim.base import _derived_seed, check_bounds
 from handle_drake.learning.optim.bo import make_optimizer
+
+#: Default group commits of a run's log: a transaction per 256 finished trials, or 0.25 s
+#: after its first write (benchmarks/bench_trial_log.py).
+COMMIT_EVERY = 256
+COMMIT_SECONDS = 0.25
 
 
 @dataclass
@@ -116,6 +129,11 @@ class TrialRunner:
             batch size of a synchronous optimiser, else ``batch_size`` if
             given, else ``os.cpu_count()`` for the default pool and 1 for a
             given executor.
+        commit_every, commit_seconds: group commits of the log (see
+            :meth:`TrialLog.grouped`): one transaction per ``commit_every``
+            finished trials, at most ``commit_seconds`` after its first write.
+            ``commit_every=None``: one transaction per write (each state
+            change of each trial durable at once, ~3 fsyncs a trial).
         batch_size: trials in flight at once (default ``workers``, twice that
             for an optimiser without a batch size of its own, e.g. random
             search, on an executor other than the inline one: a trial waits
@@ -133,6 +151,8 @@ class TrialRunner:
         batch_size=None,
         progress=True,
         workers: int | None = None,
+        commit_every: int | None = COMMIT_EVERY,
+        commit_seconds: float = COMMIT_SECONDS,
     ):
         if not callable(objective):
             raise TypeError(f"objective must be callable, got {objective!r}")
@@ -170,6 +190,9 @@ class TrialRunner:
                 # finishes one instead of idling while this process gets the result,
                 # logs it and submits the next (measured: ~30 ms a trial on Dask).
                 batch_size = 2 * workers
+        if commit_every is not None:
+            check_group(commit_every, commit_seconds)
+        self.commit_every, self.commit_seconds = commit_every, commit_seconds
         self.objective = objective
         self.optimizer = optimizer
         self.log = log
@@ -209,65 +232,88 @@ class TrialRunner:
             raise ValueError(f"n_trials must be a non-negative integer, got {n_trials!r}")
         queue, next_index = self._replay()
         finished = next_index - len(queue)
-        in_flight: dict[Future, TrialRecord] = {}
-        untold: list = []  # (trial index, tell) of logged trials the optimiser has yet to see
-        stop = False
         bar = _progress_bar(n_trials, finished, self.run_id, self.progress)
+        group = (self.log.grouped(self.commit_every, self.commit_seconds)
+                 if self.commit_every is not None else contextlib.nullcontext())
         try:
-            while True:
-                # A synchronous (BO) batch starts only once the last one is in,
-                # and an interrupted batch is finished on its own first.
-                room = self.batch_size - len(in_flight)
-                if self.synchronous:
-                    # A generational optimiser (a swarm) resumed in the middle of a
-                    # generation asks only for that generation's remaining members.
-                    room = 0 if in_flight else (len(queue) if queue else
-                                                 self.optimizer.batch_room)
-                while room > 0 and (queue or (not stop and next_index < n_trials)):
-                    if queue and self._deaths.get(queue[0].index):
-                        if in_flight:  # it saw its pool die: it runs alone
-                            break
-                        room = 1
-                    room -= 1
-                    if queue:
-                        record = queue.pop(0)
-                    else:
-                        x = self.optimizer.ask()
-                        if self.optimizer.converged:
-                            stop = True
-                            break
-                        seed = _derived_seed(self.run_seed, next_index)
-                        self.log.add_pending(self.run_id, next_index, x, seed)
-                        record = TrialRecord(self.run_id, next_index, x, "pending", seed)
-                        next_index += 1
-                    self.log.mark_running(self.run_id, record.index)
-                    in_flight[self._submit(record.parameters, record.seed)] = record
-                if not in_flight:
-                    break
-                completed, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
-                for future in sorted(completed, key=lambda f: in_flight[f].index):
-                    record = in_flight.pop(future)
-                    # Logged at once (nothing is lost if the batch is killed);
-                    # a synchronous batch is told in trial order once complete.
-                    tell = self._finish(record, future)
-                    if tell is None:  # its worker died: it runs again
-                        queue = sorted([*queue, record], key=lambda r: r.index)
-                        continue
-                    untold.append((record.index, tell))
-                    bar.update(1)
-                if not self.synchronous or not (in_flight or queue):
-                    for _, tell in sorted(untold, key=lambda item: item[0]):
-                        tell()
-                    untold.clear()
-                    best = self.optimizer.best
-                    if best is not None:
-                        bar.set_postfix(best=f"{best.y:.4g}")
+            with group:  # leaving it (an exception too) commits what was logged
+                self._loop(n_trials, queue, next_index, bar)
         finally:
             bar.close()
             if self._owns_executor and self._executor is not None:
                 self._executor.shutdown(wait=True, cancel_futures=True)
                 self._executor = None
         return self.result()
+
+    def _loop(self, n_trials, queue, next_index, bar) -> None:
+        in_flight: dict[Future, TrialRecord] = {}
+        untold: list = []  # (trial index, tell) of logged trials the optimiser has yet to see
+        stop = False
+        while True:
+            # A synchronous (BO) batch starts only once the last one is in,
+            # and an interrupted batch is finished on its own first.
+            room = self.batch_size - len(in_flight)
+            if self.synchronous:
+                # A generational optimiser (a swarm) resumed in the middle of a
+                # generation asks only for that generation's remaining members.
+                room = 0 if in_flight else (len(queue) if queue else
+                                             self.optimizer.batch_room)
+            # An executor that takes a batch (Dask) gets the trials of this fill at once.
+            many = None if self._owns_executor else getattr(self._executor, "submit_many", None)
+            batch: list[TrialRecord] = []
+            while room > 0 and (queue or (not stop and next_index < n_trials)):
+                if queue and self._deaths.get(queue[0].index):
+                    if in_flight or batch:  # it saw its pool die: it runs alone
+                        break
+                    room = 1
+                room -= 1
+                if queue:
+                    record = queue.pop(0)
+                    self.log.mark_running(self.run_id, record.index)
+                else:
+                    x = self.optimizer.ask()
+                    if self.optimizer.converged:
+                        stop = True
+                        break
+                    seed = _derived_seed(self.run_seed, next_index)
+                    # written as running at once (pending -> running in one write)
+                    self.log.add_pending(self.run_id, next_index, x, seed, running=True)
+                    record = TrialRecord(self.run_id, next_index, x, "running", seed)
+                    next_index += 1
+                if many is None:
+                    in_flight[self._submit(record.parameters, record.seed)] = record
+                else:
+                    batch.append(record)
+            if batch:
+                futures = many(functools.partial(_evaluate, self._shipped),
+                               [r.parameters for r in batch], [r.seed for r in batch],
+                               [self._pass_seed] * len(batch))
+                in_flight.update(zip(futures, batch, strict=True))
+            if not in_flight:
+                break
+            # Woken when the log's group is due too, so a finished trial is on
+            # disk at most commit_seconds after it came in, however long the rest run.
+            completed, _ = wait(list(in_flight), timeout=self.log.due_in(),
+                                return_when=FIRST_COMPLETED)
+            self.log.commit_if_due()
+            for future in sorted(completed, key=lambda f: in_flight[f].index):
+                record = in_flight.pop(future)
+                # Logged at once (committed with its group: nothing is lost if
+                # the batch is killed); a synchronous batch is told in trial
+                # order once complete.
+                tell = self._finish(record, future)
+                if tell is None:  # its worker died: it runs again
+                    queue = sorted([*queue, record], key=lambda r: r.index)
+                    continue
+                untold.append((record.index, tell))
+                bar.update(1)
+            if not self.synchronous or not (in_flight or queue):
+                for _, tell in sorted(untold, key=lambda item: item[0]):
+                    tell()
+                untold.clear()
+                best = None if bar.disable else self.optimizer.best  # O(trials): if shown
+                if best is not None:
+                    bar.set_postfix(best=f"{best.y:.4g}")
 
     def _finish(self, record: TrialRecord, future: Future):
         """Logs the trial's outcome; returns the call that tells the optimiser, or None
@@ -355,6 +401,8 @@ def run_experiment(
     optimizer_options: dict | None = None,
     batch_size: int | None = None,
     workers: int | None = None,
+    commit_every: int | None = COMMIT_EVERY,
+    commit_seconds: float = COMMIT_SECONDS,
 ) -> ExperimentResult:
     """Optimise ``objective`` over ``bounds``, logging every trial to ``db_path``; resumable.
 
@@ -364,7 +412,8 @@ def run_experiment(
     threshold. The run is identified by ``run_id`` (default
     ``"<objective name>-<strategy>-seed<seed>"``); resuming with a different
     strategy, bounds, seed, objective name or optimiser options raises
-    ``ValueError``.
+    ``ValueError``. ``commit_every``/``commit_seconds``: the log's group
+    commits (:class:`TrialRunner`).
     """
     bounds = check_bounds(bounds)
     options = dict(optimizer_options or {})
@@ -390,5 +439,7 @@ def run_experiment(
             batch_size=batch_size,
             progress=progress,
             workers=workers,
+            commit_every=commit_every,
+            commit_seconds=commit_seconds,
         )
         return runner.run(n_trials)
