@@ -39,12 +39,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from handle_drake.blas import pin_blas
+from handle_drake.base.blas import pin_blas
 
 pin_blas(force=False)
 
 from handle_drake.learning import InlineExecutor, TrialLog, run_experiment  # noqa: E402
-from handle_drake.learning.runner import COMMIT_EVERY, COMMIT_SECONDS  # noqa: E402
+from handle_drake.learning.loop import COMMIT_EVERY, COMMIT_SECONDS  # noqa: E402
 
 BOUNDS = [[-1.0, 1.0], [-1.0, 1.0]]
 CASES = ("runner grouped", "runner per write", "log grouped", "log per write")
