@@ -75,8 +75,9 @@ def table(seeds, budget, db, workers, options) -> dict:
     for optimizer in OPTIMIZERS:
         runs = []
         for seed in seeds:
-            run = run_inhand("screw_cap", optimizer, budget, workers, seed, db,
-                             progress=False, **options)
+            task = "fingertip_cylinder" if options["free"] else "screw_cap"
+            run = run_inhand(task, optimizer, budget, workers, seed, db, progress=False,
+                             **{k: v for k, v in options.items() if k != "free"})
             s = run.summary()
             runs.append({"seed": seed, "trials": s["done"], "to_target": s["trials_to_target"],
                          "best_turn_deg": s["best_held_rotation_deg"],
@@ -120,16 +121,21 @@ def main(argv=None) -> int:
     p.add_argument("--resimulate", action="store_true")
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
     p.add_argument("--budget", type=int, default=60)
-    p.add_argument("--target-deg", type=float, default=90.0)
+    p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
+    p.add_argument("--target-deg", type=float, default=None,
+                   help="default: 90 (screw cap), 60 (fingertip cylinder)")
     p.add_argument("--gaits", type=int, default=1)
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
-    options = {"target_deg": args.target_deg, "n_gaits": args.gaits}
+    if args.target_deg is None:
+        args.target_deg = 90.0 if args.task == "screw_cap" else 60.0
+    options = {"target_deg": args.target_deg, "n_gaits": args.gaits,
+               "free": args.task == "fingertip_cylinder"}
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
-    key = f"target{args.target_deg:g}-gaits{args.gaits}"
+    key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}"
     entry = result.setdefault(key, {})
     if args.base_rate:
         entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)

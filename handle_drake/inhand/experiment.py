@@ -57,6 +57,9 @@ def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
             "n_particles": n_particles, "inhand_version": 1}
 
 
+#: The tasks of :mod:`handle_drake.inhand.screw_cap` (held by the fingers).
+FINGER_TASKS = ("screw_cap", "fingertip_cylinder")
+
 #: Particles (CMA-ES: population) per iteration: the report uses 10; a
 #: thousand already spends a 1000-trial budget in one iteration.
 MAX_PARTICLES = 1000
@@ -88,10 +91,10 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if high is not None and value > high:
             raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
-    if task == "screw_cap":
+    if task in FINGER_TASKS:
         from handle_drake.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
 
-        trial = ScrewCapTrial(ScrewCapTask(**task_options))
+        trial = ScrewCapTrial(ScrewCapTask(free=task == "fingertip_cylinder", **task_options))
     else:
         trial = InHandTrial(InHandTask(task=task, **task_options))
     opt = make_inhand_optimizer(optimizer, trial.bounds, seed, n_particles,
@@ -99,7 +102,7 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
                                 min_active=int(trial.dims_per_part[0]))
     config = _config(trial, optimizer, n_particles)
     run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
-    if task == "screw_cap":  # the settings' fingerprint: other settings, another run
+    if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
         from handle_drake.inhand.screw_cap import scenario_fingerprint
 
         run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))

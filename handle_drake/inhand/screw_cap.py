@@ -67,7 +67,10 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
 from handle_drake.hands import AddHand, actuated_position_limits, get_hand_spec
@@ -99,6 +102,9 @@ class ScrewCapModel:
     # the cap's centre in the world (the hand's forearm is at the origin, palm up)
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
+    # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
+    # "fingertip cylinder"); its turn is read from its pose
+    free: bool = False
 
     def validate(self) -> None:
         for name in ("diameter", "length", "mass", "coulomb_torque", "stiction_speed", "mu",
@@ -216,36 +222,44 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None):
     R_axis = RollPitchYaw(-np.pi / 2, 0, 0)
     centre = np.asarray(cap.position, dtype=float)
     instance = plant.AddModelInstance("screw_cap")
-    bottle = plant.AddRigidBody("bottle", instance, SpatialInertia(
-        0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
-                                                    cap.bottle_length, [0, 0, 1])))
-    # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
-    X_WB = RigidTransform(R_axis, centre + [0, (cap.length + cap.bottle_length) / 2 + 0.002, 0])
-    plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
     body = plant.AddRigidBody("cap", instance, SpatialInertia(
         cap.mass, np.zeros(3), UnitInertia.SolidCylinder(cap.diameter / 2, cap.length,
                                                          [0, 0, 1])))
-    for b, shape, rgba in ((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
-                            [0.3, 0.6, 0.9, 0.5]),
-                           (body, Cylinder(cap.diameter / 2, cap.length), [0.9, 0.2, 0.2, 1])):
+    shapes = [(body, Cylinder(cap.diameter / 2, cap.length), [0.9, 0.2, 0.2, 1])]
+    bottle = joint = None
+    if not cap.free:
+        bottle = plant.AddRigidBody("bottle", instance, SpatialInertia(
+            0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
+                                                        cap.bottle_length, [0, 0, 1])))
+        # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
+        X_WB = RigidTransform(R_axis, centre + [0, (cap.length + cap.bottle_length) / 2
+                                                + 0.002, 0])
+        plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
+        shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
+                       [0.3, 0.6, 0.9, 0.5]))
+    for b, shape, rgba in shapes:
         plant.RegisterCollisionGeometry(b, RigidTransform(), shape, f"{b.name()}_collision",
                                         _proximity(cap.mu))
         plant.RegisterVisualGeometry(b, RigidTransform(), shape, f"{b.name()}_visual",
                                      np.array(rgba))
-    # revolute joint about the cap's own z (= world y): the bottle's axis
-    mouth = plant.AddFrame(FixedOffsetFrame("bottle_mouth", plant.world_frame(),
-                                            RigidTransform(R_axis, centre), instance))
-    joint = plant.AddJoint(RevoluteJoint("cap_thread", mouth, body.body_frame(), [0, 0, 1],
-                                         damping=cap.viscous))
-    actuator = plant.AddJointActuator("cap_thread_friction", joint,
-                                      effort_limit=cap.coulomb_torque)
-    actuator.set_controller_gains(PdControllerGains(
-        p=0.0, d=cap.coulomb_torque / cap.stiction_speed))
+    if not cap.free:
+        # revolute joint about the cap's own z (= world y): the bottle's axis
+        mouth = plant.AddFrame(FixedOffsetFrame("bottle_mouth", plant.world_frame(),
+                                                RigidTransform(R_axis, centre), instance))
+        joint = plant.AddJoint(RevoluteJoint("cap_thread", mouth, body.body_frame(), [0, 0, 1],
+                                             damping=cap.viscous))
+        actuator = plant.AddJointActuator("cap_thread_friction", joint,
+                                          effort_limit=cap.coulomb_torque)
+        actuator.set_controller_gains(PdControllerGains(
+            p=0.0, d=cap.coulomb_torque / cap.stiction_speed))
+    else:
+        plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(R_axis, centre))
     plant.Finalize()
-    # the bottle and its cap do not collide with each other (the thread is the joint)
-    inspector_ids = [plant.GetCollisionGeometriesForBody(b) for b in (bottle, body)]
-    scene_graph.collision_filter_manager().Apply(CollisionFilterDeclaration().ExcludeWithin(
-        GeometrySet(inspector_ids[0] + inspector_ids[1])))
+    if bottle is not None:
+        # the bottle and its cap do not collide with each other (the thread is the joint)
+        ids = [plant.GetCollisionGeometriesForBody(b) for b in (bottle, body)]
+        scene_graph.collision_filter_manager().Apply(CollisionFilterDeclaration().ExcludeWithin(
+            GeometrySet(ids[0] + ids[1])))
 
     lower, upper = actuated_position_limits(spec, 1.0)
     q0 = np.array([float(scenario.initial_position.get(n, 0.0)) for n in _NAMES])
@@ -258,8 +272,12 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None):
     builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
     builder.Connect(driver.GetOutputPort("desired_state"),
                     plant.get_desired_state_input_port(hand))
-    zero = builder.AddNamedSystem("cap_friction_reference", ConstantVectorSource(np.zeros(2)))
-    builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+    if joint is not None:
+        zero = builder.AddNamedSystem("cap_friction_reference",
+                                      ConstantVectorSource(np.zeros(2)))
+        builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+    reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(plant, body))
+    builder.Connect(reverse.get_output_port(), plant.get_applied_spatial_force_input_port())
     parameters = scenario.parameters or None
     source = builder.AddNamedSystem("motion", GaitMotionSource(
         gist, q0, scenario.gait_duration, scenario.n_frames, scenario.n_gaits,
@@ -275,25 +293,60 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None):
     hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
                    for i in plant.GetBodyIndices(hand)}
     return dict(diagram=diagram, plant=plant, source=source, joint=joint, cap=body,
-                bottle=bottle, hand_bodies=hand_bodies, q0=q0, gist=gist)
+                bottle=bottle, hand_bodies=hand_bodies, q0=q0, gist=gist, reverse=reverse,
+                weight=cap.mass * float(np.linalg.norm(plant.gravity_field().gravity_vector())))
+
+
+class ReversedGravity(LeafSystem):
+    """From ``start`` (s, a numeric parameter; default never) on, a force ``-2 m g`` on the
+    body at its centre of mass: its weight reversed (the hand turned palm down, for it)."""
+
+    def __init__(self, plant, body):
+        super().__init__()
+        self._index = body.index()
+        self._force = -2.0 * body.default_mass() * plant.gravity_field().gravity_vector()
+        self._start = self.DeclareNumericParameter(BasicVector([np.inf]))
+        self.DeclareAbstractOutputPort(
+            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
+            self._calc)
+
+    def set_start(self, context, start: float) -> None:
+        context.get_mutable_numeric_parameter(self._start).SetAtIndex(0, float(start))
+
+    def _calc(self, context, output):
+        start = context.get_numeric_parameter(self._start).GetAtIndex(0)
+        forces = []
+        if context.get_time() >= start - 1e-9:
+            f = ExternallyAppliedSpatialForce()
+            f.body_index = self._index
+            f.p_BoBq_B = np.zeros(3)
+            f.F_Bq_W = SpatialForce(np.zeros(3), self._force)
+            forces.append(f)
+        output.set_value(forces)
 
 
 def contact_summary(plant, plant_context, built) -> dict:
-    """Hand bodies touching the cap, and the palm's normal force on bottle and cap (N)."""
+    """From the plant's contact results: hand bodies touching the cap (or free cylinder),
+    the palm's contact force on bottle and cap (N, magnitude), and the upward force (N,
+    against gravity) each hand body exerts on the object."""
     results = plant.get_contact_results_output_port().Eval(plant_context)
-    cap_i, bottle_i = int(built["cap"].index()), int(built["bottle"].index())
+    cap_i = int(built["cap"].index())
+    bottle_i = int(built["bottle"].index()) if built["bottle"] is not None else -1
     hand = built["hand_bodies"]
-    touching, palm_force = set(), 0.0
+    touching, palm_force, lift = set(), 0.0, {}
     for k in range(results.num_point_pair_contacts()):
         info = results.point_pair_contact_info(k)
         a, b = int(info.bodyA_index()), int(info.bodyB_index())
-        for mine, other in ((a, b), (b, a)):
+        for mine, other, sign in ((a, b, -1.0), (b, a, 1.0)):
             if mine in (cap_i, bottle_i) and other in hand:
+                name = hand[other]
                 if mine == cap_i:
-                    touching.add(hand[other])
-                if hand[other] == "palm":
+                    touching.add(name)
+                    # contact_force() is the force on body B: on the object it is sign * it
+                    lift[name] = lift.get(name, 0.0) + sign * float(info.contact_force()[2])
+                if name == "palm":
                     palm_force += float(np.linalg.norm(info.contact_force()))
-    return {"touching": sorted(touching), "palm_force": palm_force}
+    return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
 
 
 # ------------------------------------------------------------------ the trial
@@ -318,6 +371,17 @@ class ScrewCapTask:
     coulomb_torque: float = 0.01  # N m
     viscous: float = 1.0e-3  # N m s / rad
     cap_position: tuple = (0.405, -0.02, 0.07)
+    # The fingertip cylinder: the same hand and gist, a free cylinder pinched between thumb
+    # and fingers (no bottle, no joint) at ``free_position``; a trial then ends with its
+    # weight reversed for ``reverse_time`` (the hand palm down, for it): held only if it
+    # stays (moves < ``reverse_travel``) and the fingers still touch it.
+    free: bool = False
+    free_position: tuple = (0.387, -0.025, 0.066)
+    free_diameter: float = 0.055
+    free_mass: float = 0.03
+    reverse_time: float = 0.5
+    reverse_travel: float = 0.01  # m
+    drop: float = 0.015  # m below the start: dropped (free cylinder)
 
     def __post_init__(self):
         for name in ("target_deg", "gait_duration", "sample_period", "time_step",
@@ -382,6 +446,10 @@ class ScrewCapOutcome:
     gripped_at_start: list  # hand bodies touching the cap in the settled grasp
     palm_touched: bool  # the palm touched bottle or cap at some sample
     palm_force_max: float  # N
+    # the palm's upward force on the object / its weight, at the end of the hold
+    palm_weight_share: float
+    # free cylinder: still held after its weight was reversed (None: not run, or a cap)
+    survived_reversal: bool | None
     checks_passed: int
     completed: bool
     reached_target: bool
@@ -431,6 +499,8 @@ class ScrewCapTrial:
     @property
     def name(self) -> str:
         c = self.config
+        if c.free:
+            return f"fingertip-cylinder-{c.target_deg:g}deg-{c.n_gaits}gait"
         return f"screwcap-{c.target_deg:g}deg-{c.n_gaits}gait"
 
     @cached_property
@@ -469,7 +539,9 @@ class ScrewCapTrial:
         parameters = self.gist.initial_parameters() if x is None else self._check(x)
         return ScrewCapScenario(
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
-                              position=[float(v) for v in c.cap_position]),
+                              position=[float(v) for v in c.cap_position]) if not c.free else
+            ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
+                          position=[float(v) for v in c.free_position]),
             initial_position={n: float(v) for n, v in zip(_NAMES, q0, strict=True) if v != 0},
             time_step=c.time_step, settle_time=c.settle_time, gist_name=self.gist.name,
             gist=ScrewCapScenario.gist_data(self.gist),
@@ -523,14 +595,19 @@ class ScrewCapTrial:
         c = self.config
         built = self._build(meshcat)
         simulator, plant, joint = built["simulator"], built["plant"], built["joint"]
+        body = built["cap"]
         start_wall = time.perf_counter()
         context = simulator.get_mutable_context()
         context.SetTimeStateAndParametersFrom(built["settled"])
         source = built["source"]
         source.set_parameters(source.GetMyContextFromRoot(context), x)
+        reverse = built["reverse"]
+        reverse.set_start(reverse.GetMyContextFromRoot(context), np.inf)
         plant_context = plant.GetMyContextFromRoot(context)
         counts = ScrewCapModel().encoder_counts
-        q_start = joint.get_angle(plant_context)
+        X0 = plant.EvalBodyPoseInWorld(plant_context, body)
+        R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
+        q_start = joint.get_angle(plant_context) if joint is not None else 0.0
         simulator.Initialize()
         if html is not None:
             early_stop = False
@@ -541,13 +618,24 @@ class ScrewCapTrial:
         matches = np.zeros(samples.size, dtype=bool)
         turns, truths, contacts = [], [], []
         st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                  palm_max=0.0, next_check=0)
+                  palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
+
+        def turn_now():
+            if joint is not None:  # the plant's joint (truth) and its encoder's count
+                truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
+                return truth, float(np.round(truth / 360.0 * counts) * 360.0 / counts)
+            # the free cylinder: about its own axis, unwrapped; the fingers' flex strokes
+            # turn it about -z of its frame (measured), so that direction counts positive
+            R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
+            raw = -float(np.arctan2(R[1, 0], R[0, 0]))
+            st["angle"] += (raw - st["previous"] + np.pi) % (2 * np.pi) - np.pi
+            st["previous"] = raw
+            return float(np.degrees(st["angle"])), float(np.degrees(st["angle"]))
+
         try:
             for i, t in enumerate(samples):
                 simulator.AdvanceTo(float(t))
-                truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
-                # the encoder: an incremental count of the joint's angle since the start
-                turn = float(np.round(truth / 360.0 * counts) * 360.0 / counts)
+                truth, turn = turn_now()
                 summary = contact_summary(plant, plant_context, built)
                 fingers = [b for b in summary["touching"] if b != "palm"]
                 if fingers:
@@ -555,6 +643,9 @@ class ScrewCapTrial:
                 st["palm_max"] = max(st["palm_max"], summary["palm_force"])
                 st["palm"] = st["palm"] or summary["palm_force"] > 0
                 gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+                if joint is None:  # a free cylinder must also not have dropped
+                    p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+                    gripped = gripped and p[2] - p0[2] > -c.drop
                 turns.append(turn)
                 truths.append(truth)
                 contacts.append(summary["touching"])
@@ -570,6 +661,19 @@ class ScrewCapTrial:
                         raise _EarlyStop
         except _EarlyStop:
             st["stopped"] = True
+        # the palm's share of the object's weight at the end (before any reversal)
+        final = contact_summary(plant, plant_context, built)
+        palm_share = final["lift"].get("palm", 0.0) / built["weight"]
+        survived = None
+        if joint is None and not st["stopped"]:
+            # weight reversed for reverse_time: the hand turned palm down, for the object
+            p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+            reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
+            simulator.AdvanceTo(c.total_time + c.reverse_time)
+            p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+            touching = contact_summary(plant, plant_context, built)["touching"]
+            survived = bool(np.linalg.norm(p - p_end) < c.reverse_travel
+                            and any(b != "palm" for b in touching))
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
@@ -578,14 +682,16 @@ class ScrewCapTrial:
             Path(html).write_text(meshcat.StaticHtml())
         passed = st["passed"]
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
-                       and not st["palm"])
+                       and not st["palm"] and survived is not False)
         if st["failed"]:
             matches[samples > checks[passed] + step] = False
         score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
         return ScrewCapOutcome(
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
             max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
-            palm_touched=st["palm"], palm_force_max=st["palm_max"], checks_passed=passed,
+            palm_touched=st["palm"], palm_force_max=st["palm_max"],
+            palm_weight_share=float(palm_share), survived_reversal=survived,
+            checks_passed=passed,
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)

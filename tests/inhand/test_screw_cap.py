@@ -95,3 +95,25 @@ def test_bad_settings():
         ScrewCapTask(n_gaits=0)
     with pytest.raises(ValueError, match="parameters"):
         ScrewCapTrial().evaluate(np.zeros(3))
+
+
+@pytest.fixture(scope="module")
+def fingertip():
+    return ScrewCapTrial(ScrewCapTask(free=True, target_deg=60.0))
+
+
+def test_the_fingertip_cylinder_is_held_by_the_fingers_and_survives_palm_down(fingertip):
+    # a free cylinder pinched by thumb and fingers from the demonstration's first frame:
+    # the palm does not touch it, and a known stroke turns it and keeps it through 0.5 s
+    # of reversed weight (the hand palm down, for it)
+    outcome = fingertip.evaluate(_stroke(fingertip), early_stop=False)
+    assert "thdistal" in outcome.gripped_at_start
+    assert any(b.startswith(("ff", "mf")) for b in outcome.gripped_at_start)
+    assert not outcome.palm_touched and outcome.palm_weight_share == 0.0
+    assert outcome.turn_deg >= 60.0 and outcome.survived_reversal is True
+    assert outcome.reached_target and outcome.score >= fingertip.target_score
+    # the demonstration's own motion releases the grip at the end: the reversed weight
+    # pulls the cylinder out of the hand, so that trial does not count as held
+    demo = fingertip.evaluate(fingertip.gist.initial_parameters(), early_stop=False)
+    assert demo.survived_reversal is False and not demo.reached_target
+    assert demo.score < fingertip.target_score
