@@ -69,10 +69,10 @@ def base_rate(n, seed, db, workers, options) -> dict:
             "run_id": run_id}
 
 
-def table(seeds, budget, db, workers, options) -> dict:
+def table(seeds, budget, db, workers, options, optimizers=OPTIMIZERS) -> dict:
     rows = {}
     best_trials = []
-    for optimizer in OPTIMIZERS:
+    for optimizer in optimizers:
         runs = []
         for seed in seeds:
             task = "fingertip_cylinder" if options["free"] else "screw_cap"
@@ -114,12 +114,59 @@ def resimulate(best_trials) -> list:
     return out
 
 
+def speed(rounds: int, options) -> dict:
+    """A screw-cap trial against the bare plant on the same frames from the same state."""
+    import time
+
+    from pydrake.systems.analysis import Simulator
+
+    from handle_drake.inhand.screw_cap import build_screw_cap
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written stroke
+        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    built = trial._build()
+    bare = build_screw_cap(trial.scenario(x), bare=True)
+    simulator = Simulator(bare["diagram"])
+    context = simulator.get_mutable_context()
+    plant = bare["plant"]
+    ref = built["plant"].GetMyContextFromRoot(built["settled"])
+    q, v = built["plant"].GetPositions(ref), built["plant"].GetVelocities(ref)
+    total = trial.config.total_time
+
+    def run_bare():
+        context.SetTime(0.0)
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
+        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
+        simulator.Initialize()
+        start = time.perf_counter()
+        simulator.AdvanceTo(total)
+        return time.perf_counter() - start
+
+    cases = {"trial (reset, samples, checks)": lambda: trial.evaluate(x, early_stop=False)
+             .wall_time, "bare plant, same frames": run_bare}
+    times = {k: [] for k in cases}
+    for _ in range(rounds):
+        for name, case in cases.items():
+            times[name].append(case())
+    med = {k: float(np.median(t)) for k, t in times.items()}
+    floor = med["bare plant, same frames"]
+    for k, t in med.items():
+        print(f"{k:32s} {t:8.3f} s  x{t / floor:5.2f} of the bare plant", flush=True)
+    return {"sim_time": total, "median_wall": med,
+            "ratio_to_bare": {k: t / floor for k, t in med.items()}}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base-rate", type=int, default=0, metavar="N")
     p.add_argument("--table", action="store_true")
     p.add_argument("--resimulate", action="store_true")
+    p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    p.add_argument("--optimizers", nargs="+", choices=OPTIMIZERS, default=list(OPTIMIZERS))
     p.add_argument("--budget", type=int, default=60)
     p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
     p.add_argument("--target-deg", type=float, default=None,
@@ -137,12 +184,14 @@ def main(argv=None) -> int:
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}"
     entry = result.setdefault(key, {})
+    if args.speed:
+        entry["speed"] = speed(args.speed, options)
     if args.base_rate:
         entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)
         print(json.dumps(entry["base_rate"]), flush=True)
     if args.table:
-        t = table(args.seeds, args.budget, args.db, args.workers, options)
-        entry["table"] = t["rows"]
+        t = table(args.seeds, args.budget, args.db, args.workers, options, args.optimizers)
+        entry.setdefault("table", {}).update(t["rows"])
         entry["budget"] = args.budget
         if args.resimulate:
             entry["resimulated"] = resimulate(t["best_trials"])

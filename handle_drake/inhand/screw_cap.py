@@ -201,10 +201,13 @@ def _proximity(mu: float) -> ProximityProperties:
     return props
 
 
-def build_screw_cap(scenario: ScrewCapScenario, meshcat=None):
+def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
     """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
 
     Returns a dict of handles (diagram, plant, source, cap joint, bodies).
+    ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
+    plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
+    frames (zero-order hold; no Python system, no driver, no sampling).
     """
     cap = scenario.cap
     cap.validate()
@@ -267,6 +270,28 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None):
     from handle_drake.station import _set_default_hand_positions
 
     _set_default_hand_positions(plant, hand, spec, q0, 1.0)
+    if bare:
+        from pydrake.systems.primitives import TrajectorySource
+        from pydrake.trajectories import PiecewisePolynomial
+
+        from handle_drake.hands import actuated_to_joint_positions
+        from handle_drake.inhand.gist import frames
+
+        one = frames(gist, scenario.parameters, q0, scenario.n_frames)
+        F = np.vstack([one[0], *([one] * scenario.n_gaits)])
+        times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
+        q_all = np.array([actuated_to_joint_positions(spec, f, 1.0) for f in F])
+        names = [plant.get_joint_actuator(i).joint().name()
+                 for i in plant.GetJointActuatorIndices(hand)]
+        cols = [spec.joint_names.index(n) for n in names]
+        desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
+        traj = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+            times, desired.T)))
+        builder.Connect(traj.get_output_port(), plant.get_desired_state_input_port(hand))
+        if joint is not None:
+            zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
+            builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+        return dict(diagram=builder.Build(), plant=plant)
     driver = builder.AddNamedSystem("hand_driver", PdHandDriver(
         plant, hand, spec, q0, lower, upper, max_joint_velocity=scenario.max_joint_velocity))
     builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
