@@ -72,22 +72,24 @@ def base_rate(n, seed, db, workers, options) -> dict:
 def table(seeds, budget, db, workers, options, optimizers=OPTIMIZERS) -> dict:
     rows = {}
     best_trials = []
-    for optimizer in optimizers:
-        runs = []
-        for seed in seeds:
+    by_optimizer = {optimizer: [] for optimizer in optimizers}
+    for seed in seeds:  # seed-major: an interrupted table has every optimiser's first seeds
+        for optimizer in optimizers:
             task = "fingertip_cylinder" if options["free"] else "screw_cap"
             run = run_inhand(task, optimizer, budget, workers, seed, db, progress=False,
                              **{k: v for k, v in options.items() if k != "free"})
             s = run.summary()
-            runs.append({"seed": seed, "trials": s["done"], "to_target": s["trials_to_target"],
-                         "best_turn_deg": s["best_held_rotation_deg"],
-                         "best_score": s["best_score"], "run_id": run.run_id})
+            by_optimizer[optimizer].append({
+                "seed": seed, "trials": s["done"], "to_target": s["trials_to_target"],
+                "best_turn_deg": s["best_held_rotation_deg"], "best_score": s["best_score"],
+                "run_id": run.run_id})
             done = [r for r in run.records if r.status == "done"]
             best = max(done, key=lambda r: r.metric)
             best_trials.append((run.run_id, best.index, best.scenario, best.contacts["turn_deg"]))
             print(f"{optimizer} seed {seed}: {s['done']} trials, to target "
                   f"{s['trials_to_target']}, best turn {s['best_held_rotation_deg']:.1f} deg",
                   flush=True)
+    for optimizer, runs in by_optimizer.items():
         to = [r["to_target"] if r["to_target"] else budget + 1 for r in runs]
         rows[optimizer] = {
             "runs": runs, "median_trials_to_target": float(np.median(to)),

@@ -38,7 +38,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "inhand", help="learn an in-hand rotation by action-gist guided babbling (PSO & co.)",
         description=__doc__.split("\n\n")[0])
-    p.add_argument("--task", choices=sorted([*TASKS, "screw_cap", "fingertip_cylinder"]), default="cylinder_rotation",
+    p.add_argument("--task", choices=sorted([*TASKS, "screw_cap", "fingertip_cylinder"]),
+                   default="cylinder_rotation",
                    help="screw_cap: the report's Fig. 32, a cap on a fixed bottle turned by the "
                         "fingers (score: the cap joint's encoder turn; --target-deg default 90); "
                         "fingertip_cylinder: a free cylinder pinched by thumb and fingers, held "

@@ -45,6 +45,7 @@ import time
 from functools import cached_property
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.geometry import (
     AddContactMaterial,
@@ -54,9 +55,11 @@ from pydrake.geometry import (
     ProximityProperties,
 )
 from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
     CoulombFriction,
+    ExternallyAppliedSpatialForce,
     MultibodyPlantConfig,
 )
 from pydrake.multibody.tree import (
@@ -67,9 +70,6 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.common.value import AbstractValue
-from pydrake.multibody.math import SpatialForce
-from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 

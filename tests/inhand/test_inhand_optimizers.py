@@ -168,12 +168,13 @@ def test_cmaes_is_seeded_and_leaves_numpys_global_generator_alone():
 def test_the_target_bonus_needs_the_real_target_not_the_checks_tolerance():
     # issue 35: random search seed 50 stopped at score 28 >= 27 with the cylinder turned
     # 29.2 deg (< 30): the last check passed within its tolerance. The bonus needs both.
-    dims = np.array([10, 8, 4, 4])  # d = 26, target score 27
+    dims = np.array([10, 8, 4, 4])  # d = 26: the old target score was d + 1 = 27
     matches = np.ones(20, dtype=bool)
     f_near, _, _ = incremental_score(dims, 4, matches, reached=False)
     f_real, _, _ = incremental_score(dims, 4, matches[:1].repeat(20) & False, reached=True)
     target = target_score(26, "incremental")
-    assert f_near == pytest.approx(27.0) < target <= f_real  # S_a = 0 still reaches it
+    assert f_near == pytest.approx(27.0)
+    assert f_near < target <= f_real  # S_a = 0 still reaches it
     opt = make_inhand_optimizer("random", [[0, 1]] * 26, seed=50, stop_score=target)
     opt.tell(opt.ask(), f_near)
     assert not opt.converged
