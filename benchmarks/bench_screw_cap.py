@@ -161,12 +161,56 @@ def speed(rounds: int, options) -> dict:
             "ratio_to_bare": {k: t / floor for k, t in med.items()}}
 
 
+def summarize(db, budget, resim: bool = False) -> dict:
+    """The table from whatever the trial log holds (also of an interrupted table run)."""
+    rows, resimulated = {}, []
+    with TrialLog(db) as log:
+        for info in log.runs():
+            if info.run_id.startswith("base-rate"):
+                continue
+            records = [r for r in log.trials(info.run_id) if r.status == "done"][:budget]
+            if not records:
+                continue
+            reached = [r.index + 1 for r in records if r.contacts.get("reached_target")]
+            best = max(records, key=lambda r: r.metric)
+            run = {"seed": info.seed, "trials": len(records),
+                   "to_target": min(reached) if reached else None,
+                   "best_turn_deg": max(r.contacts["turn_deg"] for r in records
+                                        if r.contacts.get("completed")) if any(
+                       r.contacts.get("completed") for r in records) else None,
+                   "best_score": best.metric, "best_trial": best.index,
+                   "best_trial_turn_deg": best.contacts["turn_deg"], "run_id": info.run_id}
+            if resim:
+                truth = simulate_scenario(best.scenario)
+                run["resimulated_turn_deg"] = truth["turn_deg"]
+                run["resimulated_palm_force_max"] = truth["palm_force_max"]
+                if "survived_reversal" in truth:
+                    run["resimulated_survived_reversal"] = truth["survived_reversal"]
+            rows.setdefault(info.strategy, []).append(run)
+    out = {}
+    for optimizer, runs in rows.items():
+        to = [r["to_target"] if r["to_target"] else budget + 1 for r in runs]
+        out[optimizer] = {"runs": runs, "median_trials_to_target": float(np.median(to)),
+                          "reached": sum(bool(r["to_target"]) for r in runs),
+                          "median_best_score": float(np.median([r["best_score"]
+                                                                 for r in runs]))}
+        line = ", ".join(f"seed {r['seed']}: {r['to_target'] or '-'}/{r['trials']}"
+                         for r in runs)
+        print(f"| {optimizer} | {out[optimizer]['reached']}/{len(runs)} | "
+              f"{out[optimizer]['median_trials_to_target']:g} | "
+              f"{out[optimizer]['median_best_score']:.2f} | {line} |", flush=True)
+    return {"rows": out, "resimulated": resimulated}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base-rate", type=int, default=0, metavar="N")
     p.add_argument("--table", action="store_true")
     p.add_argument("--resimulate", action="store_true")
     p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
+    p.add_argument("--summarize", action="store_true",
+                   help="the table from the trial log as it is (with --resimulate: re-simulate "
+                        "each run's best trial from its logged scenario)")
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
     p.add_argument("--optimizers", nargs="+", choices=OPTIMIZERS, default=list(OPTIMIZERS))
     p.add_argument("--budget", type=int, default=60)
@@ -188,6 +232,8 @@ def main(argv=None) -> int:
     entry = result.setdefault(key, {})
     if args.speed:
         entry["speed"] = speed(args.speed, options)
+    if args.summarize:
+        entry["summary"] = summarize(args.db, args.budget, args.resimulate)
     if args.base_rate:
         entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)
         print(json.dumps(entry["base_rate"]), flush=True)

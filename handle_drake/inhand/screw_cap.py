@@ -722,14 +722,17 @@ class ScrewCapTrial:
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
 
 
-def simulate_scenario(text: str) -> dict:
+def simulate_scenario(text: str, reverse_time: float = 0.5) -> dict:
     """Re-simulates a logged trial from its scenario YAML alone, reading the plant.
 
     Independent of :class:`ScrewCapTrial`'s evaluation: builds the diagram from
     the scenario, settles the grasp with the variations zeroed, runs the
-    motion, and returns the cap joint's turn (deg) read from the plant, the
-    largest normal force of the palm on bottle or cap (N), and the bodies
-    touching the cap at the end.
+    motion, and returns the object's turn (deg; the cap: its joint; the free
+    cylinder: its pose about its own axis, unwrapped every 10 ms, positive as the
+    trial counts it), the largest contact force of the palm on bottle or cap (N),
+    the bodies touching the object at the end and, for the free cylinder, whether
+    it survives ``reverse_time`` s of reversed weight (moves < 10 mm, a finger
+    still touching).
     """
     scenario = ScrewCapScenario.load(text)
     built = build_screw_cap(scenario)
@@ -743,16 +746,32 @@ def simulate_scenario(text: str) -> dict:
     source.set_parameters(source.GetMyContextFromRoot(context), still)
     simulator.Initialize()
     simulator.AdvanceTo(scenario.settle_time)
-    plant, joint = built["plant"], built["joint"]
+    plant, joint, body = built["plant"], built["joint"], built["cap"]
     plant_context = plant.GetMyContextFromRoot(context)
-    q0 = joint.get_angle(plant_context)
+    q0 = joint.get_angle(plant_context) if joint is not None else 0.0
+    R0_inv = plant.EvalBodyPoseInWorld(plant_context, body).rotation().inverse()
     context.SetTime(0.0)
     source.set_parameters(source.GetMyContextFromRoot(context), scenario.parameters)
     simulator.Initialize()
-    palm = 0.0
+    palm, angle, previous = 0.0, 0.0, 0.0
     for t in np.arange(1, int(round(scenario.total_time / 0.01)) + 1) * 0.01:
         simulator.AdvanceTo(float(t))
         palm = max(palm, contact_summary(plant, plant_context, built)["palm_force"])
-    return {"turn_deg": float(np.degrees(joint.get_angle(plant_context) - q0)),
-            "palm_force_max": palm,
-            "touching": contact_summary(plant, plant_context, built)["touching"]}
+        R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
+        raw = -float(np.arctan2(R[1, 0], R[0, 0]))
+        angle += (raw - previous + np.pi) % (2 * np.pi) - np.pi
+        previous = raw
+    out = {"turn_deg": float(np.degrees(joint.get_angle(plant_context) - q0))
+           if joint is not None else float(np.degrees(angle)),
+           "palm_force_max": palm,
+           "touching": contact_summary(plant, plant_context, built)["touching"]}
+    if joint is None:
+        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+        reverse = built["reverse"]
+        reverse.set_start(reverse.GetMyContextFromRoot(context), scenario.total_time)
+        simulator.AdvanceTo(scenario.total_time + reverse_time)
+        p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+        touching = contact_summary(plant, plant_context, built)["touching"]
+        out["survived_reversal"] = bool(np.linalg.norm(p - p_end) < 0.01
+                                        and any(b != "palm" for b in touching))
+    return out

@@ -117,3 +117,11 @@ def test_the_fingertip_cylinder_is_held_by_the_fingers_and_survives_palm_down(fi
     demo = fingertip.evaluate(fingertip.gist.initial_parameters(), early_stop=False)
     assert demo.survived_reversal is False and not demo.reached_target
     assert demo.score < fingertip.target_score
+
+
+def test_the_fingertip_scenario_re_simulates_alone_with_its_palm_down_check(fingertip):
+    x = _stroke(fingertip)
+    outcome = fingertip.evaluate(x, early_stop=False)
+    again = simulate_scenario(fingertip(x).scenario)
+    assert again["turn_deg"] == pytest.approx(outcome.turn_deg, abs=1.0)
+    assert again["survived_reversal"] is True and again["palm_force_max"] == 0.0
