@@ -385,11 +385,14 @@ class ScrewCapTask:
     n_frames: int = 50  # per gait
     hold: float = 0.2
     n_checks: int = 4
-    # turn / target required at each check; None: (0, 0, 0.3, 1) for one gait (the
-    # demonstration's fingers flex over 0.19-0.56 of the gait), k/K for more
+    # turn / target required at each check; None: (0, 0.05, 0.3, 1) for one gait (the
+    # demonstration's fingers flex over 0.19-0.56 of the gait; a hand-written stroke turns
+    # the cap 8, 35, 95 deg at 0.5, 0.75, 1.2 s), k/K for more. The first design, (0, 0,
+    # 0.3, 1), activated every parameter at check 2 (grip only) and then scored every
+    # trial that missed check 3 alike (S_b = d, S_a = 0.4): 100 ipso trials, one score.
     benchmark: tuple | None = None
     tolerance_deg: float = 2.0
-    sample_period: float = 0.05
+    sample_period: float = 0.025  # eq. 48's L = 48 samples for one gait and its hold
     time_step: float = 0.002
     settle_time: float = 0.5
     contact_window: float = 0.3  # s: a finger touched the cap at a sample this recent
@@ -444,7 +447,7 @@ class ScrewCapTask:
         if self.benchmark is not None:
             return np.asarray(self.benchmark, dtype=float)
         if self.n_gaits == 1 and self.n_checks == 4:
-            return np.array([0.0, 0.0, 0.3, 1.0])
+            return np.array([0.0, 0.05, 0.3, 1.0])
         return np.arange(1, self.n_checks + 1) / self.n_checks
 
     def check_times(self) -> np.ndarray:
