@@ -202,12 +202,46 @@ def summarize(db, budget, resim: bool = False) -> dict:
     return {"rows": out, "resimulated": resimulated}
 
 
+def figures(db, task, options, directory, html: bool = True) -> dict:
+    """Figure 34 (best score per iteration, every run of the log) and an HTML replay of the
+    best trial of all runs (re-run from its parameters with a Meshcat recording)."""
+    from handle_drake.inhand.experiment import InHandRun, plot_learning_curve, replay_best
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    runs = []
+    with TrialLog(db) as log:
+        for info in log.runs():
+            if info.run_id.startswith("base-rate"):
+                continue
+            records = [r for r in log.trials(info.run_id)]
+            n = int((info.config or {}).get("n_particles", 10))
+            runs.append(InHandRun(info.run_id, Path(db), trial, info.strategy, n, info.seed,
+                                  records))
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    png = plot_learning_curve(runs, directory / f"{task}_learning_curve.png",
+                              title=f"{trial.name}: best score per iteration")
+    out = {"learning_curve": str(png)}
+    if html and runs:
+        best_run = max(runs, key=lambda r: max((t.metric for t in r.records
+                                                if t.status == "done"), default=-1))
+        page = directory / f"{task}_best.html"
+        logged, outcome = replay_best(best_run, page)
+        out.update(html=str(page), run_id=best_run.run_id, logged_score=logged,
+                   replayed_score=outcome.score, turn_deg=outcome.turn_deg)
+        print(f"replay: {page} ({best_run.run_id}, score {outcome.score:.3f}, logged "
+              f"{logged:.3f}, turn {outcome.turn_deg:.1f} deg)", flush=True)
+    return out
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base-rate", type=int, default=0, metavar="N")
     p.add_argument("--table", action="store_true")
     p.add_argument("--resimulate", action="store_true")
     p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
+    p.add_argument("--figures", type=Path, default=None, metavar="DIR",
+                   help="learning curve of every run in --db and the best trial's HTML replay")
     p.add_argument("--summarize", action="store_true",
                    help="the table from the trial log as it is (with --resimulate: re-simulate "
                         "each run's best trial from its logged scenario)")
@@ -232,6 +266,8 @@ def main(argv=None) -> int:
     entry = result.setdefault(key, {})
     if args.speed:
         entry["speed"] = speed(args.speed, options)
+    if args.figures is not None:
+        entry["figures"] = figures(args.db, args.task, options, args.figures)
     if args.summarize:
         entry["summary"] = summarize(args.db, args.budget, args.resimulate)
     if args.base_rate:
