@@ -125,3 +125,14 @@ def test_the_fingertip_scenario_re_simulates_alone_with_its_palm_down_check(fing
     again = simulate_scenario(fingertip(x).scenario)
     assert again["turn_deg"] == pytest.approx(outcome.turn_deg, abs=1.0)
     assert again["survived_reversal"] is True and again["palm_force_max"] == 0.0
+
+
+def test_cli_refuses_settings_the_finger_tasks_do_not_have(tmp_path, capsys):
+    from handle_drake.cli import main as cli_main
+
+    for extra in (["--accelerometer", "joywarrior24f14"], ["--evaluation", "old"]):
+        rc = cli_main(["inhand", "--task", "screw_cap", "--db", str(tmp_path / "x.sqlite"),
+                       *extra])
+        assert rc == 2
+        err = capsys.readouterr().err
+        assert "--task screw_cap" in err and "Traceback" not in err
