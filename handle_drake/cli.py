@@ -28,6 +28,7 @@ AREA_COMMANDS: tuple[str, ...] = (
     "handle_drake.inhand.cli",
     "handle_drake.perception.perceive",
     "handle_drake.midi.cli",
+    "handle_drake.pick.cli",
 )
 
 
@@ -90,8 +91,11 @@ def _cmd_simulate(args) -> int:
         _warn_below_table(scenario, result.object_position[:, 2])
     if result.score is not None:
         m, score = scenario.metric, result.score
+        over = (f"; the mean over {len(m.placements)} start placements (metric.placements), "
+                f"each: {', '.join(f'{v:.6g}' for v in score.placement_values)}"
+                if m.placements else "")
         print(f"grasp metric (BW, soft finger, mean of {m.hold_samples} instants over the last "
-              f"{m.hold_window:g} s): {score.value!r} "
+              f"{m.hold_window:g} s{over}): {score.value!r} "
               f"({'force closure' if score.force_closure else 'not in force closure'}); "
               f"touching: {', '.join(sorted(score.contacts)) or 'nothing'}")
     if instrumented:

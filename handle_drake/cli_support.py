@@ -73,6 +73,14 @@ positive_int = int_at_least(1, "a positive integer")
 non_negative_int = int_at_least(0, "an integer >= 0")
 
 
+def non_empty(text: str) -> str:
+    """An argparse type: any text but the empty (or all-blank) one, which would
+    silently mean "the default"."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a non-empty value, got {text!r}")
+    return text
+
+
 def non_negative_float(text: str) -> float:
     """An argparse type: a finite number >= 0."""
     try:
@@ -116,8 +124,9 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
     """Parses ``argv`` and runs the chosen sub-command: bad input is a one-line
     error and exit code 2, Ctrl-C exit code 130 (runs that log trials resume)."""
     pin_blas(force=False)  # before the imports below load numpy
+    from handle_drake.extras import MissingExtraError
     from handle_drake.learning import TrialLogError
-    from handle_drake.learning.cluster import ExecutorError
+    from handle_drake.learning.cluster import ExecutorError, check_executor_arguments
     from handle_drake.paths import check_outputs
     from handle_drake.scenario_checks import ScenarioDeprecationWarning
 
@@ -129,8 +138,10 @@ def run_command(parser: argparse.ArgumentParser, argv: list[str] | None = None) 
             # Shown to CLI users too (Python hides DeprecationWarnings outside __main__).
             warnings.filterwarnings("always", category=ScenarioDeprecationWarning)
             check_outputs(args)  # before minutes of work, not after
+            check_executor_arguments(args)
             return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError) as error:
+    except (ValueError, FileNotFoundError, TypeError, TrialLogError, ExecutorError,
+            MissingExtraError) as error:
         print(f"handle-drake {args.command}: error: {error}", file=sys.stderr)
         return 2
     except OSError as error:

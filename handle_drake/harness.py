@@ -62,6 +62,8 @@ class HoldScore:
     samples: list  # metric at each hold instant
     force_closure: bool  # at the last instant
     contacts: dict  # body name -> contacts in the object frame, at the last instant
+    # metric.placements: each placement's value (``value`` is then their mean)
+    placement_values: list = dc.field(default_factory=list)
 
 
 @dc.dataclass

@@ -10,6 +10,8 @@ expected and what was got.
 from __future__ import annotations
 
 import os
+import stat
+import tempfile
 from pathlib import Path
 
 from handle_drake.scenario_checks import short_path
@@ -59,12 +61,17 @@ def check_output(option: str, path, kind: str = "file") -> Path:
             raise ValueError(f"{option}: expected a directory, got the file {shown}")
         if not os.access(path, os.W_OK):
             raise ValueError(f"{option}: {shown} is read-only")
+        if kind == "dir":
+            _try_create(option, path, shown)
+        else:
+            _try_open(option, path, shown)
         return path
     if not ancestor.is_dir():
         raise ValueError(f"{option}: expected a path under a directory, but {short_path(ancestor)} "
                          f"is a file")
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise ValueError(f"{option}: cannot create {shown}: {short_path(ancestor)} is read-only")
+    _try_create(option, ancestor, shown)
     name_max = _limit(ancestor, "PC_NAME_MAX", 255)
     for part in path.parts:
         if len(os.fsencode(part)) > name_max:
@@ -74,6 +81,30 @@ def check_output(option: str, path, kind: str = "file") -> Path:
     if len(os.fsencode(str(path.absolute()))) >= path_max:
         raise ValueError(f"{option}: expected a path shorter than {path_max} bytes, got {shown}")
     return path
+
+
+def _try_create(option: str, directory: Path, shown: str) -> None:
+    """Creates and at once removes a nameless file in ``directory``: what the OS
+    says, not what the permission bits say (root passes ``os.access`` on /proc,
+    a read-only mount, a full disk's quota...)."""
+    try:
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+    except OSError as error:
+        raise ValueError(f"{option}: cannot create {shown}: {short_path(directory)}: "
+                         f"{error.strerror or error}") from None
+
+
+def _try_open(option: str, path: Path, shown: str) -> None:
+    """Opens the existing ``path`` for appending (and closes it): nothing is
+    written, its contents and times stay as they are."""
+    mode = path.stat().st_mode
+    if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode):
+        raise ValueError(f"{option}: expected a regular file, got a FIFO or socket {shown}")
+    try:
+        os.close(os.open(path, os.O_WRONLY | os.O_APPEND | os.O_NONBLOCK))
+    except OSError as error:
+        raise ValueError(f"{option}: cannot write {shown}: {error.strerror or error}") from None
 
 
 def check_outputs(args) -> None:

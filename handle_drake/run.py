@@ -30,12 +30,23 @@ from handle_drake.station import hand_initial_command
 from handle_drake.systems.hand_driver import rpy_pose6
 
 __all__ = [
+    "placed",
     "ScenarioRunner",
     "RunResult",
     "script_trajectories",
     "advance_recording",
     "LOG_PERIOD",
 ]
+
+
+def placed(scenario: Scenario, placement) -> Scenario:
+    """``scenario`` with its guarded grasp's ``start_pose`` moved sideways by ``placement``
+    (``[dx, dy]``, m) and no ``metric.placements`` (one run of the robust objective)."""
+    c = scenario.controller
+    start = np.array(c.start_pose, dtype=float)
+    start[:2] += np.asarray(placement, dtype=float)
+    return dc.replace(scenario, controller=dc.replace(c, start_pose=start.tolist()),
+                      metric=dc.replace(scenario.metric, placements=[]))
 
 
 def script_trajectories(scenario: Scenario, initial_command: np.ndarray):
@@ -173,6 +184,8 @@ class ScenarioRunner:
         duration = scenario.simulation_duration if duration is None else float(duration)
         if not (np.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be finite and > 0, got {duration}")
+        if scenario.metric is not None and scenario.metric.placements:
+            return self._run_placements(scenario, duration, html)
         self.reset(scenario)
         metric = scenario.metric
         if metric is None:
@@ -196,6 +209,20 @@ class ScenarioRunner:
         hold = HoldScore(value=float(np.mean(samples)), samples=samples,
                          force_closure=bool(last[0]), contacts=last[1])
         return self.harness.run_result(duration, wall, hold)
+
+    def _run_placements(self, scenario: Scenario, duration: float, html) -> RunResult:
+        """One run per ``metric.placements`` entry (:func:`placed`); the result is the
+        first placement's run (its logs, replay and contacts) with the metric's value
+        the mean over the placements and ``placement_values`` each one's."""
+        values, first = [], None
+        for k, placement in enumerate(scenario.metric.placements):
+            result = self.run(duration, html if k == 0 else None,
+                              scenario=placed(scenario, placement))
+            values.append(result.score.value)
+            first = first or result
+        first.score = dc.replace(first.score, value=float(np.mean(values)),
+                                 placement_values=values)
+        return first
 
     def _metric_model(self, scenario: Scenario):
         from handle_drake.quality import ContactParams

@@ -55,22 +55,29 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 
+from handle_drake.arm.config import Arm
 from handle_drake.can_hand.config import CanHandDriverConfig
 from handle_drake.instruments.config import AccelerometerConfig
 from handle_drake.scenario_checks import (
+    check_pose,
     check_ranges,
     check_yaml_text,
     read_text_file,
     short,
     translate_deprecated_keys,
 )
+from handle_drake.scene.config import Hole, SortingBoxConfig
 
 __all__ = [
     "AccelerometerConfig",
+    "Arm",
+    "Hole",
+    "SortingBoxConfig",
     "CONTACT_MODELS",
     "CameraConfig",
     "CanHandDriver",
@@ -141,7 +148,8 @@ class HandConfig:
     # Shadow: xFJ1 = coupling_ratio * xFJ2 (1.0 for the C6 hand, 1.1 for the C5
     # hand). None takes the hand's default; the Barrett distal ratio is fixed.
     coupling_ratio: float | None = None
-    mount: FixedMount | FloatingWrist = dc.field(default_factory=FixedMount)
+    # Or !Arm: the hand bolted to a robot arm's flange (handle_drake.arm).
+    mount: FixedMount | FloatingWrist | Arm = dc.field(default_factory=FixedMount)
     # Initial joint positions (rad) by actuated joint name; others start at 0.
     initial_position: dict[str, float] = dc.field(default_factory=dict)
 
@@ -263,6 +271,11 @@ class GraspMetric:
     contact surface model of radius ``surface_radius``, moments scaled by half the
     object size), averaged over ``hold_samples`` instants spread over the last
     ``hold_window`` seconds of the run (its last one at ``simulation_duration``).
+
+    ``placements`` (the robust objective of ``babble --placement-error``): sideways
+    moves ``[dx, dy]`` (m) of the guarded grasp's ``start_pose``; the run is made once
+    per placement and the metric is the mean of their metrics. Empty: one run, the
+    scenario as it is.
     """
 
     hold_samples: int = 8
@@ -270,6 +283,7 @@ class GraspMetric:
     surface_radius: float = 0.004  # m; 0: raw mean contacts
     gamma: float = 0.002  # m, torsional friction
     num_edges: int = 8  # friction-cone edges
+    placements: list[list[float]] = dc.field(default_factory=list)  # [[dx, dy], ...] m
 
 
 @dc.dataclass
@@ -317,6 +331,11 @@ def default_plant_config(**fields) -> MultibodyPlantConfig:
 class Scenario:
     hand: HandConfig = dc.field(default_factory=HandConfig)
     object: ObjectConfig | None = dc.field(default_factory=ObjectConfig)
+    # Further objects on the table (instances object_1, object_2, ...; see
+    # handle_drake.scene.config); single-object commands act on ``object``.
+    objects: list[ObjectConfig] = dc.field(default_factory=list)
+    # The toy-sorting box, a fixed body with shaped holes (handle_drake.scene).
+    sorting_box: SortingBoxConfig | None = None
     table: TableConfig | None = dc.field(default_factory=TableConfig)
     # The plant (Drake's own config; AddMultibodyPlant reads it).
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
@@ -385,6 +404,8 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
         return defaults
     text = translate_deprecated_keys(text, source)
     check_yaml_text(text, Scenario, source)
+    if yaml.compose(text, Loader=yaml.SafeLoader) is None:  # comments only: as empty
+        return defaults
     try:
         return yaml_load_typed(schema=Scenario, data=text, defaults=defaults)
     except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError
@@ -395,6 +416,7 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
 def _check_transform(name: str, transform: Transform) -> None:
     if not transform.IsDeterministic():  # GetDeterministicValue would abort the process
         raise ScenarioError(f"{name}: expected a deterministic pose, got a random one")
+    check_pose(name, transform)  # names a NaN angle or axis (Drake: "NaN is detected ...")
     try:
         X = transform.GetDeterministicValue()
     except Exception as error:
@@ -425,6 +447,10 @@ def validate_scenario(scenario: Scenario) -> None:
         except ValueError as error:
             raise ScenarioError(f"hand.coupling_ratio: {error}") from None
     _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
+    if isinstance(scenario.hand.mount, Arm):
+        from handle_drake.arm.config import validate_arm
+
+        validate_arm(scenario.hand.mount, ScenarioError)
     for name, value in scenario.hand.initial_position.items():
         if name not in spec.actuated_joint_names:
             raise ScenarioError(
@@ -490,6 +516,10 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError("driver.max_joint_velocity must be finite and >= 0")
         _check_positive("driver.control_period", scenario.driver.control_period)
     check_ranges(scenario)
+    if scenario.objects or scenario.sorting_box is not None:
+        from handle_drake.scene.config import validate_scene
+
+        validate_scene(scenario, validate_scenario, ScenarioError)
 
 
 def _validate_plant_config(config) -> None:
@@ -697,3 +727,15 @@ def _validate_metric(scenario: Scenario) -> None:
             raise ScenarioError(f"metric.{name} must be finite and >= 0, got {value}")
     if m.num_edges < 3:
         raise ScenarioError(f"metric.num_edges: expected >= 3, got {m.num_edges}")
+    if m.placements:
+        if not isinstance(scenario.controller, GuardedGraspController):
+            raise ScenarioError("metric.placements: moving the start placement needs a "
+                                "controller: !GuardedGraspController (its start_pose)")
+        if len(m.placements) > 64:
+            raise ScenarioError(f"metric.placements: expected at most 64 placements, got "
+                                f"{len(m.placements)}")
+        for i, placement in enumerate(m.placements):
+            if len(placement) != 2 or not all(math.isfinite(v) and abs(v) <= 0.05
+                                              for v in placement):
+                raise ScenarioError(f"metric.placements[{i}]: expected [dx, dy] within "
+                                    f"+-0.05 m, got {short(placement)}")

@@ -423,6 +423,12 @@ def _in(path: str, value, key: str, unit: str = "") -> None:
                             f"got {short(value)}")
 
 
+def check_pose(path: str, transform) -> None:
+    """Bounds a ``Transform``'s numbers (angles, axis, translation), naming the field:
+    finite, and in :data:`LIMITS`, before Drake evaluates it."""
+    _check_pose(path, transform)
+
+
 def _check_pose(path: str, transform) -> None:
     from handle_drake.scenario import ScenarioError
 

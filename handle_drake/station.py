@@ -64,6 +64,7 @@ from handle_drake.hands import (
 )
 from handle_drake.ports import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
 from handle_drake.scenario import (
+    Arm,
     CanHandDriver,
     FixedMount,
     FloatingWrist,
@@ -151,6 +152,15 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         source = tactile if signal == "tactile" else driver
         builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
+    if isinstance(scenario.hand.mount, Arm):
+        from handle_drake.arm.model import AddArmDriver
+
+        AddArmDriver(builder, plant, scenario.hand.mount)
+    if scenario.objects:
+        from handle_drake.scene.plant import ExportSceneObjects
+
+        ExportSceneObjects(builder, plant, scenario)
+
     if isinstance(scenario.hand.mount, FloatingWrist):
         wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
         wrist_driver = builder.AddNamedSystem(
@@ -209,6 +219,11 @@ def AddPlantModels(plant, scenario: Scenario):
     mount = scenario.hand.mount
     if isinstance(mount, FixedMount):
         plant.WeldFrames(plant.world_frame(), base_frame, mount.X_WB.GetDeterministicValue())
+    elif isinstance(mount, Arm):
+        from handle_drake.arm.model import AddArm
+
+        AddArm(plant, mount, base_frame)
+        plant.set_gravity_enabled(hand, False)
     else:
         _add_floating_wrist(plant, base_frame, mount)
         plant.set_gravity_enabled(hand, False)
@@ -229,6 +244,10 @@ def AddPlantModels(plant, scenario: Scenario):
         else:
             plant.SetDefaultFloatingBaseBodyPose(object_body(plant),
                                                  object_initial_pose(scenario))
+    if scenario.objects or scenario.sorting_box is not None:
+        from handle_drake.scene.plant import AddSceneModels
+
+        AddSceneModels(plant, scenario)
     if scenario.midi_controller is not None:
         from handle_drake.midi.station import AddMidiControllerModel
 

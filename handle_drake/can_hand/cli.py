@@ -32,6 +32,7 @@ from handle_drake.can_hand.config import (
     CanFirmwareConfig,
     CanServerConfig,
 )
+from handle_drake.cli_support import non_empty
 
 __all__ = ["register", "main", "parse_listen"]
 
@@ -59,7 +60,7 @@ def _add_bus_arguments(p: argparse.ArgumentParser) -> None:
                    help="Shadow xFJ1 = ratio * xFJ2 (1.0 C6 hand, 1.1 C5 hand)")
     p.add_argument("--bus", choices=BUS_INTERFACES, default="udp_multicast",
                    help="python-can interface (virtual works inside one process only)")
-    p.add_argument("--channel", default=None,
+    p.add_argument("--channel", type=non_empty, default=None,
                    help="virtual bus name, multicast group, or SocketCAN interface "
                         f"(defaults: {_DEFAULT_CHANNEL})")
     p.add_argument("--bus-port", type=int, default=DEFAULT_MULTICAST_PORT,

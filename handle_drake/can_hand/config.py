@@ -55,7 +55,8 @@ def _priority(value) -> None:
 def _port(name: str, value, allow_zero: bool = True) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or not (
             (0 if allow_zero else 1) <= value <= 65535):
-        raise ValueError(f"{name}: expected an integer port in 0..65535, got {value!r}")
+        low = 0 if allow_zero else 1
+        raise ValueError(f"{name}: expected an integer port in {low}..65535, got {value!r}")
 
 
 @dc.dataclass

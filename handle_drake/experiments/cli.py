@@ -28,6 +28,7 @@ from pathlib import Path
 
 from handle_drake.cli_support import (
     add_mesh_arguments,
+    non_empty,
     non_negative_float,
     non_negative_int,
     positive_float,
@@ -82,13 +83,15 @@ def register(subparsers) -> None:
                           "--object; decomposed into convex pieces once (cached)")
     p.add_argument("--db", type=Path, default=Path("out/babble.sqlite"),
                    help="SQLite trial log (default out/babble.sqlite); resumed if it exists")
-    p.add_argument("--workers", type=positive_int, default=1,
+    p.add_argument("--workers", type=positive_int, default=None,
                    help="trials run in parallel (worker processes of 'local' and 'dask'); BO "
                         "then proposes batches of this size (kriging believer), a run of its "
-                        "own (default 1: the report's sequential BO). With dask://, random "
-                        "search runs as many trials at once as the cluster has workers")
+                        "own (default 1: the report's sequential BO). With dask://, BO "
+                        "proposes batches of the cluster's worker count unless --workers says "
+                        "otherwise, and random search runs as many trials at once as the "
+                        "cluster has workers")
     add_executor_arguments(p)
-    p.add_argument("--run-id", default=None, help="name of the run in the log")
+    p.add_argument("--run-id", type=non_empty, default=None, help="name of the run in the log")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="figure of the run: metric per trial with the best so far, and the "
                         "GP's map of the parameter space (default: <db folder>/<run id>.png)")
@@ -165,24 +168,29 @@ def _cmd_babble(args) -> int:
     if args.plot is not None and args.plot.suffix.lower() != ".png":
         raise ValueError(f"--plot: expected a .png file name, got {str(args.plot)!r}")
     options = {"ei_threshold": args.ei_stop} if args.ei_stop else {}
-    if args.strategy == "bo" and args.workers > 1:
-        options["batch_size"] = args.workers  # batches of parallel trials (kriging believer)
-    spec = RunSpec(config, args.strategy, args.seed, n_trials=args.trials,
-                   options=tuple(sorted(options.items())))
-    run_id = args.run_id or spec.run_id
     args.db.parent.mkdir(parents=True, exist_ok=True)
     try:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
     except TrialLogError as error:  # the lead's CLI maps ValueError to exit status 2
         raise ValueError(f"--db: {error}") from None
+    workers = args.workers or 1
     # One local worker runs trials in this process; elsewhere each worker
     # process builds the trial's diagram once (CachedTrial holds the config).
-    in_process = args.executor.kind == "local" and args.workers == 1
+    in_process = args.executor.kind == "local" and workers == 1
     objective = trial if in_process else CachedTrial(config)
-    with trial_executor(args.executor, args.workers,
+    with trial_executor(args.executor, workers,
                         connect_timeout=args.connect_timeout) as executor:
+        batch = bo_batch_size(args.strategy, args.executor, args.workers, executor)
+        if batch > 1:
+            options["batch_size"] = batch  # batches of parallel trials (kriging believer)
+        spec = RunSpec(config, args.strategy, args.seed, n_trials=args.trials,
+                       options=tuple(sorted(options.items())))
+        run_id = args.run_id or spec.run_id
         print(f"babble: {trial.name}, {args.strategy}, seed {args.seed}, up to {args.trials} "
               f"trials, run {run_id!r} in {args.db} ({args.executor} executor)", flush=True)
+        if args.strategy == "bo" and args.workers is None and args.executor.address:
+            print(f"BO batches of {batch} trial(s): the cluster's worker threads now "
+                  f"(--workers N fixes the batch size, and with it the run)", flush=True)
         result = run_experiment(
             objective, trial.bounds, args.strategy, args.trials, args.seed, args.db,
             executor=executor, progress=not args.no_progress, run_id=run_id,
@@ -190,7 +198,10 @@ def _cmd_babble(args) -> int:
     print(f"trials: {result.n_done} done, {result.n_failed} failed"
           + (" (BO stopped: expected improvement below threshold)" if result.converged else ""))
     if result.best_x is None:
-        print("no successful trial")
+        failed = [r for r in result.trials if r.status == "failed" and r.error]
+        reason = (f": trial {failed[0].index} failed: {' '.join(str(failed[0].error).split())}"
+                  if failed else "")
+        print(f"no successful trial{reason}"[:600])
         return 1
     names = _PARAMETER_NAMES[space]
     params = ", ".join(f"{n} = {v:.6g}" for n, v in zip(names, result.best_x, strict=True))
@@ -206,6 +217,22 @@ def _cmd_babble(args) -> int:
         path = args.plot or args.db.parent / f"{run_id}.png"
         print(f"figure: {plot_run(spec, run_history(args.db, run_id), path, names)}")
     return 0
+
+
+def bo_batch_size(strategy: str, executor_spec, workers: int | None, executor) -> int:
+    """Trials per BO batch: ``--workers`` when given; on a running cluster
+    (``dask://``) without it, the cluster's worker threads when the run starts (so
+    that no worker idles); else 1 (the report's sequential BO). 1 for random search
+    (it keeps the workers busy on its own)."""
+    from handle_drake.learning.cluster import executor_workers
+
+    if strategy != "bo":
+        return 1
+    if workers is not None:
+        return workers
+    if executor_spec.address is not None:
+        return executor_workers(executor)
+    return 1
 
 
 def _cmd_report(args) -> int:

@@ -47,7 +47,7 @@ from handle_drake.hands import actuated_position_limits, get_hand_spec
 from handle_drake.learning import TrialResult
 from handle_drake.objects import DEFAULT_SIZE, KINDS, ObjectSpec, total_height
 from handle_drake.quality import NO_CONTACT
-from handle_drake.run import ScenarioRunner
+from handle_drake.run import ScenarioRunner, placed
 from handle_drake.scenario import (
     DumpScenario,
     FloatingWrist,
@@ -80,6 +80,8 @@ BABBLING_SIZES = {
     "sphere": 0.07, "cylinder": 0.06, "cuboid": 0.06, "rotated_cuboid": 0.06,
     "mug": 0.08, "wine_glass": 0.07, "star_prism": 0.09,
 }
+#: m: the object sizes a grasp trial takes (a hand-held object; 1e300 m failed every trial).
+SIZE_RANGE = (0.01, 0.5)
 
 
 @dc.dataclass(frozen=True)
@@ -126,6 +128,11 @@ class GraspTrialConfig:
                              f"{KINDS + ('mesh',)}")
         elif self.object_file is not None:
             raise ValueError(f"object_file: only object 'mesh' reads a file, got {self.object!r}")
+        if self.size is not None and not (isinstance(self.size, int | float)
+                                          and not isinstance(self.size, bool)
+                                          and SIZE_RANGE[0] <= self.size <= SIZE_RANGE[1]):
+            raise ValueError(f"size: expected an object size in [{SIZE_RANGE[0]:g}, "
+                             f"{SIZE_RANGE[1]:g}] m (held in one hand), got {self.size!r}")
         if self.space not in PARAMETER_SPACES:
             raise ValueError(f"space: expected one of {PARAMETER_SPACES}, got {self.space!r}")
         if self.space == "synergy" and self.hand != "shadow":
@@ -425,8 +432,12 @@ class GraspTrial:
         values, touched = [], False
         # The stencil's first placement (the planned one when K == 1) gives the
         # outcome's scenario, contacts and hold samples; the metric is the mean.
-        for k, placement in enumerate(placement_stencil(c.placement_error, c.placement_samples)):
-            run_scenario = self.scenario(x, placement)
+        stencil = placement_stencil(c.placement_error, c.placement_samples)
+        trial_scenario = self.scenario(x)
+        for k, placement in enumerate(stencil):
+            # as ``handle-drake simulate`` runs the stored scenario's metric.placements
+            run_scenario = placed(trial_scenario, placement) if c.placement_samples > 1 \
+                else trial_scenario
             run_score = runner.run(scenario=run_scenario).score
             values.append(run_score.value)
             touched = touched or np.isfinite(controller.GetOutputPort("contact_time").Eval(
@@ -440,9 +451,11 @@ class GraspTrial:
             metric=float(noisy), metric_noiseless=value, metric_samples=score.samples,
             force_closure=score.force_closure, contacts=score.contacts,
             touched=bool(touched or score.contacts),
-            scenario=self._scenario_text(scenario, x) + (
-                f"# robust objective: this is placement 1 of {c.placement_samples} within "
-                f"{c.placement_error} m; metric = their mean\n" if c.placement_samples > 1
-                else ""),
+            scenario=self._scenario_text(scenario, x) if c.placement_samples == 1 else
+            self._scenario_text(dc.replace(trial_scenario, metric=dc.replace(
+                trial_scenario.metric, placements=stencil.tolist())), x) + (
+                f"# robust objective: metric.placements holds the {c.placement_samples} "
+                f"start placements within {c.placement_error} m; simulate runs each and "
+                "reports their mean (the trial's noiseless metric)\n"),
             wall_time=time.perf_counter() - start_wall,
         )

@@ -212,6 +212,7 @@ def _cmd_grasp(args) -> int:
         print(f"perceived by the tabletop Kinect: size {plan.perception.size * 100:.2f} cm "
               f"(true {args.size * 100:.2f}); error xy {e['xy_mm']:.1f} mm, "
               f"z {e['z_mm']:+.1f} mm, yaw {yaw}")
+        print(f"perception: {plan.perception.selection}")
     print(plan.summary())
     reactive = (args.recentre or DEFAULT_REACTIVE) if args.reactive is None else args.reactive
     print(f"execution: {'reactive (tactile)' if reactive else 'open loop (keyframes)'}"

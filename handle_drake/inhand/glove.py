@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["GLOVE_SENSORS", "GloveRecording", "load_glove", "save_glove", "GloveFormatError"]
+__all__ = ["GLOVE_SENSORS", "MAX_SAMPLE_RATE", "GloveRecording", "load_glove", "save_glove",
+           "GloveFormatError"]
 
 GLOVE_SENSORS: tuple[str, ...] = (
     "TR", "TMCP", "TIJ", "TAB",            # thumb: rotation, MCP, IP, thumb-index abduction
@@ -42,6 +43,12 @@ GLOVE_SENSORS: tuple[str, ...] = (
 )
 _FORMAT = "handle_drake.glove"
 _VERSION = 1
+#: Hz: time stamps closer than 1 / MAX_SAMPLE_RATE are refused (a CyberGlove streams at
+#: ~100-150 Hz; closer stamps are a unit error, and the gist's smoothing window, in
+#: samples, would grow without bound: 1e-12 s apart asked for 745 GiB).
+MAX_SAMPLE_RATE = 10_000.0
+#: samples per recording (10 minutes at 10 kHz): more is not one demonstration.
+MAX_SAMPLES = 6_000_000
 
 
 class GloveFormatError(ValueError):
@@ -76,12 +83,22 @@ class GloveRecording:
                 f"got {self.raw.shape[0]}")
         if self.time.shape[0] < 2:
             raise GloveFormatError(f"time: expected at least 2 samples, got {self.time.shape[0]}")
+        if self.time.shape[0] > MAX_SAMPLES:
+            raise GloveFormatError(
+                f"time: expected at most {MAX_SAMPLES} samples, got {self.time.shape[0]}")
         steps = np.diff(self.time)
         if np.any(steps <= 0):
             i = int(np.flatnonzero(steps <= 0)[0])
             raise GloveFormatError(
                 f"time: expected strictly increasing time stamps, got {self.time[i]} then "
                 f"{self.time[i + 1]} at sample {i + 1}")
+        too_close = steps < (1.0 - 1e-6) / MAX_SAMPLE_RATE  # rounding of k / rate passes
+        if np.any(too_close):
+            i = int(np.flatnonzero(too_close)[0])
+            raise GloveFormatError(
+                f"time: expected time stamps at least {1.0 / MAX_SAMPLE_RATE:g} s apart (at most "
+                f"{MAX_SAMPLE_RATE:g} samples per second), got {self.time[i]!r} then "
+                f"{self.time[i + 1]!r} at sample {i + 1} (seconds, not milliseconds?)")
         if (self.gain is None) != (self.offset is None):
             raise GloveFormatError("calibration: expected both gain and offset, or neither")
         if self.gain is not None:
@@ -107,10 +124,23 @@ class GloveRecording:
         return self.angles()[:, GLOVE_SENSORS.index(name)]
 
 
+def _has_bool(value) -> bool:
+    """A JSON true/false among the numbers (numpy would read it as 1/0)."""
+    if isinstance(value, bool):
+        return True
+    if isinstance(value, list | tuple):
+        return any(_has_bool(v) if isinstance(v, list | tuple) else isinstance(v, bool)
+                   for v in value)
+    return False
+
+
 def _array(name, value, ndim, size=None) -> np.ndarray:
     try:
-        array = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf" or _has_bool(value):  # strings, booleans, None, ragged
+            raise TypeError
+        array = raw.astype(float)
+    except (TypeError, ValueError, OverflowError):
         raise GloveFormatError(f"{name}: expected numbers, got {_short(value)}") from None
     if array.ndim != ndim:
         raise GloveFormatError(f"{name}: expected a {ndim}-D array, got shape {array.shape}")

@@ -30,6 +30,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from pydrake.common.containers import namedview
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import BasicVector
 from pydrake.systems.sensors import Accelerometer
@@ -48,6 +49,7 @@ from handle_drake.instruments.profiles import (
 
 __all__ = [
     "DeviceAccelerometer",
+    "DeviceState",
     "device_reading",
     "sensor_pose",
     "default_sensor_pose",
@@ -60,6 +62,22 @@ __all__ = [
 #: The signals every instrumented station exports as ``<object>.<signal>``.
 INSTRUMENT_SIGNALS = ("acceleration", "acceleration_counts", "roll_pitch", "at_rest",
                       "free_fall", "slip")
+
+
+#: The simulated device's own state (one discrete state group), by name: its last
+#: reading (counts) and, for the averaging, the sensor point's position one and two
+#: periods ago, its orientation one period ago (row-major) and the samples taken.
+DeviceState = namedview("DeviceState", [
+    "counts_x", "counts_y", "counts_z",
+    "p1_x", "p1_y", "p1_z",  # p_WS(t - T)
+    "p2_x", "p2_y", "p2_z",  # p_WS(t - 2T)
+    *(f"R_WS_{i}{j}" for i in range(3) for j in range(3)),  # R_WS(t - T)
+    "samples",
+])
+_DEVICE_SIZE = len(DeviceState.get_fields())
+# Positions of the fields, for the per-sample update on plain floats.
+_COUNTS, _P1, _P2, _R, _SAMPLES = (DeviceState.get_fields().index(name) for name in (
+    "counts_x", "p1_x", "p2_x", "R_WS_00", "samples"))
 
 
 def device_reading(f_S, profile: DeviceProfile, seed: int = 0, index: int = 0) -> np.ndarray:
@@ -102,19 +120,27 @@ class DeviceAccelerometer(InstrumentSystem):
     new sample in the same update (:class:`~handle_drake.instruments.estimators.
     InstrumentSystem`: their outputs and, with ``command_size``, the ``command``
     input); without, it is the device alone.
+
+    With ``calibration`` (:class:`~handle_drake.instruments.calibration.
+    AccelerometerCalibration`, e.g. the device's six-position calibration) the
+    ``acceleration`` output, and what the estimators read, is the calibrated
+    reading ``(counts * lsb - offset) / scale``; ``counts`` stay the device's own.
     """
 
     def __init__(self, profile: DeviceProfile | str, seed: int = 0, averaging: bool = False,
                  X_BS: RigidTransform | None = None, gravity_W=None,
-                 estimators: EstimatorParams | None = None, command_size: int | None = None):
+                 estimators: EstimatorParams | None = None, command_size: int | None = None,
+                 calibration=None):
         super().__init__()
         self.profile = get_profile(profile)
+        self.calibration = calibration
+        self._offset = list(calibration.offset) if calibration is not None else [0.0] * 3
+        self._scale = list(calibration.scale) if calibration is not None else [1.0] * 3
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
             raise TypeError(f"seed must be an int, got {type(seed).__name__}")
         self.seed = int(seed)
         self.averaging = bool(averaging)
         self._bias = device_bias(self.profile, self.seed).tolist()
-        self._noise_rows = (None, None)  # (block, that block's noise rows as floats)
         # The profile's derived numbers, once (properties computed per access).
         self._rate = self.profile.rate_hz
         self._inv_T2 = self.profile.rate_hz ** 2
@@ -128,8 +154,12 @@ class DeviceAccelerometer(InstrumentSystem):
             self._R_BS = X_BS.rotation().matrix().ravel().tolist()  # row-major
             self._g_W = [float(v) for v in gravity_W]
             self._body_state = self.DeclareVectorInputPort("body_state", 13)
-        # [counts (3), p_WS(t - T) (3), p_WS(t - 2T) (3), R_WS(t - T) (9), samples taken]
-        self._declare_instrument(self.profile.period, [0.0] * 19, estimators, command_size)
+        self._declare_instrument(self.profile.period, DeviceState(np.zeros(_DEVICE_SIZE))[:],
+                                 estimators, command_size)
+
+    def device_state(self, context) -> DeviceState:
+        """The device's own state in ``context``, by name (:data:`DeviceState`)."""
+        return DeviceState(context.get_discrete_state(self._state).get_value())
 
     def _noise(self, index: int) -> list[float]:
         """:func:`~handle_drake.instruments.profiles.sample_noise` of sample ``index`` as
@@ -137,18 +167,13 @@ class DeviceAccelerometer(InstrumentSystem):
         if self.profile.noise_std_g == 0.0:
             return [0.0, 0.0, 0.0]
         block, row = divmod(index, _NOISE_BLOCK)
-        cached, rows = self._noise_rows
-        if cached != block:
-            rows = (_noise_block(self.seed, block)
-                    * (self.profile.noise_std_g * STANDARD_GRAVITY)).tolist()
-            self._noise_rows = (block, rows)
-        return rows[row]
+        return _noise_rows(self.seed, block, self.profile.noise_std_g * STANDARD_GRAVITY)[row]
 
     def _sample(self, context, state) -> list[float]:
         # Plain Python floats: a sample is a few dozen scalar operations, and tiny numpy
         # arrays cost more per operation than the arithmetic (this runs once per sample
         # of every trial; see benchmarks/bench_instruments.py).
-        x = state[:19].tolist()
+        x = state.tolist()  # DeviceState, as floats: the positions of _COUNTS ... _SAMPLES
         f = None
         if self.averaging:
             qw, qx, qy, qz, bx, by, bz = self._body_state.Eval(context)[:7].tolist()
@@ -157,35 +182,48 @@ class DeviceAccelerometer(InstrumentSystem):
             p = [bx + R[0] * sx + R[1] * sy + R[2] * sz,
                  by + R[3] * sx + R[4] * sy + R[5] * sz,
                  bz + R[6] * sx + R[7] * sy + R[8] * sz]
-            if x[18] >= 2:
+            if x[_SAMPLES] >= 2:
                 inv_T2 = self._inv_T2
-                a_W = [(p[i] - 2 * x[3 + i] + x[6 + i]) * inv_T2 - self._g_W[i]
+                a_W = [(p[i] - 2 * x[_P1 + i] + x[_P2 + i]) * inv_T2 - self._g_W[i]
                        for i in range(3)]
-                R_WS = x[9:18]  # row-major R_WS(t - T): f_S = R_WS^T a_W
+                R_WS = x[_R:_R + 9]  # row-major R_WS(t - T): f_S = R_WS^T a_W
                 f = [R_WS[j] * a_W[0] + R_WS[3 + j] * a_W[1] + R_WS[6 + j] * a_W[2]
                      for j in range(3)]
-            x[6:9] = x[3:6]
-            x[3:6] = p
+            x[_P2:_P2 + 3] = x[_P1:_P1 + 3]
+            x[_P1:_P1 + 3] = p
             R_BS = self._R_BS
-            x[9:18] = [R[3 * i] * R_BS[j] + R[3 * i + 1] * R_BS[3 + j]
-                       + R[3 * i + 2] * R_BS[6 + j] for i in range(3) for j in range(3)]
-            x[18] += 1
+            x[_R:_R + 9] = [R[3 * i] * R_BS[j] + R[3 * i + 1] * R_BS[3 + j]
+                            + R[3 * i + 2] * R_BS[6 + j] for i in range(3) for j in range(3)]
+            x[_SAMPLES] += 1
         if f is None:
             f = self._input.Eval(context).tolist()
         noise = self._noise(int(round(context.get_time() * self._rate)))
         lsb, lo, hi, bias = self._lsb, self._lo, self._hi, self._bias
         counts = [min(max(round((f[i] + bias[i] + noise[i]) / lsb), lo), hi)
                   for i in range(3)]
-        x[:3] = counts
-        state[:19] = x
-        return [c * lsb for c in counts]
+        x[_COUNTS:_COUNTS + 3] = counts
+        state[:] = x
+        if self.calibration is None:
+            return [c * lsb for c in counts]
+        offset, scale = self._offset, self._scale
+        return [(counts[i] * lsb - offset[i]) / scale[i] for i in range(3)]
 
     def _calc_counts(self, context, output: BasicVector):
-        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[
+            _COUNTS:_COUNTS + 3])
 
     def _calc_acceleration(self, context, output: BasicVector):
-        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3]
-                             * self._lsb)
+        a = context.get_discrete_state(self._state).get_value()[_COUNTS:_COUNTS + 3] * self._lsb
+        if self.calibration is not None:
+            a = self.calibration.apply(a)
+        output.SetFromVector(a)
+
+
+@lru_cache(maxsize=64)
+def _noise_rows(seed: int, block: int, scale: float) -> tuple[list[float], ...]:
+    """A block of :func:`~handle_drake.instruments.profiles.sample_noise` as floats (the
+    same products), cached: no state of the system changes outside its context."""
+    return tuple((_noise_block(seed, block) * scale).tolist())
 
 
 def _quaternion_rows(w: float, x: float, y: float, z: float) -> list[float]:
@@ -255,7 +293,8 @@ def check_sensor_pose(spec, X_OS: RigidTransform, tolerance: float = 0.002) -> N
 def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
                            profile: DeviceProfile | str, seed: int = 0,
                            name: str = "object_accelerometer", averaging: bool = True,
-                           estimators: EstimatorParams | None = None, command=None):
+                           estimators: EstimatorParams | None = None, command=None,
+                           calibration=None):
     """Adds Drake's ``Accelerometer`` on ``body`` at ``X_BS`` (with the plant's
     gravity) and a :class:`DeviceAccelerometer` behind it (averaging over its
     period by default); returns the device system (outputs ``counts``,
@@ -266,7 +305,7 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
     device's; :func:`ExportInstrumentPorts` exports them); ``command`` is the
     output port whose stillness enables the slip detector (the hand and wrist
     command); without it the slip output is a constant 0 (nothing tells whether
-    the hand moves)."""
+    the hand moves). ``calibration``: the device's (see :class:`DeviceAccelerometer`)."""
     ideal = builder.AddNamedSystem(
         f"{name}_ideal",
         Accelerometer(body, X_BS, plant.gravity_field().gravity_vector()))
@@ -285,7 +324,8 @@ def AddObjectAccelerometer(builder, plant, body, X_BS: RigidTransform,
         raise ValueError("command: the slip detector's command needs estimators")
     device = builder.AddNamedSystem(name, DeviceAccelerometer(
         profile, seed, averaging=averaging, X_BS=X_BS, gravity_W=gravity,
-        estimators=estimators, command_size=None if command is None else command.size()))
+        estimators=estimators, command_size=None if command is None else command.size(),
+        calibration=calibration))
     builder.Connect(ideal.get_measurement_output_port(), device.GetInputPort("specific_force"))
     if averaging:
         builder.Connect(plant.get_state_output_port(instance), device.GetInputPort("body_state"))

@@ -12,6 +12,7 @@ types (see ``handle_drake.scenario``).
         X_OS: {translation: [0, 0, 0.05], rotation: !Rpy {deg: [0, 0, 90]}}
         # range_g: 4.0  bits: 12  rate_hz: 50   (override the profile)
         # noise: false                (no noise and bias; still sampled and quantised)
+        # calibrated: false           (raw readings: no six-position calibration first)
         # seed: 3                     (default: the scenario's random_seed)
         # estimators: {free_fall_threshold: 0.25}
         # evdev_device: /dev/input/event5   (hardware=True: the real device)
@@ -26,10 +27,22 @@ the object's own device for an instrumented object, else the JoyWarrior.
 
 import dataclasses as dc
 import math
+import numbers
 
 from pydrake.common.schema import Transform
 
-__all__ = ["AccelerometerConfig"]
+__all__ = ["AccelerometerConfig", "ESTIMATOR_MAXIMA"]
+
+#: The largest value of each estimator threshold that still means something (all > 0):
+#: durations (s) up to a minute, magnitudes (g) up to 1 g for the free-fall threshold
+#: (at or above 1 g an object at rest is "falling") and 16 g (the largest accelerometer
+#: range) for the others, angles (rad) up to pi, the command's stillness up to 1 rad or m.
+ESTIMATOR_MAXIMA = {
+    "window": 60.0, "rest_window": 60.0, "free_fall_duration": 60.0, "slip_duration": 60.0,
+    "settle_time": 60.0, "free_fall_threshold": 1.0, "rest_norm_tol": 16.0,
+    "rest_std_tol": 16.0, "slip_norm_tol": 16.0, "rest_angle_tol": math.pi,
+    "slip_angle_tol": math.pi, "still_tol": 1.0,
+}
 
 
 @dc.dataclass
@@ -40,6 +53,9 @@ class AccelerometerConfig:
     bits: int | None = None
     rate_hz: float | None = None
     noise: bool = True  # False: no noise, no bias
+    # True: the six-position calibration from the device's own rest readings first
+    # (instruments.calibration), as a real experiment does; False: raw readings.
+    calibrated: bool = True
     seed: int | None = None  # None: the scenario's random_seed
     # EstimatorParams fields by name (window, free_fall_threshold, slip_angle_tol, ...).
     estimators: dict[str, float] = dc.field(default_factory=dict)
@@ -60,7 +76,12 @@ class AccelerometerConfig:
             changes.update(noise_std_g=0.0, bias_std_g=0.0, bias_g=None)
         return profile.replace(**changes) if changes else profile
 
-    def estimator_params(self):
+    def estimator_params(self, kind: str | None = None, calibrated: bool | None = None):
+        """The estimators' thresholds: those given in ``estimators``, the others at least
+        what the device's noise and (residual) bias need
+        (:func:`~handle_drake.instruments.calibration.device_estimator_params`).
+        ``calibrated``: whether the readings are (default: ``self.calibrated``)."""
+        from handle_drake.instruments.calibration import device_estimator_params
         from handle_drake.instruments.estimators import EstimatorParams
 
         known = {f.name for f in dc.fields(EstimatorParams)}
@@ -68,7 +89,25 @@ class AccelerometerConfig:
             if key not in known:
                 raise ValueError(f"estimators: unknown parameter {key!r}; "
                                  f"expected some of {sorted(known)}")
-        return EstimatorParams(**self.estimators)
+            value, high = self.estimators[key], ESTIMATOR_MAXIMA.get(key)
+            if high is not None and isinstance(value, numbers.Real) \
+                    and not isinstance(value, bool) and value > high:
+                raise ValueError(f"estimators.{key}: expected a value in (0, {high:g}], "
+                                 f"got {value!r}")
+        return device_estimator_params(self.profile(kind),
+                                       self.calibrated if calibrated is None else calibrated,
+                                       self.estimators)
+
+    def calibration(self, kind: str | None, seed: int):
+        """The device's six-position calibration from its own rest readings, or None
+        (``calibrated: false``, or a device without bias and noise)."""
+        from handle_drake.instruments.calibration import calibrate_device
+
+        profile = self.profile(kind)
+        if not self.calibrated or (profile.noise_std_g == 0 and profile.bias_std_g == 0
+                                   and profile.bias_g is None):
+            return None
+        return calibrate_device(profile, seed)
 
     def validate(self, kind: str) -> None:
         """Raises ValueError naming the field (without the ``object.accelerometer.`` prefix)."""
@@ -81,4 +120,4 @@ class AccelerometerConfig:
         if self.seed is not None and not 0 <= self.seed < 2**32:
             raise ValueError(f"seed: expected an integer in [0, 2**32), got {self.seed!r}")
         self.profile(kind)
-        self.estimator_params()
+        self.estimator_params(kind)

@@ -22,15 +22,21 @@ accelerometer output at the device rate:
   total measured acceleration is zero in this case".
 * **slip** (:func:`slip_indicator`), the method stated: while the hand's
   command is still, a held object is static. After the command has been still
-  for ``settle_time``, the window's mean specific force is the reference; slip
-  is flagged when, for ``slip_duration``, the mean over the last ``window`` s
-  (vibration of a held object averages out) is off: (a) its magnitude departs
-  from 1 g by
-  more than ``norm_tol`` (a static object feels exactly 1 g; one sliding on an
-  incline of angle alpha with friction mu feels only the contact force,
-  ``g0 cos(alpha) sqrt(1 + mu^2)``), or (b) its direction turns away from the
-  reference by more than ``angle_tol`` (the object rotates in the grasp). While
-  the command moves, the detector is idle (0) and forgets its reference.
+  for ``settle_time``, the reference is taken at the first sample where the
+  object is at rest (the :func:`at_rest` test over the last ``rest_window``
+  s): the window's mean specific force. Until then every sample counts as
+  slipping (the hand is still and settled, so an object that is not at rest
+  moves in the grasp: a slide already under way when the hand stops, whose
+  steady specific force would otherwise become the reference). With a
+  reference, slip is flagged when, for ``slip_duration``, the mean over the
+  last ``window`` s (vibration of a held object averages out) is off: (a) its
+  magnitude departs from 1 g by more than ``norm_tol`` (a static object feels
+  exactly 1 g; one sliding on an incline of angle alpha with friction mu feels
+  only the contact force, ``g0 cos(alpha) sqrt(1 + mu^2)``), or (b) its
+  direction turns away from the reference by more than ``angle_tol`` (the
+  object rotates in the grasp, or starts to slide down a slope: the contact
+  force tilts by atan(mu) from the slope's normal). While the command moves,
+  the detector is idle (0) and forgets its reference.
 
 Thresholds are parameters (:class:`EstimatorParams`) with the defaults above.
 
@@ -39,11 +45,11 @@ In the station the estimators run inside the device's own update
 :class:`~handle_drake.instruments.accelerometer.DeviceAccelerometer` and the
 evdev driver of a real device): one periodic event per device sample updates
 the reading and all three estimators (:class:`InstrumentEstimators`, on plain
-floats). :class:`RollPitchEstimator`, :class:`FreeFallDetector` and
-:class:`SlipDetector` are the same estimators as separate systems behind any
-acceleration signal, each sampling it :attr:`_Sampled.OFFSET` s after the
-device; they are the reference the fused update is tested against, output for
-output and sample for sample (``tests/instruments/test_instrument_fused.py``).
+floats, its state in named groups: :data:`EstimatorState`).
+:class:`EstimatorSystem` runs the same estimators behind any acceleration
+signal. The plain functions are the reference the update is tested against,
+output for output and sample for sample
+(``tests/instruments/test_instrument_fused.py``).
 """
 
 from __future__ import annotations
@@ -53,6 +59,7 @@ import math
 import operator
 
 import numpy as np
+from pydrake.common.containers import namedview
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from handle_drake.instruments.profiles import STANDARD_GRAVITY
@@ -65,11 +72,10 @@ __all__ = [
     "at_rest",
     "free_fall",
     "slip_indicator",
-    "RollPitchEstimator",
-    "FreeFallDetector",
-    "SlipDetector",
+    "EstimatorState",
     "InstrumentEstimators",
     "InstrumentSystem",
+    "EstimatorSystem",
 ]
 
 G0 = STANDARD_GRAVITY
@@ -207,186 +213,40 @@ def _check_period(period) -> float:
     return float(period)
 
 
-class _Sampled(LeafSystem):
-    """Samples the 3-vector input ``acceleration`` every ``period`` s, ``offset`` s
-    after the device's own sample instants (so it reads the fresh sample, not the
-    previous one), into a ring of ``n`` samples kept in the discrete state."""
-
-    #: s after the device's sample instant (the device updates at k * period).
-    OFFSET = 1e-4
-
-    def __init__(self, period: float, n: int, extra):
-        super().__init__()
-        self._period = _check_period(period)
-        self._n = int(n)
-        extra = np.asarray(extra, dtype=float).ravel()
-        self._input = self.DeclareVectorInputPort("acceleration", 3)
-        # [ring (n x 3), number of samples taken, extra state ...]
-        self._state = self.DeclareDiscreteState(np.r_[np.zeros(3 * self._n + 1), extra])
-        self.DeclarePeriodicDiscreteUpdateEvent(self._period, self.OFFSET, self._update)
-
-    def _recent(self, x: np.ndarray, k: int) -> np.ndarray:
-        """The last ``min(k, taken)`` samples, oldest first."""
-        taken = int(x[3 * self._n])
-        k = min(k, taken, self._n)
-        ring = x[: 3 * self._n].reshape(self._n, 3)
-        return ring[(taken - k + np.arange(k)) % self._n]
-
-    def _update(self, context, discrete_state):
-        x = context.get_discrete_state(self._state).get_value().copy()
-        f = self._input.Eval(context)
-        taken = int(x[3 * self._n])
-        ring = x[: 3 * self._n].reshape(self._n, 3)
-        ring[taken % self._n] = f
-        x[3 * self._n] = taken + 1
-        self._step(context, x, f)
-        discrete_state.get_mutable_vector(self._state).SetFromVector(x)
-
-    def _step(self, context, x: np.ndarray, f: np.ndarray) -> None:
-        """Updates the extra state ``x[3n+1:]`` in place."""
-
-    def _extra_state(self, context) -> np.ndarray:
-        return context.get_discrete_state(self._state).get_value()[3 * self._n + 1:]
-
-
-class RollPitchEstimator(_Sampled):
-    """Roll and pitch of the sensor frame from its accelerometer (valid at rest).
-
-    Input ``acceleration`` (3, m/s^2, sensor frame). Outputs ``roll_pitch`` (2,
-    rad, of the mean over ``window``; zeros before the first sample) and
-    ``at_rest`` (1: 1.0 when :func:`at_rest` holds over a full ``rest_window``).
-    """
-
-    def __init__(self, period: float, params: EstimatorParams | None = None):
-        self.params = params or EstimatorParams()
-        period = _check_period(period)
-        self._n_mean = self.params.samples(self.params.window, period)
-        n = max(self._n_mean, self.params.samples(self.params.rest_window, period), 2)
-        super().__init__(period, n, [])
-        self.DeclareVectorOutputPort("roll_pitch", 2, self._calc_roll_pitch,
-                                     {self.discrete_state_ticket(self._state)})
-        self.DeclareVectorOutputPort("at_rest", 1, self._calc_at_rest,
-                                     {self.discrete_state_ticket(self._state)})
-
-    def _calc_roll_pitch(self, context, output: BasicVector):
-        recent = self._recent(context.get_discrete_state(self._state).get_value(), self._n_mean)
-        output.SetFromVector(roll_pitch(recent.mean(axis=0)) if len(recent) else np.zeros(2))
-
-    def _calc_at_rest(self, context, output: BasicVector):
-        x = context.get_discrete_state(self._state).get_value()
-        p = self.params
-        rest = int(x[3 * self._n]) >= self._n and at_rest(
-            self._recent(x, self._n), p.rest_norm_tol, p.rest_std_tol, p.rest_angle_tol)
-        output.SetFromVector([1.0 if rest else 0.0])
-
-
-class FreeFallDetector(_Sampled):
-    """Free fall: input ``acceleration`` (3, m/s^2); output ``free_fall`` (1: 1.0 once
-    the magnitude has stayed below ``free_fall_threshold`` g for
-    ``free_fall_duration`` s) and ``detection_time`` (1: s, when the present free
-    fall was flagged, NaN when not in free fall)."""
-
-    def __init__(self, period: float, params: EstimatorParams | None = None):
-        self.params = params or EstimatorParams()
-        period = _check_period(period)
-        self._need = self.params.samples(self.params.free_fall_duration, period)
-        # extra state: [consecutive low samples, detection time]
-        super().__init__(period, 1, [0.0, np.nan])
-        self.DeclareVectorOutputPort("free_fall", 1, self._calc_free_fall,
-                                     {self.discrete_state_ticket(self._state)})
-        self.DeclareVectorOutputPort("detection_time", 1, self._calc_time,
-                                     {self.discrete_state_ticket(self._state)})
-
-    def _step(self, context, x, f):
-        extra = x[3 * self._n + 1:]
-        low = np.linalg.norm(f) < self.params.free_fall_threshold * G0
-        extra[0] = extra[0] + 1 if low else 0
-        if extra[0] == self._need:
-            extra[1] = context.get_time()
-        elif extra[0] < self._need:
-            extra[1] = np.nan
-
-    def _calc_free_fall(self, context, output: BasicVector):
-        output.SetFromVector([1.0 if self._extra_state(context)[0] >= self._need else 0.0])
-
-    def _calc_time(self, context, output: BasicVector):
-        output.SetFromVector([self._extra_state(context)[1]])
-
-
-class SlipDetector(_Sampled):
-    """Slip of a held object (method in the module doc).
-
-    Inputs: ``acceleration`` (3, m/s^2) and ``command`` (``command_size``: what
-    moves the hand, e.g. the hand's joint command and the wrist pose; the
-    detector runs only while it is still). Output ``slip`` (1: 1.0 while slip
-    is detected).
-    """
-
-    def __init__(self, period: float, command_size: int, params: EstimatorParams | None = None):
-        self.params = params or EstimatorParams()
-        period = _check_period(period)
-        if isinstance(command_size, bool) or not isinstance(command_size, int | np.integer) \
-                or command_size < 1:
-            raise ValueError(f"command_size must be an int >= 1, got {command_size!r}")
-        self._m = int(command_size)
-        self._settle = self.params.samples(self.params.settle_time, period)
-        self._need = self.params.samples(self.params.slip_duration, period)
-        # extra state: [still samples, samples flagged, reference (3), previous command (m),
-        #               have previous command]
-        super().__init__(period, self.params.samples(self.params.window, period),
-                         np.zeros(2 + 3 + self._m + 1))
-        self._command = self.DeclareVectorInputPort("command", self._m)
-        self.DeclareVectorOutputPort("slip", 1, self._calc_slip,
-                                     {self.discrete_state_ticket(self._state)})
-
-    def _step(self, context, x, f):
-        p = self.params
-        extra = x[3 * self._n + 1:]
-        command = self._command.Eval(context)
-        previous = extra[5:5 + self._m]
-        still = extra[-1] > 0 and np.max(np.abs(command - previous)) <= p.still_tol
-        previous[:] = command
-        extra[-1] = 1.0
-        if not still:
-            extra[0] = extra[1] = 0.0
-            extra[2:5] = 0.0
-            return
-        extra[0] += 1
-        if extra[0] < self._settle:
-            return
-        mean = self._recent(x, self._n).mean(axis=0)
-        if extra[0] == self._settle:
-            extra[2:5] = mean
-        flagged = slip_indicator(mean, extra[2:5], p.slip_norm_tol, p.slip_angle_tol)
-        extra[1] = extra[1] + 1 if flagged else 0.0
-
-    def _calc_slip(self, context, output: BasicVector):
-        output.SetFromVector([1.0 if self._extra_state(context)[1] >= self._need else 0.0])
-
-
-# ------------------------------------------------------------ fused, one update
+#: The estimators' counters and slip reference: one discrete state group, read by name.
+EstimatorState = namedview("EstimatorState", [
+    "taken",           # samples taken
+    "low_samples",     # consecutive samples below the free-fall threshold
+    "detection_time",  # s: the sample that completed the present free fall (NaN: none)
+    "still_samples",   # consecutive samples with the command still
+    "slip_samples",    # consecutive samples judged slipping
+    "ref_x", "ref_y", "ref_z",  # the slip reference (NaN: none taken yet)
+    "have_command",    # 1 once a command has been read
+])
+# Field positions, for the per-sample update on plain floats (see InstrumentEstimators).
+(_TAKEN, _LOW, _DETECTED, _STILL, _SLIPPING, _REF, _, _, _HAVE_COMMAND) = range(
+    len(EstimatorState.get_fields()))
 
 
 class InstrumentEstimators:
-    """:class:`RollPitchEstimator`, :class:`FreeFallDetector` and (with a
-    ``command_size``) :class:`SlipDetector` as one update of one state vector,
-    for a device system to run in its own periodic update (not a System:
-    :class:`InstrumentSystem` holds it). The state is the separate systems'
-    state in one vector: one ring of the last samples (as many as the longest
-    window needs), then ``[samples taken, low samples, free-fall detection time]``
-    and, with a command, ``[still samples, samples flagged, reference (3),
-    previous command (m), have previous command]``.
+    """The roll/pitch, free-fall and (with a ``command_size``) slip estimators as one
+    update, for a device system to run in its own periodic update (not a System:
+    :class:`InstrumentSystem` holds it and calls :meth:`declare_state` in its
+    constructor). Its discrete state groups:
+
+    - ``samples`` (``3 n``): the last ``n`` samples (as many as the longest window
+      needs), sample ``k`` in row ``k % n``;
+    - ``estimates``: :data:`EstimatorState`, by name;
+    - ``command`` (``command_size``): the command read at the previous sample.
 
     :meth:`step` works on plain Python floats (tiny numpy arrays cost more per
-    operation than the arithmetic) and writes only the new sample's ring slot
-    and the tail. Where its float arithmetic could differ from the separate
-    systems' numpy arithmetic in the last bits (a magnitude against the
+    operation than the arithmetic). Where its float arithmetic could differ from
+    the plain functions' numpy arithmetic in the last bits (a magnitude against the
     free-fall threshold, the slip test's magnitude and angle against their
     tolerances), a value within :attr:`BAND` of its threshold is decided by the
-    separate systems' own expressions (``np.linalg.norm``,
-    :func:`slip_indicator`), so every decision is theirs exactly. The outputs
-    are computed as the separate systems compute them (:func:`roll_pitch`,
-    :func:`at_rest` of the same samples).
+    plain functions' own expressions (``np.linalg.norm``, :func:`slip_indicator`),
+    so every decision is theirs exactly. The outputs are computed by the plain
+    functions (:func:`roll_pitch`, :func:`at_rest`) of the samples.
     """
 
     #: Relative half-width of the band around a threshold where the numpy expression
@@ -402,11 +262,9 @@ class InstrumentEstimators:
                 or command_size < 1):
             raise ValueError(f"command_size must be an int >= 1, got {command_size!r}")
         self.command_size = 0 if command_size is None else int(command_size)
-        # The separate systems' windows (samples): RollPitchEstimator's mean and ring
-        # (its at-rest window), SlipDetector's ring (its mean).
-        self._n_mean = p.samples(p.window, period)  # also SlipDetector's mean
+        self._n_mean = p.samples(p.window, period)  # roll/pitch's and the slip test's mean
         self._n_rest = max(self._n_mean, p.samples(p.rest_window, period), 2)
-        self._n = self._n_rest  # the ring: the longest window
+        self._n = self._n_rest  # the samples kept: the longest window
         self._fall_need = p.samples(p.free_fall_duration, period)
         self._settle = p.samples(p.settle_time, period)
         self._slip_need = p.samples(p.slip_duration, period)
@@ -414,74 +272,92 @@ class InstrumentEstimators:
         self._norm_tol = p.slip_norm_tol * G0
         # arccos(c) > angle_tol  <=>  c < cos(angle_tol) (never when angle_tol >= pi).
         self._cos_tol = math.cos(p.slip_angle_tol) if p.slip_angle_tol < math.pi else -math.inf
-        self._tail = 3 * self._n
-        m = self.command_size
-        self._initial_tail = [0.0, 0.0, math.nan] + ([0.0] * (2 + 3 + m + 1) if m else [])
-        self._tail_end = self._tail + len(self._initial_tail)
+        self._groups = None
 
-    def initial_state(self) -> list[float]:
-        return [0.0] * self._tail + self._initial_tail
+    def initial_estimates(self) -> EstimatorState:
+        x = EstimatorState(np.zeros(len(EstimatorState.get_fields())))
+        x.detection_time = math.nan
+        x.ref_x = x.ref_y = x.ref_z = math.nan
+        return x
 
-    @property
-    def size(self) -> int:
-        return self._tail_end
+    def declare_state(self, system: LeafSystem) -> set:
+        """Declares the state groups on ``system`` (in its constructor); returns their
+        tickets."""
+        if self._groups is not None:
+            raise RuntimeError("the estimators' state is declared once, by one system")
+        samples = system.DeclareDiscreteState(3 * self._n)
+        estimates = system.DeclareDiscreteState(self.initial_estimates()[:])
+        command = (system.DeclareDiscreteState(self.command_size) if self.command_size
+                   else None)
+        self._groups = (samples, estimates, command)
+        return {system.discrete_state_ticket(g) for g in self._groups if g is not None}
 
-    def step(self, x: np.ndarray, offset: int, t: float, f: list[float], command=None) -> None:
+    def estimates(self, state) -> EstimatorState:
+        """The :data:`EstimatorState` of a context's (or an update's) discrete state."""
+        return EstimatorState(state.get_value(self._groups[1]))
+
+    def step(self, state, t: float, f: list[float], command=None) -> None:
         """Takes the sample ``f`` (3 floats, m/s^2) at time ``t``: updates the
-        estimators' state ``x[offset:offset + size]`` in place (``x``: the update's
-        writable discrete state). ``command``: the command's values (a list), when
-        the estimators have one."""
+        estimators' groups of ``state`` (the update's writable ``DiscreteValues``) in
+        place. ``command``: the command's values (a list), when the estimators have one."""
+        samples_group, estimates_group, command_group = self._groups
+        ring = state.get_mutable_value(samples_group)
+        estimates = state.get_mutable_value(estimates_group)
+        e = estimates.tolist()
         fx, fy, fz = f
-        n3, end = offset + self._tail, offset + self._tail_end
-        tail = x[n3:end].tolist()
-        taken = int(tail[0])
-        slot = offset + 3 * (taken % self._n)
-        x[slot:slot + 3] = f
+        taken = int(e[_TAKEN])
+        slot = 3 * (taken % self._n)
+        ring[slot:slot + 3] = f
         taken += 1
-        tail[0] = taken
-        # FreeFallDetector._step
+        e[_TAKEN] = taken
         norm = math.sqrt(fx * fx + fy * fy + fz * fz)
         threshold = self._fall_threshold
         if abs(norm - threshold) > self.BAND * threshold:
             low = norm < threshold
-        else:  # at the threshold (or not finite): FreeFallDetector's own expression
+        else:  # at the threshold (or not finite): free_fall's own expression
             low = bool(np.linalg.norm(np.array(f, dtype=float)) < threshold)
-        tail[1] = tail[1] + 1 if low else 0
-        if tail[1] == self._fall_need:
-            tail[2] = t
-        elif tail[1] < self._fall_need:
-            tail[2] = math.nan
+        e[_LOW] = e[_LOW] + 1 if low else 0
+        if e[_LOW] == self._fall_need:
+            e[_DETECTED] = t
+        elif e[_LOW] < self._fall_need:
+            e[_DETECTED] = math.nan
         if self.command_size:
-            self._slip_step(x, offset, tail, taken, command)
-        x[n3:end] = tail
+            previous = state.get_mutable_value(command_group)
+            self._slip_step(ring, e, taken, command, previous.tolist())
+            previous[:] = command
+        estimates[:] = e
 
-    def _slip_step(self, x, offset, tail, taken, command) -> None:
-        """SlipDetector._step on ``tail`` (the state after the ring, as floats)."""
-        m = self.command_size
+    def _slip_step(self, ring, e, taken, command, previous) -> None:
+        """The slip method (module doc) on the estimates ``e`` (floats, in place)."""
         tol = self.params.still_tol
         # max |command - previous| <= tol, as each entry's (a NaN is not still)
-        still = tail[-1] > 0 and all(map(tol.__ge__, map(abs, map(operator.sub, command,
-                                                                   tail[8:8 + m]))))
-        tail[8:8 + m] = command
-        tail[-1] = 1.0
+        still = e[_HAVE_COMMAND] > 0 and all(map(tol.__ge__, map(abs, map(operator.sub, command,
+                                                                           previous))))
+        e[_HAVE_COMMAND] = 1.0
         if not still:
-            tail[3:8] = [0.0] * 5
+            e[_STILL:_REF + 3] = [0.0, 0.0, math.nan, math.nan, math.nan]
             return
-        tail[3] += 1
-        if tail[3] < self._settle:
+        e[_STILL] += 1
+        if e[_STILL] < self._settle:
             return
-        if tail[3] == self._settle:  # the reference: once per still spell, as numpy does it
-            tail[5:8] = self._recent(x, offset, self._n_mean, taken).mean(axis=0).tolist()
+        if math.isnan(e[_REF]):  # no reference yet: one at rest (as numpy does it), or slip
+            p = self.params
+            if taken >= self._n_rest and at_rest(
+                    self._recent(ring, self._n_rest, taken), p.rest_norm_tol, p.rest_std_tol,
+                    p.rest_angle_tol):
+                e[_REF:_REF + 3] = self._recent(ring, self._n_mean, taken).mean(axis=0).tolist()
+            else:
+                e[_SLIPPING] += 1
+                return
         # The mean of the last samples, in order (the ring slots, oldest first).
         n, k = self._n, min(self._n_mean, taken, self._n)
         first = (taken - k) % n
         if first + k <= n:
-            window = x[offset + 3 * first:offset + 3 * (first + k)].tolist()
+            window = ring[3 * first:3 * (first + k)].tolist()
         else:
-            window = (x[offset + 3 * first:offset + 3 * n].tolist()
-                      + x[offset:offset + 3 * (first + k - n)].tolist())
+            window = ring[3 * first:3 * n].tolist() + ring[:3 * (first + k - n)].tolist()
         mx, my, mz = sum(window[0::3]) / k, sum(window[1::3]) / k, sum(window[2::3]) / k
-        rx, ry, rz = tail[5:8]
+        rx, ry, rz = e[_REF:_REF + 3]
         r_norm = max(math.sqrt(rx * rx + ry * ry + rz * rz), 1e-12)
         rx, ry, rz = rx / r_norm, ry / r_norm, rz / r_norm
         norm = math.sqrt(mx * mx + my * my + mz * mz)
@@ -491,60 +367,58 @@ class InstrumentEstimators:
         if (abs(off - self._norm_tol) > band * G0 and abs(cos - self._cos_tol) > band
                 and math.isfinite(norm) and math.isfinite(r_norm)):
             flagged = off > self._norm_tol or cos < self._cos_tol
-        else:  # near a threshold (or not finite): SlipDetector's own expression
+        else:  # near a threshold (or not finite): slip_indicator's own expression
             p = self.params
-            flagged = bool(slip_indicator(self._recent(x, offset, self._n_mean, taken)
-                                          .mean(axis=0), np.array(tail[5:8]),
-                                          p.slip_norm_tol, p.slip_angle_tol))
-        tail[4] = tail[4] + 1 if flagged else 0.0
+            flagged = bool(slip_indicator(self._recent(ring, self._n_mean, taken).mean(axis=0),
+                                          np.array(e[_REF:_REF + 3]), p.slip_norm_tol,
+                                          p.slip_angle_tol))
+        e[_SLIPPING] = e[_SLIPPING] + 1 if flagged else 0.0
 
-    def _recent(self, x: np.ndarray, offset: int, k: int, taken: int | None = None
-                ) -> np.ndarray:
-        """The last ``min(k, taken)`` samples, oldest first (as ``_Sampled._recent``)."""
-        if taken is None:
-            taken = int(x[offset + self._tail])
+    def _recent(self, ring: np.ndarray, k: int, taken: int) -> np.ndarray:
+        """The last ``min(k, taken)`` samples (k, 3), oldest first."""
         k = min(k, taken, self._n)
-        ring = x[offset:offset + self._tail].reshape(self._n, 3)
-        return ring[(taken - k + np.arange(k)) % self._n]
+        return ring.reshape(self._n, 3)[(taken - k + np.arange(k)) % self._n]
 
-    # Outputs, from the state x[offset:], as the separate systems compute them.
+    def recent(self, state, k: int) -> np.ndarray:
+        """The last ``min(k, taken)`` samples of a context's discrete state, oldest first."""
+        return self._recent(state.get_value(self._groups[0]), k,
+                            int(self.estimates(state).taken))
 
-    def roll_pitch(self, x: np.ndarray, offset: int) -> np.ndarray:
-        recent = self._recent(x, offset, self._n_mean)
+    # Outputs, from a context's discrete state, by the plain functions.
+
+    def roll_pitch(self, state) -> np.ndarray:
+        recent = self.recent(state, self._n_mean)
         return roll_pitch(recent.mean(axis=0)) if len(recent) else np.zeros(2)
 
-    def at_rest(self, x: np.ndarray, offset: int) -> float:
+    def at_rest(self, state) -> float:
         p = self.params
-        rest = int(x[offset + self._tail]) >= self._n_rest and at_rest(
-            self._recent(x, offset, self._n_rest), p.rest_norm_tol, p.rest_std_tol,
-            p.rest_angle_tol)
+        rest = int(self.estimates(state).taken) >= self._n_rest and at_rest(
+            self.recent(state, self._n_rest), p.rest_norm_tol, p.rest_std_tol, p.rest_angle_tol)
         return 1.0 if rest else 0.0
 
-    def free_fall(self, x: np.ndarray, offset: int) -> float:
-        return 1.0 if x[offset + self._tail + 1] >= self._fall_need else 0.0
+    def free_fall(self, state) -> float:
+        return 1.0 if self.estimates(state).low_samples >= self._fall_need else 0.0
 
-    def detection_time(self, x: np.ndarray, offset: int) -> float:
-        return float(x[offset + self._tail + 2])
+    def detection_time(self, state) -> float:
+        return float(self.estimates(state).detection_time)
 
-    def slip(self, x: np.ndarray, offset: int) -> float:
+    def slip(self, state) -> float:
         if not self.command_size:
             return 0.0
-        return 1.0 if x[offset + self._tail + 4] >= self._slip_need else 0.0
+        return 1.0 if self.estimates(state).slip_samples >= self._slip_need else 0.0
 
 
 class InstrumentSystem(LeafSystem):
     """A device system (``counts`` and ``acceleration`` outputs) that can carry the
-    estimators: one discrete state group ``[device state, estimator state]`` and
-    one periodic update per device sample, at ``k * period``, which takes the
-    device's sample (:meth:`_sample`, the subclass's) and, with estimators, steps
-    them on it (:class:`InstrumentEstimators`) in the same update. Its outputs
-    are then those of the separate estimator systems behind the device:
-    ``roll_pitch`` (2), ``at_rest``, ``free_fall``, ``detection_time`` (the time
-    of the sample that completed the free-fall run; the separate
-    :class:`FreeFallDetector` reports its own update's, :attr:`_Sampled.OFFSET`
-    later), ``slip`` (a constant 0.0 without a command: nothing tells whether the
-    hand moves), and the input ``command`` (with a ``command_size``), which the
-    update reads at the sample instant.
+    estimators: the device's own discrete state group, the estimators' groups
+    (:class:`InstrumentEstimators`), and one periodic update per device sample, at
+    ``k * period``, which takes the device's sample (:meth:`_sample`, the
+    subclass's) and, with estimators, steps them on it in the same update. Outputs
+    with estimators: ``roll_pitch`` (2), ``at_rest``, ``free_fall``,
+    ``detection_time`` (the time of the sample that completed the free-fall run),
+    ``slip`` (a constant 0.0 without a command: nothing tells whether the hand
+    moves), and the input ``command`` (with a ``command_size``), which the update
+    reads at the sample instant.
     """
 
     def _declare_instrument(self, period: float, device_state, estimators, command_size):
@@ -553,20 +427,19 @@ class InstrumentSystem(LeafSystem):
         self._device_size = len(device_state)
         self.estimators = (None if estimators is None else
                            InstrumentEstimators(period, estimators, command_size))
-        x0 = [float(v) for v in device_state]
+        self._state = self.DeclareDiscreteState(np.array([float(v) for v in device_state]))
+        ticket = {self.discrete_state_ticket(self._state)}
         if self.estimators is not None:
-            x0 += self.estimators.initial_state()
+            estimator_tickets = self.estimators.declare_state(self)
             if self.estimators.command_size:
                 self._command = self.DeclareVectorInputPort("command",
                                                             self.estimators.command_size)
-        self._state = self.DeclareDiscreteState(np.array(x0))
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        ticket = {self.discrete_state_ticket(self._state)}
         self.DeclareVectorOutputPort("counts", 3, self._calc_counts, ticket)
         self.DeclareVectorOutputPort("acceleration", 3, self._calc_acceleration, ticket)
         if self.estimators is None:
             return
-        est, o = self.estimators, self._device_size
+        est = self.estimators
         for name, size, value in (("roll_pitch", 2, est.roll_pitch),
                                   ("at_rest", 1, est.at_rest),
                                   ("free_fall", 1, est.free_fall),
@@ -576,31 +449,31 @@ class InstrumentSystem(LeafSystem):
                 self.DeclareVectorOutputPort("slip", 1, lambda context, out: out.SetAtIndex(0, 0.0),
                                              {self.nothing_ticket()})
                 continue
-            self.DeclareVectorOutputPort(name, size, self._calc_estimate(value, o, size), ticket)
+            self.DeclareVectorOutputPort(name, size, self._calc_estimate(value, size),
+                                         estimator_tickets)
 
-    def _calc_estimate(self, value, offset, size):
-        state = self._state
+    @staticmethod
+    def _calc_estimate(value, size):
         if size == 1:
             def calc(context, output):
-                output.SetAtIndex(0, value(context.get_discrete_state(state).get_value(), offset))
+                output.SetAtIndex(0, value(context.get_discrete_state()))
         else:
             def calc(context, output):
-                output.SetFromVector(value(context.get_discrete_state(state).get_value(), offset))
+                output.SetFromVector(value(context.get_discrete_state()))
         return calc
 
     def _update(self, context, discrete_state):
         # Drake hands the update a copy of the current state: write what changes.
-        x = discrete_state.get_mutable_value(self._state)
-        f = self._sample(context, x)
+        f = self._sample(context, discrete_state.get_mutable_value(self._state))
         if self.estimators is not None:
             command = self._command.Eval(context).tolist() if self.estimators.command_size \
                 else None
-            self.estimators.step(x, self._device_size, context.get_time(), f, command)
+            self.estimators.step(discrete_state, context.get_time(), f, command)
 
     def _sample(self, context, x: np.ndarray) -> list[float] | None:
-        """Takes the device's sample: updates the device state ``x[:device size]`` and
-        returns the new ``acceleration`` (3 floats, m/s^2, as the output reads it; a
-        device without estimators may return None)."""
+        """Takes the device's sample: updates the device's state ``x`` and returns the
+        new ``acceleration`` (3 floats, m/s^2, as the output reads it; a device
+        without estimators may return None)."""
         raise NotImplementedError
 
     def _calc_counts(self, context, output: BasicVector):
@@ -608,3 +481,27 @@ class InstrumentSystem(LeafSystem):
 
     def _calc_acceleration(self, context, output: BasicVector):
         raise NotImplementedError
+
+
+class EstimatorSystem(InstrumentSystem):
+    """The estimators behind any acceleration signal: input ``acceleration`` (3, m/s^2,
+    sensor frame), sampled every ``period`` s from t = 0 (and, with a
+    ``command_size``, input ``command``); outputs the estimates of
+    :class:`InstrumentSystem` and the held sample as ``counts`` and ``acceleration``."""
+
+    def __init__(self, period: float, params: EstimatorParams | None = None,
+                 command_size: int | None = None):
+        super().__init__()
+        self._input = self.DeclareVectorInputPort("acceleration", 3)
+        self._declare_instrument(_check_period(period), [0.0, 0.0, 0.0],
+                                 params or EstimatorParams(), command_size)
+
+    def _sample(self, context, x):
+        f = self._input.Eval(context).tolist()
+        x[:] = f
+        return f
+
+    def _calc_counts(self, context, output: BasicVector):
+        output.SetFromVector(context.get_discrete_state(self._state).get_value())
+
+    _calc_acceleration = _calc_counts

@@ -105,16 +105,27 @@ def open_device(name_or_path: str, axes=(ABS_X, ABS_Y, ABS_Z)):
     """Opens an evdev device by path (``/dev/input/eventN``) or by a part of its name
     (e.g. ``"JoyWarrior"``), removes the kernel deadband ("flat") of the axes and
     returns a :class:`LiveEvents`."""
-    import evdev
+    from handle_drake.extras import require_extra
+
+    evdev = require_extra("evdev")  # the joywarrior extra
 
     if not isinstance(name_or_path, str) or not name_or_path:
         raise ValueError(f"evdev_device: expected a device path or name, got {name_or_path!r}")
     if name_or_path.startswith("/"):
         if not Path(name_or_path).exists():
             raise FileNotFoundError(f"evdev_device: {name_or_path} does not exist")
-        device = evdev.InputDevice(name_or_path)
+        try:
+            device = evdev.InputDevice(name_or_path)
+        except OSError as error:  # /dev/zero, a directory, a file, a tty: not evdev
+            raise ValueError(f"evdev_device: {name_or_path} is not an input event device "
+                             f"(/dev/input/eventN): {error.strerror or error}") from None
     else:
-        found = [evdev.InputDevice(p) for p in evdev.list_devices()]
+        found = []
+        for p in evdev.list_devices():
+            try:
+                found.append(evdev.InputDevice(p))
+            except OSError:  # unreadable (permissions) or gone: not a candidate
+                continue
         matches = [d for d in found if name_or_path.lower() in d.name.lower()]
         if not matches:
             names = [d.name for d in found]
@@ -138,13 +149,24 @@ def save_events(path, events) -> None:
     Path(path).write_text("\n".join(lines) + "\n")
 
 
+#: bytes: a recording is text, ~20 bytes an event (an hour at 1 kHz, 3 axes: ~220 MB).
+MAX_RECORDING_BYTES = 256 << 20
+
+
 def load_events(path) -> RecordedEvents:
-    """Reads a recording written by :func:`save_events`."""
+    """Reads a recording written by :func:`save_events`.
+
+    Raises FileNotFoundError when nothing is there, ValueError naming the
+    recording for a directory, FIFO or device, a file that is not UTF-8 text or
+    larger than :data:`MAX_RECORDING_BYTES`, and a line that is not
+    ``t type code value``.
+    """
+    from handle_drake.scenario_checks import read_text_file
+
+    text = read_text_file(path, "evdev_device: event recording", max_bytes=MAX_RECORDING_BYTES)
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"event recording not found: {path}")
     rows = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
+    for number, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue

@@ -331,7 +331,7 @@ def run_figure8(device="joywarrior", rotations=ROTATIONS_DEG, seed: int = 0, mes
     wall = runner.harness.advance(scenario.simulation_duration, html)
     rows = np.array(runner.recorder.rows)
     data = {name: rows[:, i] for i, name in enumerate(_COLUMNS)}
-    params = scenario.object.accelerometer.estimator_params()
+    params = scenario.object.accelerometer.estimator_params(scenario.object.kind)
     return Figure8Result(_setup(device), data, np.array(runner.recorder.ideal), phases,
                          params.free_fall_threshold, wall, scenario.simulation_duration)
 

@@ -127,10 +127,12 @@ def AddSimulatedInstruments(builder, plant, scenario, body) -> dict:
     station's builder (after the hand driver); exports the instrument ports."""
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)
+    seed = instrument_seed(scenario)
     device = AddObjectAccelerometer(builder, plant, body, instrument_X_OS(scenario), profile,
-                                    seed=instrument_seed(scenario),
-                                    estimators=config.estimator_params(),
-                                    command=_command_port(builder))
+                                    seed=seed,
+                                    estimators=config.estimator_params(scenario.object.kind),
+                                    command=_command_port(builder),
+                                    calibration=config.calibration(scenario.object.kind, seed))
     ExportInstrumentPorts(builder, device)
     # Ground truth for experiments (simulation only): the ideal specific force in S.
     builder.ExportOutput(builder.GetSubsystemByName("object_accelerometer_ideal")
@@ -172,7 +174,11 @@ def WithHardwareInstruments(station, scenario, source=None):
         builder.ExportOutput(port, port.get_name())
     command = inner.GetOutputPort("hand.position_commanded")
     device = builder.AddNamedSystem("object_accelerometer", EvdevAccelerometer(
-        source, profile, estimators=config.estimator_params(), command_size=command.size()))
+        # A real device's readings are raw here (its calibration would come from its own
+        # six rest positions): thresholds for an uncalibrated device.
+        source, profile, estimators=config.estimator_params(scenario.object.kind,
+                                                            calibrated=False),
+        command_size=command.size()))
     builder.Connect(command, device.GetInputPort("command"))
     ExportInstrumentPorts(builder, device)
     diagram = builder.Build()

@@ -70,6 +70,7 @@ __all__ = [
     "DaskExecutor",
     "LocalPool",
     "add_executor_arguments",
+    "check_executor_arguments",
     "as_executor",
     "executor_workers",
     "trial_executor",
@@ -174,9 +175,27 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
              "Dask LocalCluster of --workers processes) or 'dask://HOST:PORT' (the workers of "
              "a running `dask scheduler`, on any machines)")
     parser.add_argument(
-        "--connect-timeout", type=_timeout_type, default=CONNECT_TIMEOUT, metavar="SECONDS",
+        "--connect-timeout", type=_timeout_type, default=None, metavar="SECONDS",
         help=f"dask://: give up when no scheduler answers, or it has no worker, within SECONDS "
              f"(default {CONNECT_TIMEOUT:g})")
+
+
+def check_executor_arguments(args) -> None:
+    """Before any work: ``--connect-timeout`` is refused without ``--executor
+    dask://HOST:PORT`` (it would be silently ignored), and a ``dask://`` address
+    must greet as a Dask server within the timeout (:mod:`.dask_probe`; nothing
+    is written before). For any parsed namespace (does nothing without them)."""
+    spec = getattr(args, "executor", None)
+    timeout = getattr(args, "connect_timeout", None)
+    if not isinstance(spec, ExecutorSpec):
+        return
+    if timeout is not None and spec.address is None:
+        raise ValueError(f"--connect-timeout: only for --executor dask://HOST:PORT (a running "
+                         f"scheduler), got --executor {spec}")
+    if spec.address is not None:
+        from handle_drake.learning.dask_probe import probe_scheduler
+
+        probe_scheduler(spec.address, CONNECT_TIMEOUT if timeout is None else timeout)
 
 
 # -------------------------------------------------------------- worker side
@@ -262,9 +281,13 @@ class LocalPool(Executor):
 
     def submit(self, fn, /, *args, **kwargs):
         if self._pool is None:
+            from handle_drake.orphans import init_worker
+
+            # Workers die with this process, even when it is killed with kill -9.
             self._pool = ProcessPoolExecutor(
                 max_workers=self.max_workers, mp_context=multiprocessing.get_context("spawn"),
-                initializer=self._initializer, initargs=self._initargs)
+                initializer=init_worker,
+                initargs=(os.getpid(), self._initializer, self._initargs))
         try:
             return self._pool.submit(fn, *args, **kwargs)
         except BrokenProcessPool:  # a worker died: this pool takes no more work
@@ -414,6 +437,8 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
         _check_local_workers(workers)
     elif isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    if connect_timeout is None:
+        connect_timeout = CONNECT_TIMEOUT
     if not (isinstance(connect_timeout, int | float)
             and 0 < connect_timeout <= MAX_CONNECT_TIMEOUT):
         raise ValueError(f"connect_timeout: expected seconds in (0, {MAX_CONNECT_TIMEOUT:g}], "
@@ -427,6 +452,10 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
         return
+    if spec.address is not None:  # a bounded look first: Client trusts whatever answers
+        from handle_drake.learning.dask_probe import probe_scheduler
+
+        probe_scheduler(spec.address, connect_timeout)
     try:
         # distributed loads its defaults into dask.config on import: *before* the
         # settings below, since set() on a missing "distributed" subtree records it as
@@ -472,8 +501,10 @@ def _connect(spec: ExecutorSpec, workers, connect_timeout):
         except BaseException:
             cluster.close()
             raise
-    try:
-        client = Client(spec.address, timeout=connect_timeout)
+    from handle_drake.learning.dask_probe import connect_client
+
+    try:  # a bounded look at the peer first: Client trusts whatever answers
+        client = connect_client(spec.address, connect_timeout)
     except (OSError, TimeoutError) as error:
         raise ExecutorError(
             f"executor {spec}: no Dask scheduler answered at {spec.address} within "

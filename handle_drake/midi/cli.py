@@ -84,7 +84,13 @@ def _load(args, default_file: str):
 
 
 def _cmd_jog(args) -> int:
-    from handle_drake.midi.experiments import run_midi_scenario
+    import sys
+
+    from handle_drake.midi.experiments import (
+        commanded_wrist_turn_deg,
+        run_midi_scenario,
+        wheel_followed,
+    )
 
     scenario = _load(args, JOG_SCENARIO)
     result = run_midi_scenario(scenario, start_meshcat(args.meshcat or args.html is not None),
@@ -95,10 +101,18 @@ def _cmd_jog(args) -> int:
           f"  (largest {s['max_rotation_deg']:.1f} deg)")
     print(f"  counted from MIDI  {s['midi_ticks']:+5d} ticks   error {s['error_ticks']:+.2f} "
           f"ticks")
+    wrist = commanded_wrist_turn_deg(scenario, result.times[0], result.times[-1])
+    followed = wheel_followed(s["rotation_deg"], wrist)
+    print(f"  wrist turned       {wrist:+8.2f} deg (script): the wheel "
+          f"{'followed' if followed else 'did NOT follow'}")
     print(f"  messages: {result.counts['accepted']} accepted, {result.counts['rejected']} "
           f"rejected; simulated {result.times[-1]:.1f} s in {result.wall_time:.1f} s")
     if args.html:
         print(f"replay written to {args.html}")
+    if not followed:
+        print(f"handle-drake midi: the wheel turned {s['rotation_deg']:+.1f} deg where the "
+              f"wrist turned {wrist:+.1f} deg: the pinch did not carry it", file=sys.stderr)
+        return 1
     return 0 if abs(s["error_ticks"]) < 1.0 else 1
 
 

@@ -228,3 +228,19 @@ def AddMidiController(plant, X_WC: RigidTransform | None = None, fixed: bool = T
 def control_joints(plant, instance, names):
     """The joints of the controls ``names`` (e.g. ``[c.name for c in control_layout()]``)."""
     return [plant.GetJointByName(n, instance) for n in names]
+
+
+def check_mapping_on_device(mapping, geometry: ControllerGeometry | None = None) -> None:
+    """Raises ValueError naming the first control of ``mapping`` the modelled device
+    lacks (a name not on it, or on it as another kind): the simulated controller
+    sends only the controls it has, so such a mapping would send nothing for them."""
+    layout = {c.name: c.kind for c in control_layout(geometry)}
+    for i, control in enumerate(mapping.controls):
+        kind = layout.get(control.name)
+        if kind is None:
+            raise ValueError(
+                f"controls[{i}].name: the {mapping.device} model has no control "
+                f"{control.name!r}; expected one of {', '.join(layout)}")
+        if kind != control.kind:
+            raise ValueError(f"controls[{i}] ({control.name!r}).kind: on the {mapping.device} "
+                             f"model {control.name} is a {kind}, got {control.kind!r}")

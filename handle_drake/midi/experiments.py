@@ -38,6 +38,9 @@ __all__ = [
     "fader_push_scenario",
     "jog_pinch_scenario",
     "run_midi_scenario",
+    "unwrap_wrist",
+    "commanded_wrist_turn_deg",
+    "wheel_followed",
 ]
 
 def _geometry() -> ControllerGeometry:
@@ -131,19 +134,70 @@ def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
         script.append(Keyframe(time=t + turn_time * k / steps,
                                wrist=turned(math.radians(turn_deg) * k / steps)))
     t += turn_time
-    back_steps = max(2, int(abs(back_deg) / 5))
-    back_time = turn_time * abs(back_deg) / max(abs(turn_deg), 1e-9)
-    for k in range(1, back_steps + 1):
-        theta = math.radians(turn_deg - back_deg * k / back_steps)
-        script.append(Keyframe(time=t + 0.2 + back_time * k / back_steps, wrist=turned(theta)))
-    t += 0.2 + back_time
+    if back_deg != 0:  # no back-turn: no keyframes (they would share one time)
+        back_steps = max(2, int(abs(back_deg) / 5))
+        back_time = turn_time * abs(back_deg) / max(abs(turn_deg), 1e-9)
+        for k in range(1, back_steps + 1):
+            theta = math.radians(turn_deg - back_deg * k / back_steps)
+            script.append(Keyframe(time=t + 0.2 + back_time * k / back_steps,
+                                   wrist=turned(theta)))
+        t += 0.2 + back_time
     final = math.radians(turn_deg - back_deg)
     script.append(Keyframe(time=t + 0.2))
     script.append(Keyframe(time=t + 0.6, hand=openc))
     lifted = turned(final)
     lifted[2] += 0.06
     script.append(Keyframe(time=t + 1.0, wrist=lifted))
-    return _base_scenario(plan.X_WB_pregrasp, openc, script, duration=t + 1.2)
+    return _base_scenario(plan.X_WB_pregrasp, openc, unwrap_wrist(script), duration=t + 1.2)
+
+
+#: How far (deg) the wheel's net turn may differ from the wrist's before ``midi jog``
+#: says the pinch did not carry it: the larger of this and half the wrist's turn. The
+#: planned pinches land within 11 deg (+60/-20: wheel +50.9; -75/+25: -90.8; +25: +31.8).
+JOG_FOLLOW_TOL_DEG = 15.0
+
+
+def commanded_wrist_turn_deg(scenario, t0: float, t1: float) -> float:
+    """The wrist's yaw change (deg) from ``t0`` to ``t1`` as the scenario's script plays
+    it (linear between keyframes, as :func:`~handle_drake.run.script_trajectories`):
+    for the jog pinch, the turn the pinched wheel should make."""
+    from handle_drake.hands import get_hand_spec
+    from handle_drake.run import script_trajectories
+
+    spec = get_hand_spec(scenario.hand.kind)
+    _, wrist = script_trajectories(scenario, np.zeros(len(spec.actuated_joint_names)))
+    if wrist is None:
+        return 0.0
+    return math.degrees(float(wrist.value(t1)[5, 0] - wrist.value(t0)[5, 0]))
+
+
+def wheel_followed(wheel_deg: float, wrist_deg: float) -> bool:
+    """True when the wheel turned with the wrist: the same way, within
+    :data:`JOG_FOLLOW_TOL_DEG` or half the wrist's turn."""
+    tol = max(JOG_FOLLOW_TOL_DEG, 0.5 * abs(wrist_deg))
+    return abs(wheel_deg - wrist_deg) <= tol and (
+        abs(wrist_deg) <= JOG_FOLLOW_TOL_DEG or wheel_deg * wrist_deg > 0)
+
+
+def unwrap_wrist(script):
+    """``script`` with each keyframe's wrist roll, pitch and yaw moved by whole
+    turns to lie within half a turn of the previous wrist keyframe's.
+
+    The script interpolates ``[x y z roll pitch yaw]`` linearly, so a yaw that
+    crosses +-180 degrees between two keyframes (RollPitchYaw wraps it) would
+    send the wrist the long way round, nearly a full turn the other way.
+    """
+    out, previous = [], None
+    for keyframe in script:
+        if keyframe.wrist:
+            wrist = np.array(keyframe.wrist, dtype=float)
+            if previous is not None:
+                turns = np.round((wrist[3:] - previous[3:]) / (2 * math.pi))
+                wrist[3:] -= 2 * math.pi * turns
+            previous = wrist
+            keyframe = dc.replace(keyframe, wrist=[float(v) for v in wrist])
+        out.append(keyframe)
+    return out
 
 
 def fader_push_scenario(fader: str = "fader5", push: float = 0.040):

@@ -104,8 +104,19 @@ def _check_midi_system() -> None:
             "the container); use the in-process port or Meshcat sliders (--meshcat) instead")
 
 
+def _check_backend_installed() -> None:
+    """mido's default back end (python-rtmidi) is an extra: without it, one line
+    naming the extra (:class:`~handle_drake.extras.MissingExtraError`)."""
+    if mido.backend.name == "mido.backends.rtmidi":
+        from handle_drake.extras import require_extra
+
+        require_extra("rtmidi")
+
+
 def device_port_names() -> tuple[list[str], list[str]]:
-    """(input names, output names) of the MIDI system; raises :class:`MidiPortError`."""
+    """(input names, output names) of the MIDI system; raises :class:`MidiPortError`
+    (or :class:`~handle_drake.extras.MissingExtraError` without python-rtmidi)."""
+    _check_backend_installed()
     _check_midi_system()
     try:
         return list(mido.get_input_names()), list(mido.get_output_names())

@@ -36,7 +36,9 @@ INSTANCE = "midi_controller"
 def validate_midi_controller(config) -> None:
     """Checks a ``MidiControllerConfig``; raises ``ScenarioError`` naming the field."""
     from handle_drake.scenario import ScenarioError
+    from handle_drake.scenario_checks import check_pose
 
+    check_pose("midi_controller.X_WC", config.X_WC)  # names a NaN angle or axis
     try:
         X = config.X_WC.GetDeterministicValue()
     except Exception as error:
@@ -46,8 +48,10 @@ def validate_midi_controller(config) -> None:
     if not (math.isfinite(config.scan_period) and config.scan_period > 0):
         raise ScenarioError(
             f"midi_controller.scan_period must be a finite number > 0, got {config.scan_period}")
+    from handle_drake.midi.device import check_mapping_on_device
+
     try:
-        LoadMidiMapping(config.mapping or None)
+        check_mapping_on_device(LoadMidiMapping(config.mapping or None))
     except (ValueError, FileNotFoundError) as error:
         raise ScenarioError(f"midi_controller.mapping: {error}") from None
 

@@ -51,7 +51,7 @@ from handle_drake.midi.codec import (
     MidiDecoder,
     control_message,
 )
-from handle_drake.midi.device import control_layout
+from handle_drake.midi.device import check_mapping_on_device, control_layout
 from handle_drake.midi.mapping import MidiMapping
 
 __all__ = [
@@ -113,6 +113,7 @@ class MidiControllerEncoder(LeafSystem):
         super().__init__()
         if not (np.isfinite(period) and period > 0):
             raise ValueError(f"period must be a finite number > 0 (s), got {period}")
+        check_mapping_on_device(mapping, geometry)
         layout = control_layout(geometry)
         known = set(mapping.names())
         self._layout = [c for c in layout if c.name in known]

@@ -87,6 +87,7 @@ __all__ = [
     "DEFAULT_DENSITY",
     "MIN_EXTENT",
     "MAX_EXTENT",
+    "MAX_TRIANGLES",
     "LARGE_EXTENT",
     "DENSITY_RANGE",
     "MeshObjectSpec",
@@ -183,7 +184,7 @@ class MeshObjectSpec:
 
         if not str(self.file):
             raise ValueError("file: expected a mesh file path, got an empty string")
-        path = check_input_file(self.file, "file: mesh file")
+        path = check_input_file(self.file, "file: mesh file", max_bytes=MAX_MESH_BYTES)
         object.__setattr__(self, "file", str(path.resolve()))
         object.__setattr__(self, "scale", _number("scale", self.scale))
         if self.mass is not None:
@@ -252,9 +253,32 @@ class _Geometry:
 
 #: m (or file units): larger coordinates are garbage, and their products overflow.
 MAX_COORDINATE = 1e12
+#: triangles: a larger mesh is refused (decimate it first, e.g. in MeshLab or Blender).
+#: A hand-held object needs a few thousand; scanned ones (YCB's 16k models) ~30k;
+#: CoACD took 91 s on a 200k-triangle torus.
+MAX_TRIANGLES = 200_000
+#: bytes: a mesh file larger than this is refused before it is parsed.
+MAX_MESH_BYTES = 256 << 20
+
+
+def _check_obj_indices(path: str) -> None:
+    """OBJ indices count from 1 (negative: from the end); 0 names no vertex, and
+    trimesh would read it as the last vertex."""
+    if not path.lower().endswith(".obj"):
+        return
+    with open(path, "rb") as file:
+        for number, line in enumerate(file, 1):
+            if not line.startswith((b"f ", b"f\t", b"l ", b"l\t")):
+                continue
+            for token in line.split()[1:]:
+                for index in token.split(b"/"):
+                    if index and index.lstrip(b"+-").strip(b"0") == b"":
+                        raise ValueError(f"file: {path}:{number}: face index 0; OBJ indices "
+                                         f"count from 1 (negative ones from the end)")
 
 
 def _read(path: str) -> trimesh.Trimesh:
+    _check_obj_indices(path)
     try:
         with np.errstate(all="ignore"):  # overflow warnings would precede the refusal
             loaded = trimesh.load(path, force="mesh")
@@ -263,6 +287,9 @@ def _read(path: str) -> trimesh.Trimesh:
         raise ValueError(f"file: cannot read mesh {path}: {type(error).__name__}: {text}") from None
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise ValueError(f"file: {path} holds no triangles (empty mesh or a point cloud)")
+    if len(loaded.faces) > MAX_TRIANGLES:
+        raise ValueError(f"file: {path} has {len(loaded.faces)} triangles, expected at most "
+                         f"{MAX_TRIANGLES} (decimate it first)")
     if not np.all(np.isfinite(loaded.vertices)):
         raise ValueError(f"file: {path} has non-finite vertex coordinates")
     if np.abs(loaded.vertices).max() > MAX_COORDINATE:
@@ -493,19 +520,51 @@ def _isolated(function, *args):
     CoACD is C++ that segfaults on some inputs (measured: a closed,
     self-intersecting mesh with its remeshing off); in a child process that
     costs the child, not the user's session. Spawning costs ~1 s, against
-    seconds to minutes of decomposition.
+    seconds to minutes of decomposition. CoACD does not look at signals while
+    it runs, so the child ignores Ctrl-C and this process, which waits in
+    short polls, kills it on KeyboardInterrupt (or any other exception): a
+    decomposition stops within a second of Ctrl-C. The child dies with this
+    process too (:mod:`handle_drake.orphans`).
     """
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
-    from concurrent.futures.process import BrokenProcessPool
 
     if multiprocessing.current_process().daemon:  # a Dask or pool worker may not have children
         return function(*args)
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+    context = multiprocessing.get_context("spawn")
+    receive, send = context.Pipe(duplex=False)
+    child = context.Process(target=_isolated_child, args=(send, os.getpid(), function, args),
+                            name="handle_drake-isolated", daemon=True)
+    child.start()
+    send.close()  # only the child writes: its death reads as EOF here
+    try:
+        while not receive.poll(0.1):
+            if not child.is_alive() and not receive.poll(0):
+                return None
         try:
-            return pool.submit(function, *args).result()
-        except (BrokenProcessPool, RuntimeError, ValueError):
+            ok, value = receive.recv()
+        except (EOFError, OSError):  # died without an answer (a segfault)
             return None
+        return value if ok else None
+    finally:
+        receive.close()
+        if child.is_alive():
+            child.kill()
+        child.join(5)
+
+
+def _isolated_child(send, parent_pid, function, args):
+    import signal
+
+    from handle_drake.orphans import die_with_parent
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides (see _isolated)
+    die_with_parent(parent_pid)
+    try:
+        result = (True, function(*args))
+    except (RuntimeError, ValueError):
+        result = (False, None)
+    send.send(result)
+    send.close()
 
 
 @lru_cache(maxsize=64)

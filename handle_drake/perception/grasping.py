@@ -31,7 +31,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from handle_drake.perception.detect import Detection
 
 __all__ = ["PerceivedObject", "perceive_object", "planner_input", "PLANNABLE", "PerceivedTrial",
-           "aimed_trial_scenario", "perceived_grasp_trial"]
+           "aimed_trial_scenario", "perceived_grasp_trial", "select_detection"]
 
 PLANNABLE = ("sphere", "cylinder", "cuboid")
 
@@ -44,6 +44,7 @@ class PerceivedObject:
     true_size: float
     true_X_WO: RigidTransform
     detection: Detection
+    selection: str = ""  # which detection was taken and why (select_detection)
 
     def errors(self) -> dict:
         """Position (mm, xy and z), yaw (deg, modulo the object's symmetry;
@@ -95,28 +96,76 @@ def _tabletop_view(object_config, profile: str, seed: int):
     return scenario, view
 
 
-def _nearest_detection(view, xy) -> Detection:
-    """The view's detection whose centre lies nearest (horizontally) to ``xy`` (m, world)."""
-    return min(view.detections, key=lambda d: float(np.linalg.norm(d.position[:2] - xy)))
+def select_detection(detections, size: float, near_xy, size_of=None
+                     ) -> tuple[Detection, str]:
+    """The detection to grasp, chosen by what the robot is told, never by the
+    truth: among the detections whose size (``size_of(detection)``, m;
+    default the footprint's length ``extent[0]``) is within 25 % of the
+    requested ``size``, the one nearest (horizontally) the commanded
+    position ``near_xy`` (m, world); if none has that size, the one nearest
+    ``near_xy``. Returns ``(detection, why)``, ``why`` a sentence naming the
+    choice (for the user)."""
+    if not detections:
+        raise ValueError("perception: no object detected")
+    size_of = (lambda d: float(d.extent[0])) if size_of is None else size_of
+    near_xy = np.asarray(near_xy, dtype=float)
+    sized = [d for d in detections if abs(size_of(d) - size) <= 0.25 * size]
+    pool = sized or list(detections)
+    chosen = min(pool, key=lambda d: float(np.linalg.norm(d.position[:2] - near_xy)))
+    index = next(i for i, d in enumerate(detections) if d is chosen)
+    p = chosen.position
+    rule = ("of the requested size (within 25 %)" if sized else
+            "none has the requested size (within 25 %)")
+    why = (f"took detection {index + 1} of {len(detections)} ({chosen.kind} at "
+           f"[{p[0]:+.3f}, {p[1]:+.3f}] m): the one nearest the commanded position "
+           f"[{near_xy[0]:+.3f}, {near_xy[1]:+.3f}] m, {rule}")
+    return chosen, why
 
 
 def perceive_object(kind: str, size: float, xy=(0.0, 0.0), yaw: float = 0.0,
-                    profile: str = "kinect_v1", seed: int = 0) -> PerceivedObject:
+                    profile: str = "kinect_v1", seed: int = 0, near_xy=None,
+                    clutter=()) -> PerceivedObject:
     """Renders the true object (resting pose at ``xy``, ``yaw`` rad) through
-    the tabletop camera and returns what the planner is given."""
+    the tabletop camera and returns what the planner is given.
+
+    The detection planned on is chosen as a robot would, from the request
+    alone (:func:`select_detection`): the requested size, nearest the
+    commanded position ``near_xy`` (default ``xy``, where the user says the
+    object rests). ``clutter``: other objects on the table
+    (:class:`handle_drake.perception.scenes.SceneObject`, standing upright);
+    then the table is rendered without the hand
+    (:class:`~handle_drake.perception.scenes.TabletopScene`)."""
     from handle_drake.grasp.planning import resting_pose
     from handle_drake.scenario import ObjectConfig
 
     if kind not in PLANNABLE:
         raise ValueError(f"kind: the planner grasps {list(PLANNABLE)}, got {kind!r}")
     X_WO = resting_pose(kind, size, xy=xy, yaw=yaw)
-    _, view = _tabletop_view(ObjectConfig(kind=kind, size=size, X_WO=Transform(X_WO),
-                                          on_table=False), profile, seed)
-    if not view.detections:
-        raise ValueError(f"perception: no object detected ({view.message or 'empty view'})")
-    detection = _nearest_detection(view, X_WO.translation()[:2])
+    if clutter:
+        detections, message = _cluttered_view(kind, size, X_WO, clutter, profile, seed)
+    else:
+        _, view = _tabletop_view(ObjectConfig(kind=kind, size=size, X_WO=Transform(X_WO),
+                                              on_table=False), profile, seed)
+        detections, message = view.detections, view.message
+    if not detections:
+        raise ValueError(f"perception: no object detected ({message or 'empty view'})")
+    detection, why = select_detection(detections, size, xy if near_xy is None else near_xy,
+                                      size_of=lambda d: planner_input(kind, d)[0])
     perceived_size, X_WO_perceived = planner_input(kind, detection)
-    return PerceivedObject(kind, perceived_size, X_WO_perceived, float(size), X_WO, detection)
+    return PerceivedObject(kind, perceived_size, X_WO_perceived, float(size), X_WO, detection,
+                           why)
+
+
+def _cluttered_view(kind, size, X_WO, clutter, profile, seed):
+    """Detections of the object at ``X_WO`` among ``clutter`` (rendered
+    without the hand)."""
+    from handle_drake.objects import ObjectSpec
+    from handle_drake.perception.detect import detect
+    from handle_drake.perception.scenes import TabletopScene
+
+    scene = TabletopScene(list(clutter), profile=profile, seed=seed,
+                          extra=[(ObjectSpec(kind, float(size)), X_WO)])
+    return detect(scene.frame(0.0)), ""
 
 
 # --------------------------------------------------- the seven babbling objects
@@ -196,7 +245,8 @@ def perceived_grasp_trial(kind: str, xy=(0.0, 0.0), yaw: float = 0.0, hand: str 
     if not view.detections:
         return PerceivedTrial(kind, (float(xy[0]), float(xy[1]), float(yaw)), None,
                               (math.nan, math.nan), math.nan, math.nan, False)
-    detection = _nearest_detection(view, truth)
+    # Chosen as a robot would: the kind's size, nearest where it was told to look.
+    detection, _ = select_detection(view.detections, trial.config.object_size, xy)
     error = detection_error(detection, scenario)
     R_OW = X_WO.rotation().inverse().matrix()
     d_W = np.array([*(detection.position[:2] - truth), 0.0])

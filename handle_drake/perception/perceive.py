@@ -33,7 +33,7 @@ import numpy as np
 from handle_drake.perception.detect import Detection, DetectorParams, TablePlane, detect_objects
 from handle_drake.perception.frames import DepthFrame, load_frame, save_frame
 
-__all__ = ["CameraView", "render_views", "perceive_frame", "detection_error",
+__all__ = ["CameraView", "render_views", "perceive_frame", "detection_error", "true_extent",
            "CATALOGUE_PRIMITIVE", "register"]
 
 #: The primitive a catalogue object should be recognised as.
@@ -107,8 +107,9 @@ def render_views(scenario, params: DetectorParams | None = None, time: float = 0
 
 
 def robot_labels(station) -> np.ndarray:
-    """The render labels of the hand's and wrist's geometry in ``station``
-    (read from each perception geometry's ``("label", "id")`` property)."""
+    """The render labels of the hand's, wrist's and arm's geometry in ``station``,
+    and of the sorting box (a known fixture, as the robot is known), read from
+    each perception geometry's ``("label", "id")`` property."""
     from pydrake.geometry import Role
 
     from handle_drake.station import HAND_INSTANCE, WRIST_INSTANCE
@@ -116,7 +117,7 @@ def robot_labels(station) -> np.ndarray:
     plant = station.GetSubsystemByName("plant")
     inspector = station.GetSubsystemByName("scene_graph").model_inspector()
     labels = set()
-    for name in (HAND_INSTANCE, WRIST_INSTANCE):
+    for name in (HAND_INSTANCE, WRIST_INSTANCE, "arm", "sorting_box"):
         if not plant.HasModelInstanceNamed(name):
             continue
         for body_index in plant.GetBodyIndices(plant.GetModelInstanceByName(name)):
@@ -141,13 +142,41 @@ def _true_yaw(kind: str, R_WO: np.ndarray) -> float | None:
     return yaw + (ROTATED_CUBOID_YAW if kind == "rotated_cuboid" else 0.0)
 
 
-def detection_error(detection: Detection, scenario) -> dict:
-    """Errors of a detection against the scenario's object (its initial pose)."""
-    from handle_drake.station import object_initial_pose
+def true_extent(spec, R_WO: np.ndarray | None = None) -> np.ndarray | None:
+    """What a detection's ``extent`` should read for a catalogue object
+    standing upright (m): the footprint's length and width (a box's two
+    horizontal edges, longer first; a round object's diameter, a mug's cup
+    without its handle) and the height. None for a mesh or an object not
+    upright (``R_WO`` tilted)."""
+    from handle_drake.objects import dimensions, total_height
 
-    X_WO = object_initial_pose(scenario)
+    if spec.kind not in CATALOGUE_PRIMITIVE:
+        return None
+    if R_WO is not None and abs(float(np.asarray(R_WO)[2, 2]) - 1.0) > 1e-6:
+        return None
+    d = dimensions(spec)
+    if CATALOGUE_PRIMITIVE[spec.kind] == "box":
+        length, width = sorted((d["width"], d["depth"]), reverse=True)
+    else:
+        length = width = d["diameter"]
+    return np.array([length, width, total_height(spec)])
+
+
+def detection_error(detection: Detection, scenario) -> dict:
+    """Errors of a detection against the scenario's object (its initial pose); with
+    several objects (``objects:``), against the one nearest to it on the table:
+    position (mm; ``xy_mm`` horizontal, ``z_mm``), yaw (deg, boxes),
+    ``extent_mm`` (detected minus true length, width, height, mm; None for a
+    mesh or a tilted object, see :func:`true_extent`) and whether the kind is
+    right."""
+    from handle_drake.scene.config import scene_objects
+    from handle_drake.scene.plant import initial_pose, spec_of
+
+    truth = [(o, initial_pose(o, scenario.table)) for _, o in scene_objects(scenario)]
+    obj, X_WO = min(truth, key=lambda t: float(np.linalg.norm(
+        t[1].translation()[:2] - detection.position[:2])))
     delta = detection.position - X_WO.translation()
-    kind = scenario.object.kind
+    kind = obj.kind
     yaw_true = _true_yaw(kind, X_WO.rotation().matrix())
     yaw_error = None
     if yaw_true is not None and detection.kind == "box":
@@ -157,10 +186,13 @@ def detection_error(detection: Detection, scenario) -> dict:
     # A mesh (or an instrumented device) is no primitive: its detected kind
     # cannot be right or wrong (kind_expected and kind_ok are None).
     expected = CATALOGUE_PRIMITIVE.get(kind)
+    extent = true_extent(spec_of(obj), X_WO.rotation().matrix())
     return {"position_mm": [round(float(v) * 1000, 2) for v in delta],
             "xy_mm": round(float(np.linalg.norm(delta[:2])) * 1000, 2),
             "z_mm": round(float(delta[2]) * 1000, 2),
             "yaw_deg": None if yaw_error is None else round(yaw_error, 2),
+            "extent_mm": None if extent is None else
+            [round(float(v) * 1000, 2) for v in np.asarray(detection.extent) - extent],
             "kind_expected": expected,
             "kind_ok": None if expected is None else detection.kind == expected}
 
@@ -176,7 +208,7 @@ def _report(views, scenario=None) -> dict:
                            "height": float(view.plane.offset / max(view.plane.normal[2], 1e-9))})
         for detection in view.detections:
             entry = {"camera": view.camera, **detection.as_dict()}
-            if scenario is not None and scenario.object is not None:
+            if scenario is not None and (scenario.object is not None or scenario.objects):
                 entry["error"] = detection_error(detection, scenario)
             objects.append(entry)
     return {"objects": objects, "tables": tables, "messages": messages}
@@ -204,8 +236,10 @@ def _print_report(report: dict) -> None:
             else:
                 kind = (f"{'ok' if err['kind_ok'] else 'WRONG'} "
                         f"(expected {err['kind_expected']})")
+            extent = ("n/a" if err["extent_mm"] is None else
+                      " x ".join(f"{v:+.0f}" for v in err["extent_mm"]) + " mm")
             print(f"  error against the truth: xy {err['xy_mm']:.1f} mm, z {err['z_mm']:+.1f} mm, "
-                  f"yaw {yaw}, kind {kind}")
+                  f"yaw {yaw}, extent {extent}, kind {kind}")
     if not report["objects"]:
         print("no object detected")
 

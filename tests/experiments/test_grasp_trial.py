@@ -1,6 +1,7 @@
 """Simulated grasp trials score what physics and geometry say they should."""
 
 import pickle
+import re
 
 import numpy as np
 import pytest
@@ -236,5 +237,46 @@ def test_robust_metric_is_the_mean_over_placed_trials(barrett_sphere):
     nominal = [barrett_sphere.evaluate(x + d).metric_noiseless for d in placement_stencil(e, k)]
     outcome = robust.evaluate(x)
     assert outcome.metric_noiseless == pytest.approx(np.mean(nominal), abs=1e-9)
-    assert "robust objective: this is placement 1 of 3" in outcome.scenario
+    assert "metric.placements holds the 3 start placements" in outcome.scenario
     assert robust.name == "barrett-sphere-offset-robust4mm3"
+
+
+def test_a_robust_trials_stored_scenario_replays_its_logged_metric(tmp_path, capsys):
+    """The trial's stored scenario holds all its placements (metric.placements): ``handle-drake
+    simulate`` on it runs each and reports their mean, the trial's noiseless metric (it
+    held placement 1 of K, whose metric alone was off the logged one)."""
+    from handle_drake.cli import main
+    from handle_drake.scenario import LoadScenario
+
+    e, k = 0.004, 3
+    robust = GraspTrial(hand="barrett", object="sphere", space="offset", placement_error=e,
+                        placement_samples=k, noise=0.01)
+    x = np.array([0.012, -0.006])
+    result = robust(x, seed=5)  # what run_experiment logs: metric (noisy), scenario
+    logged = result.contacts["metric_noiseless"]
+    assert result.metric != logged  # the log's metric carries the noise; the replay has none
+    scenario = LoadScenario(data=result.scenario)
+    np.testing.assert_array_equal(scenario.metric.placements, placement_stencil(e, k))
+    path = tmp_path / "trial.yaml"
+    path.write_text(result.scenario)
+    assert main(["simulate", str(path)]) == 0
+    out = capsys.readouterr().out
+    replayed = float(re.search(r"grasp metric \(.*each: ([^)]*)\): ([^ ]+)", out)[2])
+    assert replayed == logged, out
+    each = [float(v) for v in re.search(r"each: ([^)]*)\)", out)[1].split(", ")]
+    assert len(each) == k and np.mean(each) == pytest.approx(logged, abs=1e-6)
+    # the placements differ: one of them alone is not the trial's metric
+    assert max(each) - min(each) > 1e-4
+
+
+def test_bad_placements_are_named(barrett_sphere, tmp_path):
+    from handle_drake.scenario import LoadScenario, ScenarioError
+
+    path = tmp_path / "trial.yaml"
+    path.write_text(barrett_sphere.scenario_for([0.0, 0.0]))
+    assert LoadScenario(filename=path, data="metric: {placements: [[0.001, 0.0]]}")
+    for bad in ("[[0.1, 0.0]]", "[[0.001]]", "[[.nan, 0.0]]"):
+        with pytest.raises(ScenarioError, match=r"metric.placements\[0\]"):
+            LoadScenario(filename=path, data=f"metric: {{placements: {bad}}}")
+    with pytest.raises(ScenarioError, match="GuardedGraspController"):
+        LoadScenario(filename=path, data="controller: null\nmetric: {placements: [[0, 0]]}")

@@ -15,7 +15,7 @@ from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink
 from handle_drake.instruments.accelerometer import AddObjectAccelerometer
 from handle_drake.instruments.estimators import (
     EstimatorParams,
-    SlipDetector,
+    EstimatorSystem,
     at_rest,
     free_fall,
     roll_pitch,
@@ -79,7 +79,7 @@ def _incline(alpha_deg: float, mu: float, duration: float = 0.6):
     thickness = 0.05
     X_WP = RigidTransform(R, [0, 0, 0])  # plane frame: its top surface through the origin
     X_WG = X_WP @ RigidTransform([0, 0, -thickness / 2])
-    plant.RegisterCollisionGeometry(plant.world_body(), X_WG, Box(2, 2, thickness), "plane",
+    plant.RegisterCollisionGeometry(plant.world_body(), X_WG, Box(4, 4, thickness), "plane",
                                     props)
     spec = ObjectSpec("cuboid", 0.04, mu=mu, dimensions={"depth": 0.03, "height": 0.02})
     AddObject(plant, spec, name="object")
@@ -123,6 +123,21 @@ def test_a_box_sliding_down_an_incline_triggers_slip_a_resting_one_does_not():
     np.testing.assert_allclose(np.linalg.norm(f[t > 0.2], axis=1), G, rtol=1e-3)
 
 
+def test_a_slide_under_way_when_the_hand_settles_is_flagged():
+    # tan 25 deg = 0.47 > 0.25: the box slides from its release, before the detector's
+    # settle time is over. Its specific force, g cos(alpha) sqrt(1 + mu^2) = 0.934 g,
+    # is within slip_norm_tol (0.08 g) of 1 g and steady in direction: a reference
+    # taken during the slide saw nothing. Settled and not at rest is slip.
+    alpha, mu = 25.0, 0.25
+    t, f, slip, travel = _incline(alpha, mu, duration=1.1)
+    assert travel > 1.0  # a = g (sin - mu cos) = 1.93 m/s^2 (point contact: a bit more)
+    expected = G * math.cos(math.radians(alpha)) * math.sqrt(1 + mu ** 2)
+    np.testing.assert_allclose(np.linalg.norm(f[t > 0.2], axis=1), expected, rtol=0.02)
+    assert abs(expected / G - 1) < EstimatorParams().slip_norm_tol  # the magnitude alone misses
+    detected = t > EstimatorParams().settle_time + EstimatorParams().slip_duration + 0.02
+    assert slip[detected].all()
+
+
 def test_slip_detector_is_idle_while_the_command_moves():
     from pydrake.systems.primitives import TrajectorySource
     from pydrake.trajectories import PiecewisePolynomial
@@ -132,7 +147,7 @@ def test_slip_detector_is_idle_while_the_command_moves():
     command = builder.AddSystem(TrajectorySource(
         PiecewisePolynomial.FirstOrderHold([0.0, 0.5, 1.0], [[0.0, 1.0, 1.0]])))
     params = EstimatorParams()
-    detector = builder.AddSystem(SlipDetector(0.008, 1, params))
+    detector = builder.AddSystem(EstimatorSystem(0.008, params, command_size=1))
     builder.Connect(accel.get_output_port(), detector.GetInputPort("acceleration"))
     builder.Connect(command.get_output_port(), detector.GetInputPort("command"))
     diagram = builder.Build()
@@ -152,6 +167,6 @@ def test_bad_estimator_parameters():
     with pytest.raises(ValueError, match="estimators.window"):
         EstimatorParams(window=0.0)
     with pytest.raises(ValueError, match="command_size"):
-        SlipDetector(0.008, 0)
+        EstimatorSystem(0.008, command_size=0)
     with pytest.raises(ValueError, match="period"):
-        SlipDetector(-1.0, 3)
+        EstimatorSystem(-1.0, command_size=3)

@@ -1,15 +1,14 @@
-"""The estimators fused into the device's own update (one event per sample) against
-the separate systems they replace (the device, then RollPitchEstimator,
-FreeFallDetector and SlipDetector sampling it 0.1 ms later): every output exactly
-equal at every sample.
+"""The estimators in the device's own update (one event per sample) against the plain
+functions of the module (``roll_pitch``, ``at_rest``, ``free_fall``, ``slip_indicator``) and
+the slip method its doc states, computed here sample by sample from the whole history:
+every output exactly equal at every sample.
 
-Two levels: the estimators alone, on scripted sequences of rest, rotation, free
-fall, impacts, slip, values exactly at the thresholds and signed zeros, with a
-command that is still, moves, and is still again; and the device model on a
-box that falls onto an incline and slides or rests there (noise, bias,
-quantisation; three devices, seeds and thresholds). The command is the same
-value for both at each sample (it changes between samples): the fused update
-reads it at the sample instant, the separate slip detector 0.1 ms later.
+Two levels: the estimators alone (:class:`EstimatorSystem`), on scripted sequences of
+rest, rotation, free fall, impacts, slip, values exactly at the thresholds and signed
+zeros, with a command that is still, moves, and is still again; and the device model
+on a box that falls onto an incline and slides or rests there (noise, bias,
+quantisation; four devices, seeds and thresholds), against the reference applied to
+what the device alone reads.
 """
 
 import math
@@ -20,105 +19,89 @@ from pydrake.geometry import AddContactMaterial, Box, ProximityProperties
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import BasicVector, DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.instruments.accelerometer import AddObjectAccelerometer, DeviceAccelerometer
 from handle_drake.instruments.estimators import (
     EstimatorParams,
-    FreeFallDetector,
+    EstimatorState,
+    EstimatorSystem,
     InstrumentEstimators,
-    InstrumentSystem,
-    RollPitchEstimator,
-    SlipDetector,
-    _Sampled,
+    at_rest,
+    roll_pitch,
+    slip_indicator,
 )
 from handle_drake.instruments.profiles import STANDARD_GRAVITY as G0
 from handle_drake.instruments.profiles import get_profile, sample_noise
 from handle_drake.objects import AddObject, ObjectSpec, resting_height
 
 M = 4  # command size
-OFFSET = _Sampled.OFFSET
 ESTIMATES = ("roll_pitch", "at_rest", "free_fall", "detection_time", "slip")
 
 
-class _Scripted(InstrumentSystem):
-    """An instrument whose 'device' reads its input ``f`` as it is (any float)."""
+def _reference(f, c, params: EstimatorParams, period: float) -> list[dict]:
+    """The outputs after each sample ``f[k]`` (the command ``c[k]`` at its instant, or
+    ``c`` None), from the plain functions and the module doc's method."""
+    p = params
+    n_mean = p.samples(p.window, period)
+    n_rest = max(n_mean, p.samples(p.rest_window, period), 2)
+    fall_need = p.samples(p.free_fall_duration, period)
+    settle, slip_need = p.samples(p.settle_time, period), p.samples(p.slip_duration, period)
+    out = []
+    low, detected, still, slipping, ref, previous = 0, math.nan, 0, 0, None, None
+    for k in range(len(f)):
+        history = f[:k + 1]
+        mean = history[-n_mean:].mean(axis=0)
+        rest = k + 1 >= n_rest and at_rest(history[-n_rest:], p.rest_norm_tol, p.rest_std_tol,
+                                           p.rest_angle_tol)
+        low = low + 1 if np.linalg.norm(f[k]) < p.free_fall_threshold * G0 else 0
+        if low == fall_need:
+            detected = k * period
+        elif low < fall_need:
+            detected = math.nan
+        if c is not None:
+            is_still = previous is not None and np.max(np.abs(c[k] - previous)) <= p.still_tol
+            previous = c[k]
+            if not is_still:
+                still, slipping, ref = 0, 0, None
+            else:
+                still += 1
+                if still >= settle:
+                    if ref is None and rest:  # the reference: the first sample at rest
+                        ref = mean
+                    if ref is None:  # settled and not at rest: slipping
+                        slipping += 1
+                    else:
+                        flagged = slip_indicator(mean, ref, p.slip_norm_tol, p.slip_angle_tol)
+                        slipping = slipping + 1 if flagged else 0
+        out.append({"roll_pitch": roll_pitch(mean), "at_rest": [float(rest)],
+                    "free_fall": [float(low >= fall_need)], "detection_time": [detected],
+                    "slip": [float(slipping >= slip_need)]})
+    return out
 
-    def __init__(self, period, params, command_size):
-        super().__init__()
-        self._f = self.DeclareVectorInputPort("f", 3)
-        self._declare_instrument(period, [0.0, 0.0, 0.0], params, command_size)
 
-    def _sample(self, context, x):
-        f = self._f.Eval(context).tolist()
-        x[:3] = f
-        return f
-
-    def _calc_counts(self, context, output: BasicVector):
-        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:3])
-
-    _calc_acceleration = _calc_counts
+def _outputs(system, context) -> dict:
+    system_context = system.GetMyContextFromRoot(context)
+    return {name: np.array(system.GetOutputPort(name).Eval(system_context))
+            for name in ESTIMATES}
 
 
-def _separate(builder, period, params, acceleration, command_size):
-    """The separate estimators behind the output port ``acceleration`` (and a slip
-    detector with a ``command_size``): the systems and which has each output."""
-    systems = [builder.AddSystem(RollPitchEstimator(period, params)),
-               builder.AddSystem(FreeFallDetector(period, params))]
-    if command_size:
-        systems.append(builder.AddSystem(SlipDetector(period, command_size, params)))
-    for system in systems:
-        builder.Connect(acceleration, system.GetInputPort("acceleration"))
-    ports = {"roll_pitch": systems[0], "at_rest": systems[0], "free_fall": systems[1],
-             "detection_time": systems[1]}
-    if command_size:
-        ports["slip"] = systems[2]
-    return systems, ports
-
-
-def _compare_outputs(context, fused, separate_ports, seen):
-    """Every estimator output of ``fused`` against the separate systems' (slip: 0 when
-    they have no slip detector); the detection time is the sample's, OFFSET earlier."""
-    fused_context = fused.GetMyContextFromRoot(context)
+def _compare_outputs(system, context, want: dict, seen: dict, outputs=None) -> None:
+    outputs = outputs or _outputs(system, context)
     for name in ESTIMATES:
-        have = np.array(fused.GetOutputPort(name).Eval(fused_context))
-        system = separate_ports.get(name)
-        want = (np.zeros(1) if system is None else
-                np.array(system.GetOutputPort(name).Eval(system.GetMyContextFromRoot(context))))
+        have = outputs[name]
+        expected = np.array(want[name], dtype=float)
         if name == "detection_time":
-            assert np.isnan(have[0]) == np.isnan(want[0]), (name, want, have)
-            if not np.isnan(want[0]):
-                assert have[0] == pytest.approx(want[0] - OFFSET, abs=1e-12), (want, have)
+            assert np.isnan(have[0]) == np.isnan(expected[0]), (want, have)
+            if not np.isnan(expected[0]):
+                assert have[0] == pytest.approx(expected[0], abs=1e-12), (want, have)
                 seen["detected"] = seen.get("detected", 0) + 1
             continue
-        assert np.array_equal(want, have), (name, want, have)
-        assert np.array_equal(np.signbit(want), np.signbit(have)), (name, want, have)
-        seen.setdefault(name, set()).add(tuple(np.round(want, 6)))
-
-
-def _compare_states(context, fused, separate):
-    """The state behind the outputs too: samples taken, the last samples, the free-fall
-    counter and the slip detector's counters, reference and last command."""
-    def state(system):
-        return system.GetMyContextFromRoot(context).get_discrete_state(0).get_value()
-
-    est: InstrumentEstimators = fused.estimators
-    o = fused._device_size
-    x = state(fused)
-    tail = x[o + 3 * est._n:]
-    for system in separate:
-        y = state(system)
-        m = system._n
-        assert y[3 * m] == tail[0]
-        k = min(m, int(tail[0]))
-        assert np.array_equal(est._recent(x, o, k), system._recent(y, k))
-        extra = y[3 * m + 1:]
-        if isinstance(system, FreeFallDetector):
-            assert extra[0] == tail[1]
-        elif isinstance(system, SlipDetector):
-            assert np.array_equal(extra, tail[3:], equal_nan=True), (extra, tail)
+        assert np.array_equal(expected, have), (name, expected, have)
+        assert np.array_equal(np.signbit(expected), np.signbit(have)), (name, expected, have)
+        seen.setdefault(name, set()).add(tuple(np.round(expected, 6)))
 
 
 # ----------------------------------------------------------- scripted samples
@@ -176,34 +159,33 @@ def _script(rng, params: EstimatorParams) -> tuple[np.ndarray, np.ndarray]:
 
 def _compare_scripted(f, c, period, params, with_command=True):
     builder = DiagramBuilder()
-    fused = builder.AddSystem(_Scripted(period, params, M if with_command else None))
-    builder.ExportInput(fused.GetInputPort("f"), "f")
-    # The separate estimators read the fused system's own acceleration output (the
-    # sample it took) and the same command.
-    separate, ports = _separate(builder, period, params, fused.GetOutputPort("acceleration"),
-                                M if with_command else None)
+    system = builder.AddSystem(EstimatorSystem(period, params, M if with_command else None))
+    builder.ExportInput(system.GetInputPort("acceleration"), "acceleration")
     if with_command:
-        builder.ExportInput(fused.GetInputPort("command"), "command")
-        builder.ConnectInput("command", separate[2].GetInputPort("command"))
+        builder.ExportInput(system.GetInputPort("command"), "command")
     else:
-        assert not fused.HasInputPort("command")
+        assert not system.HasInputPort("command")
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
+    reference = _reference(f, c if with_command else None, params, period)
     seen = {}
     for k in range(len(f)):
-        diagram.GetInputPort("f").FixValue(context, f[k])
+        diagram.GetInputPort("acceleration").FixValue(context, f[k])
         if with_command:
             diagram.GetInputPort("command").FixValue(context, c[k])
-        # sample k: the fused update at k T, the separate ones at k T + OFFSET
-        simulator.AdvanceTo(k * period + OFFSET + period / 2)
-        _compare_outputs(context, fused, ports, seen)
-        _compare_states(context, fused, separate)
+        simulator.AdvanceTo(k * period + period / 2)  # sample k at k T
+        _compare_outputs(system, context, reference[k], seen)
+    # the state, by name: every sample taken, the held sample is the last one
+    state = system.GetMyContextFromRoot(context).get_discrete_state()
+    assert system.estimators.estimates(state).taken == len(f)
+    assert isinstance(system.estimators.estimates(state), EstimatorState)
+    np.testing.assert_array_equal(system.estimators.recent(state, 1)[0], f[-1])
     return seen
 
 
 @pytest.mark.parametrize("seed, period", [(0, 0.008), (1, 0.01), (2, 0.001)])
-def test_fused_estimators_equal_the_separate_ones_exactly(seed, period):
+def test_estimators_equal_the_plain_functions_exactly(seed, period):
     params = EstimatorParams()
     f, c = _script(np.random.default_rng(seed), params)
     if period < 0.004:  # each sample 4 times: the windows span as many samples
@@ -216,7 +198,7 @@ def test_fused_estimators_equal_the_separate_ones_exactly(seed, period):
     assert seen["detected"] >= 1  # samples with a free fall detected (and its time)
 
 
-def test_fused_estimators_equal_the_separate_ones_with_other_parameters():
+def test_estimators_equal_the_plain_functions_with_other_parameters():
     # short windows and settle time: the slip test runs on most samples
     params = EstimatorParams(window=0.02, rest_window=0.05, settle_time=0.03,
                              slip_duration=0.016, free_fall_duration=0.01,
@@ -226,7 +208,7 @@ def test_fused_estimators_equal_the_separate_ones_with_other_parameters():
     assert seen["slip"] == {(0.0,), (1.0,)}
 
 
-def test_fused_estimators_without_a_command_have_a_constant_zero_slip():
+def test_estimators_without_a_command_have_a_constant_zero_slip():
     params = EstimatorParams()
     f, c = _script(np.random.default_rng(4), params)
     seen = _compare_scripted(f[:150], c[:150], 0.008, params, with_command=False)
@@ -238,8 +220,8 @@ def test_fused_estimators_without_a_command_have_a_constant_zero_slip():
 
 def _incline_diagram(profile, seed, params, alpha_deg, mu, drop):
     """A box released ``drop`` m above a plane inclined by alpha (slides when
-    tan(alpha) > mu), carrying the device twice: alone with the separate estimators
-    behind it, and with the estimators fused. The command: still, a move, still."""
+    tan(alpha) > mu), carrying the device twice: alone, and with the estimators in its
+    update. The command: still, a move, still (returned, to read at the samples)."""
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.001), builder)
     R = RotationMatrix.MakeXRotation(math.radians(alpha_deg))
@@ -255,7 +237,7 @@ def _incline_diagram(profile, seed, params, alpha_deg, mu, drop):
         body, X_WP @ RigidTransform(RollPitchYaw(0.1, -0.2, 0.3).ToRotationMatrix(),
                                     [0, 0, resting_height(spec) + drop]))
     plant.Finalize()
-    # Steps half-way between samples: the same value at k T and k T + OFFSET.
+    # Steps half-way between samples.
     T = profile.period
     times = np.array([0.0, 0.1, 0.1 + 0.5 * T, 0.2 + 0.5 * T, 0.25 + 0.5 * T, 2.0])
     values = np.zeros((M, len(times)))
@@ -270,32 +252,45 @@ def _incline_diagram(profile, seed, params, alpha_deg, mu, drop):
     fused = AddObjectAccelerometer(builder, plant, body, X_BS, profile, seed=seed,
                                    name="fused", estimators=params,
                                    command=command.get_output_port())
-    separate, ports = _separate(builder, T, params, alone.GetOutputPort("acceleration"), M)
-    builder.Connect(command.get_output_port(), separate[2].GetInputPort("command"))
-    return builder.Build(), alone, fused, separate, ports
+    return builder.Build(), alone, fused, command
 
 
 @pytest.mark.parametrize("device, seed, params, alpha, mu", [
     ("joywarrior24f14", 0, EstimatorParams(), 30.0, 0.2),
     ("wiimote", 3, EstimatorParams(settle_time=0.1, rest_window=0.08), 10.0, 0.8),
     ("ideal", 1, EstimatorParams(settle_time=0.05, slip_norm_tol=0.05, window=0.01), 30.0, 0.2),
+    ("nunchuk", 7, EstimatorParams(), 25.0, 0.25),
 ])
-def test_fused_device_equals_the_device_and_separate_estimators(device, seed, params, alpha, mu):
+def test_device_with_estimators_equals_the_device_and_the_plain_functions(
+        device, seed, params, alpha, mu):
     profile = get_profile(device)
-    diagram, alone, fused, separate, ports = _incline_diagram(profile, seed, params, alpha, mu,
-                                                              drop=0.08)
+    diagram, alone, fused, command = _incline_diagram(profile, seed, params, alpha, mu,
+                                                      drop=0.08)
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
     T = profile.period
-    seen = {}
-    for k in range(int(round(0.7 / T))):
-        simulator.AdvanceTo(k * T + OFFSET + T / 2)
+    n = int(round(0.7 / T))
+    f, c, outputs, seen = [], [], [], {}
+    for k in range(n):
+        simulator.AdvanceTo(k * T)  # the command as the sample k reads it, at its instant
+        c.append(command.get_output_port().Eval(command.GetMyContextFromRoot(context)))
+        simulator.AdvanceTo(k * T + T / 2)
         for name in ("counts", "acceleration"):
             want = alone.GetOutputPort(name).Eval(alone.GetMyContextFromRoot(context))
             have = fused.GetOutputPort(name).Eval(fused.GetMyContextFromRoot(context))
             assert np.array_equal(want, have), (k, name, want, have)
-        _compare_outputs(context, fused, ports, seen)
-        _compare_states(context, fused, separate)
+        f.append(np.array(alone.GetOutputPort("acceleration").Eval(
+            alone.GetMyContextFromRoot(context))))
+        outputs.append(_outputs(fused, context))
+    for want, have in zip(_reference(np.array(f), np.array(c), params, T), outputs,
+                          strict=True):
+        _compare_outputs(fused, context, want, seen, have)
+    # the device's state, by name: the samples it averaged over, its last counts
+    state = fused.device_state(fused.GetMyContextFromRoot(context))
+    assert state.samples == n
+    np.testing.assert_array_equal([state.counts_x, state.counts_y, state.counts_z],
+                                  fused.GetOutputPort("counts").Eval(
+                                      fused.GetMyContextFromRoot(context)))
     # the run exercises the flags: it falls (free fall), lands, rests or slides
     assert seen["free_fall"] == {(0.0,), (1.0,)}
     assert (1.0,) in seen["at_rest"] or alpha > 20
@@ -311,11 +306,13 @@ def test_the_device_noise_is_the_profiles_sample_noise():
     assert DeviceAccelerometer("ideal")._noise(7) == [0.0, 0.0, 0.0]
 
 
-def test_fused_estimators_bad_parameters():
+def test_estimators_bad_parameters():
     with pytest.raises(ValueError, match="command_size"):
         InstrumentEstimators(0.008, None, 0)
     with pytest.raises(ValueError, match="period"):
         InstrumentEstimators(0.0)
+    with pytest.raises(ValueError, match="period"):
+        EstimatorSystem(-1.0)
     from pydrake.systems.framework import DiagramBuilder as Builder
 
     from handle_drake.instruments.accelerometer import ExportInstrumentPorts

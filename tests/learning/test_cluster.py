@@ -434,3 +434,26 @@ def test_the_reports_grids_and_runs_on_dask_equal_those_simulated_here(tmp_path,
         with TrialLog(tmp_path / "dask.sqlite") as a, TrialLog(tmp_path / "here.sqlite") as b:
             rows = _record_rows(a.trials(spec.run_id))
             assert len(rows) == 1 and rows == _record_rows(b.trials(spec.run_id))
+
+
+def test_babble_bo_on_a_running_cluster_proposes_batches_of_its_worker_count(
+        tmp_path, capsys, dask_executor):
+    """``babble --strategy bo --executor dask://HOST:PORT`` without --workers (the README's
+    cluster command): BO proposes batches of the cluster's workers (2 here), not one trial
+    at a time; --workers 1 still asks for the sequential BO."""
+    from handle_drake.experiments.cli import main
+
+    address = "dask://" + dask_executor.address.removeprefix("tcp://")
+    db = tmp_path / "babble.sqlite"
+    common = ["babble", "--object", "sphere", "--dims", "2", "--strategy", "bo", "--trials",
+              "4", "--seed", "3", "--executor", address, "--db", str(db), "--no-progress",
+              "--no-plot"]
+    assert main(common) == 0
+    assert "BO batches of 2 trial(s)" in capsys.readouterr().out
+    assert main(common + ["--workers", "1"]) == 0
+    with TrialLog(db) as log:
+        runs = log.runs()
+        print({r.run_id: r.config for r in runs})
+        assert sorted(r.config.get("batch_size", 1) for r in runs) == [1, 2]
+        for run in runs:
+            assert [t.status for t in log.trials(run.run_id)] == ["done"] * 4

@@ -6,6 +6,7 @@ write-scenarios`` writes them); the jog run is cut after the back-turn.
 
 import dataclasses as dc
 import math
+import re
 
 import numpy as np
 import pytest
@@ -64,3 +65,66 @@ def test_experiment_arguments_are_checked():
     with pytest.raises(ValueError, match="scenario.controller"):  # the receiver takes its place
         run_midi_scenario(dc.replace(fader_push_scenario(), controller=GuardedGraspController()))
     assert math.isfinite(fader_push_scenario().simulation_duration)
+
+
+def _wrist_yaws(scenario) -> np.ndarray:
+    return np.degrees([k.wrist[5] for k in scenario.script if k.wrist])
+
+
+@pytest.fixture(scope="module")
+def clockwise_pinch():
+    """The pinch turning the wheel clockwise past the wrist's yaw of -180 degrees
+    (the planned grasp's yaw is -144 deg: -75 then 25 further is -244 deg)."""
+    from handle_drake.midi.experiments import jog_pinch_scenario
+
+    return jog_pinch_scenario(turn_deg=-75, back_deg=25)
+
+
+def test_a_clockwise_turn_past_180_degrees_keeps_the_wrist_yaw_continuous(clockwise_pinch):
+    yaws = _wrist_yaws(clockwise_pinch)
+    # no keyframe jumps (RollPitchYaw wraps -184 deg to +176: the long way round)
+    assert np.abs(np.diff(yaws)).max() < 10.0
+    assert yaws.min() < -180.0
+    # the turn the script makes: -75, then 25 further the same way
+    from handle_drake.midi.experiments import commanded_wrist_turn_deg
+
+    scenario = clockwise_pinch
+    assert commanded_wrist_turn_deg(scenario, 0.0, scenario.simulation_duration) == \
+        pytest.approx(-100.0, abs=1e-9)
+
+
+def test_midi_jog_fails_when_the_wheel_does_not_follow_the_wrist(clockwise_pinch, tmp_path,
+                                                                   capsys):
+    from handle_drake.cli import main
+    from handle_drake.scenario import DumpScenario
+
+    fixed = tmp_path / "clockwise.yaml"
+    fixed.write_text(DumpScenario(clockwise_pinch))
+    assert main(["midi", "jog", "--scenario", str(fixed)]) == 0
+    out = capsys.readouterr().out
+    wheel = float(re.search(r"true rotation *([-+\d.]+) deg", out)[1])
+    assert -110 < wheel < -80, out  # the wheel turned clockwise with the wrist
+    assert "the wheel followed" in out
+    # The same script with the yaw wrapped to [-180, 180) (as before the fix): the wrist
+    # goes the long way round and the command must not report success.
+    wrapped = dc.replace(clockwise_pinch, script=[
+        dc.replace(k, wrist=[*k.wrist[:5], (k.wrist[5] + math.pi) % (2 * math.pi) - math.pi])
+        if k.wrist else k for k in clockwise_pinch.script])
+    old = tmp_path / "wrapped.yaml"
+    old.write_text(DumpScenario(wrapped))
+    assert main(["midi", "jog", "--scenario", str(old)]) == 1
+    captured = capsys.readouterr()
+    assert "did NOT follow" in captured.out
+    assert "the pinch did not carry it" in captured.err and "Traceback" not in captured.err
+
+
+def test_a_turn_without_a_back_turn_is_a_valid_scenario():
+    from handle_drake.midi.experiments import jog_pinch_scenario
+    from handle_drake.scenario import DumpScenario
+
+    scenario = jog_pinch_scenario(turn_deg=25, back_deg=0)
+    times = [k.time for k in scenario.script]
+    assert np.all(np.diff(times) > 0)
+    loaded = LoadScenario(data=DumpScenario(scenario))  # validates the script
+    yaws = _wrist_yaws(loaded)
+    assert yaws[-1] - yaws[0] == pytest.approx(25.0, abs=1e-6)

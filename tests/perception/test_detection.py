@@ -149,6 +149,11 @@ def test_perceive_cli_json_and_recorded_frame_round_trip(tmp_path):
     report = json.loads(run.stdout)
     (obj,) = report["objects"]
     assert obj["kind"] == "box" and obj["error"]["xy_mm"] < 10
+    # The extent's error against the catalogue cuboid (60 x 36 x 90 mm), as documented.
+    assert len(obj["error"]["extent_mm"]) == 3
+    np.testing.assert_allclose(obj["extent"], [0.060, 0.036, 0.090], atol=0.006)
+    np.testing.assert_allclose(obj["error"]["extent_mm"],
+                               np.array(obj["extent"]) * 1000 - [60, 36, 90], atol=0.01)
     np.testing.assert_allclose(obj["position"][:2], [0.05, 0.05], atol=0.01)
     # The saved 16-bit PNG frame gives the same detection through --frame.
     again = subprocess.run(
@@ -178,7 +183,7 @@ def test_the_hand_in_view_is_filtered_out_by_its_render_labels(capsys):
     assert set(robot_labels(station).tolist()) == hand_bodies
     (kept,) = render_views(scenario, exclude_robot=False)
     (filtered,) = render_views(scenario)
-    assert len(kept.detections) == 2  # the object and the hand
+    assert len(kept.detections) >= 2  # the object and the hand (its parts may split)
     (only,) = filtered.detections
     error = detection_error(only, scenario)
     assert error["kind_ok"] and error["xy_mm"] < 5.0

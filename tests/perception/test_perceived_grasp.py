@@ -50,3 +50,31 @@ def test_a_perceived_cuboid_is_close_enough_to_plan_on():
     np.testing.assert_allclose(scenario.object.X_WO.GetDeterministicValue().translation(),
                                perceived.true_X_WO.translation())
     assert plan.to_scenario().object.size == pytest.approx(perceived.size)
+
+
+def test_the_object_planned_on_is_chosen_by_the_request_not_by_the_truth():
+    """Was the detection nearest the true pose. Now: the requested size,
+    nearest the commanded position. Two 75 mm cuboids and a 40 mm sphere:
+    told to look near the second cuboid, it is the one planned on (the truth,
+    the first, is not consulted); the sphere, nearer the commanded spot but
+    not of the requested size, is passed over."""
+    from handle_drake.perception.grasping import select_detection
+    from handle_drake.perception.scenes import SceneObject
+
+    other = SceneObject("cuboid", 0.075, (-0.08, 0.08), math.radians(10))
+    ball = SceneObject("sphere", 0.04, (-0.10, -0.02))
+    perceived = perceive_object("cuboid", 0.075, xy=(0.06, -0.04), yaw=math.radians(35),
+                                near_xy=(-0.10, 0.02), clutter=[other, ball])
+    np.testing.assert_allclose(perceived.X_WO.translation()[:2], other.xy, atol=0.005)
+    assert "took detection" in perceived.selection and "requested size" in perceived.selection
+    # Told to look near the first, it takes the first.
+    perceived = perceive_object("cuboid", 0.075, xy=(0.06, -0.04), yaw=math.radians(35),
+                                clutter=[other, ball])
+    assert perceived.errors()["xy_mm"] < 5
+    # No detection of the requested size: the nearest the commanded spot, said so.
+    small = _detection([0.0, 0.0, 0.02], [0.04, 0.04, 0.04], 0.0, "sphere")
+    far = _detection([0.2, 0.0, 0.02], [0.045, 0.045, 0.04], 0.0, "sphere")
+    chosen, why = select_detection([far, small], 0.2, (0.01, 0.0))
+    assert chosen is small and "none has the requested size" in why
+    with pytest.raises(ValueError, match="no object detected"):
+        select_detection([], 0.05, (0, 0))

@@ -1,0 +1,112 @@
+"""Pick and place on seeded random scenes of the Hamburg table (issue 33 targets).
+
+For each seed (``--seeds``, default 0-19) the scene of 2-5 objects
+(:func:`handle_drake.pick.scenes.random_scene`) is picked once from perception
+and once from the true poses (``--modes``), the nearest pickable object each
+time, through :func:`handle_drake.pick.cli.pick`. Prints the success table
+(per mode and per kind), the planning times (grasp planner, arm IK, joint
+paths), the simulation's real-time rate next to a floor measured in the same
+run (the bare station, arm and hand only, no objects or box), and the load;
+writes JSON.
+
+Run: python benchmarks/bench_pick.py [--seeds 0-19] [--modes perceived,true] [--out out/bench]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _seeds(text: str) -> list[int]:
+    if "-" in text:
+        a, b = text.split("-")
+        return list(range(int(a), int(b) + 1))
+    return [int(s) for s in text.split(",")]
+
+
+def _floor_rate(scenario) -> float:
+    """Real-time rate of the station with the arm and hand only (1 s simulated)."""
+    import dataclasses as dc
+
+    from pydrake.systems.analysis import Simulator
+
+    from handle_drake.station import MakeHandStation
+
+    bare = dc.replace(scenario, object=None, objects=[], sorting_box=None, cameras=[])
+    simulator = Simulator(MakeHandStation(bare))
+    start = time.perf_counter()
+    simulator.AdvanceTo(1.0)
+    return 1.0 / (time.perf_counter() - start)
+
+
+def main(argv=None) -> int:
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", default="0-19")
+    parser.add_argument("--modes", default="perceived,true")
+    parser.add_argument("--out", default="out/bench")
+    args = parser.parse_args(argv)
+
+    from handle_drake.demo import diagrams_dir
+    from handle_drake.pick.cli import pick
+    from handle_drake.pick.scenes import random_scene
+    from handle_drake.scenario import LoadScenario
+
+    base = LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml")
+    floor = _floor_rate(base)
+    rows = []
+    for seed in _seeds(args.seeds):
+        scenario = random_scene(base, seed)
+        for mode in args.modes.split(","):
+            start = time.perf_counter()
+            result = pick(scenario, true_poses=(mode == "true"))
+            result.update(seed=seed, mode=mode, total_s=time.perf_counter() - start,
+                          load=os.getloadavg()[0])
+            rows.append(result)
+            print(f"seed {seed:2d} {mode:9s} {result.get('true_kind', '-'):7s} "
+                  f"{result.get('grasp_class', '-'):18s} {result['outcome']}", flush=True)
+            partial = Path(args.out) / "pick_partial.json"
+            partial.parent.mkdir(parents=True, exist_ok=True)
+            partial.write_text(json.dumps(rows, indent=1, default=str))  # survives a stop
+    print("\nmode       in the box   sphere   cuboid")
+    summary = {}
+    for mode in args.modes.split(","):
+        mine = [r for r in rows if r["mode"] == mode]
+        ok = [r for r in mine if r.get("in_box")]
+        per_kind = {k: (sum(1 for r in ok if r.get("true_kind") == k),
+                        sum(1 for r in mine if r.get("true_kind") == k))
+                    for k in ("sphere", "cuboid")}
+        summary[mode] = {"in_box": len(ok), "runs": len(mine), "per_kind": per_kind}
+        print(f"{mode:10s} {len(ok):3d}/{len(mine):<3d}      "
+              + "   ".join(f"{a}/{b}" for a, b in per_kind.values()))
+    planned = [r for r in rows if "planning_s" in r]
+    if planned:
+        for key in ("grasp", "ik", "path"):
+            values = [r["planning_s"][key] for r in planned]
+            print(f"planning {key:5s}: median {np.median(values):.2f} s, "
+                  f"max {np.max(values):.2f} s")
+        ik_path = [r["planning_s"]["ik"] + r["planning_s"]["path"] for r in planned]
+        print(f"IK + paths: median {np.median(ik_path):.2f} s, max {np.max(ik_path):.2f} s")
+    simulated = [r for r in rows if "sim_s" in r]
+    if simulated:
+        rate = np.median([r["sim_s"] / r["wall_s"] for r in simulated])
+        print(f"simulation: median {rate:.2f}x real time; floor (arm + hand alone) "
+              f"{floor:.2f}x; ratio {rate / floor:.2f}")
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "pick.json"
+    path.write_text(json.dumps({"summary": summary, "floor_rate": floor, "rows": rows},
+                               indent=1, default=str))
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,258 @@
+"""Plan a pick and place: the grasp planner's hand poses, arm configurations that
+reach them, collision-checked joint paths, and the release over the object's hole.
+
+:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn. For
+each, the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`,
+reaching from the arm's base towards the object) gives the pre-grasp, grasp and
+lift poses of the hand base; :class:`handle_drake.arm.reach.ArmReach` finds arm
+joints for each (limits, 3 mm clearance; each IK seeded by the previous
+configuration). The release pose keeps the grasp (``X_OB``, object to hand
+base, as planned) and puts the object ``DROP_HEIGHT`` above its hole, turned to
+the hole's orientation (a cuboid's width along the box's x, either way round;
+a sphere at its own yaw or a quarter or half turn from it, whichever the arm
+reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it. Between
+consecutive configurations the straight joint-space segment must be collision
+free (checked every 0.02 rad with the hand's posture of that phase); if one is
+not, Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free
+path between the two (:func:`free_path`). The first class whose whole chain
+exists is the plan; otherwise :class:`PickPlanningError` lists each class's
+reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+import time
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+
+__all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "free_path"]
+
+#: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
+#: through lift and carry in bench_pick first (lateral tripod let a cuboid swing 32 deg).
+CLASS_ORDER = {
+    "sphere": ("tripod", "parallel_extension", "palmar_pinch", "lateral_tripod",
+               "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
+    "cuboid": ("parallel_extension", "tripod", "palmar_pinch", "lateral_tripod",
+               "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
+}
+DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
+CARRY_HEIGHT = 0.12  # m, above the release pose
+
+
+class PickPlanningError(ValueError):
+    """No grasp class gives a reachable, collision-free pick; the message says why."""
+
+
+@dc.dataclass
+class Waypoint:
+    label: str
+    q: np.ndarray  # arm joints (rad)
+    hand: np.ndarray  # hand command (actuated joints, rad) held from here on
+    path: list | None = None  # intermediate arm configurations from the previous waypoint
+
+
+@dc.dataclass
+class PickPlan:
+    target: str
+    kind: str
+    grasp_class: str
+    grasp: object  # the GraspPlan
+    waypoints: list[Waypoint]
+    X_WO: RigidTransform  # the pose planned on (perceived or true)
+    X_WO_release: RigidTransform
+    seconds: dict  # grasp planning, IK and path times (s)
+    attempts: dict  # class -> reason it was not taken
+
+    def summary(self) -> str:
+        t = self.seconds
+        return (f"{self.target} ({self.kind}): {self.grasp_class}; planning "
+                f"{t['grasp']:.2f} s grasp + {t['ik']:.2f} s IK + {t['path']:.2f} s paths")
+
+
+def _yaw(R) -> float:
+    m = R.matrix()
+    return math.atan2(m[1, 0], m[0, 0])
+
+
+def _release_poses(scenario, kind, spec, X_WO, X_OB):
+    """Candidate (X_WO_release, X_WB_release), nearest turn first."""
+    from handle_drake.objects import resting_height
+    from handle_drake.scene.plant import box_pose, hole_centres
+
+    centre = hole_centres(scenario)[kind]
+    z = centre[2] + resting_height(spec) + DROP_HEIGHT
+    yaw0 = _yaw(X_WO.rotation())
+    if kind == "cuboid":  # its square hole takes it at every quarter turn
+        box_yaw = _yaw(box_pose(scenario).rotation())
+        yaws = [box_yaw + k * math.pi / 2 for k in range(4)]
+    else:
+        yaws = [yaw0 + k * math.pi / 2 for k in (0, 1, -1, 2)]
+    yaws.sort(key=lambda y: abs((y - yaw0 + math.pi) % (2 * math.pi) - math.pi))
+    out = []
+    for yaw in yaws:
+        X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
+        out.append((X, X @ X_OB))
+    return out
+
+
+def _raised(X: RigidTransform, dz: float) -> RigidTransform:
+    return RigidTransform(X.rotation(), X.translation() + [0, 0, dz])
+
+
+def free_path(reach, q_from, q_to, q_hand, clearance: float = 0.002):
+    """A collision-free joint path from ``q_from`` to ``q_to`` (list of arm
+    configurations, ends excluded) by Drake's ``KinematicTrajectoryOptimization``
+    (B-spline, minimum duration + length, joint position and velocity limits,
+    the minimum-distance constraint at sample points; 10 control points and 20
+    samples, then 14 and 28), or None. The result is checked densely
+    (:meth:`ArmReach.path_is_free` between consecutive samples)."""
+    for num_control_points, samples in ((10, 20), (14, 28)):
+        path = _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearance)
+        if path is not None:
+            return path
+    return None
+
+
+def _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearance):
+    from pydrake.multibody.inverse_kinematics import MinimumDistanceLowerBoundConstraint
+    from pydrake.planning import KinematicTrajectoryOptimization
+    from pydrake.solvers import SnoptSolver, Solve
+
+    plant = reach.plant
+    n = plant.num_positions()
+    a, b = reach.positions(q_from, q_hand), reach.positions(q_to, q_hand)
+    trajopt = KinematicTrajectoryOptimization(n, num_control_points)
+    prog = trajopt.get_mutable_prog()
+    trajopt.AddDurationCost(1.0)
+    trajopt.AddPathLengthCost(1.0)
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    lower, upper = np.where(np.isfinite(lower), lower, -10), np.where(np.isfinite(upper), upper, 10)
+    lower[reach._hand_q] = upper[reach._hand_q] = q_hand
+    trajopt.AddPositionBounds(lower, upper)
+    velocity = np.full(n, 10.0)
+    velocity[reach._arm_q] = reach.spec.velocity
+    trajopt.AddVelocityBounds(-velocity, velocity)
+    trajopt.AddDurationConstraint(0.2, 20.0)
+    trajopt.AddPathPositionConstraint(a, a, 0)
+    trajopt.AddPathPositionConstraint(b, b, 1)
+    trajopt.AddPathVelocityConstraint(np.zeros(n), np.zeros(n), 0)
+    trajopt.AddPathVelocityConstraint(np.zeros(n), np.zeros(n), 1)
+    constraint = MinimumDistanceLowerBoundConstraint(plant, clearance, reach.plant_context, None,
+                                                     0.02)
+    for s in np.linspace(0, 1, samples)[1:-1]:
+        trajopt.AddPathPositionConstraint(constraint, s)
+    # Initial guess: the straight segment.
+    guess = np.linspace(a, b, num_control_points).T
+    from pydrake.trajectories import BsplineTrajectory
+
+    trajopt.SetInitialGuess(BsplineTrajectory(trajopt.basis(), list(guess.T[:, :, None])))
+    prog.SetSolverOption(SnoptSolver.id(), "Major iterations limit", 300)
+    result = Solve(prog)
+    if not result.is_success():
+        return None
+    trajectory = trajopt.ReconstructTrajectory(result)
+    times = np.linspace(trajectory.start_time(), trajectory.end_time(), samples)
+    path = [trajectory.value(t).ravel()[reach._arm_q] for t in times[1:-1]]
+    points = [np.asarray(q_from)] + path + [np.asarray(q_to)]
+    segments = zip(points, points[1:], strict=False)
+    if not all(reach.path_is_free(p, q, q_hand, clearance=0.0) for p, q in segments):
+        return None
+    return path
+
+
+def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidTransform,
+              q_start, classes=None) -> PickPlan:
+    """Plans picking ``target`` (a ``kind`` of ``size`` at ``X_WO``) into its hole
+    (see the module doc). ``reach`` is an :class:`~handle_drake.arm.reach.ArmReach`
+    of the scenario ignoring ``target``; ``q_start`` the arm's joints now."""
+    from handle_drake.grasp.planning import plan_grasp
+    from handle_drake.hands import actuated_to_joint_positions, get_hand_spec
+    from handle_drake.objects import ObjectSpec
+
+    if kind not in CLASS_ORDER:
+        raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
+                                f"{sorted(CLASS_ORDER)})")
+    ratio = scenario.hand.coupling_ratio or 1.0
+    hand = get_hand_spec(scenario.hand.kind)
+    base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()
+    spec = ObjectSpec(kind=kind, size=size)
+    q_start = np.asarray(q_start, dtype=float)
+    attempts, seconds = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}
+    for cls in classes or CLASS_ORDER[kind]:
+        start = time.perf_counter()
+        try:
+            grasp = plan_grasp(cls, spec, X_WO, table_height=scenario.table.top_height,
+                               reach_direction=X_WO.translation()[:2] - base[:2],
+                               coupling_ratio=ratio)
+        except ValueError as error:
+            attempts[cls] = f"no grasp plan: {str(error)[:100]}"
+            seconds["grasp"] += time.perf_counter() - start
+            continue
+        seconds["grasp"] += time.perf_counter() - start
+        q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
+        q_closed = actuated_to_joint_positions(hand, grasp.close_command, ratio)
+        X_OB = X_WO.inverse() @ grasp.X_WB
+        chain = [("pregrasp", grasp.X_WB_pregrasp, q_open, grasp.preshape_command),
+                 ("grasp", grasp.X_WB, q_open, grasp.preshape_command),
+                 ("close", None, q_closed, grasp.close_command),
+                 ("lift", grasp.lifted(), q_closed, grasp.close_command)]
+        waypoints = [Waypoint("start", q_start, grasp.preshape_command)]
+        reason = _solve_chain(reach, chain, waypoints, seconds)
+        X_release = None
+        if not reason:
+            reason = "no IK for the carry and release poses at any turn over the hole"
+            for X_WO_rel, X_WB_rel in _release_poses(scenario, kind, spec, X_WO, X_OB):
+                tail = [("carry", _raised(X_WB_rel, CARRY_HEIGHT), q_closed, grasp.close_command),
+                        ("release", X_WB_rel, q_closed, grasp.close_command),
+                        ("open", None, q_open, grasp.preshape_command)]
+                trial = list(waypoints)
+                if not _solve_chain(reach, tail, trial, seconds):
+                    waypoints, X_release, reason = trial, X_WO_rel, ""
+                    break
+        if not reason:
+            reason = _connect(reach, waypoints, seconds)
+        if reason:
+            attempts[cls] = reason
+            continue
+        return PickPlan(target, kind, cls, grasp, waypoints, X_WO, X_release, seconds, attempts)
+    raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
+        f"{c}: {r}" for c, r in attempts.items()))
+
+
+def _solve_chain(reach, chain, waypoints, seconds) -> str:
+    for label, X, q_hand, command in chain:
+        previous = waypoints[-1]
+        if X is None:  # the hand changes posture where the arm stands
+            waypoints.append(Waypoint(label, previous.q, command))
+            continue
+        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=2)
+        seconds["ik"] += result.seconds
+        if not result.ok:
+            return f"no IK for the {label} pose"
+        waypoints.append(Waypoint(label, result.q, command))
+    return ""
+
+
+def _connect(reach, waypoints, seconds) -> str:
+    from handle_drake.hands import actuated_to_joint_positions, get_hand_spec
+
+    start = time.perf_counter()
+    hand = get_hand_spec(reach.hand_spec.name)
+    try:
+        for a, b in zip(waypoints, waypoints[1:], strict=False):
+            if np.allclose(a.q, b.q):
+                continue
+            # The posture held while the arm moves from a to b is a's command.
+            q_hand = actuated_to_joint_positions(hand, a.hand, reach.coupling_ratio)
+            if reach.path_is_free(a.q, b.q, q_hand):
+                continue
+            path = free_path(reach, a.q, b.q, q_hand)
+            if path is None:
+                return f"no collision-free path from {a.label} to {b.label}"
+            b.path = path
+        return ""
+    finally:
+        seconds["path"] += time.perf_counter() - start

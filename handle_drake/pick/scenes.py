@@ -1,0 +1,61 @@
+"""Seeded random scenes: 2-5 objects on the scenario's table, clear of the box.
+
+The kinds are those the grasp planner grasps standing on the table and the box
+has a hole for: spheres and upright cuboids (the planner grasps a cylinder only
+lying on its side, which no hole takes, and does not plan the star prism). Sizes
+are the holes' objects' sizes; places and yaws are drawn uniformly in
+``REGION`` (m, world x and y) and redrawn until every two objects stand
+``GAP`` apart (room for the fingers) and off the box.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+
+import numpy as np
+from pydrake.common.schema import Transform
+
+__all__ = ["random_scene", "REGION", "GAP", "SCENE_KINDS"]
+
+SCENE_KINDS = ("sphere", "cuboid")
+REGION = ((-0.20, -0.32), (0.20, 0.12))
+GAP = 0.06
+
+
+def random_scene(scenario, seed: int):
+    """A copy of ``scenario`` whose objects are 2-5 seeded random ones."""
+    from handle_drake.scenario import ObjectConfig
+    from handle_drake.scene.plant import box_footprint_contains, footprint_radius, spec_of
+
+    if scenario.sorting_box is None:
+        raise ValueError("--scene-seed: the scenario has no sorting_box to place objects around")
+    sizes = {h.kind: h.size for h in scenario.sorting_box.holes if h.kind in SCENE_KINDS}
+    kinds = [k for k in SCENE_KINDS if k in sizes]
+    if not kinds:
+        raise ValueError(f"--scene-seed: the sorting box has no hole for {list(SCENE_KINDS)}")
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(2, 6))
+    objects, placed = [], []
+    for _ in range(count):
+        kind = kinds[int(rng.integers(len(kinds)))]
+        o = ObjectConfig(kind=kind, size=sizes[kind] or 0.06)
+        r = footprint_radius(spec_of(o))
+        for _attempt in range(200):
+            xy = rng.uniform(*REGION)
+            yaw = float(rng.uniform(-math.pi, math.pi))
+            if all(math.dist(xy, p) >= r + q + GAP for p, q in placed) and \
+                    not box_footprint_contains(scenario, xy, margin=r + 0.02):
+                break
+        else:
+            continue  # no room left: fewer objects
+        placed.append((xy, r))
+        o.X_WO = _transform(xy, yaw)
+        objects.append(o)
+    return dc.replace(scenario, object=objects[0], objects=objects[1:])
+
+
+def _transform(xy, yaw) -> Transform:
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    return Transform(RigidTransform(RollPitchYaw(0, 0, yaw), [xy[0], xy[1], 0.0]))

@@ -1,0 +1,125 @@
+"""Pick and place: random scenes, the pick plan, and one whole pick into the box."""
+
+import math
+
+import numpy as np
+import pytest
+
+from handle_drake.arm.reach import ArmReach
+from handle_drake.cli import main
+from handle_drake.demo import diagrams_dir
+from handle_drake.pick.plan import DROP_HEIGHT, plan_pick
+from handle_drake.pick.scenes import GAP, REGION, random_scene
+from handle_drake.scenario import LoadScenario, validate_scenario
+from handle_drake.scene.config import scene_objects
+from handle_drake.scene.plant import (
+    footprint_radius,
+    hole_centres,
+    initial_pose,
+    spec_of,
+)
+
+PATH = diagrams_dir() / "hamburg_setup.yaml"
+
+
+@pytest.fixture(scope="module")
+def hamburg():
+    return LoadScenario(filename=PATH)
+
+
+def test_random_scenes_are_seeded_valid_and_spread(hamburg):
+    counts = set()
+    for seed in range(8):
+        scene = random_scene(hamburg, seed)
+        again = random_scene(hamburg, seed)
+        objects = scene_objects(scene)
+        np.testing.assert_array_equal(
+            [np.asarray(o.X_WO.translation, dtype=float) for _, o in objects],
+            [np.asarray(o.X_WO.translation, dtype=float) for _, o in scene_objects(again)])
+        assert 2 <= len(objects) <= 5
+        counts.add(len(objects))
+        validate_scenario(scene)  # no overlaps, none on the box
+        for i, (_, a) in enumerate(objects):
+            pa = np.asarray(a.X_WO.translation[:2], dtype=float)
+            assert np.all(pa >= REGION[0]) and np.all(pa <= REGION[1])
+            for _, b in objects[i + 1:]:
+                pb = np.asarray(b.X_WO.translation[:2], dtype=float)
+                gap = math.dist(pa, pb) - footprint_radius(spec_of(a)) - footprint_radius(
+                    spec_of(b))
+                assert gap >= GAP - 1e-9
+    assert len(counts) >= 2
+
+
+def test_pick_plan_reaches_every_pose_and_releases_over_the_hole(hamburg):
+    name, sphere = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "sphere")
+    reach = ArmReach(hamburg, ignore=(name,))
+    X_WO = initial_pose(sphere, hamburg.table)
+    plan = plan_pick(hamburg, reach, name, "sphere", sphere.size, X_WO,
+                     hamburg.hand.mount.initial_position)
+    by_label = {w.label: w for w in plan.waypoints}
+    assert list(by_label) == ["start", "pregrasp", "grasp", "close", "lift", "carry",
+                              "release", "open"]
+    grasp = plan.grasp
+    for label, X in (("pregrasp", grasp.X_WB_pregrasp), ("grasp", grasp.X_WB),
+                     ("lift", grasp.lifted())):
+        X_reached = reach.hand_pose(by_label[label].q)
+        assert np.linalg.norm(X_reached.translation() - X.translation()) < 0.004
+    # Released: the object (rigidly in the hand as planned) centred over its hole,
+    # its bottom DROP_HEIGHT above the lid.
+    X_OB = X_WO.inverse() @ grasp.X_WB
+    X_WO_release = reach.hand_pose(by_label["release"].q) @ X_OB.inverse()
+    hole = hole_centres(hamburg)["sphere"]
+    np.testing.assert_allclose(X_WO_release.translation()[:2], hole[:2], atol=0.004)
+    assert X_WO_release.translation()[2] == pytest.approx(
+        hole[2] + sphere.size / 2 + DROP_HEIGHT, abs=0.004)
+    for w in plan.waypoints[1:]:
+        assert np.all(w.q >= np.array(reach.spec.lower)) and np.all(
+            w.q <= np.array(reach.spec.upper))
+    assert plan.seconds["ik"] + plan.seconds["path"] < 10.0  # bounded (timing: benchmark)
+
+
+def test_pick_command_puts_the_sphere_in_the_box(capsys):
+    code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere"])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-1] == "in the box" and code == 0
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--override", "hand: {mount: !FloatingWrist {}}"], "hand.mount must be an !Arm"),
+    (["--override", "sorting_box: null"], "--place box: the scenario has no sorting_box"),
+    (["--override", "cameras: []"], "no camera to perceive with"),
+    (["--true-poses", "--object", "9"], "--object: 9 is not one of the 4 objects"),
+    (["--true-poses", "--object", "-1"], "--object: -1 is not one of the 4 objects"),
+    (["--scene-seed", "-3"], "--scene-seed: expected an integer >= 0"),
+])
+def test_pick_refuses_bad_input_with_exit_2(args, message, capsys):
+    code = main(["pick", str(PATH), *args])
+    assert code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
+    """Hand low over the table on either side of the sorting box: the straight joint
+    segment drives it through the box; KinematicTrajectoryOptimization finds a way."""
+    import dataclasses as dc
+
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from handle_drake.pick.plan import free_path
+
+    reach = ArmReach(dc.replace(hamburg, cameras=[]))
+    hand = np.zeros(len(reach.hand_spec.joint_names))
+    ready = np.array(hamburg.hand.mount.initial_position)
+    a = reach.solve_from_seeds(RigidTransform(RollPitchYaw(np.pi / 2, 0, np.pi / 2),
+                                              [-0.4, -0.03, 0.13]), [ready], hand)
+    b = reach.solve_from_seeds(RigidTransform(RollPitchYaw(np.pi / 2, 0, np.pi / 2),
+                                              [-0.4, 0.6, 0.13]), [a.q], hand)
+    assert a.ok and b.ok
+    assert not reach.path_is_free(a.q, b.q, hand)
+    path = free_path(reach, a.q, b.q, hand)
+    assert path is not None and len(path) > 2
+    points = [a.q, *path, b.q]
+    for p, q in zip(points, points[1:], strict=False):
+        assert reach.path_is_free(p, q, hand)
+        assert np.all(q >= np.array(reach.spec.lower) - 1e-6)
+        assert np.all(q <= np.array(reach.spec.upper) + 1e-6)
