@@ -180,3 +180,30 @@ def test_the_target_bonus_needs_the_real_target_not_the_checks_tolerance():
     assert not opt.converged
     opt.tell(opt.ask(), f_real)
     assert opt.converged
+
+
+def test_restarts_of_section_5_5_4_after_iterations_without_progress():
+    # a flat objective (as the screw cap's first check design gave): the swarm of Algorithm 2
+    # contracts; with restart_after=3 it starts anew after three iterations without a better
+    # personal best, drawn from its own seeded stream (a replay rebuilds it exactly)
+    def run(restart_after):
+        opt = IncrementalPSO([[0, 1]] * 6, seed=3, n_particles=6, min_active=6,
+                             restart_after=restart_after)
+        spreads = []
+        for _ in range(6):
+            xs = [opt.ask() for _ in range(opt.batch_size)]
+            for x in xs:
+                opt.tell(x, 1.0)
+            spreads.append(float(opt.x.std(axis=0).mean()))
+        return opt, spreads
+
+    plain, plain_spread = run(None)
+    restarted, spread = run(3)
+    assert plain.restarts == 0 and restarted.restarts == 1
+    assert max(plain_spread[2:]) < 0.15 < 0.29  # contracted from U(0, 1)'s 0.29, stays so
+    assert spread[3] > 2 * plain_spread[3]  # re-drawn uniformly at the restart
+    again, _ = run(3)
+    np.testing.assert_array_equal(again.x, restarted.x)
+    with pytest.raises(ValueError, match="restart_after"):
+        IncrementalPSO([[0, 1]] * 2, restart_after=0)
+    assert make_inhand_optimizer("ipso-restart", [[0, 1]] * 2).restart_after == 3
