@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.apps.inhand.evaluation import incremental_score
+from handle_drake.apps.inhand.evaluation import incremental_score, target_score
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
 from handle_drake.learning.optim.population import (
     CMAES,
@@ -50,7 +50,7 @@ def test_algorithm2_finds_a_known_optimum():
 
 def test_incremental_activation_on_a_staged_objective():
     opt = IncrementalPSO([[0, 1]] * 6, seed=1, n_particles=10, min_active=2,
-                         stop_score=3 * 2 + 1)
+                         stop_score=3 * 2 + 2)
     frozen = opt.x[:, 2:].copy()
     xs = [opt.ask() for _ in range(10)]
     for x in xs:
@@ -163,3 +163,47 @@ def test_cmaes_is_seeded_and_leaves_numpys_global_generator_alone():
     assert np.random.random() == expected
     b = CMAES([[0, 1]] * 4, seed=7, n_particles=6)
     np.testing.assert_array_equal(xa, [b.ask() for _ in range(6)])
+
+
+def test_the_target_bonus_needs_the_real_target_not_the_checks_tolerance():
+    # issue 35: random search seed 50 stopped at score 28 >= 27 with the cylinder turned
+    # 29.2 deg (< 30): the last check passed within its tolerance. The bonus needs both.
+    dims = np.array([10, 8, 4, 4])  # d = 26: the old target score was d + 1 = 27
+    matches = np.ones(20, dtype=bool)
+    f_near, _, _ = incremental_score(dims, 4, matches, reached=False)
+    f_real, _, _ = incremental_score(dims, 4, matches[:1].repeat(20) & False, reached=True)
+    target = target_score(26, "incremental")
+    assert f_near == pytest.approx(27.0)
+    assert f_near < target <= f_real  # S_a = 0 still reaches it
+    opt = make_inhand_optimizer("random", [[0, 1]] * 26, seed=50, stop_score=target)
+    opt.tell(opt.ask(), f_near)
+    assert not opt.converged
+    opt.tell(opt.ask(), f_real)
+    assert opt.converged
+
+
+def test_restarts_of_section_5_5_4_after_iterations_without_progress():
+    # a flat objective (as the screw cap's first check design gave): the swarm of Algorithm 2
+    # contracts; with restart_after=3 it starts anew after three iterations without a better
+    # personal best, drawn from its own seeded stream (a replay rebuilds it exactly)
+    def run(restart_after):
+        opt = IncrementalPSO([[0, 1]] * 6, seed=3, n_particles=6, min_active=6,
+                             restart_after=restart_after)
+        spreads = []
+        for _ in range(6):
+            xs = [opt.ask() for _ in range(opt.batch_size)]
+            for x in xs:
+                opt.tell(x, 1.0)
+            spreads.append(float(opt.x.std(axis=0).mean()))
+        return opt, spreads
+
+    plain, plain_spread = run(None)
+    restarted, spread = run(3)
+    assert plain.restarts == 0 and restarted.restarts == 1
+    assert max(plain_spread[2:]) < 0.15 < 0.29  # contracted from U(0, 1)'s 0.29, stays so
+    assert spread[3] > 2 * plain_spread[3]  # re-drawn uniformly at the restart
+    again, _ = run(3)
+    np.testing.assert_array_equal(again.x, restarted.x)
+    with pytest.raises(ValueError, match="restart_after"):
+        IncrementalPSO([[0, 1]] * 2, restart_after=0)
+    assert make_inhand_optimizer("ipso-restart", [[0, 1]] * 2).restart_after == 3

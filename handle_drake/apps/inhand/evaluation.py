@@ -15,21 +15,29 @@ are active from the start, passing check ``k`` activates those of part
 - ``S_b`` (eq. 47) = number of activated parameters,
 - ``S_a`` (eq. 48) = share of the ``L`` planned samples whose state matches
   the benchmark (samples after an early stop count as not matching),
-- ``f = S_a + S_b`` (eq. 49), plus 1 when the final check passes (our
-  addition: passing the last check activates nothing new, and without it a
-  motion that reaches the target would not score above one that fails only
-  the last check).
+- ``f = S_a + S_b`` (eq. 49), plus 2 when the target is reached: the final
+  check passes *and* the state meets the target strictly (our addition:
+  passing the last check activates nothing new, and without it a motion that
+  reaches the target would not score above one that fails only the last
+  check; the checks allow a tolerance below the benchmark, the bonus does not).
 
-So ``f >= d + 1`` exactly when the target state is reached, ``floor(f)`` is
-the number of parameters Algorithm 2 may update (``d`` for a complete pass),
-and the maximum is ``d + 2``.
+A trial that passes every check but misses the target scores at most
+``d + S_a <= d + 1`` (``S_b = d``), one that reaches it at least ``d + 2``: so
+``f >= d + 2`` exactly when the target state is reached and a run that stops
+on that score stops only on the real target (issue 35: with a bonus of 1 the
+target score ``d + 1`` was also reached by ``S_b = d, S_a = 1`` and by a last
+check passed within its tolerance). ``floor(f)`` is the number of parameters
+Algorithm 2 may update (capped at ``d``), and the maximum is ``d + 3``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["old_score", "incremental_score", "part_dimensions", "target_score"]
+__all__ = ["old_score", "incremental_score", "part_dimensions", "target_score", "BONUS"]
+
+#: Added to eq. 49 when the target is reached (> the largest S_a, so reached is f >= d + 2).
+BONUS = 2.0
 
 
 def old_score(held_time: float, total_time: float, rotation: float, target: float) -> float:
@@ -57,12 +65,15 @@ def part_dimensions(starts, sizes, n_parts: int) -> np.ndarray:
     return np.bincount(parts, weights=sizes, minlength=n_parts).astype(int)
 
 
-def incremental_score(dims_per_part, checks_passed: int, matches) -> tuple[float, float, float]:
+def incremental_score(dims_per_part, checks_passed: int, matches,
+                      reached: bool | None = None) -> tuple[float, float, float]:
     """``(f, S_b, S_a)`` of eqs. 47-49 (see the module doc).
 
     ``dims_per_part`` (K,): parameters per part; ``checks_passed``: how many
     checks passed in a row (0..K); ``matches`` (L,): per planned sample, whether
-    its state matched the benchmark (False for samples not reached).
+    its state matched the benchmark (False for samples not reached);
+    ``reached``: whether the final state meets the target strictly (None: the
+    last check decides alone). The bonus needs both the last check and it.
     """
     dims = np.asarray(dims_per_part, dtype=int)
     K = dims.size
@@ -73,13 +84,14 @@ def incremental_score(dims_per_part, checks_passed: int, matches) -> tuple[float
         raise ValueError("matches: expected at least one planned sample")
     s_b = float(dims[: min(checks_passed + 1, K)].sum())
     s_a = float(matches.mean())
-    return s_b + s_a + (1.0 if checks_passed == K else 0.0), s_b, s_a
+    bonus = checks_passed == K and (reached is None or bool(reached))
+    return s_b + s_a + (BONUS if bonus else 0.0), s_b, s_a
 
 
 def target_score(dimension: int, evaluation: str) -> float:
     """The score at and above which a trial reached the target (held, rotated by the target)."""
     if evaluation == "incremental":
-        return float(dimension) + 1.0
+        return float(dimension) + BONUS
     if evaluation == "old":
         return 2.0
     raise ValueError(f"evaluation: expected 'incremental' or 'old', got {evaluation!r}")

@@ -15,6 +15,7 @@ process, a local process pool or a Dask cluster
 from __future__ import annotations
 
 import dataclasses as dc
+import json
 import math
 from pathlib import Path
 
@@ -47,11 +48,17 @@ class InHandRun:
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
     task = dc.asdict(trial.config)
+    if "cap_position" in task:  # the screw cap (handle_drake.inhand.screw_cap)
+        return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
+                "screw_cap_version": 1}
     if not task["accelerometer"]:  # a setting added later: logs written before still resume
         del task["accelerometer"]
     return {"task": task, "optimizer": optimizer,
             "n_particles": n_particles, "inhand_version": 1}
 
+
+#: The tasks of :mod:`handle_drake.inhand.screw_cap` (held by the fingers).
+FINGER_TASKS = ("screw_cap", "fingertip_cylinder")
 
 #: Particles (CMA-ES: population) per iteration: the report uses 10; a
 #: thousand already spends a 1000-trial budget in one iteration.
@@ -84,12 +91,21 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if high is not None and value > high:
             raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
-    trial = InHandTrial(InHandTask(task=task, **task_options))
+    if task in FINGER_TASKS:
+        from handle_drake.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
+
+        trial = ScrewCapTrial(ScrewCapTask(free=task == "fingertip_cylinder", **task_options))
+    else:
+        trial = InHandTrial(InHandTask(task=task, **task_options))
     opt = make_inhand_optimizer(optimizer, trial.bounds, seed, n_particles,
                                 stop_score=trial.target_score,
                                 min_active=int(trial.dims_per_part[0]))
     config = _config(trial, optimizer, n_particles)
     run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
+    if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
+        from handle_drake.inhand.screw_cap import scenario_fingerprint
+
+        run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))
     db = Path(db)
     db.parent.mkdir(parents=True, exist_ok=True)
     with TrialLog(db) as log:
@@ -125,6 +141,19 @@ def run_summary(records, trial: InHandTrial, n_particles: int) -> dict:
     # strictly: held at the end and rotated by at least the target (the checks allow
     # tolerance_deg less; computed from the logged outcome, not from the score)
     target = trial.config.target_deg
+    if "turn_deg" in (done[0].contacts or {}):  # the screw cap: the cap's encoder turn
+        reached = [r.index + 1 for r in done if r.contacts.get("reached_target")]
+        best = max(done, key=lambda r: r.metric)
+        out.update(best_index=best.index, best_score=best.metric,
+                   best_rotation_deg=best.contacts["turn_deg"],
+                   best_turn_deg_truth=best.contacts["turn_deg_truth"],
+                   best_held=not best.contacts["palm_touched"],
+                   best_held_rotation_deg=max(r.contacts["turn_deg"] for r in done),
+                   share_held=float(np.mean([not r.contacts["palm_touched"] for r in done])),
+                   trials_to_target=min(reached) if reached else None,
+                   target_score=trial.target_score,
+                   mean_wall_time=float(np.mean([r.wall_time for r in done if r.wall_time])))
+        return out
     reached = [r.index + 1 for r in done if r.contacts and r.contacts.get("held")
                and r.contacts.get("completed", True) and r.contacts["rotation_deg"] >= target]
     held = [r for r in done if r.contacts and r.contacts.get("held")]

@@ -450,7 +450,7 @@ simulation_duration: {c.settle_time + c.total_time}
         if c.evaluation == "incremental":
             if st.failed:  # the samples after the first failed check count as not matching
                 matches[samples > checks[passed] + step] = False
-            score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches)
+            score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
         else:
             score = old_score(st.held_time, c.total_time, angle if held_end else 0.0, c.target)
             s_b = s_a = None

@@ -25,6 +25,9 @@
 - :class:`CMAES`: the ``cma`` package's CMA-ES in the unit cube (mean at the
   centre, sigma 0.3, population = particles), ask/tell per individual.
 - random search: :class:`handle_drake.learning.RandomSearch`.
+- ``ipso-restart``: Algorithm 2 with the report's restarts (5.5.4: "rather than
+  increasing N_Iter, we prefer to restart the babbling learning process"): after
+  3 iterations without a better personal best the swarm starts anew.
 
 All stop once a told score reaches ``stop_score`` (the task's target score)
 and are rebuilt exactly by replaying their tells (the trial log's resume).
@@ -42,7 +45,7 @@ from handle_drake.learning.optim.bo import RandomSearch
 __all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "make_inhand_optimizer",
            "INHAND_OPTIMIZERS"]
 
-INHAND_OPTIMIZERS = ("ipso", "pso", "cmaes", "random")
+INHAND_OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
 
 
 def _positive_int(name, value) -> int:
@@ -146,8 +149,15 @@ class IncrementalPSO(_Generational):
     def __init__(self, bounds, seed: int = 0, n_particles: int = 10, w: float = 0.4,
                  phi_p: float = 0.4, phi_c: float = 0.4, incremental: bool = True,
                  min_active: int = 1, cluster_size: int | None = None,
-                 freeze_inactive: bool = True, stop_score: float | None = None):
+                 freeze_inactive: bool = True, stop_score: float | None = None,
+                 restart_after: int | None = None):
         super().__init__(bounds, seed, n_particles, stop_score)
+        # 5.5.4: "rather than increasing N_Iter, we prefer to restart the babbling learning
+        # process": after this many iterations without a better personal best, every
+        # particle starts anew (uniform position and velocity, no memory); None: never
+        self.restart_after = None if restart_after is None else _positive_int(
+            "restart_after", restart_after)
+        self._stale, self._best_seen, self.restarts = 0, -math.inf, 0
         self.w = _non_negative("w", w)
         self.phi_p = _non_negative("phi_p", phi_p)
         self.phi_c = _non_negative("phi_c", phi_c)
@@ -186,6 +196,20 @@ class IncrementalPSO(_Generational):
         better = scores > self.f_p
         self.p[better] = self.x[better]
         self.f_p[better] = scores[better]
+        if self.restart_after is not None:
+            best = float(np.max(self.f_p))
+            self._stale = 0 if best > self._best_seen else self._stale + 1
+            self._best_seen = max(self._best_seen, best)
+            if self._stale >= self.restart_after:
+                rng = np.random.default_rng([self.seed, 0x15A0, 0xF00D, self.generation])
+                self.x = rng.random((self.batch_size, self.dim))
+                self.v = rng.uniform(-1.0, 1.0, (self.batch_size, self.dim))
+                self.p = self.x.copy()
+                self.f_p = np.full(self.batch_size, -math.inf)
+                self.active[:] = self.min_active
+                self._stale, self._best_seen = 0, -math.inf
+                self.restarts += 1
+                return
         c = self.cluster_centre
         for i in range(self.batch_size):
             m = self.active_dimensions(self.f_p[i])
@@ -263,6 +287,11 @@ def make_inhand_optimizer(name: str, bounds, seed: int = 0, n_particles: int = 1
     if name == "ipso":
         return IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
                               stop_score=stop_score)
+    if name == "ipso-restart":  # Algorithm 2 with the restarts of 5.5.4
+        opt = IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
+                             stop_score=stop_score, restart_after=3)
+        opt.strategy = "ipso-restart"
+        return opt
     if name == "pso":
         opt = IncrementalPSO(bounds, seed, n_particles, w=0.7298, phi_p=1.49618,
                              phi_c=1.49618, incremental=False, cluster_size=1,

@@ -1,0 +1,288 @@
+"""The screw cap (report Fig. 32): base rate, the optimiser table and the re-simulated best.
+
+1. ``--base-rate N``: N uniformly random parameter vectors in the action-gist
+   box (``run_inhand(..., "random")`` without its stop, so all N run; logged in
+   the SQLite ``--db``, resumable): the share reaching the target (the cap
+   turned >= ``--target-deg`` by its encoder, palm never touching, all checks).
+2. ``--table``: ipso (Algorithm 2), pso, cmaes and random search, ``--seeds``
+   each, every run until a trial reaches the target or ``--budget`` trials;
+   plus the demonstration's own parameters (one trial). Per optimiser: median
+   trials to the target (a run that did not reach it counts as the budget +
+   1 and is listed as not reached), median best turn and score at the budget.
+3. ``--resimulate``: every run's best trial re-simulated from its logged
+   scenario YAML alone by ``handle_drake.inhand.screw_cap.simulate_scenario``
+   (a separate build that reads the cap joint from the plant).
+
+Run: ``python benchmarks/bench_screw_cap.py --base-rate 200 --table --seeds 0 1 2 3 4
+--budget 60 --resimulate``; writes ``benchmarks/results/screw_cap.json`` and prints
+markdown tables (``docs/results/inhand.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+
+pin_blas(force=False)
+
+import numpy as np  # noqa: E402
+
+from handle_drake.inhand.experiment import run_inhand  # noqa: E402
+from handle_drake.inhand.screw_cap import (  # noqa: E402
+    ScrewCapTask,
+    ScrewCapTrial,
+    simulate_scenario,
+)
+from handle_drake.learning.log import TrialLog  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
+OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+
+
+def base_rate(n, seed, db, workers, options) -> dict:
+    # random search with no stop: all n trials run
+    from handle_drake.inhand.experiment import _config
+    from handle_drake.inhand.optimizers import StoppingRandomSearch
+    from handle_drake.inhand.screw_cap import scenario_fingerprint
+    from handle_drake.learning.runner import TrialRunner
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    config = _config(trial, "random-nostop", 1)
+    run_id = f"base-rate-{trial.name}-seed{seed}-" + scenario_fingerprint(
+        json.dumps(config, sort_keys=True))
+    with TrialLog(db) as log:
+        log.open_run(run_id, "random", trial.bounds, seed, trial.name, config)
+        opt = StoppingRandomSearch(trial.bounds, seed, stop_score=None)
+        TrialRunner(trial, opt, log, run_id, workers=workers, batch_size=workers,
+                    progress=False).run(n)
+        records = [r for r in log.trials(run_id) if r.status == "done"]
+    turns = np.array([r.contacts["turn_deg"] for r in records])
+    reached = np.array([bool(r.contacts["reached_target"]) for r in records])
+    return {"trials": len(records), "reached": int(reached.sum()),
+            "base_rate": float(reached.mean()) if records else None,
+            "share_turn_ge_target": float(np.mean(turns >= trial.config.target_deg)),
+            "turn_deg_quantiles": np.quantile(turns, [0.1, 0.5, 0.9, 1.0]).round(1).tolist(),
+            "run_id": run_id}
+
+
+def table(seeds, budget, db, workers, options, optimizers=OPTIMIZERS) -> dict:
+    rows = {}
+    best_trials = []
+    by_optimizer = {optimizer: [] for optimizer in optimizers}
+    for seed in seeds:  # seed-major: an interrupted table has every optimiser's first seeds
+        for optimizer in optimizers:
+            task = "fingertip_cylinder" if options["free"] else "screw_cap"
+            run = run_inhand(task, optimizer, budget, workers, seed, db, progress=False,
+                             **{k: v for k, v in options.items() if k != "free"})
+            s = run.summary()
+            by_optimizer[optimizer].append({
+                "seed": seed, "trials": s["done"], "to_target": s["trials_to_target"],
+                "best_turn_deg": s["best_held_rotation_deg"], "best_score": s["best_score"],
+                "run_id": run.run_id})
+            done = [r for r in run.records if r.status == "done"]
+            best = max(done, key=lambda r: r.metric)
+            best_trials.append((run.run_id, best.index, best.scenario, best.contacts["turn_deg"]))
+            print(f"{optimizer} seed {seed}: {s['done']} trials, to target "
+                  f"{s['trials_to_target']}, best turn {s['best_held_rotation_deg']:.1f} deg",
+                  flush=True)
+    for optimizer, runs in by_optimizer.items():
+        to = [r["to_target"] if r["to_target"] else budget + 1 for r in runs]
+        rows[optimizer] = {
+            "runs": runs, "median_trials_to_target": float(np.median(to)),
+            "reached": sum(bool(r["to_target"]) for r in runs),
+            "median_best_turn_deg": float(np.median([r["best_turn_deg"] for r in runs])),
+            "median_best_score": float(np.median([r["best_score"] for r in runs]))}
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    demo = trial.evaluate(trial.gist.initial_parameters(), early_stop=False)
+    rows["demonstration"] = {"turn_deg": demo.turn_deg, "score": demo.score,
+                             "reached": demo.reached_target}
+    return {"rows": rows, "best_trials": best_trials}
+
+
+def resimulate(best_trials) -> list:
+    out = []
+    for run_id, index, scenario, logged in best_trials:
+        truth = simulate_scenario(scenario)
+        out.append({"run_id": run_id, "trial": index, "logged_turn_deg": logged,
+                    "resimulated_turn_deg": truth["turn_deg"],
+                    "palm_force_max": truth["palm_force_max"]})
+        print(f"{run_id} trial {index}: logged {logged:.1f} deg, re-simulated "
+              f"{truth['turn_deg']:.1f} deg, palm force max {truth['palm_force_max']:.2f} N",
+              flush=True)
+    return out
+
+
+def speed(rounds: int, options) -> dict:
+    """A screw-cap trial against the bare plant on the same frames from the same state."""
+    import time
+
+    from pydrake.systems.analysis import Simulator
+
+    from handle_drake.inhand.screw_cap import build_screw_cap
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written stroke
+        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    built = trial._build()
+    bare = build_screw_cap(trial.scenario(x), bare=True)
+    simulator = Simulator(bare["diagram"])
+    context = simulator.get_mutable_context()
+    plant = bare["plant"]
+    ref = built["plant"].GetMyContextFromRoot(built["settled"])
+    q, v = built["plant"].GetPositions(ref), built["plant"].GetVelocities(ref)
+    total = trial.config.total_time
+
+    def run_bare():
+        context.SetTime(0.0)
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
+        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
+        simulator.Initialize()
+        start = time.perf_counter()
+        simulator.AdvanceTo(total)
+        return time.perf_counter() - start
+
+    cases = {"trial (reset, samples, checks)": lambda: trial.evaluate(x, early_stop=False)
+             .wall_time, "bare plant, same frames": run_bare}
+    times = {k: [] for k in cases}
+    for _ in range(rounds):
+        for name, case in cases.items():
+            times[name].append(case())
+    med = {k: float(np.median(t)) for k, t in times.items()}
+    floor = med["bare plant, same frames"]
+    for k, t in med.items():
+        print(f"{k:32s} {t:8.3f} s  x{t / floor:5.2f} of the bare plant", flush=True)
+    return {"sim_time": total, "median_wall": med,
+            "ratio_to_bare": {k: t / floor for k, t in med.items()}}
+
+
+def summarize(db, budget, resim: bool = False) -> dict:
+    """The table from whatever the trial log holds (also of an interrupted table run)."""
+    rows, resimulated = {}, []
+    with TrialLog(db) as log:
+        for info in log.runs():
+            if info.run_id.startswith("base-rate"):
+                continue
+            records = [r for r in log.trials(info.run_id) if r.status == "done"][:budget]
+            if not records:
+                continue
+            reached = [r.index + 1 for r in records if r.contacts.get("reached_target")]
+            best = max(records, key=lambda r: r.metric)
+            run = {"seed": info.seed, "trials": len(records),
+                   "to_target": min(reached) if reached else None,
+                   "best_turn_deg": max(r.contacts["turn_deg"] for r in records
+                                        if r.contacts.get("completed")) if any(
+                       r.contacts.get("completed") for r in records) else None,
+                   "best_score": best.metric, "best_trial": best.index,
+                   "best_trial_turn_deg": best.contacts["turn_deg"], "run_id": info.run_id}
+            if resim:
+                truth = simulate_scenario(best.scenario)
+                run["resimulated_turn_deg"] = truth["turn_deg"]
+                run["resimulated_palm_force_max"] = truth["palm_force_max"]
+                if "survived_reversal" in truth:
+                    run["resimulated_survived_reversal"] = truth["survived_reversal"]
+            rows.setdefault(info.strategy, []).append(run)
+    out = {}
+    for optimizer, runs in rows.items():
+        to = [r["to_target"] if r["to_target"] else budget + 1 for r in runs]
+        out[optimizer] = {"runs": runs, "median_trials_to_target": float(np.median(to)),
+                          "reached": sum(bool(r["to_target"]) for r in runs),
+                          "median_best_score": float(np.median([r["best_score"]
+                                                                 for r in runs]))}
+        line = ", ".join(f"seed {r['seed']}: {r['to_target'] or '-'}/{r['trials']}"
+                         for r in runs)
+        print(f"| {optimizer} | {out[optimizer]['reached']}/{len(runs)} | "
+              f"{out[optimizer]['median_trials_to_target']:g} | "
+              f"{out[optimizer]['median_best_score']:.2f} | {line} |", flush=True)
+    return {"rows": out, "resimulated": resimulated}
+
+
+def figures(db, task, options, directory, html: bool = True) -> dict:
+    """Figure 34 (best score per iteration, every run of the log) and an HTML replay of the
+    best trial of all runs (re-run from its parameters with a Meshcat recording)."""
+    from handle_drake.inhand.experiment import InHandRun, plot_learning_curve, replay_best
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    runs = []
+    with TrialLog(db) as log:
+        for info in log.runs():
+            if info.run_id.startswith("base-rate"):
+                continue
+            records = [r for r in log.trials(info.run_id)]
+            n = int((info.config or {}).get("n_particles", 10))
+            runs.append(InHandRun(info.run_id, Path(db), trial, info.strategy, n, info.seed,
+                                  records))
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    png = plot_learning_curve(runs, directory / f"{task}_learning_curve.png",
+                              title=f"{trial.name}: best score per iteration")
+    out = {"learning_curve": str(png)}
+    if html and runs:
+        best_run = max(runs, key=lambda r: max((t.metric for t in r.records
+                                                if t.status == "done"), default=-1))
+        page = directory / f"{task}_best.html"
+        logged, outcome = replay_best(best_run, page)
+        out.update(html=str(page), run_id=best_run.run_id, logged_score=logged,
+                   replayed_score=outcome.score, turn_deg=outcome.turn_deg)
+        print(f"replay: {page} ({best_run.run_id}, score {outcome.score:.3f}, logged "
+              f"{logged:.3f}, turn {outcome.turn_deg:.1f} deg)", flush=True)
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--base-rate", type=int, default=0, metavar="N")
+    p.add_argument("--table", action="store_true")
+    p.add_argument("--resimulate", action="store_true")
+    p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
+    p.add_argument("--figures", type=Path, default=None, metavar="DIR",
+                   help="learning curve of every run in --db and the best trial's HTML replay")
+    p.add_argument("--summarize", action="store_true",
+                   help="the table from the trial log as it is (with --resimulate: re-simulate "
+                        "each run's best trial from its logged scenario)")
+    p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    p.add_argument("--optimizers", nargs="+", choices=OPTIMIZERS, default=list(OPTIMIZERS))
+    p.add_argument("--budget", type=int, default=60)
+    p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
+    p.add_argument("--target-deg", type=float, default=None,
+                   help="default: 90 (screw cap), 60 (fingertip cylinder)")
+    p.add_argument("--gaits", type=int, default=1)
+    p.add_argument("--workers", type=int, default=1)
+    p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
+    p.add_argument("--out", type=Path, default=RESULTS)
+    args = p.parse_args(argv)
+    if args.target_deg is None:
+        args.target_deg = 90.0 if args.task == "screw_cap" else 60.0
+    options = {"target_deg": args.target_deg, "n_gaits": args.gaits,
+               "free": args.task == "fingertip_cylinder"}
+    args.db.parent.mkdir(parents=True, exist_ok=True)
+    result = json.loads(args.out.read_text()) if args.out.exists() else {}
+    key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}"
+    entry = result.setdefault(key, {})
+    if args.speed:
+        entry["speed"] = speed(args.speed, options)
+    if args.figures is not None:
+        entry["figures"] = figures(args.db, args.task, options, args.figures)
+    if args.summarize:
+        entry["summary"] = summarize(args.db, args.budget, args.resimulate)
+    if args.base_rate:
+        entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)
+        print(json.dumps(entry["base_rate"]), flush=True)
+    if args.table:
+        t = table(args.seeds, args.budget, args.db, args.workers, options, args.optimizers)
+        entry.setdefault("table", {}).update(t["rows"])
+        entry["budget"] = args.budget
+        if args.resimulate:
+            entry["resimulated"] = resimulate(t["best_trials"])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,780 @@
+"""The screw cap of report Fig. 32: a cap on a fixed bottle, turned by finger gaiting.
+
+The model (values and sources: ``handle_drake/inhand/data/README.md``,
+section "Screw cap"):
+
+- a bottle welded to the world (no table needed: it is fixed), its axis
+  along world y, and a cap (a cylinder ``diameter`` across, ``length`` along
+  the axis) on a revolute joint about that axis at the bottle's mouth;
+- thread friction on the cap joint: Coulomb ``coulomb_torque`` plus viscous
+  ``viscous`` (N m s/rad). Drake's discrete SAP plant has no Coulomb joint
+  friction, so the Coulomb part is a PD actuator on the cap joint with ``kp =
+  0``, ``kd = coulomb_torque / stiction_speed`` and an effort limit of
+  ``coulomb_torque``: SAP solves it implicitly as ``tau = -clamp(kd v, -Tc,
+  Tc)``, i.e. Coulomb friction regularised below ``stiction_speed``; the
+  viscous part is the joint's own damping (also implicit).
+- the Shadow hand fixed palm up above nothing: the cap is held by its joint,
+  so the palm cannot carry it; the cap sits at the fingers' middle and distal
+  phalanges (not over the palm), its axis along the fingers' flexion axes, so
+  that flexing the first, middle and ring fingers drags its surface round and
+  the thumb, rotated across by the demonstration's THJ5, grips it from the
+  other side. The cap is ``length`` long so that all three fingers reach it
+  (their span across the hand is about 55 mm; the Shadow fingers' flexion
+  axes are parallel, so a cap turned by flexion must lie along them).
+
+The trial (:class:`ScrewCapTrial`): the grasp is the demonstration's first
+frame mapped to the hand by the four rules (rule 3: the thumb-index
+abduction drives THJ4 and THJ3), settled for ``settle_time``; then the frames
+of Algorithm 1 (:class:`GaitMotionSource`: the gist's frames, repeated
+``n_gaits`` times: grip, turn, release, regrasp). The score reads the cap
+joint as an incremental encoder would (``encoder_counts`` per turn,
+quantised): the total turn in the demonstrated direction (positive = the way
+the flexing fingers turn the cap). The palm never touching the bottle or the
+cap is part of the target.
+
+Every trial is a :class:`ScrewCapScenario` (a dataclass dumped whole as YAML
+with Drake's ``yaml_dump_typed``; the parameters are data in it), so a logged
+trial is re-simulated from its scenario alone (:func:`simulate_scenario`).
+"""
+
+
+import dataclasses as dc
+import hashlib
+import math
+import time
+from functools import cached_property
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.geometry import (
+    AddContactMaterial,
+    CollisionFilterDeclaration,
+    Cylinder,
+    GeometrySet,
+    ProximityProperties,
+)
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    CoulombFriction,
+    ExternallyAppliedSpatialForce,
+    MultibodyPlantConfig,
+)
+from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    PdControllerGains,
+    RevoluteJoint,
+    SpatialInertia,
+    UnitInertia,
+)
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import ConstantVectorSource
+
+from handle_drake.hands import AddHand, actuated_position_limits, get_hand_spec
+from handle_drake.inhand.evaluation import incremental_score, part_dimensions, target_score
+from handle_drake.inhand.gist import ActionGist, GistMotionSource
+from handle_drake.systems.hand_driver import PdHandDriver
+
+__all__ = ["ScrewCapModel", "ScrewCapScenario",
+           "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
+           "build_screw_cap", "simulate_scenario",
+           "scenario_fingerprint"]
+
+_NAMES = get_hand_spec("shadow").actuated_joint_names
+
+
+@dc.dataclass
+class ScrewCapModel:
+    """Bottle and cap (m, kg, N m); see the data README for the values' sources."""
+
+    diameter: float = 0.035  # cap, across
+    length: float = 0.060  # cap, along the axis (the fingers' span)
+    mass: float = 0.012
+    coulomb_torque: float = 0.01  # N m, the thread's running (dry) friction
+    viscous: float = 1.0e-3  # N m s / rad
+    stiction_speed: float = 0.01  # rad/s, below which the Coulomb part is viscous
+    mu: float = 1.0  # cap and fingertips (knurled plastic on rubber pads)
+    bottle_diameter: float = 0.060
+    bottle_length: float = 0.080
+    # the cap's centre in the world (the hand's forearm is at the origin, palm up)
+    position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
+    encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
+    # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
+    # "fingertip cylinder"); its turn is read from its pose
+    free: bool = False
+
+    def validate(self) -> None:
+        for name in ("diameter", "length", "mass", "coulomb_torque", "stiction_speed", "mu",
+                     "bottle_diameter", "bottle_length"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"cap.{name}: expected a finite value > 0, got {value!r}")
+        if not (math.isfinite(self.viscous) and self.viscous >= 0):
+            raise ValueError(f"cap.viscous: expected a finite value >= 0, got {self.viscous!r}")
+        if len(self.position) != 3 or not all(math.isfinite(v) for v in self.position):
+            raise ValueError(f"cap.position: expected 3 finite values, got {self.position!r}")
+        if isinstance(self.encoder_counts, bool) or not isinstance(self.encoder_counts, int) \
+                or self.encoder_counts < 4:
+            raise ValueError(f"cap.encoder_counts: expected an integer >= 4, got "
+                             f"{self.encoder_counts!r}")
+
+
+@dc.dataclass
+class GistMotionData:
+    """One meta motion of the action gist, as data (``MetaMotion``)."""
+
+    finger: str = "FF"
+    start: float = 0.0
+    end: float = 1.0
+    variation: list[float] = dc.field(default_factory=list)
+
+
+@dc.dataclass
+class ScrewCapScenario:
+    """One screw-cap trial, whole: the model, the hand, the motion and its parameters."""
+
+    cap: ScrewCapModel = dc.field(default_factory=ScrewCapModel)
+    hand_rpy_deg: list[float] = dc.field(default_factory=lambda: [-90.0, 0.0, -90.0])
+    hand_xyz: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    # the settled grasp's command (rad, by actuated joint name; others 0)
+    initial_position: dict[str, float] = dc.field(default_factory=dict)
+    time_step: float = 0.002
+    max_joint_velocity: float = 4.0  # rad/s, the hand driver's rate limit
+    settle_time: float = 0.5
+    # Algorithm 1: the action gist, its frames and repetitions
+    gist_name: str = ""
+    gist: list[GistMotionData] = dc.field(default_factory=list)
+    gait_duration: float = 1.0  # s per gait
+    n_frames: int = 50  # per gait
+    n_gaits: int = 1
+    hold: float = 0.2  # s after the last gait
+    parameters: list[float] = dc.field(default_factory=list)  # eq. 45
+
+    def dump(self) -> str:
+        return yaml_dump_typed(self)
+
+    @staticmethod
+    def load(text: str) -> "ScrewCapScenario":
+        return yaml_load_typed(schema=ScrewCapScenario, data=text)
+
+    @property
+    def total_time(self) -> float:
+        return self.n_gaits * self.gait_duration + self.hold
+
+    def action_gist(self) -> ActionGist:
+        return ActionGist.from_dict({"name": self.gist_name, "motions": [
+            dc.asdict(m) for m in self.gist]})
+
+    @staticmethod
+    def gist_data(gist: ActionGist) -> list[GistMotionData]:
+        return [GistMotionData(m.finger, m.start, m.end, list(m.variation))
+                for m in gist.motions]
+
+
+def scenario_fingerprint(text: str) -> str:
+    """A short content hash of a scenario's YAML (for run ids)."""
+    return hashlib.sha256(text.encode()).hexdigest()[:10]
+
+
+class GaitMotionSource(GistMotionSource):
+    """:class:`GistMotionSource` whose gait repeats ``n_gaits`` times (then holds)."""
+
+    def __init__(self, gist, q0, duration, n_frames=50, n_gaits=1, parameters=None):
+        super().__init__(gist, q0, duration, n_frames, parameters=parameters)
+        if isinstance(n_gaits, bool) or not isinstance(n_gaits, int) or n_gaits < 1:
+            raise ValueError(f"n_gaits: expected an integer >= 1, got {n_gaits!r}")
+        self._n_gaits = n_gaits
+
+    def frame_index(self, t: float) -> int:
+        cycle = math.floor(t / self._duration + 1e-9)
+        if cycle >= self._n_gaits:
+            return self._n
+        return super().frame_index(t - cycle * self._duration)
+
+
+def _proximity(mu: float) -> ProximityProperties:
+    props = ProximityProperties()
+    AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
+    return props
+
+
+def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
+    """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
+
+    Returns a dict of handles (diagram, plant, source, cap joint, bodies).
+    ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
+    plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
+    frames (zero-order hold; no Python system, no driver, no sampling).
+    """
+    cap = scenario.cap
+    cap.validate()
+    gist = scenario.action_gist()
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=scenario.time_step, contact_model="point",
+        discrete_contact_approximation="sap", use_sampled_output_ports=False), builder)
+    spec = get_hand_spec("shadow")
+    hand = AddHand(plant, "shadow", coupling_ratio=1.0)
+    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
+                     RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
+                                    scenario.hand_xyz))
+    # The axis along world y: a cylinder's z axis turned onto y.
+    R_axis = RollPitchYaw(-np.pi / 2, 0, 0)
+    centre = np.asarray(cap.position, dtype=float)
+    instance = plant.AddModelInstance("screw_cap")
+    body = plant.AddRigidBody("cap", instance, SpatialInertia(
+        cap.mass, np.zeros(3), UnitInertia.SolidCylinder(cap.diameter / 2, cap.length,
+                                                         [0, 0, 1])))
+    shapes = [(body, Cylinder(cap.diameter / 2, cap.length), [0.9, 0.2, 0.2, 1])]
+    bottle = joint = None
+    if not cap.free:
+        bottle = plant.AddRigidBody("bottle", instance, SpatialInertia(
+            0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
+                                                        cap.bottle_length, [0, 0, 1])))
+        # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
+        X_WB = RigidTransform(R_axis, centre + [0, (cap.length + cap.bottle_length) / 2
+                                                + 0.002, 0])
+        plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
+        shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
+                       [0.3, 0.6, 0.9, 0.5]))
+    for b, shape, rgba in shapes:
+        plant.RegisterCollisionGeometry(b, RigidTransform(), shape, f"{b.name()}_collision",
+                                        _proximity(cap.mu))
+        plant.RegisterVisualGeometry(b, RigidTransform(), shape, f"{b.name()}_visual",
+                                     np.array(rgba))
+    if not cap.free:
+        # revolute joint about the cap's own z (= world y): the bottle's axis
+        mouth = plant.AddFrame(FixedOffsetFrame("bottle_mouth", plant.world_frame(),
+                                                RigidTransform(R_axis, centre), instance))
+        joint = plant.AddJoint(RevoluteJoint("cap_thread", mouth, body.body_frame(), [0, 0, 1],
+                                             damping=cap.viscous))
+        actuator = plant.AddJointActuator("cap_thread_friction", joint,
+                                          effort_limit=cap.coulomb_torque)
+        actuator.set_controller_gains(PdControllerGains(
+            p=0.0, d=cap.coulomb_torque / cap.stiction_speed))
+    else:
+        plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(R_axis, centre))
+    plant.Finalize()
+    if bottle is not None:
+        # the bottle and its cap do not collide with each other (the thread is the joint)
+        ids = [plant.GetCollisionGeometriesForBody(b) for b in (bottle, body)]
+        scene_graph.collision_filter_manager().Apply(CollisionFilterDeclaration().ExcludeWithin(
+            GeometrySet(ids[0] + ids[1])))
+
+    lower, upper = actuated_position_limits(spec, 1.0)
+    q0 = np.array([float(scenario.initial_position.get(n, 0.0)) for n in _NAMES])
+    q0 = np.clip(q0, lower, upper)
+    from handle_drake.station import _set_default_hand_positions
+
+    _set_default_hand_positions(plant, hand, spec, q0, 1.0)
+    if bare:
+        from pydrake.systems.primitives import TrajectorySource
+        from pydrake.trajectories import PiecewisePolynomial
+
+        from handle_drake.hands import actuated_to_joint_positions
+        from handle_drake.inhand.gist import frames
+
+        one = frames(gist, scenario.parameters, q0, scenario.n_frames)
+        F = np.vstack([one[0], *([one] * scenario.n_gaits)])
+        times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
+        q_all = np.array([actuated_to_joint_positions(spec, f, 1.0) for f in F])
+        names = [plant.get_joint_actuator(i).joint().name()
+                 for i in plant.GetJointActuatorIndices(hand)]
+        cols = [spec.joint_names.index(n) for n in names]
+        desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
+        traj = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+            times, desired.T)))
+        builder.Connect(traj.get_output_port(), plant.get_desired_state_input_port(hand))
+        if joint is not None:
+            zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
+            builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+        return dict(diagram=builder.Build(), plant=plant)
+    driver = builder.AddNamedSystem("hand_driver", PdHandDriver(
+        plant, hand, spec, q0, lower, upper, max_joint_velocity=scenario.max_joint_velocity))
+    builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
+    builder.Connect(driver.GetOutputPort("desired_state"),
+                    plant.get_desired_state_input_port(hand))
+    if joint is not None:
+        zero = builder.AddNamedSystem("cap_friction_reference",
+                                      ConstantVectorSource(np.zeros(2)))
+        builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+    reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(plant, body))
+    builder.Connect(reverse.get_output_port(), plant.get_applied_spatial_force_input_port())
+    parameters = scenario.parameters or None
+    source = builder.AddNamedSystem("motion", GaitMotionSource(
+        gist, q0, scenario.gait_duration, scenario.n_frames, scenario.n_gaits,
+        parameters=parameters))
+    builder.Connect(source.get_output_port(), driver.get_command_input_port())
+    if meshcat is not None:
+        from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
+
+        meshcat.Delete()
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, MeshcatVisualizerParams(
+            role=Role.kIllustration, prefix="illustration", publish_period=0.02))
+    diagram = builder.Build()
+    hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
+                   for i in plant.GetBodyIndices(hand)}
+    return dict(diagram=diagram, plant=plant, source=source, joint=joint, cap=body,
+                bottle=bottle, hand_bodies=hand_bodies, q0=q0, gist=gist, reverse=reverse,
+                weight=cap.mass * float(np.linalg.norm(plant.gravity_field().gravity_vector())))
+
+
+class ReversedGravity(LeafSystem):
+    """From ``start`` (s, a numeric parameter; default never) on, a force ``-2 m g`` on the
+    body at its centre of mass: its weight reversed (the hand turned palm down, for it)."""
+
+    def __init__(self, plant, body):
+        super().__init__()
+        self._index = body.index()
+        self._force = -2.0 * body.default_mass() * plant.gravity_field().gravity_vector()
+        self._start = self.DeclareNumericParameter(BasicVector([np.inf]))
+        self.DeclareAbstractOutputPort(
+            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
+            self._calc)
+
+    def set_start(self, context, start: float) -> None:
+        context.get_mutable_numeric_parameter(self._start).SetAtIndex(0, float(start))
+
+    def _calc(self, context, output):
+        start = context.get_numeric_parameter(self._start).GetAtIndex(0)
+        forces = []
+        if context.get_time() >= start - 1e-9:
+            f = ExternallyAppliedSpatialForce()
+            f.body_index = self._index
+            f.p_BoBq_B = np.zeros(3)
+            f.F_Bq_W = SpatialForce(np.zeros(3), self._force)
+            forces.append(f)
+        output.set_value(forces)
+
+
+def contact_summary(plant, plant_context, built) -> dict:
+    """From the plant's contact results: hand bodies touching the cap (or free cylinder),
+    the palm's contact force on bottle and cap (N, magnitude), and the upward force (N,
+    against gravity) each hand body exerts on the object."""
+    results = plant.get_contact_results_output_port().Eval(plant_context)
+    cap_i = int(built["cap"].index())
+    bottle_i = int(built["bottle"].index()) if built["bottle"] is not None else -1
+    hand = built["hand_bodies"]
+    touching, palm_force, lift = set(), 0.0, {}
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        for mine, other, sign in ((a, b, -1.0), (b, a, 1.0)):
+            if mine in (cap_i, bottle_i) and other in hand:
+                name = hand[other]
+                if mine == cap_i:
+                    touching.add(name)
+                    # contact_force() is the force on body B: on the object it is sign * it
+                    lift[name] = lift.get(name, 0.0) + sign * float(info.contact_force()[2])
+                if name == "palm":
+                    palm_force += float(np.linalg.norm(info.contact_force()))
+    return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
+
+
+# ------------------------------------------------------------------ the trial
+@dc.dataclass(frozen=True)
+class ScrewCapTask:
+    """Settings of one screw-cap trial (angles in deg, times in s)."""
+
+    target_deg: float = 90.0  # total turn, in the demonstrated direction
+    n_gaits: int = 1
+    gait_duration: float = 1.0
+    n_frames: int = 50  # per gait
+    hold: float = 0.2
+    n_checks: int = 4
+    # turn / target required at each check; None: (0, 0.05, 0.3, 1) for one gait (the
+    # demonstration's fingers flex over 0.19-0.56 of the gait; a hand-written stroke turns
+    # the cap 8, 35, 95 deg at 0.5, 0.75, 1.2 s), k/K for more. The first design, (0, 0,
+    # 0.3, 1), activated every parameter at check 2 (grip only) and then scored every
+    # trial that missed check 3 alike (S_b = d, S_a = 0.4): 100 ipso trials, one score.
+    benchmark: tuple | None = None
+    tolerance_deg: float = 2.0
+    sample_period: float = 0.025  # eq. 48's L = 48 samples for one gait and its hold
+    time_step: float = 0.002
+    settle_time: float = 0.5
+    contact_window: float = 0.3  # s: a finger touched the cap at a sample this recent
+    coulomb_torque: float = 0.01  # N m
+    viscous: float = 1.0e-3  # N m s / rad
+    cap_position: tuple = (0.405, -0.02, 0.07)
+    # The fingertip cylinder: the same hand and gist, a free cylinder pinched between thumb
+    # and fingers (no bottle, no joint) at ``free_position``; a trial then ends with its
+    # weight reversed for ``reverse_time`` (the hand palm down, for it): held only if it
+    # stays (moves < ``reverse_travel``) and the fingers still touch it.
+    free: bool = False
+    free_position: tuple = (0.387, -0.025, 0.066)
+    free_diameter: float = 0.055
+    free_mass: float = 0.03
+    reverse_time: float = 0.5
+    reverse_travel: float = 0.01  # m
+    drop: float = 0.015  # m below the start: dropped (free cylinder)
+
+    def __post_init__(self):
+        for name in ("target_deg", "gait_duration", "sample_period", "time_step",
+                     "settle_time", "contact_window", "coulomb_torque"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not (isinstance(value, int | float)
+                                               and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        for name in ("hold", "tolerance_deg", "viscous"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name}: expected a finite value >= 0, got {value!r}")
+        for name in ("n_gaits", "n_frames", "n_checks"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+        if not 1e-4 <= self.time_step <= 0.01:
+            raise ValueError(f"time_step: expected a value in [0.0001, 0.01] s, got "
+                             f"{self.time_step!r}")
+        if self.benchmark is not None and len(self.benchmark) != self.n_checks:
+            raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
+                             f"{len(self.benchmark)}")
+        if len(self.cap_position) != 3:
+            raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
+
+    @property
+    def total_time(self) -> float:
+        return self.n_gaits * self.gait_duration + self.hold
+
+    @property
+    def motion_time(self) -> float:
+        return self.n_gaits * self.gait_duration
+
+    def benchmark_fractions(self) -> np.ndarray:
+        if self.benchmark is not None:
+            return np.asarray(self.benchmark, dtype=float)
+        if self.n_gaits == 1 and self.n_checks == 4:
+            return np.array([0.0, 0.05, 0.3, 1.0])
+        return np.arange(1, self.n_checks + 1) / self.n_checks
+
+    def check_times(self) -> np.ndarray:
+        times = np.arange(1, self.n_checks + 1) / self.n_checks * self.motion_time
+        times[-1] = self.total_time
+        return times
+
+    def sample_times(self) -> np.ndarray:
+        n = int(round(self.total_time / self.sample_period))
+        return np.arange(1, n + 1) * self.total_time / n
+
+    def benchmark_at(self, t) -> np.ndarray:
+        """Turn (deg) the benchmark expects at times ``t``: linear between the checks."""
+        return self.target_deg * np.interp(t, np.r_[0.0, self.check_times()],
+                                           np.r_[0.0, self.benchmark_fractions()])
+
+
+@dc.dataclass
+class ScrewCapOutcome:
+    score: float
+    turn_deg: float  # the encoder's total turn at the end (or at the early stop)
+    turn_deg_truth: float  # the same read from the plant's joint (unquantised)
+    max_turn_deg: float
+    gripped_at_start: list  # hand bodies touching the cap in the settled grasp
+    palm_touched: bool  # the palm touched bottle or cap at some sample
+    palm_force_max: float  # N
+    # the palm's upward force on the object / its weight, at the end of the hold
+    palm_weight_share: float
+    # free cylinder: still held after its weight was reversed (None: not run, or a cap)
+    survived_reversal: bool | None
+    checks_passed: int
+    completed: bool
+    reached_target: bool
+    s_b: float
+    s_a: float
+    times: list
+    turn_deg_series: list  # encoder
+    contacts: list  # per sample: hand bodies touching the cap
+    sim_time: float
+    wall_time: float
+
+    def as_dict(self) -> dict:
+        return dc.asdict(self)
+
+
+class _EarlyStop(Exception):
+    pass
+
+
+def _demonstration(name: str = "screw_cap_rotation.json"):
+    from handle_drake.inhand.glove import load_glove
+    from handle_drake.inhand.mapping import glove_to_shadow
+    from handle_drake.inhand.task import DATA_DIR
+
+    recording = load_glove(DATA_DIR / name)
+    return recording, glove_to_shadow(recording)
+
+
+class ScrewCapTrial:
+    """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
+
+    The diagram is built on the first call in each process and kept on this
+    object (not pickled: a worker builds its own).
+    """
+
+    def __init__(self, config: ScrewCapTask | None = None, **kwargs):
+        self.config = config if config is not None else ScrewCapTask(**kwargs)
+        self._built = None
+
+    def __getstate__(self):
+        return {"config": self.config}
+
+    def __setstate__(self, state):
+        self.config = state["config"]
+        self._built = None
+
+    @property
+    def name(self) -> str:
+        c = self.config
+        if c.free:
+            return f"fingertip-cylinder-{c.target_deg:g}deg-{c.n_gaits}gait"
+        return f"screwcap-{c.target_deg:g}deg-{c.n_gaits}gait"
+
+    @cached_property
+    def gist(self) -> ActionGist:
+        from handle_drake.inhand.gist import extract_gist
+
+        recording, commands = _demonstration()
+        return extract_gist(recording.time, commands, name="screw_cap_rotation")
+
+    @property
+    def dimension(self) -> int:
+        return self.gist.dimension
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.gist.bounds()
+
+    @property
+    def dims_per_part(self) -> np.ndarray:
+        g = self.gist
+        # the parameters are shared by all gaits: they belong to the parts of the first gait
+        return part_dimensions([m.start / self.config.n_gaits for m in g.motions],
+                               [1 + len(m.joints) for m in g.motions], self.config.n_checks)
+
+    @property
+    def target_score(self) -> float:
+        return target_score(self.dimension, "incremental")
+
+    def initial_command(self) -> np.ndarray:
+        """The demonstration's first frame mapped by the four rules (rule 3 for the thumb)."""
+        return _demonstration()[1][0].copy()
+
+    def scenario(self, x=None) -> ScrewCapScenario:
+        c = self.config
+        q0 = self.initial_command()
+        parameters = self.gist.initial_parameters() if x is None else self._check(x)
+        return ScrewCapScenario(
+            cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
+                              position=[float(v) for v in c.cap_position]) if not c.free else
+            ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
+                          position=[float(v) for v in c.free_position]),
+            initial_position={n: float(v) for n, v in zip(_NAMES, q0, strict=True) if v != 0},
+            time_step=c.time_step, settle_time=c.settle_time, gist_name=self.gist.name,
+            gist=ScrewCapScenario.gist_data(self.gist),
+            gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
+            hold=c.hold, parameters=[float(v) for v in parameters])
+
+    def _check(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.dimension:
+            raise ValueError(f"parameters: expected {self.dimension} values (eq. 45), got "
+                             f"{x.size}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError("parameters: expected finite values")
+        return x
+
+    def _build(self, meshcat=None):
+        if self._built is not None and meshcat is None:
+            return self._built
+        built = build_screw_cap(self.scenario(), meshcat=meshcat)
+        simulator = Simulator(built["diagram"])
+        context = simulator.get_mutable_context()
+        source = built["source"]
+        still = self.gist.initial_parameters().copy()
+        for sl in self.gist.slices():
+            still[sl][1:] = 0.0
+        source.set_parameters(source.GetMyContextFromRoot(context), still)
+        simulator.Initialize()
+        simulator.AdvanceTo(self.config.settle_time)
+        settled = context.Clone()
+        settled.SetTime(0.0)
+        plant = built["plant"]
+        built.update(simulator=simulator, settled=settled,
+                     gripped=contact_summary(plant, plant.GetMyContextFromRoot(context),
+                                             built)["touching"])
+        if meshcat is None:
+            self._built = built
+        return built
+
+    def __call__(self, x, seed: int = 0):
+        from handle_drake.learning.executors import TrialResult
+
+        outcome = self.evaluate(x)
+        detail = outcome.as_dict()
+        detail.pop("times")
+        return TrialResult(metric=outcome.score, contacts=detail,
+                           scenario=self.scenario(x).dump())
+
+    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> ScrewCapOutcome:
+        """Runs one trial from the settled grasp (deterministic)."""
+        x = self._check(x)
+        c = self.config
+        built = self._build(meshcat)
+        simulator, plant, joint = built["simulator"], built["plant"], built["joint"]
+        body = built["cap"]
+        start_wall = time.perf_counter()
+        context = simulator.get_mutable_context()
+        context.SetTimeStateAndParametersFrom(built["settled"])
+        source = built["source"]
+        source.set_parameters(source.GetMyContextFromRoot(context), x)
+        reverse = built["reverse"]
+        reverse.set_start(reverse.GetMyContextFromRoot(context), np.inf)
+        plant_context = plant.GetMyContextFromRoot(context)
+        counts = ScrewCapModel().encoder_counts
+        X0 = plant.EvalBodyPoseInWorld(plant_context, body)
+        R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
+        q_start = joint.get_angle(plant_context) if joint is not None else 0.0
+        simulator.Initialize()
+        if html is not None:
+            early_stop = False
+            meshcat.StartRecording()
+        samples, checks = c.sample_times(), c.check_times()
+        fractions = c.benchmark_fractions()
+        step = 1e-3 * c.time_step
+        matches = np.zeros(samples.size, dtype=bool)
+        turns, truths, contacts = [], [], []
+        st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
+                  palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
+
+        def turn_now():
+            if joint is not None:  # the plant's joint (truth) and its encoder's count
+                truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
+                return truth, float(np.round(truth / 360.0 * counts) * 360.0 / counts)
+            # the free cylinder: about its own axis, unwrapped; the fingers' flex strokes
+            # turn it about -z of its frame (measured), so that direction counts positive
+            R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
+            raw = -float(np.arctan2(R[1, 0], R[0, 0]))
+            st["angle"] += (raw - st["previous"] + np.pi) % (2 * np.pi) - np.pi
+            st["previous"] = raw
+            return float(np.degrees(st["angle"])), float(np.degrees(st["angle"]))
+
+        try:
+            for i, t in enumerate(samples):
+                simulator.AdvanceTo(float(t))
+                truth, turn = turn_now()
+                summary = contact_summary(plant, plant_context, built)
+                fingers = [b for b in summary["touching"] if b != "palm"]
+                if fingers:
+                    st["last_touch"] = float(t)
+                st["palm_max"] = max(st["palm_max"], summary["palm_force"])
+                st["palm"] = st["palm"] or summary["palm_force"] > 0
+                gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+                if joint is None:  # a free cylinder must also not have dropped
+                    p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+                    gripped = gripped and p[2] - p0[2] > -c.drop
+                turns.append(turn)
+                truths.append(truth)
+                contacts.append(summary["touching"])
+                matches[i] = gripped and turn >= c.benchmark_at(t) - c.tolerance_deg
+                k = st["next_check"]
+                if k < checks.size and t >= checks[k] - step:
+                    ok = gripped and turn >= c.target_deg * fractions[k] - c.tolerance_deg
+                    if ok and not st["failed"]:
+                        st["passed"] += 1
+                    st["failed"] = st["failed"] or not ok
+                    st["next_check"] += 1
+                    if st["failed"] and early_stop:
+                        raise _EarlyStop
+        except _EarlyStop:
+            st["stopped"] = True
+        # the palm's share of the object's weight at the end (before any reversal)
+        final = contact_summary(plant, plant_context, built)
+        palm_share = final["lift"].get("palm", 0.0) / built["weight"]
+        survived = None
+        if joint is None and not st["stopped"]:
+            # weight reversed for reverse_time: the hand turned palm down, for the object
+            p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+            reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
+            simulator.AdvanceTo(c.total_time + c.reverse_time)
+            p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+            touching = contact_summary(plant, plant_context, built)["touching"]
+            survived = bool(np.linalg.norm(p - p_end) < c.reverse_travel
+                            and any(b != "palm" for b in touching))
+        if html is not None:
+            meshcat.StopRecording()
+            meshcat.PublishRecording()
+            from pathlib import Path
+
+            Path(html).write_text(meshcat.StaticHtml())
+        passed = st["passed"]
+        reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
+                       and not st["palm"] and survived is not False)
+        if st["failed"]:
+            matches[samples > checks[passed] + step] = False
+        score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
+        return ScrewCapOutcome(
+            score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
+            max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
+            palm_touched=st["palm"], palm_force_max=st["palm_max"],
+            palm_weight_share=float(palm_share), survived_reversal=survived,
+            checks_passed=passed,
+            completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
+            times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
+            sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
+
+
+def simulate_scenario(text: str, reverse_time: float = 0.5) -> dict:
+    """Re-simulates a logged trial from its scenario YAML alone, reading the plant.
+
+    Independent of :class:`ScrewCapTrial`'s evaluation: builds the diagram from
+    the scenario, settles the grasp with the variations zeroed, runs the
+    motion, and returns the object's turn (deg; the cap: its joint; the free
+    cylinder: its pose about its own axis, unwrapped every 10 ms, positive as the
+    trial counts it), the largest contact force of the palm on bottle or cap (N),
+    the bodies touching the object at the end and, for the free cylinder, whether
+    it survives ``reverse_time`` s of reversed weight (moves < 10 mm, a finger
+    still touching).
+    """
+    scenario = ScrewCapScenario.load(text)
+    built = build_screw_cap(scenario)
+    gist = built["gist"]
+    simulator = Simulator(built["diagram"])
+    context = simulator.get_mutable_context()
+    source = built["source"]
+    still = np.asarray(scenario.parameters, dtype=float).copy()
+    for sl in gist.slices():
+        still[sl][1:] = 0.0
+    source.set_parameters(source.GetMyContextFromRoot(context), still)
+    simulator.Initialize()
+    simulator.AdvanceTo(scenario.settle_time)
+    plant, joint, body = built["plant"], built["joint"], built["cap"]
+    plant_context = plant.GetMyContextFromRoot(context)
+    q0 = joint.get_angle(plant_context) if joint is not None else 0.0
+    R0_inv = plant.EvalBodyPoseInWorld(plant_context, body).rotation().inverse()
+    context.SetTime(0.0)
+    source.set_parameters(source.GetMyContextFromRoot(context), scenario.parameters)
+    simulator.Initialize()
+    palm, angle, previous = 0.0, 0.0, 0.0
+    for t in np.arange(1, int(round(scenario.total_time / 0.01)) + 1) * 0.01:
+        simulator.AdvanceTo(float(t))
+        palm = max(palm, contact_summary(plant, plant_context, built)["palm_force"])
+        R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
+        raw = -float(np.arctan2(R[1, 0], R[0, 0]))
+        angle += (raw - previous + np.pi) % (2 * np.pi) - np.pi
+        previous = raw
+    out = {"turn_deg": float(np.degrees(joint.get_angle(plant_context) - q0))
+           if joint is not None else float(np.degrees(angle)),
+           "palm_force_max": palm,
+           "touching": contact_summary(plant, plant_context, built)["touching"]}
+    if joint is None:
+        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+        reverse = built["reverse"]
+        reverse.set_start(reverse.GetMyContextFromRoot(context), scenario.total_time)
+        simulator.AdvanceTo(scenario.total_time + reverse_time)
+        p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+        touching = contact_summary(plant, plant_context, built)["touching"]
+        out["survived_reversal"] = bool(np.linalg.norm(p - p_end) < 0.01
+                                        and any(b != "palm" for b in touching))
+    return out

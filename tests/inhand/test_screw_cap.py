@@ -1,0 +1,138 @@
+"""The screw cap (report Fig. 32): physics of the task, the encoder score, the logged scenario."""
+
+import numpy as np
+import pytest
+
+from handle_drake.inhand.screw_cap import (
+    GaitMotionSource,
+    ScrewCapScenario,
+    ScrewCapTask,
+    ScrewCapTrial,
+    simulate_scenario,
+)
+
+ONE_COUNT_DEG = 360.0 / 4096
+
+
+@pytest.fixture(scope="module")
+def trial():
+    return ScrewCapTrial(ScrewCapTask())
+
+
+def _stroke(trial, j3=1.0, j2=0.9):
+    """Hand-written: the three fingers' flex strokes at J3 j3, J2 j2 rad; no release, thumb
+    still; the demonstration's start times."""
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):
+        x[sl][1:] = [j3, j2] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    return x
+
+
+def test_the_grasp_is_the_demonstrations_first_frame_with_rule_3(trial):
+    q0 = dict(zip(trial.scenario().initial_position, trial.scenario().initial_position.values(),
+                  strict=True))
+    # rule 3: the thumb-index abduction drives both thumb abduction joints
+    assert q0["THJ4"] == pytest.approx(0.61, abs=0.02)
+    assert q0["THJ3"] == pytest.approx(0.21, abs=0.02)  # clipped to THJ3's range
+    assert q0["FFJ3"] == pytest.approx(0.35, abs=0.03)
+    # the gist: thumb, first, middle, ring flex then release (8 meta motions, eq. 45: 26)
+    assert [m.finger for m in trial.gist.motions] == ["TH", "FF", "MF", "RF", "FF", "TH",
+                                                      "MF", "RF"]
+    assert trial.dimension == 26 and trial.target_score == 28
+
+
+def test_a_known_stroke_turns_the_cap_90_deg_read_from_the_joint(trial):
+    outcome = trial.evaluate(_stroke(trial))
+    # settled grasp: the fingers (not the palm) touch the cap; the cap is on its joint
+    assert len([b for b in outcome.gripped_at_start if b.endswith("distal")]) >= 2
+    assert outcome.completed and outcome.reached_target
+    assert outcome.turn_deg >= 90.0 and not outcome.palm_touched
+    assert outcome.score >= trial.target_score
+    # the encoder reads the joint within one count, at every sample
+    assert abs(outcome.turn_deg - outcome.turn_deg_truth) <= ONE_COUNT_DEG / 2 + 1e-9
+    # the logged scenario is whole: re-simulated alone (own build, reads the plant)
+    result = trial(_stroke(trial))
+    scenario = ScrewCapScenario.load(result.scenario)
+    np.testing.assert_allclose(scenario.parameters, _stroke(trial))
+    again = simulate_scenario(result.scenario)
+    assert again["turn_deg"] == pytest.approx(outcome.turn_deg_truth, abs=0.5)
+    assert again["palm_force_max"] == 0.0
+
+
+def test_the_demonstrations_own_parameters_and_a_still_hand_do_not_reach_it(trial):
+    still = _stroke(trial, 0.0, 0.0)
+    rest = trial.evaluate(still, early_stop=False)
+    assert abs(rest.turn_deg) < 3.0 and not rest.reached_target
+    assert rest.score < trial.target_score
+    demo = trial.evaluate(trial.gist.initial_parameters(), early_stop=False)
+    assert demo.turn_deg < 90.0 and not demo.reached_target
+
+
+def test_random_parameters_rarely_reach_the_target(trial):
+    # the base rate (benchmarks/bench_screw_cap.py, 200 trials: docs/results/inhand.md);
+    # here 8 uniformly random vectors: none may reach 90 deg
+    rng = np.random.default_rng(35)
+    b = trial.bounds
+    reached = [trial.evaluate(b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])).reached_target
+               for _ in range(8)]
+    assert sum(reached) == 0
+
+
+def test_gaits_repeat_the_frames(trial):
+    source = GaitMotionSource(trial.gist, np.zeros(20), 1.0, 50, n_gaits=3)
+    assert source.frame_index(0.0) == 1 and source.frame_index(0.99) == 50
+    assert source.frame_index(1.0) == 1 and source.frame_index(2.5) == 26
+    assert source.frame_index(3.2) == 50  # held after the last gait
+    with pytest.raises(ValueError, match="n_gaits"):
+        GaitMotionSource(trial.gist, np.zeros(20), 1.0, 50, n_gaits=0)
+
+
+def test_bad_settings():
+    with pytest.raises(ValueError, match="target_deg"):
+        ScrewCapTask(target_deg=-1)
+    with pytest.raises(ValueError, match="n_gaits"):
+        ScrewCapTask(n_gaits=0)
+    with pytest.raises(ValueError, match="parameters"):
+        ScrewCapTrial().evaluate(np.zeros(3))
+
+
+@pytest.fixture(scope="module")
+def fingertip():
+    return ScrewCapTrial(ScrewCapTask(free=True, target_deg=60.0))
+
+
+def test_the_fingertip_cylinder_is_held_by_the_fingers_and_survives_palm_down(fingertip):
+    # a free cylinder pinched by thumb and fingers from the demonstration's first frame:
+    # the palm does not touch it, and a known stroke turns it and keeps it through 0.5 s
+    # of reversed weight (the hand palm down, for it)
+    outcome = fingertip.evaluate(_stroke(fingertip), early_stop=False)
+    assert "thdistal" in outcome.gripped_at_start
+    assert any(b.startswith(("ff", "mf")) for b in outcome.gripped_at_start)
+    assert not outcome.palm_touched and outcome.palm_weight_share == 0.0
+    assert outcome.turn_deg >= 60.0 and outcome.survived_reversal is True
+    assert outcome.reached_target and outcome.score >= fingertip.target_score
+    # the demonstration's own motion releases the grip at the end: the reversed weight
+    # pulls the cylinder out of the hand, so that trial does not count as held
+    demo = fingertip.evaluate(fingertip.gist.initial_parameters(), early_stop=False)
+    assert demo.survived_reversal is False and not demo.reached_target
+    assert demo.score < fingertip.target_score
+
+
+def test_the_fingertip_scenario_re_simulates_alone_with_its_palm_down_check(fingertip):
+    x = _stroke(fingertip)
+    outcome = fingertip.evaluate(x, early_stop=False)
+    again = simulate_scenario(fingertip(x).scenario)
+    assert again["turn_deg"] == pytest.approx(outcome.turn_deg, abs=1.0)
+    assert again["survived_reversal"] is True and again["palm_force_max"] == 0.0
+
+
+def test_cli_refuses_settings_the_finger_tasks_do_not_have(tmp_path, capsys):
+    from handle_drake.cli import main as cli_main
+
+    for extra in (["--accelerometer", "joywarrior24f14"], ["--evaluation", "old"]):
+        rc = cli_main(["inhand", "--task", "screw_cap", "--db", str(tmp_path / "x.sqlite"),
+                       *extra])
+        assert rc == 2
+        err = capsys.readouterr().err
+        assert "--task screw_cap" in err and "Traceback" not in err
