@@ -10,7 +10,7 @@
    trials to the target (a run that did not reach it counts as the budget +
    1 and is listed as not reached), median best turn and score at the budget.
 3. ``--resimulate``: every run's best trial re-simulated from its logged
-   scenario YAML alone by ``handle_drake.inhand.screw_cap.simulate_scenario``
+   scenario YAML alone by ``handle_drake.apps.inhand.screw_cap.simulate_scenario``
    (a separate build that reads the cap joint from the plant).
 
 Run: ``python benchmarks/bench_screw_cap.py --base-rate 200 --table --seeds 0 1 2 3 4
@@ -25,14 +25,14 @@ import json
 import sys
 from pathlib import Path
 
-from handle_drake.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.inhand.experiment import run_inhand  # noqa: E402
-from handle_drake.inhand.screw_cap import (  # noqa: E402
+from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
+from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     ScrewCapTask,
     ScrewCapTrial,
     simulate_scenario,
@@ -45,10 +45,10 @@ OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
 
 def base_rate(n, seed, db, workers, options) -> dict:
     # random search with no stop: all n trials run
-    from handle_drake.inhand.experiment import _config
-    from handle_drake.inhand.optimizers import StoppingRandomSearch
-    from handle_drake.inhand.screw_cap import scenario_fingerprint
-    from handle_drake.learning.runner import TrialRunner
+    from handle_drake.apps.inhand.experiment import _config
+    from handle_drake.learning.optim.population import StoppingRandomSearch
+    from handle_drake.apps.inhand.screw_cap import scenario_fingerprint
+    from handle_drake.learning.loop import TrialRunner
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
     config = _config(trial, "random-nostop", 1)
@@ -122,7 +122,7 @@ def speed(rounds: int, options) -> dict:
 
     from pydrake.systems.analysis import Simulator
 
-    from handle_drake.inhand.screw_cap import build_screw_cap
+    from handle_drake.apps.inhand.screw_cap import build_screw_cap
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
     g = trial.gist
@@ -205,7 +205,7 @@ def summarize(db, budget, resim: bool = False) -> dict:
 def figures(db, task, options, directory, html: bool = True) -> dict:
     """Figure 34 (best score per iteration, every run of the log) and an HTML replay of the
     best trial of all runs (re-run from its parameters with a Meshcat recording)."""
-    from handle_drake.inhand.experiment import InHandRun, plot_learning_curve, replay_best
+    from handle_drake.apps.inhand.experiment import InHandRun, plot_learning_curve, replay_best
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
     runs = []

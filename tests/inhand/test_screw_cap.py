@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from handle_drake.inhand.screw_cap import (
+from handle_drake.apps.inhand.screw_cap import (
     GaitMotionSource,
     ScrewCapScenario,
     ScrewCapTask,

@@ -48,7 +48,7 @@ class InHandRun:
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
     task = dc.asdict(trial.config)
-    if "cap_position" in task:  # the screw cap (handle_drake.inhand.screw_cap)
+    if "cap_position" in task:  # the screw cap (handle_drake.apps.inhand.screw_cap)
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
                 "screw_cap_version": 1}
     if not task["accelerometer"]:  # a setting added later: logs written before still resume
@@ -57,7 +57,7 @@ def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
             "n_particles": n_particles, "inhand_version": 1}
 
 
-#: The tasks of :mod:`handle_drake.inhand.screw_cap` (held by the fingers).
+#: The tasks of :mod:`handle_drake.apps.inhand.screw_cap` (held by the fingers).
 FINGER_TASKS = ("screw_cap", "fingertip_cylinder")
 
 #: Particles (CMA-ES: population) per iteration: the report uses 10; a
@@ -92,7 +92,7 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
         if high is not None and value > high:
             raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
     if task in FINGER_TASKS:
-        from handle_drake.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
+        from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
 
         trial = ScrewCapTrial(ScrewCapTask(free=task == "fingertip_cylinder", **task_options))
     else:
@@ -103,7 +103,7 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     config = _config(trial, optimizer, n_particles)
     run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
     if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
-        from handle_drake.inhand.screw_cap import scenario_fingerprint
+        from handle_drake.apps.inhand.screw_cap import scenario_fingerprint
 
         run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))
     db = Path(db)

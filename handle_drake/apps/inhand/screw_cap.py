@@ -1,6 +1,6 @@
 """The screw cap of report Fig. 32: a cap on a fixed bottle, turned by finger gaiting.
 
-The model (values and sources: ``handle_drake/inhand/data/README.md``,
+The model (values and sources: ``handle_drake/apps/inhand/data/README.md``,
 section "Screw cap"):
 
 - a bottle welded to the world (no table needed: it is fixed), its axis
@@ -73,9 +73,9 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
-from handle_drake.hands import AddHand, actuated_position_limits, get_hand_spec
-from handle_drake.inhand.evaluation import incremental_score, part_dimensions, target_score
-from handle_drake.inhand.gist import ActionGist, GistMotionSource
+from handle_drake.base.hands import AddHand, actuated_position_limits, get_hand_spec
+from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions, target_score
+from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource
 from handle_drake.systems.hand_driver import PdHandDriver
 
 __all__ = ["ScrewCapModel", "ScrewCapScenario",
@@ -274,8 +274,8 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
         from pydrake.systems.primitives import TrajectorySource
         from pydrake.trajectories import PiecewisePolynomial
 
-        from handle_drake.hands import actuated_to_joint_positions
-        from handle_drake.inhand.gist import frames
+        from handle_drake.base.hands import actuated_to_joint_positions
+        from handle_drake.apps.inhand.gist import frames
 
         one = frames(gist, scenario.parameters, q0, scenario.n_frames)
         F = np.vstack([one[0], *([one] * scenario.n_gaits)])
@@ -498,9 +498,9 @@ class _EarlyStop(Exception):
 
 
 def _demonstration(name: str = "screw_cap_rotation.json"):
-    from handle_drake.inhand.glove import load_glove
-    from handle_drake.inhand.mapping import glove_to_shadow
-    from handle_drake.inhand.task import DATA_DIR
+    from handle_drake.apps.inhand.glove import load_glove
+    from handle_drake.apps.inhand.mapping import glove_to_shadow
+    from handle_drake.apps.inhand.task import DATA_DIR
 
     recording = load_glove(DATA_DIR / name)
     return recording, glove_to_shadow(recording)
@@ -533,7 +533,7 @@ class ScrewCapTrial:
 
     @cached_property
     def gist(self) -> ActionGist:
-        from handle_drake.inhand.gist import extract_gist
+        from handle_drake.apps.inhand.gist import extract_gist
 
         recording, commands = _demonstration()
         return extract_gist(recording.time, commands, name="screw_cap_rotation")
