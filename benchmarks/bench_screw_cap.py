@@ -46,9 +46,9 @@ OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
 def base_rate(n, seed, db, workers, options) -> dict:
     # random search with no stop: all n trials run
     from handle_drake.apps.inhand.experiment import _config
-    from handle_drake.learning.optim.population import StoppingRandomSearch
     from handle_drake.apps.inhand.screw_cap import scenario_fingerprint
     from handle_drake.learning.loop import TrialRunner
+    from handle_drake.learning.optim.population import StoppingRandomSearch
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
     config = _config(trial, "random-nostop", 1)

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial, scenario_fingerprint
 from handle_drake.apps.inhand.task import InHandTask, InHandTrial
 from handle_drake.learning.cluster import as_executor, executor_workers, max_local_workers
 from handle_drake.learning.executors import InlineExecutor
@@ -92,7 +93,6 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
         if high is not None and value > high:
             raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
     if task in FINGER_TASKS:
-        from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
 
         trial = ScrewCapTrial(ScrewCapTask(free=task == "fingertip_cylinder", **task_options))
     else:
@@ -103,7 +103,6 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     config = _config(trial, optimizer, n_particles)
     run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
     if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
-        from handle_drake.apps.inhand.screw_cap import scenario_fingerprint
 
         run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))
     db = Path(db)

@@ -73,9 +73,19 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
-from handle_drake.base.hands import AddHand, actuated_position_limits, get_hand_spec
 from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions, target_score
-from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource
+from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
+from handle_drake.apps.inhand.glove import load_glove
+from handle_drake.apps.inhand.mapping import glove_to_shadow
+from handle_drake.apps.inhand.task import DATA_DIR
+from handle_drake.base.hands import (
+    AddHand,
+    actuated_position_limits,
+    actuated_to_joint_positions,
+    get_hand_spec,
+)
+from handle_drake.learning.executors import TrialResult
+from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver
 
 __all__ = ["ScrewCapModel", "ScrewCapScenario",
@@ -267,15 +277,12 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     lower, upper = actuated_position_limits(spec, 1.0)
     q0 = np.array([float(scenario.initial_position.get(n, 0.0)) for n in _NAMES])
     q0 = np.clip(q0, lower, upper)
-    from handle_drake.station import _set_default_hand_positions
 
     _set_default_hand_positions(plant, hand, spec, q0, 1.0)
     if bare:
         from pydrake.systems.primitives import TrajectorySource
         from pydrake.trajectories import PiecewisePolynomial
 
-        from handle_drake.base.hands import actuated_to_joint_positions
-        from handle_drake.apps.inhand.gist import frames
 
         one = frames(gist, scenario.parameters, q0, scenario.n_frames)
         F = np.vstack([one[0], *([one] * scenario.n_gaits)])
@@ -498,9 +505,6 @@ class _EarlyStop(Exception):
 
 
 def _demonstration(name: str = "screw_cap_rotation.json"):
-    from handle_drake.apps.inhand.glove import load_glove
-    from handle_drake.apps.inhand.mapping import glove_to_shadow
-    from handle_drake.apps.inhand.task import DATA_DIR
 
     recording = load_glove(DATA_DIR / name)
     return recording, glove_to_shadow(recording)
@@ -533,7 +537,6 @@ class ScrewCapTrial:
 
     @cached_property
     def gist(self) -> ActionGist:
-        from handle_drake.apps.inhand.gist import extract_gist
 
         recording, commands = _demonstration()
         return extract_gist(recording.time, commands, name="screw_cap_rotation")
@@ -609,7 +612,6 @@ class ScrewCapTrial:
         return built
 
     def __call__(self, x, seed: int = 0):
-        from handle_drake.learning.executors import TrialResult
 
         outcome = self.evaluate(x)
         detail = outcome.as_dict()
