@@ -107,7 +107,7 @@ def test_run_ids_follow_the_code_not_its_comments_or_docstrings():
 # reduced-mode switch change no metric.
 _NOT_SIMULATION = ("base/blas", "learning/", "base/checks", "base/port_names", "base/models",
                    "can_hand/", "accelerometer/", "camera/", "devices/midi/", "base/viewing",
-                   "base/testing", "__init__")
+                   "base/testing", "base/extras", "base/orphans", "__init__")
 
 
 def test_the_run_id_covers_all_the_simulation_code_a_trial_runs():

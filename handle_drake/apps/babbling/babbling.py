@@ -152,7 +152,8 @@ def code_digest(source: str) -> bytes:
 def simulation_sources() -> list[Path]:
     """The source files a grasp trial's metric depends on: the trial, harness, scenario
     runner, station, scenario, hands, objects (the instrumented devices' geometry
-    included), drivers, controllers and grasp quality. What else a trial loads
+    included), the scene's further objects and the arm, drivers, controllers and grasp
+    quality. What else a trial loads
     cannot change its metric: the learning engine, validation, port names, other
     drivers' settings (``tests/experiments/test_babbling.py`` keeps this true)."""
     root = PACKAGE_DIR
@@ -162,6 +163,7 @@ def simulation_sources() -> list[Path]:
         root / "station.py", root / "scenario.py", root / "base" / "hands.py",
         *(root / "geometry" / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
         *(root / "geometry" / "quality").glob("*.py"),
+        *(root / "scene").glob("*.py"), *(root / "devices" / "arm").glob("*.py"),
     ])
 
 
