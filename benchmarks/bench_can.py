@@ -458,10 +458,12 @@ def rounds(n: int) -> None:
         p50 = np.array([x["latency_ms_p50"] for x in runs[name]])
         p99 = np.array([x["latency_ms_p99"] for x in runs[name]])
         states = np.array([x.get("states_per_s", np.nan) for x in runs[name]])
-        table[name] = {"p50_median_ms": float(np.median(p50)),
-                       "p99_median_ms": float(np.median(p99)),
-                       "p99_min_ms": float(p99.min()), "p99_max_ms": float(p99.max()),
+        # a round whose floor lost every reply (no latency) is nan: left out, and counted
+        table[name] = {"p50_median_ms": float(np.nanmedian(p50)),
+                       "p99_median_ms": float(np.nanmedian(p99)),
+                       "p99_min_ms": float(np.nanmin(p99)), "p99_max_ms": float(np.nanmax(p99)),
                        "p99_met": int(np.sum(p99 <= 2.0)), "rounds": n,
+                       "rounds_without_reply": int(np.sum(np.isnan(p99))),
                        "states_per_s_median": float(np.nanmedian(states))}
         t = table[name]
         print(f"{name:<28}{t['states_per_s_median']:8.0f}{t['p50_median_ms']:9.2f}"
