@@ -24,6 +24,8 @@ from handle_drake.geometry.quality import (
     quality_from_wrenches,
     transform_wrenches,
 )
+from handle_drake.geometry.quality import hull as hull_module
+from handle_drake.geometry.quality.hull import EPA_STATS
 
 R_SPHERE = 0.05
 
@@ -223,6 +225,92 @@ def test_epa_radius_matches_full_qhull():
         assert np.max(W @ u) == pytest.approx(r, abs=1e-10)  # u supports the hull at r
         checked += 1
     assert checked >= 5
+
+
+def _epa_compacting_reference(W):
+    """The EPA as first written (facet lists compacted each step, horizon by np.unique on
+    packed ridge keys, the same 6x6 solve per facet): the fast path must give its radius."""
+    sup = W[np.argmax(np.vstack([np.eye(6), -np.eye(6)]) @ W.T, axis=1)]
+    chosen, basis = [sup[0]], np.empty((0, 6))
+    while len(chosen) < 7:
+        rel = sup - chosen[0]
+        resid = rel - (rel @ basis.T) @ basis
+        dist = np.linalg.norm(resid, axis=1)
+        j = int(np.argmax(dist))
+        assert dist[j] > 1e-9, "reference: the 12 axis supports span no simplex"
+        chosen.append(sup[j])
+        basis = np.vstack([basis, resid[j] / dist[j]])
+    V = list(chosen)
+    center = np.mean(chosen, axis=0)
+
+    def oriented(F):
+        P = np.array(V)[F]
+        A = np.empty_like(P)
+        A[:, :5] = P[:, 1:] - P[:, :1]
+        A[:, 5] = P[:, 0] - center
+        rhs = np.zeros((len(P), 6, 1))
+        rhs[:, 5] = 1.0
+        N = np.linalg.solve(A, rhs)[..., 0]
+        N /= np.sqrt(np.add.reduce(N * N, axis=1, keepdims=True))
+        return N, np.einsum("ij,ij->i", N, P[:, 0])
+
+    cols = np.array([[c for c in range(6) if c != j] for j in range(6)])
+    F = np.array([[c for c in range(7) if c != j] for j in range(7)])
+    N, b = oriented(F)
+    scale = max(1.0, float(np.max(np.abs(W))))
+    for _ in range(2000):
+        j = int(np.argmin(b))
+        s = W[np.argmax(W @ N[j])]
+        if s @ N[j] - b[j] <= max(1e-12 * scale, 4e-11 * scale):
+            return float(b[j])
+        vis = N @ s - b > 1e-11 * scale
+        V.append(s)
+        ridges = F[vis][:, cols].reshape(-1, 5)
+        uniq, count = np.unique(ridges, axis=0, return_counts=True)
+        horizon = uniq[count == 1]
+        F_new = np.hstack([horizon, np.full((len(horizon), 1), len(V) - 1)])
+        N_new, b_new = oriented(F_new)
+        F = np.concatenate([F[~vis], F_new])
+        N = np.concatenate([N[~vis], N_new])
+        b = np.concatenate([b[~vis], b_new])
+    raise AssertionError("reference EPA did not converge")
+
+
+def test_epa_equals_the_compacting_reference_and_qhull_on_random_4x8_grasps():
+    rng = np.random.default_rng(34)
+    params = ContactParams(mu=0.5, gamma=0.002, num_edges=8, characteristic_length=R_SPHERE)
+    stats0 = dict(EPA_STATS)
+    checked = 0
+    for p, n in random_grasps(rng, pick(80, 30), n_range=(4, 4), spread=0.15):
+        W = params.wrenches(p, n).reshape(-1, 6)
+        if min_norm_point(W)[1] > 1e-9:
+            continue
+        r, _ = largest_ball_radius(W)
+        assert r > 0
+        assert r == _epa_compacting_reference(W)  # bit-identical to the first EPA
+        assert r == pytest.approx(qhull_ball_radius(W), rel=1e-12)
+        checked += 1
+    assert checked >= 10
+    assert EPA_STATS["fallbacks"] == stats0["fallbacks"]  # no grasp needed qhull
+
+
+def test_epa_ridge_hash_collisions_fall_back_to_the_exact_answer(monkeypatch):
+    """All vertex hashes equal: every ridge key collides, the horizon is lost; the
+    exact ridge check must reject the polytope and the radius still be qhull's."""
+    rng = np.random.default_rng(35)
+    params = ContactParams(mu=0.5, gamma=0.002, num_edges=8, characteristic_length=R_SPHERE)
+    monkeypatch.setattr(hull_module, "_VERTEX_HASH", np.zeros_like(hull_module._VERTEX_HASH))
+    checked = 0
+    for p, n in random_grasps(rng, 20, n_range=(4, 4), spread=0.15):
+        W = params.wrenches(p, n).reshape(-1, 6)
+        if min_norm_point(W)[1] > 1e-9:
+            continue
+        before = EPA_STATS["fallbacks"]
+        r, _ = largest_ball_radius(W)
+        assert EPA_STATS["fallbacks"] == before + 1
+        assert r == pytest.approx(qhull_ball_radius(W), rel=1e-12)
+        checked += 1
+    assert checked >= 3
 
 
 def test_permutation_invariance():

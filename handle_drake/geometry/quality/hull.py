@@ -153,6 +153,12 @@ def minkowski_support(wrench_sets, include_origin: bool = True):
 
 _RIDGE_COLS = np.array([[c for c in range(DIM) if c != j] for j in range(DIM)])
 _SHIFTS = (np.arange(DIM - 1) * _BITS).astype(np.int64)
+# Zobrist hashes of the vertices: a facet carries the xor of its 6 vertices' hashes, so the
+# key of its ridge opposite vertex v is one xor away (no (facets, 6, 5) index array per step).
+# A collision of two different ridges (odds ~1e-14 per call) can only break the ridge
+# structure, which consistent() checks with exact keys before a result is returned.
+_VERTEX_HASH = np.random.default_rng(20261127).integers(
+    0, np.iinfo(np.int64).max, size=_MAX_VERTICES, dtype=np.int64)
 
 
 def _ridge_keys(ridges: np.ndarray) -> np.ndarray:
@@ -160,15 +166,39 @@ def _ridge_keys(ridges: np.ndarray) -> np.ndarray:
 
 
 class _Epa:
+    """The polytope Q: facets in growing buffers; a removed facet stays with offset +inf.
+
+    Live facets keep the order a compacting list would give them (survivors in order, new
+    ones appended), so ``argmin(b)`` picks the same facet; rows of ``F`` are sorted vertex
+    indices (a new facet is a sorted ridge plus the newest vertex).
+    """
+
     def __init__(self, support, scale: float):
         self.support = support
         self.eps = 1e-11 * scale  # visibility tolerance
         self.V = np.empty((64, DIM))
         self.nv = 0
-        self.F = np.empty((0, DIM), dtype=np.int64)
-        self.N = np.empty((0, DIM))
-        self.b = np.empty(0)
+        self.nf = 0
+        self._grow_facets(256)
         self.center = np.zeros(DIM)
+
+    def _grow_facets(self, capacity: int) -> None:
+        F = np.zeros((capacity, DIM), dtype=np.int64)
+        N = np.zeros((capacity, DIM))
+        b = np.full(capacity, np.inf)
+        H = np.zeros(capacity, dtype=np.int64)
+        if self.nf:
+            F[: self.nf], N[: self.nf] = self.F[: self.nf], self.N[: self.nf]
+            b[: self.nf], H[: self.nf] = self.b[: self.nf], self.H[: self.nf]
+        self.F, self.N, self.b, self.H = F, N, b, H
+
+    def _append_facets(self, F_new, N_new, b_new, H_new) -> None:
+        n = len(F_new)
+        if self.nf + n > len(self.b):
+            self._grow_facets(2 * (self.nf + n))
+        sl = slice(self.nf, self.nf + n)
+        self.F[sl], self.N[sl], self.b[sl], self.H[sl] = F_new, N_new, b_new, H_new
+        self.nf += n
 
     def _push_vertex(self, s) -> int:
         if self.nv == len(self.V):
@@ -192,7 +222,7 @@ class _Epa:
         rhs[:, DIM - 1] = 1.0
         N = np.linalg.solve(A, rhs)[..., 0]
         N /= np.sqrt(np.add.reduce(N * N, axis=1, keepdims=True))  # np.linalg.norm's sum
-        return F_new, N, np.einsum("ij,ij->i", N, P[:, 0])
+        return N, np.einsum("ij,ij->i", N, P[:, 0])
 
     def init_simplex(self, pts: np.ndarray, scale: float) -> bool:
         """Pick 7 affinely independent points; query more directions if needed."""
@@ -222,48 +252,54 @@ class _Epa:
             self._push_vertex(p)
         self.center = np.mean(self.V[: DIM + 1], axis=0)
         F = np.array([[c for c in range(DIM + 1) if c != j] for j in range(DIM + 1)])
-        self.F, self.N, self.b = self._oriented(F)
-        return len(self.F) == DIM + 1
+        N, b = self._oriented(F)
+        self._append_facets(F, N, b, np.bitwise_xor.reduce(_VERTEX_HASH[F], axis=1))
+        return self.nf == DIM + 1
 
     def add(self, s: np.ndarray) -> bool:
-        d = self.N @ s - self.b
-        vis = d > self.eps
-        if not np.any(vis):
+        nf = self.nf
+        d = self.N[:nf] @ s - self.b[:nf]  # removed facets: 0 - inf, never visible
+        vis = np.flatnonzero(d > self.eps)
+        if not len(vis):
             return False
         if self.nv >= _MAX_VERTICES:
             raise OverflowError("EPA: too many vertices")
         vi = self._push_vertex(s)
-        ridges = self.F[vis][:, _RIDGE_COLS].reshape(-1, DIM - 1)
+        Fv = self.F[vis]  # (nvis, 6)
+        Hv = self.H[vis]
         # The horizon: ridges of exactly one visible facet (a ridge shared by two visible
-        # facets is interior). Keys sorted once, a key equal to neither neighbour is
-        # single (np.unique with counts, in a third of its calls), in key order as it.
-        keys = _ridge_keys(ridges)
-        order = np.argsort(keys, kind="stable")
+        # facets is interior): keys sorted once, a key equal to neither neighbour is single.
+        Vh = _VERTEX_HASH[Fv]
+        keys = (Hv[:, None] ^ Vh).ravel()  # key of the ridge opposite each vertex
+        order = np.argsort(keys)
         sorted_keys = keys[order]
         single = np.ones(len(keys), dtype=bool)
         same = sorted_keys[1:] == sorted_keys[:-1]
         single[1:] &= ~same
         single[:-1] &= ~same
-        horizon = ridges[order[single]]
-        F_new = np.empty((len(horizon), DIM), dtype=np.int64)
-        F_new[:, :DIM - 1] = horizon
+        f, j = np.divmod(order[single], DIM)
+        F_new = np.empty((len(f), DIM), dtype=np.int64)
+        F_new[:, :DIM - 1] = Fv[f[:, None], _RIDGE_COLS[j]]
         F_new[:, DIM - 1] = vi
-        F_new, N_new, b_new = self._oriented(F_new)
-        keep = ~vis
-        self.F = np.concatenate([self.F[keep], F_new])
-        self.N = np.concatenate([self.N[keep], N_new])
-        self.b = np.concatenate([self.b[keep], b_new])
+        N_new, b_new = self._oriented(F_new)
+        self.b[vis] = np.inf
+        self.N[vis] = 0.0
+        self._append_facets(F_new, N_new, b_new, Hv[f] ^ Vh[f, j] ^ _VERTEX_HASH[vi])
         return True
 
     def consistent(self) -> bool:
-        ridges = self.F[:, _RIDGE_COLS].reshape(-1, DIM - 1)
+        live = np.isfinite(self.b[: self.nf])
+        if not np.any(live):
+            return False
+        F, N, b = self.F[: self.nf][live], self.N[: self.nf][live], self.b[: self.nf][live]
+        ridges = F[:, _RIDGE_COLS].reshape(-1, DIM - 1)
         keys = np.sort(_ridge_keys(np.sort(ridges, axis=1)))
         # every ridge in exactly two facets: sorted keys pair up, and pairs differ
         if len(keys) % 2 or not (np.all(keys[0::2] == keys[1::2])
                                  and np.all(keys[2::2] != keys[1:-1:2])):
             return False
-        slack = self.V[: self.nv] @ self.N.T - self.b
-        return bool(np.max(slack) <= 1e-8 * max(1.0, float(np.max(np.abs(self.b)))))
+        slack = self.V[: self.nv] @ N.T - b
+        return bool(np.max(slack) <= 1e-8 * max(1.0, float(np.max(np.abs(b)))))
 
 
 def qhull_ball_radius(W) -> float:
@@ -317,7 +353,7 @@ def largest_ball_radius(
     try:
         gap_tol = max(tol * scale, 4 * epa.eps)
         for _ in range(max_iterations):
-            j = int(np.argmin(epa.b))
+            j = int(np.argmin(epa.b[: epa.nf]))
             u = epa.N[j]
             s, hs = support(u[None, :])
             if hs[0] - epa.b[j] <= gap_tol:
