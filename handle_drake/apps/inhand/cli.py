@@ -45,8 +45,9 @@ def register(subparsers) -> None:
                         "fingers (score: the cap joint's encoder turn; --target-deg default 90); "
                         "fingertip_cylinder: a free cylinder pinched by thumb and fingers, held "
                         "only if it survives its weight reversed at the end (default 60); "
-                        "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored from its MIDI "
-                        "ticks alone, the true wheel angle logged beside (default 60)")
+                        "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored "
+                        "from its MIDI ticks alone, the true wheel angle logged beside "
+                        "(default 60)")
     p.add_argument("--gaits", type=positive_int, default=1,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
