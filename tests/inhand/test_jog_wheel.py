@@ -88,3 +88,4 @@ def test_cli_jog_wheel_runs_and_bad_flags_exit_2(tmp_path, capsys):
                      "--db", str(db), "--no-plot", "--no-progress", "--no-html"]) == 0
     out = capsys.readouterr().out
     assert "inhand: jog_wheel" in out and "trials: 1 done" in out
+    assert "best score" in out and "held" not in out  # a wheel on its axle

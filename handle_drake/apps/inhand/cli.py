@@ -131,10 +131,12 @@ def _cmd_inhand(args) -> int:
         return 1
     reached = (f"target reached at trial {s['trials_to_target']}" if s["trials_to_target"]
                else "target not reached")
+    held = ("" if args.task == "jog_wheel" else  # a wheel on its axle: nothing to hold
+            f"{'held' if s['best_held'] else 'not held'} at the end; ")
     print(f"best score {s['best_score']:.4g} (target score {s['target_score']:g}), trial "
-          f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, "
-          f"{'held' if s['best_held'] else 'not held'} at the end; {reached}; "
-          f"{100 * s['share_held']:.0f} % of trials held")
+          f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, {held}{reached}"
+          + ("" if args.task == "jog_wheel" else
+             f"; {100 * s['share_held']:.0f} % of trials held"))
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")
