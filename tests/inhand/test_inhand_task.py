@@ -114,8 +114,8 @@ def test_cli_run_in_parallel_equals_the_sequential_run(tmp_path, capsys):
     """``handle-drake inhand`` as a user runs it: the sequential run (with an instrumented
     cylinder) writes its learning curve and replay (the replayed best trial scores what
     was logged); the same run with the particles of each iteration on a local pool of 2
-    worker processes (a plain cylinder: the sensor changes no physics) logs the same
-    trials. (The same run on Dask, through ``--executor dask://``:
+    worker processes logs the same trials (the instrumented cylinder too: its score is the
+    sensor's, issue 35). (The same run on Dask, through ``--executor dask://``:
     ``tests/learning/test_cluster.py``.)"""
     common = ["inhand", "--optimizer", "ipso", "--particles", "2", "--trials", "4", "--seed",
               "1", "--no-progress"]
@@ -130,7 +130,7 @@ def test_cli_run_in_parallel_equals_the_sequential_run(tmp_path, capsys):
     assert replayed == pytest.approx(logged, abs=1e-3)
     assert "deg (joywarrior24f14 accelerometer)" in out
     assert cli_main([*common, "--db", str(tmp_path / "pool.sqlite"), "--workers", "2",
-                     "--no-plot", "--no-html"]) == 0
+                     "--no-plot", "--no-html", "--accelerometer", "joywarrior24f14"]) == 0
     assert "trials: 4 done, 0 failed" in capsys.readouterr().out
     sequential = _rows(tmp_path / "seq.sqlite")
     assert [r[0] for r in sequential] == [0, 1, 2, 3]

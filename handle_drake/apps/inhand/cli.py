@@ -38,12 +38,16 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "inhand", help="learn an in-hand rotation by action-gist guided babbling (PSO & co.)",
         description=__doc__.split("\n\n")[0])
-    p.add_argument("--task", choices=sorted([*TASKS, "screw_cap", "fingertip_cylinder"]),
+    p.add_argument("--task", choices=sorted([*TASKS, "screw_cap", "fingertip_cylinder",
+                                             "jog_wheel"]),
                    default="cylinder_rotation",
                    help="screw_cap: the report's Fig. 32, a cap on a fixed bottle turned by the "
                         "fingers (score: the cap joint's encoder turn; --target-deg default 90); "
                         "fingertip_cylinder: a free cylinder pinched by thumb and fingers, held "
-                        "only if it survives its weight reversed at the end (default 60)")
+                        "only if it survives its weight reversed at the end (default 60); "
+                        "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored "
+                        "from its MIDI ticks alone, the true wheel angle logged beside "
+                        "(default 60)")
     p.add_argument("--gaits", type=positive_int, default=1,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
@@ -92,7 +96,13 @@ def _cmd_inhand(args) -> int:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
     except TrialLogError as error:
         raise ValueError(f"--db: {error}") from None
-    if args.task in ("screw_cap", "fingertip_cylinder"):
+    if args.task == "jog_wheel":
+        if args.accelerometer or args.evaluation != "incremental" or args.gaits != 1:
+            raise ValueError("--task jog_wheel: the incremental evaluation from MIDI only (no "
+                             "--accelerometer, --evaluation old, --gaits)")
+        options = dict(progress=not args.no_progress,
+                       target_deg=60.0 if args.target_deg is None else args.target_deg)
+    elif args.task in ("screw_cap", "fingertip_cylinder"):
         if args.accelerometer or args.evaluation != "incremental":
             raise ValueError(f"--task {args.task}: the incremental evaluation from the plant "
                              "only (no --accelerometer, --evaluation old)")
@@ -121,10 +131,12 @@ def _cmd_inhand(args) -> int:
         return 1
     reached = (f"target reached at trial {s['trials_to_target']}" if s["trials_to_target"]
                else "target not reached")
+    held = ("" if args.task == "jog_wheel" else  # a wheel on its axle: nothing to hold
+            f"{'held' if s['best_held'] else 'not held'} at the end; ")
     print(f"best score {s['best_score']:.4g} (target score {s['target_score']:g}), trial "
-          f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, "
-          f"{'held' if s['best_held'] else 'not held'} at the end; {reached}; "
-          f"{100 * s['share_held']:.0f} % of trials held")
+          f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, {held}{reached}"
+          + ("" if args.task == "jog_wheel" else
+             f"; {100 * s['share_held']:.0f} % of trials held"))
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")
@@ -133,6 +145,9 @@ def _cmd_inhand(args) -> int:
         logged, outcome = replay_best(run, html)
         print(f"replay of the best trial: {html} (score {outcome.score:.4g}, logged "
               f"{logged:.4g})")
+        if hasattr(outcome, "true_turn_deg"):
+            print(f"its turn at the end: {outcome.turn_deg:.1f} deg (MIDI, "
+                  f"{outcome.ticks:+d} ticks), {outcome.true_turn_deg:.1f} deg (plant)")
         if getattr(outcome, "accelerometer_rotation_deg_series", None):
             print(f"its rotation at the end: {outcome.rotation_deg:.1f} deg (plant), "
                   f"{outcome.accelerometer_rotation_deg_series[-1]:.1f} deg "

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.apps.inhand.jog_wheel import JogWheelTask, JogWheelTrial
 from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial, scenario_fingerprint
 from handle_drake.apps.inhand.task import InHandTask, InHandTrial
 from handle_drake.learning.cluster import as_executor, executor_workers, max_local_workers
@@ -49,6 +50,9 @@ class InHandRun:
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
     task = dc.asdict(trial.config)
+    if isinstance(trial, JogWheelTrial):  # scored from MIDI (handle_drake.apps.inhand.jog_wheel)
+        return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
+                "jog_wheel_version": 1}
     if "cap_position" in task:  # the screw cap (handle_drake.apps.inhand.screw_cap)
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
                 "screw_cap_version": 1}
@@ -92,7 +96,9 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if high is not None and value > high:
             raise ValueError(f"{name}: expected an integer in [{low}, {high}], got {value!r}")
-    if task in FINGER_TASKS:
+    if task == "jog_wheel":
+        trial = JogWheelTrial(JogWheelTask(**task_options))
+    elif task in FINGER_TASKS:
 
         trial = ScrewCapTrial(ScrewCapTask(free=task == "fingertip_cylinder", **task_options))
     else:

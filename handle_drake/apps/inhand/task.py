@@ -20,9 +20,10 @@ axis from the plant, unwrapped; positive = the direction the flexing fingers
 roll it; with ``accelerometer`` set, the object is the report's instrumented
 object (2.4): the station's ``object.acceleration`` port, the device model of
 :mod:`handle_drake.devices.accelerometer` at the object's origin, gives the same rotation
-from the gravity direction, valid at rest), held (the object has not dropped more
-than ``drop`` below nor moved more than ``max_travel`` from its start, and
-touched the hand at a sample within the last ``contact_window``: a rolled
+from the gravity direction, valid at rest, and the checks and the score read that
+estimate only, the plant's rotation logged beside it; held stays the plant's), held
+(the object has not dropped more than ``drop`` below nor moved more than ``max_travel``
+from its start, and touched the hand at a sample within the last ``contact_window``: a rolled
 object hops off the palm for a few ms), the hand bodies and fingertips
 touching it. Checks after each of ``n_checks`` equal parts of the motion (the
 last one at the end of the hold) compare with the benchmark: held, rotation at
@@ -180,7 +181,7 @@ class InHandTask:
 @dc.dataclass
 class TrialOutcome:
     score: float
-    rotation_deg: float  # at the end (or at the early stop)
+    rotation_deg: float  # the plant's, at the end (or at the early stop)
     max_rotation_deg: float
     held: bool  # at the end of the trial (False if it stopped early)
     held_time: float  # s
@@ -192,7 +193,9 @@ class TrialOutcome:
     times: list  # sample times, s
     rotation_deg_series: list
     # the same from the object's accelerometer (gravity direction; valid at rest);
-    # empty without InHandTask.accelerometer
+    # empty without InHandTask.accelerometer. With it, the checks, the target and the
+    # score use this series only (and the "old" evaluation its last value); the plant's
+    # rotation_deg_series is the truth logged beside it
     accelerometer_rotation_deg_series: list
     contacts: list  # per sample, hand bodies touching the object
     sim_time: float
@@ -424,9 +427,12 @@ simulation_duration: {c.settle_time + c.total_time}
                 accel_rotations.append(float(np.degrees(st.acc_angle)))
             rotations.append(float(np.degrees(st.angle)))
             contacts_log.append(touching)
-            matches[i] = st.held and st.angle >= c.benchmark_at(t) - tolerance
+            # the rotation scored: the instrumented object's own estimate when it has one
+            # (the plant's, logged beside, is then never scored), else the plant's
+            sensed = st.acc_angle if accelerometer is not None else st.angle
+            matches[i] = st.held and sensed >= c.benchmark_at(t) - tolerance
             if st.next_check < checks.size and t >= checks[st.next_check] - step:
-                ok = st.held and st.angle >= c.target * c.benchmark[st.next_check] - tolerance
+                ok = st.held and sensed >= c.target * c.benchmark[st.next_check] - tolerance
                 if ok and not st.failed:
                     st.passed += 1
                 st.failed = st.failed or not ok
@@ -442,7 +448,8 @@ simulation_duration: {c.settle_time + c.total_time}
         except _EarlyStop:
             st.stopped = True
         sim_time = float(samples[len(rotations) - 1])
-        angle, passed = st.angle, st.passed
+        angle = st.acc_angle if accelerometer is not None else st.angle
+        passed = st.passed
         held_end = st.held and not st.stopped
         # The target itself is strict (the checks' tolerance lets a run stop within
         # tolerance_deg of it; such a trial does not count as reaching it).

@@ -1,0 +1,479 @@
+"""The jog wheel learned from its MIDI ticks alone (issue 35 item 3, report 2.4.4).
+
+The iControls Pro's jog wheel (:mod:`handle_drake.devices.midi`) is turned by
+the Shadow hand on a floating wrist: a palmar pinch on the wheel's rim
+(planned by :func:`handle_drake.grasp.planning.plan_grasp`, as in Figure 9's
+``handle-drake midi jog``), closed by the grip parameter, then the wrist turns
+about the wheel's axis in ``n_parts`` segments, one yaw change per segment, and
+holds. The parameters (the jog's action gist, eq. 45 with one variation per
+meta motion): ``[grip, turn_1 .. turn_K]``; ``grip`` scales the pinch from the
+pre-shape (0) to the planned closure (1), ``turn_k`` is the wrist's yaw change
+(deg) of segment ``k``. The grip and the first turn belong to part 1, turn
+``k`` to part ``k`` (:func:`~handle_drake.apps.inhand.evaluation.part_dimensions`).
+
+**The evaluation sees only MIDI.** The station's simulated device sends its
+messages (relative ``control_change`` ticks) through a mido port (an
+in-process cable here, the device's own port on hardware); the trial drains
+the host end of that port into a list of messages stamped with their arrival
+time and hands that list, and nothing else, to :class:`MidiJogEvaluator`,
+which decodes the jog's ticks with the device's mapping and scores them with
+the incremental evaluation (eqs. 47-49): checks at the end of each segment
+(the last at the end of the hold), the net turn in the demonstrated direction
+at least ``target * benchmark[k]`` less one tick (turns are counted from the
+start of the turning motion: the pinch's closing may nudge the wheel). The evaluator has no handle
+on the plant: the same object scores a recorded stream or a live device. The
+plant's true wheel angle (the jog joint) is logged beside every sensed sample
+(``true_turn_deg_series``), as the check from outside the evaluator.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+import time
+from functools import cached_property
+
+import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.common.value import Value
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.systems.framework import LeafSystem
+from pydrake.systems.primitives import TrajectorySource
+
+from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions
+from handle_drake.base.hands import get_hand_spec
+from handle_drake.devices.midi.codec import ControlCounts, MidiDecoder
+from handle_drake.devices.midi.device import ControllerGeometry, control_layout
+from handle_drake.devices.midi.mapping import LoadMidiMapping, MidiMapping
+from handle_drake.devices.midi.ports import in_process_pair
+from handle_drake.devices.midi.systems import MidiBatch
+from handle_drake.geometry.objects import ObjectSpec
+from handle_drake.grasp.planning import plan_grasp
+from handle_drake.grasp.taxonomy import GraspClass
+from handle_drake.learning.executors import TrialResult
+from handle_drake.scenario import (
+    DumpScenario,
+    FloatingWrist,
+    HandConfig,
+    Keyframe,
+    MidiControllerConfig,
+    Scenario,
+    SimHandDriver,
+    TableConfig,
+    default_plant_config,
+)
+from handle_drake.trial.harness import TrialHarness
+from handle_drake.trial.simulate import script_trajectories
+
+__all__ = ["JogWheelTask", "JogWheelTrial", "JogOutcome", "JogScore", "MidiJogEvaluator",
+           "MidiPortWriter", "JOG"]
+
+JOG = "jog"
+#: Grasp phase before the turn (s): reach 0.5, settle 0.1, close 0.4, settle 0.2.
+_GRASP_TIME = 1.2
+
+
+@dc.dataclass(frozen=True)
+class JogWheelTask:
+    """Settings of one jog-wheel trial (times in s, angles in deg)."""
+
+    target_deg: float = 60.0  # net turn in the demonstrated direction
+    direction: int = 1  # +1: counter-clockwise seen from above (the jog joint's +)
+    n_parts: int = 4  # turn segments = checks
+    segment_time: float = 0.3
+    hold: float = 0.2
+    max_turn_deg: float = 30.0  # bound of each segment's yaw change
+    max_grip: float = 1.2  # bound of the grip parameter (1: the planned closure)
+    benchmark: tuple = (0.25, 0.5, 0.75, 1.0)  # turn / target required at each check
+    sample_period: float = 0.05
+    time_step: float = 0.002
+
+    def __post_init__(self):
+        for name in ("target_deg", "segment_time", "max_turn_deg", "max_grip", "sample_period",
+                     "time_step"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        if not self.target_deg <= 360.0:
+            raise ValueError(f"target_deg: expected a value in (0, 360], got {self.target_deg}")
+        if not (math.isfinite(self.hold) and self.hold >= 0):
+            raise ValueError(f"hold: expected a finite value >= 0, got {self.hold!r}")
+        if self.direction not in (1, -1):
+            raise ValueError(f"direction: expected +1 or -1, got {self.direction!r}")
+        if isinstance(self.n_parts, bool) or not isinstance(self.n_parts, int) \
+                or self.n_parts < 1:
+            raise ValueError(f"n_parts: expected an integer >= 1, got {self.n_parts!r}")
+        if len(self.benchmark) != self.n_parts:
+            raise ValueError(f"benchmark: expected {self.n_parts} values (one per check), got "
+                             f"{len(self.benchmark)}")
+
+    @property
+    def turn_start(self) -> float:
+        return _GRASP_TIME
+
+    @property
+    def total_time(self) -> float:
+        return _GRASP_TIME + self.n_parts * self.segment_time + self.hold
+
+    def check_times(self) -> np.ndarray:
+        times = self.turn_start + np.arange(1, self.n_parts + 1) * self.segment_time
+        times[-1] = self.total_time
+        return times
+
+    def sample_times(self) -> np.ndarray:
+        span = self.total_time - self.turn_start
+        n = max(1, int(round(span / self.sample_period)))
+        return self.turn_start + np.arange(1, n + 1) * span / n
+
+    def benchmark_at(self, t) -> np.ndarray:
+        """Turn (deg) the benchmark expects at times ``t``: linear between the checks."""
+        return self.target_deg * np.interp(t, np.r_[self.turn_start, self.check_times()],
+                                           np.r_[0.0, self.benchmark])
+
+    @property
+    def dims_per_part(self) -> np.ndarray:
+        # meta motions: the grip and turn 1 start in part 1, turn k in part k
+        starts = [0.0] + [k / self.n_parts for k in range(self.n_parts)]
+        return part_dimensions(starts, [1] * (self.n_parts + 1), self.n_parts)
+
+    def bounds(self) -> np.ndarray:
+        low = [0.0] + [-self.max_turn_deg] * self.n_parts
+        high = [self.max_grip] + [self.max_turn_deg] * self.n_parts
+        return np.array([low, high], dtype=float).T
+
+    def demonstration(self) -> np.ndarray:
+        """The demonstration's parameters: the planned pinch, the target turned evenly."""
+        step = self.direction * min(self.max_turn_deg, 1.1 * self.target_deg / self.n_parts)
+        return np.r_[1.0, np.full(self.n_parts, step)]
+
+    @property
+    def target_score(self) -> float:
+        return float(self.dims_per_part.sum()) + 2.0  # evaluation.BONUS: reached
+
+
+@dc.dataclass
+class JogScore:
+    """What :class:`MidiJogEvaluator` made of a message stream."""
+
+    score: float
+    turn_deg: float  # net turn from the turn's start to the end, demonstrated direction > 0
+    ticks: int  # net jog ticks over the whole stream (device sign)
+    checks_passed: int
+    reached_target: bool
+    s_b: float
+    s_a: float
+    turn_deg_series: list  # at task.sample_times()
+    accepted: int
+    rejected: int
+
+
+class MidiJogEvaluator:
+    """Scores a jog-wheel trial from the MIDI messages the device sent, and only them.
+
+    ``evaluate(stream)`` takes ``(time_s, message)`` pairs or ``mido.Message`` s
+    with their ``time`` set (s since the trial started), in arrival order, as
+    a recorded file or a live port delivers them. Messages of other controls
+    and bad bytes are counted and ignored.
+    """
+
+    def __init__(self, task: JogWheelTask, mapping: MidiMapping | None = None):
+        self.task = task
+        self.mapping = mapping if mapping is not None else LoadMidiMapping()
+        if JOG not in self.mapping.names():
+            raise ValueError(f"mapping: no control named {JOG!r}")
+        self.ticks_per_turn = int(self.mapping.jog_ticks_per_turn)
+
+    @property
+    def tick_deg(self) -> float:
+        return 360.0 / self.ticks_per_turn
+
+    def tick_series(self, stream) -> tuple[np.ndarray, np.ndarray, dict]:
+        """``(times, net ticks after each jog message, counts)`` of a stream."""
+        decoder = MidiDecoder(self.mapping)
+        counts = ControlCounts(self.mapping)
+        times, ticks = [], []
+        for item in stream:
+            t, message = (item if isinstance(item, tuple) else (item.time, item))
+            event = decoder.decode(message)
+            if event is None or event.name != JOG:
+                continue
+            counts.add(event)
+            times.append(float(t))
+            ticks.append(counts[JOG])
+        return (np.array(times, float), np.array(ticks, int),
+                {"accepted": decoder.accepted, "rejected": decoder.total_rejected})
+
+    def turn_at(self, stream, t) -> np.ndarray:
+        """Net turn (deg, demonstrated direction > 0) at times ``t``."""
+        times, ticks, _ = self.tick_series(stream)
+        return self._turn(times, ticks, np.asarray(t, float))
+
+    def _turn(self, times, ticks, t) -> np.ndarray:
+        idx = np.searchsorted(times, t, side="right") - 1
+        net = np.where(idx >= 0, ticks[np.clip(idx, 0, None)] if ticks.size else 0, 0)
+        return self.task.direction * net * self.tick_deg
+
+    def evaluate(self, stream) -> JogScore:
+        stream = list(stream)
+        c = self.task
+        times, ticks, counts = self.tick_series(stream)
+        samples, checks = c.sample_times(), c.check_times()
+        # from the turn's start: the pinch's closing may nudge the wheel before it
+        base = self._turn(times, ticks, np.array([c.turn_start]))[0]
+        turn = self._turn(times, ticks, samples) - base
+        at_checks = self._turn(times, ticks, checks) - base
+        tol = self.tick_deg  # one tick: the device's resolution
+        matches = turn >= c.benchmark_at(samples) - tol
+        passed = 0
+        for k in range(c.n_parts):
+            if at_checks[k] < c.target_deg * c.benchmark[k] - tol:
+                break
+            passed += 1
+        if passed < c.n_parts:  # the samples after the first failed check do not match
+            matches[samples > checks[passed] + 1e-9] = False
+        final = float(turn[-1])
+        reached = bool(passed == c.n_parts and final >= c.target_deg)
+        score, s_b, s_a = incremental_score(c.dims_per_part, passed, matches, reached)
+        return JogScore(score=float(score), turn_deg=final,
+                        ticks=int(ticks[-1]) if ticks.size else 0, checks_passed=passed,
+                        reached_target=reached, s_b=s_b, s_a=s_a,
+                        turn_deg_series=[float(v) for v in turn], **counts)
+
+
+class MidiPortWriter(LeafSystem):
+    """Sends each new :class:`MidiBatch` on ``midi_in`` to a mido output ``port``,
+    every message stamped with the simulation time (``message.time``, s)."""
+
+    def __init__(self, port, period: float):
+        super().__init__()
+        self._port = port
+        self._seq = 0
+        self._in = self.DeclareAbstractInputPort("midi_in", _batch())
+        self.DeclarePeriodicPublishEvent(period, 0.0, self._publish)
+
+    def reset(self) -> None:
+        self._seq = 0
+
+    def _publish(self, context):
+        batch = self._in.Eval(context)
+        if isinstance(batch, MidiBatch) and batch.seq != self._seq:
+            self._seq = batch.seq
+            for message in batch.messages:
+                self._port.send(message.copy(time=float(context.get_time())))
+
+
+def _batch() -> Value:
+    return Value[object](MidiBatch())
+
+
+@dc.dataclass
+class JogOutcome:
+    score: float
+    turn_deg: float  # from MIDI
+    true_turn_deg: float  # the plant's jog joint (logged beside, never scored)
+    ticks: int
+    checks_passed: int
+    reached_target: bool
+    s_b: float
+    s_a: float
+    times: list
+    turn_deg_series: list  # MIDI
+    true_turn_deg_series: list  # plant
+    messages: int
+    rejected: int
+    sim_time: float
+    wall_time: float
+
+    def as_dict(self) -> dict:
+        return dc.asdict(self)
+
+
+_BUILD_CACHE: dict = {}
+
+
+class JogWheelTrial:
+    """A picklable objective ``trial(x, seed) -> TrialResult`` (score maximised)."""
+
+    def __init__(self, config: JogWheelTask | None = None, **kwargs):
+        self.config = config if config is not None else JogWheelTask(**kwargs)
+
+    def __getstate__(self):
+        return {"config": self.config}
+
+    def __setstate__(self, state):
+        self.config = state["config"]
+
+    @property
+    def name(self) -> str:
+        return f"inhand-jog_wheel-midi-{self.config.target_deg:g}deg"
+
+    @property
+    def dimension(self) -> int:
+        return self.config.n_parts + 1
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.config.bounds()
+
+    @property
+    def dims_per_part(self) -> np.ndarray:
+        return self.config.dims_per_part
+
+    @property
+    def target_score(self) -> float:
+        return self.config.target_score
+
+    @cached_property
+    def _plan(self):
+        g = ControllerGeometry()
+        jog = next(c for c in control_layout(g) if c.name == JOG)
+        d = 2 * g.jog_radius
+        block = ObjectSpec("cuboid", d, mu=g.mu, dimensions={"depth": d, "height": g.jog_height})
+        p_target = np.array(jog.p_C) - [0.0, 0.0, 0.1 * g.jog_height]
+        plan = plan_grasp(GraspClass.PALMAR_PINCH, block, RigidTransform(p_target),
+                          table_height=g.panel_height - 0.1 * g.jog_height,
+                          reach_direction=(-1.0, 0.0))
+        return plan, np.array([jog.p_C[0], jog.p_C[1], 0.0])
+
+    def scenario(self, x=None) -> Scenario:
+        """The trial as a scenario (``handle-drake simulate`` replays it); ``x`` None: the
+        demonstration's parameters."""
+        c = self.config
+        x = c.demonstration() if x is None else self._check(x)
+        plan, centre = self._plan
+        openc = plan.command_dict(plan.preshape_command)
+        close = plan.command_dict(plan.close_command)
+        grip = {n: float(openc.get(n, 0.0) + x[0] * (v - openc.get(n, 0.0)))
+                for n, v in close.items()}
+
+        def turned(theta: float) -> list[float]:
+            X = plan.X_WB
+            R = RollPitchYaw(X.rotation()).vector()
+            s, co = math.sin(theta), math.cos(theta)
+            p = X.translation() - centre
+            p = centre + [co * p[0] - s * p[1], s * p[0] + co * p[1], p[2]]
+            # a turn about world z adds to the yaw (R_z(theta) R_z(y) R_y(p) R_x(r))
+            return [*map(float, p), float(R[0]), float(R[1]), float(R[2] + theta)]
+
+        pre = RigidTransform(plan.X_WB_pregrasp)
+        pose_pre = [*map(float, pre.translation()), *map(float,
+                                                         RollPitchYaw(pre.rotation()).vector())]
+        script = [Keyframe(time=0.0, hand=openc, wrist=pose_pre),
+                  Keyframe(time=0.5, wrist=turned(0.0)),
+                  Keyframe(time=0.6),
+                  Keyframe(time=1.0, hand=grip),
+                  Keyframe(time=_GRASP_TIME)]
+        theta = 0.0
+        for k in range(c.n_parts):
+            theta += math.radians(x[1 + k])
+            script.append(Keyframe(time=_GRASP_TIME + (k + 1) * c.segment_time,
+                                   wrist=turned(theta)))
+        if c.hold > 0:
+            script.append(Keyframe(time=c.total_time))
+        return Scenario(
+            hand=HandConfig(kind="shadow", coupling_ratio=1.0,
+                            mount=FloatingWrist(X_WB=Transform(pre)),
+                            initial_position=dict(openc)),
+            object=None, table=TableConfig(top_height=0.0),
+            plant_config=default_plant_config(time_step=c.time_step),
+            driver=SimHandDriver(max_joint_velocity=4.0, control_period=c.time_step),
+            simulation_duration=c.total_time, script=script,
+            midi_controller=MidiControllerConfig(X_WC=Transform(RigidTransform())))
+
+    def scenario_for(self, x) -> str:
+        return DumpScenario(self.scenario(x)) + (
+            f"# jog-wheel trial {self.name}; parameters [grip, turns deg]: "
+            f"{[float(v) for v in np.asarray(x).reshape(-1)]}\n")
+
+    def _check(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.dimension:
+            raise ValueError(f"parameters: expected {self.dimension} values [grip, "
+                             f"{self.config.n_parts} turns], got {x.size}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError("parameters: expected finite values")
+        return x
+
+    def _build(self, meshcat=None):
+        key = (self.config, meshcat is not None)
+        if meshcat is None and key in _BUILD_CACHE:
+            return _BUILD_CACHE[key]
+        scenario = self.scenario()
+        device_end, host_end = in_process_pair("jog wheel")
+        sources = {}
+
+        def add_driver(builder, station):
+            names = get_hand_spec("shadow").actuated_joint_names
+            q0 = np.array([scenario.hand.initial_position.get(n, 0.0) for n in names])
+            hand, wrist = script_trajectories(scenario, q0)
+            sources["hand"] = builder.AddNamedSystem("hand_script", TrajectorySource(hand))
+            sources["wrist"] = builder.AddNamedSystem("wrist_script", TrajectorySource(wrist))
+            builder.Connect(sources["hand"].get_output_port(),
+                            station.GetInputPort("hand.position"))
+            builder.Connect(sources["wrist"].get_output_port(),
+                            station.GetInputPort("wrist.pose"))
+            writer = builder.AddNamedSystem("midi_port_writer", MidiPortWriter(
+                device_end, scenario.midi_controller.scan_period))
+            builder.Connect(station.GetOutputPort("midi_controller.midi"),
+                            writer.get_input_port())
+            return writer
+
+        harness = TrialHarness(scenario, add_driver, log=(), meshcat=meshcat)
+        encoder = harness.station.GetSubsystemByName("midi_controller")
+        built = dict(harness=harness, sources=sources, host=host_end, device=device_end,
+                     jog_index=encoder.control_names.index(JOG),
+                     positions=harness.station.GetOutputPort("midi_controller.control_positions"),
+                     q0=np.array([scenario.hand.initial_position.get(n, 0.0) for n in
+                                  get_hand_spec("shadow").actuated_joint_names]))
+        if meshcat is None:
+            _BUILD_CACHE[key] = built
+        return built
+
+    def __call__(self, x, seed: int = 0) -> TrialResult:
+        outcome = self.evaluate(x)
+        detail = outcome.as_dict()
+        detail.pop("times")
+        # the keys run_summary reads (as for the screw cap's encoder: turn_deg is the MIDI
+        # turn, the truth beside it; the wheel cannot drop and there is no palm rule)
+        detail.update(turn_deg_truth=outcome.true_turn_deg, palm_touched=False)
+        return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario_for(x))
+
+    def evaluate(self, x, meshcat=None, html=None) -> JogOutcome:
+        """Runs the trial: the plant is simulated, MIDI leaves it through the port, the
+        evaluator scores the drained messages; the true angle is logged beside."""
+        x = self._check(x)
+        c = self.config
+        built = self._build(meshcat)
+        harness = built["harness"]
+        start = time.perf_counter()
+        hand, wrist = script_trajectories(self.scenario(x), built["q0"])
+        harness.reset()
+        built["sources"]["hand"].UpdateTrajectory(hand)
+        built["sources"]["wrist"].UpdateTrajectory(wrist)
+        harness.controller.reset()
+        for _ in built["host"].iter_pending():  # nothing of an earlier trial is scored
+            pass
+        harness.initialize()
+        station_context = harness.station.GetMyContextFromRoot(harness.context)
+        jog = built["jog_index"]
+        samples = c.sample_times()
+        truth, start_angle = [], []
+
+        def log_truth():
+            theta = float(built["positions"].Eval(station_context)[jog])
+            if not start_angle:  # the turn's start
+                start_angle.append(theta)
+                return
+            truth.append(c.direction * math.degrees(theta - start_angle[0]))
+
+        harness.advance(np.r_[c.turn_start, samples],
+                        html=html if meshcat is not None else None, at_each=log_truth)
+        stream = list(built["host"].iter_pending())  # what the device sent, nothing more
+        score = MidiJogEvaluator(c).evaluate(stream)
+        return JogOutcome(
+            score=score.score, turn_deg=score.turn_deg, true_turn_deg=truth[-1],
+            ticks=score.ticks, checks_passed=score.checks_passed,
+            reached_target=score.reached_target, s_b=score.s_b, s_a=score.s_a,
+            times=samples.tolist(), turn_deg_series=score.turn_deg_series,
+            true_turn_deg_series=truth, messages=len(stream), rejected=score.rejected,
+            sim_time=float(samples[-1]), wall_time=time.perf_counter() - start)

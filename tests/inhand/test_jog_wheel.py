@@ -1,0 +1,91 @@
+"""The jog wheel learned from MIDI (issue 35 item 3): the score sees only the device's messages."""
+
+import inspect
+
+import mido
+import numpy as np
+import pytest
+
+from handle_drake.apps.inhand.jog_wheel import JOG, JogWheelTask, JogWheelTrial, MidiJogEvaluator
+from handle_drake.cli import main as cli_main
+from handle_drake.devices.midi.codec import control_message
+from handle_drake.devices.midi.mapping import LoadMidiMapping
+
+
+@pytest.fixture(scope="module")
+def trial():
+    return JogWheelTrial(JogWheelTask())
+
+
+def test_midi_turn_equals_the_true_wheel_turn_within_one_tick(trial):
+    """A known stroke (the demonstration: the planned pinch, the wrist turned 4 x 16.5 deg):
+    the wheel really turns (plant) and MIDI counts it within one tick at every sample."""
+    outcome = trial.evaluate(trial.config.demonstration())
+    tick = MidiJogEvaluator(trial.config).tick_deg
+    assert tick == pytest.approx(360.0 / LoadMidiMapping().jog_ticks_per_turn)
+    assert outcome.true_turn_deg > 50.0  # the pinch carried the wheel (not 0 = 0)
+    assert abs(outcome.turn_deg - outcome.true_turn_deg) <= tick
+    err = np.abs(np.subtract(outcome.turn_deg_series, outcome.true_turn_deg_series))
+    assert err.max() <= tick + 1e-9
+    assert outcome.messages > 0 and outcome.rejected == 0
+    # a turn the other way is not a turn in the demonstrated direction
+    back = trial.evaluate(np.r_[1.0, -20.0, -20.0, -20.0, -20.0])
+    assert back.true_turn_deg < -50.0 and abs(back.turn_deg - back.true_turn_deg) <= tick
+    assert back.checks_passed == 0 and not back.reached_target
+    assert back.score < outcome.score
+
+
+def _recorded(ticks_at, mapping):
+    """A recorded device stream: one jog message per (time s, signed ticks) entry, as a
+    real iControls Pro sends them (relative control_change), stamped with the time."""
+    jog = mapping.control(JOG)
+    return [control_message(jog, int(n), mapping.relative_encoding).copy(time=float(t))
+            for t, n in ticks_at]
+
+
+def test_the_evaluator_scores_a_recorded_stream_with_no_plant():
+    task = JogWheelTask()
+    mapping = LoadMidiMapping()
+    evaluator = MidiJogEvaluator(task, mapping)
+    # the evaluator is given a task, the mapping and the message stream: nothing else
+    assert list(inspect.signature(evaluator.evaluate).parameters) == ["stream"]
+    tick = evaluator.tick_deg
+    t0, t1 = task.turn_start, task.turn_start + task.n_parts * task.segment_time
+    # a steady turn of 72 deg over the turning motion (closed form: 72 / tick ticks)
+    n = int(round(72.0 / tick))
+    stream = _recorded([(t0 + (k + 1) * (t1 - t0) / n, 1) for k in range(n)], mapping)
+    # noise a real port delivers: another control, a foreign channel, broken bytes
+    stream += [mido.Message("note_on", channel=15, note=1, velocity=64, time=1.5),
+               mido.Message("sysex", data=[1, 2], time=1.6)]
+    stream.sort(key=lambda m: m.time)
+    good = evaluator.evaluate(stream)
+    assert good.turn_deg == pytest.approx(n * tick)
+    assert good.checks_passed == task.n_parts and good.reached_target
+    d = int(task.dims_per_part.sum())
+    assert good.s_b == d and good.score >= task.target_score and good.rejected == 2
+    # (time, message) pairs, as a live port's receive times give them, score the same
+    assert evaluator.evaluate([(m.time, m) for m in stream]).score == good.score
+    # the same stream stopped half way: two checks pass, the third fails, no target
+    half = [m for m in stream if m.time <= t0 + 0.5 * (t1 - t0)]
+    stopped = evaluator.evaluate(half)
+    assert stopped.checks_passed == 2 and not stopped.reached_target
+    assert stopped.s_b == task.dims_per_part[:3].sum() and stopped.score < task.target_score
+    # ticks before the turning motion (the pinch closing) do not count
+    early = _recorded([(0.9, 5)], mapping) + stream
+    assert evaluator.evaluate(early).turn_deg == pytest.approx(good.turn_deg)
+    # the other way round: nothing passes
+    reverse = [control_message(mapping.control(JOG), -1, mapping.relative_encoding)
+               .copy(time=m.time) for m in stream if m.type == "control_change"]
+    assert evaluator.evaluate(reverse).checks_passed == 0
+
+
+def test_cli_jog_wheel_runs_and_bad_flags_exit_2(tmp_path, capsys):
+    db = tmp_path / "jog.sqlite"
+    assert cli_main(["inhand", "--task", "jog_wheel", "--accelerometer", "joywarrior24f14",
+                     "--db", str(db)]) == 2
+    assert "--task jog_wheel" in capsys.readouterr().err
+    assert cli_main(["inhand", "--task", "jog_wheel", "--optimizer", "random", "--trials", "1",
+                     "--db", str(db), "--no-plot", "--no-progress", "--no-html"]) == 0
+    out = capsys.readouterr().out
+    assert "inhand: jog_wheel" in out and "trials: 1 done" in out
+    assert "best score" in out and "held" not in out  # a wheel on its axle
