@@ -78,6 +78,23 @@ def test_pick_plan_reaches_every_pose_and_releases_over_the_hole(hamburg):
     assert plan.seconds["ik"] + plan.seconds["path"] < 10.0  # bounded (timing: benchmark)
 
 
+def test_each_grasp_class_gets_a_time_budget(hamburg):
+    from handle_drake.apps.pick.plan import CLASS_ORDER, PickPlanningError
+    from handle_drake.grasp.planning import clear_solution_cache
+
+    clear_solution_cache()  # a cached answer would skip the search the budget bounds
+    name, sphere = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "sphere")
+    reach = ArmReach(hamburg, ignore=(name,))
+    with pytest.raises(PickPlanningError) as error:
+        plan_pick(hamburg, reach, name, "sphere", sphere.size,
+                  initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
+                  grasp_budget=1e-6)
+    # Every class the sphere's size allows ran out of its budget; the others are too small.
+    timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
+                 in str(error.value)]
+    assert timed_out == ["tripod", "parallel_extension", "palmar_pinch"]
+
+
 def test_pick_command_puts_the_sphere_in_the_box(capsys):
     code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere"])
     lines = capsys.readouterr().out.strip().splitlines()
