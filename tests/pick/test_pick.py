@@ -95,6 +95,30 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     assert timed_out == ["tripod", "parallel_extension", "palmar_pinch"]
 
 
+def test_bystanders_are_welded_where_they_rest_and_the_target_stays_free(hamburg):
+    import dataclasses as dc
+
+    from handle_drake.apps.pick.execute import weld_bystanders
+    from handle_drake.station import GetPlant, MakeHandStation
+
+    scene = dc.replace(random_scene(hamburg, 3), cameras=[])
+    names = [n for n, _ in scene_objects(scene)]
+    target = names[-1]
+    welded = weld_bystanders(scene, target)
+    plant = GetPlant(MakeHandStation(welded))
+    free = GetPlant(MakeHandStation(scene))
+    assert free.num_positions() - plant.num_positions() == 7 * (len(names) - 1)
+    context = plant.CreateDefaultContext()
+    for name, o in scene_objects(welded):
+        body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(name))[0])
+        assert body.is_floating_base_body() == (name == target)
+        np.testing.assert_allclose(
+            plant.EvalBodyPoseInWorld(context, body).translation(),
+            initial_pose(o, scene.table).translation(), atol=1e-12)
+    with pytest.raises(ValueError, match="not an object"):
+        weld_bystanders(scene, "object_9")
+
+
 def test_pick_command_puts_the_sphere_in_the_box(capsys):
     code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere"])
     lines = capsys.readouterr().out.strip().splitlines()
