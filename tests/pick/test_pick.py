@@ -93,6 +93,13 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
                  in str(error.value)]
     assert timed_out == ["tripod", "parallel_extension", "palmar_pinch"]
+    # A total budget: the first class spends it, the rest are not tried.
+    with pytest.raises(PickPlanningError) as error:
+        plan_pick(hamburg, reach, name, "sphere", sphere.size,
+                  initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
+                  grasp_budget=None, total_budget=1e-6)
+    assert "tripod: no grasp plan: time budget" in str(error.value)
+    assert "parallel_extension: not tried: the grasp planning budget" in str(error.value)
 
 
 def test_bystanders_are_welded_where_they_rest_and_the_target_stays_free(hamburg):

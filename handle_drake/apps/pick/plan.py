@@ -34,6 +34,7 @@ from handle_drake.grasp.planning import plan_grasp
 from handle_drake.scene.config import box_pose, hole_centres
 
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
+           "GRASP_TOTAL_BUDGET",
            "free_path"]
 
 #: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
@@ -50,6 +51,9 @@ CLASS_ORDER = {
 #: extension on a cuboid) took 0.9-7 s cold at load 9 on 2 cores; the failing ones up to
 #: 45 s each (docs/results/pick.md).
 GRASP_BUDGET = 10.0  # s
+#: Seconds all classes' grasp searches together may take (each gets the least of
+#: ``GRASP_BUDGET`` and what is left); the classes after it are reported as not tried.
+GRASP_TOTAL_BUDGET = 30.0  # s
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 CARRY_HEIGHT = 0.12  # m, above the release pose
 
@@ -174,11 +178,13 @@ def _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearanc
 
 
 def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidTransform,
-              q_start, classes=None, grasp_budget: float | None = GRASP_BUDGET) -> PickPlan:
+              q_start, classes=None, grasp_budget: float | None = GRASP_BUDGET,
+              total_budget: float | None = GRASP_TOTAL_BUDGET) -> PickPlan:
     """Plans picking ``target`` (a ``kind`` of ``size`` at ``X_WO``) into its hole
     (see the module doc). ``reach`` is an :class:`~handle_drake.apps.pick.reach.ArmReach`
     of the scenario ignoring ``target``; ``q_start`` the arm's joints now;
-    ``grasp_budget`` the seconds each class's grasp search may take (None: unbounded).
+    ``grasp_budget`` the seconds each class's grasp search may take, ``total_budget``
+    all of them together (None: unbounded).
     The grasp planner reuses its hand-IK answer for a kind and size it planned before
     (``plan_grasp``'s ``cache``), so a second pick of the same kind and size skips it."""
 
@@ -192,11 +198,18 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     q_start = np.asarray(q_start, dtype=float)
     attempts, seconds = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}
     for cls in classes or CLASS_ORDER[kind]:
+        budget = grasp_budget
+        if total_budget is not None:
+            left = total_budget - seconds["grasp"]
+            if left <= 0:
+                attempts[cls] = f"not tried: the grasp planning budget ({total_budget} s) is spent"
+                continue
+            budget = left if budget is None else min(budget, left)
         start = time.perf_counter()
         try:
             grasp = plan_grasp(cls, spec, X_WO, table_height=scenario.table.top_height,
                                reach_direction=X_WO.translation()[:2] - base[:2],
-                               coupling_ratio=ratio, time_budget=grasp_budget)
+                               coupling_ratio=ratio, time_budget=budget)
         except ValueError as error:
             attempts[cls] = f"no grasp plan: {str(error)[:100]}"
             seconds["grasp"] += time.perf_counter() - start
