@@ -70,6 +70,7 @@ row, ``z_G`` opposition axis, thumb on ``+z_G``), P palm, B hand base (forearm).
 from __future__ import annotations
 
 import dataclasses as dc
+import time
 from functools import lru_cache
 
 import numpy as np
@@ -94,7 +95,9 @@ __all__ = [
     "PLANNABLE_KINDS",
     "GraspPlan",
     "GraspPlanningError",
+    "GraspPlanningTimeout",
     "ClassSynergies",
+    "clear_solution_cache",
     "default_synergies",
     "grasp_dims",
     "plan_grasp",
@@ -139,6 +142,23 @@ _ACT = _SPEC.actuated_joint_names
 
 class GraspPlanningError(ValueError):
     """No grasp of the requested class was found (unreachable pose or object)."""
+
+
+class GraspPlanningTimeout(GraspPlanningError):
+    """The class's hand-IK search ran past its ``time_budget`` (no answer: not cached)."""
+
+
+# The hand-IK search's answer for (class, kind, shape, dims, height above the table,
+# coupling ratio) with the default synergies: it does not depend on where the object
+# stands or the reach direction (those only place the solved grasp in the world), so a
+# second pick of the same kind and size reuses it (a failed search too). Bounded.
+_SOLUTION_CACHE: dict = {}
+_SOLUTION_CACHE_SIZE = 256
+
+
+def clear_solution_cache() -> None:
+    """Forgets the cached hand-IK answers (see ``plan_grasp``'s ``cache``)."""
+    _SOLUTION_CACHE.clear()
 
 
 # ---------------------------------------------------------------- objects
@@ -442,6 +462,8 @@ def plan_grasp(
     coupling_ratio: float = 1.0,
     lift_height: float = 0.13,
     vertical_standoff: bool = True,
+    time_budget: float | None = None,
+    cache: bool = True,
 ) -> GraspPlan:
     """Plan a grasp of class ``grasp_class`` on ``obj`` at ``X_WO`` (see module doc).
 
@@ -452,6 +474,11 @@ def plan_grasp(
     reach_direction: preferred horizontal direction (world x, y) the hand
       reaches in (the forearm trails behind it); used to pick the hand's yaw
       among the object's symmetric grasps.
+    time_budget: seconds the hand-IK search may take (checked before each
+      solve, so it can overrun by one solve); None: no bound.
+    cache: reuse the hand-IK answer of an earlier call with the same class,
+      object kind and dimensions, height above the table and coupling ratio
+      (default synergies only); the answer is exact, not approximate.
 
     Raises:
         ValueError: unknown class, object kind or size outside the class's
@@ -459,8 +486,13 @@ def plan_grasp(
             supported orientation, a target outside the wrist's travel.
         GraspPlanningError (a ValueError): no collision-free posture puts the
             class's contacts on the object from above the table.
+            GraspPlanningTimeout (a GraspPlanningError): the search ran out of
+            ``time_budget``.
     """
     info = grasp_info(grasp_class)
+    if time_budget is not None and not (np.isfinite(time_budget) and time_budget > 0):
+        raise ValueError(f"time_budget must be a positive number of seconds, got {time_budget}")
+    deadline = None if time_budget is None else time.perf_counter() + float(time_budget)
     spec = _object_spec(obj)
     if not isinstance(X_WO, RigidTransform):
         raise TypeError(f"X_WO must be a RigidTransform, got {type(X_WO).__name__}")
@@ -474,6 +506,10 @@ def plan_grasp(
     row_O = _row_axis(spec)
     _world_grasp_frame(spec.kind, X_WO, row_O=row_O)  # validates the resting orientation early
 
+    key = None
+    if cache and synergies is None:
+        key = (info.grasp_class, spec.kind, shape, tuple(float(d) for d in dims), height,
+               float(coupling_ratio))
     synergies = default_synergies() if synergies is None else synergies
     if not isinstance(synergies, ClassSynergies):
         raise TypeError(f"synergies must be ClassSynergies, got {type(synergies).__name__}")
@@ -482,8 +518,19 @@ def plan_grasp(
                                             coupling_ratio)
     c_table1 = grasp_centre_palm(info.grasp_class, size)
     a_P = approach_palm(info.grasp_class)
-    solution = _solve_contacts(info, spec.kind, shape, dims, height, priors, priors_refine,
-                               c_table1, a_P, coupling_ratio)
+    if key is not None and key in _SOLUTION_CACHE:
+        solution = _SOLUTION_CACHE[key]
+    else:
+        solution = _solve_contacts(info, spec.kind, shape, dims, height, priors, priors_refine,
+                                   c_table1, a_P, coupling_ratio, deadline)
+        if solution is _TIMED_OUT:
+            raise GraspPlanningTimeout(
+                f"time budget: the {info.name} search took over {time_budget:.1f} s "
+                f"without a grasp")
+        if key is not None:
+            if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
+                _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
+            _SOLUTION_CACHE[key] = solution
     if solution is None:
         raise GraspPlanningError(
             f"unreachable: no collision-free {info.name} grasp puts the "
@@ -547,9 +594,17 @@ def _posture_priors(grasp_class, synergies: ClassSynergies, amplitudes, coupling
     return priors, priors_refine
 
 
+_TIMED_OUT = object()  # _solve_contacts's answer when the deadline passed
+
+
+def _out_of_time(deadline) -> bool:
+    return deadline is not None and time.perf_counter() > deadline
+
+
 def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
-                    coupling_ratio):
-    """``(solution, up_G, centre source, kinematics)`` of the first acceptable IK, or None.
+                    coupling_ratio, deadline=None):
+    """``(solution, up_G, centre source, kinematics)`` of the first acceptable IK, None,
+    or ``_TIMED_OUT`` when ``deadline`` (``time.perf_counter()``) passed before one.
 
     The parallel extension first with its whole row of fingers on the object
     (on a sphere, the fingers that fit: ``contact_layout``), then, while there
@@ -568,14 +623,15 @@ def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_ta
     for pad_tilt in tilts:
         for row_fingers in rows:
             found = _solve_layout(info, kind, shape, dims, height, priors, priors_refine,
-                                  c_table1, a_P, coupling_ratio, row_fingers, pad_tilt)
+                                  c_table1, a_P, coupling_ratio, row_fingers, pad_tilt,
+                                  deadline)
             if found is not None:
                 return found
     return None
 
 
 def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
-                  coupling_ratio, row_fingers, pad_tilt=None):
+                  coupling_ratio, row_fingers, pad_tilt=None, deadline=None):
     """:func:`_solve_contacts` for one layout (``row_fingers``: ``contact_layout``).
 
     Canonical attempts first: the hand comes in along its Table 2 approach
@@ -596,6 +652,8 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
                                 tuple(up_canonical), height)
     X_PG_guess = RigidTransform(_canonical_R_PG(a_P), c_table1)
     for prior in priors:
+        if _out_of_time(deadline):
+            return _TIMED_OUT
         sol = kin_canonical.solve_grasp(
             info.grasp_class, shape, dims, prior, approach_P=a_P, X_PO_guess=X_PG_guess,
             min_distance=-MAX_PENETRATION, max_approach_angle=CANONICAL_APPROACH_ANGLE,
@@ -608,12 +666,16 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
     attempts = [(p, "table1") for p in priors] + [(p, "refined") for p in priors_refine]
     free_kin = _kinematics(float(coupling_ratio), shape, tuple(dims), None, None)
     for prior, source in attempts:
+        if _out_of_time(deadline):
+            return _TIMED_OUT
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
             centre_prior_weight=100.0, p_PO_guess=c_table1)
         free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None,
                                     row_fingers=row_fingers, max_pad_tilt=pad_tilt, **kw)
         if not (free.success and free.contact_error < 1.5e-3):
             continue
+        if _out_of_time(deadline):
+            return _TIMED_OUT
         up = _up_in_grasp_frame(kind, -(free.X_PO.rotation().inverse().multiply(a_P)))
         kin = _kinematics(float(coupling_ratio), shape, tuple(dims), tuple(np.round(up, 6)),
                           height)

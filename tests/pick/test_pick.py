@@ -78,6 +78,54 @@ def test_pick_plan_reaches_every_pose_and_releases_over_the_hole(hamburg):
     assert plan.seconds["ik"] + plan.seconds["path"] < 10.0  # bounded (timing: benchmark)
 
 
+def test_each_grasp_class_gets_a_time_budget(hamburg):
+    from handle_drake.apps.pick.plan import CLASS_ORDER, PickPlanningError
+    from handle_drake.grasp.planning import clear_solution_cache
+
+    clear_solution_cache()  # a cached answer would skip the search the budget bounds
+    name, sphere = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "sphere")
+    reach = ArmReach(hamburg, ignore=(name,))
+    with pytest.raises(PickPlanningError) as error:
+        plan_pick(hamburg, reach, name, "sphere", sphere.size,
+                  initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
+                  grasp_budget=1e-6)
+    # Every class the sphere's size allows ran out of its budget; the others are too small.
+    timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
+                 in str(error.value)]
+    assert timed_out == ["tripod", "parallel_extension", "palmar_pinch"]
+    # A total budget: the first class spends it, the rest are not tried.
+    with pytest.raises(PickPlanningError) as error:
+        plan_pick(hamburg, reach, name, "sphere", sphere.size,
+                  initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
+                  grasp_budget=None, total_budget=1e-6)
+    assert "tripod: no grasp plan: time budget" in str(error.value)
+    assert "parallel_extension: not tried: the grasp planning budget" in str(error.value)
+
+
+def test_bystanders_are_welded_where_they_rest_and_the_target_stays_free(hamburg):
+    import dataclasses as dc
+
+    from handle_drake.apps.pick.execute import weld_bystanders
+    from handle_drake.station import GetPlant, MakeHandStation
+
+    scene = dc.replace(random_scene(hamburg, 3), cameras=[])
+    names = [n for n, _ in scene_objects(scene)]
+    target = names[-1]
+    welded = weld_bystanders(scene, target)
+    plant = GetPlant(MakeHandStation(welded))
+    free = GetPlant(MakeHandStation(scene))
+    assert free.num_positions() - plant.num_positions() == 7 * (len(names) - 1)
+    context = plant.CreateDefaultContext()
+    for name, o in scene_objects(welded):
+        body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(name))[0])
+        assert body.is_floating_base_body() == (name == target)
+        np.testing.assert_allclose(
+            plant.EvalBodyPoseInWorld(context, body).translation(),
+            initial_pose(o, scene.table).translation(), atol=1e-12)
+    with pytest.raises(ValueError, match="not an object"):
+        weld_bystanders(scene, "object_9")
+
+
 def test_pick_command_puts_the_sphere_in_the_box(capsys):
     code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere"])
     lines = capsys.readouterr().out.strip().splitlines()

@@ -10,6 +10,12 @@ through ``hand.position``; the close ramps over ``CLOSE_TIME`` s and holds
 the box (:func:`handle_drake.scene.plant.in_box`). A failure is told by what
 the object did: not lifted with the hand, dropped on the way, or stopped on
 the lid.
+
+The other objects on the table (bystanders) are free bodies; with
+``still_bystanders`` they are welded where they rest (resting on the table,
+1 s of the station alone, they halve its speed). Off by default: in the pick
+runs the gain was within the machine's noise and one of the seeded scenes
+ended differently (docs/results/pick.md, benchmarks/bench_pick_sim.py).
 """
 
 from __future__ import annotations
@@ -20,10 +26,10 @@ import time
 import numpy as np
 
 from handle_drake.devices.arm.model import get_arm_spec
-from handle_drake.scene.config import in_box
+from handle_drake.scene.config import in_box, object_instance_name
 from handle_drake.station import MakeHandStation
 
-__all__ = ["PickOutcome", "execute_pick", "MIN_SEGMENT"]
+__all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "MIN_SEGMENT"]
 
 MIN_SEGMENT = 0.4  # s
 CLOSE_TIME = 0.6  # s
@@ -70,9 +76,26 @@ def _timeline(plan, velocity):
     return np.array(times), np.array(arm), np.array(hand), marks
 
 
-def execute_pick(scenario, plan, html=None) -> PickOutcome:
-    """Simulates ``plan`` on ``scenario``'s station (cameras left out); writes an
-    HTML replay to ``html`` when given."""
+def weld_bystanders(scenario, target: str):
+    """``scenario`` with every object but ``target`` (an instance name: ``object``,
+    ``object_1``...) welded where it rests."""
+    names = [object_instance_name(i + 1) for i in range(len(scenario.objects))]
+    if scenario.object is not None:
+        names.append("object")
+    if target not in names:
+        raise ValueError(f"target {target!r} is not an object of the scenario")
+    first = scenario.object
+    if first is not None and target != "object":
+        first = dc.replace(first, fixed=True)
+    others = [o if object_instance_name(i + 1) == target else dc.replace(o, fixed=True)
+              for i, o in enumerate(scenario.objects)]
+    return dc.replace(scenario, object=first, objects=others)
+
+
+def execute_pick(scenario, plan, html=None, still_bystanders: bool = False) -> PickOutcome:
+    """Simulates ``plan`` on ``scenario``'s station (cameras left out; the other
+    objects welded with ``still_bystanders``); writes an HTML replay to
+    ``html`` when given."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import TrajectorySource
@@ -80,6 +103,8 @@ def execute_pick(scenario, plan, html=None) -> PickOutcome:
 
 
     scenario = dc.replace(scenario, cameras=[])
+    if still_bystanders:
+        scenario = weld_bystanders(scenario, plan.target)
     meshcat = None
     if html is not None:
         from pydrake.geometry import StartMeshcat

@@ -33,7 +33,9 @@ from handle_drake.geometry.objects import ObjectSpec, resting_height
 from handle_drake.grasp.planning import plan_grasp
 from handle_drake.scene.config import box_pose, hole_centres
 
-__all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "free_path"]
+__all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
+           "GRASP_TOTAL_BUDGET",
+           "free_path"]
 
 #: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
 #: through lift and carry in bench_pick first (lateral tripod let a cuboid swing 32 deg).
@@ -43,6 +45,15 @@ CLASS_ORDER = {
     "cuboid": ("parallel_extension", "tripod", "palmar_pinch", "lateral_tripod",
                "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
 }
+#: Seconds the grasp planner's hand-IK search may take per class (``plan_grasp``'s
+#: ``time_budget``): a class that has not found a grasp by then is reported as timed out
+#: and the next is tried. The classes taken in bench_pick (tripod on a sphere, parallel
+#: extension on a cuboid) took 0.9-7 s cold at load 9 on 2 cores; the failing ones up to
+#: 45 s each (docs/results/pick.md).
+GRASP_BUDGET = 10.0  # s
+#: Seconds all classes' grasp searches together may take (each gets the least of
+#: ``GRASP_BUDGET`` and what is left); the classes after it are reported as not tried.
+GRASP_TOTAL_BUDGET = 30.0  # s
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 CARRY_HEIGHT = 0.12  # m, above the release pose
 
@@ -167,10 +178,15 @@ def _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearanc
 
 
 def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidTransform,
-              q_start, classes=None) -> PickPlan:
+              q_start, classes=None, grasp_budget: float | None = GRASP_BUDGET,
+              total_budget: float | None = GRASP_TOTAL_BUDGET) -> PickPlan:
     """Plans picking ``target`` (a ``kind`` of ``size`` at ``X_WO``) into its hole
     (see the module doc). ``reach`` is an :class:`~handle_drake.apps.pick.reach.ArmReach`
-    of the scenario ignoring ``target``; ``q_start`` the arm's joints now."""
+    of the scenario ignoring ``target``; ``q_start`` the arm's joints now;
+    ``grasp_budget`` the seconds each class's grasp search may take, ``total_budget``
+    all of them together (None: unbounded).
+    The grasp planner reuses its hand-IK answer for a kind and size it planned before
+    (``plan_grasp``'s ``cache``), so a second pick of the same kind and size skips it."""
 
     if kind not in CLASS_ORDER:
         raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
@@ -182,11 +198,18 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     q_start = np.asarray(q_start, dtype=float)
     attempts, seconds = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}
     for cls in classes or CLASS_ORDER[kind]:
+        budget = grasp_budget
+        if total_budget is not None:
+            left = total_budget - seconds["grasp"]
+            if left <= 0:
+                attempts[cls] = f"not tried: the grasp planning budget ({total_budget} s) is spent"
+                continue
+            budget = left if budget is None else min(budget, left)
         start = time.perf_counter()
         try:
             grasp = plan_grasp(cls, spec, X_WO, table_height=scenario.table.top_height,
                                reach_direction=X_WO.translation()[:2] - base[:2],
-                               coupling_ratio=ratio)
+                               coupling_ratio=ratio, time_budget=budget)
         except ValueError as error:
             attempts[cls] = f"no grasp plan: {str(error)[:100]}"
             seconds["grasp"] += time.perf_counter() - start
