@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial, scenario_fingerprint
-from handle_drake.apps.inhand.task import InHandTask, InHandTrial
+from handle_drake.apps.inhand.task import InHandTask, InHandTrial, inhand_fingerprint
 from handle_drake.learning.cluster import as_executor, executor_workers, max_local_workers
 from handle_drake.learning.executors import InlineExecutor
 from handle_drake.learning.log import TrialLog
@@ -103,8 +103,9 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     config = _config(trial, optimizer, n_particles)
     run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
     if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
-
         run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))
+    else:  # the code's fingerprint (as babbling's): other settings under this id are refused
+        run_id += "-" + inhand_fingerprint()
     db = Path(db)
     db.parent.mkdir(parents=True, exist_ok=True)
     with TrialLog(db) as log:

@@ -39,7 +39,6 @@ trial is re-simulated from its scenario alone (:func:`simulate_scenario`).
 
 
 import dataclasses as dc
-import hashlib
 import math
 import time
 from functools import cached_property
@@ -77,7 +76,7 @@ from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensio
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
-from handle_drake.apps.inhand.task import DATA_DIR
+from handle_drake.apps.inhand.task import DATA_DIR, GistMotionData, gist_data, gist_from_data
 from handle_drake.base.hands import (
     AddHand,
     actuated_position_limits,
@@ -85,6 +84,7 @@ from handle_drake.base.hands import (
     get_hand_spec,
 )
 from handle_drake.learning.executors import TrialResult
+from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver
 
@@ -133,16 +133,6 @@ class ScrewCapModel:
 
 
 @dc.dataclass
-class GistMotionData:
-    """One meta motion of the action gist, as data (``MetaMotion``)."""
-
-    finger: str = "FF"
-    start: float = 0.0
-    end: float = 1.0
-    variation: list[float] = dc.field(default_factory=list)
-
-
-@dc.dataclass
 class ScrewCapScenario:
     """One screw-cap trial, whole: the model, the hand, the motion and its parameters."""
 
@@ -175,18 +165,11 @@ class ScrewCapScenario:
         return self.n_gaits * self.gait_duration + self.hold
 
     def action_gist(self) -> ActionGist:
-        return ActionGist.from_dict({"name": self.gist_name, "motions": [
-            dc.asdict(m) for m in self.gist]})
+        return gist_from_data(self.gist_name, self.gist)
 
     @staticmethod
     def gist_data(gist: ActionGist) -> list[GistMotionData]:
-        return [GistMotionData(m.finger, m.start, m.end, list(m.variation))
-                for m in gist.motions]
-
-
-def scenario_fingerprint(text: str) -> str:
-    """A short content hash of a scenario's YAML (for run ids)."""
-    return hashlib.sha256(text.encode()).hexdigest()[:10]
+        return gist_data(gist)
 
 
 class GaitMotionSource(GistMotionSource):
