@@ -42,7 +42,6 @@ import functools
 import time
 from functools import cached_property
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 from pydrake.common.schema import Transform
@@ -472,78 +471,77 @@ class InHandTrial:
         context.SetTimeStateAndParametersFrom(built["settled"])
         harness.controller.set_parameters(harness.controller_context(), x)
         plant_context = harness.plant_context()
-        body = built["body"]
-        X0 = plant.EvalBodyPoseInWorld(plant_context, body)
-        R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
-        harness.initialize()
-        if html is not None:
-            early_stop = False  # a replay shows the whole motion (the score is the same)
-
+        X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
         samples = c.sample_times()
-        checks = c.check_times()
-        step = 1e-3 * c.time_step
-        tolerance = float(np.radians(c.tolerance_deg))
+        st = _Sampling(plant_context=plant_context,
+                       station_context=harness.station.GetMyContextFromRoot(context),
+                       R0_inv=X0.rotation().inverse(), p0=X0.translation().copy(),
+                       early_stop=early_stop and html is None,  # a replay shows it all
+                       samples=samples, checks=c.check_times(),
+                       matches=np.zeros(samples.size, dtype=bool))
+        harness.initialize()
         accelerometer = built["accelerometer"]
-        station_context = harness.station.GetMyContextFromRoot(context)
-        contacts_port = plant.get_contact_results_output_port()
-        matches = np.zeros(samples.size, dtype=bool)
-        rotations, accel_rotations, contacts_log = [], [], []
-        # failed: a check failed, no later check counts (the checks pass in a row)
-        st = SimpleNamespace(i=0, next_check=0, angle=0.0, previous=0.0, held_time=0.0,
-                             held=True, passed=0, stopped=False, failed=False,
-                             last_touch=0.0, acc_prev=None, acc_angle=0.0)
         if accelerometer is not None:  # the reading at the start of the trial (settled)
-            up_O = accelerometer.Eval(station_context)
+            up_O = accelerometer.Eval(st.station_context)
             st.acc_prev = float(np.arctan2(up_O[1], up_O[0]))
-
-        def sample():
-            i, t = st.i, float(samples[st.i])
-            st.i += 1
-            X = plant.EvalBodyPoseInWorld(plant_context, body)
-            R = (R0_inv @ X.rotation()).matrix()
-            raw = -np.arctan2(R[1, 0], R[0, 0])  # about the object axis, task direction > 0
-            st.angle += (raw - st.previous + np.pi) % (2 * np.pi) - np.pi
-            st.previous = raw
-            touching = _touching(contacts_port.Eval(plant_context), body, built["hand_bodies"])
-            p = X.translation()
-            if touching:
-                st.last_touch = t
-            # A rolling object hops off the palm for a few ms: it counts as
-            # touching the hand if it did so within the last contact_window.
-            st.held = bool(p[2] - p0[2] > -c.drop and np.linalg.norm(p - p0) < c.max_travel
-                           and t - st.last_touch <= c.contact_window + 1e-9)
-            if st.held:
-                st.held_time = t
-            if accelerometer is not None:
-                # The instrumented object (report 2.4): its accelerometer (sensor frame =
-                # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
-                # "up" in the object frame, whose angle about the object axis gives the
-                # rotation (the task direction turns "up" the other way round).
-                up_O = accelerometer.Eval(station_context)
-                raw_acc = float(np.arctan2(up_O[1], up_O[0]))
-                st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
-                st.acc_prev = raw_acc
-                accel_rotations.append(float(np.degrees(st.acc_angle)))
-            rotations.append(float(np.degrees(st.angle)))
-            contacts_log.append(touching)
-            matches[i] = st.held and st.angle >= c.benchmark_at(t) - tolerance
-            if st.next_check < checks.size and t >= checks[st.next_check] - step:
-                ok = st.held and st.angle >= c.target * c.benchmark[st.next_check] - tolerance
-                if ok and not st.failed:
-                    st.passed += 1
-                st.failed = st.failed or not ok
-                st.next_check += 1
-                if st.failed and c.evaluation == "incremental" and early_stop:
-                    raise _EarlyStop
-            if not st.held and c.evaluation == "old" and early_stop:
-                raise _EarlyStop
-
         try:
             harness.advance(samples, html=html if meshcat is not None else None,
-                            at_each=sample)
+                            at_each=lambda: self._sample(st, built))
         except _EarlyStop:
             st.stopped = True
-        sim_time = float(samples[len(rotations) - 1])
+        return self._outcome(st, time.perf_counter() - start_wall)
+
+    def _sample(self, st: "_Sampling", built: dict) -> None:
+        """One sample of the running trial: rotation, held, contacts, the checks."""
+        c, plant, body = self.config, built["harness"].plant, built["body"]
+        i, t = st.i, float(st.samples[st.i])
+        st.i += 1
+        X = plant.EvalBodyPoseInWorld(st.plant_context, body)
+        R = (st.R0_inv @ X.rotation()).matrix()
+        raw = -np.arctan2(R[1, 0], R[0, 0])  # about the object axis, task direction > 0
+        st.angle += (raw - st.previous + np.pi) % (2 * np.pi) - np.pi
+        st.previous = raw
+        touching = _touching(plant.get_contact_results_output_port().Eval(st.plant_context),
+                             body, built["hand_bodies"])
+        p = X.translation()
+        if touching:
+            st.last_touch = t
+        # A rolling object hops off the palm for a few ms: it counts as
+        # touching the hand if it did so within the last contact_window.
+        st.held = bool(p[2] - st.p0[2] > -c.drop and np.linalg.norm(p - st.p0) < c.max_travel
+                       and t - st.last_touch <= c.contact_window + 1e-9)
+        if st.held:
+            st.held_time = t
+        accelerometer = built["accelerometer"]
+        if accelerometer is not None:
+            # The instrumented object (report 2.4): its accelerometer (sensor frame =
+            # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
+            # "up" in the object frame, whose angle about the object axis gives the
+            # rotation (the task direction turns "up" the other way round).
+            up_O = accelerometer.Eval(st.station_context)
+            raw_acc = float(np.arctan2(up_O[1], up_O[0]))
+            st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
+            st.acc_prev = raw_acc
+            st.accel_rotations.append(float(np.degrees(st.acc_angle)))
+        st.rotations.append(float(np.degrees(st.angle)))
+        st.contacts.append(touching)
+        tolerance = float(np.radians(c.tolerance_deg))
+        st.matches[i] = st.held and st.angle >= c.benchmark_at(t) - tolerance
+        if st.next_check < st.checks.size and t >= st.checks[st.next_check] - 1e-3 * c.time_step:
+            ok = st.held and st.angle >= c.target * c.benchmark[st.next_check] - tolerance
+            if ok and not st.failed:
+                st.passed += 1
+            st.failed = st.failed or not ok
+            st.next_check += 1
+            if st.failed and c.evaluation == "incremental" and st.early_stop:
+                raise _EarlyStop
+        if not st.held and c.evaluation == "old" and st.early_stop:
+            raise _EarlyStop
+
+    def _outcome(self, st: "_Sampling", wall_time: float) -> TrialOutcome:
+        """The score of the samples taken (eqs. 47-49, or the old evaluation)."""
+        c = self.config
+        rotations, samples, checks = st.rotations, st.samples, st.checks
         angle, passed = st.angle, st.passed
         held_end = st.held and not st.stopped
         # The target itself is strict (the checks' tolerance lets a run stop within
@@ -551,8 +549,9 @@ class InHandTrial:
         reached = bool(held_end and passed == c.n_checks and angle >= c.target)
         if c.evaluation == "incremental":
             if st.failed:  # the samples after the first failed check count as not matching
-                matches[samples > checks[passed] + step] = False
-            score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
+                st.matches[samples > checks[passed] + 1e-3 * c.time_step] = False
+            score, s_b, s_a = incremental_score(self.dims_per_part, passed, st.matches,
+                                                reached)
         else:
             score = old_score(st.held_time, c.total_time, angle if held_end else 0.0, c.target)
             s_b = s_a = None
@@ -561,8 +560,37 @@ class InHandTrial:
             held=held_end, held_time=st.held_time, checks_passed=passed,
             completed=not st.stopped, reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(rotations)].tolist(), rotation_deg_series=rotations,
-            accelerometer_rotation_deg_series=accel_rotations, contacts=contacts_log,
-            sim_time=sim_time, wall_time=time.perf_counter() - start_wall)
+            accelerometer_rotation_deg_series=st.accel_rotations, contacts=st.contacts,
+            sim_time=float(samples[len(rotations) - 1]), wall_time=wall_time)
+
+
+@dc.dataclass(eq=False)
+class _Sampling:
+    """The running state of one in-hand trial's samples (:meth:`InHandTrial.evaluate`)."""
+
+    plant_context: object
+    station_context: object
+    R0_inv: object  # the object's start orientation, inverted
+    p0: np.ndarray  # the object's start position
+    early_stop: bool
+    samples: np.ndarray  # sample times
+    checks: np.ndarray  # check times
+    matches: np.ndarray  # per sample: held and on the benchmark
+    i: int = 0  # the next sample
+    next_check: int = 0
+    angle: float = 0.0  # rad, unwrapped, task direction > 0
+    previous: float = 0.0
+    held_time: float = 0.0
+    held: bool = True
+    passed: int = 0
+    stopped: bool = False
+    failed: bool = False  # a check failed: no later check counts (the checks pass in a row)
+    last_touch: float = 0.0
+    acc_prev: float | None = None
+    acc_angle: float = 0.0
+    rotations: list = dc.field(default_factory=list)  # deg per sample
+    accel_rotations: list = dc.field(default_factory=list)
+    contacts: list = dc.field(default_factory=list)  # hand bodies touching, per sample
 
 
 class _EarlyStop(Exception):

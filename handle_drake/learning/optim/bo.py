@@ -138,6 +138,38 @@ class RandomSearch(Optimizer):
         return self._register(u)
 
 
+def _check_options(dim, batch_size, output_transform, n_initial, xi, ei_threshold,
+                   direct_maxfun, refit_until, refit_growth):
+    """Validates :class:`BayesianOptimizer`'s options; returns ``n_initial`` and
+    ``direct_maxfun`` with their defaults for ``dim`` dimensions filled in."""
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) \
+            or batch_size < 1:
+        raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    if output_transform not in OUTPUT_TRANSFORMS:
+        raise ValueError(
+            f"output_transform must be one of {OUTPUT_TRANSFORMS}, got {output_transform!r}"
+        )
+    if n_initial is None:
+        n_initial = max(10, dim + 1)
+    if isinstance(n_initial, bool) or not isinstance(n_initial, int | np.integer):
+        raise TypeError(f"n_initial must be an integer, got {n_initial!r}")
+    if n_initial < 1:
+        raise ValueError(f"n_initial must be >= 1, got {n_initial}")
+    if xi is not None and not (math.isfinite(xi) and xi >= 0):
+        raise ValueError(f"xi must be >= 0 or None, got {xi}")
+    if not (math.isfinite(ei_threshold) and ei_threshold >= 0):
+        raise ValueError(f"ei_threshold must be >= 0, got {ei_threshold}")
+    if direct_maxfun is None:
+        direct_maxfun = 500 * dim
+    if direct_maxfun < 1:
+        raise ValueError(f"direct_maxfun must be >= 1, got {direct_maxfun}")
+    if refit_until < 1 or not refit_growth > 0:
+        raise ValueError(
+            f"refit_until must be >= 1 and refit_growth > 0, got {refit_until}, {refit_growth}"
+        )
+    return n_initial, direct_maxfun
+
+
 class BayesianOptimizer(Optimizer):
     """Sequential Bayesian optimisation: GP (Matérn 3/2) + expected improvement + DIRECT.
 
@@ -213,33 +245,11 @@ class BayesianOptimizer(Optimizer):
         batch_size: int = 1,
     ):
         super().__init__(bounds, seed)
-        if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) \
-                or batch_size < 1:
-            raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        n_initial, direct_maxfun = _check_options(
+            self.dim, batch_size, output_transform, n_initial, xi, ei_threshold, direct_maxfun,
+            refit_until, refit_growth)
         self.batch_size = int(batch_size)
-        if output_transform not in OUTPUT_TRANSFORMS:
-            raise ValueError(
-                f"output_transform must be one of {OUTPUT_TRANSFORMS}, got {output_transform!r}"
-            )
         self.output_transform = output_transform
-        if n_initial is None:
-            n_initial = max(10, self.dim + 1)
-        if isinstance(n_initial, bool) or not isinstance(n_initial, int | np.integer):
-            raise TypeError(f"n_initial must be an integer, got {n_initial!r}")
-        if n_initial < 1:
-            raise ValueError(f"n_initial must be >= 1, got {n_initial}")
-        if xi is not None and not (math.isfinite(xi) and xi >= 0):
-            raise ValueError(f"xi must be >= 0 or None, got {xi}")
-        if not (math.isfinite(ei_threshold) and ei_threshold >= 0):
-            raise ValueError(f"ei_threshold must be >= 0, got {ei_threshold}")
-        if direct_maxfun is None:
-            direct_maxfun = 500 * self.dim
-        if direct_maxfun < 1:
-            raise ValueError(f"direct_maxfun must be >= 1, got {direct_maxfun}")
-        if refit_until < 1 or not refit_growth > 0:
-            raise ValueError(
-                f"refit_until must be >= 1 and refit_growth > 0, got {refit_until}, {refit_growth}"
-            )
         self.n_initial = int(n_initial)
         if min_trials_to_stop is None:
             min_trials_to_stop = max(10 * self.dim, self.n_initial + 3)
