@@ -45,7 +45,8 @@ from handle_drake.base.models import PACKAGE_DIR, models_dir
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.cluster import LocalPool, as_executor, executor_workers
 from handle_drake.learning.log import code_digest, code_fingerprint  # noqa: F401 (code_digest: API)
-from handle_drake.learning.optim.bo import BO_DEFAULTS_VERSION, make_optimizer
+from handle_drake.learning.optim.bo import BO_DEFAULTS_VERSION
+from handle_drake.learning.optim.factory import make_optimizer
 from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig, placement_stencil
 
 __all__ = [

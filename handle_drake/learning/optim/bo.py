@@ -57,7 +57,6 @@ would be proposed again); :attr:`best` never returns it.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,6 +73,7 @@ from handle_drake.learning.gp import GaussianProcess, Hyperparameters
 from handle_drake.learning.optim.base import (  # noqa: F401 - _derived_seed: used by the runner
     Best,
     Optimizer,
+    RandomSearch,
     _check_seed,
     _derived_seed,
     check_bounds,
@@ -87,9 +87,7 @@ __all__ = [
     "RandomSearch",
     "OptimizationResult",
     "Best",
-    "maximize",
     "check_bounds",
-    "make_optimizer",
     "v1_options",
     "BO_DEFAULTS_VERSION",
     "OUTPUT_TRANSFORMS",
@@ -115,27 +113,6 @@ class OptimizationResult:
     strategy: str
     converged: bool
     best_so_far: np.ndarray = field(repr=False, default=None)
-
-
-class RandomSearch(Optimizer):
-    """Uniform random search with the ask/tell interface of :class:`BayesianOptimizer`.
-
-    Point ``k`` (counting told and pending points) is drawn from a generator
-    seeded with ``(seed, k)``, so any number of asks may be outstanding
-    (parallel trials) and a replayed run proposes the same points.
-    """
-
-    strategy = "random"
-    batch_size = None  # any number of asks may be outstanding
-    synchronous = False
-
-    def __init__(self, bounds, seed: int = 0):
-        super().__init__(bounds, seed)
-
-    def ask(self) -> np.ndarray:
-        k = self.n_told + self.n_pending
-        u = np.random.default_rng([self.seed, k]).random(self.dim)
-        return self._register(u)
 
 
 def _check_options(dim, batch_size, output_transform, n_initial, xi, ei_threshold,
@@ -452,55 +429,3 @@ def v1_options(dim: int) -> dict:
     unchanged); for side-by-side benchmarks against the current defaults.
     """
     return dict(n_initial=int(dim) + 1, ei_threshold=1e-6)
-
-
-def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
-    """``"bo"`` -> :class:`BayesianOptimizer`, ``"random"`` -> :class:`RandomSearch`."""
-    if strategy == "bo":
-        return BayesianOptimizer(bounds, seed, **options)
-    if strategy == "random":
-        if options:
-            raise TypeError(f"RandomSearch takes no options, got {sorted(options)}")
-        return RandomSearch(bounds, seed)
-    raise ValueError(f"strategy must be 'bo' or 'random', got {strategy!r}")
-
-
-def maximize(
-    f: Callable[[np.ndarray], float],
-    bounds,
-    n_trials: int,
-    seed: int = 0,
-    strategy: str = "bo",
-    stop_on_convergence: bool = True,
-    **options,
-) -> OptimizationResult:
-    """Maximise ``f(x)`` over the box in at most ``n_trials`` evaluations, in this process.
-
-    A non-finite value of ``f`` is told as a failure; exceptions propagate.
-    For logged, resumable or parallel runs use
-    :func:`handle_drake.learning.loop.run_experiment`.
-    """
-    if isinstance(n_trials, bool) or not isinstance(n_trials, int | np.integer) or n_trials < 1:
-        raise ValueError(f"n_trials must be a positive integer, got {n_trials!r}")
-    optimizer = make_optimizer(strategy, bounds, seed, **options)
-    for _ in range(int(n_trials)):
-        x = optimizer.ask()
-        if stop_on_convergence and optimizer.converged:
-            break
-        value = float(f(x))
-        if math.isfinite(value):
-            optimizer.tell(x, value)
-        else:
-            optimizer.tell_failure(x, f"non-finite metric {value}")
-    best = optimizer.best
-    Y = optimizer.Y
-    best_so_far = np.fmax.accumulate(np.where(np.isnan(Y), -np.inf, Y)) if Y.size else Y
-    return OptimizationResult(
-        x=None if best is None else best.x,
-        y=math.nan if best is None else best.y,
-        X=optimizer.X,
-        Y=Y,
-        strategy=strategy,
-        converged=optimizer.converged,
-        best_so_far=best_so_far,
-    )
