@@ -118,6 +118,10 @@ def test_one_factory_builds_every_optimiser_by_name():
         assert opt.strategy == name and opt.dim == 3
         assert np.all((opt.ask() >= 0) & (opt.ask() <= 1))
     assert set(INHAND_OPTIMIZERS) < set(OPTIMIZERS)
+    for name in INHAND_OPTIMIZERS:  # the in-hand run's arguments, whatever the optimiser
+        opt = make_optimizer(name, [[0, 1]] * 6, 0, n_particles=4, stop_score=7.0,
+                             min_active=2)
+        assert opt.strategy == name
     with pytest.raises(ValueError, match=r"strategy: expected one of \('bo', 'random'"):
         make_optimizer("nelder-mead", [[0, 1]], 0)
     with pytest.raises(TypeError, match="RandomSearch takes no options"):

@@ -194,26 +194,9 @@ def _proximity(mu: float) -> ProximityProperties:
     return props
 
 
-def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
-    """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
-
-    Returns a dict of handles (diagram, plant, source, cap joint, bodies).
-    ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
-    plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
-    frames (zero-order hold; no Python system, no driver, no sampling).
-    """
-    cap = scenario.cap
-    cap.validate()
-    gist = scenario.action_gist()
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=scenario.time_step, contact_model="point",
-        discrete_contact_approximation="sap", use_sampled_output_ports=False), builder)
-    spec = get_hand_spec("shadow")
-    hand = AddHand(plant, "shadow", coupling_ratio=1.0)
-    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
-                     RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
-                                    scenario.hand_xyz))
+def _add_cap(plant, cap: ScrewCapModel):
+    """The cap (and, unless free, the bottle welded to the world and the thread joint with
+    its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
     # The axis along world y: a cylinder's z axis turned onto y.
     R_axis = RollPitchYaw(-np.pi / 2, 0, 0)
     centre = np.asarray(cap.position, dtype=float)
@@ -250,6 +233,51 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
             p=0.0, d=cap.coulomb_torque / cap.stiction_speed))
     else:
         plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(R_axis, centre))
+    return instance, body, bottle, joint
+
+
+def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance):
+    """The speed floor's PD targets: a ``TrajectorySource`` of the scenario's frames."""
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    one = frames(gist, scenario.parameters, q0, scenario.n_frames)
+    F = np.vstack([one[0], *([one] * scenario.n_gaits)])
+    times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
+    q_all = np.array([actuated_to_joint_positions(spec, f, 1.0) for f in F])
+    names = [plant.get_joint_actuator(i).joint().name()
+             for i in plant.GetJointActuatorIndices(hand)]
+    cols = [spec.joint_names.index(n) for n in names]
+    desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
+    traj = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+        times, desired.T)))
+    builder.Connect(traj.get_output_port(), plant.get_desired_state_input_port(hand))
+    if joint is not None:
+        zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
+        builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+
+
+def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
+    """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
+
+    Returns a dict of handles (diagram, plant, source, cap joint, bodies).
+    ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
+    plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
+    frames (zero-order hold; no Python system, no driver, no sampling).
+    """
+    cap = scenario.cap
+    cap.validate()
+    gist = scenario.action_gist()
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=scenario.time_step, contact_model="point",
+        discrete_contact_approximation="sap", use_sampled_output_ports=False), builder)
+    spec = get_hand_spec("shadow")
+    hand = AddHand(plant, "shadow", coupling_ratio=1.0)
+    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
+                     RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
+                                    scenario.hand_xyz))
+    instance, body, bottle, joint = _add_cap(plant, cap)
     plant.Finalize()
     if bottle is not None:
         # the bottle and its cap do not collide with each other (the thread is the joint)
@@ -263,24 +291,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
 
     _set_default_hand_positions(plant, hand, spec, q0, 1.0)
     if bare:
-        from pydrake.systems.primitives import TrajectorySource
-        from pydrake.trajectories import PiecewisePolynomial
-
-
-        one = frames(gist, scenario.parameters, q0, scenario.n_frames)
-        F = np.vstack([one[0], *([one] * scenario.n_gaits)])
-        times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
-        q_all = np.array([actuated_to_joint_positions(spec, f, 1.0) for f in F])
-        names = [plant.get_joint_actuator(i).joint().name()
-                 for i in plant.GetJointActuatorIndices(hand)]
-        cols = [spec.joint_names.index(n) for n in names]
-        desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
-        traj = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
-            times, desired.T)))
-        builder.Connect(traj.get_output_port(), plant.get_desired_state_input_port(hand))
-        if joint is not None:
-            zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
-            builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+        _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance)
         return dict(diagram=builder.Build(), plant=plant)
     driver = builder.AddNamedSystem("hand_driver", PdHandDriver(
         plant, hand, spec, q0, lower, upper, max_joint_velocity=scenario.max_joint_velocity))

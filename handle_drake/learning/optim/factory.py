@@ -32,15 +32,17 @@ def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
     """The optimiser named ``strategy`` (module doc) over ``bounds``, seeded ``seed``.
 
     ``options`` go to the optimiser: BO's keyword arguments; ``stop_score`` for random
-    search (and ``n_particles``, which it ignores: it has no population, so every
-    in-hand optimiser takes the same arguments); ``n_particles``, ``stop_score`` and
-    (the incremental swarms) ``min_active`` for the swarms.
+    search; ``n_particles``, ``stop_score`` and (the incremental swarms) ``min_active``
+    for the swarms. The swarms' options are taken by every optimiser but BO and used
+    where they mean something (random search has no population; PSO and CMA-ES have no
+    activated dimensions), so every in-hand optimiser takes the same arguments.
     """
     if strategy == "bo":
         return BayesianOptimizer(bounds, seed, **options)
     if strategy == "random":
         stop_score = options.pop("stop_score", None)
         options.pop("n_particles", None)
+        options.pop("min_active", None)
         if options:
             raise TypeError(f"RandomSearch takes no options, got {sorted(options)}")
         if stop_score is None:
