@@ -42,6 +42,7 @@ import dataclasses as dc
 import math
 import time
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -613,6 +614,34 @@ class ScrewCapTrial:
         return TrialResult(metric=outcome.score, contacts=detail,
                            scenario=self.scenario(x).dump())
 
+    def _gripped(self, st: dict, t, summary: dict, built: dict, plant_context, p0) -> bool:
+        """A finger touched the object within ``contact_window``, the palm never did (its
+        record kept in ``st``) and a free cylinder has not dropped."""
+        c = self.config
+        fingers = [b for b in summary["touching"] if b != "palm"]
+        if fingers:
+            st["last_touch"] = float(t)
+        st["palm_max"] = max(st["palm_max"], summary["palm_force"])
+        st["palm"] = st["palm"] or summary["palm_force"] > 0
+        gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+        if built["joint"] is None:  # a free cylinder must also not have dropped
+            p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation()
+            gripped = gripped and p[2] - p0[2] > -c.drop
+        return gripped
+
+    def _survives_reversal(self, built: dict, plant_context) -> bool:
+        """Weight reversed for ``reverse_time`` (the hand turned palm down, for the free
+        cylinder): still within ``reverse_travel`` and touched by a finger."""
+        c, plant, body = self.config, built["plant"], built["cap"]
+        context, reverse = built["simulator"].get_mutable_context(), built["reverse"]
+        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+        reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
+        built["simulator"].AdvanceTo(c.total_time + c.reverse_time)
+        p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+        touching = contact_summary(plant, plant_context, built)["touching"]
+        return bool(np.linalg.norm(p - p_end) < c.reverse_travel
+                    and any(b != "palm" for b in touching))
+
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> ScrewCapOutcome:
         """Runs one trial from the settled grasp (deterministic)."""
         x = self._check(x)
@@ -644,32 +673,12 @@ class ScrewCapTrial:
         st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
                   palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
 
-        def turn_now():
-            if joint is not None:  # the plant's joint (truth) and its encoder's count
-                truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
-                return truth, float(np.round(truth / 360.0 * counts) * 360.0 / counts)
-            # the free cylinder: about its own axis, unwrapped; the fingers' flex strokes
-            # turn it about -z of its frame (measured), so that direction counts positive
-            R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
-            raw = -float(np.arctan2(R[1, 0], R[0, 0]))
-            st["angle"] += (raw - st["previous"] + np.pi) % (2 * np.pi) - np.pi
-            st["previous"] = raw
-            return float(np.degrees(st["angle"])), float(np.degrees(st["angle"]))
-
         try:
             for i, t in enumerate(samples):
                 simulator.AdvanceTo(float(t))
-                truth, turn = turn_now()
+                truth, turn = _turn(st, built, plant_context, R0_inv, q_start, counts)
                 summary = contact_summary(plant, plant_context, built)
-                fingers = [b for b in summary["touching"] if b != "palm"]
-                if fingers:
-                    st["last_touch"] = float(t)
-                st["palm_max"] = max(st["palm_max"], summary["palm_force"])
-                st["palm"] = st["palm"] or summary["palm_force"] > 0
-                gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
-                if joint is None:  # a free cylinder must also not have dropped
-                    p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
-                    gripped = gripped and p[2] - p0[2] > -c.drop
+                gripped = self._gripped(st, t, summary, built, plant_context, p0)
                 turns.append(turn)
                 truths.append(truth)
                 contacts.append(summary["touching"])
@@ -690,19 +699,10 @@ class ScrewCapTrial:
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
         survived = None
         if joint is None and not st["stopped"]:
-            # weight reversed for reverse_time: the hand turned palm down, for the object
-            p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
-            reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
-            simulator.AdvanceTo(c.total_time + c.reverse_time)
-            p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
-            touching = contact_summary(plant, plant_context, built)["touching"]
-            survived = bool(np.linalg.norm(p - p_end) < c.reverse_travel
-                            and any(b != "palm" for b in touching))
+            survived = self._survives_reversal(built, plant_context)
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
-            from pathlib import Path
-
             Path(html).write_text(meshcat.StaticHtml())
         passed = st["passed"]
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
@@ -719,6 +719,22 @@ class ScrewCapTrial:
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
+
+
+def _turn(st: dict, built: dict, plant_context, R0_inv, q_start: float, counts: int):
+    """The object's turn now (deg): (truth, as read): the cap's joint and its encoder's
+    count, or the free cylinder's pose about its own axis, unwrapped in ``st``."""
+    plant, joint, body = built["plant"], built["joint"], built["cap"]
+    if joint is not None:  # the plant's joint (truth) and its encoder's count
+        truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
+        return truth, float(np.round(truth / 360.0 * counts) * 360.0 / counts)
+    # the free cylinder: about its own axis, unwrapped; the fingers' flex strokes
+    # turn it about -z of its frame (measured), so that direction counts positive
+    R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
+    raw = -float(np.arctan2(R[1, 0], R[0, 0]))
+    st["angle"] += (raw - st["previous"] + np.pi) % (2 * np.pi) - np.pi
+    st["previous"] = raw
+    return float(np.degrees(st["angle"])), float(np.degrees(st["angle"]))
 
 
 def simulate_scenario(text: str, reverse_time: float = 0.5) -> dict:
