@@ -182,7 +182,6 @@ MAX_FUNCTION_LINES = 80
 LONG_FUNCTIONS: dict[str, int] = {
     "handle_drake/scenario.py::validate_scenario": 82,
     "handle_drake/geometry/detect.py::_merge_parts": 82,
-    "handle_drake/devices/camera/frames.py::load_frame": 82,
 }
 
 
