@@ -99,9 +99,9 @@ from handle_drake.learning.cluster import add_executor_arguments, trial_executor
 from handle_drake.learning.optim.bo import (  # noqa: E402
     BO_DEFAULTS_VERSION,
     _derived_seed,
-    make_optimizer,
     v1_options,
 )
+from handle_drake.learning.optim.factory import make_optimizer  # noqa: E402
 from handle_drake.trial.grasp_trial import GraspTrial  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "babbling.json"

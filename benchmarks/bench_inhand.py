@@ -58,7 +58,7 @@ def _bare_plant(trial: InHandTrial, x):
     from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
     from handle_drake.station import AddPlantModels
 
-    scenario = trial.scenario()
+    scenario = trial.scenario().station
     c = trial.config
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
@@ -128,11 +128,8 @@ def speed(rounds: int) -> dict:
 
 
 def _fresh(trial, x):
-    from handle_drake.apps.inhand import task as task_module
-
     start = time.perf_counter()
-    task_module._BUILD_CACHE.pop((trial.config, False), None)  # this trial's diagram only
-    InHandTrial(trial.config).evaluate(x)
+    InHandTrial(trial.config).evaluate(x)  # a new trial object builds its own diagram
     return time.perf_counter() - start
 
 

@@ -34,10 +34,9 @@ from handle_drake.learning.optim.bo import (
     OptimizationResult,
     RandomSearch,
     check_bounds,
-    make_optimizer,
-    maximize,
     v1_options,
 )
+from handle_drake.learning.optim.factory import OPTIMIZERS, make_optimizer, maximize
 
 __all__ = [
     "BayesianOptimizer",
@@ -47,6 +46,7 @@ __all__ = [
     "GaussianProcess",
     "Hyperparameters",
     "InlineExecutor",
+    "OPTIMIZERS",
     "OptimizationResult",
     "Optimizer",
     "RandomSearch",

@@ -23,7 +23,9 @@ resume, and none is repeated or lost.
 
 from __future__ import annotations
 
+import ast
 import functools
+import hashlib
 import json
 import math
 import os
@@ -31,6 +33,7 @@ import sqlite3
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
@@ -72,6 +75,43 @@ CREATE TABLE trials (
     PRIMARY KEY (run_id, trial_index)
 );
 """
+
+
+def code_digest(source: str) -> bytes:
+    """What of a Python source can change results: its syntax tree without docstrings.
+
+    Comments, blank lines, formatting and docstrings drop out (``ast`` keeps
+    neither comments nor positions here), so editing a docstring does not
+    start a new run; any change to code does.
+    """
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+                    and isinstance(body[0].value.value, str):
+                node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree, annotate_fields=False, include_attributes=False).encode()
+
+
+def code_fingerprint(root: Path, sources, data_files=()) -> str:
+    """A run's simulation fingerprint: Drake's version, the code of ``sources``
+    (:func:`code_digest`, paths relative to ``root``) and the bytes of ``data_files``
+    (model files, recordings; by name). A run computed by other code or data is
+    never resumed as if it were current."""
+    digest = hashlib.sha1(f"drake {version('drake')}".encode())
+    for path in sources:
+        digest.update(Path(path).relative_to(root).as_posix().encode())
+        digest.update(code_digest(Path(path).read_text()))
+    for path in data_files:
+        digest.update(Path(path).name.encode())
+        digest.update(Path(path).read_bytes())
+    return digest.hexdigest()[:10]
+
+
+def scenario_fingerprint(text: str) -> str:
+    """A short content hash of a scenario's (or settings') text, for run ids."""
+    return hashlib.sha256(text.encode()).hexdigest()[:10]
 
 
 class TrialLogError(RuntimeError):

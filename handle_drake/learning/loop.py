@@ -72,7 +72,7 @@ from handle_drake.learning.executors import (
 )
 from handle_drake.learning.log import TrialLog, TrialLogError, TrialRecord, check_group
 from handle_drake.learning.optim.base import _derived_seed, check_bounds
-from handle_drake.learning.optim.bo import make_optimizer
+from handle_drake.learning.optim.factory import make_optimizer
 
 #: Default group commits of a run's log: a transaction per 256 finished trials, or 0.25 s
 #: after its first write (benchmarks/bench_trial_log.py).

@@ -7,7 +7,7 @@ from matplotlib.image import imread
 
 from handle_drake.apps.babbling.babbling import RunHistory, RunSpec, grid_points
 from handle_drake.apps.babbling.plots import MAP_POINTS, gp_mean_map, plot_run, run_model
-from handle_drake.learning.optim.bo import make_optimizer
+from handle_drake.learning.optim.factory import make_optimizer
 from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
 CONFIG = GraspTrialConfig(hand="barrett", object="sphere", space="offset")

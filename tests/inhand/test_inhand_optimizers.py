@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from handle_drake.apps.inhand.evaluation import incremental_score, target_score
+from handle_drake.apps.inhand.experiment import run_inhand
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
+from handle_drake.learning.optim.factory import OPTIMIZERS, make_optimizer
 from handle_drake.learning.optim.population import (
     CMAES,
     INHAND_OPTIMIZERS,
     IncrementalPSO,
-    make_inhand_optimizer,
 )
 
 TARGET = np.array([0.8, 0.2, 0.5, 0.5, 0.3, 0.9])
@@ -78,10 +79,10 @@ def test_incremental_activation_on_a_staged_objective():
 def test_standard_pso_and_cmaes_and_random_on_a_sphere():
     f = lambda x: -float(np.sum((np.asarray(x) - 0.3) ** 2))  # noqa: E731
     for name, tol in (("pso", 0.05), ("cmaes", 0.05)):
-        opt = make_inhand_optimizer(name, [[-1, 1]] * 5, seed=2, n_particles=10)
+        opt = make_optimizer(name, [[-1, 1]] * 5, seed=2, n_particles=10)
         _drive(opt, f, 80)
         np.testing.assert_allclose(opt.best.x, 0.3, atol=tol)
-    rnd = make_inhand_optimizer("random", [[-1, 1]] * 5, seed=2)
+    rnd = make_optimizer("random", [[-1, 1]] * 5, seed=2)
     for _ in range(50):
         x = rnd.ask()
         rnd.tell(x, f(x))
@@ -90,7 +91,7 @@ def test_standard_pso_and_cmaes_and_random_on_a_sphere():
 
 def test_stop_score_stops():
     for name in INHAND_OPTIMIZERS:
-        opt = make_inhand_optimizer(name, [[0, 1]] * 6, seed=0, n_particles=4, stop_score=7.0)
+        opt = make_optimizer(name, [[0, 1]] * 6, seed=0, n_particles=4, stop_score=7.0)
         assert not opt.converged
         x = opt.ask()
         opt.tell(x, 7.5)
@@ -108,7 +109,25 @@ def test_bad_input(kwargs, message):
     with pytest.raises(ValueError, match=message):
         IncrementalPSO(**args)
     with pytest.raises(ValueError, match="optimizer: expected one of"):
-        make_inhand_optimizer("bo", [[0, 1]], 0)
+        run_inhand("cylinder_rotation", "bo", trials=0)  # not an in-hand optimiser
+
+
+def test_one_factory_builds_every_optimiser_by_name():
+    for name in OPTIMIZERS:
+        opt = make_optimizer(name, [[0, 1]] * 3, seed=1)
+        assert opt.strategy == name and opt.dim == 3
+        assert np.all((opt.ask() >= 0) & (opt.ask() <= 1))
+    assert set(INHAND_OPTIMIZERS) < set(OPTIMIZERS)
+    for name in INHAND_OPTIMIZERS:  # the in-hand run's arguments, whatever the optimiser
+        opt = make_optimizer(name, [[0, 1]] * 6, 0, n_particles=4, stop_score=7.0,
+                             min_active=2)
+        assert opt.strategy == name
+    with pytest.raises(ValueError, match=r"strategy: expected one of \('bo', 'random'"):
+        make_optimizer("nelder-mead", [[0, 1]], 0)
+    with pytest.raises(TypeError, match="RandomSearch takes no options"):
+        make_optimizer("random", [[0, 1]], 0, xi=0.1)
+    with pytest.raises(TypeError, match=r"pso takes n_particles, stop_score, min_active"):
+        make_optimizer("pso", [[0, 1]], 0, xi=0.1)
 
 
 def test_members_are_told_in_order_and_asks_are_bounded():
@@ -142,7 +161,7 @@ def test_resumed_run_equals_uninterrupted(tmp_path, name):
         with TrialLog(db) as log:
             if log.get_run("r") is None:
                 log.create_run("r", name, [[0, 1]] * 6, 5, "staged")
-            opt = make_inhand_optimizer(name, [[0, 1]] * 6, 5, n_particles=4)
+            opt = make_optimizer(name, [[0, 1]] * 6, 5, n_particles=4)
             TrialRunner(objective, opt, log, "r", executor=InlineExecutor(),
                         progress=False).run(n)
             return [(r.parameters.tolist(), r.metric, r.status) for r in log.trials("r")]
@@ -175,7 +194,7 @@ def test_the_target_bonus_needs_the_real_target_not_the_checks_tolerance():
     target = target_score(26, "incremental")
     assert f_near == pytest.approx(27.0)
     assert f_near < target <= f_real  # S_a = 0 still reaches it
-    opt = make_inhand_optimizer("random", [[0, 1]] * 26, seed=50, stop_score=target)
+    opt = make_optimizer("random", [[0, 1]] * 26, seed=50, stop_score=target)
     opt.tell(opt.ask(), f_near)
     assert not opt.converged
     opt.tell(opt.ask(), f_real)
@@ -206,4 +225,4 @@ def test_restarts_of_section_5_5_4_after_iterations_without_progress():
     np.testing.assert_array_equal(again.x, restarted.x)
     with pytest.raises(ValueError, match="restart_after"):
         IncrementalPSO([[0, 1]] * 2, restart_after=0)
-    assert make_inhand_optimizer("ipso-restart", [[0, 1]] * 2).restart_after == 3
+    assert make_optimizer("ipso-restart", [[0, 1]] * 2).restart_after == 3

@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from handle_drake.apps.inhand.experiment import learning_curve, replay_best, run_inhand
-from handle_drake.apps.inhand.task import InHandTask, InHandTrial
+from handle_drake.apps.inhand.task import (
+    InHandScenario,
+    InHandTask,
+    InHandTrial,
+    inhand_fingerprint,
+)
 from handle_drake.cli import main as cli_main
+from handle_drake.scenario import DumpScenario
 
 
 def _stroke(trial):
@@ -67,6 +73,15 @@ def test_a_replayed_best_trial_reproduces_its_score(tmp_path):
     assert outcome.accelerometer_rotation_deg_series == []  # a plain cylinder
     it, best = learning_curve(run.records, 1)
     assert list(it) == [1, 2] and best[1] == max(r.metric for r in run.records)
+    # every trial is logged whole as its scenario (parameters as data), the run id carries
+    # the code's fingerprint
+    assert run.run_id.endswith("-" + inhand_fingerprint())
+    for record in run.records:
+        logged = InHandScenario.load(record.scenario)
+        assert logged.parameters == [float(v) for v in record.parameters]
+        assert DumpScenario(logged.station) == DumpScenario(run.trial.scenario().station)
+        assert logged.station.table is None and logged.station.object.kind == "cylinder"
+        assert logged.action_gist() == run.trial.gist
     # the same settings resume the run; other settings under its id are refused
     again = run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
                        db=tmp_path / "r.sqlite", progress=False)
@@ -74,6 +89,21 @@ def test_a_replayed_best_trial_reproduces_its_score(tmp_path):
     with pytest.raises(ValueError, match=r"exists in .* with config.task.mu=0.8, got 0.9"):
         run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
                    db=tmp_path / "r.sqlite", progress=False, mu=0.9)
+
+
+def test_each_trial_object_builds_its_own_diagram_and_pickles_without_it():
+    import pickle
+
+    trial = InHandTrial(InHandTask(settle_time=0.1, hold=0.0, motion_duration=0.2))
+    x = trial.gist.initial_parameters()
+    first = trial.evaluate(x)
+    built = trial._built
+    assert built is not None and trial.evaluate(x).score == first.score
+    assert trial._built is built  # built once per trial object
+    copy = pickle.loads(pickle.dumps(trial))
+    assert copy._built is None and copy.config == trial.config  # a worker builds its own
+    other = InHandTrial(trial.config)
+    assert other.evaluate(x).score == first.score and other._built is not built
 
 
 def test_bad_input():

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize, minimize_scalar
 
-from handle_drake.learning.optim.bo import BayesianOptimizer, RandomSearch, check_bounds, maximize
+from handle_drake.learning.optim.bo import BayesianOptimizer, RandomSearch, check_bounds
+from handle_drake.learning.optim.factory import maximize
 from handle_drake.learning.test_functions import Branin, SineSum1D
 
 FAST = dict(direct_maxfun=300, n_restarts=1)

@@ -30,7 +30,6 @@ lucky noise draw does not count.
 
 from __future__ import annotations
 
-import ast
 import dataclasses as dc
 import functools
 import hashlib
@@ -45,7 +44,9 @@ import numpy as np
 from handle_drake.base.models import PACKAGE_DIR, models_dir
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRecord, replay, run_experiment
 from handle_drake.learning.cluster import LocalPool, as_executor, executor_workers
-from handle_drake.learning.optim.bo import BO_DEFAULTS_VERSION, make_optimizer
+from handle_drake.learning.log import code_digest, code_fingerprint  # noqa: F401 (code_digest: API)
+from handle_drake.learning.optim.bo import BO_DEFAULTS_VERSION
+from handle_drake.learning.optim.factory import make_optimizer
 from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig, placement_stencil
 
 __all__ = [
@@ -132,23 +133,6 @@ def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
     return np.array([trial.evaluate(x).metric_noiseless for x in points])
 
 
-def code_digest(source: str) -> bytes:
-    """What of a Python source can change results: its syntax tree without docstrings.
-
-    Comments, blank lines, formatting and docstrings drop out (``ast`` keeps
-    neither comments nor positions here), so editing a docstring does not
-    start a new run; any change to code does.
-    """
-    tree = ast.parse(source)
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
-            body = node.body
-            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
-                    and isinstance(body[0].value.value, str):
-                node.body = body[1:] or [ast.Pass()]
-    return ast.dump(tree, annotate_fields=False, include_attributes=False).encode()
-
-
 def simulation_sources() -> list[Path]:
     """The source files a grasp trial's metric depends on: the trial, harness, scenario
     runner, station, scenario, hands, objects (the instrumented devices' geometry
@@ -177,18 +161,8 @@ def simulation_fingerprint() -> str:
 
     Computed once per process (every run id and cache key needs it): the
     files as they were when first asked, i.e. the code this process runs."""
-    from importlib.metadata import version
-
-
-    root = PACKAGE_DIR
-    digest = hashlib.sha1(f"drake {version('drake')}".encode())
-    for path in simulation_sources():
-        digest.update(path.relative_to(root).as_posix().encode())
-        digest.update(code_digest(path.read_text()))
-    for path in sorted(models_dir().glob("*/*.sdf")):
-        digest.update(path.name.encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()[:10]
+    return code_fingerprint(PACKAGE_DIR, simulation_sources(),
+                            sorted(models_dir().glob("*/*.sdf")))
 
 
 def _config_key(config: GraspTrialConfig) -> str:

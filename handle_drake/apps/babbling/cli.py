@@ -133,13 +133,10 @@ def _resolve_space(args) -> str:
     return args.space
 
 
-def _cmd_babble(args) -> int:
-    from handle_drake.apps.babbling.babbling import CachedTrial, RunSpec
-    from handle_drake.learning import TrialLog, TrialLogError, run_experiment
-    from handle_drake.learning.cluster import trial_executor
-    from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
+def _trial_config(args, space):
+    """The grasp trial's settings from the command line (object or mesh, robustness)."""
+    from handle_drake.trial.grasp_trial import GraspTrialConfig
 
-    space = _resolve_space(args)
     samples = args.placement_samples
     if args.placement_error == 0 and samples not in (None, 1):
         raise ValueError(f"--placement-samples {samples}: needs --placement-error > 0")
@@ -160,6 +157,17 @@ def _cmd_babble(args) -> int:
         refuse_without_mesh(args, "--mesh-scale")
         config = GraspTrialConfig(hand=args.hand, object=args.object or "sphere", space=space,
                                   noise=args.noise, size=args.size, **robust)
+    return config
+
+
+def _cmd_babble(args) -> int:
+    from handle_drake.apps.babbling.babbling import CachedTrial, RunSpec
+    from handle_drake.learning import TrialLog, TrialLogError, run_experiment
+    from handle_drake.learning.cluster import trial_executor
+    from handle_drake.trial.grasp_trial import GraspTrial
+
+    space = _resolve_space(args)
+    config = _trial_config(args, space)
     trial = GraspTrial(config)
     if args.ei_stop and args.strategy != "bo":
         raise ValueError(f"--ei-stop {args.ei_stop}: only Bayesian optimisation has a stop rule")

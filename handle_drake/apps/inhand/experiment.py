@@ -23,12 +23,13 @@ import numpy as np
 
 from handle_drake.apps.inhand.jog_wheel import JogWheelTask, JogWheelTrial
 from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial, scenario_fingerprint
-from handle_drake.apps.inhand.task import InHandTask, InHandTrial
+from handle_drake.apps.inhand.task import InHandTask, InHandTrial, inhand_fingerprint
 from handle_drake.learning.cluster import as_executor, executor_workers, max_local_workers
 from handle_drake.learning.executors import InlineExecutor
 from handle_drake.learning.log import TrialLog
 from handle_drake.learning.loop import TrialRunner
-from handle_drake.learning.optim.population import INHAND_OPTIMIZERS, make_inhand_optimizer
+from handle_drake.learning.optim.factory import make_optimizer
+from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
 
 __all__ = ["run_inhand", "InHandRun", "run_summary", "learning_curve", "plot_learning_curve",
            "replay_best"]
@@ -103,14 +104,15 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
         trial = ScrewCapTrial(ScrewCapTask(free=task == "fingertip_cylinder", **task_options))
     else:
         trial = InHandTrial(InHandTask(task=task, **task_options))
-    opt = make_inhand_optimizer(optimizer, trial.bounds, seed, n_particles,
-                                stop_score=trial.target_score,
-                                min_active=int(trial.dims_per_part[0]))
+    opt = make_optimizer(optimizer, trial.bounds, seed, n_particles=n_particles,
+                         stop_score=trial.target_score,
+                         min_active=int(trial.dims_per_part[0]))
     config = _config(trial, optimizer, n_particles)
     run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
     if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
-
         run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))
+    else:  # the code's fingerprint (as babbling's): other settings under this id are refused
+        run_id += "-" + inhand_fingerprint()
     db = Path(db)
     db.parent.mkdir(parents=True, exist_ok=True)
     with TrialLog(db) as log:

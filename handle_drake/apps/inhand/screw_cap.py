@@ -39,10 +39,10 @@ trial is re-simulated from its scenario alone (:func:`simulate_scenario`).
 
 
 import dataclasses as dc
-import hashlib
 import math
 import time
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -77,7 +77,7 @@ from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensio
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
-from handle_drake.apps.inhand.task import DATA_DIR
+from handle_drake.apps.inhand.task import DATA_DIR, GistMotionData, gist_data, gist_from_data
 from handle_drake.base.hands import (
     AddHand,
     actuated_position_limits,
@@ -85,6 +85,7 @@ from handle_drake.base.hands import (
     get_hand_spec,
 )
 from handle_drake.learning.executors import TrialResult
+from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver
 
@@ -133,16 +134,6 @@ class ScrewCapModel:
 
 
 @dc.dataclass
-class GistMotionData:
-    """One meta motion of the action gist, as data (``MetaMotion``)."""
-
-    finger: str = "FF"
-    start: float = 0.0
-    end: float = 1.0
-    variation: list[float] = dc.field(default_factory=list)
-
-
-@dc.dataclass
 class ScrewCapScenario:
     """One screw-cap trial, whole: the model, the hand, the motion and its parameters."""
 
@@ -175,18 +166,11 @@ class ScrewCapScenario:
         return self.n_gaits * self.gait_duration + self.hold
 
     def action_gist(self) -> ActionGist:
-        return ActionGist.from_dict({"name": self.gist_name, "motions": [
-            dc.asdict(m) for m in self.gist]})
+        return gist_from_data(self.gist_name, self.gist)
 
     @staticmethod
     def gist_data(gist: ActionGist) -> list[GistMotionData]:
-        return [GistMotionData(m.finger, m.start, m.end, list(m.variation))
-                for m in gist.motions]
-
-
-def scenario_fingerprint(text: str) -> str:
-    """A short content hash of a scenario's YAML (for run ids)."""
-    return hashlib.sha256(text.encode()).hexdigest()[:10]
+        return gist_data(gist)
 
 
 class GaitMotionSource(GistMotionSource):
@@ -211,26 +195,9 @@ def _proximity(mu: float) -> ProximityProperties:
     return props
 
 
-def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
-    """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
-
-    Returns a dict of handles (diagram, plant, source, cap joint, bodies).
-    ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
-    plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
-    frames (zero-order hold; no Python system, no driver, no sampling).
-    """
-    cap = scenario.cap
-    cap.validate()
-    gist = scenario.action_gist()
-    builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=scenario.time_step, contact_model="point",
-        discrete_contact_approximation="sap", use_sampled_output_ports=False), builder)
-    spec = get_hand_spec("shadow")
-    hand = AddHand(plant, "shadow", coupling_ratio=1.0)
-    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
-                     RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
-                                    scenario.hand_xyz))
+def _add_cap(plant, cap: ScrewCapModel):
+    """The cap (and, unless free, the bottle welded to the world and the thread joint with
+    its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
     # The axis along world y: a cylinder's z axis turned onto y.
     R_axis = RollPitchYaw(-np.pi / 2, 0, 0)
     centre = np.asarray(cap.position, dtype=float)
@@ -267,6 +234,51 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
             p=0.0, d=cap.coulomb_torque / cap.stiction_speed))
     else:
         plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(R_axis, centre))
+    return instance, body, bottle, joint
+
+
+def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance):
+    """The speed floor's PD targets: a ``TrajectorySource`` of the scenario's frames."""
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    one = frames(gist, scenario.parameters, q0, scenario.n_frames)
+    F = np.vstack([one[0], *([one] * scenario.n_gaits)])
+    times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
+    q_all = np.array([actuated_to_joint_positions(spec, f, 1.0) for f in F])
+    names = [plant.get_joint_actuator(i).joint().name()
+             for i in plant.GetJointActuatorIndices(hand)]
+    cols = [spec.joint_names.index(n) for n in names]
+    desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
+    traj = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+        times, desired.T)))
+    builder.Connect(traj.get_output_port(), plant.get_desired_state_input_port(hand))
+    if joint is not None:
+        zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
+        builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+
+
+def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
+    """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
+
+    Returns a dict of handles (diagram, plant, source, cap joint, bodies).
+    ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
+    plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
+    frames (zero-order hold; no Python system, no driver, no sampling).
+    """
+    cap = scenario.cap
+    cap.validate()
+    gist = scenario.action_gist()
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=scenario.time_step, contact_model="point",
+        discrete_contact_approximation="sap", use_sampled_output_ports=False), builder)
+    spec = get_hand_spec("shadow")
+    hand = AddHand(plant, "shadow", coupling_ratio=1.0)
+    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
+                     RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
+                                    scenario.hand_xyz))
+    instance, body, bottle, joint = _add_cap(plant, cap)
     plant.Finalize()
     if bottle is not None:
         # the bottle and its cap do not collide with each other (the thread is the joint)
@@ -280,24 +292,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
 
     _set_default_hand_positions(plant, hand, spec, q0, 1.0)
     if bare:
-        from pydrake.systems.primitives import TrajectorySource
-        from pydrake.trajectories import PiecewisePolynomial
-
-
-        one = frames(gist, scenario.parameters, q0, scenario.n_frames)
-        F = np.vstack([one[0], *([one] * scenario.n_gaits)])
-        times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
-        q_all = np.array([actuated_to_joint_positions(spec, f, 1.0) for f in F])
-        names = [plant.get_joint_actuator(i).joint().name()
-                 for i in plant.GetJointActuatorIndices(hand)]
-        cols = [spec.joint_names.index(n) for n in names]
-        desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
-        traj = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
-            times, desired.T)))
-        builder.Connect(traj.get_output_port(), plant.get_desired_state_input_port(hand))
-        if joint is not None:
-            zero = builder.AddSystem(ConstantVectorSource(np.zeros(2)))
-            builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+        _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance)
         return dict(diagram=builder.Build(), plant=plant)
     driver = builder.AddNamedSystem("hand_driver", PdHandDriver(
         plant, hand, spec, q0, lower, upper, max_joint_velocity=scenario.max_joint_velocity))
@@ -619,6 +614,34 @@ class ScrewCapTrial:
         return TrialResult(metric=outcome.score, contacts=detail,
                            scenario=self.scenario(x).dump())
 
+    def _gripped(self, st: dict, t, summary: dict, built: dict, plant_context, p0) -> bool:
+        """A finger touched the object within ``contact_window``, the palm never did (its
+        record kept in ``st``) and a free cylinder has not dropped."""
+        c = self.config
+        fingers = [b for b in summary["touching"] if b != "palm"]
+        if fingers:
+            st["last_touch"] = float(t)
+        st["palm_max"] = max(st["palm_max"], summary["palm_force"])
+        st["palm"] = st["palm"] or summary["palm_force"] > 0
+        gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+        if built["joint"] is None:  # a free cylinder must also not have dropped
+            p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation()
+            gripped = gripped and p[2] - p0[2] > -c.drop
+        return gripped
+
+    def _survives_reversal(self, built: dict, plant_context) -> bool:
+        """Weight reversed for ``reverse_time`` (the hand turned palm down, for the free
+        cylinder): still within ``reverse_travel`` and touched by a finger."""
+        c, plant, body = self.config, built["plant"], built["cap"]
+        context, reverse = built["simulator"].get_mutable_context(), built["reverse"]
+        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+        reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
+        built["simulator"].AdvanceTo(c.total_time + c.reverse_time)
+        p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+        touching = contact_summary(plant, plant_context, built)["touching"]
+        return bool(np.linalg.norm(p - p_end) < c.reverse_travel
+                    and any(b != "palm" for b in touching))
+
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> ScrewCapOutcome:
         """Runs one trial from the settled grasp (deterministic)."""
         x = self._check(x)
@@ -650,32 +673,12 @@ class ScrewCapTrial:
         st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
                   palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
 
-        def turn_now():
-            if joint is not None:  # the plant's joint (truth) and its encoder's count
-                truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
-                return truth, float(np.round(truth / 360.0 * counts) * 360.0 / counts)
-            # the free cylinder: about its own axis, unwrapped; the fingers' flex strokes
-            # turn it about -z of its frame (measured), so that direction counts positive
-            R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
-            raw = -float(np.arctan2(R[1, 0], R[0, 0]))
-            st["angle"] += (raw - st["previous"] + np.pi) % (2 * np.pi) - np.pi
-            st["previous"] = raw
-            return float(np.degrees(st["angle"])), float(np.degrees(st["angle"]))
-
         try:
             for i, t in enumerate(samples):
                 simulator.AdvanceTo(float(t))
-                truth, turn = turn_now()
+                truth, turn = _turn(st, built, plant_context, R0_inv, q_start, counts)
                 summary = contact_summary(plant, plant_context, built)
-                fingers = [b for b in summary["touching"] if b != "palm"]
-                if fingers:
-                    st["last_touch"] = float(t)
-                st["palm_max"] = max(st["palm_max"], summary["palm_force"])
-                st["palm"] = st["palm"] or summary["palm_force"] > 0
-                gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
-                if joint is None:  # a free cylinder must also not have dropped
-                    p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
-                    gripped = gripped and p[2] - p0[2] > -c.drop
+                gripped = self._gripped(st, t, summary, built, plant_context, p0)
                 turns.append(turn)
                 truths.append(truth)
                 contacts.append(summary["touching"])
@@ -696,19 +699,10 @@ class ScrewCapTrial:
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
         survived = None
         if joint is None and not st["stopped"]:
-            # weight reversed for reverse_time: the hand turned palm down, for the object
-            p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
-            reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
-            simulator.AdvanceTo(c.total_time + c.reverse_time)
-            p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
-            touching = contact_summary(plant, plant_context, built)["touching"]
-            survived = bool(np.linalg.norm(p - p_end) < c.reverse_travel
-                            and any(b != "palm" for b in touching))
+            survived = self._survives_reversal(built, plant_context)
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
-            from pathlib import Path
-
             Path(html).write_text(meshcat.StaticHtml())
         passed = st["passed"]
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
@@ -725,6 +719,22 @@ class ScrewCapTrial:
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
+
+
+def _turn(st: dict, built: dict, plant_context, R0_inv, q_start: float, counts: int):
+    """The object's turn now (deg): (truth, as read): the cap's joint and its encoder's
+    count, or the free cylinder's pose about its own axis, unwrapped in ``st``."""
+    plant, joint, body = built["plant"], built["joint"], built["cap"]
+    if joint is not None:  # the plant's joint (truth) and its encoder's count
+        truth = float(np.degrees(joint.get_angle(plant_context) - q_start))
+        return truth, float(np.round(truth / 360.0 * counts) * 360.0 / counts)
+    # the free cylinder: about its own axis, unwrapped; the fingers' flex strokes
+    # turn it about -z of its frame (measured), so that direction counts positive
+    R = (R0_inv @ plant.EvalBodyPoseInWorld(plant_context, body).rotation()).matrix()
+    raw = -float(np.arctan2(R[1, 0], R[0, 0]))
+    st["angle"] += (raw - st["previous"] + np.pi) % (2 * np.pi) - np.pi
+    st["previous"] = raw
+    return float(np.degrees(st["angle"])), float(np.degrees(st["angle"]))
 
 
 def simulate_scenario(text: str, reverse_time: float = 0.5) -> dict:

@@ -12,7 +12,7 @@ three fingers over 1 s) turns the 4 cm cylinder by about 50 deg and it stays on
 the palm, so 30 deg held is physically reachable
 (``tests/inhand/test_inhand_task.py`` replays it).
 
-The grasp is settled once per process (``settle_time`` of simulation with the
+The grasp is settled once per trial object (``settle_time`` of simulation with the
 initial command) and every trial starts from a copy of that context: time 0,
 the settled state, the trial's parameters on the :class:`GistMotionSource`.
 The trial samples every ``sample_period``: object pose (rotation about its
@@ -30,18 +30,23 @@ last one at the end of the hold) compare with the benchmark: held, rotation at
 least ``target * benchmark[k] - tolerance_deg`` (the tolerance absorbs the
 object's sub-degree rocking in the cradle). The incremental evaluation
 stops at the first failed check, the old one when the object drops.
+
+Every trial is an :class:`InHandScenario` (the station's scenario, the motion and
+its parameters: a dataclass dumped whole with Drake's ``yaml_dump_typed``), so a
+logged trial is rebuilt from its scenario alone (:func:`build_inhand`); run ids
+carry :func:`inhand_fingerprint`.
 """
 
-from __future__ import annotations
 
 import dataclasses as dc
-import json
+import functools
 import time
 from functools import cached_property
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from handle_drake.apps.inhand.evaluation import (
     incremental_score,
@@ -54,13 +59,25 @@ from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import ABDUCTION_RULES, glove_to_shadow
 from handle_drake.base.checks import LIMITS
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.base.models import PACKAGE_DIR, models_dir
 from handle_drake.devices.accelerometer.profiles import get_profile
 from handle_drake.learning.executors import TrialResult
-from handle_drake.scenario import DumpScenario, LoadScenario, Scenario
+from handle_drake.learning.log import code_fingerprint
+from handle_drake.scenario import (
+    AccelerometerConfig,
+    FixedMount,
+    HandConfig,
+    ObjectConfig,
+    Scenario,
+    SimHandDriver,
+    default_plant_config,
+)
 from handle_drake.station import object_body
 from handle_drake.trial.harness import TrialHarness
 
-__all__ = ["TASKS", "InHandTask", "InHandTrial", "TrialOutcome", "EVALUATIONS", "task_gist"]
+__all__ = ["TASKS", "InHandTask", "InHandTrial", "InHandScenario", "TrialOutcome", "EVALUATIONS",
+           "task_gist", "build_inhand", "inhand_fingerprint", "GistMotionData", "gist_data",
+           "gist_from_data"]
 
 DATA_DIR = Path(__file__).parent / "data"
 EVALUATIONS = ("incremental", "old")
@@ -205,25 +222,146 @@ class TrialOutcome:
         return dc.asdict(self)
 
 
-_BUILD_CACHE: dict = {}
+# The scenario dataclasses below need real types for yaml_dump_typed (this module has no
+# ``from __future__ import annotations``); the screw cap's scenario uses them too.
+@dc.dataclass
+class GistMotionData:
+    """One meta motion of the action gist, as data (``MetaMotion``) in a scenario."""
+
+    finger: str = "FF"
+    start: float = 0.0
+    end: float = 1.0
+    variation: list[float] = dc.field(default_factory=list)
+
+
+def gist_data(gist: ActionGist) -> list[GistMotionData]:
+    """The gist's meta motions as scenario data (plain floats: they dump exactly)."""
+    return [GistMotionData(m.finger, float(m.start), float(m.end),
+                           [float(v) for v in m.variation]) for m in gist.motions]
+
+
+def gist_from_data(name: str, motions: list[GistMotionData]) -> ActionGist:
+    """The :class:`ActionGist` a scenario's meta motions describe."""
+    return ActionGist.from_dict({"name": name, "motions": [dc.asdict(m) for m in motions]})
+
+
+@dc.dataclass
+class InHandScenario:
+    """One palm-up in-hand trial, whole: the station's scenario (hand, object, plant,
+    driver), the motion of Algorithm 1 (the action gist, its frames) and its
+    parameters (eq. 45) as data. Dumped with Drake's ``yaml_dump_typed`` (as the
+    screw cap's :class:`~handle_drake.apps.inhand.screw_cap.ScrewCapScenario`), so a
+    logged trial is rebuilt from its scenario alone (:func:`build_inhand`)."""
+
+    station: Scenario = dc.field(default_factory=Scenario)
+    settle_time: float = 1.0  # s with the initial command before the motion
+    gist_name: str = ""
+    gist: list[GistMotionData] = dc.field(default_factory=list)
+    motion_duration: float = 1.0
+    n_frames: int = 50
+    parameters: list[float] = dc.field(default_factory=list)  # eq. 45
+
+    def dump(self) -> str:
+        return yaml_dump_typed(self)
+
+    @staticmethod
+    def load(text: str) -> "InHandScenario":
+        # yaml_dump_typed leaves out None fields: the table (and any other optional part
+        # of the station) absent from the text is absent from the scenario
+        defaults = InHandScenario(station=Scenario(object=None, table=None))
+        return yaml_load_typed(schema=InHandScenario, data=text, defaults=defaults)
+
+    def action_gist(self) -> ActionGist:
+        return gist_from_data(self.gist_name, self.gist)
+
+    def initial_command(self) -> np.ndarray:
+        names = get_hand_spec(self.station.hand.kind).actuated_joint_names
+        return np.array([float(self.station.hand.initial_position.get(n, 0.0)) for n in names])
+
+
+def inhand_sources() -> list[Path]:
+    """The source files an in-hand trial's score depends on besides its scenario: the
+    trial and its evaluation, the gist, the harness, station and scenario, hands,
+    objects, drivers and the accelerometer's model."""
+    root = PACKAGE_DIR
+    here = Path(__file__).parent
+    return sorted([
+        here / "task.py", here / "gist.py", here / "evaluation.py", here / "mapping.py",
+        here / "glove.py", root / "trial" / "harness.py", root / "station.py",
+        root / "scenario.py", root / "base" / "hands.py",
+        *(root / "geometry" / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
+        *(root / "devices" / "accelerometer").glob("*.py"),
+    ])
+
+
+@functools.cache
+def inhand_fingerprint() -> str:
+    """Hash of what an in-hand trial's score depends on besides its settings: the
+    code of :func:`inhand_sources` (without comments and docstrings), the hand model
+    files, the demonstrations and Drake's version (as babbling's
+    ``simulation_fingerprint``). Computed once per process."""
+    return code_fingerprint(PACKAGE_DIR, inhand_sources(),
+                            sorted(models_dir().glob("*/*.sdf"))
+                            + sorted(DATA_DIR.glob("*.json")))
+
+
+def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
+    """The trial's diagram from its scenario, the grasp settled (all variations zero).
+
+    Returns the harness, the settled context (time 0) the trials start from, the
+    object body, the hand's bodies by index and the accelerometer port (or None).
+    """
+    gist = scenario.action_gist()
+    q0 = scenario.initial_command()
+
+    def add_motion(builder, station):
+        source = builder.AddNamedSystem("motion", GistMotionSource(
+            gist, q0, scenario.motion_duration, scenario.n_frames))
+        builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
+        return source
+
+    harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat)
+    plant, source = harness.plant, harness.controller
+    hand = plant.GetModelInstanceByName("hand")
+    hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
+                   for i in plant.GetBodyIndices(hand)}
+    # Settle the grasp once: hold the initial command (all variations zero).
+    still = gist.initial_parameters().copy()
+    for sl in gist.slices():
+        still[sl][1:] = 0.0
+    harness.reset()
+    source.set_parameters(harness.controller_context(), still)
+    harness.initialize()
+    harness.advance(scenario.settle_time)
+    # Trials start from this context, not from the scenario's default one.
+    settled = harness.context.Clone()
+    settled.SetTime(0.0)
+    accelerometer = scenario.station.object.accelerometer is not None
+    return dict(harness=harness, settled=settled, body=object_body(plant),
+                hand_bodies=hand_bodies,
+                accelerometer=harness.station.GetOutputPort("object.acceleration")
+                if accelerometer else None)
 
 
 class InHandTrial:
     """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
 
-    The diagram (station + :class:`GistMotionSource`) is built once per
-    process and kept in a process-wide cache keyed by the settings, so
-    executors that ship the objective with every call (Dask) still reuse it.
+    Every trial is an :class:`InHandScenario` (logged whole). The diagram
+    (station + :class:`GistMotionSource`) is built on the first call and kept on
+    this object (not pickled: a worker builds its own; the executors unpickle an
+    objective once per worker).
     """
 
     def __init__(self, config: InHandTask | None = None, **kwargs):
         self.config = config if config is not None else InHandTask(**kwargs)
+        self._built = None
 
     def __getstate__(self):
         return {"config": self.config}
 
     def __setstate__(self, state):
         self.config = state["config"]
+        self._built = None
 
     @property
     def name(self) -> str:
@@ -265,79 +403,42 @@ class InHandTrial:
             q0[names.index(joint)] = value
         return q0
 
-    def scenario(self) -> Scenario:
+    def scenario(self, x=None) -> InHandScenario:
+        """The trial with parameters ``x`` (default: the demonstration's own) as data."""
         c, spec = self.config, TASKS[self.config.task]
-        x, y, z = spec.X_WO_xyz
-        dims = ", ".join(f"{k}: {v}" for k, v in spec.dimensions)
-        q0 = self.initial_command()
         names = get_hand_spec("shadow").actuated_joint_names
-        initial = ", ".join(f"{n}: {float(v)!r}" for n, v in zip(names, q0, strict=True) if v != 0)
-        # the sensor frame is the object's origin (the default X_OS of a plain object)
-        sensor = f"\n  accelerometer: {{device: {c.accelerometer}, seed: 0}}" \
-            if c.accelerometer else ""
-        return LoadScenario(data=f"""
-hand:
-  kind: shadow
-  coupling_ratio: 1.0
-  mount: !FixedMount
-    X_WB: {{translation: [0, 0, 0], rotation: !Rpy {{deg: {list(_HAND_RPY_DEG)}}}}}
-  initial_position: {{{initial}}}
-object:
-  kind: {spec.object_kind}
-  size: {spec.size}
-  dimensions: {{{dims}}}
-  mu: {c.mu}
-  X_WO: {{translation: [{x}, {y}, {z}], rotation: !Rpy {{deg: [-90, 0, 0]}}}}
-  on_table: false{sensor}
-table: null
-plant_config: {{time_step: {c.time_step}, contact_model: point}}
-driver: !SimHandDriver {{max_joint_velocity: 4.0}}
-simulation_duration: {c.settle_time + c.total_time}
-""")
-
-    def scenario_for(self, x) -> str:
-        return DumpScenario(self.scenario()) + (
-            f"# in-hand trial {self.name}, Algorithm 1 over {self.config.n_frames} frames in "
-            f"{self.config.motion_duration} s; parameters (eq. 45): "
-            f"{json.dumps([float(v) for v in np.asarray(x).reshape(-1)])}\n")
+        q0 = self.initial_command()
+        X_WB = Transform(translation=[0.0, 0.0, 0.0])
+        X_WB.set_rotation_rpy_deg(list(_HAND_RPY_DEG))
+        X_WO = Transform(translation=list(spec.X_WO_xyz))
+        X_WO.set_rotation_rpy_deg([-90.0, 0.0, 0.0])
+        station = Scenario(
+            hand=HandConfig(kind="shadow", coupling_ratio=1.0, mount=FixedMount(X_WB=X_WB),
+                            initial_position={n: float(v) for n, v in
+                                              zip(names, q0, strict=True) if v != 0}),
+            # the sensor frame is the object's origin (the default X_OS of a plain object)
+            object=ObjectConfig(kind=spec.object_kind, size=spec.size,
+                                dimensions=dict(spec.dimensions), mu=c.mu, X_WO=X_WO,
+                                on_table=False,
+                                accelerometer=AccelerometerConfig(device=c.accelerometer, seed=0)
+                                if c.accelerometer else None),
+            table=None,
+            plant_config=default_plant_config(time_step=c.time_step, contact_model="point"),
+            driver=SimHandDriver(max_joint_velocity=4.0),
+            simulation_duration=c.settle_time + c.total_time)
+        parameters = self.gist.initial_parameters() if x is None else self._check(x)
+        return InHandScenario(station=station, settle_time=c.settle_time,
+                              gist_name=self.gist.name, gist=gist_data(self.gist),
+                              motion_duration=c.motion_duration, n_frames=c.n_frames,
+                              parameters=[float(v) for v in parameters])
 
     # ------------------------------------------------------------ building
     def _build(self, meshcat=None):
-        key = (self.config, meshcat is not None)
-        if meshcat is None and key in _BUILD_CACHE:
-            return _BUILD_CACHE[key]
-        c = self.config
-        q0 = self.initial_command()
-
-        def add_motion(builder, station):
-            source = builder.AddNamedSystem("motion", GistMotionSource(
-                self.gist, q0, c.motion_duration, c.n_frames))
-            builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
-            return source
-
-        harness = TrialHarness(self.scenario(), add_motion, log=(), meshcat=meshcat)
-        plant, source = harness.plant, harness.controller
-        hand = plant.GetModelInstanceByName("hand")
-        hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
-                       for i in plant.GetBodyIndices(hand)}
-        # Settle the grasp once: hold the initial command (all variations zero).
-        still = self.gist.initial_parameters().copy()
-        for sl in self.gist.slices():
-            still[sl][1:] = 0.0
-        harness.reset()
-        source.set_parameters(harness.controller_context(), still)
-        harness.initialize()
-        harness.advance(c.settle_time)
-        # Trials start from this context, not from the scenario's default one.
-        settled = harness.context.Clone()
-        settled.SetTime(0.0)
-        station = harness.station
-        built = dict(harness=harness, settled=settled, body=object_body(plant),
-                     hand_bodies=hand_bodies,
-                     accelerometer=station.GetOutputPort("object.acceleration")
-                     if c.accelerometer else None)
+        if self._built is not None and meshcat is None:
+            return self._built
+        built = build_inhand(self.scenario(), meshcat=meshcat)
         if meshcat is None:
-            _BUILD_CACHE[key] = built
+            self._built = built
         return built
 
     def _check(self, x) -> np.ndarray:
@@ -355,7 +456,7 @@ simulation_duration: {c.settle_time + c.total_time}
         detail = outcome.as_dict()
         for key in ("times",):
             detail.pop(key)
-        return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario_for(x))
+        return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario(x).dump())
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> TrialOutcome:
         """Runs one trial (deterministic: the simulation has no noise; ``seed`` is unused).
@@ -373,82 +474,82 @@ simulation_duration: {c.settle_time + c.total_time}
         context.SetTimeStateAndParametersFrom(built["settled"])
         harness.controller.set_parameters(harness.controller_context(), x)
         plant_context = harness.plant_context()
-        body = built["body"]
-        X0 = plant.EvalBodyPoseInWorld(plant_context, body)
-        R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
-        harness.initialize()
-        if html is not None:
-            early_stop = False  # a replay shows the whole motion (the score is the same)
-
+        X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
         samples = c.sample_times()
-        checks = c.check_times()
-        step = 1e-3 * c.time_step
-        tolerance = float(np.radians(c.tolerance_deg))
+        st = _Sampling(plant_context=plant_context,
+                       station_context=harness.station.GetMyContextFromRoot(context),
+                       R0_inv=X0.rotation().inverse(), p0=X0.translation().copy(),
+                       early_stop=early_stop and html is None,  # a replay shows it all
+                       samples=samples, checks=c.check_times(),
+                       matches=np.zeros(samples.size, dtype=bool))
+        harness.initialize()
         accelerometer = built["accelerometer"]
-        station_context = harness.station.GetMyContextFromRoot(context)
-        contacts_port = plant.get_contact_results_output_port()
-        matches = np.zeros(samples.size, dtype=bool)
-        rotations, accel_rotations, contacts_log = [], [], []
-        # failed: a check failed, no later check counts (the checks pass in a row)
-        st = SimpleNamespace(i=0, next_check=0, angle=0.0, previous=0.0, held_time=0.0,
-                             held=True, passed=0, stopped=False, failed=False,
-                             last_touch=0.0, acc_prev=None, acc_angle=0.0)
         if accelerometer is not None:  # the reading at the start of the trial (settled)
-            up_O = accelerometer.Eval(station_context)
+            up_O = accelerometer.Eval(st.station_context)
             st.acc_prev = float(np.arctan2(up_O[1], up_O[0]))
-
-        def sample():
-            i, t = st.i, float(samples[st.i])
-            st.i += 1
-            X = plant.EvalBodyPoseInWorld(plant_context, body)
-            R = (R0_inv @ X.rotation()).matrix()
-            raw = -np.arctan2(R[1, 0], R[0, 0])  # about the object axis, task direction > 0
-            st.angle += (raw - st.previous + np.pi) % (2 * np.pi) - np.pi
-            st.previous = raw
-            touching = _touching(contacts_port.Eval(plant_context), body, built["hand_bodies"])
-            p = X.translation()
-            if touching:
-                st.last_touch = t
-            # A rolling object hops off the palm for a few ms: it counts as
-            # touching the hand if it did so within the last contact_window.
-            st.held = bool(p[2] - p0[2] > -c.drop and np.linalg.norm(p - p0) < c.max_travel
-                           and t - st.last_touch <= c.contact_window + 1e-9)
-            if st.held:
-                st.held_time = t
-            if accelerometer is not None:
-                # The instrumented object (report 2.4): its accelerometer (sensor frame =
-                # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
-                # "up" in the object frame, whose angle about the object axis gives the
-                # rotation (the task direction turns "up" the other way round).
-                up_O = accelerometer.Eval(station_context)
-                raw_acc = float(np.arctan2(up_O[1], up_O[0]))
-                st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
-                st.acc_prev = raw_acc
-                accel_rotations.append(float(np.degrees(st.acc_angle)))
-            rotations.append(float(np.degrees(st.angle)))
-            contacts_log.append(touching)
-            # the rotation scored: the instrumented object's own estimate when it has one
-            # (the plant's, logged beside, is then never scored), else the plant's
-            sensed = st.acc_angle if accelerometer is not None else st.angle
-            matches[i] = st.held and sensed >= c.benchmark_at(t) - tolerance
-            if st.next_check < checks.size and t >= checks[st.next_check] - step:
-                ok = st.held and sensed >= c.target * c.benchmark[st.next_check] - tolerance
-                if ok and not st.failed:
-                    st.passed += 1
-                st.failed = st.failed or not ok
-                st.next_check += 1
-                if st.failed and c.evaluation == "incremental" and early_stop:
-                    raise _EarlyStop
-            if not st.held and c.evaluation == "old" and early_stop:
-                raise _EarlyStop
-
         try:
             harness.advance(samples, html=html if meshcat is not None else None,
-                            at_each=sample)
+                            at_each=lambda: self._sample(st, built))
         except _EarlyStop:
             st.stopped = True
-        sim_time = float(samples[len(rotations) - 1])
-        angle = st.acc_angle if accelerometer is not None else st.angle
+        return self._outcome(st, time.perf_counter() - start_wall)
+
+    def _sample(self, st: "_Sampling", built: dict) -> None:
+        """One sample of the running trial: rotation, held, contacts, the checks."""
+        c, plant, body = self.config, built["harness"].plant, built["body"]
+        i, t = st.i, float(st.samples[st.i])
+        st.i += 1
+        X = plant.EvalBodyPoseInWorld(st.plant_context, body)
+        R = (st.R0_inv @ X.rotation()).matrix()
+        raw = -np.arctan2(R[1, 0], R[0, 0])  # about the object axis, task direction > 0
+        st.angle += (raw - st.previous + np.pi) % (2 * np.pi) - np.pi
+        st.previous = raw
+        touching = _touching(plant.get_contact_results_output_port().Eval(st.plant_context),
+                             body, built["hand_bodies"])
+        p = X.translation()
+        if touching:
+            st.last_touch = t
+        # A rolling object hops off the palm for a few ms: it counts as
+        # touching the hand if it did so within the last contact_window.
+        st.held = bool(p[2] - st.p0[2] > -c.drop and np.linalg.norm(p - st.p0) < c.max_travel
+                       and t - st.last_touch <= c.contact_window + 1e-9)
+        if st.held:
+            st.held_time = t
+        accelerometer = built["accelerometer"]
+        if accelerometer is not None:
+            # The instrumented object (report 2.4): its accelerometer (sensor frame =
+            # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
+            # "up" in the object frame, whose angle about the object axis gives the
+            # rotation (the task direction turns "up" the other way round).
+            up_O = accelerometer.Eval(st.station_context)
+            raw_acc = float(np.arctan2(up_O[1], up_O[0]))
+            st.acc_angle += (raw_acc - st.acc_prev + np.pi) % (2 * np.pi) - np.pi
+            st.acc_prev = raw_acc
+            st.accel_rotations.append(float(np.degrees(st.acc_angle)))
+        st.rotations.append(float(np.degrees(st.angle)))
+        st.contacts.append(touching)
+        tolerance = float(np.radians(c.tolerance_deg))
+        # the rotation scored: the instrumented object's own estimate when it has one
+        # (the plant's, logged beside, is then never scored), else the plant's
+        sensed = st.acc_angle if accelerometer is not None else st.angle
+        st.matches[i] = st.held and sensed >= c.benchmark_at(t) - tolerance
+        if st.next_check < st.checks.size and t >= st.checks[st.next_check] - 1e-3 * c.time_step:
+            ok = st.held and sensed >= c.target * c.benchmark[st.next_check] - tolerance
+            if ok and not st.failed:
+                st.passed += 1
+            st.failed = st.failed or not ok
+            st.next_check += 1
+            if st.failed and c.evaluation == "incremental" and st.early_stop:
+                raise _EarlyStop
+        if not st.held and c.evaluation == "old" and st.early_stop:
+            raise _EarlyStop
+
+    def _outcome(self, st: "_Sampling", wall_time: float) -> TrialOutcome:
+        """The score of the samples taken (eqs. 47-49, or the old evaluation)."""
+        c = self.config
+        rotations, samples, checks = st.rotations, st.samples, st.checks
+        # the instrumented object's own estimate when it has one (sensed = scored)
+        angle = st.acc_angle if st.acc_prev is not None else st.angle
         passed = st.passed
         held_end = st.held and not st.stopped
         # The target itself is strict (the checks' tolerance lets a run stop within
@@ -456,8 +557,9 @@ simulation_duration: {c.settle_time + c.total_time}
         reached = bool(held_end and passed == c.n_checks and angle >= c.target)
         if c.evaluation == "incremental":
             if st.failed:  # the samples after the first failed check count as not matching
-                matches[samples > checks[passed] + step] = False
-            score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
+                st.matches[samples > checks[passed] + 1e-3 * c.time_step] = False
+            score, s_b, s_a = incremental_score(self.dims_per_part, passed, st.matches,
+                                                reached)
         else:
             score = old_score(st.held_time, c.total_time, angle if held_end else 0.0, c.target)
             s_b = s_a = None
@@ -466,8 +568,37 @@ simulation_duration: {c.settle_time + c.total_time}
             held=held_end, held_time=st.held_time, checks_passed=passed,
             completed=not st.stopped, reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(rotations)].tolist(), rotation_deg_series=rotations,
-            accelerometer_rotation_deg_series=accel_rotations, contacts=contacts_log,
-            sim_time=sim_time, wall_time=time.perf_counter() - start_wall)
+            accelerometer_rotation_deg_series=st.accel_rotations, contacts=st.contacts,
+            sim_time=float(samples[len(rotations) - 1]), wall_time=wall_time)
+
+
+@dc.dataclass(eq=False)
+class _Sampling:
+    """The running state of one in-hand trial's samples (:meth:`InHandTrial.evaluate`)."""
+
+    plant_context: object
+    station_context: object
+    R0_inv: object  # the object's start orientation, inverted
+    p0: np.ndarray  # the object's start position
+    early_stop: bool
+    samples: np.ndarray  # sample times
+    checks: np.ndarray  # check times
+    matches: np.ndarray  # per sample: held and on the benchmark
+    i: int = 0  # the next sample
+    next_check: int = 0
+    angle: float = 0.0  # rad, unwrapped, task direction > 0
+    previous: float = 0.0
+    held_time: float = 0.0
+    held: bool = True
+    passed: int = 0
+    stopped: bool = False
+    failed: bool = False  # a check failed: no later check counts (the checks pass in a row)
+    last_touch: float = 0.0
+    acc_prev: float | None = None
+    acc_angle: float = 0.0
+    rotations: list = dc.field(default_factory=list)  # deg per sample
+    accel_rotations: list = dc.field(default_factory=list)
+    contacts: list = dc.field(default_factory=list)  # hand bodies touching, per sample
 
 
 class _EarlyStop(Exception):

@@ -149,6 +149,33 @@ def _sidecar_number(path, meta, key, integer=False):
     return value
 
 
+def _read_depth_png(path: Path, png: Path) -> np.ndarray:
+    """The frame's depth image as an array of PNG units (checked: a PNG, at most
+    :data:`MAX_PIXELS`, a single-channel 16-bit mode); errors name the frame ``path``."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with warnings.catch_warnings():  # the pixel cap below says it in one line
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            image = Image.open(png)
+        with image:
+            if image.format != "PNG":
+                raise ValueError(f"frame {path}: depth_png: expected a PNG image, got "
+                                 f"{image.format} ({png.name})")
+            if image.width * image.height > MAX_PIXELS:
+                raise ValueError(f"frame {path}: depth_png: expected at most {MAX_PIXELS} "
+                                 f"pixels, got {image.width} x {image.height}")
+            # Pillow opens a 16-bit grey PNG as "I;16" (older versions: "I").
+            if image.mode not in ("I;16", "I;16B", "I"):
+                raise ValueError(f"frame {path}: depth_png: expected a single-channel 16-bit "
+                                 f"PNG (depth in units of depth_scale), got mode {image.mode} "
+                                 f"({png.name})")
+            units = np.asarray(image)
+    except (UnidentifiedImageError, OSError, Image.DecompressionBombError, SyntaxError) as error:
+        raise ValueError(f"frame {path}: cannot read depth image {png.name}: {error}") from None
+    return units
+
+
 def load_frame(path: str | Path) -> DepthFrame:
     """Reads a frame's JSON sidecar and its 16-bit depth PNG.
 
@@ -159,9 +186,6 @@ def load_frame(path: str | Path) -> DepthFrame:
     a 32-bit TIFF holds signed values), intrinsics or a pose out of range
     (:class:`DepthFrame`).
     """
-    from PIL import Image, UnidentifiedImageError
-
-
     text = read_text_file(path, "frame", max_bytes=1 << 20)  # the sidecar is < 1 kB
     path = Path(path)
     try:
@@ -190,25 +214,7 @@ def load_frame(path: str | Path) -> DepthFrame:
         raise ValueError(f"frame {path}: depth_png: expected a file name, got "
                          f"{meta['depth_png']!r}"[:300])
     png = check_input_file(path.parent / meta["depth_png"], f"frame {path}: depth_png")
-    try:
-        with warnings.catch_warnings():  # the pixel cap below says it in one line
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            image = Image.open(png)
-        with image:
-            if image.format != "PNG":
-                raise ValueError(f"frame {path}: depth_png: expected a PNG image, got "
-                                 f"{image.format} ({png.name})")
-            if image.width * image.height > MAX_PIXELS:
-                raise ValueError(f"frame {path}: depth_png: expected at most {MAX_PIXELS} "
-                                 f"pixels, got {image.width} x {image.height}")
-            # Pillow opens a 16-bit grey PNG as "I;16" (older versions: "I").
-            if image.mode not in ("I;16", "I;16B", "I"):
-                raise ValueError(f"frame {path}: depth_png: expected a single-channel 16-bit "
-                                 f"PNG (depth in units of depth_scale), got mode {image.mode} "
-                                 f"({png.name})")
-            units = np.asarray(image)
-    except (UnidentifiedImageError, OSError, Image.DecompressionBombError, SyntaxError) as error:
-        raise ValueError(f"frame {path}: cannot read depth image {png.name}: {error}") from None
+    units = _read_depth_png(path, png)
     if units.ndim != 2 or units.dtype.kind not in "iu" or units.min(initial=0) < 0 or \
             units.max(initial=0) > MAX_PNG_MM:
         raise ValueError(f"frame {path}: depth_png: expected a single-channel 16-bit image, got "

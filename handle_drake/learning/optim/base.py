@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Optimizer", "Best", "check_bounds"]
+__all__ = ["Optimizer", "Best", "RandomSearch", "check_bounds"]
 
 
 def check_bounds(bounds) -> np.ndarray:
@@ -208,3 +208,24 @@ class Optimizer:
     def _register(self, u) -> np.ndarray:
         self._pending.append(np.asarray(u, dtype=float))
         return self.from_unit(u)
+
+
+class RandomSearch(Optimizer):
+    """Uniform random search with the ask/tell interface of :class:`BayesianOptimizer`.
+
+    Point ``k`` (counting told and pending points) is drawn from a generator
+    seeded with ``(seed, k)``, so any number of asks may be outstanding
+    (parallel trials) and a replayed run proposes the same points.
+    """
+
+    strategy = "random"
+    batch_size = None  # any number of asks may be outstanding
+    synchronous = False
+
+    def __init__(self, bounds, seed: int = 0):
+        super().__init__(bounds, seed)
+
+    def ask(self) -> np.ndarray:
+        k = self.n_told + self.n_pending
+        u = np.random.default_rng([self.seed, k]).random(self.dim)
+        return self._register(u)

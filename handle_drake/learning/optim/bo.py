@@ -57,7 +57,6 @@ would be proposed again); :attr:`best` never returns it.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,6 +73,7 @@ from handle_drake.learning.gp import GaussianProcess, Hyperparameters
 from handle_drake.learning.optim.base import (  # noqa: F401 - _derived_seed: used by the runner
     Best,
     Optimizer,
+    RandomSearch,
     _check_seed,
     _derived_seed,
     check_bounds,
@@ -87,9 +87,7 @@ __all__ = [
     "RandomSearch",
     "OptimizationResult",
     "Best",
-    "maximize",
     "check_bounds",
-    "make_optimizer",
     "v1_options",
     "BO_DEFAULTS_VERSION",
     "OUTPUT_TRANSFORMS",
@@ -117,25 +115,36 @@ class OptimizationResult:
     best_so_far: np.ndarray = field(repr=False, default=None)
 
 
-class RandomSearch(Optimizer):
-    """Uniform random search with the ask/tell interface of :class:`BayesianOptimizer`.
-
-    Point ``k`` (counting told and pending points) is drawn from a generator
-    seeded with ``(seed, k)``, so any number of asks may be outstanding
-    (parallel trials) and a replayed run proposes the same points.
-    """
-
-    strategy = "random"
-    batch_size = None  # any number of asks may be outstanding
-    synchronous = False
-
-    def __init__(self, bounds, seed: int = 0):
-        super().__init__(bounds, seed)
-
-    def ask(self) -> np.ndarray:
-        k = self.n_told + self.n_pending
-        u = np.random.default_rng([self.seed, k]).random(self.dim)
-        return self._register(u)
+def _check_options(dim, batch_size, output_transform, n_initial, xi, ei_threshold,
+                   direct_maxfun, refit_until, refit_growth):
+    """Validates :class:`BayesianOptimizer`'s options; returns ``n_initial`` and
+    ``direct_maxfun`` with their defaults for ``dim`` dimensions filled in."""
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) \
+            or batch_size < 1:
+        raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    if output_transform not in OUTPUT_TRANSFORMS:
+        raise ValueError(
+            f"output_transform must be one of {OUTPUT_TRANSFORMS}, got {output_transform!r}"
+        )
+    if n_initial is None:
+        n_initial = max(10, dim + 1)
+    if isinstance(n_initial, bool) or not isinstance(n_initial, int | np.integer):
+        raise TypeError(f"n_initial must be an integer, got {n_initial!r}")
+    if n_initial < 1:
+        raise ValueError(f"n_initial must be >= 1, got {n_initial}")
+    if xi is not None and not (math.isfinite(xi) and xi >= 0):
+        raise ValueError(f"xi must be >= 0 or None, got {xi}")
+    if not (math.isfinite(ei_threshold) and ei_threshold >= 0):
+        raise ValueError(f"ei_threshold must be >= 0, got {ei_threshold}")
+    if direct_maxfun is None:
+        direct_maxfun = 500 * dim
+    if direct_maxfun < 1:
+        raise ValueError(f"direct_maxfun must be >= 1, got {direct_maxfun}")
+    if refit_until < 1 or not refit_growth > 0:
+        raise ValueError(
+            f"refit_until must be >= 1 and refit_growth > 0, got {refit_until}, {refit_growth}"
+        )
+    return n_initial, direct_maxfun
 
 
 class BayesianOptimizer(Optimizer):
@@ -213,33 +222,11 @@ class BayesianOptimizer(Optimizer):
         batch_size: int = 1,
     ):
         super().__init__(bounds, seed)
-        if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer) \
-                or batch_size < 1:
-            raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        n_initial, direct_maxfun = _check_options(
+            self.dim, batch_size, output_transform, n_initial, xi, ei_threshold, direct_maxfun,
+            refit_until, refit_growth)
         self.batch_size = int(batch_size)
-        if output_transform not in OUTPUT_TRANSFORMS:
-            raise ValueError(
-                f"output_transform must be one of {OUTPUT_TRANSFORMS}, got {output_transform!r}"
-            )
         self.output_transform = output_transform
-        if n_initial is None:
-            n_initial = max(10, self.dim + 1)
-        if isinstance(n_initial, bool) or not isinstance(n_initial, int | np.integer):
-            raise TypeError(f"n_initial must be an integer, got {n_initial!r}")
-        if n_initial < 1:
-            raise ValueError(f"n_initial must be >= 1, got {n_initial}")
-        if xi is not None and not (math.isfinite(xi) and xi >= 0):
-            raise ValueError(f"xi must be >= 0 or None, got {xi}")
-        if not (math.isfinite(ei_threshold) and ei_threshold >= 0):
-            raise ValueError(f"ei_threshold must be >= 0, got {ei_threshold}")
-        if direct_maxfun is None:
-            direct_maxfun = 500 * self.dim
-        if direct_maxfun < 1:
-            raise ValueError(f"direct_maxfun must be >= 1, got {direct_maxfun}")
-        if refit_until < 1 or not refit_growth > 0:
-            raise ValueError(
-                f"refit_until must be >= 1 and refit_growth > 0, got {refit_until}, {refit_growth}"
-            )
         self.n_initial = int(n_initial)
         if min_trials_to_stop is None:
             min_trials_to_stop = max(10 * self.dim, self.n_initial + 3)
@@ -442,55 +429,3 @@ def v1_options(dim: int) -> dict:
     unchanged); for side-by-side benchmarks against the current defaults.
     """
     return dict(n_initial=int(dim) + 1, ei_threshold=1e-6)
-
-
-def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
-    """``"bo"`` -> :class:`BayesianOptimizer`, ``"random"`` -> :class:`RandomSearch`."""
-    if strategy == "bo":
-        return BayesianOptimizer(bounds, seed, **options)
-    if strategy == "random":
-        if options:
-            raise TypeError(f"RandomSearch takes no options, got {sorted(options)}")
-        return RandomSearch(bounds, seed)
-    raise ValueError(f"strategy must be 'bo' or 'random', got {strategy!r}")
-
-
-def maximize(
-    f: Callable[[np.ndarray], float],
-    bounds,
-    n_trials: int,
-    seed: int = 0,
-    strategy: str = "bo",
-    stop_on_convergence: bool = True,
-    **options,
-) -> OptimizationResult:
-    """Maximise ``f(x)`` over the box in at most ``n_trials`` evaluations, in this process.
-
-    A non-finite value of ``f`` is told as a failure; exceptions propagate.
-    For logged, resumable or parallel runs use
-    :func:`handle_drake.learning.loop.run_experiment`.
-    """
-    if isinstance(n_trials, bool) or not isinstance(n_trials, int | np.integer) or n_trials < 1:
-        raise ValueError(f"n_trials must be a positive integer, got {n_trials!r}")
-    optimizer = make_optimizer(strategy, bounds, seed, **options)
-    for _ in range(int(n_trials)):
-        x = optimizer.ask()
-        if stop_on_convergence and optimizer.converged:
-            break
-        value = float(f(x))
-        if math.isfinite(value):
-            optimizer.tell(x, value)
-        else:
-            optimizer.tell_failure(x, f"non-finite metric {value}")
-    best = optimizer.best
-    Y = optimizer.Y
-    best_so_far = np.fmax.accumulate(np.where(np.isnan(Y), -np.inf, Y)) if Y.size else Y
-    return OptimizationResult(
-        x=None if best is None else best.x,
-        y=math.nan if best is None else best.y,
-        X=optimizer.X,
-        Y=Y,
-        strategy=strategy,
-        converged=optimizer.converged,
-        best_so_far=best_so_far,
-    )

@@ -17,8 +17,8 @@
   trials of an iteration run in parallel and a run depends only on its seed.
   Positions leaving the box are clipped to it and that velocity component is
   set to zero.
-- standard PSO (``make_inhand_optimizer("pso")``): the same swarm with every
-  dimension updated, global best (cluster of one) and Clerc's constriction
+- standard PSO (``make_optimizer("pso")`` of :mod:`handle_drake.learning.optim.factory`):
+  the same swarm with every dimension updated, global best (cluster of one) and Clerc's constriction
   coefficients ``w = 0.7298, phi_p = phi_c = 1.49618``, so the comparison
   isolates what Algorithm 2 changes. It is this class rather than a library
   PSO because a library's initialisation and bound handling would differ too.
@@ -39,12 +39,11 @@ import math
 
 import numpy as np
 
-from handle_drake.learning.optim.base import Optimizer, _derived_seed
-from handle_drake.learning.optim.bo import RandomSearch
+from handle_drake.learning.optim.base import Optimizer, RandomSearch, _derived_seed
 
-__all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "make_inhand_optimizer",
-           "INHAND_OPTIMIZERS"]
+__all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "INHAND_OPTIMIZERS"]
 
+# the optimisers the in-hand command offers (built by optim.factory.make_optimizer)
 INHAND_OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
 
 
@@ -279,27 +278,3 @@ class StoppingRandomSearch(_StopMixin, RandomSearch):
     def tell(self, x, y) -> None:
         super().tell(x, y)
         self._check_stop(float(y))
-
-
-def make_inhand_optimizer(name: str, bounds, seed: int = 0, n_particles: int = 10,
-                          stop_score: float | None = None, min_active: int = 1):
-    """``ipso`` (Algorithm 2), ``pso`` (standard), ``cmaes`` or ``random`` with the same box."""
-    if name == "ipso":
-        return IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
-                              stop_score=stop_score)
-    if name == "ipso-restart":  # Algorithm 2 with the restarts of 5.5.4
-        opt = IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
-                             stop_score=stop_score, restart_after=3)
-        opt.strategy = "ipso-restart"
-        return opt
-    if name == "pso":
-        opt = IncrementalPSO(bounds, seed, n_particles, w=0.7298, phi_p=1.49618,
-                             phi_c=1.49618, incremental=False, cluster_size=1,
-                             stop_score=stop_score)
-        opt.strategy = "pso"
-        return opt
-    if name == "cmaes":
-        return CMAES(bounds, seed, n_particles, stop_score=stop_score)
-    if name == "random":
-        return StoppingRandomSearch(bounds, seed, stop_score=stop_score)
-    raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {name!r}")
