@@ -70,6 +70,7 @@ row, ``z_G`` opposition axis, thumb on ``+z_G``), P palm, B hand base (forearm).
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 import time
 from functools import lru_cache
 
@@ -474,11 +475,9 @@ def plan_grasp(
     reach_direction: preferred horizontal direction (world x, y) the hand
       reaches in (the forearm trails behind it); used to pick the hand's yaw
       among the object's symmetric grasps.
-    time_budget: seconds the hand-IK search may take (checked before each
-      solve, so it can overrun by one solve); None: no bound.
-    cache: reuse the hand-IK answer of an earlier call with the same class,
-      object kind and dimensions, height above the table and coupling ratio
-      (default synergies only); the answer is exact, not approximate.
+    time_budget: seconds the hand-IK search may take (None: no bound; may overrun one solve).
+    cache: reuse an earlier call's exact hand-IK answer (same class, object kind and
+      dimensions, height above the table, coupling ratio; default synergies only).
 
     Raises:
         ValueError: unknown class, object kind or size outside the class's
@@ -490,26 +489,20 @@ def plan_grasp(
             ``time_budget``.
     """
     info = grasp_info(grasp_class)
-    if time_budget is not None and not (np.isfinite(time_budget) and time_budget > 0):
-        raise ValueError(f"time_budget must be a positive number of seconds, got {time_budget}")
-    deadline = None if time_budget is None else time.perf_counter() + float(time_budget)
+    deadline = _deadline(time_budget)
     spec = _object_spec(obj)
     if not isinstance(X_WO, RigidTransform):
         raise TypeError(f"X_WO must be a RigidTransform, got {type(X_WO).__name__}")
     shape, dims = grasp_dims(spec)
     size = check_size(info.grasp_class, dims[0])
     height = _height_above_table(X_WO, table_height)
-    for name, value, lo in (("standoff", standoff, 0.0), ("lift_height", lift_height, 0.0)):
-        if not (np.isfinite(value) and value > lo):
-            raise ValueError(f"{name} must be a positive distance (m), got {value}")
+    _check_distances(standoff=standoff, lift_height=lift_height)
     reach = _horizontal_unit(reach_direction)
     row_O = _row_axis(spec)
     _world_grasp_frame(spec.kind, X_WO, row_O=row_O)  # validates the resting orientation early
 
-    key = None
-    if cache and synergies is None:
-        key = (info.grasp_class, spec.kind, shape, tuple(float(d) for d in dims), height,
-               float(coupling_ratio))
+    key = ((info.grasp_class, spec.kind, shape, tuple(float(d) for d in dims), height,
+            float(coupling_ratio)) if cache and synergies is None else None)
     synergies = default_synergies() if synergies is None else synergies
     if not isinstance(synergies, ClassSynergies):
         raise TypeError(f"synergies must be ClassSynergies, got {type(synergies).__name__}")
@@ -518,26 +511,9 @@ def plan_grasp(
                                             coupling_ratio)
     c_table1 = grasp_centre_palm(info.grasp_class, size)
     a_P = approach_palm(info.grasp_class)
-    if key is not None and key in _SOLUTION_CACHE:
-        solution = _SOLUTION_CACHE[key]
-    else:
-        solution = _solve_contacts(info, spec.kind, shape, dims, height, priors, priors_refine,
-                                   c_table1, a_P, coupling_ratio, deadline)
-        if solution is _TIMED_OUT:
-            raise GraspPlanningTimeout(
-                f"time budget: the {info.name} search took over {time_budget:.1f} s "
-                f"without a grasp")
-        if key is not None:
-            if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
-                _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
-            _SOLUTION_CACHE[key] = solution
-    if solution is None:
-        raise GraspPlanningError(
-            f"unreachable: no collision-free {info.name} grasp puts the "
-            f"{'/'.join(info.fingers)} contacts on this {spec.kind} (grasp width "
-            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
-        )
-    sol, up, source, kin = solution
+    solve = functools.partial(_solve_contacts, info, spec.kind, shape, dims, height, priors,
+                              priors_refine, c_table1, a_P, coupling_ratio, deadline)
+    sol, up, source, kin = _cached_solution(key, solve, info, spec.kind, size, time_budget)
     X_PG = sol.X_PO
     X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
         kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
@@ -556,6 +532,43 @@ def plan_grasp(
         contact_error=sol.contact_error, table_height=float(table_height),
         lift_height=float(lift_height), coupling_ratio=float(coupling_ratio),
     )
+
+
+def _check_distances(**distances: float) -> None:
+    for name, value in distances.items():
+        if not (np.isfinite(value) and value > 0.0):
+            raise ValueError(f"{name} must be a positive distance (m), got {value}")
+
+
+def _deadline(time_budget: float | None) -> float | None:
+    """The ``time.perf_counter()`` by which a search must stop (None: no bound)."""
+    if time_budget is not None and not (np.isfinite(time_budget) and time_budget > 0):
+        raise ValueError(f"time_budget must be a positive number of seconds, got {time_budget}")
+    return None if time_budget is None else time.perf_counter() + float(time_budget)
+
+
+def _cached_solution(key, solve, info, kind: str, size: float, time_budget):
+    """``solve()``'s hand-IK answer, reused from an earlier call with the same ``key``
+    (exact: the answer depends only on what the key holds); raises when there is none."""
+    if key is not None and key in _SOLUTION_CACHE:
+        solution = _SOLUTION_CACHE[key]
+    else:
+        solution = solve()
+        if solution is _TIMED_OUT:
+            raise GraspPlanningTimeout(
+                f"time budget: the {info.name} search took over {time_budget:.1f} s "
+                f"without a grasp")
+        if key is not None:
+            if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
+                _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
+            _SOLUTION_CACHE[key] = solution
+    if solution is None:
+        raise GraspPlanningError(
+            f"unreachable: no collision-free {info.name} grasp puts the "
+            f"{'/'.join(info.fingers)} contacts on this {kind} (grasp width "
+            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
+        )
+    return solution
 
 
 def _height_above_table(X_WO: RigidTransform, table_height: float) -> float:
