@@ -436,6 +436,27 @@ def _check_positive(name: str, value: float) -> None:
         raise ScenarioError(f"{name} must be a finite number > 0, got {value!r}")
 
 
+def _validate_catalogue_object(o: ObjectConfig) -> None:
+    if o.kind not in KINDS:
+        raise ScenarioError(
+            f"object.kind: unknown object {short(o.kind)}; "
+            f"expected one of {list(KINDS) + ['mesh']}"
+        )
+    _check_positive("object.size", o.size)
+    try:
+        ObjectSpec(kind=o.kind, size=o.size, dimensions=o.dimensions or None)
+    except ValueError as error:
+        raise ScenarioError(f"object: {error}") from None
+    if o.file:
+        raise ScenarioError(f"object.file: only kind 'mesh' reads a file, got kind "
+                            f"{o.kind!r} with file {o.file!r}")
+    if o.mass is not None:
+        _check_positive("object.mass", o.mass)
+    if not (math.isfinite(o.mu) and o.mu >= 0):
+        raise ScenarioError(f"object.mu must be finite and >= 0, got {o.mu}")
+    _check_transform("object.X_WO", o.X_WO)
+
+
 def validate_scenario(scenario: Scenario) -> None:
     """Checks values the YAML schema cannot; raises :class:`ScenarioError`."""
 
@@ -453,7 +474,6 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError(f"hand.coupling_ratio: {error}") from None
     _check_transform("hand.mount.X_WB", scenario.hand.mount.X_WB)
     if isinstance(scenario.hand.mount, Arm):
-
         validate_arm(scenario.hand.mount, ScenarioError)
     for name, value in scenario.hand.initial_position.items():
         if name not in spec.actuated_joint_names:
@@ -466,26 +486,7 @@ def validate_scenario(scenario: Scenario) -> None:
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
     elif scenario.object is not None:
-        if scenario.object.kind not in KINDS:
-            raise ScenarioError(
-                f"object.kind: unknown object {short(scenario.object.kind)}; "
-                f"expected one of {list(KINDS) + ['mesh']}"
-            )
-        _check_positive("object.size", scenario.object.size)
-
-        try:
-            ObjectSpec(kind=scenario.object.kind, size=scenario.object.size,
-                       dimensions=scenario.object.dimensions or None)
-        except ValueError as error:
-            raise ScenarioError(f"object: {error}") from None
-        if scenario.object.file:
-            raise ScenarioError(f"object.file: only kind 'mesh' reads a file, got kind "
-                                f"{scenario.object.kind!r} with file {scenario.object.file!r}")
-        if scenario.object.mass is not None:
-            _check_positive("object.mass", scenario.object.mass)
-        if not (math.isfinite(scenario.object.mu) and scenario.object.mu >= 0):
-            raise ScenarioError(f"object.mu must be finite and >= 0, got {scenario.object.mu}")
-        _check_transform("object.X_WO", scenario.object.X_WO)
+        _validate_catalogue_object(scenario.object)
     if scenario.object is not None and scenario.object.accelerometer is not None:
         _validate_accelerometer(scenario)  # mesh or catalogue object alike
     if scenario.table is not None:
@@ -516,7 +517,6 @@ def validate_scenario(scenario: Scenario) -> None:
         _check_positive("driver.control_period", scenario.driver.control_period)
     check_ranges(scenario)
     if scenario.objects or scenario.sorting_box is not None:
-
         validate_scene(scenario, validate_scenario, ScenarioError)
 
 

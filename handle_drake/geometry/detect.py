@@ -27,6 +27,7 @@ import dataclasses as dc
 import math
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError, cKDTree
 
 __all__ = ["TablePlane", "Detection", "DetectorParams", "fit_table_plane", "detect_objects",
            "min_area_rectangle", "KINDS", "TabletopDetector", "detect"]
@@ -498,13 +499,10 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
       cluster within 2 cm (horizontally), the nearest of which it joins. (A
       ball whose bottom is hidden behind a can looks off the table too, but
       is neither thin nor a small part of its neighbour.) The first rule is
-      applied first: a glass's bowl,
-      larger than its foot, takes the foot and so reaches the table.
+      applied first: a glass's bowl, larger than its foot, takes the foot and
+      so reaches the table.
 
-    Objects that merely stand close (a ball 2 cm from a box) stay apart.
-    Objects on a table do not stack here."""
-    from scipy.spatial import ConvexHull, QhullError, cKDTree
-
+    Objects that merely stand close (a ball 2 cm from a box) stay apart; none stack here."""
     if len(clusters) < 2:
         return clusters
     origin, R_WT = _table_frame(plane)
