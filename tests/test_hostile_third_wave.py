@@ -308,11 +308,18 @@ def test_ctrl_c_stops_an_isolated_decomposition_promptly():
     (a 200k-triangle torus: still decomposing 10 s after SIGINT)."""
     from handle_drake.geometry.objects.mesh import _isolated
 
+    # Ctrl-C as a terminal delivers it: Python's own handler, whatever an earlier test in
+    # this worker process (a Dask cluster, a CAN command's stop logic) left installed.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
     start = time.monotonic()
     timer.start()
-    with pytest.raises(KeyboardInterrupt):
-        _isolated(time.sleep, 30.0)  # stands in for CoACD: C++ that never looks at signals
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            _isolated(time.sleep, 30.0)  # stands in for CoACD: C++ that never looks at signals
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - start < 10
     assert _isolated(divmod, 7, 2) == (3, 1)  # and it still runs
 
