@@ -406,7 +406,8 @@ def baseline_tree(revision: str, directory: Path) -> Path:
     shutil.copytree(ROOT / "handle_drake", tree / "handle_drake",
                     ignore=shutil.ignore_patterns("__pycache__", "can_hand"))
     (tree / "models").symlink_to(ROOT / "models")
-    archive = subprocess.run(["git", "archive", revision, "handle_drake/devices/can_hand"], cwd=ROOT,
+    archive = subprocess.run(["git", "archive", revision, "handle_drake/devices/can_hand"],
+                             cwd=ROOT,
                              capture_output=True, check=True).stdout
     subprocess.run(["tar", "-x", "-C", str(tree)], input=archive, check=True)
     return tree

@@ -291,7 +291,8 @@ def probe_can(tmp):
     sim = subprocess.Popen([sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-sim",
                             "--hand", "barrett", "--rate", "200", *bus],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    server = subprocess.Popen([sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-server",
+    server = subprocess.Popen([sys.executable, "-m", "handle_drake.devices.can_hand.cli",
+                               "can-server",
                                "--hand", "barrett", "--listen", "127.0.0.1:0",
                                "--hello-timeout", "1", *bus],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)

@@ -414,8 +414,8 @@ def test_committed_models_are_up_to_date_and_table_top_is_at_zero(tmp_path):
     assert generated, "export wrote nothing"
     for relative in generated:
         assert (committed / relative).read_text() == (tmp_path / relative).read_text(), (
-            f"models/objects/{relative} is stale: run python -m handle_drake.geometry.objects export "
-            "models/objects"
+            f"models/objects/{relative} is stale: run "
+            "python -m handle_drake.geometry.objects export models/objects"
         )
     objects_plant, _ = AddMultibodyPlant(MultibodyPlantConfig(time_step=1e-3), DiagramBuilder())
     for kind in KINDS:

@@ -1,8 +1,8 @@
 """One trial harness: build the station diagram once, reset its context per trial, score.
 
 Every way the project runs a simulated (or real) hand goes through
-:class:`TrialHarness`: the scripted scenario run (:class:`~handle_drake.trial.simulate.ScenarioRunner`,
-``handle-drake simulate``), the reactive plan execution
+:class:`TrialHarness`: the scripted scenario run
+(:class:`~handle_drake.trial.simulate.ScenarioRunner`, ``handle-drake simulate``), the reactive plan execution
 (:class:`~handle_drake.apps.planning.execution.ReactiveGraspRunner`) and the grasp
 babbling trial (:class:`~handle_drake.trial.grasp_trial.GraspTrial`).
 A trial is *parameters -> scenario (override) -> simulate -> metric*; the

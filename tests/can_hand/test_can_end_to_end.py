@@ -251,7 +251,8 @@ def test_cli_processes_stop_cleanly_on_sigint_and_sigterm(processes):
 def test_cli_reports_bad_arguments(processes):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     result = subprocess.run(
-        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-server", "--listen", "nope"],
+        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-server",
+         "--listen", "nope"],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "expected HOST:PORT" in result.stderr
     result = subprocess.run(
@@ -259,7 +260,8 @@ def test_cli_reports_bad_arguments(processes):
          "--channel", "nosuchcan7"], capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "no network interface 'nosuchcan7'" in result.stderr
     result = subprocess.run(
-        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-sim", "--frame-format", "canfd"],
+        [sys.executable, "-m", "handle_drake.devices.can_hand.cli", "can-sim",
+         "--frame-format", "canfd"],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=30)
     assert result.returncode == 2 and "invalid choice: 'canfd'" in result.stderr
 

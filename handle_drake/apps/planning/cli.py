@@ -283,7 +283,8 @@ def write_class_scenarios(directory: Path) -> list[Path]:
     for name, (kind, size) in CLASS_OBJECTS.items():
         plan = plan_grasp(name, (kind, size), resting_pose(kind, size))
         path = Path(directory) / f"grasp_{name}.yaml"
-        header = (f"# Planned by handle_drake.grasp.planning (python -m handle_drake.apps.planning.cli "
+        header = ("# Planned by handle_drake.grasp.planning "
+                  "(python -m handle_drake.apps.planning.cli "
                   f"--write-scenarios diagrams):\n# {plan.summary()}\n"
                   f"# Run: handle-drake simulate {path.name}\n")
         path.write_text(header + plan_scenario_yaml(plan))

@@ -128,8 +128,9 @@ def _command_port(builder):
 
 
 def AddSimulatedInstruments(builder, plant, scenario, body, spec) -> dict:
-    """Adds the scenario's object accelerometer on ``body`` (object spec ``spec``), with its estimators, to the
-    station's builder (after the hand driver); exports the instrument ports."""
+    """Adds the scenario's object accelerometer on ``body`` (object spec ``spec``), with its
+    estimators, to the station's builder (after the hand driver); exports the instrument
+    ports."""
     config = scenario.object.accelerometer
     profile = config.profile(scenario.object.kind)
     seed = instrument_seed(scenario)

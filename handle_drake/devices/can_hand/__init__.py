@@ -12,7 +12,8 @@ The chain (seed report, section 2.1: MuscleHandProxy -> TCP -> CANbusServer):
 - :mod:`~handle_drake.devices.can_hand.protocol`: the framed TCP protocol (pure);
 - :mod:`~handle_drake.devices.can_hand.server`: the bus server (rate limits, clamps, watchdog);
 - :mod:`~handle_drake.devices.can_hand.firmware`: a simulated hand on the bus;
-- :mod:`~handle_drake.devices.can_hand.client` and :mod:`~handle_drake.devices.can_hand.driver`: the proxy;
+- :mod:`~handle_drake.devices.can_hand.client` and
+  :mod:`~handle_drake.devices.can_hand.driver`: the proxy;
 - ``MakeHardwareStation`` (the hardware branch of the station) lives beside
   ``MakeHandStation`` in :mod:`handle_drake.station`.
 """

@@ -1,4 +1,5 @@
-"""``python -m handle_drake.geometry.objects export <directory>``: regenerate the committed models."""
+"""``python -m handle_drake.geometry.objects export <directory>``: regenerate the committed
+models."""
 
 import sys
 
