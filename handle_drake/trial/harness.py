@@ -2,8 +2,9 @@
 
 Every way the project runs a simulated (or real) hand goes through
 :class:`TrialHarness`: the scripted scenario run
-(:class:`~handle_drake.trial.simulate.ScenarioRunner`, ``handle-drake simulate``), the reactive plan execution
-(:class:`~handle_drake.apps.planning.execution.ReactiveGraspRunner`) and the grasp
+(:class:`~handle_drake.trial.simulate.ScenarioRunner`, ``handle-drake simulate``), the
+reactive plan execution (:class:`~handle_drake.apps.planning.execution.ReactiveGraspRunner`)
+and the grasp
 babbling trial (:class:`~handle_drake.trial.grasp_trial.GraspTrial`).
 A trial is *parameters -> scenario (override) -> simulate -> metric*; the
 harness is the "simulate" part and owns what all of them share:
