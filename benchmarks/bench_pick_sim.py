@@ -12,32 +12,12 @@ Run: python benchmarks/bench_pick_sim.py [--seeds 0-19] [--out out/bench]
 from __future__ import annotations
 
 import argparse
-import dataclasses as dc
 import json
 import os
-import time
 from pathlib import Path
 
 import numpy as np
-
-
-def _seeds(text: str) -> list[int]:
-    if "-" in text:
-        a, b = text.split("-")
-        return list(range(int(a), int(b) + 1))
-    return [int(s) for s in text.split(",")]
-
-
-def _floor_rate(scenario) -> float:
-    from pydrake.systems.analysis import Simulator
-
-    from handle_drake.station import MakeHandStation
-
-    bare = dc.replace(scenario, object=None, objects=[], sorting_box=None, cameras=[])
-    simulator = Simulator(MakeHandStation(bare))
-    start = time.perf_counter()
-    simulator.AdvanceTo(1.0)
-    return 1.0 / (time.perf_counter() - start)
+from bench_pick import _floor_rate, _seeds  # the same seeds syntax and arm-and-hand floor
 
 
 def main(argv=None) -> int:

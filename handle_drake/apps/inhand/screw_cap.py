@@ -77,7 +77,13 @@ from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensio
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
-from handle_drake.apps.inhand.task import DATA_DIR, GistMotionData, gist_data, gist_from_data
+from handle_drake.apps.inhand.task import (
+    DATA_DIR,
+    GistMotionData,
+    GistTrial,
+    gist_data,
+    gist_from_data,
+)
 from handle_drake.base.hands import (
     AddHand,
     actuated_position_limits,
@@ -505,23 +511,14 @@ def _demonstration(name: str = "screw_cap_rotation.json"):
     return recording, glove_to_shadow(recording)
 
 
-class ScrewCapTrial:
+class ScrewCapTrial(GistTrial):
     """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
 
     The diagram is built on the first call in each process and kept on this
     object (not pickled: a worker builds its own).
     """
 
-    def __init__(self, config: ScrewCapTask | None = None, **kwargs):
-        self.config = config if config is not None else ScrewCapTask(**kwargs)
-        self._built = None
-
-    def __getstate__(self):
-        return {"config": self.config}
-
-    def __setstate__(self, state):
-        self.config = state["config"]
-        self._built = None
+    config_type = ScrewCapTask
 
     @property
     def name(self) -> str:
@@ -535,14 +532,6 @@ class ScrewCapTrial:
 
         recording, commands = _demonstration()
         return extract_gist(recording.time, commands, name="screw_cap_rotation")
-
-    @property
-    def dimension(self) -> int:
-        return self.gist.dimension
-
-    @property
-    def bounds(self) -> np.ndarray:
-        return self.gist.bounds()
 
     @property
     def dims_per_part(self) -> np.ndarray:

@@ -343,17 +343,16 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
                 if accelerometer else None)
 
 
-class InHandTrial:
-    """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
+class GistTrial:
+    """What every gist-driven in-hand trial shares: its settings ``config`` (of
+    ``config_type``; the only thing pickled: a diagram does not pickle, so each process
+    builds its own on its first call, into ``_built``) and the parameter space of its
+    action ``gist`` (which the subclass defines)."""
 
-    Every trial is an :class:`InHandScenario` (logged whole). The diagram
-    (station + :class:`GistMotionSource`) is built on the first call and kept on
-    this object (not pickled: a worker builds its own; the executors unpickle an
-    objective once per worker).
-    """
+    config_type: type
 
-    def __init__(self, config: InHandTask | None = None, **kwargs):
-        self.config = config if config is not None else InHandTask(**kwargs)
+    def __init__(self, config=None, **kwargs):
+        self.config = config if config is not None else self.config_type(**kwargs)
         self._built = None
 
     def __getstate__(self):
@@ -364,6 +363,26 @@ class InHandTrial:
         self._built = None
 
     @property
+    def dimension(self) -> int:
+        return self.gist.dimension
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.gist.bounds()
+
+
+class InHandTrial(GistTrial):
+    """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
+
+    Every trial is an :class:`InHandScenario` (logged whole). The diagram
+    (station + :class:`GistMotionSource`) is built on the first call and kept on
+    this object (not pickled: a worker builds its own; the executors unpickle an
+    objective once per worker).
+    """
+
+    config_type = InHandTask
+
+    @property
     def name(self) -> str:
         c = self.config
         return f"inhand-{c.task}-{c.evaluation}-{c.target_deg:g}deg"
@@ -371,14 +390,6 @@ class InHandTrial:
     @cached_property
     def gist(self) -> ActionGist:
         return task_gist(self.config.task)
-
-    @property
-    def dimension(self) -> int:
-        return self.gist.dimension
-
-    @property
-    def bounds(self) -> np.ndarray:
-        return self.gist.bounds()
 
     @property
     def dims_per_part(self) -> np.ndarray:
