@@ -92,7 +92,7 @@ def probe_scenarios():
         "simulation_duration: 1e300": "simulation_duration",
         "simulation_duration: .inf": "simulation_duration",
         "plant_config: {time_step: 1e-5}\nsimulation_duration: 3000": "steps",
-        "visualization_period: 1e-12": "visualization_period",
+        "visualization: {publish_period: 1e-12}": "visualization.publish_period",
         "hand: {mount: !FloatingWrist {translation_kp: -5}}": "translation_kp",
         "hand: {mount: !FloatingWrist {translation_kd: .inf}}": "translation_kd",
         "hand: {mount: !FloatingWrist {rotation_kp: .nan}}": "rotation_kp",
@@ -445,17 +445,17 @@ def probe_second_wave(tmp):
             ["diagrams/tabletop_perception.yaml", "--save-frames", ok],
             ["diagrams/tabletop_perception.yaml", "--override", "cameras: 5"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: nope}]"],
+             "cameras: [{profile: nope, config: {name: k}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: kinect_v1, parent: nowhere}]"],
+             "cameras: [{config: {name: k, X_PB: {base_frame: nowhere}}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: kinect_v1, width: 1000000000}]"],
+             "cameras: [{config: {name: k, width: 1000000000}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: kinect_v1, target: [0, 0, 0], "
-             "X_PC: {translation: [0, 0, 0]}}]"],
+             "cameras: [{target: [0, 0, 0], config: {name: k, X_PB: {translation: [0, 0, 0]}}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, X_PC: {translation: [-0.7, 0, 0.7]}, target: [0, 0, 0]}, "
-             "{name: k, X_PC: {translation: [0.7, 0, 0.7]}, target: [0, 0, 0]}]"],
+             "cameras: [{target: [0, 0, 0], "
+             "config: {name: k, X_PB: {translation: [-0.7, 0, 0.7]}}}, {target: [0, 0, 0], "
+             "config: {name: k, X_PB: {translation: [0.7, 0, 0.7]}}}]"],
             []],
         "mesh objects": [
             *[[c, "--mesh", str(tmp / f)] for c in ("grasp --class tripod", "babble --trials 1")
