@@ -215,7 +215,8 @@ def main(argv=None) -> int:
           f"{', '.join(f'{r:.2f}' for r in ratios)} over {args.repeats} repeat(s) "
           f"(target <= 1.0)")
     results_run.finish(
-        [{"repeat": i + 1, "step": step, **{k: v for k, v in r.items() if k != "rows"}}
+        [{"repeat": i + 1, "step": step, **{k: v for k, v in r.items()
+                                            if not isinstance(v, list | dict)}}
          for i, run in enumerate(runs) for step, r in run["rows"].items()],
         {"benchmark": "perception", "scene_seed": args.scene_seed,
          "baseline": str(args.baseline) if args.baseline else None, "runs": runs,

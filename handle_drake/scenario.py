@@ -435,7 +435,7 @@ def _refuse_renamed_keys(text: str, source: str) -> None:
     if not any(key in text for key in ("visualization_period", "cameras")):
         return
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        root = yaml.compose(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     except (yaml.YAMLError, RecursionError):
         return  # check_yaml_text names the problem
     if not isinstance(root, yaml.MappingNode):
