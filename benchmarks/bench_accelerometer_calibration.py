@@ -23,7 +23,6 @@ Usage: ``python benchmarks/bench_accelerometer_calibration.py [--seeds N]``
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
@@ -36,6 +35,7 @@ from pydrake.systems.analysis import Simulator  # noqa: E402
 from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 from pydrake.systems.primitives import ConstantVectorSource, VectorLogSink  # noqa: E402
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.devices.accelerometer.calibration import (  # noqa: E402
     calibrate_device,
     device_estimator_params,
@@ -82,7 +82,10 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results"
                         / "accelerometer_calibration.json")
+    add_page_arguments(parser, "accelerometer_calibration")
     args = parser.parse_args()
+    run = ResultsRun("Accelerometer at rest: roll/pitch error and flags per device and set-up",
+                     args)
     rows = []
     for name, profile in PROFILES.items():
         if profile.bias_std_g == 0:
@@ -125,9 +128,8 @@ def main() -> int:
     for r in rows[::len(SETUPS)]:
         print(f"{r['device']:16s} calibration residual bias (length, max over seeds) "
               f"{r['residual_bias_mg']:.2f} mg, bound {r['residual_bound_mg']:.2f} mg")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"seeds": args.seeds, "orientations_deg": ORIENTATIONS,
-                                    "rows": rows}, indent=1))
+    run.finish(rows, {"seeds": args.seeds, "orientations_deg": ORIENTATIONS, "rows": rows},
+               args.out)
     print(f"results: {args.out}")
     return 0
 

@@ -17,12 +17,13 @@ Run: python benchmarks/bench_arm_reachability.py [--places N] [--out out/bench]
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 from pathlib import Path
 
 import numpy as np
+
+from handle_drake.base.results import ResultsRun, add_page_arguments
 
 
 def main(argv=None) -> int:
@@ -31,7 +32,9 @@ def main(argv=None) -> int:
     parser.add_argument("--places", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="out/bench")
+    add_page_arguments(parser, "arm_reachability")
     args = parser.parse_args(argv)
+    run = ResultsRun("Arm reachability of planned grasps per grasp class", args)
 
     from pydrake.math import RigidTransform, RollPitchYaw
 
@@ -113,8 +116,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "arm_reachability.json"
-    path.write_text(json.dumps({"summary": summary, "rows": rows,
-                                "load_average": os.getloadavg()}, indent=1))
+    run.finish([{"class": name, **row} for name, row in summary.items()],
+               {"summary": summary, "rows": rows, "load_average": os.getloadavg()}, path)
     print(f"load average {os.getloadavg()[0]:.1f}; wrote {path}")
     return 0
 

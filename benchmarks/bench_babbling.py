@@ -95,6 +95,7 @@ from handle_drake.apps.babbling.report import (  # noqa: E402
     _random_spec,
     _table3_spec,
 )
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 from handle_drake.learning.optim.bo import (  # noqa: E402
     BO_DEFAULTS_VERSION,
@@ -436,6 +437,7 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
     timings["validation_s"] = time.perf_counter() - start
 
     budget = settings.trials
+    printed = []
     for name, table in tables.items():
         if args.robust_only and name == "nominal":
             continue
@@ -463,6 +465,7 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
             row += [f"{validation[kind][name]['max_abs_error']:.3f}"]
             rows.append(row)
         _print_table(header, rows)
+        printed += [{"objective": name, **dict(zip(header, row, strict=True))} for row in rows]
         ahead_random = sum(e["verdict"]["vs_random"] == "ahead" for e in table.values())
         level_gp = sum(e["verdict"].get("vs_gp_minimize") in ("ahead", "level")
                        for e in table.values())
@@ -487,6 +490,7 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
         cpu_count=os.cpu_count(), load_average=os.getloadavg()), indent=1,
         default=lambda v: str(v)).replace("Infinity", '"inf"'))
     print(f"\nwritten {results}")
+    args.results_run.finish(printed, json_path=results, write_json=False)
     return 0
 
 
@@ -522,7 +526,10 @@ def main(argv=None) -> int:
                         help="--surrogate: Sobol points per object simulated to check the "
                              "surrogate, besides both optima (default 2)")
     add_executor_arguments(parser)  # grids and BO/random runs; gp_minimize stays local
+    add_page_arguments(parser, "babbling")
     args = parser.parse_args(argv)
+    run = args.results_run = ResultsRun(
+        "Motor babbling: trials to within 5 / 10 / 20 % of the optimum per object", args)
 
     if args.quick:
         settings = ReportSettings(seeds=2, trials=15, grid=9, workers=args.workers)
@@ -706,6 +713,8 @@ def main(argv=None) -> int:
         load_average=os.getloadavg()), indent=1,
         default=lambda v: str(v)).replace("Infinity", '"inf"'))
     print(f"\nwritten {results}")
+    run.finish([dict(zip(header, row, strict=True)) for row in rows], json_path=results,
+               write_json=False)
     return 0
 
 

@@ -29,7 +29,6 @@ Run: ``python benchmarks/bench_bayesopt.py [--quick]``; writes
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -43,6 +42,7 @@ pin_blas(force=False)
 import numpy as np  # noqa: E402
 from scipy.stats import norm, qmc  # noqa: E402
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning.acquisition import (  # noqa: E402
     default_xi,
     expected_improvement_point,
@@ -273,7 +273,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer seeds, smaller budgets")
     parser.add_argument("--skip-efficiency", action="store_true")
+    add_page_arguments(parser, "bayesopt")
     args = parser.parse_args(argv)
+    run = ResultsRun("Bayesian optimisation: per-iteration overhead and trials to target", args)
     try:
         import skopt  # noqa: F401
 
@@ -321,21 +323,20 @@ def main(argv=None):
         )
         rows = efficiency(functions, seeds, have_skopt)
 
-    os.makedirs(os.path.dirname(RESULTS), exist_ok=True)
-    with open(RESULTS, "w") as f:
-        json.dump(
-            {
-                "quick": args.quick,
-                "python": sys.version.split()[0],
-                "machine": platform.machine(),
-                "cpu_count": os.cpu_count(),
-                "load_average": os.getloadavg(),
-                "overhead": overhead,
-                "efficiency": rows,
-            },
-            f,
-            indent=2,
-        )
+    run.finish(
+        [{"part": "overhead", **row} for row in overhead]
+        + [{"part": "efficiency", **row} for row in rows],
+        {
+            "quick": args.quick,
+            "python": sys.version.split()[0],
+            "machine": platform.machine(),
+            "cpu_count": os.cpu_count(),
+            "load_average": os.getloadavg(),
+            "overhead": overhead,
+            "efficiency": rows,
+        },
+        RESULTS,
+    )
     print(f"\nwrote {RESULTS}")
 
 

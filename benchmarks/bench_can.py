@@ -72,6 +72,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CODE = Path(os.environ.get("BENCH_CAN_CODE", ROOT))  # the handle_drake tree under test
 sys.path.insert(0, str(CODE))
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.base.testing import pick  # noqa: E402
 
 RATE = 1000.0  # Hz: command rate, server commit limit and firmware cycle
@@ -426,7 +427,7 @@ def child(code: Path, case: str, kind: str, frame_format: str = "-") -> dict:
     return value
 
 
-def rounds(n: int) -> None:
+def rounds(n: int, run: ResultsRun) -> None:
     """Barrett against Shadow without RT priority, interleaved and repeated, floors in each round.
 
     Each round runs every procs-udp case and the UDP/TCP floors once, in a random order, so
@@ -472,10 +473,10 @@ def rounds(n: int) -> None:
               f"{t['p99_met']:>5}/{n}")
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "can_rounds.json").write_text(json.dumps(
-        {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(), "rounds": n,
-         "load_average_start": load_start, "load_average_end": load_end, "summary": table,
-         "runs": runs}, indent=2))
+    run.finish([{"case": name, **t} for name, t in table.items()],
+               {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(),
+                "rounds": n, "load_average_start": load_start, "load_average_end": load_end,
+                "summary": table, "runs": runs}, out / "can_rounds.json")
     print(f"wrote {out / 'can_rounds.json'}")
 
 
@@ -492,6 +493,7 @@ def main() -> None:
                              "in a shuffled order each round; writes can_rounds.json")
     parser.add_argument("--child-echo-udp", nargs=5, help=argparse.SUPPRESS)
     parser.add_argument("--child-echo-tcp", nargs=1, type=int, help=argparse.SUPPRESS)
+    add_page_arguments(parser, "can")
     args = parser.parse_args()
     if args.child:
         print(json.dumps(run_case(*args.child)), flush=True)
@@ -506,8 +508,10 @@ def main() -> None:
     if args.rounds < 0:
         parser.error(f"--rounds: expected a count >= 0, got {args.rounds}")
     if args.rounds:
-        rounds(args.rounds)
+        rounds(args.rounds, ResultsRun("CAN hand: interleaved rounds, Barrett against Shadow",
+                                       args))
         return
+    run = ResultsRun("CAN hand: full-hand setpoint round trip at 1 kHz", args)
 
     with tempfile.TemporaryDirectory() as tmp:
         versions = {"after": ROOT}
@@ -561,11 +565,13 @@ def main() -> None:
             print(f"floor p99 without the hand's cycle wait (tcp + {udp}): {floor[fmt]:.2f} ms")
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "can.json").write_text(json.dumps(
-        {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(),
-         "baseline": args.baseline, "load_average_start": load_start,
-         "load_average_end": load_end, "cases": cases,
-         "floor_p99_ms_tcp_plus_udp": floor}, indent=2))
+    table = [{"case": name, **{k: v for k, v in r.items() if k.startswith(
+        ("commands_per_s", "commits_per_s", "states_per_s", "can_frames_per_s", "latency_ms"))}}
+        for name, r in cases.items()]
+    run.finish(table, {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(),
+                       "baseline": args.baseline, "load_average_start": load_start,
+                       "load_average_end": load_end, "cases": cases,
+                       "floor_p99_ms_tcp_plus_udp": floor}, out / "can.json")
     print(f"wrote {out / 'can.json'}")
 
 

@@ -69,6 +69,7 @@ import numpy as np  # noqa: E402
 
 from handle_drake.apps.babbling.babbling import CachedTrial  # noqa: E402
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning import run_experiment  # noqa: E402
 from handle_drake.learning.cluster import LocalPool, trial_executor  # noqa: E402
 from handle_drake.learning.executors import TrialResult, _evaluate  # noqa: E402
@@ -361,7 +362,9 @@ def main(argv=None) -> int:
                         default=Path(__file__).parent / "results" / "dask.json")
     parser.add_argument("--summarise", type=Path, default=None, metavar="JSON",
                         help="print the table of a saved run (its samples) and exit")
+    add_page_arguments(parser, "dask")
     args = parser.parse_args(argv)
+    run = ResultsRun("Dask cluster against local workers: trials/s and efficiency", args)
     key = lambda text: (*text.split("|")[:2], int(text.split("|")[2]))  # noqa: E731
     if args.summarise is not None:
         saved = json.loads(args.summarise.read_text())
@@ -443,8 +446,7 @@ def main(argv=None) -> int:
                      efficiency_2=">= 0.85 (random, pso, inhand_pso)"),
         machine=dict(cpus=os.cpu_count(), python=sys.version.split()[0],
                      platform=platform.platform()))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
+    run.finish(result["table"], result, args.out)
     print(f"\nwritten to {args.out}")
     return 0
 

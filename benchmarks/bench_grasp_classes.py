@@ -35,7 +35,6 @@ cuboid (round objects have no yaw). Results go to
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from concurrent.futures import as_completed
 from pathlib import Path
@@ -43,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
+from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor
 from handle_drake.trial.plans import plan_scenario
 
@@ -116,7 +116,10 @@ def main(argv=None) -> int:
                         help="override a ReactiveGraspParams field (repeatable), "
                              "e.g. close_shift_speed=0.03")
     add_executor_arguments(parser)
+    add_page_arguments(parser, "grasp_classes")
     args = parser.parse_args(argv)
+    run = ResultsRun("Grasp classes: open-loop and reactive grasps held per class and object",
+                     args)
     if args.directions < 1 or not 0 <= args.offset < 100 or not -0.5 < args.size_error < 0.5:
         raise SystemExit("need --directions >= 1, 0 <= --offset < 100 mm, |--size-error| < 0.5")
     import dataclasses
@@ -208,14 +211,14 @@ def main(argv=None) -> int:
           "* = held")
     label += "".join(f"_{name}{value:g}" for name, value in sorted(overrides.items()))
     out = RESULTS.with_name(f"grasp_classes{label}.json")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(dict(reduced=small, wall_time_s=wall, summary=summary,
+    run.finish(table_rows(summary, "class/object"), dict(
+        reduced=small, wall_time_s=wall, summary=summary,
                                    held_open_loop=total, held_reactive=total_r,
                                    reactive_overrides=overrides,
                                    error=dict(offset_mm=args.offset, directions=args.directions,
                                               size_error=args.size_error,
                                               yaw_error_deg=args.yaw_error),
-                                   trials=rows), indent=1))
+                                   trials=rows), out)
     print(f"wrote {out}")
     return 0
 

@@ -41,6 +41,7 @@ import numpy as np  # noqa: E402
 from handle_drake.apps.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
 from handle_drake.apps.inhand.gist import frames  # noqa: E402
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS, InHandTask, InHandTrial  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 from handle_drake.learning.optim.population import INHAND_OPTIMIZERS  # noqa: E402
 
@@ -209,7 +210,9 @@ def main(argv=None) -> int:
     p.add_argument("--db", type=Path, default=Path("out/inhand/bench.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
     add_executor_arguments(p)
+    add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
+    run = ResultsRun("In-hand tasks: speed and optimisers' trials to target", args)
     result = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                           "cpus": os.cpu_count()}}
     if args.out.exists():
@@ -223,8 +226,12 @@ def main(argv=None) -> int:
             result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials,
                                 args.targets, args.db, None, args.particles, executor,
                                 args.evaluation)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    printed = []
+    if args.speed:
+        printed += table_rows(result["speed"], "speed")
+    if args.table:
+        printed += table_rows(result[key], "task")
+    run.finish(printed, result, args.out)
     print(f"wrote {args.out}")
     return 0
 

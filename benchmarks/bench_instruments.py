@@ -31,7 +31,6 @@ Usage: ``python benchmarks/bench_instruments.py [--repeats N] [--quick] [--profi
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from pathlib import Path
@@ -42,6 +41,7 @@ pin_blas(force=False)
 
 from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
 from handle_drake.base.models import diagrams_dir  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
 from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 
@@ -129,7 +129,9 @@ def main(argv=None) -> int:
                         help="one cProfile'd trial per case instead: where the time goes")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "instruments.json")
+    add_page_arguments(parser, "instruments")
     args = parser.parse_args(argv)
+    run = ResultsRun("Instrumented objects: station cost of the device sensors", args)
     if args.profile:
         rows = profile()
         print(f"One {TRIAL_SECONDS:.0f} s trial per case under cProfile (CPU clock)")
@@ -160,9 +162,8 @@ def main(argv=None) -> int:
     print(f"device sensors: at most {100 * (worst - 1):+.1f} % CPU time against the station "
           f"without (median of paired rounds), {100 * (fastest - 1):+.1f} % (fastest runs); "
           f"target <= +5 %")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"trial_seconds": TRIAL_SECONDS, "repeats": repeats,
-                                    "rows": rows, "target_ratio": 1.05}, indent=2))
+    run.finish(rows, {"trial_seconds": TRIAL_SECONDS, "repeats": repeats, "rows": rows,
+                      "target_ratio": 1.05}, args.out)
     print(f"results: {args.out}")
     return 0
 

@@ -29,6 +29,7 @@ import numpy as np  # noqa: E402
 
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.apps.inhand.jog_wheel import JogWheelTrial, MidiJogEvaluator  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "jog_wheel.json"
 
@@ -88,14 +89,20 @@ def main(argv=None) -> int:
     p.add_argument("--trials", type=int, default=30)
     p.add_argument("--db", type=Path, default=Path("out/inhand/jog_wheel.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
+    add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
+    run = ResultsRun("Jog wheel: base rate and optimisers (MIDI ticks only)", args)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     if args.base_rate:
         result["base_rate"] = base_rate(args.base_rate, args.seed)
     if args.optimizers:
         result["optimisers"] = optimisers(args.optimizers, args.seeds, args.trials, args.db)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    table = []
+    if "base_rate" in result:
+        table.append({"optimizer": "random (base rate)", **{
+            k: v for k, v in result["base_rate"].items() if k not in ("trials", "demonstration")}})
+    table += result.get("optimisers", [])
+    run.finish(table, result, args.out)
     print(f"wrote {args.out}")
     return 0
 

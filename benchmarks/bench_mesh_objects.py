@@ -24,7 +24,6 @@ Writes ``benchmarks/results/bench_mesh_objects.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import tempfile
@@ -39,6 +38,7 @@ import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial import ConvexHull, Delaunay, QhullError  # noqa: E402
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.geometry.objects import ObjectSpec, mesh_examples  # noqa: E402
 from handle_drake.geometry.objects import mesh as mesh_objects  # noqa: E402
 
@@ -169,7 +169,9 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer points and trials")
     parser.add_argument("--vhacd", action="store_true", help="also run V-HACD (vhacdx)")
     parser.add_argument("--trials", type=int, default=None)
+    add_page_arguments(parser, "mesh_objects")
     args = parser.parse_args(argv)
+    run = ResultsRun("Mesh objects: convex decomposition and trial cost", args)
     n_points = 4000 if args.quick else 20000
     trials = args.trials or (3 if args.quick else 8)
     with tempfile.TemporaryDirectory() as tmp:
@@ -197,10 +199,10 @@ def main(argv=None) -> int:
                   f"{r.get('catalogue_trial_s', float('nan')):11.3f} "
                   f"{r.get('ratio', float('nan')):6.2f} "
                   f"{r.get('metric_max_abs_diff', float('nan')):9.3f}")
-    RESULTS.mkdir(exist_ok=True)
     out = RESULTS / "bench_mesh_objects.json"
-    out.write_text(json.dumps({"decomposition": deco, "trials": times,
-                               "machine_cpus": os.cpu_count()}, indent=1))
+    run.finish([{"part": "decomposition", **r} for r in deco]
+               + [{"part": "trials", **r} for r in times],
+               {"decomposition": deco, "trials": times, "machine_cpus": os.cpu_count()}, out)
     print(f"\nwritten {out}")
     return 0
 

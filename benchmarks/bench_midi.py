@@ -35,7 +35,6 @@ against the floor's. Writes ``benchmarks/results/midi.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import queue
 import random
@@ -49,6 +48,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
 from handle_drake.apps.figure9.hand_control import BuildMidiHandControl
+from handle_drake.base.results import ResultsRun, add_page_arguments
 from handle_drake.base.testing import reduced
 from handle_drake.devices.midi.ports import in_process_pair
 from handle_drake.scenario import LoadScenario
@@ -203,7 +203,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=1 if reduced() else 3)
     parser.add_argument("--seconds", type=float, default=1.5 if reduced() else 4.0)
+    add_page_arguments(parser, "midi")
     args = parser.parse_args()
+    run = ResultsRun("MIDI controller: message latency against a queue floor", args)
     cases = [("midi-in-process-5ms", "midi", 0.005, "in-process"),
              ("floor-queue-5ms", "floor", 0.005, None),
              ("midi-in-process-1ms", "midi", 0.001, "in-process"),
@@ -266,10 +268,11 @@ def main() -> None:
         print(f"  {load}: MidiHandControl {midi:7.1f}   floor {floor:7.1f}   ratio "
               f"{midi / floor:5.2f}")
     out = ROOT / "benchmarks" / "results"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "midi.json").write_text(json.dumps(
-        {"cases": table, "update_cost_us": cost, "skipped": skipped, "rounds": args.rounds,
-         "seconds": args.seconds, "loadavg": os.getloadavg(), "cpus": os.cpu_count()}, indent=2))
+    run.finish([{"case": name, **row} for name, row in table.items()]
+               + [{"case": f"update cost {k} (us)", "median_us": v} for k, v in cost.items()],
+               {"cases": table, "update_cost_us": cost, "skipped": skipped,
+                "rounds": args.rounds, "seconds": args.seconds, "loadavg": os.getloadavg(),
+                "cpus": os.cpu_count()}, out / "midi.json")
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; "
           f"wrote {out / 'midi.json'}")
 

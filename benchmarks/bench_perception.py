@@ -39,7 +39,6 @@ from __future__ import annotations
 import argparse
 import gc
 import importlib.util
-import json
 import os
 import platform
 import sys
@@ -53,6 +52,7 @@ pin_blas(force=False)
 import numpy as np  # noqa: E402
 
 from handle_drake.base.models import diagrams_dir  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.geometry.detect import TabletopDetector, detect_objects  # noqa: E402
 
 
@@ -184,7 +184,9 @@ def main(argv=None) -> int:
                         help="another detect.py to time on the same clouds")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "perception.json")
+    add_page_arguments(parser, "perception")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Perception: detection time against the depth render", args)
     if args.rounds < 2 or args.repeats < 1:
         parser.error("--rounds must be >= 2 and --repeats >= 1")
     if args.baseline is not None and not args.baseline.is_file():
@@ -212,11 +214,13 @@ def main(argv=None) -> int:
     print(f"\ndetect (plane per scene) / render (depth + cloud): "
           f"{', '.join(f'{r:.2f}' for r in ratios)} over {args.repeats} repeat(s) "
           f"(target <= 1.0)")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({
-        "benchmark": "perception", "scene_seed": args.scene_seed,
-        "baseline": str(args.baseline) if args.baseline else None, "runs": runs,
-        "machine": platform.platform(), "cpus": os.cpu_count()}, indent=1))
+    results_run.finish(
+        [{"repeat": i + 1, "step": step, **{k: v for k, v in r.items()
+                                            if not isinstance(v, list | dict)}}
+         for i, run in enumerate(runs) for step, r in run["rows"].items()],
+        {"benchmark": "perception", "scene_seed": args.scene_seed,
+         "baseline": str(args.baseline) if args.baseline else None, "runs": runs,
+         "machine": platform.platform(), "cpus": os.cpu_count()}, args.out)
     print(f"wrote {args.out}")
     return 0
 

@@ -17,7 +17,6 @@ Run: ``python benchmarks/bench_perception_grasp.py [--poses 3] [--workers 2]
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 
@@ -27,6 +26,7 @@ pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "perception_grasp.json"
@@ -76,7 +76,9 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     add_executor_arguments(parser)
+    add_page_arguments(parser, "perception")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Grasps planned from perception against the true pose", args)
     rng = np.random.default_rng(args.seed)
     cases = []
     for grasp_class, (kind, size) in CLASS_OBJECTS.items():
@@ -123,9 +125,11 @@ def main(argv=None) -> int:
     recovered = counts["perceived", "reactive"] - counts["perceived", "open_loop"]
     print(f"gap truth -> perception (open loop): {gap}; recovered by the reactive approach: "
           f"{recovered}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({"rows": rows, "counts": {f"{s}/{m}": v for (s, m), v in
-                                                            counts.items()}}, indent=1))
+    results_run.finish(
+        [{"grasp_class": r["grasp_class"], "kind": r["kind"], **(r["errors"] or {}),
+          **{f"{s} {m}": bool(r[s][m]) for s in ("truth", "perceived")
+             for m in ("open_loop", "reactive")}} for r in rows],
+        {"rows": rows, "counts": {f"{s}/{m}": v for (s, m), v in counts.items()}}, RESULTS)
     print(f"wrote {RESULTS}")
     return 0
 

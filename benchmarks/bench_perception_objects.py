@@ -18,7 +18,6 @@ prints a table and writes ``benchmarks/results/perception_objects.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -30,6 +29,8 @@ from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
+
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "perception_objects.json"
 
@@ -45,7 +46,9 @@ def main(argv=None) -> int:
     parser.add_argument("--hand", default="barrett", choices=("barrett", "shadow"))
     parser.add_argument("--objects", nargs="+", default=list(OBJECT_ORDER))
     parser.add_argument("--out", type=Path, default=RESULTS)
+    add_page_arguments(parser, "perception")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Grasp trials on perceived objects, per object", args)
     if args.poses < 1:
         parser.error("--poses must be >= 1")
     rng = np.random.default_rng(args.seed)
@@ -91,12 +94,12 @@ def main(argv=None) -> int:
               f"{r['kind_ok']:>5d} {r['truth_metric']:9.3f} {r['perceived_metric_mean']:9.3f} "
               f"{('yes' if r['truth_success'] else 'no'):>14s} "
               f"{r['perceived_success']:>11d}/{r['poses']:<2d}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({
-        "hand": args.hand, "poses": args.poses, "seed": args.seed, "wall_time_s": wall,
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "load_average": os.getloadavg()},
-        "rows": rows}, indent=1))
+    results_run.finish(
+        [{k: v for k, v in r.items() if k != "cases"} for r in rows],
+        {"hand": args.hand, "poses": args.poses, "seed": args.seed, "wall_time_s": wall,
+         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                     "load_average": os.getloadavg()},
+         "rows": rows}, args.out)
     print(f"written {args.out}")
     return 0
 

@@ -22,7 +22,6 @@ table (per kind) and writes ``benchmarks/results/perception_scenes.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -33,6 +32,8 @@ from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither
 pin_blas(force=False)
 
 import numpy as np  # noqa: E402
+
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results" / "perception_scenes.json"
 
@@ -56,7 +57,9 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0-29", help="e.g. 0-29 or 100-119,7")
     parser.add_argument("--profile", default="kinect_v1", choices=("kinect_v1", "ideal"))
     parser.add_argument("--out", type=Path, default=RESULTS)
+    add_page_arguments(parser, "perception")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Cluttered tabletop scenes: objects found per kind", args)
     try:
         seeds = _seeds(args.seeds)
     except ValueError:
@@ -125,13 +128,17 @@ def main(argv=None) -> int:
     for r in per_kind.values():
         r["xy_mm_median"] = float(np.median(r["xy_mm"])) if r["xy_mm"] else None
         r["xy_mm_max"] = float(np.max(r["xy_mm"])) if r["xy_mm"] else None
-    args.out.write_text(json.dumps({
+    printed = [{"kind": kind, **{k: r[k] for k in ("objects", "found_1cm", "kind_ok",
+                                                    "xy_mm_median", "xy_mm_max")}}
+               for kind, r in sorted(per_kind.items())]
+    printed.append({"kind": "all", **total})
+    results_run.finish(printed, {
         "benchmark": "perception_scenes", "seeds": seeds, "profile": args.profile,
         "wall_time_s": wall, "per_kind": per_kind, "total": total,
         "total_at_least_half_visible": total_seen,
         "scenes_all_found_1cm": scenes_ok, "phantoms": phantoms,
         "load_average": os.getloadavg(), "machine": platform.platform(),
-        "cpus": os.cpu_count(), "scenes": scenes}, indent=1))
+        "cpus": os.cpu_count(), "scenes": scenes}, args.out)
     print(f"written {args.out}")
     return 0
 

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows
+
 
 def _seeds(text: str) -> list[int]:
     if "-" in text:
@@ -51,7 +53,9 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0-19")
     parser.add_argument("--modes", default="perceived,true")
     parser.add_argument("--out", default="out/bench")
+    add_page_arguments(parser, "pick")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Pick and place on the arm: objects in the box", args)
 
     from handle_drake.apps.pick.cli import pick
     from handle_drake.apps.pick.scenes import random_scene
@@ -102,8 +106,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "pick.json"
-    path.write_text(json.dumps({"summary": summary, "floor_rate": floor, "rows": rows},
-                               indent=1, default=str))
+    results_run.finish(table_rows(summary, "mode"),
+                       {"summary": summary, "floor_rate": floor, "rows": rows}, path)
     print(f"wrote {path}")
     return 0
 

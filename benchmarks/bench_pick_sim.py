@@ -19,13 +19,17 @@ from pathlib import Path
 import numpy as np
 from bench_pick import _floor_rate, _seeds  # the same seeds syntax and arm-and-hand floor
 
+from handle_drake.base.results import ResultsRun, add_page_arguments
+
 
 def main(argv=None) -> int:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", default="0-19")
     parser.add_argument("--out", default="out/bench")
+    add_page_arguments(parser, "pick")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Pick simulation: bystanders free against welded", args)
 
     import handle_drake.apps.pick.execute as execute
     from handle_drake.apps.pick.cli import pick
@@ -99,6 +103,10 @@ def main(argv=None) -> int:
                   f"max {np.max(total):.2f} s, <= 2 s in {sum(t <= 2 for t in total)}/"
                   f"{len(total)}")
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    results_run.finish(
+        [{k: v for k, v in r.items() if k not in ("free", "welded")}
+         | {f"{mode} {k}": v for mode in ("free", "welded") for k, v in r.get(mode, {}).items()}
+         for r in rows], rows, Path(args.out) / "pick_sim.json")
     return 0
 
 

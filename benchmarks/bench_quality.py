@@ -25,7 +25,6 @@ modes); a batch of 1000 mixed grasps is timed through ``bw_metric_batch``.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from pathlib import Path
@@ -38,6 +37,7 @@ import numpy as np  # noqa: E402
 from pydrake.solvers import ClarabelSolver, MathematicalProgram  # noqa: E402
 from scipy.spatial import ConvexHull, QhullError  # noqa: E402
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.geometry.quality import (  # noqa: E402
     ContactParams,
     bw_metric_batch,
@@ -153,7 +153,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer grasps, smaller budgets")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "quality.json"))
+    add_page_arguments(ap, "quality")
     args = ap.parse_args(argv)
+    results_run = ResultsRun("Grasp quality: time per grasp against qhull, Drake and facet QP",
+                             args)
     rng = np.random.default_rng(0)
     n_grasps = 5 if args.quick else 20
     n_ref = 2 if args.quick else 5
@@ -219,8 +222,11 @@ def main(argv=None):
           f"{t_batch:.2f} s, {fmt_time(t_batch / 1000)} per grasp")
     result = {"machine": platform.platform(), "python": platform.python_version(),
               "quick": args.quick, "rows": rows, "batch": batch}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    printed = [{"contacts": row["contacts"], "edges": row["edges"], "mode": mode,
+                **(row[mode] or {})} for row in rows for mode in ("closure", "non_closure")]
+    printed.append({"contacts": 4, "edges": 8, "mode": "batch of 1000",
+                    "ours_s": batch["per_grasp_s"]})
+    results_run.finish(printed, result, Path(args.out))
     print(f"wrote {args.out}")
 
 

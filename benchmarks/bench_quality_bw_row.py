@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import os
 import platform
 import subprocess
@@ -30,6 +29,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_quality as bq  # noqa: E402
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.geometry.quality import grasp_quality, metrics  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,7 +74,9 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--baseline", default=None, help="git revision of hull.py for 'before'")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "quality_bw_row.json"))
+    add_page_arguments(ap, "quality")
     args = ap.parse_args(argv)
+    results_run = ResultsRun("Grasp quality: one BW table row against qhull", args)
     if args.rounds < 1:
         ap.error(f"--rounds: expected >= 1, got {args.rounds}")
     params, grasps = row_grasps()
@@ -107,8 +109,9 @@ def main(argv=None):
               "baseline": args.baseline, "rounds": rounds, "median_s": med,
               "median_ratio_qhull_over": ratio, "load_average": load,
               "bit_identical_to_baseline": identical if args.baseline else None}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    results_run.finish([{"method": k, "median_ms": 1e3 * v,
+                         "qhull_over_method": ratio.get(k, 1.0)} for k, v in med.items()],
+                       result, Path(args.out))
     print(f"wrote {args.out}")
 
 

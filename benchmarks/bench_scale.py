@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import os
 import platform
@@ -61,6 +60,7 @@ from handle_drake.base.blas import pin_blas
 
 pin_blas(force=False)
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning import TrialLog, run_experiment  # noqa: E402
 from handle_drake.learning.cluster import QUIET_WORKER, DaskExecutor  # noqa: E402
 from handle_drake.learning.loop import COMMIT_EVERY, COMMIT_SECONDS  # noqa: E402
@@ -210,7 +210,10 @@ def main(argv=None) -> int:
                         help="trials per case = waves x workers (default 6, quick 3)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "scale.json")
+    add_page_arguments(parser, "scale")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Scaling the trial executor: efficiency per workers and trial time",
+                             args)
     rounds = args.rounds or (1 if args.quick else 2)
     waves = args.waves or (3 if args.quick else 6)
     print(f"bench_scale: {rounds} round(s), {waves} waves a case, {THREADS_PER_WORKER} "
@@ -277,8 +280,11 @@ def main(argv=None) -> int:
                   target="efficiency >= 0.9 at 128 workers, 0.5 s trials",
                   machine=dict(cpus=os.cpu_count(), python=sys.version.split()[0],
                                platform=platform.platform()))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
+    results_run.finish(
+        [{"workers": int(k.split("|")[0]), "trial_s": float(k.split("|")[1]),
+          "efficiency": v["efficiency"], "core_share": v["core_share"],
+          **{f"{g} ms/trial": c for g, c in v["cpu_per_trial_ms"].items()}}
+         for k, v in table.items()], result, args.out)
     print(f"\nwritten to {args.out}")
     e = table[f"{max(WORKERS)}|0.5"]["efficiency"]
     print(f"efficiency at {max(WORKERS)} workers, 0.5 s trials: {e:.3f} (target >= 0.9)")

@@ -37,6 +37,7 @@ from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     ScrewCapTrial,
     simulate_scenario,
 )
+from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows  # noqa: E402
 from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
@@ -255,7 +256,9 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
+    add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
+    results_run = ResultsRun(f"In-hand {args.task}: base rate, optimisers and speed", args)
     if args.target_deg is None:
         args.target_deg = 90.0 if args.task == "screw_cap" else 60.0
     options = {"target_deg": args.target_deg, "n_gaits": args.gaits,
@@ -279,8 +282,12 @@ def main(argv=None) -> int:
         entry["budget"] = args.budget
         if args.resimulate:
             entry["resimulated"] = resimulate(t["best_trials"])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1, default=float))
+    printed = []
+    for part in ("speed", "base_rate", "summary", "table"):
+        if part in entry:
+            printed += [{"task": key, "part": part, **row}
+                        for row in table_rows(entry[part], "case")]
+    results_run.finish(printed, json.loads(json.dumps(result, default=float)), args.out)
     return 0
 
 

@@ -24,7 +24,6 @@ Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo]``
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import time
@@ -36,6 +35,7 @@ pin_blas(force=False)
 
 from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
 from handle_drake.base.models import diagrams_dir  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
 from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 
@@ -305,7 +305,9 @@ def main(argv=None) -> int:
                         help="only the demo case (point, 1 ms, sap) and its floors")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station.json")
+    add_page_arguments(parser, "station")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Station speed: Shadow grasp trial against the bare plant", args)
     repeats = 1 if args.quick else args.repeats
     load_before = os.getloadavg()[0]
     rows, floors, overhead = bench_realtime(repeats, args.demo)
@@ -350,11 +352,17 @@ def main(argv=None) -> int:
     print(f"targets: >= 4x real time at 1 ms point contact: "
           f"{'met' if point_1ms >= 4 else 'NOT met'} ({point_1ms:.1f}x); reset <= 5 ms: "
           f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"realtime": rows, "plant_only": floors, "reset": reset,
-                                    "station_overhead": overhead,
-                                    "cpu_count": os.cpu_count(),
-                                    "load_average": os.getloadavg()}, indent=2))
+    printed = [{k: r[k] for k in ("contact_model", "approximation", "time_step_ms",
+                                  "wall_s_median", "cpu_s_median", "realtime_factor",
+                                  "object_lift_cm_at_2s")} for r in rows]
+    printed += [{"contact_model": f"plant alone: {f['variant']}", "approximation": "sap",
+                 "time_step_ms": 1, **{k: f[k] for k in ("wall_s_median", "cpu_s_median",
+                                                         "realtime_factor",
+                                                         "object_lift_cm_at_2s")}}
+                for f in [overhead["replay"], *floors]]
+    results_run.finish(printed, {"realtime": rows, "plant_only": floors, "reset": reset,
+                                 "station_overhead": overhead, "cpu_count": os.cpu_count(),
+                                 "load_average": os.getloadavg()}, args.out)
     print(f"wrote {args.out}")
     return 0
 

@@ -30,7 +30,6 @@ writes ``benchmarks/results/trial_log.json``; its last line reads
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import statistics
@@ -43,6 +42,7 @@ from handle_drake.base.blas import pin_blas
 
 pin_blas(force=False)
 
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning import InlineExecutor, TrialLog, run_experiment  # noqa: E402
 from handle_drake.learning.loop import COMMIT_EVERY, COMMIT_SECONDS  # noqa: E402
 
@@ -100,7 +100,10 @@ def main(argv=None) -> int:
                         help="where the databases go (default: a temporary folder)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "trial_log.json")
+    add_page_arguments(parser, "trial_log")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Trial log: logged trials per second, grouped against per write",
+                             args)
     rounds = args.rounds or (2 if args.quick else 5)
     n_grouped = 1000 if args.quick else 5000
     n_write = 100 if args.quick else 300  # ~3 fsyncs a trial: fewer, same rate
@@ -149,8 +152,10 @@ def main(argv=None) -> int:
         table=table, target="runner grouped >= 2000 logged trials/s",
         machine=dict(cpus=os.cpu_count(), python=sys.version.split()[0],
                      platform=platform.platform()))
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
+    results_run.finish([{"case": c, "trials/s median": t["median"], "min": t["min"],
+                         "max": t["max"], "per CPU second (median)": t["per_cpu_second"]["median"],
+                         "load (median)": t["load"]["median"]} for c, t in table.items()],
+                       result, args.out)
     print(f"\nwritten to {args.out}")
     print(f"per-write commit rate (before issue 34), same run: "
           f"{table['runner per write']['median']:.0f} trials/s")

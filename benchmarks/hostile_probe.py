@@ -17,6 +17,7 @@ at its time limit) and writes ``hostile_probe_third_<label>.json``;
 ``PROBE_ONLY=<part>`` limits it to one surface, ``PROBE_VERBOSE=1`` prints each case.
 """
 
+import argparse
 import contextlib
 import io
 import json
@@ -32,6 +33,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from handle_drake.base.results import ResultsRun, add_page_arguments
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = {}
@@ -92,7 +95,7 @@ def probe_scenarios():
         "simulation_duration: 1e300": "simulation_duration",
         "simulation_duration: .inf": "simulation_duration",
         "plant_config: {time_step: 1e-5}\nsimulation_duration: 3000": "steps",
-        "visualization_period: 1e-12": "visualization_period",
+        "visualization: {publish_period: 1e-12}": "visualization.publish_period",
         "hand: {mount: !FloatingWrist {translation_kp: -5}}": "translation_kp",
         "hand: {mount: !FloatingWrist {translation_kd: .inf}}": "translation_kd",
         "hand: {mount: !FloatingWrist {rotation_kp: .nan}}": "rotation_kp",
@@ -445,17 +448,17 @@ def probe_second_wave(tmp):
             ["diagrams/tabletop_perception.yaml", "--save-frames", ok],
             ["diagrams/tabletop_perception.yaml", "--override", "cameras: 5"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: nope}]"],
+             "cameras: [{profile: nope, config: {name: k}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: kinect_v1, parent: nowhere}]"],
+             "cameras: [{config: {name: k, X_PB: {base_frame: nowhere}}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: kinect_v1, width: 1000000000}]"],
+             "cameras: [{config: {name: k, width: 1000000000}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, profile: kinect_v1, target: [0, 0, 0], "
-             "X_PC: {translation: [0, 0, 0]}}]"],
+             "cameras: [{target: [0, 0, 0], config: {name: k, X_PB: {translation: [0, 0, 0]}}}]"],
             ["diagrams/tabletop_perception.yaml", "--override",
-             "cameras: [{name: k, X_PC: {translation: [-0.7, 0, 0.7]}, target: [0, 0, 0]}, "
-             "{name: k, X_PC: {translation: [0.7, 0, 0.7]}, target: [0, 0, 0]}]"],
+             "cameras: [{target: [0, 0, 0], "
+             "config: {name: k, X_PB: {translation: [-0.7, 0, 0.7]}}}, {target: [0, 0, 0], "
+             "config: {name: k, X_PB: {translation: [0.7, 0, 0.7]}}}]"],
             []],
         "mesh objects": [
             *[[c, "--mesh", str(tmp / f)] for c in ("grasp --class tripod", "babble --trials 1")
@@ -1015,6 +1018,13 @@ def _probe_ctrl_c(tmp):
 
 
 def main():
+    # `--no-page` / `--results-page PATH` as the other benchmarks (no argparse here: the
+    # positional part name picks one part).
+    page = argparse.ArgumentParser(add_help=False)
+    add_page_arguments(page, "hostile_probe")
+    page_args, sys.argv[1:] = page.parse_known_args(sys.argv[1:])
+    results_run = ResultsRun("Hostile input probe: inputs tried, refused cleanly, failures",
+                             page_args)
     only = {"can": probe_can, "second": probe_second_wave, "third": probe_third_wave}
     if sys.argv[1:2] and sys.argv[1] in only:  # one part only ('can' needs the least time)
         with tempfile.TemporaryDirectory() as tmp:
@@ -1025,7 +1035,7 @@ def main():
             label = sys.argv[2] if len(sys.argv) > 2 else "run"
             out = ROOT / "benchmarks" / "results"
             out.mkdir(parents=True, exist_ok=True)
-            (out / f"hostile_probe_third_{label}.json").write_text(json.dumps(RESULTS, indent=1))
+            results_run.finish(_table(), RESULTS, out / f"hostile_probe_third_{label}.json")
             print("| surface | tried | clean | traceback | hang | wrong (silent accept) |\n"
                   "|---|---|---|---|---|---|")
             for part, r in RESULTS.items():
@@ -1049,9 +1059,12 @@ def main():
     for part, r in RESULTS.items():
         for failure in r["failures"][:20]:
             print(f"  {part}: {failure}")
-    out = ROOT / "benchmarks" / "results"
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "hostile_probe.json").write_text(json.dumps(RESULTS, indent=1))
+    results_run.finish(_table(), RESULTS, ROOT / "benchmarks" / "results" / "hostile_probe.json")
+
+
+def _table() -> list[dict]:
+    return [{"part": part, **{k: r[k] for k in ("tried", "clean", "traceback", "hang", "wrong")}}
+            for part, r in RESULTS.items()]
 
 
 if __name__ == "__main__":

@@ -59,6 +59,7 @@ import yaml
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.visualization import VisualizationConfig
 
 from handle_drake.base.checks import (
     ScenarioError,
@@ -74,6 +75,12 @@ from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.sensor import check_sensor_pose
 from handle_drake.devices.accelerometer.wiring import instrument_X_OS
 from handle_drake.devices.arm.config import Arm, validate_arm
+from handle_drake.devices.camera.config import (
+    CAMERA_PARENTS,
+    CameraConfig,
+    DepthCamera,
+    resolve_camera_config,
+)
 from handle_drake.devices.camera.profiles import get_profile
 from handle_drake.devices.can_hand.config import CanHandDriverConfig
 from handle_drake.devices.midi.wiring import validate_midi_controller
@@ -88,6 +95,7 @@ __all__ = [
     "SortingBoxConfig",
     "CONTACT_MODELS",
     "CameraConfig",
+    "DepthCamera",
     "CanHandDriver",
     "FixedMount",
     "FloatingWrist",
@@ -103,6 +111,7 @@ __all__ = [
     "ScenarioError",
     "SimHandDriver",
     "default_plant_config",
+    "default_visualization_config",
     "TableConfig",
     "DumpScenario",
     "object_spec",
@@ -301,26 +310,6 @@ class CanHandDriver(CanHandDriverConfig):
     """
 
 
-@dc.dataclass
-class CameraConfig:
-    """A depth camera rendered by Drake's ``RgbdSensor`` (see
-    ``handle_drake.devices.camera``).
-
-    The camera frame C follows Drake's convention: +z along the optical axis,
-    +x to the right of the image, +y down. ``X_PC`` is its pose in the parent:
-    ``world`` (a fixed camera) or ``wrist`` (the hand's base body, moving with
-    it). With ``target`` (world-fixed cameras only), only ``X_PC``'s
-    translation is used and the camera looks at ``target`` (m, world) with the
-    image's up direction as close to world +z as possible.
-    """
-
-    name: str = "camera"
-    profile: str = "kinect_v1"  # see handle_drake.devices.camera.PROFILES
-    parent: str = "world"  # world | wrist
-    X_PC: Transform = dc.field(default_factory=Transform)
-    target: list[float] = dc.field(default_factory=list)
-
-
 def default_plant_config(**fields) -> MultibodyPlantConfig:
     """Drake's ``MultibodyPlantConfig`` with this project's defaults, then
     ``fields`` (e.g. ``time_step=0.002``): a 1 ms discrete step, point contact,
@@ -331,6 +320,17 @@ def default_plant_config(**fields) -> MultibodyPlantConfig:
     defaults = dict(time_step=0.001, contact_model="point",
                     discrete_contact_approximation="sap", use_sampled_output_ports=False)
     return MultibodyPlantConfig(**(defaults | fields))
+
+
+def default_visualization_config(**fields) -> VisualizationConfig:
+    """Drake's ``VisualizationConfig`` with this project's defaults, then
+    ``fields``: Meshcat at 32 Hz, the illustration geometry and the contact
+    forces (no proximity or inertia layers), and no Meshcat of its own (the
+    station draws only into a Meshcat it is given). Its ``lcm_bus`` is not
+    used: the station's LCM messages go to an in-memory null bus."""
+    defaults = dict(publish_period=1.0 / 32, publish_proximity=False, publish_inertia=False,
+                    enable_meshcat_creation=False)
+    return VisualizationConfig(**(defaults | fields))
 
 
 @dc.dataclass
@@ -355,10 +355,12 @@ class Scenario:
     controller: GuardedGraspController | None = None
     # An optional score of the run (printed by ``handle-drake simulate``).
     metric: GraspMetric | None = None
-    # Meshcat publish period (s) when a Meshcat is given.
-    visualization_period: float = 1.0 / 32
-    # Depth cameras (simulation: Drake's RgbdSensor with RenderEngineVtk).
-    cameras: list[CameraConfig] = dc.field(default_factory=list)
+    # What the station draws when a Meshcat is given (Drake's own config;
+    # ApplyVisualizationConfig reads it).
+    visualization: VisualizationConfig = dc.field(default_factory=default_visualization_config)
+    # Depth cameras (simulation: Drake's RgbdSensor with RenderEngineVtk): Drake's
+    # CameraConfig plus the device profile (handle_drake.devices.camera.config).
+    cameras: list[DepthCamera] = dc.field(default_factory=list)
     # An optional MIDI controller on the table (an instrumented object).
     midi_controller: MidiControllerConfig | None = None
 
@@ -409,6 +411,7 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
     if not text.strip():
         return defaults
     text = translate_deprecated_keys(text, source)
+    _refuse_renamed_keys(text, source)
     check_yaml_text(text, Scenario, source)
     if yaml.compose(text, Loader=yaml.SafeLoader) is None:  # comments only: as empty
         return defaults
@@ -417,6 +420,39 @@ def _load(text: str, defaults: Scenario, source: str) -> Scenario:
     except Exception as error:  # yaml.YAMLError, RuntimeError, ValueError, TypeError
         message = str(error).strip().splitlines()
         raise ScenarioError(f"invalid scenario ({source}): {' '.join(message)[:500]}") from None
+
+
+#: Keys that became fields of Drake's config types: old -> new (a camera's old
+#: keys are per list item, ``cameras[i].<old>``).
+RENAMED_KEYS = {"visualization_period": "visualization.publish_period (Drake's "
+                                        "VisualizationConfig)"}
+RENAMED_CAMERA_KEYS = {"name": "config.name", "X_PC": "config.X_PB",
+                       "parent": "config.X_PB.base_frame (world | wrist)"}
+
+
+def _refuse_renamed_keys(text: str, source: str) -> None:
+    """A one-line :class:`ScenarioError` naming an old key and its new place."""
+    if not any(key in text for key in ("visualization_period", "cameras")):
+        return
+    try:
+        root = yaml.compose(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+    except (yaml.YAMLError, RecursionError):
+        return  # check_yaml_text names the problem
+    if not isinstance(root, yaml.MappingNode):
+        return
+    for key, value in root.value:
+        if key.value in RENAMED_KEYS:
+            raise ScenarioError(f"{key.value}: renamed to {RENAMED_KEYS[key.value]} "
+                                f"({source})")
+        if key.value == "cameras" and isinstance(value, yaml.SequenceNode):
+            for i, item in enumerate(value.value):
+                if not isinstance(item, yaml.MappingNode):
+                    continue
+                for k, _ in item.value:
+                    if getattr(k, "value", None) in RENAMED_CAMERA_KEYS:
+                        raise ScenarioError(
+                            f"cameras[{i}].{k.value}: moved into Drake's CameraConfig as "
+                            f"cameras[{i}].{RENAMED_CAMERA_KEYS[k.value]} ({source})")
 
 
 def _check_transform(name: str, transform: Transform) -> None:
@@ -496,7 +532,7 @@ def validate_scenario(scenario: Scenario) -> None:
         _check_positive("table.size_y", scenario.table.size_y)
     _validate_plant_config(scenario.plant_config)
     _check_positive("simulation_duration", scenario.simulation_duration)
-    _check_positive("visualization_period", scenario.visualization_period)
+    _check_positive("visualization.publish_period", scenario.visualization.publish_period)
     _validate_script(scenario, spec)
     _validate_cameras(scenario)
     if scenario.controller is not None:
@@ -635,9 +671,6 @@ def _validate_script(scenario: Scenario, spec) -> None:
                 )
 
 
-CAMERA_PARENTS = ("world", "wrist")
-
-
 def _validate_cameras(scenario: Scenario) -> None:
 
     names = set()
@@ -645,36 +678,39 @@ def _validate_cameras(scenario: Scenario) -> None:
         where = f"cameras[{i}]"
         if not isinstance(camera.name, str) or not camera.name.strip() or any(
                 c in camera.name for c in "./ \t\n"):
-            raise ScenarioError(f"{where}.name must be a non-empty name without '.', '/' or "
-                                f"spaces, got {short(camera.name)}")
+            raise ScenarioError(f"{where}.config.name must be a non-empty name without '.', "
+                                f"'/' or spaces, got {short(camera.name)}")
         if camera.name in names:
-            raise ScenarioError(f"{where}.name: duplicate camera name {short(camera.name)}")
+            raise ScenarioError(f"{where}.config.name: duplicate camera name "
+                                f"{short(camera.name)}")
         names.add(camera.name)
         try:
             get_profile(camera.profile)
         except ValueError as error:
             raise ScenarioError(f"{where}.profile: {error}") from None
         if camera.parent not in CAMERA_PARENTS:
-            raise ScenarioError(f"{where}.parent: expected one of {list(CAMERA_PARENTS)}, "
-                                f"got {short(camera.parent)}")
-        _check_transform(f"{where}.X_PC", camera.X_PC)
+            raise ScenarioError(f"{where}.config.X_PB.base_frame: expected one of "
+                                f"{list(CAMERA_PARENTS)}, got {short(camera.parent)}")
+        resolve_camera_config(camera, where, ScenarioError)
+        _check_transform(f"{where}.config.X_PB", camera.config.X_PB)
         if camera.parent == "world" and scenario.table is not None:
-            p = camera.X_PC.GetDeterministicValue().translation()
+            p = camera.config.X_PB.GetDeterministicValue().translation()
             table = scenario.table
             # The table top is a 5 cm slab below top_height (objects.AddTable).
             if (abs(p[0]) < table.size_x / 2 and abs(p[1]) < table.size_y / 2
                     and table.top_height - 0.05 <= p[2] <= table.top_height):
-                raise ScenarioError(f"{where}.X_PC: the camera at {p.round(4).tolist()} is "
-                                    f"inside the table top (z {table.top_height - 0.05:g} to "
-                                    f"{table.top_height:g} m); place it above the table")
+                raise ScenarioError(f"{where}.config.X_PB: the camera at "
+                                    f"{p.round(4).tolist()} is inside the table top (z "
+                                    f"{table.top_height - 0.05:g} to {table.top_height:g} m); "
+                                    f"place it above the table")
         if camera.target:
             if camera.parent != "world":
-                raise ScenarioError(f"{where}.target needs parent: world (a camera on the "
-                                    f"wrist moves; give its orientation in X_PC)")
+                raise ScenarioError(f"{where}.target needs X_PB.base_frame: world (a camera on "
+                                    f"the wrist moves; give its orientation in X_PB)")
             if len(camera.target) != 3 or not all(math.isfinite(v) for v in camera.target):
                 raise ScenarioError(f"{where}.target: expected 3 finite values [x y z] (m), "
                                     f"got {camera.target}")
-            eye = camera.X_PC.GetDeterministicValue().translation()
+            eye = camera.config.X_PB.GetDeterministicValue().translation()
             if np.linalg.norm(np.asarray(camera.target) - eye) < 1e-6:
                 raise ScenarioError(f"{where}.target: the camera cannot look at its own "
                                     f"position {eye.tolist()}")

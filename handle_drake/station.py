@@ -45,6 +45,7 @@ plant.
 from __future__ import annotations
 
 import numpy as np
+from pydrake.lcm import DrakeLcm
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.multibody.tree import (
@@ -55,6 +56,7 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.visualization import ApplyVisualizationConfig
 
 from handle_drake.base.hands import (
     AddHand,
@@ -323,18 +325,12 @@ def _set_default_hand_positions(plant, hand, spec, command, coupling_ratio) -> N
 
 
 def _add_visualization(builder, plant, scene_graph, meshcat, scenario) -> None:
-    from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
-    from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
-
+    # Drake's ApplyVisualizationConfig adds the Meshcat (and contact) visualisers the
+    # scenario's VisualizationConfig asks for; its LCM messages go to a null bus.
     meshcat.Delete()
-    params = MeshcatVisualizerParams(publish_period=scenario.visualization_period,
-                                     role=Role.kIllustration, prefix="illustration")
-    MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat, params)
-    ContactVisualizer.AddToBuilder(
-        builder, plant, meshcat,
-        ContactVisualizerParams(publish_period=scenario.visualization_period,
-                                newtons_per_meter=200),
-    )
+    ApplyVisualizationConfig(scenario.visualization, builder, plant=plant,
+                             scene_graph=scene_graph, meshcat=meshcat,
+                             lcm=DrakeLcm("memq://null"))
 
 
 def GetPlant(station):
@@ -403,5 +399,5 @@ def _add_hardware_visualization(builder, driver, scenario, spec, meshcat) -> Non
                     scene_graph.get_source_pose_port(plant.get_source_id()))
     MeshcatVisualizer.AddToBuilder(
         builder, scene_graph, meshcat,
-        MeshcatVisualizerParams(publish_period=scenario.visualization_period,
+        MeshcatVisualizerParams(publish_period=scenario.visualization.publish_period,
                                 role=Role.kIllustration, prefix="illustration"))

@@ -496,8 +496,8 @@ def test_a_mesh_object_renders_for_the_cameras_and_is_detected_as_its_catalogue_
 
     data = (f"object: {{kind: mesh, file: '{files['cuboid']}', X_WO: {{translation: "
             "[0.05, -0.03, 0], rotation: !Rpy {deg: [0, 0, 30]}}}\n"
-            "cameras: [{name: kinect, profile: ideal, X_PC: {translation: [-0.707, 0, 0.707]}, "
-            "target: [0, 0, 0]}]\n")
+            "cameras: [{profile: ideal, target: [0, 0, 0], config: {name: kinect, "
+            "X_PB: {translation: [-0.707, 0, 0.707]}}}]\n")
     scenario = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml", data=data)
     (view,) = render_views(scenario)
     (box,) = view.detections

@@ -478,7 +478,8 @@ def check_ranges(scenario) -> None:
         raise ScenarioError(
             f"simulation_duration / plant_config.time_step: expected at most {high:,} steps, "
             f"got {steps:,.0f} ({scenario.simulation_duration:g} s / {time_step:g} s)")
-    _in("visualization_period", scenario.visualization_period, "visualization_period", " s")
+    _in("visualization.publish_period", scenario.visualization.publish_period,
+        "visualization_period", " s")
     if isinstance(scenario.random_seed, bool) or not isinstance(scenario.random_seed, int) or \
             not 0 <= scenario.random_seed < 2**32:
         raise ScenarioError(f"random_seed: expected an integer in [0, 2**32), got "
@@ -499,7 +500,7 @@ def check_ranges(scenario) -> None:
         for k, value in enumerate(keyframe.wrist[3:6]):
             _in(f"script[{i}].wrist[{k + 3}]", value, "wrist_angle", " rad")
     for i, camera in enumerate(getattr(scenario, "cameras", [])):
-        _check_pose(f"cameras[{i}].X_PC", camera.X_PC)
+        _check_pose(f"cameras[{i}].config.X_PB", camera.config.X_PB)
         for k, value in enumerate(camera.target):
             _in(f"cameras[{i}].target[{k}]", value, "position", " m")
     wrist = [(k.time, k.wrist) for k in scenario.script if k.wrist]

@@ -64,7 +64,7 @@ FIELDS = {
                      "adjacent_bodies_collision_filters"],
     # The deprecated top-level plant keys are still translated: fuzz them too.
     "": ["contact_model", "time_step", "contact_approximation", "plant_config",
-         "simulation_duration", "random_seed", "script", "visualization_period"],
+         "simulation_duration", "random_seed", "script", "visualization"],
 }
 TAGS = ["", "!SimHandDriver ", "!CanHandDriver ", "!FloatingWrist ", "!FixedMount ", "!Foo ",
         "!Rpy ", "!AngleAxis ", "!Uniform "]

@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 
 from handle_drake.apps.inhand.jog_wheel import JOG, JogWheelTask, JogWheelTrial, MidiJogEvaluator
+from handle_drake.base.models import diagrams_dir
 from handle_drake.cli import main as cli_main
 from handle_drake.devices.midi.codec import control_message
 from handle_drake.devices.midi.mapping import LoadMidiMapping
+from handle_drake.scenario import DumpScenario, LoadScenario
 
 
 @pytest.fixture(scope="module")
@@ -89,3 +91,58 @@ def test_cli_jog_wheel_runs_and_bad_flags_exit_2(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "inhand: jog_wheel" in out and "trials: 1 done" in out
     assert "best score" in out and "held" not in out  # a wheel on its axle
+
+
+def test_the_jog_pinch_is_figure_9s_one_builder():
+    """The task and Figure 9's ``midi jog`` share the planned pinch (trial.jog_pinch): the
+    same start pose, open hand and grasp phase; the task's turns are turns about the
+    wheel's axis (the wrist's position stays at the pinch's radius from it)."""
+    from handle_drake.apps.figure9.experiments import jog_pinch_scenario
+    from handle_drake.trial.jog_pinch import GRASP_TIME, plan_jog_pinch
+
+    figure9 = jog_pinch_scenario()
+    task = JogWheelTrial(JogWheelTask()).scenario(np.r_[1.0, 20.0, 20.0, 20.0, 20.0])
+    assert DumpScenario(task).count("FloatingWrist") == 1
+    for a, b in ((figure9.hand, task.hand), (figure9.table, task.table),
+                 (figure9.midi_controller, task.midi_controller)):
+        assert repr(a) == repr(b)
+    grasp = [k for k in task.script if k.time <= GRASP_TIME]
+    assert len(grasp) == 5
+    for mine, theirs in zip(grasp, figure9.script, strict=False):
+        assert mine.time == theirs.time and mine.wrist == theirs.wrist
+        assert mine.hand.keys() == theirs.hand.keys()
+        # grip 1 is the planned closure (o + 1 (c - o): equal to rounding)
+        for name, value in mine.hand.items():
+            assert value == pytest.approx(theirs.hand[name], abs=1e-12)
+    pinch = plan_jog_pinch()
+    radius = np.linalg.norm((pinch.plan.X_WB.translation() - pinch.centre)[:2])
+    turns = [k for k in task.script if k.time > GRASP_TIME and k.wrist]
+    assert len(turns) == 4
+    for k, keyframe in enumerate(turns, start=1):
+        p, yaw = np.array(keyframe.wrist[:3]), keyframe.wrist[5]
+        assert np.linalg.norm((p - pinch.centre)[:2]) == pytest.approx(radius, abs=1e-12)
+        assert np.degrees(yaw - grasp[1].wrist[5]) == pytest.approx(20.0 * k, abs=1e-9)
+
+
+def test_the_trial_pickles_as_a_gist_trial_config_only(trial):
+    import pickle
+
+    from handle_drake.apps.inhand import jog_wheel
+    from handle_drake.apps.inhand.task import GistTrial
+
+    assert isinstance(trial, GistTrial) and not hasattr(jog_wheel, "_BUILD_CACHE")
+    trial._build()  # a diagram on this object, never pickled
+    copy = pickle.loads(pickle.dumps(trial))
+    assert copy.config == trial.config and copy._built is None
+    assert copy.dimension == 5 and copy.bounds.shape == (5, 2)
+
+
+def test_the_committed_scenario_is_the_demonstration_trial_and_its_midi_agrees(trial):
+    from handle_drake.apps.figure9.experiments import run_midi_scenario
+
+    scenario = LoadScenario(filename=diagrams_dir() / "inhand_jog_wheel.yaml")
+    assert DumpScenario(scenario) == DumpScenario(trial.scenario())
+    # handle-drake simulate's MIDI report (the figure 9 runner) counts what the trial's
+    # evaluator counted from the port: the same net jog ticks.
+    result = run_midi_scenario(scenario)
+    assert int(result.midi(JOG)[-1]) == trial.evaluate(trial.config.demonstration()).ticks

@@ -19,8 +19,8 @@ SCENARIO = diagrams_dir() / "tabletop_perception.yaml"
 
 
 def _camera(profile):
-    return (f"cameras: [{{name: kinect, profile: {profile}, "
-            f"X_PC: {{translation: [-0.707, 0, 0.707]}}, target: [0, 0, 0]}}]\n")
+    return (f"cameras: [{{profile: {profile}, target: [0, 0, 0], config: {{name: kinect, "
+            f"X_PB: {{translation: [-0.707, 0, 0.707]}}}}}}]\n")
 
 
 def _object(kind, x=0.0, y=0.0, yaw_deg=0.0, size=0.06):
@@ -118,13 +118,31 @@ def test_min_area_rectangle_of_a_rotated_rectangle():
 
 
 @pytest.mark.parametrize("override, match", [
-    ("cameras: [{name: k, profile: kinect_v9}]", "unknown profile"),
-    ("cameras: [{name: k, parent: elbow}]", "parent"),
-    ("cameras: [{name: k, X_PC: {translation: [0, 0, 1]}}, {name: k}]", "duplicate"),
-    ("cameras: [{name: 'a.b'}]", "name"),
-    ("cameras: [{name: k, X_PC: {translation: [0, 0, -0.02]}}]", "inside the table"),
-    ("cameras: [{name: k, X_PC: {translation: [0, 0, 1]}, target: [0, 0, 1]}]", "own position"),
-    ("cameras: [{name: k, X_PC: {translation: [0, 0, 1]}, target: [0, 0]}]", "3 finite"),
+    ("cameras: [{profile: kinect_v9, config: {name: k}}]", "unknown profile"),
+    ("cameras: [{config: {name: k, X_PB: {base_frame: elbow}}}]", r"X_PB\.base_frame"),
+    ("cameras: [{config: {name: k, X_PB: {translation: [0, 0, 1]}}}, {config: {name: k}}]",
+     "duplicate"),
+    ("cameras: [{config: {name: 'a.b'}}]", r"cameras\[0\]\.config\.name"),
+    ("cameras: [{config: {name: k, X_PB: {translation: [0, 0, -0.02]}}}]", "inside the table"),
+    ("cameras: [{target: [0, 0, 1], config: {name: k, X_PB: {translation: [0, 0, 1]}}}]",
+     "own position"),
+    ("cameras: [{target: [0, 0], config: {name: k, X_PB: {translation: [0, 0, 1]}}}]",
+     "3 finite"),
+    # The profile sets the render intrinsics; Drake's publishing fields are not used.
+    ("cameras: [{profile: kinect_v1, config: {name: k, width: 1000}}]",
+     r"cameras\[0\]\.config\.width: set by the profile 'kinect_v1'"),
+    ("cameras: [{config: {name: k, focal: !FovDegrees {y: 60}}}]", r"config\.focal"),
+    ("cameras: [{config: {name: k, fps: 30}}]", r"config\.fps: not used"),
+    ("cameras: [{config: {name: k, X_BD: {translation: [0, 0.02, 0]}}}]", r"config\.X_BD"),
+    ("cameras: [{config: {name: k}, parnet: world}]", r"cameras\[0\]\.parnet"),
+    # The pre-Drake keys name their new place.
+    ("cameras: [{name: k, profile: kinect_v1}]",
+     r"cameras\[0\]\.name: moved .* cameras\[0\]\.config\.name"),
+    ("cameras: [{profile: kinect_v1, X_PC: {translation: [0, 0, 1]}}]",
+     r"cameras\[0\]\.X_PC: moved .* cameras\[0\]\.config\.X_PB"),
+    ("cameras: [{profile: kinect_v1, parent: world}]", r"base_frame"),
+    ("visualization_period: 0.1", r"visualization_period: renamed to "
+                                  r"visualization\.publish_period"),
 ])
 def test_bad_cameras_are_refused_naming_the_field(override, match):
     with pytest.raises(ScenarioError, match=match):
@@ -133,8 +151,8 @@ def test_bad_cameras_are_refused_naming_the_field(override, match):
 
 def test_a_camera_looking_away_reports_nothing_in_view():
     scenario = LoadScenario(filename=SCENARIO, data=(
-        "cameras: [{name: up, profile: kinect_v1, X_PC: {translation: [0, 0, 1]}, "
-        "target: [0, 0, 3]}]"))
+        "cameras: [{profile: kinect_v1, target: [0, 0, 3], "
+        "config: {name: up, X_PB: {translation: [0, 0, 1]}}}]"))
     (view,) = render_views(scenario)
     assert view.detections == [] and "nothing in view" in view.message
 

@@ -13,9 +13,11 @@ parallel-extension grasp and the JoyWarrior held in a tripod grasp. Here:
 3. the hand opens (back to the pre-shape) and the device falls to the table.
 
 The device's accelerometer (its catalogue sensor frame and profile, seeded
-noise and bias) feeds the station's estimators; a recorder samples the
+noise and bias) feeds the station's estimators; Drake's loggers record the
 estimates, the flags and the true sensor orientation from the plant right
-after each device sample. Reported (:class:`Figure8Result.summary`): roll and
+after each device sample (a ``ZeroOrderHold`` with the device's period and a
+0.2 ms offset, logged by a ``VectorLogSink``: the figures are bit-identical to
+the former list recorder's). Reported (:class:`Figure8Result.summary`): roll and
 pitch errors in degrees (RMS and max) over the at-rest phases (each hold after
 its first ``REST_SETTLE`` s) and while moving; false free-fall and slip alarms
 while the grasp holds (lift done to the open command); the free-fall
@@ -37,8 +39,15 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
+from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.framework import LeafSystem
+from pydrake.systems.primitives import (
+    LogVectorOutput,
+    Multiplexer,
+    VectorLogSink,
+    ZeroOrderHold,
+)
 
 from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.estimators import angle_difference, true_roll_pitch
@@ -186,37 +195,93 @@ def figure8_scenario(device="joywarrior", rotations=ROTATIONS_DEG, seed: int = 0
     return scenario, phases, plan
 
 
-class _Recorder(LeafSystem):
-    """Samples the instrument ports and the true sensor orientation right after each
-    device sample, and the ideal sensor's magnitude every ``RELEASE_PERIOD`` s."""
+#: The recorder samples this long after each device sample (s): Drake runs a publish
+#: event at t before the discrete updates at t, so a sample at the device's own instant
+#: would see the estimates of the sample before.
+SAMPLE_DELAY = 2e-4
 
-    def __init__(self, period: float, X_OS: RigidTransform):
+
+class _SensorTruth(LeafSystem):
+    """``[true roll, true pitch, z]`` of the sensor frame S in world (rad, rad, m) from
+    the object's pose: an output only (no state, no events)."""
+
+    def __init__(self, X_OS: RigidTransform):
         super().__init__()
-        from pydrake.common.value import AbstractValue
-
         self._X_OS = X_OS
-        self.inputs = {name: self.DeclareVectorInputPort(name, size) for name, size in
-                       (("roll_pitch", 2), ("at_rest", 1), ("free_fall", 1), ("slip", 1),
-                        ("acceleration", 3), ("ideal", 3))}
         self._pose = self.DeclareAbstractInputPort("pose", AbstractValue.Make(RigidTransform()))
-        self.rows, self.ideal = [], []
-        self.DeclarePeriodicPublishEvent(period, 2e-4, self._sample)
-        self.DeclarePeriodicPublishEvent(RELEASE_PERIOD, 0.0, self._sample_ideal)
+        self.DeclareVectorOutputPort("truth", 3, self._calc)
 
-    def clear(self):
-        self.rows, self.ideal = [], []
-
-    def _sample(self, context):
+    def _calc(self, context, output):
         X_WS = self._pose.Eval(context) @ self._X_OS
-        values = [context.get_time(), *true_roll_pitch(X_WS.rotation()),
-                  float(X_WS.translation()[2])]
-        for name in ("roll_pitch", "at_rest", "free_fall", "slip", "acceleration"):
-            values += list(self.inputs[name].Eval(context))
-        self.rows.append(values)
+        output.SetFromVector([*true_roll_pitch(X_WS.rotation()), float(X_WS.translation()[2])])
 
-    def _sample_ideal(self, context):
-        self.ideal.append((context.get_time(),
-                           float(np.linalg.norm(self.inputs["ideal"].Eval(context)))))
+
+#: The recorded signals, in the order of :data:`_COLUMNS` after ``t``: (station
+#: port, or None for the sensor truth, size).
+_SIGNALS = ((None, 3), ("object.roll_pitch", 2), ("object.at_rest", 1),
+            ("object.free_fall", 1), ("object.slip", 1), ("object.acceleration", 3))
+
+
+@dc.dataclass
+class _Recorder:
+    """Drake's loggers on the instrument ports: the estimates, the flags and the true
+    sensor pose, sampled ``SAMPLE_DELAY`` after each device sample by a
+    ``ZeroOrderHold`` (period, offset) and logged by a ``VectorLogSink`` one period
+    later; the ideal sensor (``object.acceleration_true``) logged every
+    ``RELEASE_PERIOD`` s."""
+
+    period: float
+    hold: ZeroOrderHold
+    samples: VectorLogSink
+    ideal: VectorLogSink
+
+    @classmethod
+    def add(cls, builder, station, period: float, X_OS: RigidTransform) -> _Recorder:
+        truth = builder.AddNamedSystem("sensor_truth", _SensorTruth(X_OS))
+        builder.Connect(station.GetOutputPort("object.pose"), truth.get_input_port())
+        mux = builder.AddNamedSystem("recorded_signals",
+                                     Multiplexer([size for _, size in _SIGNALS]))
+        for i, (port, _) in enumerate(_SIGNALS):
+            source = truth.get_output_port() if port is None else station.GetOutputPort(port)
+            builder.Connect(source, mux.get_input_port(i))
+        hold = builder.AddNamedSystem("sample_after_device",
+                                      ZeroOrderHold(period, mux.get_output_port().size(),
+                                                    offset_sec=SAMPLE_DELAY))
+        builder.Connect(mux.get_output_port(), hold.get_input_port())
+        samples = LogVectorOutput(hold.get_output_port(), builder, period)
+        samples.set_name("recorder")
+        ideal = LogVectorOutput(station.GetOutputPort("object.acceleration_true"), builder,
+                                RELEASE_PERIOD)
+        ideal.set_name("ideal_recorder")
+        return cls(period, hold, samples, ideal)
+
+    def clear(self, root_context) -> None:
+        for sink in (self.samples, self.ideal):
+            sink.GetMutableLog(sink.GetMyMutableContextFromRoot(root_context)).Clear()
+
+    def rows(self, root_context) -> np.ndarray:
+        """(T, 12): ``t`` (the sampling instants, ``k period + SAMPLE_DELAY``) then the
+        signals. The log at ``(k + 1) period`` holds the sample of ``k period +
+        SAMPLE_DELAY``; the sample of the last period, not logged yet when the run
+        ends, is read from the hold."""
+        log = self.samples.GetLog(self.samples.GetMyContextFromRoot(root_context))
+        k = np.round(log.sample_times() / self.period).astype(int) - 1
+        keep = k >= 0  # the log at t = 0 holds the hold's initial zeros
+        values = log.data()[:, keep].T
+        k = k[keep]
+        t_end = root_context.get_time()
+        last = math.floor((t_end - SAMPLE_DELAY) / self.period + 1e-9)
+        if last >= 0 and (not len(k) or last > k[-1]):
+            held = self.hold.get_output_port().Eval(self.hold.GetMyContextFromRoot(root_context))
+            values = np.vstack([values, held])
+            k = np.append(k, last)
+        t = SAMPLE_DELAY + k * self.period
+        return np.column_stack([t, values])
+
+    def ideal_norms(self, root_context) -> np.ndarray:
+        """(T, 2): t, |f| of the ideal sensor."""
+        log = self.ideal.GetLog(self.ideal.GetMyContextFromRoot(root_context))
+        return np.column_stack([log.sample_times(), np.linalg.norm(log.data(), axis=0)])
 
 
 _COLUMNS = ("t", "true_roll", "true_pitch", "sensor_z", "roll", "pitch", "at_rest",
@@ -309,14 +374,7 @@ def _runner_class():
             driver = super().add_driver(builder, station)
             profile = self.scenario.object.accelerometer.profile(self.scenario.object.kind)
             X_OS = instrument_X_OS(self.scenario, object_spec(self.scenario))
-            self.recorder = builder.AddNamedSystem("recorder", _Recorder(profile.period, X_OS))
-            for name in ("roll_pitch", "at_rest", "free_fall", "slip", "acceleration"):
-                builder.Connect(station.GetOutputPort(f"object.{name}"),
-                                self.recorder.inputs[name])
-            builder.Connect(station.GetOutputPort("object.acceleration_true"),
-                            self.recorder.inputs["ideal"])
-            builder.Connect(station.GetOutputPort("object.pose"),
-                            self.recorder.GetInputPort("pose"))
+            self.recorder = _Recorder.add(builder, station, profile.period, X_OS)
             return driver
 
     return Figure8Runner
@@ -328,13 +386,13 @@ def run_figure8(device="joywarrior", rotations=ROTATIONS_DEG, seed: int = 0, mes
     scenario, phases, _ = figure8_scenario(device, rotations, seed)
     runner = _runner_class()(scenario, meshcat)
     runner.reset()
-    runner.recorder.clear()
+    runner.recorder.clear(runner.context)
     wall = runner.harness.advance(scenario.simulation_duration, html)
-    rows = np.array(runner.recorder.rows)
+    rows = runner.recorder.rows(runner.context)
     data = {name: rows[:, i] for i, name in enumerate(_COLUMNS)}
     params = scenario.object.accelerometer.estimator_params(scenario.object.kind)
-    return Figure8Result(_setup(device), data, np.array(runner.recorder.ideal), phases,
-                         params.free_fall_threshold, wall, scenario.simulation_duration)
+    return Figure8Result(_setup(device), data, runner.recorder.ideal_norms(runner.context),
+                         phases, params.free_fall_threshold, wall, scenario.simulation_duration)
 
 
 def summary_table(results) -> str:

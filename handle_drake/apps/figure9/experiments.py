@@ -22,7 +22,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
@@ -30,21 +29,17 @@ from handle_drake.devices.midi.codec import fader_value
 from handle_drake.devices.midi.device import ControllerGeometry, control_layout
 from handle_drake.devices.midi.mapping import LoadMidiMapping
 from handle_drake.devices.midi.systems import MidiReceiver
-from handle_drake.geometry.objects import ObjectSpec
 from handle_drake.grasp.kinematics import GraspKinematics
-from handle_drake.grasp.planning import plan_grasp
-from handle_drake.grasp.taxonomy import GraspClass
 from handle_drake.scenario import (
-    FloatingWrist,
-    HandConfig,
     Keyframe,
-    MidiControllerConfig,
-    Scenario,
-    SimHandDriver,
-    TableConfig,
-    default_plant_config,
 )
 from handle_drake.trial.harness import DEFAULT_LOG
+from handle_drake.trial.jog_pinch import (
+    GRASP_TIME,
+    controller_scenario,
+    plan_jog_pinch,
+    unwrap_wrist,
+)
 from handle_drake.trial.simulate import ScenarioRunner, script_trajectories
 
 __all__ = [
@@ -67,30 +62,6 @@ def _control(name: str):
     return next(c for c in control_layout(_geometry()) if c.name == name)
 
 
-def _base_scenario(X_WB: RigidTransform, initial: dict, script, duration: float,
-                   X_WC=(0.0, 0.0)):
-
-    return Scenario(
-        hand=HandConfig(kind="shadow", coupling_ratio=1.0,
-                        mount=FloatingWrist(X_WB=Transform(X_WB)),
-                        initial_position=dict(initial)),
-        object=None,
-        table=TableConfig(top_height=0.0),
-        # 2 ms: the same wheel rotation and fader travel as at 1 ms (within
-        # 1 degree / 0.1 mm) at twice the speed.
-        plant_config=default_plant_config(time_step=0.002),
-        driver=SimHandDriver(max_joint_velocity=4.0, control_period=0.002),
-        simulation_duration=duration,
-        script=script,
-        midi_controller=MidiControllerConfig(
-            X_WC=Transform(RigidTransform([X_WC[0], X_WC[1], 0.0]))),
-    )
-
-
-def _pose6(X: RigidTransform) -> list[float]:
-    return [float(v) for v in np.r_[X.translation(), RollPitchYaw(X.rotation()).vector()]]
-
-
 def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
                        turn_time: float = 1.2, reach_direction=(-1.0, 0.0)):
     """The palmar-pinch jog-wheel experiment as a :class:`~handle_drake.scenario.Scenario`.
@@ -106,32 +77,12 @@ def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
             raise ValueError(f"{name}: expected a finite angle within +-120 degrees, got {value}")
     if not (math.isfinite(turn_time) and turn_time > 0):
         raise ValueError(f"turn_time: expected a positive duration (s), got {turn_time}")
-    g = _geometry()
-    jog = _control("jog")
-    c = np.array([jog.p_C[0], jog.p_C[1], 0.0])
-    d = 2 * g.jog_radius
-    block = ObjectSpec("cuboid", d, mu=g.mu, dimensions={"depth": d, "height": g.jog_height})
-    # The pinch aims below the rim's mid-height: a fingertip pad planned at
-    # mid-height touches the rim's top edge with the rounded tip first.
-    p_target = np.array(jog.p_C) - [0.0, 0.0, 0.1 * g.jog_height]
-    plan = plan_grasp(GraspClass.PALMAR_PINCH, block, RigidTransform(p_target),
-                      table_height=g.panel_height - 0.1 * g.jog_height,
-                      reach_direction=reach_direction)
-    close = plan.command_dict(plan.close_command)
+    pinch = plan_jog_pinch(reach_direction)
+    plan = pinch.plan
     openc = plan.command_dict(plan.preshape_command)
-
-    def turned(theta: float) -> list[float]:
-        R = RotationMatrix.MakeZRotation(theta)
-        X = plan.X_WB
-        p = c + R.multiply(X.translation() - c)
-        return _pose6(RigidTransform(R.multiply(X.rotation()), p))
-
-    script = [Keyframe(time=0.0, hand=openc, wrist=_pose6(plan.X_WB_pregrasp)),
-              Keyframe(time=0.5, wrist=_pose6(plan.X_WB)),
-              Keyframe(time=0.6),
-              Keyframe(time=1.0, hand=close),
-              Keyframe(time=1.2)]
-    t = 1.2
+    turned = pinch.turned
+    script = pinch.grasp_script()
+    t = GRASP_TIME
     steps = max(2, int(abs(turn_deg) / 5))
     for k in range(1, steps + 1):
         script.append(Keyframe(time=t + turn_time * k / steps,
@@ -151,7 +102,8 @@ def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
     lifted = turned(final)
     lifted[2] += 0.06
     script.append(Keyframe(time=t + 1.0, wrist=lifted))
-    return _base_scenario(plan.X_WB_pregrasp, openc, unwrap_wrist(script), duration=t + 1.2)
+    return controller_scenario(plan.X_WB_pregrasp, openc, unwrap_wrist(script),
+                               duration=t + 1.2)
 
 
 #: How far (deg) the wheel's net turn may differ from the wrist's before ``midi jog``
@@ -178,27 +130,6 @@ def wheel_followed(wheel_deg: float, wrist_deg: float) -> bool:
     tol = max(JOG_FOLLOW_TOL_DEG, 0.5 * abs(wrist_deg))
     return abs(wheel_deg - wrist_deg) <= tol and (
         abs(wrist_deg) <= JOG_FOLLOW_TOL_DEG or wheel_deg * wrist_deg > 0)
-
-
-def unwrap_wrist(script):
-    """``script`` with each keyframe's wrist roll, pitch and yaw moved by whole
-    turns to lie within half a turn of the previous wrist keyframe's.
-
-    The script interpolates ``[x y z roll pitch yaw]`` linearly, so a yaw that
-    crosses +-180 degrees between two keyframes (RollPitchYaw wraps it) would
-    send the wrist the long way round, nearly a full turn the other way.
-    """
-    out, previous = [], None
-    for keyframe in script:
-        if keyframe.wrist:
-            wrist = np.array(keyframe.wrist, dtype=float)
-            if previous is not None:
-                turns = np.round((wrist[3:] - previous[3:]) / (2 * math.pi))
-                wrist[3:] -= 2 * math.pi * turns
-            previous = wrist
-            keyframe = dc.replace(keyframe, wrist=[float(v) for v in wrist])
-        out.append(keyframe)
-    return out
 
 
 def fader_push_scenario(fader: str = "fader5", push: float = 0.040):
@@ -236,7 +167,7 @@ def fader_push_scenario(fader: str = "fader5", push: float = 0.040):
         Keyframe(time=1.8),
         Keyframe(time=2.2, wrist=[*(p_WB + [0, push, 0.04]), *rpy]),
     ]
-    return _base_scenario(RigidTransform(R_WB, above), curled, script, duration=2.4)
+    return controller_scenario(RigidTransform(R_WB, above), curled, script, duration=2.4)
 
 
 def _fingertip_offset(command: dict) -> np.ndarray:

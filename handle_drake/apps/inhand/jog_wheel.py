@@ -34,43 +34,37 @@ import time
 from functools import cached_property
 
 import numpy as np
-from pydrake.common.schema import Transform
 from pydrake.common.value import Value
-from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.primitives import TrajectorySource
 
 from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions
+from handle_drake.apps.inhand.task import GistTrial
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.midi.codec import ControlCounts, MidiDecoder
-from handle_drake.devices.midi.device import ControllerGeometry, control_layout
 from handle_drake.devices.midi.mapping import LoadMidiMapping, MidiMapping
 from handle_drake.devices.midi.ports import in_process_pair
 from handle_drake.devices.midi.systems import MidiBatch
-from handle_drake.geometry.objects import ObjectSpec
-from handle_drake.grasp.planning import plan_grasp
-from handle_drake.grasp.taxonomy import GraspClass
 from handle_drake.learning.executors import TrialResult
 from handle_drake.scenario import (
     DumpScenario,
-    FloatingWrist,
-    HandConfig,
     Keyframe,
-    MidiControllerConfig,
     Scenario,
-    SimHandDriver,
-    TableConfig,
-    default_plant_config,
 )
 from handle_drake.trial.harness import TrialHarness
+from handle_drake.trial.jog_pinch import (
+    GRASP_TIME,
+    JogPinch,
+    controller_scenario,
+    plan_jog_pinch,
+    unwrap_wrist,
+)
 from handle_drake.trial.simulate import script_trajectories
 
 __all__ = ["JogWheelTask", "JogWheelTrial", "JogOutcome", "JogScore", "MidiJogEvaluator",
            "MidiPortWriter", "JOG"]
 
 JOG = "jog"
-#: Grasp phase before the turn (s): reach 0.5, settle 0.1, close 0.4, settle 0.2.
-_GRASP_TIME = 1.2
 
 
 @dc.dataclass(frozen=True)
@@ -109,11 +103,11 @@ class JogWheelTask:
 
     @property
     def turn_start(self) -> float:
-        return _GRASP_TIME
+        return GRASP_TIME
 
     @property
     def total_time(self) -> float:
-        return _GRASP_TIME + self.n_parts * self.segment_time + self.hold
+        return GRASP_TIME + self.n_parts * self.segment_time + self.hold
 
     def check_times(self) -> np.ndarray:
         times = self.turn_start + np.arange(1, self.n_parts + 1) * self.segment_time
@@ -288,20 +282,13 @@ class JogOutcome:
         return dc.asdict(self)
 
 
-_BUILD_CACHE: dict = {}
+class JogWheelTrial(GistTrial):
+    """A picklable objective ``trial(x, seed) -> TrialResult`` (score maximised): the
+    in-hand trials' :class:`~handle_drake.apps.inhand.task.GistTrial` (only ``config``
+    pickled, the diagram built once per process on this object); its parameters are
+    the jog's own ``[grip, turn_1 .. turn_K]``."""
 
-
-class JogWheelTrial:
-    """A picklable objective ``trial(x, seed) -> TrialResult`` (score maximised)."""
-
-    def __init__(self, config: JogWheelTask | None = None, **kwargs):
-        self.config = config if config is not None else JogWheelTask(**kwargs)
-
-    def __getstate__(self):
-        return {"config": self.config}
-
-    def __setstate__(self, state):
-        self.config = state["config"]
+    config_type = JogWheelTask
 
     @property
     def name(self) -> str:
@@ -324,61 +311,26 @@ class JogWheelTrial:
         return self.config.target_score
 
     @cached_property
-    def _plan(self):
-        g = ControllerGeometry()
-        jog = next(c for c in control_layout(g) if c.name == JOG)
-        d = 2 * g.jog_radius
-        block = ObjectSpec("cuboid", d, mu=g.mu, dimensions={"depth": d, "height": g.jog_height})
-        p_target = np.array(jog.p_C) - [0.0, 0.0, 0.1 * g.jog_height]
-        plan = plan_grasp(GraspClass.PALMAR_PINCH, block, RigidTransform(p_target),
-                          table_height=g.panel_height - 0.1 * g.jog_height,
-                          reach_direction=(-1.0, 0.0))
-        return plan, np.array([jog.p_C[0], jog.p_C[1], 0.0])
+    def _pinch(self) -> JogPinch:
+        return plan_jog_pinch(reach_direction=(-1.0, 0.0))
 
     def scenario(self, x=None) -> Scenario:
         """The trial as a scenario (``handle-drake simulate`` replays it); ``x`` None: the
         demonstration's parameters."""
         c = self.config
         x = c.demonstration() if x is None else self._check(x)
-        plan, centre = self._plan
-        openc = plan.command_dict(plan.preshape_command)
-        close = plan.command_dict(plan.close_command)
-        grip = {n: float(openc.get(n, 0.0) + x[0] * (v - openc.get(n, 0.0)))
-                for n, v in close.items()}
-
-        def turned(theta: float) -> list[float]:
-            X = plan.X_WB
-            R = RollPitchYaw(X.rotation()).vector()
-            s, co = math.sin(theta), math.cos(theta)
-            p = X.translation() - centre
-            p = centre + [co * p[0] - s * p[1], s * p[0] + co * p[1], p[2]]
-            # a turn about world z adds to the yaw (R_z(theta) R_z(y) R_y(p) R_x(r))
-            return [*map(float, p), float(R[0]), float(R[1]), float(R[2] + theta)]
-
-        pre = RigidTransform(plan.X_WB_pregrasp)
-        pose_pre = [*map(float, pre.translation()), *map(float,
-                                                         RollPitchYaw(pre.rotation()).vector())]
-        script = [Keyframe(time=0.0, hand=openc, wrist=pose_pre),
-                  Keyframe(time=0.5, wrist=turned(0.0)),
-                  Keyframe(time=0.6),
-                  Keyframe(time=1.0, hand=grip),
-                  Keyframe(time=_GRASP_TIME)]
+        pinch = self._pinch
+        openc = pinch.plan.command_dict(pinch.plan.preshape_command)
+        script = pinch.grasp_script(grip=float(x[0]))
         theta = 0.0
         for k in range(c.n_parts):
             theta += math.radians(x[1 + k])
-            script.append(Keyframe(time=_GRASP_TIME + (k + 1) * c.segment_time,
-                                   wrist=turned(theta)))
+            script.append(Keyframe(time=GRASP_TIME + (k + 1) * c.segment_time,
+                                   wrist=pinch.turned(theta)))
         if c.hold > 0:
             script.append(Keyframe(time=c.total_time))
-        return Scenario(
-            hand=HandConfig(kind="shadow", coupling_ratio=1.0,
-                            mount=FloatingWrist(X_WB=Transform(pre)),
-                            initial_position=dict(openc)),
-            object=None, table=TableConfig(top_height=0.0),
-            plant_config=default_plant_config(time_step=c.time_step),
-            driver=SimHandDriver(max_joint_velocity=4.0, control_period=c.time_step),
-            simulation_duration=c.total_time, script=script,
-            midi_controller=MidiControllerConfig(X_WC=Transform(RigidTransform())))
+        return controller_scenario(pinch.plan.X_WB_pregrasp, openc, unwrap_wrist(script),
+                                   duration=c.total_time, time_step=c.time_step)
 
     def scenario_for(self, x) -> str:
         return DumpScenario(self.scenario(x)) + (
@@ -395,9 +347,8 @@ class JogWheelTrial:
         return x
 
     def _build(self, meshcat=None):
-        key = (self.config, meshcat is not None)
-        if meshcat is None and key in _BUILD_CACHE:
-            return _BUILD_CACHE[key]
+        if self._built is not None and meshcat is None:
+            return self._built
         scenario = self.scenario()
         device_end, host_end = in_process_pair("jog wheel")
         sources = {}
@@ -426,7 +377,7 @@ class JogWheelTrial:
                      q0=np.array([scenario.hand.initial_position.get(n, 0.0) for n in
                                   get_hand_spec("shadow").actuated_joint_names]))
         if meshcat is None:
-            _BUILD_CACHE[key] = built
+            self._built = built
         return built
 
     def __call__(self, x, seed: int = 0) -> TrialResult:

@@ -31,10 +31,11 @@ from pydrake.math import RigidTransform, RotationMatrix
 from handle_drake.apps.perception.perceive import detection_error, render_views
 from handle_drake.apps.perception.scenes import TabletopScene
 from handle_drake.base.models import diagrams_dir
+from handle_drake.devices.camera.config import drake_camera_config
 from handle_drake.geometry.detect import Detection, detect
 from handle_drake.geometry.objects import KINDS, ObjectSpec
 from handle_drake.grasp.planning import resting_pose
-from handle_drake.scenario import CameraConfig, LoadScenario, ObjectConfig
+from handle_drake.scenario import DepthCamera, LoadScenario, ObjectConfig
 from handle_drake.station import object_initial_pose
 from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
@@ -94,8 +95,9 @@ def _tabletop_view(object_config, profile: str, seed: int):
     scenario.object = object_config
     scenario.random_seed = int(seed)
     camera = scenario.cameras[0]
-    scenario.cameras = [CameraConfig(name=camera.name, profile=profile, parent=camera.parent,
-                                     X_PC=camera.X_PC, target=list(camera.target))]
+    scenario.cameras = [DepthCamera(profile=profile, target=list(camera.target),
+                                    config=drake_camera_config(profile, camera.name,
+                                                               camera.config.X_PB))]
     (view,) = render_views(scenario)
     return scenario, view
 

@@ -26,10 +26,12 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+from pydrake.common.schema import Transform
 
 from handle_drake.apps.perception.perceive import CATALOGUE_PRIMITIVE
 from handle_drake.apps.perception.perceive import true_extent as extent
 from handle_drake.base.models import diagrams_dir
+from handle_drake.devices.camera.config import drake_camera_config
 from handle_drake.devices.camera.frames import DepthFrame
 from handle_drake.devices.camera.profiles import get_profile
 from handle_drake.devices.camera.sensors import AddCameras, camera_info
@@ -40,7 +42,7 @@ from handle_drake.geometry.objects import (
     dimensions,
     resting_height,
 )
-from handle_drake.scenario import CameraConfig, LoadScenario
+from handle_drake.scenario import DepthCamera, LoadScenario
 
 __all__ = ["SceneObject", "TabletopScene", "random_scene", "match_detections", "SCENE_KINDS",
            "footprint_radius", "true_extent"]
@@ -157,8 +159,9 @@ class TabletopScene:
                 raise TypeError(f"objects: expected SceneObject items, got {type(obj).__name__}")
         base = LoadScenario(filename=diagrams_dir() / "tabletop_perception.yaml")
         camera = base.cameras[0] if camera is None else camera
-        camera = CameraConfig(name=camera.name, profile=profile, parent="world",
-                              X_PC=camera.X_PC, target=list(camera.target))
+        X_PB = Transform(camera.config.X_PB.GetDeterministicValue())  # world-fixed
+        camera = DepthCamera(profile=profile, target=list(camera.target),
+                             config=drake_camera_config(profile, camera.name, X_PB))
         self.table_top = float(base.table.top_height)
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)

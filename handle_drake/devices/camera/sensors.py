@@ -19,26 +19,17 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import (
-    ClippingRange,
-    ColorRenderCamera,
-    DepthRange,
-    DepthRenderCamera,
-    MakeRenderEngineVtk,
-    RenderCameraCore,
-    RenderEngineVtkParams,
-)
+from pydrake.geometry import MakeRenderEngineVtk, RenderEngineVtkParams
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, PixelType, RgbdSensor
 
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.devices.camera.config import RENDERER, resolve_camera_config
 from handle_drake.devices.camera.profiles import CameraProfile, apply_depth_model, get_profile
 
 __all__ = ["AddCameras", "camera_info", "look_at", "DepthModel", "RENDERER"]
-
-RENDERER = "handle_drake_vtk"
 
 
 def camera_info(profile: CameraProfile) -> CameraInfo:
@@ -96,22 +87,20 @@ def AddCameras(builder, plant, scene_graph, scenario, hand_instance=None) -> Non
         scene_graph.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
     for index, camera in enumerate(scenario.cameras):
         profile = get_profile(camera.profile)
-        info = camera_info(profile)
-        core = RenderCameraCore(RENDERER, info, ClippingRange(0.01, 20.0), RigidTransform())
-        # The renderer's depth range is wider than the sensor's: the profile's
-        # model marks what lies outside the valid range.
-        depth_camera = DepthRenderCamera(core, DepthRange(0.02, 15.0))
-        color_camera = ColorRenderCamera(core, show_window=False)
+        config = resolve_camera_config(camera, f"cameras[{index}]")
+        # Drake's CameraConfig makes the render cameras (the profile's intrinsics,
+        # the renderer's clipping and depth ranges; see devices.camera.config).
+        color_camera, depth_camera = config.MakeCameras()
+        info = depth_camera.core().intrinsics()
+        X_PC = config.X_PB.GetDeterministicValue()
         if camera.parent == "world":
             parent_id = plant.GetBodyFrameIdOrThrow(plant.world_body().index())
-            X_PC = camera.X_PC.GetDeterministicValue()
             if camera.target:
                 X_PC = look_at(X_PC.translation(), camera.target)
         else:
             spec = get_hand_spec(scenario.hand.kind)
             base = plant.GetBodyByName(spec.base_body, hand_instance)
             parent_id = plant.GetBodyFrameIdOrThrow(base.index())
-            X_PC = camera.X_PC.GetDeterministicValue()
         sensor = builder.AddNamedSystem(
             f"camera_{camera.name}",
             RgbdSensor(parent_id, X_PC, color_camera, depth_camera))
