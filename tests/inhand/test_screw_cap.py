@@ -4,10 +4,12 @@ import numpy as np
 import pytest
 
 from handle_drake.apps.inhand.screw_cap import (
+    FOUR_FINGER_GRIP,
     GaitMotionSource,
     ScrewCapScenario,
     ScrewCapTask,
     ScrewCapTrial,
+    contact_summary,
     simulate_scenario,
 )
 
@@ -40,6 +42,23 @@ def test_the_grasp_is_the_demonstrations_first_frame_with_rule_3(trial):
     assert [m.finger for m in trial.gist.motions] == ["TH", "FF", "MF", "RF", "FF", "TH",
                                                       "MF", "RF"]
     assert trial.dimension == 26 and trial.target_score == 28
+
+
+def test_the_four_finger_grip_touches_the_cap_with_thumb_and_three_fingers():
+    # report 5.7: "the four fingers tightly grip the screwcap"; read from the plant's contact
+    # results in the settled state (rule 3's thumb abductions kept)
+    trial = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP))
+    q0 = trial.scenario().initial_position
+    assert q0["THJ4"] == pytest.approx(0.61, abs=0.02)
+    assert q0["THJ3"] == pytest.approx(0.21, abs=0.02)
+    built = trial._build()
+    plant = built["plant"]
+    summary = contact_summary(plant, plant.GetMyContextFromRoot(built["settled"]), built)
+    assert {"thdistal", "ffdistal", "mfdistal", "rfdistal"} <= set(summary["touching"])
+    assert summary["palm_force"] == 0.0
+    # the closure matters: from the first frame alone the thumb does not reach this cap
+    alone = ScrewCapTrial(ScrewCapTask(**{**FOUR_FINGER_GRIP, "grasp_closure": ()}))._build()
+    assert "thdistal" not in alone["gripped"]
 
 
 def test_a_known_stroke_turns_the_cap_90_deg_read_from_the_joint(trial):

@@ -54,7 +54,7 @@ from pydrake.geometry import (
     GeometrySet,
     ProximityProperties,
 )
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
@@ -95,12 +95,21 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver
 
-__all__ = ["ScrewCapModel", "ScrewCapScenario",
+__all__ = ["FOUR_FINGER_GRIP", "ScrewCapModel", "ScrewCapScenario",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "simulate_scenario",
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
+# The report's grip (5.7: "the four fingers tightly grip the screwcap"): ScrewCapTask
+# settings under which the settled grasp touches the cap with the thumb's distal phalanx
+# and the first, middle and ring fingers' (palm 0 N). With the demonstration's first frame
+# alone the thumb stays >= 3 mm from any 30-40 mm cap that the three fingers touch
+# (a search over the cap's pose), so the grasp closes: THJ2 +0.3 rad (the thumb onto the
+# cap), the three fingers' J2 +0.15 rad; THJ4/THJ3 stay rule 3's 0.61/0.21 rad.
+FOUR_FINGER_GRIP = dict(
+    cap_position=(0.385, -0.02, 0.058), cap_diameter=0.04,
+    grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.15), ("MFJ2", 0.15), ("RFJ2", 0.15)))
 
 
 @dc.dataclass
@@ -118,6 +127,8 @@ class ScrewCapModel:
     bottle_length: float = 0.080
     # the cap's centre in the world (the hand's forearm is at the origin, palm up)
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
+    # the axis: world y turned about world z by this angle (deg)
+    axis_yaw_deg: float = 0.0
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
     # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
     # "fingertip cylinder"); its turn is read from its pose
@@ -133,6 +144,9 @@ class ScrewCapModel:
             raise ValueError(f"cap.viscous: expected a finite value >= 0, got {self.viscous!r}")
         if len(self.position) != 3 or not all(math.isfinite(v) for v in self.position):
             raise ValueError(f"cap.position: expected 3 finite values, got {self.position!r}")
+        if not (math.isfinite(self.axis_yaw_deg) and abs(self.axis_yaw_deg) <= 90):
+            raise ValueError(f"cap.axis_yaw_deg: expected a value in [-90, 90], got "
+                             f"{self.axis_yaw_deg!r}")
         if isinstance(self.encoder_counts, bool) or not isinstance(self.encoder_counts, int) \
                 or self.encoder_counts < 4:
             raise ValueError(f"cap.encoder_counts: expected an integer >= 4, got "
@@ -204,8 +218,9 @@ def _proximity(mu: float) -> ProximityProperties:
 def _add_cap(plant, cap: ScrewCapModel):
     """The cap (and, unless free, the bottle welded to the world and the thread joint with
     its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
-    # The axis along world y: a cylinder's z axis turned onto y.
-    R_axis = RollPitchYaw(-np.pi / 2, 0, 0)
+    # The axis along world y (a cylinder's z axis turned onto y), then yawed about world z.
+    R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
+    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(-np.pi / 2, 0, 0))
     centre = np.asarray(cap.position, dtype=float)
     instance = plant.AddModelInstance("screw_cap")
     body = plant.AddRigidBody("cap", instance, SpatialInertia(
@@ -218,8 +233,8 @@ def _add_cap(plant, cap: ScrewCapModel):
             0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
                                                         cap.bottle_length, [0, 0, 1])))
         # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
-        X_WB = RigidTransform(R_axis, centre + [0, (cap.length + cap.bottle_length) / 2
-                                                + 0.002, 0])
+        X_WB = RigidTransform(R_axis, centre + R_yaw @ np.array(
+            [0, (cap.length + cap.bottle_length) / 2 + 0.002, 0]))
         plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
         shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
                        [0.3, 0.6, 0.9, 0.5]))
@@ -407,6 +422,12 @@ class ScrewCapTask:
     coulomb_torque: float = 0.01  # N m
     viscous: float = 1.0e-3  # N m s / rad
     cap_position: tuple = (0.405, -0.02, 0.07)
+    cap_diameter: float = 0.035
+    cap_axis_yaw_deg: float = 0.0
+    # The grasp: the demonstration's first frame mapped by the four rules, plus these
+    # offsets ((actuated joint name, rad), ...): the hand closing on the object before
+    # the motion (FOUR_FINGER_GRIP); () by default.
+    grasp_closure: tuple = ()
     # The fingertip cylinder: the same hand and gist, a free cylinder pinched between thumb
     # and fingers (no bottle, no joint) at ``free_position``; a trial then ends with its
     # weight reversed for ``reverse_time`` (the hand palm down, for it): held only if it
@@ -442,6 +463,18 @@ class ScrewCapTask:
                              f"{len(self.benchmark)}")
         if len(self.cap_position) != 3:
             raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
+        if not 0.02 <= self.cap_diameter <= 0.06:
+            raise ValueError(f"cap_diameter: expected a value in [0.02, 0.06] m, got "
+                             f"{self.cap_diameter!r}")
+        for item in self.grasp_closure:
+            if (len(item) != 2 or item[0] not in _NAMES
+                    or not (isinstance(item[1], int | float) and abs(item[1]) <= 1.0)):
+                raise ValueError(f"grasp_closure: expected (actuated joint name, offset in "
+                                 f"[-1, 1] rad) pairs, got {item!r}")
+
+    def closure(self) -> tuple:
+        """The grasp closure as ((actuated joint name, offset rad), ...)."""
+        return tuple((str(n), float(v)) for n, v in self.grasp_closure)
 
     @property
     def total_time(self) -> float:
@@ -545,8 +578,12 @@ class ScrewCapTrial(GistTrial):
         return target_score(self.dimension, "incremental")
 
     def initial_command(self) -> np.ndarray:
-        """The demonstration's first frame mapped by the four rules (rule 3 for the thumb)."""
-        return _demonstration()[1][0].copy()
+        """The demonstration's first frame mapped by the four rules (rule 3 for the thumb),
+        plus the task's grasp closure."""
+        q0 = _demonstration()[1][0].copy()
+        for name, offset in self.config.closure():
+            q0[_NAMES.index(name)] += offset
+        return q0
 
     def scenario(self, x=None) -> ScrewCapScenario:
         c = self.config
@@ -554,6 +591,7 @@ class ScrewCapTrial(GistTrial):
         parameters = self.gist.initial_parameters() if x is None else self._check(x)
         return ScrewCapScenario(
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
+                              diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
                               position=[float(v) for v in c.cap_position]) if not c.free else
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
                           position=[float(v) for v in c.free_position]),
