@@ -98,6 +98,27 @@ def test_random_parameters_rarely_reach_the_target(trial):
     assert sum(reached) == 0
 
 
+def test_the_fast_trial_scores_as_the_python_driver_with_contact_results_every_sample(
+        trial, fingertip):
+    # the trial plays the driver's rate-limited commands planned before it runs and reads
+    # the touching bodies from the geometry query; the reference runs the Python driver
+    # every step and reads the contact results every sample: the same trial, to 1e-9
+    rng = np.random.default_rng(7)
+    b = trial.bounds
+    for t, x in [(trial, _stroke(trial)), (trial, trial.gist.initial_parameters()),
+                 (trial, b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])),
+                 (fingertip, _stroke(fingertip))]:
+        fast = t.evaluate(x, early_stop=False).as_dict()
+        ref = t.evaluate(x, early_stop=False, driver=True, contact_results=True).as_dict()
+        assert fast["score"] == pytest.approx(ref["score"], abs=1e-9)
+        np.testing.assert_allclose(fast["turn_deg_series"], ref["turn_deg_series"], atol=1e-9)
+        assert fast["turn_deg_truth"] == pytest.approx(ref["turn_deg_truth"], abs=1e-9)
+        assert fast["contacts"] == ref["contacts"]
+        assert (fast["reached_target"], fast["palm_force_max"], fast["survived_reversal"]) == \
+            (ref["reached_target"], ref["palm_force_max"], ref["survived_reversal"])
+    assert trial._built["planned"] is not None and trial._reference_build["planned"] is None
+
+
 def test_gaits_repeat_the_frames(trial):
     source = GaitMotionSource(trial.gist, np.zeros(20), 1.0, 50, n_gaits=3)
     assert source.frame_index(0.0) == 1 and source.frame_index(0.99) == 50
