@@ -5,6 +5,7 @@ import pytest
 
 from handle_drake.apps.inhand.screw_cap import (
     FOUR_FINGER_GRIP,
+    REGRASP_GAITS,
     GaitMotionSource,
     ScrewCapScenario,
     ScrewCapTask,
@@ -117,6 +118,41 @@ def test_the_fast_trial_scores_as_the_python_driver_with_contact_results_every_s
         assert (fast["reached_target"], fast["palm_force_max"], fast["survived_reversal"]) == \
             (ref["reached_target"], ref["palm_force_max"], ref["survived_reversal"])
     assert trial._built["planned"] is not None and trial._reference_build["planned"] is None
+
+
+def _gait(trial, release):
+    """The stroke (J3 1.0, J2 0.9 on the three fingers) and, at the demonstrated release
+    times, the release ``(J3, J2)`` magnitudes; thumb still. A gist parameter vector."""
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):
+        x[sl][1:] = 0.0 if m.finger == "TH" else ([1.0, 0.9] if m.variation[0] > 0
+                                                  else release)
+    assert np.all((x >= trial.bounds[:, 0]) & (x <= trial.bounds[:, 1]))
+    return x
+
+
+def test_repeated_gaits_with_a_release_that_clears_the_cap_turn_it_360_deg():
+    trial = ScrewCapTrial(ScrewCapTask(**REGRASP_GAITS))
+    n = trial.config.n_gaits
+    # the release drops each finger 0.6 rad (J3) below its grasp, J2 still flexed: it
+    # leaves the cap; the next gait's first frame closes it again (regrasp)
+    cleared = trial.evaluate(_gait(trial, [1.6, 0.0]), early_stop=False)
+    t, turn = np.array(cleared.times), np.array(cleared.turn_deg_series)
+    assert cleared.turn_deg >= 360.0 and not cleared.palm_touched
+    per_gait = np.diff([0.0] + [turn[np.argmin(abs(t - k))] for k in range(1, n + 1)])
+    assert np.all(per_gait[1:] > 30.0)  # every regrasp turns it on, not only the first
+    # between the release and the regrasp no finger touches the cap, and the thread's
+    # friction holds it: no turn back
+    window = (t % 1.0 > 0.86) & (t % 1.0 < 0.99) & (t < n)
+    assert not any(cleared.contacts[i] for i in np.flatnonzero(window))
+    assert np.all(np.diff(turn)[window[1:]] >= -1e-9)
+    # the same stroke without a release stalls (the fingers regrasp over the cap), and a
+    # release back along the stroke's path drags it back while touching
+    assert trial.evaluate(_gait(trial, [0.0, 0.0]), early_stop=False).turn_deg < 250.0
+    back = trial.evaluate(_gait(trial, [1.0, 0.9]), early_stop=False)
+    assert back.turn_deg < 250.0
+    assert any(back.contacts[i] for i in np.flatnonzero(window))
 
 
 def test_gaits_repeat_the_frames(trial):

@@ -97,7 +97,7 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["FOUR_FINGER_GRIP", "ScrewCapModel", "ScrewCapScenario",
+__all__ = ["FOUR_FINGER_GRIP", "REGRASP_GAITS", "ScrewCapModel", "ScrewCapScenario",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "simulate_scenario",
            "scenario_fingerprint"]
@@ -112,6 +112,11 @@ _NAMES = get_hand_spec("shadow").actuated_joint_names
 FOUR_FINGER_GRIP = dict(
     cap_position=(0.385, -0.02, 0.058), cap_diameter=0.04,
     grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.15), ("MFJ2", 0.15), ("RFJ2", 0.15)))
+# Repeated gaits (grip, turn, release, regrasp) towards 360 deg: the cap 5 mm higher than
+# the one-gait task's, so that the first frame's fingers hold it lightly (in the one-gait
+# placement they press it with 50-70 N in the settled grasp and drag it back on every
+# regrasp: the thread's 0.01 N m cannot hold against that).
+REGRASP_GAITS = dict(cap_position=(0.405, -0.02, 0.075), n_gaits=5, target_deg=360.0)
 
 
 @dc.dataclass
