@@ -21,7 +21,8 @@ roll it; with ``accelerometer`` set, the object is the report's instrumented
 object (2.4): the station's ``object.acceleration`` port, the device model of
 :mod:`handle_drake.devices.accelerometer` at the object's origin, gives the same rotation
 from the gravity direction, valid at rest, and the checks and the score read that
-estimate only, the plant's rotation logged beside it; held stays the plant's), held
+estimate only, the plant's rotation logged beside it; held is then the object's own:
+its instrument never flagged a free fall, the plant's held logged as ``held_truth``), held
 (the object has not dropped more than ``drop`` below nor moved more than ``max_travel``
 from its start, and touched the hand at a sample within the last ``contact_window``: a rolled
 object hops off the palm for a few ms), the hand bodies and fingertips
