@@ -212,3 +212,14 @@ def test_cli_refuses_settings_the_finger_tasks_do_not_have(tmp_path, capsys):
         assert rc == 2
         err = capsys.readouterr().err
         assert "--task screw_cap" in err and "Traceback" not in err
+
+
+def test_new_settings_at_their_defaults_keep_logged_run_ids():
+    # the run id hashes the task's settings: the grip's settings, added later, leave them
+    # at their defaults, so logs written before still resume; set, they tell runs apart
+    from handle_drake.apps.inhand.experiment import _config
+
+    task = _config(ScrewCapTrial(ScrewCapTask()), "ipso", 10)["task"]
+    assert not {"cap_diameter", "cap_axis_yaw_deg", "grasp_closure"} & set(task)
+    grip = _config(ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP)), "ipso", 10)["task"]
+    assert grip["cap_diameter"] == 0.04 and len(grip["grasp_closure"]) == 4
