@@ -33,6 +33,8 @@ import numpy as np  # noqa: E402
 
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
+    FOUR_FINGER_GRIP,
+    REGRASP_GAITS,
     ScrewCapTask,
     ScrewCapTrial,
     simulate_scenario,
@@ -41,6 +43,7 @@ from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
 OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP, "regrasp": REGRASP_GAITS}
 
 
 def base_rate(n, seed, db, workers, options) -> dict:
@@ -256,18 +259,27 @@ def main(argv=None) -> int:
     p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
     p.add_argument("--target-deg", type=float, default=None,
                    help="default: 90 (screw cap), 60 (fingertip cylinder)")
-    p.add_argument("--gaits", type=int, default=1)
+    p.add_argument("--gaits", type=int, default=None, help="default: 1 (the placement's)")
+    p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
+                   help="the screw cap's placement: one-gait (the 90 deg task), four-finger "
+                        "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
+    preset = PLACEMENTS[args.placement]
+    if preset and args.task != "screw_cap":
+        p.error("--placement: only with --task screw_cap")
     if args.target_deg is None:
-        args.target_deg = 90.0 if args.task == "screw_cap" else 60.0
-    options = {"target_deg": args.target_deg, "n_gaits": args.gaits,
+        args.target_deg = preset.get("target_deg", 90.0 if args.task == "screw_cap" else 60.0)
+    if args.gaits is None:
+        args.gaits = preset.get("n_gaits", 1)
+    options = {**preset, "target_deg": args.target_deg, "n_gaits": args.gaits,
                "free": args.task == "fingertip_cylinder"}
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
-    key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}"
+    key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
+        f"-{args.placement}" if preset else "")
     entry = result.setdefault(key, {})
     if args.speed:
         entry["speed"] = speed(args.speed, options)
