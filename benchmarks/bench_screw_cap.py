@@ -33,6 +33,8 @@ import numpy as np  # noqa: E402
 
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
+    FOUR_FINGER_GRIP,
+    REGRASP_GAITS,
     ScrewCapTask,
     ScrewCapTrial,
     simulate_scenario,
@@ -42,6 +44,7 @@ from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
 OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP, "regrasp": REGRASP_GAITS}
 
 
 def base_rate(n, seed, db, workers, options) -> dict:
@@ -131,6 +134,7 @@ def speed(rounds: int, options) -> dict:
     for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written stroke
         x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
     built = trial._build()
+    trial._build(driver=True)  # settled before the timing
     bare = build_screw_cap(trial.scenario(x), bare=True)
     simulator = Simulator(bare["diagram"])
     context = simulator.get_mutable_context()
@@ -149,7 +153,11 @@ def speed(rounds: int, options) -> dict:
         return time.perf_counter() - start
 
     cases = {"trial (reset, samples, checks)": lambda: trial.evaluate(x, early_stop=False)
-             .wall_time, "bare plant, same frames": run_bare}
+             .wall_time,
+             # the trial as before: Python hand driver per step, contact results per sample
+             "trial, driver + contact results": lambda: trial.evaluate(
+                 x, early_stop=False, contact_results=True, driver=True).wall_time,
+             "bare plant, same frames": run_bare}
     times = {k: [] for k in cases}
     for _ in range(rounds):
         for name, case in cases.items():
@@ -252,20 +260,29 @@ def main(argv=None) -> int:
     p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
     p.add_argument("--target-deg", type=float, default=None,
                    help="default: 90 (screw cap), 60 (fingertip cylinder)")
-    p.add_argument("--gaits", type=int, default=1)
+    p.add_argument("--gaits", type=int, default=None, help="default: 1 (the placement's)")
+    p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
+                   help="the screw cap's placement: one-gait (the 90 deg task), four-finger "
+                        "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
     add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
+    preset = PLACEMENTS[args.placement]
+    if preset and args.task != "screw_cap":
+        p.error("--placement: only with --task screw_cap")
     results_run = ResultsRun(f"In-hand {args.task}: base rate, optimisers and speed", args)
     if args.target_deg is None:
-        args.target_deg = 90.0 if args.task == "screw_cap" else 60.0
-    options = {"target_deg": args.target_deg, "n_gaits": args.gaits,
+        args.target_deg = preset.get("target_deg", 90.0 if args.task == "screw_cap" else 60.0)
+    if args.gaits is None:
+        args.gaits = preset.get("n_gaits", 1)
+    options = {**preset, "target_deg": args.target_deg, "n_gaits": args.gaits,
                "free": args.task == "fingertip_cylinder"}
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
-    key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}"
+    key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
+        f"-{args.placement}" if preset else "")
     entry = result.setdefault(key, {})
     if args.speed:
         entry["speed"] = speed(args.speed, options)

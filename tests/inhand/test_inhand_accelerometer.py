@@ -38,3 +38,36 @@ def test_the_score_reads_the_accelerometer_and_agrees_with_the_plant_at_rest():
     rest = t >= c.motion_duration - 0.15
     assert np.abs(sensed[rest] - truth[rest]).max() <= accuracy
     assert truth[-1] >= c.target_deg  # the plant agrees that the target was reached
+
+
+def test_held_is_the_instrumented_objects_own_a_fall_flagged_by_its_accelerometer():
+    # "held" in --accelerometer mode: the instrument never flagged a free fall (report 2.4);
+    # the plant's held is logged beside it (held_truth)
+    from pydrake.math import RigidTransform
+
+    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
+    held = trial.evaluate(_stroke(trial), early_stop=False)
+    assert held.held and held.held_truth and held.reached_target
+    # the same trial from the settled grasp with the object lifted 10 cm: it falls for
+    # ~0.14 s (> the estimator's 24 ms below 0.3 g) before it lands in the hand
+    built = trial._build()
+    plant, settled = built["harness"].plant, built["settled"]
+    lifted = settled.Clone()
+    lifted_plant = plant.GetMyMutableContextFromRoot(lifted)
+    X = plant.EvalBodyPoseInWorld(lifted_plant, built["body"])
+    plant.SetFreeBodyPose(lifted_plant, built["body"],
+                          RigidTransform(X.rotation(), X.translation() + [0, 0, 0.10]))
+    built["settled"] = lifted
+    try:
+        dropped = trial.evaluate(_stroke(trial), early_stop=False)
+    finally:
+        built["settled"] = settled
+    assert not dropped.held and not dropped.reached_target
+    # the instrument knows at the first sample (50 ms: 24 ms below 0.3 g done), before the
+    # object has fallen the plant's 15 mm (55 ms): never held, where the plant's held
+    # would have lasted to that sample
+    assert dropped.held_time == 0.0
+    # the plant agrees: it fell more than the 15 mm the plant's held allows
+    assert dropped.held_truth is False
+    again = trial.evaluate(_stroke(trial), early_stop=False)  # the settled grasp restored
+    assert again.held and again.score == held.score

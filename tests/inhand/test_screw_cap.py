@@ -4,10 +4,13 @@ import numpy as np
 import pytest
 
 from handle_drake.apps.inhand.screw_cap import (
+    FOUR_FINGER_GRIP,
+    REGRASP_GAITS,
     GaitMotionSource,
     ScrewCapScenario,
     ScrewCapTask,
     ScrewCapTrial,
+    contact_summary,
     simulate_scenario,
 )
 
@@ -40,6 +43,23 @@ def test_the_grasp_is_the_demonstrations_first_frame_with_rule_3(trial):
     assert [m.finger for m in trial.gist.motions] == ["TH", "FF", "MF", "RF", "FF", "TH",
                                                       "MF", "RF"]
     assert trial.dimension == 26 and trial.target_score == 28
+
+
+def test_the_four_finger_grip_touches_the_cap_with_thumb_and_three_fingers():
+    # report 5.7: "the four fingers tightly grip the screwcap"; read from the plant's contact
+    # results in the settled state (rule 3's thumb abductions kept)
+    trial = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP))
+    q0 = trial.scenario().initial_position
+    assert q0["THJ4"] == pytest.approx(0.61, abs=0.02)
+    assert q0["THJ3"] == pytest.approx(0.21, abs=0.02)
+    built = trial._build()
+    plant = built["plant"]
+    summary = contact_summary(plant, plant.GetMyContextFromRoot(built["settled"]), built)
+    assert {"thdistal", "ffdistal", "mfdistal", "rfdistal"} <= set(summary["touching"])
+    assert summary["palm_force"] == 0.0
+    # the closure matters: from the first frame alone the thumb does not reach this cap
+    alone = ScrewCapTrial(ScrewCapTask(**{**FOUR_FINGER_GRIP, "grasp_closure": ()}))._build()
+    assert "thdistal" not in alone["gripped"]
 
 
 def test_a_known_stroke_turns_the_cap_90_deg_read_from_the_joint(trial):
@@ -77,6 +97,62 @@ def test_random_parameters_rarely_reach_the_target(trial):
     reached = [trial.evaluate(b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])).reached_target
                for _ in range(8)]
     assert sum(reached) == 0
+
+
+def test_the_fast_trial_scores_as_the_python_driver_with_contact_results_every_sample(
+        trial, fingertip):
+    # the trial plays the driver's rate-limited commands planned before it runs and reads
+    # the touching bodies from the geometry query; the reference runs the Python driver
+    # every step and reads the contact results every sample: the same trial, to 1e-9
+    rng = np.random.default_rng(7)
+    b = trial.bounds
+    for t, x in [(trial, _stroke(trial)), (trial, trial.gist.initial_parameters()),
+                 (trial, b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])),
+                 (fingertip, _stroke(fingertip))]:
+        fast = t.evaluate(x, early_stop=False).as_dict()
+        ref = t.evaluate(x, early_stop=False, driver=True, contact_results=True).as_dict()
+        assert fast["score"] == pytest.approx(ref["score"], abs=1e-9)
+        np.testing.assert_allclose(fast["turn_deg_series"], ref["turn_deg_series"], atol=1e-9)
+        assert fast["turn_deg_truth"] == pytest.approx(ref["turn_deg_truth"], abs=1e-9)
+        assert fast["contacts"] == ref["contacts"]
+        assert (fast["reached_target"], fast["palm_force_max"], fast["survived_reversal"]) == \
+            (ref["reached_target"], ref["palm_force_max"], ref["survived_reversal"])
+    assert trial._built["planned"] is not None and trial._reference_build["planned"] is None
+
+
+def _gait(trial, release):
+    """The stroke (J3 1.0, J2 0.9 on the three fingers) and, at the demonstrated release
+    times, the release ``(J3, J2)`` magnitudes; thumb still. A gist parameter vector."""
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):
+        x[sl][1:] = 0.0 if m.finger == "TH" else ([1.0, 0.9] if m.variation[0] > 0
+                                                  else release)
+    assert np.all((x >= trial.bounds[:, 0]) & (x <= trial.bounds[:, 1]))
+    return x
+
+
+def test_repeated_gaits_with_a_release_that_clears_the_cap_turn_it_360_deg():
+    trial = ScrewCapTrial(ScrewCapTask(**REGRASP_GAITS))
+    n = trial.config.n_gaits
+    # the release drops each finger 0.6 rad (J3) below its grasp, J2 still flexed: it
+    # leaves the cap; the next gait's first frame closes it again (regrasp)
+    cleared = trial.evaluate(_gait(trial, [1.6, 0.0]), early_stop=False)
+    t, turn = np.array(cleared.times), np.array(cleared.turn_deg_series)
+    assert cleared.turn_deg >= 360.0 and not cleared.palm_touched
+    per_gait = np.diff([0.0] + [turn[np.argmin(abs(t - k))] for k in range(1, n + 1)])
+    assert np.all(per_gait[1:] > 30.0)  # every regrasp turns it on, not only the first
+    # between the release and the regrasp no finger touches the cap, and the thread's
+    # friction holds it: no turn back
+    window = (t % 1.0 > 0.86) & (t % 1.0 < 0.99) & (t < n)
+    assert not any(cleared.contacts[i] for i in np.flatnonzero(window))
+    assert np.all(np.diff(turn)[window[1:]] >= -1e-9)
+    # the same stroke without a release stalls (the fingers regrasp over the cap), and a
+    # release back along the stroke's path drags it back while touching
+    assert trial.evaluate(_gait(trial, [0.0, 0.0]), early_stop=False).turn_deg < 250.0
+    back = trial.evaluate(_gait(trial, [1.0, 0.9]), early_stop=False)
+    assert back.turn_deg < 250.0
+    assert any(back.contacts[i] for i in np.flatnonzero(window))
 
 
 def test_gaits_repeat_the_frames(trial):
@@ -136,3 +212,14 @@ def test_cli_refuses_settings_the_finger_tasks_do_not_have(tmp_path, capsys):
         assert rc == 2
         err = capsys.readouterr().err
         assert "--task screw_cap" in err and "Traceback" not in err
+
+
+def test_new_settings_at_their_defaults_keep_logged_run_ids():
+    # the run id hashes the task's settings: the grip's settings, added later, leave them
+    # at their defaults, so logs written before still resume; set, they tell runs apart
+    from handle_drake.apps.inhand.experiment import _config
+
+    task = _config(ScrewCapTrial(ScrewCapTask()), "ipso", 10)["task"]
+    assert not {"cap_diameter", "cap_axis_yaw_deg", "grasp_closure"} & set(task)
+    grip = _config(ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP)), "ipso", 10)["task"]
+    assert grip["cap_diameter"] == 0.04 and len(grip["grasp_closure"]) == 4

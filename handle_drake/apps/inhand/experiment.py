@@ -55,6 +55,11 @@ def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
                 "jog_wheel_version": 1}
     if "cap_position" in task:  # the screw cap (handle_drake.apps.inhand.screw_cap)
+        # settings added later leave the config at their defaults: logs written before resume
+        defaults = {f.name: f.default for f in dc.fields(trial.config)}
+        for name in ("cap_diameter", "cap_axis_yaw_deg", "grasp_closure"):
+            if name in task and task[name] == defaults.get(name):
+                del task[name]
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
                 "screw_cap_version": 1}
     if not task["accelerometer"]:  # a setting added later: logs written before still resume

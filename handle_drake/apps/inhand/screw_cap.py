@@ -54,7 +54,7 @@ from pydrake.geometry import (
     GeometrySet,
     ProximityProperties,
 )
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
@@ -63,6 +63,7 @@ from pydrake.multibody.plant import (
     MultibodyPlantConfig,
 )
 from pydrake.multibody.tree import (
+    BodyIndex,
     FixedOffsetFrame,
     PdControllerGains,
     RevoluteJoint,
@@ -71,7 +72,8 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantVectorSource
+from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions, target_score
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
@@ -93,14 +95,28 @@ from handle_drake.base.hands import (
 from handle_drake.learning.executors import TrialResult
 from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
-from handle_drake.systems.hand_driver import PdHandDriver
+from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["ScrewCapModel", "ScrewCapScenario",
+__all__ = ["FOUR_FINGER_GRIP", "REGRASP_GAITS", "ScrewCapModel", "ScrewCapScenario",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "simulate_scenario",
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
+# The report's grip (5.7: "the four fingers tightly grip the screwcap"): ScrewCapTask
+# settings under which the settled grasp touches the cap with the thumb's distal phalanx
+# and the first, middle and ring fingers' (palm 0 N). With the demonstration's first frame
+# alone the thumb stays >= 3 mm from any 30-40 mm cap that the three fingers touch
+# (a search over the cap's pose), so the grasp closes: THJ2 +0.3 rad (the thumb onto the
+# cap), the three fingers' J2 +0.15 rad; THJ4/THJ3 stay rule 3's 0.61/0.21 rad.
+FOUR_FINGER_GRIP = dict(
+    cap_position=(0.385, -0.02, 0.058), cap_diameter=0.04,
+    grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.15), ("MFJ2", 0.15), ("RFJ2", 0.15)))
+# Repeated gaits (grip, turn, release, regrasp) towards 360 deg: the cap 5 mm higher than
+# the one-gait task's, so that the first frame's fingers hold it lightly (in the one-gait
+# placement they press it with 50-70 N in the settled grasp and drag it back on every
+# regrasp: the thread's 0.01 N m cannot hold against that).
+REGRASP_GAITS = dict(cap_position=(0.405, -0.02, 0.075), n_gaits=5, target_deg=360.0)
 
 
 @dc.dataclass
@@ -118,6 +134,8 @@ class ScrewCapModel:
     bottle_length: float = 0.080
     # the cap's centre in the world (the hand's forearm is at the origin, palm up)
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
+    # the axis: world y turned about world z by this angle (deg)
+    axis_yaw_deg: float = 0.0
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
     # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
     # "fingertip cylinder"); its turn is read from its pose
@@ -133,6 +151,9 @@ class ScrewCapModel:
             raise ValueError(f"cap.viscous: expected a finite value >= 0, got {self.viscous!r}")
         if len(self.position) != 3 or not all(math.isfinite(v) for v in self.position):
             raise ValueError(f"cap.position: expected 3 finite values, got {self.position!r}")
+        if not (math.isfinite(self.axis_yaw_deg) and abs(self.axis_yaw_deg) <= 90):
+            raise ValueError(f"cap.axis_yaw_deg: expected a value in [-90, 90], got "
+                             f"{self.axis_yaw_deg!r}")
         if isinstance(self.encoder_counts, bool) or not isinstance(self.encoder_counts, int) \
                 or self.encoder_counts < 4:
             raise ValueError(f"cap.encoder_counts: expected an integer >= 4, got "
@@ -188,6 +209,10 @@ class GaitMotionSource(GistMotionSource):
             raise ValueError(f"n_gaits: expected an integer >= 1, got {n_gaits!r}")
         self._n_gaits = n_gaits
 
+    def frames_for(self, parameters) -> np.ndarray:
+        """The (N, 20) frames of one gait for ``parameters`` (as the output sends them)."""
+        return self._frames(np.asarray(parameters, dtype=float))
+
     def frame_index(self, t: float) -> int:
         cycle = math.floor(t / self._duration + 1e-9)
         if cycle >= self._n_gaits:
@@ -204,8 +229,9 @@ def _proximity(mu: float) -> ProximityProperties:
 def _add_cap(plant, cap: ScrewCapModel):
     """The cap (and, unless free, the bottle welded to the world and the thread joint with
     its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
-    # The axis along world y: a cylinder's z axis turned onto y.
-    R_axis = RollPitchYaw(-np.pi / 2, 0, 0)
+    # The axis along world y (a cylinder's z axis turned onto y), then yawed about world z.
+    R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
+    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(-np.pi / 2, 0, 0))
     centre = np.asarray(cap.position, dtype=float)
     instance = plant.AddModelInstance("screw_cap")
     body = plant.AddRigidBody("cap", instance, SpatialInertia(
@@ -218,8 +244,8 @@ def _add_cap(plant, cap: ScrewCapModel):
             0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
                                                         cap.bottle_length, [0, 0, 1])))
         # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
-        X_WB = RigidTransform(R_axis, centre + [0, (cap.length + cap.bottle_length) / 2
-                                                + 0.002, 0])
+        X_WB = RigidTransform(R_axis, centre + R_yaw @ np.array(
+            [0, (cap.length + cap.bottle_length) / 2 + 0.002, 0]))
         plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
         shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
                        [0.3, 0.6, 0.9, 0.5]))
@@ -245,9 +271,6 @@ def _add_cap(plant, cap: ScrewCapModel):
 
 def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance):
     """The speed floor's PD targets: a ``TrajectorySource`` of the scenario's frames."""
-    from pydrake.systems.primitives import TrajectorySource
-    from pydrake.trajectories import PiecewisePolynomial
-
     one = frames(gist, scenario.parameters, q0, scenario.n_frames)
     F = np.vstack([one[0], *([one] * scenario.n_gaits)])
     times = np.arange(F.shape[0]) * scenario.gait_duration / scenario.n_frames
@@ -264,10 +287,34 @@ def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, inst
         builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
 
 
-def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False):
+def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity, driver):
+    """The hand's PD targets: the Python driver (returned first), or its commands planned
+    per trial (:class:`PlannedCommands`, returned second) played by a TrajectorySource."""
+    if driver:
+        hand_driver = builder.AddNamedSystem("hand_driver", PdHandDriver(
+            plant, hand, spec, q0, *limits, max_joint_velocity=max_joint_velocity))
+        builder.Connect(plant.get_state_output_port(),
+                        hand_driver.get_plant_state_input_port())
+        builder.Connect(hand_driver.GetOutputPort("desired_state"),
+                        plant.get_desired_state_input_port(hand))
+        return hand_driver, None
+    planned = PlannedCommands(q0, *limits, max_joint_velocity,
+                              actuated_order(plant, hand, _NAMES))
+    planned.player = builder.AddNamedSystem("planned_commands", TrajectorySource(
+        planned.trajectory(np.tile(q0, (2, 1)))))
+    builder.Connect(planned.player.get_output_port(), plant.get_desired_state_input_port(hand))
+    return None, planned
+
+
+def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False,
+                    driver: bool = True):
     """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
 
     Returns a dict of handles (diagram, plant, source, cap joint, bodies).
+    ``driver=False`` (the trial's fast path): the hand driver's rate-limited commands are
+    computed for the whole trial in numpy before it runs (:class:`PlannedCommands`) and
+    played by a ``TrajectorySource``: the same plant inputs at every step as the Python
+    driver's, without a Python call per step (tested: equal scores).
     ``bare``: the speed floor of ``benchmarks/bench_screw_cap.py --speed``: the same
     plant, the hand's PD targets straight from a ``TrajectorySource`` of the scenario's
     frames (zero-order hold; no Python system, no driver, no sampling).
@@ -300,22 +347,22 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     if bare:
         _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance)
         return dict(diagram=builder.Build(), plant=plant)
-    driver = builder.AddNamedSystem("hand_driver", PdHandDriver(
-        plant, hand, spec, q0, lower, upper, max_joint_velocity=scenario.max_joint_velocity))
-    builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
-    builder.Connect(driver.GetOutputPort("desired_state"),
-                    plant.get_desired_state_input_port(hand))
+    hand_driver, planned = _add_hand_command(builder, plant, hand, spec, q0, (lower, upper),
+                                             scenario.max_joint_velocity, driver)
     if joint is not None:
         zero = builder.AddNamedSystem("cap_friction_reference",
                                       ConstantVectorSource(np.zeros(2)))
         builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
-    reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(plant, body))
-    builder.Connect(reverse.get_output_port(), plant.get_applied_spatial_force_input_port())
+    reverse = None
+    if joint is None:  # only the free cylinder has its weight reversed
+        reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(plant, body))
+        builder.Connect(reverse.get_output_port(), plant.get_applied_spatial_force_input_port())
     parameters = scenario.parameters or None
     source = builder.AddNamedSystem("motion", GaitMotionSource(
         gist, q0, scenario.gait_duration, scenario.n_frames, scenario.n_gaits,
         parameters=parameters))
-    builder.Connect(source.get_output_port(), driver.get_command_input_port())
+    if hand_driver is not None:
+        builder.Connect(source.get_output_port(), hand_driver.get_command_input_port())
     if meshcat is not None:
         from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
 
@@ -325,9 +372,62 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     diagram = builder.Build()
     hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
                    for i in plant.GetBodyIndices(hand)}
+    # collision geometry -> ("cap" | "bottle" | hand body name), for the per-sample read
+    geometry = {g: hand_bodies[int(i)] for i in hand_bodies
+                for g in plant.GetCollisionGeometriesForBody(plant.get_body(BodyIndex(i)))}
+    geometry.update({g: "cap" for g in plant.GetCollisionGeometriesForBody(body)})
+    if bottle is not None:
+        geometry.update({g: "bottle" for g in plant.GetCollisionGeometriesForBody(bottle)})
     return dict(diagram=diagram, plant=plant, source=source, joint=joint, cap=body,
-                bottle=bottle, hand_bodies=hand_bodies, q0=q0, gist=gist, reverse=reverse,
+                bottle=bottle, hand_bodies=hand_bodies, geometry=geometry, q0=q0, gist=gist,
+                reverse=reverse, planned=planned,
                 weight=cap.mass * float(np.linalg.norm(plant.gravity_field().gravity_vector())))
+
+
+class PlannedCommands:
+    """:class:`PdHandDriver`'s commands for a whole trial, computed before it runs.
+
+    The driver updates every ``period`` (its and the plant's step): at ``t_k = k
+    period`` it moves its command towards the target (the motion source's frame at
+    ``t_k``, clipped to the limits) by at most ``max_joint_velocity * period`` per joint,
+    and the plant's step at ``t_k`` reads the command from before that update. So the
+    plant's PD target on ``[t_k, t_k+1)`` is ``cmd_k`` with ``cmd_0`` = the settled
+    command and ``cmd_k+1 = cmd_k + clip(target(t_k) - cmd_k, -s, s)``: computed here in
+    the same arithmetic and played by a zero-order-hold ``TrajectorySource`` whose breaks
+    sit half a step before each ``t_k`` (no ambiguity at a step's time)."""
+
+    period = 0.002  # PdHandDriver's control period
+
+    def __init__(self, q0, lower, upper, max_joint_velocity, order):
+        self.q0 = np.asarray(q0, dtype=float)
+        self._lower, self._upper = np.asarray(lower), np.asarray(upper)
+        self._max_step = (max_joint_velocity * self.period if max_joint_velocity > 0
+                          else np.inf)
+        self._order = np.asarray(order)
+        self.player = None
+
+    def commands(self, targets: np.ndarray) -> np.ndarray:
+        """(K + 1, nu) commands cmd_0..cmd_K for targets (K, nu) at t_0..t_K-1."""
+        cmd = np.empty((len(targets) + 1, self.q0.size))
+        cmd[0] = current = self.q0
+        for k, target in enumerate(np.clip(targets, self._lower, self._upper)):
+            current = current + np.clip(target - current, -self._max_step, self._max_step)
+            cmd[k + 1] = current
+        return cmd
+
+    def trajectory(self, cmd: np.ndarray):
+        desired = np.hstack([cmd[:, self._order], np.zeros((len(cmd), self.q0.size))])
+        breaks = (np.arange(len(cmd)) - 0.5) * self.period
+        breaks = np.append(breaks, breaks[-1] + self.period)
+        return PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([desired, desired[-1]]).T)
+
+    def plan(self, source, parameters, end_time: float) -> None:
+        """Plays the driver's commands for the source's frames of ``parameters`` until
+        ``end_time`` (s)."""
+        n = int(math.ceil(end_time / self.period - 1e-9)) + 1
+        frames_ = source.frames_for(parameters)
+        targets = frames_[[source.frame_index(k * self.period) - 1 for k in range(n)]]
+        self.player.UpdateTrajectory(self.trajectory(self.commands(targets)))
 
 
 class ReversedGravity(LeafSystem):
@@ -382,6 +482,25 @@ def contact_summary(plant, plant_context, built) -> dict:
     return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
 
 
+def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
+    """The per-sample read without the contact solver: (hand bodies whose collision
+    geometry penetrates the cap, whether the palm's penetrates the cap or bottle), from
+    the geometry query's point pairs: the same pairs as the point-contact results
+    (tested: the trial's scores agree with reading :func:`contact_summary` every
+    sample), whose forces are then needed only where the palm touches."""
+    query = plant.get_geometry_query_input_port().Eval(plant_context)
+    names = built["geometry"]
+    touching, palm = set(), False
+    for pair in query.ComputePointPairPenetration():
+        a, b = names.get(pair.id_A), names.get(pair.id_B)
+        for mine, other in ((a, b), (b, a)):
+            if mine in ("cap", "bottle") and other not in (None, "cap", "bottle"):
+                if mine == "cap":
+                    touching.add(other)
+                palm = palm or other == "palm"
+    return sorted(touching), palm
+
+
 # ------------------------------------------------------------------ the trial
 @dc.dataclass(frozen=True)
 class ScrewCapTask:
@@ -407,6 +526,12 @@ class ScrewCapTask:
     coulomb_torque: float = 0.01  # N m
     viscous: float = 1.0e-3  # N m s / rad
     cap_position: tuple = (0.405, -0.02, 0.07)
+    cap_diameter: float = 0.035
+    cap_axis_yaw_deg: float = 0.0
+    # The grasp: the demonstration's first frame mapped by the four rules, plus these
+    # offsets ((actuated joint name, rad), ...): the hand closing on the object before
+    # the motion (FOUR_FINGER_GRIP); () by default.
+    grasp_closure: tuple = ()
     # The fingertip cylinder: the same hand and gist, a free cylinder pinched between thumb
     # and fingers (no bottle, no joint) at ``free_position``; a trial then ends with its
     # weight reversed for ``reverse_time`` (the hand palm down, for it): held only if it
@@ -442,6 +567,18 @@ class ScrewCapTask:
                              f"{len(self.benchmark)}")
         if len(self.cap_position) != 3:
             raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
+        if not 0.02 <= self.cap_diameter <= 0.06:
+            raise ValueError(f"cap_diameter: expected a value in [0.02, 0.06] m, got "
+                             f"{self.cap_diameter!r}")
+        for item in self.grasp_closure:
+            if (len(item) != 2 or item[0] not in _NAMES
+                    or not (isinstance(item[1], int | float) and abs(item[1]) <= 1.0)):
+                raise ValueError(f"grasp_closure: expected (actuated joint name, offset in "
+                                 f"[-1, 1] rad) pairs, got {item!r}")
+
+    def closure(self) -> tuple:
+        """The grasp closure as ((actuated joint name, offset rad), ...)."""
+        return tuple((str(n), float(v)) for n, v in self.grasp_closure)
 
     @property
     def total_time(self) -> float:
@@ -545,8 +682,12 @@ class ScrewCapTrial(GistTrial):
         return target_score(self.dimension, "incremental")
 
     def initial_command(self) -> np.ndarray:
-        """The demonstration's first frame mapped by the four rules (rule 3 for the thumb)."""
-        return _demonstration()[1][0].copy()
+        """The demonstration's first frame mapped by the four rules (rule 3 for the thumb),
+        plus the task's grasp closure."""
+        q0 = _demonstration()[1][0].copy()
+        for name, offset in self.config.closure():
+            q0[_NAMES.index(name)] += offset
+        return q0
 
     def scenario(self, x=None) -> ScrewCapScenario:
         c = self.config
@@ -554,6 +695,7 @@ class ScrewCapTrial(GistTrial):
         parameters = self.gist.initial_parameters() if x is None else self._check(x)
         return ScrewCapScenario(
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
+                              diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
                               position=[float(v) for v in c.cap_position]) if not c.free else
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
                           position=[float(v) for v in c.free_position]),
@@ -572,10 +714,16 @@ class ScrewCapTrial(GistTrial):
             raise ValueError("parameters: expected finite values")
         return x
 
-    def _build(self, meshcat=None):
-        if self._built is not None and meshcat is None:
-            return self._built
-        built = build_screw_cap(self.scenario(), meshcat=meshcat)
+    def _build(self, meshcat=None, driver: bool = False):
+        """The diagram, settled (kept per process). ``driver``: with the Python hand
+        driver (the reference of the default build's planned commands; also used with
+        ``meshcat`` and when the time step is not the driver's period)."""
+        driver = driver or meshcat is not None or \
+            self.config.time_step != PlannedCommands.period
+        key = "_reference_build" if driver else "_built"
+        if meshcat is None and getattr(self, key, None) is not None:
+            return getattr(self, key)
+        built = build_screw_cap(self.scenario(), meshcat=meshcat, driver=driver)
         simulator = Simulator(built["diagram"])
         context = simulator.get_mutable_context()
         source = built["source"]
@@ -583,6 +731,8 @@ class ScrewCapTrial(GistTrial):
         for sl in self.gist.slices():
             still[sl][1:] = 0.0
         source.set_parameters(source.GetMyContextFromRoot(context), still)
+        if built["planned"] is not None:
+            built["planned"].plan(source, still, self.config.settle_time)
         simulator.Initialize()
         simulator.AdvanceTo(self.config.settle_time)
         settled = context.Clone()
@@ -592,7 +742,7 @@ class ScrewCapTrial(GistTrial):
                      gripped=contact_summary(plant, plant.GetMyContextFromRoot(context),
                                              built)["touching"])
         if meshcat is None:
-            self._built = built
+            setattr(self, key, built)
         return built
 
     def __call__(self, x, seed: int = 0):
@@ -631,21 +781,37 @@ class ScrewCapTrial(GistTrial):
         return bool(np.linalg.norm(p - p_end) < c.reverse_travel
                     and any(b != "palm" for b in touching))
 
-    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> ScrewCapOutcome:
-        """Runs one trial from the settled grasp (deterministic)."""
-        x = self._check(x)
-        c = self.config
-        built = self._build(meshcat)
-        simulator, plant, joint = built["simulator"], built["plant"], built["joint"]
-        body = built["cap"]
-        start_wall = time.perf_counter()
-        context = simulator.get_mutable_context()
+    def _reset(self, built: dict, x):
+        """The simulator at the settled grasp, time 0, with the parameters ``x`` (and their
+        planned commands); returns the plant's context."""
+        c, context = self.config, built["simulator"].get_mutable_context()
         context.SetTimeStateAndParametersFrom(built["settled"])
         source = built["source"]
         source.set_parameters(source.GetMyContextFromRoot(context), x)
+        if built["planned"] is not None:
+            built["planned"].plan(source, x, c.total_time + (c.reverse_time
+                                                             if built["joint"] is None else 0))
         reverse = built["reverse"]
-        reverse.set_start(reverse.GetMyContextFromRoot(context), np.inf)
-        plant_context = plant.GetMyContextFromRoot(context)
+        if reverse is not None:
+            reverse.set_start(reverse.GetMyContextFromRoot(context), np.inf)
+        return built["plant"].GetMyContextFromRoot(context)
+
+    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
+                 contact_results: bool = False, driver: bool = False) -> ScrewCapOutcome:
+        """Runs one trial from the settled grasp (deterministic).
+
+        Each sample reads the touching bodies from the geometry query
+        (:func:`touching_geometry`) and the contact results (forces) only when the palm
+        touches; ``contact_results``: read the contact results at every sample instead
+        (the reference the cheaper read is tested against); ``driver``: run the Python
+        hand driver per step instead of its planned commands (likewise)."""
+        x = self._check(x)
+        c = self.config
+        built = self._build(meshcat, driver)
+        simulator, plant, joint = built["simulator"], built["plant"], built["joint"]
+        body = built["cap"]
+        start_wall = time.perf_counter()
+        plant_context = self._reset(built, x)
         counts = ScrewCapModel().encoder_counts
         X0 = plant.EvalBodyPoseInWorld(plant_context, body)
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
@@ -666,7 +832,7 @@ class ScrewCapTrial(GistTrial):
             for i, t in enumerate(samples):
                 simulator.AdvanceTo(float(t))
                 truth, turn = _turn(st, built, plant_context, R0_inv, q_start, counts)
-                summary = contact_summary(plant, plant_context, built)
+                summary = _sample_contacts(plant, plant_context, built, contact_results)
                 gripped = self._gripped(st, t, summary, built, plant_context, p0)
                 turns.append(turn)
                 truths.append(truth)
@@ -708,6 +874,17 @@ class ScrewCapTrial(GistTrial):
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
+
+
+def _sample_contacts(plant, plant_context, built, contact_results: bool) -> dict:
+    """:func:`contact_summary`'s touching set and palm force, the forces read only when the
+    palm touches (or always, with ``contact_results``)."""
+    if contact_results:
+        return contact_summary(plant, plant_context, built)
+    touching, palm = touching_geometry(plant, plant_context, built)
+    if palm:
+        return contact_summary(plant, plant_context, built)
+    return {"touching": touching, "palm_force": 0.0}
 
 
 def _turn(st: dict, built: dict, plant_context, R0_inv, q_start: float, counts: int):

@@ -21,7 +21,8 @@ roll it; with ``accelerometer`` set, the object is the report's instrumented
 object (2.4): the station's ``object.acceleration`` port, the device model of
 :mod:`handle_drake.devices.accelerometer` at the object's origin, gives the same rotation
 from the gravity direction, valid at rest, and the checks and the score read that
-estimate only, the plant's rotation logged beside it; held stays the plant's), held
+estimate only, the plant's rotation logged beside it; held is then the object's own:
+its instrument never flagged a free fall, the plant's held logged as ``held_truth``), held
 (the object has not dropped more than ``drop`` below nor moved more than ``max_travel``
 from its start, and touched the hand at a sample within the last ``contact_window``: a rolled
 object hops off the palm for a few ms), the hand bodies and fingertips
@@ -217,6 +218,10 @@ class TrialOutcome:
     contacts: list  # per sample, hand bodies touching the object
     sim_time: float
     wall_time: float
+    # the plant's "held" at the end (not dropped 15 mm, not moved 40 mm, touched within the
+    # contact window). With an accelerometer ``held`` is the object's own: no free fall
+    # flagged by its instrument at any sample; this is the truth logged beside it
+    held_truth: bool | None = None
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
@@ -340,6 +345,8 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     return dict(harness=harness, settled=settled, body=object_body(plant),
                 hand_bodies=hand_bodies,
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
+                if accelerometer else None,
+                free_fall=harness.station.GetOutputPort("object.free_fall")
                 if accelerometer else None)
 
 
@@ -522,11 +529,20 @@ class InHandTrial(GistTrial):
             st.last_touch = t
         # A rolling object hops off the palm for a few ms: it counts as
         # touching the hand if it did so within the last contact_window.
-        st.held = bool(p[2] - st.p0[2] > -c.drop and np.linalg.norm(p - st.p0) < c.max_travel
-                       and t - st.last_touch <= c.contact_window + 1e-9)
+        st.held_truth = bool(p[2] - st.p0[2] > -c.drop
+                             and np.linalg.norm(p - st.p0) < c.max_travel
+                             and t - st.last_touch <= c.contact_window + 1e-9)
+        accelerometer = built["accelerometer"]
+        if accelerometer is not None:
+            # held as the instrumented object knows it: its instrument never flagged a
+            # free fall ("a falling object is easily detected, because the total measured
+            # acceleration is zero", 2.4); the plant's held is logged beside it
+            st.fell = st.fell or built["free_fall"].Eval(st.station_context)[0] > 0.5
+            st.held = not st.fell
+        else:
+            st.held = st.held_truth
         if st.held:
             st.held_time = t
-        accelerometer = built["accelerometer"]
         if accelerometer is not None:
             # The instrumented object (report 2.4): its accelerometer (sensor frame =
             # object frame) reads the specific force R_WO^T (a_WO - g); at rest that is
@@ -580,7 +596,8 @@ class InHandTrial(GistTrial):
             completed=not st.stopped, reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(rotations)].tolist(), rotation_deg_series=rotations,
             accelerometer_rotation_deg_series=st.accel_rotations, contacts=st.contacts,
-            sim_time=float(samples[len(rotations) - 1]), wall_time=wall_time)
+            sim_time=float(samples[len(rotations) - 1]), wall_time=wall_time,
+            held_truth=st.held_truth and not st.stopped)
 
 
 @dc.dataclass(eq=False)
@@ -601,6 +618,8 @@ class _Sampling:
     previous: float = 0.0
     held_time: float = 0.0
     held: bool = True
+    held_truth: bool = True  # the plant's (equal to held without an accelerometer)
+    fell: bool = False  # the instrument flagged a free fall at some sample
     passed: int = 0
     stopped: bool = False
     failed: bool = False  # a check failed: no later check counts (the checks pass in a row)
