@@ -80,7 +80,10 @@ def test_pick_plan_reaches_every_pose_and_releases_over_the_hole(hamburg):
 
 def test_each_grasp_class_gets_a_time_budget(hamburg):
     from handle_drake.apps.pick.plan import CLASS_ORDER, PickPlanningError
+    from handle_drake.grasp.database import GraspDatabase
     from handle_drake.grasp.planning import clear_solution_cache
+
+    empty = GraspDatabase()  # the search the budget bounds, not the stored grasps
 
     clear_solution_cache()  # a cached answer would skip the search the budget bounds
     name, sphere = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "sphere")
@@ -88,7 +91,7 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     with pytest.raises(PickPlanningError) as error:
         plan_pick(hamburg, reach, name, "sphere", sphere.size,
                   initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
-                  grasp_budget=1e-6)
+                  grasp_budget=1e-6, grasp_db=empty)
     # Every class the sphere's size allows ran out of its budget; the others are too small.
     timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
                  in str(error.value)]
@@ -97,7 +100,7 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     with pytest.raises(PickPlanningError) as error:
         plan_pick(hamburg, reach, name, "sphere", sphere.size,
                   initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
-                  grasp_budget=None, total_budget=1e-6)
+                  grasp_budget=None, total_budget=1e-6, grasp_db=empty)
     assert "tripod: no grasp plan: time budget" in str(error.value)
     assert "parallel_extension: not tried: the grasp planning budget" in str(error.value)
 
