@@ -8,8 +8,8 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
 from handle_drake.apps.pick.plan import (
-    GRASP_DB,
     CLASS_ORDER,
+    GRASP_DB,
     catalogue_size,
     default_grasp_database,
     grasp_db_requests,
