@@ -129,10 +129,27 @@ def test_bystanders_are_welded_where_they_rest_and_the_target_stays_free(hamburg
         weld_bystanders(scene, "object_9")
 
 
-def test_pick_command_puts_the_sphere_in_the_box(capsys):
-    code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere"])
-    lines = capsys.readouterr().out.strip().splitlines()
+@pytest.mark.parametrize("close", ["reactive", "scripted"])
+def test_pick_command_puts_the_sphere_in_the_box(close, capsys):
+    import json
+
+    flags = ["--scripted-close"] if close == "scripted" else []
+    code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere", "--json", *flags])
+    out = capsys.readouterr().out.strip()
+    lines = out.splitlines()
     assert lines[-1] == "in the box" and code == 0
+    result = json.loads("\n".join(lines[:-1]))
+    assert result["close"] == close and result["grasp_stored"]
+    if close == "reactive":
+        # The tactile close ran: the tripod's first, middle finger and thumb (channels
+        # 0, 1, 4) each stopped on a touch part-way, the idle ring and little fingers
+        # never closed; then the squeeze and the lift.
+        assert result["close_mode"] == "LIFT"
+        assert result["fingers_touched"] == [True, True, False, False, True]
+        closing = np.array(result["closing_at_squeeze"])
+        assert np.all((closing[[0, 1, 4]] > 0.1) & (closing[[0, 1, 4]] < 1.0))
+    else:
+        assert "close_mode" not in result
 
 
 @pytest.mark.parametrize("args, message", [

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses as dc
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +49,9 @@ def register(subparsers) -> None:
                    help="where to put it (the sorting box's hole for its kind)")
     p.add_argument("--true-poses", action="store_true",
                    help="plan on the scenario's true object poses instead of perceiving")
+    p.add_argument("--scripted-close", action="store_true",
+                   help="close the hand with the open-loop ramp to the planned closing "
+                        "command instead of the reactive tactile close")
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--grasp-db", type=Path, default=None, metavar="PATH",
@@ -110,10 +114,10 @@ def choose_target(objects, base_xy, index=None, kind=None) -> int:
 
 
 def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
-         grasp_db=None, execute: bool = True) -> dict:
+         grasp_db=None, execute: bool = True, close: str = "reactive") -> dict:
     """Perceive (or read the truth), plan and execute one pick; returns the result.
     ``grasp_db``: a GraspDatabase (default: the shipped one); ``execute=False``
-    stops after planning."""
+    stops after planning; ``close``: "reactive" or "scripted" (``execute_pick``)."""
     from handle_drake.apps.pick.execute import execute_pick
     from handle_drake.apps.pick.plan import PickPlanningError, plan_pick
     from handle_drake.apps.pick.reach import ArmReach
@@ -146,7 +150,9 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
         np.asarray(t[1].X_WO.translation[:2], dtype=float), p_seen[:2]))
     world = dc.replace(scenario, object=seen[0], objects=seen[1:])
     seen_name = "object" if i == 0 else f"object_{i}"
+    start = time.perf_counter()
     reach = ArmReach(world, ignore=(seen_name,))
+    result["reach_model_s"] = time.perf_counter() - start
     result.update(target=true_name, kind=target.kind, true_kind=true_object.kind,
                   planned_xy=p_seen[:2].round(4).tolist())
     try:
@@ -162,7 +168,12 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     if not execute:
         result["outcome"] = "planned (not executed)"
         return result
-    outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html)
+    outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html,
+                           close=close)
+    result["close"] = close
+    if outcome.close_mode is not None:
+        result.update(close_mode=outcome.close_mode, fingers_touched=outcome.fingers_touched,
+                      closing_at_squeeze=outcome.closing_at_squeeze)
     result.update(outcome=outcome.reason, in_box=outcome.in_box,
                   final_position=outcome.p_WO_final.round(4).tolist(),
                   sim_s=outcome.sim_seconds, wall_s=outcome.wall_seconds)
@@ -211,7 +222,7 @@ def _cmd_pick(args) -> int:
 
         scenario = random_scene(scenario, args.scene_seed)
     result = pick(scenario, args.true_poses, args.object, args.kind, args.html,
-                  grasp_db=grasp_db)
+                  grasp_db=grasp_db, close="scripted" if args.scripted_close else "reactive")
     if args.json:
         print(json.dumps(result, indent=1))
     else:
