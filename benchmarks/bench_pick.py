@@ -53,6 +53,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="out/bench")
     parser.add_argument("--close", default="reactive", choices=("reactive", "scripted"),
                         help="the hand's close (handle-drake pick --scripted-close)")
+    parser.add_argument("--no-correction", action="store_true",
+                        help="release without measuring the object in the hand "
+                             "(handle-drake pick --no-release-correction)")
     parser.add_argument("--plan-only", action="store_true",
                         help="plan each pick, do not simulate it (planning times only)")
     args = parser.parse_args(argv)
@@ -75,7 +78,7 @@ def main(argv=None) -> int:
         for mode in args.modes.split(","):
             start = time.perf_counter()
             result = pick(scenario, true_poses=(mode == "true"), execute=not args.plan_only,
-                          close=args.close)
+                          close=args.close, correct_release=not args.no_correction)
             result.update(seed=seed, mode=mode, total_s=time.perf_counter() - start,
                           load=os.getloadavg()[0])
             rows.append(result)

@@ -140,6 +140,8 @@ def test_pick_command_puts_the_sphere_in_the_box(close, capsys):
     assert lines[-1] == "in the box" and code == 0
     result = json.loads("\n".join(lines[:-1]))
     assert result["close"] == close and result["grasp_stored"]
+    # The ball was located in the hand after the lift and the release planned for it.
+    assert result["release_corrected"] and result["in_hand_contacts"] >= 2
     if close == "reactive":
         # The tactile close ran: the tripod's first, middle finger and thumb (channels
         # 0, 1, 4) each stopped on a touch part-way, the idle ring and little fingers

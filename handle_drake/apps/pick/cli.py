@@ -52,6 +52,9 @@ def register(subparsers) -> None:
     p.add_argument("--scripted-close", action="store_true",
                    help="close the hand with the open-loop ramp to the planned closing "
                         "command instead of the reactive tactile close")
+    p.add_argument("--no-release-correction", action="store_true",
+                   help="release where the plan put the object in the hand, without "
+                        "measuring it there after the lift")
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--grasp-db", type=Path, default=None, metavar="PATH",
@@ -114,10 +117,13 @@ def choose_target(objects, base_xy, index=None, kind=None) -> int:
 
 
 def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
-         grasp_db=None, execute: bool = True, close: str = "reactive") -> dict:
+         grasp_db=None, execute: bool = True, close: str = "reactive",
+         correct_release: bool = True) -> dict:
     """Perceive (or read the truth), plan and execute one pick; returns the result.
     ``grasp_db``: a GraspDatabase (default: the shipped one); ``execute=False``
-    stops after planning; ``close``: "reactive" or "scripted" (``execute_pick``)."""
+    stops after planning; ``close``: "reactive" or "scripted", ``correct_release``:
+    measure the object in the hand after the lift and release it where it is
+    (``execute_pick``)."""
     from handle_drake.apps.pick.execute import execute_pick
     from handle_drake.apps.pick.plan import PickPlanningError, plan_pick
     from handle_drake.apps.pick.reach import ArmReach
@@ -169,8 +175,11 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
         result["outcome"] = "planned (not executed)"
         return result
     outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html,
-                           close=close)
-    result["close"] = close
+                           close=close, reach=reach if correct_release else None)
+    result.update(close=close, release_corrected=outcome.release_corrected,
+                  in_hand_offset_mm=outcome.in_hand_offset_mm,
+                  in_hand_turn_deg=outcome.in_hand_turn_deg,
+                  in_hand_contacts=outcome.in_hand_contacts)
     if outcome.close_mode is not None:
         result.update(close_mode=outcome.close_mode, fingers_touched=outcome.fingers_touched,
                       closing_at_squeeze=outcome.closing_at_squeeze)
@@ -222,7 +231,8 @@ def _cmd_pick(args) -> int:
 
         scenario = random_scene(scenario, args.scene_seed)
     result = pick(scenario, args.true_poses, args.object, args.kind, args.html,
-                  grasp_db=grasp_db, close="scripted" if args.scripted_close else "reactive")
+                  grasp_db=grasp_db, close="scripted" if args.scripted_close else "reactive",
+                  correct_release=not args.no_release_correction)
     if args.json:
         print(json.dumps(result, indent=1))
     else:

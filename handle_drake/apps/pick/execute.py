@@ -18,7 +18,18 @@ the hand has arrived when the arm's timeline reaches the grasp
 (:class:`_CloseTrigger`), and feels nothing before. The arm waits
 ``REACTIVE_CLOSE_TIME`` s there (the longest close, the squeeze and the hold)
 before it lifts. ``close="scripted"``: the open-loop ramp to the closing command
-over ``CLOSE_TIME`` s, held ``HOLD_TIME`` s. Success: the object's centre is in
+over ``CLOSE_TIME`` s, held ``HOLD_TIME`` s.
+
+The release is corrected by what the fingers feel (given the arm's ``reach``):
+the close can move the object in the hand (2.4 cm in a replay of a cuboid that
+then jammed on its hole's rim), and the release pose assumed the planned grasp.
+After the lift the object is located in the hand from its contacts with the hand
+(:func:`measure_in_hand`: each contact's point and the object's surface normal
+there, as fingertip sensors with contact location would give them, and the
+hand's pose from the arm's joints), and the carry and release are planned again
+for the object where it is (:func:`handle_drake.apps.pick.plan.replan_release`);
+the arm's trajectory from the lift on is replaced. Without contacts, or when no
+release is reachable with the measured grasp, the plan stands. Success: the object's centre is in
 the box (:func:`handle_drake.scene.plant.in_box`). A failure is told by what
 the object did: not lifted with the hand, dropped on the way, or stopped on
 the lid.
@@ -34,14 +45,19 @@ from __future__ import annotations
 
 import dataclasses as dc
 import time
+import warnings
 
 import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import BasicVector, LeafSystem
+from scipy.spatial.transform import Rotation
 
+from handle_drake.apps.pick.plan import replan_release
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.arm.model import get_arm_spec
+from handle_drake.geometry.objects import dimensions
 from handle_drake.scene.config import in_box, object_instance_name
-from handle_drake.station import MakeHandStation
+from handle_drake.station import GetPlant, MakeHandStation
 from handle_drake.systems.reactive_grasp import (
     ReactiveGrasp,
     ReactiveGraspParams,
@@ -49,7 +65,7 @@ from handle_drake.systems.reactive_grasp import (
 )
 
 __all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "MIN_SEGMENT", "CLOSES",
-           "REACTIVE_CLOSE_TIME"]
+           "REACTIVE_CLOSE_TIME", "measure_in_hand", "locate_object"]
 
 MIN_SEGMENT = 0.4  # s
 CLOSE_TIME = 0.6  # s, the scripted close's ramp
@@ -63,6 +79,7 @@ REACTIVE_PARAMS = ReactiveGraspParams()
 REACTIVE_CLOSE_TIME = (REACTIVE_PARAMS.max_closing / REACTIVE_PARAMS.close_rate
                        + REACTIVE_PARAMS.squeeze_time + REACTIVE_PARAMS.hold_time + 0.1)
 _FAR = 10.0  # m, the pose the close trigger reports before the grasp
+PRIOR_WEIGHT = 0.01  # the predicted orientation's weight against each contact normal
 
 
 class _CloseTrigger(LeafSystem):
@@ -102,6 +119,10 @@ class _HandSwitch(LeafSystem):
         self._reactive = self.DeclareVectorInputPort("reactive", nu)
         self.DeclareVectorOutputPort("hand_position", nu, self._output)
 
+    def set_window(self, t_from: float, t_to: float) -> None:
+        """Moves the reactive window (the release was planned again)."""
+        self._window = (float(t_from), float(t_to))
+
     def _output(self, context, output: BasicVector):
         t = context.get_time()
         inside = self._window[0] <= t < self._window[1]
@@ -120,6 +141,13 @@ class PickOutcome:
     close_mode: str | None = None
     fingers_touched: list | None = None
     closing_at_squeeze: list | None = None
+    # The object in the hand after the lift (with a reach): how far (mm) and how much
+    # turned (deg) from the planned grasp it was measured, from how many contacts, and
+    # whether the release was planned again for it.
+    in_hand_offset_mm: float | None = None
+    in_hand_turn_deg: float | None = None
+    in_hand_contacts: int = 0
+    release_corrected: bool = False
 
     @property
     def real_time_rate(self) -> float:
@@ -175,6 +203,119 @@ def _connect_reactive_close(builder, station, scenario, plan, marks, scripted_po
     builder.Connect(scripted_port, switch.GetInputPort("scripted"))
     builder.Connect(controller.GetOutputPort("hand_position"), switch.GetInputPort("reactive"))
     builder.Connect(switch.get_output_port(), station.GetInputPort("hand.position"))
+    return switch
+
+
+def measure_in_hand(plant, plant_context, contacts, target_instance, hand_instance,
+                    base_body: str, spec, X_OB_planned: RigidTransform):
+    """``(X_OB, contacts used)``: the object's pose in the hand base frame B from its
+    contacts with the hand (``contacts``: the plant's ContactResults), or None with
+    fewer than two. The prediction is the planned grasp (``X_OB_planned``) on the hand
+    where it is now. A sphere's centre lies one radius inside each contact point along
+    the surface normal (their mean; orientation as predicted). A cuboid's faces: each
+    contact's normal is matched to the predicted face it is nearest to, the rotation
+    that best turns the predicted faces' normals onto the measured ones (Wahba's
+    problem, :meth:`scipy.spatial.transform.Rotation.align_vectors`, the predicted
+    axes added with weight ``PRIOR_WEIGHT``) corrects the orientation, and the centre
+    is the least-squares point whose faces pass through the contact points (held at
+    the prediction along directions no contact constrains)."""
+    object_bodies = {int(i) for i in plant.GetBodyIndices(target_instance)}
+    hand_bodies = {int(i) for i in plant.GetBodyIndices(hand_instance)}
+    points, normals = [], []
+    for k in range(contacts.num_point_pair_contacts()):
+        info = contacts.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        nhat = np.asarray(info.point_pair().nhat_BA_W)  # from B into A
+        if a in object_bodies and b in hand_bodies:
+            normal = -nhat
+        elif b in object_bodies and a in hand_bodies:
+            normal = nhat
+        else:
+            continue
+        points.append(np.asarray(info.contact_point()))
+        normals.append(normal / np.linalg.norm(normal))
+    if len(points) < 2:
+        return None
+    X_WB = plant.GetBodyByName(base_body, hand_instance).EvalPoseInWorld(plant_context)
+    X_WO = locate_object(spec, X_WB @ X_OB_planned.inverse(), points, normals)
+    return X_WO.inverse() @ X_WB, len(points)
+
+
+def locate_object(spec, X_WO_predicted: RigidTransform, points, normals) -> RigidTransform:
+    """The pose of a sphere or cuboid ``spec`` touched at ``points`` (k, 3) where its
+    outward surface normals are ``normals`` (k, 3), near ``X_WO_predicted`` (see
+    :func:`measure_in_hand`)."""
+    points, normals = np.asarray(points, dtype=float), np.asarray(normals, dtype=float)
+    R, c = X_WO_predicted.rotation().matrix(), X_WO_predicted.translation()
+    d = dimensions(spec)
+    if spec.kind == "sphere":
+        c = np.mean(points - 0.5 * d["diameter"] * normals, axis=0)
+    else:
+        half = 0.5 * np.array([d["width"], d["depth"], d["height"]])
+        axis = np.argmax(np.abs(normals @ R), axis=1)
+        sign = np.sign(np.einsum("ij,ij->i", normals, R[:, axis].T))
+        faces = (R[:, axis] * sign).T
+        # The predicted axes as weak observations of themselves: a rotation about a
+        # direction no contact normal constrains (two opposite faces only) stays as
+        # predicted instead of being arbitrary.
+        weights = np.r_[np.ones(len(normals)), np.full(3, PRIOR_WEIGHT)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            turn = Rotation.align_vectors(np.vstack([normals, R.T]), np.vstack([faces, R.T]),
+                                          weights=weights)[0].as_matrix()
+        R, faces = turn @ R, faces @ turn.T
+        A, rhs, weight = faces, np.einsum("ij,ij->i", faces, points) - half[axis], 1e-3
+        c = np.linalg.solve(A.T @ A + weight * np.eye(3), A.T @ rhs + weight * c)
+    return RigidTransform(RotationMatrix(_orthonormal(R)), c)
+
+
+def _orthonormal(R) -> np.ndarray:
+    u, _, vt = np.linalg.svd(R)
+    return u @ vt
+
+
+def _correct_release(simulator, diagram, station, scenario, plan, reach, close, sources):
+    """Measures the object in the hand (now, after the lift) and, if a release is
+    reachable with it, replaces the arm's and the hand's trajectories from the lift on.
+    Returns ``(plan, times, marks, report)``."""
+    from pydrake.trajectories import PiecewisePolynomial
+
+    plant = GetPlant(station)
+    context = plant.GetMyContextFromRoot(simulator.get_context())
+    hand = plant.GetModelInstanceByName("hand")
+    X_OB_planned = plan.X_WO.inverse() @ plan.grasp.X_WB
+    measured = measure_in_hand(plant, context,
+                               station.GetOutputPort("contact_results").Eval(
+                                   station.GetMyContextFromRoot(simulator.get_context())),
+                               plant.GetModelInstanceByName(plan.target), hand,
+                               get_hand_spec(scenario.hand.kind).base_body,
+                               plan.grasp.object_spec, X_OB_planned)
+    if measured is None:
+        return plan, None, None, {}
+    X_OB, count = measured
+    error = X_OB_planned.inverse() @ X_OB
+    report = dict(in_hand_offset_mm=round(float(np.linalg.norm(
+        X_OB.translation() - X_OB_planned.translation())) * 1000, 1),
+        in_hand_turn_deg=round(float(np.degrees(error.rotation().ToAngleAxis().angle())), 1),
+        in_hand_contacts=count)
+    again = replan_release(scenario, reach, plan, X_OB)
+    if again is None:
+        return plan, None, None, report
+    plan = dc.replace(plan, waypoints=again[0], X_WO_release=again[1])
+    times, arm, hand_knots, marks = _plan_timeline(plan, scenario, close)
+    arm_source, hand_source, switch = sources
+    arm_source.UpdateTrajectory(PiecewisePolynomial.FirstOrderHold(times, arm.T))
+    hand_source.UpdateTrajectory(PiecewisePolynomial.FirstOrderHold(times, hand_knots.T))
+    if switch is not None:
+        switch.set_window(marks["grasp"], marks["release"])
+    return plan, times, marks, dict(report, release_corrected=True)
+
+
+def _plan_timeline(plan, scenario, close):
+    spec = get_arm_spec(scenario.hand.mount.kind)
+    if close == "reactive":
+        return _timeline(plan, spec.velocity, REACTIVE_CLOSE_TIME, 0.0)
+    return _timeline(plan, spec.velocity)
 
 
 def weld_bystanders(scenario, target: str):
@@ -194,10 +335,12 @@ def weld_bystanders(scenario, target: str):
 
 
 def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
-                 close: str = "reactive") -> PickOutcome:
+                 close: str = "reactive", reach=None) -> PickOutcome:
     """Simulates ``plan`` on ``scenario``'s station (cameras left out; the other
-    objects welded with ``still_bystanders``; ``close``: one of ``CLOSES``, see the
-    module doc); writes an HTML replay to ``html`` when given."""
+    objects welded with ``still_bystanders``; ``close``: one of ``CLOSES``; with
+    ``reach``, the ArmReach the plan was made with, the release is corrected by the
+    object measured in the hand: see the module doc); writes an HTML replay to
+    ``html`` when given."""
     if close not in CLOSES:
         raise ValueError(f"close: expected one of {CLOSES}, got {close!r}")
     from pydrake.systems.analysis import Simulator
@@ -215,11 +358,7 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
 
         meshcat = StartMeshcat()
     station = MakeHandStation(scenario, meshcat=meshcat)
-    spec = get_arm_spec(scenario.hand.mount.kind)
-    if close == "reactive":
-        times, arm, hand, marks = _timeline(plan, spec.velocity, REACTIVE_CLOSE_TIME, 0.0)
-    else:
-        times, arm, hand, marks = _timeline(plan, spec.velocity)
+    times, arm, hand, marks = _plan_timeline(plan, scenario, close)
     builder = DiagramBuilder()
     builder.AddSystem(station)
     arm_source = builder.AddSystem(TrajectorySource(
@@ -228,9 +367,10 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     hand_source = builder.AddSystem(TrajectorySource(
         PiecewisePolynomial.FirstOrderHold(times, hand.T)))
     builder.Connect(arm_source.get_output_port(), station.GetInputPort("arm.position"))
+    switch = None
     if close == "reactive":
-        _connect_reactive_close(builder, station, scenario, plan, marks,
-                                hand_source.get_output_port())
+        switch = _connect_reactive_close(builder, station, scenario, plan, marks,
+                                         hand_source.get_output_port())
     else:
         builder.Connect(hand_source.get_output_port(), station.GetInputPort("hand.position"))
     diagram = builder.Build()
@@ -244,13 +384,14 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     start = time.perf_counter()
     simulator.AdvanceTo(marks["lift"])
     p_lift = position.Eval(station_context).copy()
-    close_report = {}
-    if close == "reactive":
-        controller = diagram.GetSubsystemByName("reactive_close")
-        c = controller.GetMyContextFromRoot(context)
-        close_report = dict(close_mode=controller.get_mode(c).name,
-                            fingers_touched=controller.fingers_touched(c).tolist(),
-                            closing_at_squeeze=controller.closing_at_squeeze(c).round(3).tolist())
+    close_report = _close_report(diagram, context) if close == "reactive" else {}
+    if reach is not None:
+        plan, new_times, new_marks, measured = _correct_release(
+            simulator, diagram, station, scenario, plan, reach, close,
+            (arm_source, hand_source, switch))
+        close_report.update(measured)
+        if new_times is not None:
+            times, marks = new_times, new_marks
     simulator.AdvanceTo(marks["release"])
     p_release = position.Eval(station_context).copy()
     end = times[-1] + SETTLE_TIME
@@ -267,6 +408,14 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     inside = in_box(scenario, p)
     reason = _judge(plan, inside, p0, p_lift, p_release, p)
     return PickOutcome(inside, reason, p, end, wall, **close_report)
+
+
+def _close_report(diagram, context) -> dict:
+    controller = diagram.GetSubsystemByName("reactive_close")
+    c = controller.GetMyContextFromRoot(context)
+    return dict(close_mode=controller.get_mode(c).name,
+                fingers_touched=controller.fingers_touched(c).tolist(),
+                closing_at_squeeze=controller.closing_at_squeeze(c).round(3).tolist())
 
 
 def _judge(plan, inside, p0, p_lift, p_release, p) -> str:

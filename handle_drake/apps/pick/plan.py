@@ -39,7 +39,7 @@ from handle_drake.scene.config import box_pose, hole_centres
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
            "default_grasp_database", "grasp_db_requests", "build_grasp_database",
-           "free_path"]
+           "free_path", "replan_release"]
 
 #: The pick application's grasp database (``handle-drake pick SCENARIO
 #: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
@@ -326,6 +326,36 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                         stored)
     raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
         f"{c}: {r}" for c, r in attempts.items()))
+
+
+def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransform):
+    """The carry, release and open waypoints again, for the object held at
+    ``X_OB_measured`` (object to hand base, as measured after the lift) instead of the
+    planned grasp: ``(waypoints, X_WO_release)`` with the plan's waypoints up to the
+    lift unchanged, or None when no turn over the hole is reachable and collision
+    free with it (the caller keeps the plan)."""
+    ratio = scenario.hand.coupling_ratio or 1.0
+    hand = get_hand_spec(scenario.hand.kind)
+    grasp = plan.grasp
+    q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
+    q_closed = actuated_to_joint_positions(hand, grasp.close_command, ratio)
+    labels = [w.label for w in plan.waypoints]
+    head = [dc.replace(w) for w in plan.waypoints[:labels.index("lift") + 1]]
+    spec = grasp.object_spec
+    X_WO_lift = reach.hand_pose(head[-1].q) @ X_OB_measured.inverse()
+    seconds = {"ik": 0.0, "path": 0.0}
+    for X_WO_rel, X_WB_rel in _release_poses(scenario, plan.kind, spec, X_WO_lift,
+                                              X_OB_measured):
+        tail = [("carry", _raised(X_WB_rel, CARRY_HEIGHT), q_closed, grasp.close_command),
+                ("release", X_WB_rel, q_closed, grasp.close_command),
+                ("open", None, q_open, grasp.preshape_command)]
+        trial = list(head)
+        if _solve_chain(reach, tail, trial, seconds):
+            continue
+        moved = trial[len(head) - 1:]
+        if not _connect(reach, moved, seconds):
+            return trial, X_WO_rel
+    return None
 
 
 def _solve_chain(reach, chain, waypoints, seconds) -> str:
