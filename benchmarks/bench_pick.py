@@ -53,23 +53,36 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0-19")
     parser.add_argument("--modes", default="perceived,true")
     parser.add_argument("--out", default="out/bench")
+    parser.add_argument("--close", default="reactive", choices=("reactive", "scripted"),
+                        help="the hand's close (handle-drake pick --scripted-close)")
+    parser.add_argument("--no-correction", action="store_true",
+                        help="release without measuring the object in the hand "
+                             "(handle-drake pick --no-release-correction)")
+    parser.add_argument("--plan-only", action="store_true",
+                        help="plan each pick, do not simulate it (planning times only)")
     add_page_arguments(parser, "pick")
     args = parser.parse_args(argv)
     results_run = ResultsRun("Pick and place on the arm: objects in the box", args)
 
     from handle_drake.apps.pick.cli import pick
+    from handle_drake.apps.pick.plan import default_grasp_database
     from handle_drake.apps.pick.scenes import random_scene
     from handle_drake.base.models import diagrams_dir
     from handle_drake.scenario import LoadScenario
 
+    start = time.perf_counter()
+    database = default_grasp_database()
+    db_load = time.perf_counter() - start
+    print(f"grasp database: {len(database)} entries, loaded in {db_load:.3f} s")
     base = LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml")
-    floor = _floor_rate(base)
+    floor = float("nan") if args.plan_only else _floor_rate(base)
     rows = []
     for seed in _seeds(args.seeds):
         scenario = random_scene(base, seed)
         for mode in args.modes.split(","):
             start = time.perf_counter()
-            result = pick(scenario, true_poses=(mode == "true"))
+            result = pick(scenario, true_poses=(mode == "true"), execute=not args.plan_only,
+                          close=args.close, correct_release=not args.no_correction)
             result.update(seed=seed, mode=mode, total_s=time.perf_counter() - start,
                           load=os.getloadavg()[0])
             rows.append(result)
@@ -97,6 +110,14 @@ def main(argv=None) -> int:
                   f"max {np.max(values):.2f} s")
         ik_path = [r["planning_s"]["ik"] + r["planning_s"]["path"] for r in planned]
         print(f"IK + paths: median {np.median(ik_path):.2f} s, max {np.max(ik_path):.2f} s")
+        whole = [sum(r["planning_s"].values()) for r in planned]
+        print(f"whole plan (grasp + IK + paths): median {np.median(whole):.2f} s, "
+              f"90 % {np.percentile(whole, 90):.2f} s, max {np.max(whole):.2f} s; "
+              f"<= 2 s in {sum(w <= 2.0 for w in whole)}/{len(whole)}; grasp stored in "
+              f"{sum(bool(r.get('grasp_stored')) for r in planned)}/{len(planned)}")
+        model = [r["reach_model_s"] for r in planned]
+        print(f"arm collision model per scene (ArmReach): median {np.median(model):.2f} s, "
+              f"max {np.max(model):.2f} s")
     simulated = [r for r in rows if "sim_s" in r]
     if simulated:
         rate = np.median([r["sim_s"] / r["wall_s"] for r in simulated])
@@ -105,9 +126,10 @@ def main(argv=None) -> int:
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    path = out / "pick.json"
+    path = out / ("pick_plan.json" if args.plan_only else "pick.json")
     results_run.finish(table_rows(summary, "mode"),
-                       {"summary": summary, "floor_rate": floor, "rows": rows}, path)
+                       {"summary": summary, "floor_rate": floor, "rows": rows,
+                        "grasp_db_load_s": db_load}, path)
     print(f"wrote {path}")
     return 0
 

@@ -44,10 +44,10 @@ def main(argv=None) -> int:
         scenario = random_scene(base, seed)
         runs = {}
 
-        def both(scenario, plan, html=None, runs=runs):
+        def both(scenario, plan, html=None, runs=runs, **options):
             runs["floor"] = _floor_rate(scenario)
-            runs["free"] = original(scenario, plan, still_bystanders=False)
-            runs["welded"] = original(scenario, plan, still_bystanders=True)
+            runs["free"] = original(scenario, plan, still_bystanders=False, **options)
+            runs["welded"] = original(scenario, plan, still_bystanders=True, **options)
             return runs["welded"]
 
         execute.execute_pick = both

@@ -70,7 +70,6 @@ row, ``z_G`` opposition axis, thumb on ``+z_G``), P palm, B hand base (forearm).
 from __future__ import annotations
 
 import dataclasses as dc
-import functools
 import time
 from functools import lru_cache
 
@@ -98,9 +97,15 @@ __all__ = [
     "GraspPlanningError",
     "GraspPlanningTimeout",
     "ClassSynergies",
+    "ObjectFrameGrasp",
+    "PLANNER_HAND",
+    "PLANNER_VERSION",
     "clear_solution_cache",
     "default_synergies",
     "grasp_dims",
+    "grasp_key",
+    "object_frame_grasp",
+    "place_grasp",
     "plan_grasp",
     "resting_pose",
 ]
@@ -149,9 +154,17 @@ class GraspPlanningTimeout(GraspPlanningError):
     """The class's hand-IK search ran past its ``time_budget`` (no answer: not cached)."""
 
 
-# The hand-IK search's answer for (class, kind, shape, dims, height above the table,
+#: Version of the planner's answers: bump it when a change alters the grasp that
+#: ``plan_grasp`` returns for the same input (a grasp database built by an older
+#: version is then stale: :mod:`handle_drake.grasp.database` recomputes its entries).
+PLANNER_VERSION = 1
+#: The hand the planner plans for (the key of a stored grasp names it).
+PLANNER_HAND = "shadow"
+
+# The planner's pose-invariant answer (an :class:`ObjectFrameGrasp`, or None when the
+# search found no grasp) for (class, kind, shape, dims, height above the table,
 # coupling ratio) with the default synergies: it does not depend on where the object
-# stands or the reach direction (those only place the solved grasp in the world), so a
+# stands or the reach direction (those only place the grasp in the world), so a
 # second pick of the same kind and size reuses it (a failed search too). Bounded.
 _SOLUTION_CACHE: dict = {}
 _SOLUTION_CACHE_SIZE = 256
@@ -327,6 +340,52 @@ class GraspPlan:
                 f"[{p[0]:.3f} {p[1]:.3f} {p[2]:.3f}] m")
 
 
+@dc.dataclass(frozen=True)
+class ObjectFrameGrasp:
+    """The part of a plan that does not depend on where the object stands: what a
+    grasp database stores (:mod:`handle_drake.grasp.database`).
+
+    ``key``: :func:`grasp_key` of the request it answers. X_PG: the grasp frame in
+    the palm (the IK's object pose); up_G: world up in G; X_BP: the palm in the hand
+    base (forearm) at the IK posture; q_grasp / q_pre / q_close: (24,) postures of
+    the grasp (idle fingers cleared), pre-shape and closing command; amplitudes /
+    grasp_amplitudes: the synergy amplitudes (seed, final posture).
+    """
+
+    key: tuple
+    X_PG: RigidTransform
+    up_G: np.ndarray
+    centre_source: str
+    X_BP: RigidTransform
+    q_grasp: np.ndarray
+    q_pre: np.ndarray
+    q_close: np.ndarray
+    contact_error: float
+    amplitudes: np.ndarray | None
+    grasp_amplitudes: np.ndarray
+
+
+def grasp_key(grasp_class, obj, height: float, coupling_ratio: float = 1.0) -> tuple:
+    """The request a pose-invariant grasp answers: ``(hand, class, kind, shape,
+    dims, height above the table, coupling ratio)`` (the planner version is the
+    database's). Lengths are rounded to a micrometre (``KEY_RESOLUTION``): a height
+    computed as the object's z minus the table's differs from the resting height in
+    the last bits."""
+    info = grasp_info(grasp_class)
+    spec = _object_spec(obj)
+    shape, dims = grasp_dims(spec)
+    return (PLANNER_HAND, info.grasp_class.value, spec.kind, shape,
+            tuple(_key_length(d) for d in dims), _key_length(height),
+            round(float(coupling_ratio), 9))
+
+
+KEY_RESOLUTION = 1e-6  # m, lengths in a grasp_key
+
+
+def _key_length(x: float) -> float:
+    return round(float(x) / KEY_RESOLUTION) * KEY_RESOLUTION
+
+
 # ---------------------------------------------------------------- planning
 
 
@@ -465,6 +524,7 @@ def plan_grasp(
     vertical_standoff: bool = True,
     time_budget: float | None = None,
     cache: bool = True,
+    database=None,
 ) -> GraspPlan:
     """Plan a grasp of class ``grasp_class`` on ``obj`` at ``X_WO`` (see module doc).
 
@@ -476,8 +536,12 @@ def plan_grasp(
       reaches in (the forearm trails behind it); used to pick the hand's yaw
       among the object's symmetric grasps.
     time_budget: seconds the hand-IK search may take (None: no bound; may overrun one solve).
-    cache: reuse an earlier call's exact hand-IK answer (same class, object kind and
+    cache: reuse an earlier call's exact answer (same class, object kind and
       dimensions, height above the table, coupling ratio; default synergies only).
+    database: a :class:`~handle_drake.grasp.database.GraspDatabase` (or any mapping
+      with ``get(key, default)`` of :func:`grasp_key` to :class:`ObjectFrameGrasp`
+      or None) consulted before searching (default synergies only); its stored
+      grasp is the one a fresh search gives.
 
     Raises:
         ValueError: unknown class, object kind or size outside the class's
@@ -501,8 +565,52 @@ def plan_grasp(
     row_O = _row_axis(spec)
     _world_grasp_frame(spec.kind, X_WO, row_O=row_O)  # validates the resting orientation early
 
-    key = ((info.grasp_class, spec.kind, shape, tuple(float(d) for d in dims), height,
-            float(coupling_ratio)) if cache and synergies is None else None)
+    key = grasp_key(info.grasp_class, spec, height, coupling_ratio)
+    found = _MISSING
+    if synergies is None:
+        if cache and key in _SOLUTION_CACHE:
+            found = _SOLUTION_CACHE[key]
+        elif database is not None:
+            found = database.get(key, _MISSING)
+    if found is _MISSING:
+        found = _object_frame_grasp(key, info, spec, shape, dims, size, height, synergies,
+                                    coupling_ratio, deadline, time_budget)
+        if cache and synergies is None:
+            if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
+                _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
+            _SOLUTION_CACHE[key] = found
+    if found is None:
+        raise GraspPlanningError(
+            f"unreachable: no collision-free {info.name} grasp puts the "
+            f"{'/'.join(info.fingers)} contacts on this {spec.kind} (grasp width "
+            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
+        )
+    return place_grasp(found, info.grasp_class, spec, size, X_WO, table_height, reach,
+                       standoff, lift_height, vertical_standoff, coupling_ratio, row_O)
+
+
+_MISSING = object()  # no stored answer for a key
+
+
+def object_frame_grasp(grasp_class, obj, height: float, coupling_ratio: float = 1.0,
+                       time_budget: float | None = None) -> ObjectFrameGrasp | None:
+    """The planner's pose-invariant answer for ``obj`` resting ``height`` above the
+    table (its centre), searched afresh (no cache; default synergies): what a grasp
+    database stores. None when no grasp of the class exists; raises
+    :class:`GraspPlanningTimeout` past ``time_budget``."""
+    info = grasp_info(grasp_class)
+    deadline = _deadline(time_budget)
+    spec = _object_spec(obj)
+    shape, dims = grasp_dims(spec)
+    size = check_size(info.grasp_class, dims[0])
+    key = grasp_key(info.grasp_class, spec, height, coupling_ratio)
+    return _object_frame_grasp(key, info, spec, shape, dims, size, float(height), None,
+                               coupling_ratio, deadline, time_budget)
+
+
+def _object_frame_grasp(key, info, spec, shape, dims, size, height, synergies,
+                        coupling_ratio, deadline, time_budget):
+    """The hand-IK search and the pre-shape and close of its answer (None: no grasp)."""
     synergies = default_synergies() if synergies is None else synergies
     if not isinstance(synergies, ClassSynergies):
         raise TypeError(f"synergies must be ClassSynergies, got {type(synergies).__name__}")
@@ -511,25 +619,45 @@ def plan_grasp(
                                             coupling_ratio)
     c_table1 = grasp_centre_palm(info.grasp_class, size)
     a_P = approach_palm(info.grasp_class)
-    solve = functools.partial(_solve_contacts, info, spec.kind, shape, dims, height, priors,
-                              priors_refine, c_table1, a_P, coupling_ratio, deadline)
-    sol, up, source, kin = _cached_solution(key, solve, info, spec.kind, size, time_budget)
-    X_PG = sol.X_PO
-    X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
-        kin, sol, spec.kind, X_WO, up, a_P, reach, standoff, lift_height, vertical_standoff,
-        row_O)
+    found = _solve_contacts(info, spec.kind, shape, dims, height, priors, priors_refine,
+                            c_table1, a_P, coupling_ratio, deadline)
+    if found is _TIMED_OUT:
+        raise GraspPlanningTimeout(
+            f"time budget: the {info.name} search took over {time_budget:.1f} s "
+            f"without a grasp")
+    if found is None:
+        return None
+    sol, up, source, kin = found
+    # The forearm is welded at the IK plant's world origin, wrist joints at 0.
+    kin.fingertip_positions(sol.q)
+    X_BP = kin.palm.CalcPoseInWorld(kin.context)
     q_grasp, q_pre, q_close = _preshape_and_close(kin, sol, info.grasp_class, up,
                                                   coupling_ratio)
-    sol = dc.replace(sol, q=q_grasp)
-    grasp_amplitudes = synergies.synergies.positions_to_amplitudes(sol.q)
+    return ObjectFrameGrasp(
+        key=key, X_PG=sol.X_PO, up_G=np.asarray(up, dtype=float), centre_source=source,
+        X_BP=X_BP, q_grasp=q_grasp, q_pre=q_pre, q_close=q_close,
+        contact_error=float(sol.contact_error), amplitudes=amplitudes,
+        grasp_amplitudes=synergies.synergies.positions_to_amplitudes(q_grasp))
+
+
+def place_grasp(grasp: ObjectFrameGrasp, grasp_class, spec, size, X_WO, table_height,
+                reach, standoff, lift_height, vertical_standoff, coupling_ratio, row_O
+                ) -> GraspPlan:
+    """The :class:`GraspPlan` of a pose-invariant grasp on the object at ``X_WO``."""
+    a_P = approach_palm(grasp_class)
+    X_WG, X_WP, X_WB, X_WB_pre, approach_W = _hand_poses(
+        grasp, spec.kind, X_WO, a_P, reach, standoff, lift_height, vertical_standoff,
+        row_O)
     return GraspPlan(
-        grasp_class=info.grasp_class, object_spec=spec, grasp_size=size, X_WO=X_WO,
+        grasp_class=grasp_class, object_spec=spec, grasp_size=size, X_WO=X_WO,
         X_WG=X_WG, X_WP=X_WP, X_WB=X_WB, X_WB_pregrasp=X_WB_pre, approach_W=approach_W,
-        q_grasp=sol.q, preshape_command=_command(q_pre), grasp_command=_command(sol.q),
-        close_command=_command(q_close), amplitudes=amplitudes,
-        grasp_amplitudes=grasp_amplitudes, p_PC_table1=c_table1,
-        p_PC=X_PG.translation().copy(), centre_source=source,
-        contact_error=sol.contact_error, table_height=float(table_height),
+        q_grasp=grasp.q_grasp.copy(), preshape_command=_command(grasp.q_pre),
+        grasp_command=_command(grasp.q_grasp), close_command=_command(grasp.q_close),
+        amplitudes=None if grasp.amplitudes is None else grasp.amplitudes.copy(),
+        grasp_amplitudes=grasp.grasp_amplitudes.copy(),
+        p_PC_table1=grasp_centre_palm(grasp_class, size),
+        p_PC=grasp.X_PG.translation().copy(), centre_source=grasp.centre_source,
+        contact_error=grasp.contact_error, table_height=float(table_height),
         lift_height=float(lift_height), coupling_ratio=float(coupling_ratio),
     )
 
@@ -545,30 +673,6 @@ def _deadline(time_budget: float | None) -> float | None:
     if time_budget is not None and not (np.isfinite(time_budget) and time_budget > 0):
         raise ValueError(f"time_budget must be a positive number of seconds, got {time_budget}")
     return None if time_budget is None else time.perf_counter() + float(time_budget)
-
-
-def _cached_solution(key, solve, info, kind: str, size: float, time_budget):
-    """``solve()``'s hand-IK answer, reused from an earlier call with the same ``key``
-    (exact: the answer depends only on what the key holds); raises when there is none."""
-    if key is not None and key in _SOLUTION_CACHE:
-        solution = _SOLUTION_CACHE[key]
-    else:
-        solution = solve()
-        if solution is _TIMED_OUT:
-            raise GraspPlanningTimeout(
-                f"time budget: the {info.name} search took over {time_budget:.1f} s "
-                f"without a grasp")
-        if key is not None:
-            if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
-                _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
-            _SOLUTION_CACHE[key] = solution
-    if solution is None:
-        raise GraspPlanningError(
-            f"unreachable: no collision-free {info.name} grasp puts the "
-            f"{'/'.join(info.fingers)} contacts on this {kind} (grasp width "
-            f"{size * 100:.1f} cm) from above the table with the approach of Table 2"
-        )
-    return solution
 
 
 def _height_above_table(X_WO: RigidTransform, table_height: float) -> float:
@@ -702,14 +806,15 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
     return None
 
 
-def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
+def _hand_poses(grasp, kind, X_WO, a_P, reach, standoff, lift_height,
                 vertical_standoff, row_O=(1.0, 0.0, 0.0)):
-    """``(X_WG, X_WP, X_WB, X_WB_pregrasp, approach_W)`` of an IK solution on the object.
+    """``(X_WG, X_WP, X_WB, X_WB_pregrasp, approach_W)`` of an :class:`ObjectFrameGrasp`
+    on the object at ``X_WO``.
 
     Raises ValueError when the base's grasp or stand-off pose (with the lift) is
     outside the floating wrist's travel.
     """
-    X_PG = sol.X_PO
+    X_PG, up = grasp.X_PG, grasp.up_G
     R_GP = X_PG.rotation().inverse().matrix()
     R_WG = _world_grasp_frame(kind, X_WO, up, row_O=row_O)
     forearm_W = R_WG @ R_GP @ np.array([0.0, 0.0, -1.0])  # palm -> forearm direction
@@ -721,10 +826,7 @@ def _hand_poses(kin, sol, kind, X_WO, up, a_P, reach, standoff, lift_height,
         R_WG = _yaw(R_WG, np.pi)
     X_WG = RigidTransform(RotationMatrix(R_WG), X_WO.translation())
     X_WP = X_WG @ X_PG.inverse()
-    # The forearm is welded at the IK plant's world origin, wrist joints at 0.
-    kin.fingertip_positions(sol.q)
-    X_BP = kin.palm.CalcPoseInWorld(kin.context)
-    X_WB = X_WP @ X_BP.inverse()
+    X_WB = X_WP @ grasp.X_BP.inverse()
     approach_W = X_WP.rotation().multiply(a_P)
     retreat = -approach_W if not vertical_standoff else np.array([0.0, 0.0, 1.0])
     X_WB_pre = RigidTransform(X_WB.rotation(), X_WB.translation() + standoff * retreat)

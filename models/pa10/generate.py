@@ -29,14 +29,16 @@ E2_ALONG_FOREARM = 0.200  # where the forearm roll joint sits (kinematically imm
 W2_ALONG_WRIST = 0.050  # where the flange roll joint sits (kinematically immaterial)
 
 # name, parent, axis, offset of the joint in the parent frame (z), lower, upper (deg),
-# velocity (rad/s), effort (N m), link mass (kg)
+# velocity (rad/s), effort (N m), mass (kg) of the link the joint moves (README.md,
+# "Masses and collision shapes": the PA-10's m2..m7 per joint; S2's link is the
+# seven-axis arm's S2 and S3 links together; S1's has no source)
 JOINTS = [
     ("S1", "base", "0 0 1", 0.0, -177, 177, 1.0, 232.0, 9.78),
-    ("S2", "link1", "0 1 0", BASE_TO_SHOULDER, -90, 90, 1.0, 232.0, 8.41),
-    ("E1", "link2", "0 1 0", UPPER_ARM, -137, 137, 2.0, 100.0, 3.51),
-    ("E2", "link3", "0 0 1", E2_ALONG_FOREARM, -255, 255, 2 * math.pi, 14.5, 4.31),
-    ("W1", "link4", "0 1 0", FOREARM - E2_ALONG_FOREARM, -165, 165, 2 * math.pi, 14.5, 3.45),
-    ("W2", "link5", "0 0 1", W2_ALONG_WRIST, -255, 255, 2 * math.pi, 14.5, 1.46),
+    ("S2", "link1", "0 1 0", BASE_TO_SHOULDER, -90, 90, 1.0, 232.0, 8.41 + 3.51),
+    ("E1", "link2", "0 1 0", UPPER_ARM, -137, 137, 2.0, 100.0, 4.31),
+    ("E2", "link3", "0 0 1", E2_ALONG_FOREARM, -255, 255, 2 * math.pi, 14.5, 3.45),
+    ("W1", "link4", "0 1 0", FOREARM - E2_ALONG_FOREARM, -165, 165, 2 * math.pi, 14.5, 1.46),
+    ("W2", "link5", "0 0 1", W2_ALONG_WRIST, -255, 255, 2 * math.pi, 14.5, 0.24),
 ]
 
 # Collision/visual cylinders per link: (radius, z_from, z_to) along the link's z

@@ -80,7 +80,10 @@ def test_pick_plan_reaches_every_pose_and_releases_over_the_hole(hamburg):
 
 def test_each_grasp_class_gets_a_time_budget(hamburg):
     from handle_drake.apps.pick.plan import CLASS_ORDER, PickPlanningError
+    from handle_drake.grasp.database import GraspDatabase
     from handle_drake.grasp.planning import clear_solution_cache
+
+    empty = GraspDatabase()  # the search the budget bounds, not the stored grasps
 
     clear_solution_cache()  # a cached answer would skip the search the budget bounds
     name, sphere = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "sphere")
@@ -88,7 +91,7 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     with pytest.raises(PickPlanningError) as error:
         plan_pick(hamburg, reach, name, "sphere", sphere.size,
                   initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
-                  grasp_budget=1e-6)
+                  grasp_budget=1e-6, grasp_db=empty)
     # Every class the sphere's size allows ran out of its budget; the others are too small.
     timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
                  in str(error.value)]
@@ -97,7 +100,7 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     with pytest.raises(PickPlanningError) as error:
         plan_pick(hamburg, reach, name, "sphere", sphere.size,
                   initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
-                  grasp_budget=None, total_budget=1e-6)
+                  grasp_budget=None, total_budget=1e-6, grasp_db=empty)
     assert "tripod: no grasp plan: time budget" in str(error.value)
     assert "parallel_extension: not tried: the grasp planning budget" in str(error.value)
 
@@ -126,10 +129,29 @@ def test_bystanders_are_welded_where_they_rest_and_the_target_stays_free(hamburg
         weld_bystanders(scene, "object_9")
 
 
-def test_pick_command_puts_the_sphere_in_the_box(capsys):
-    code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere"])
-    lines = capsys.readouterr().out.strip().splitlines()
+@pytest.mark.parametrize("close", ["reactive", "scripted"])
+def test_pick_command_puts_the_sphere_in_the_box(close, capsys):
+    import json
+
+    flags = ["--scripted-close"] if close == "scripted" else []
+    code = main(["pick", str(PATH), "--true-poses", "--kind", "sphere", "--json", *flags])
+    out = capsys.readouterr().out.strip()
+    lines = out.splitlines()
     assert lines[-1] == "in the box" and code == 0
+    result = json.loads("\n".join(lines[:-1]))
+    assert result["close"] == close and result["grasp_stored"]
+    # The ball was located in the hand after the lift and the release planned for it.
+    assert result["release_corrected"] and result["in_hand_contacts"] >= 2
+    if close == "reactive":
+        # The tactile close ran: the tripod's first, middle finger and thumb (channels
+        # 0, 1, 4) each stopped on a touch part-way, the idle ring and little fingers
+        # never closed; then the squeeze and the lift.
+        assert result["close_mode"] == "LIFT"
+        assert result["fingers_touched"] == [True, True, False, False, True]
+        closing = np.array(result["closing_at_squeeze"])
+        assert np.all((closing[[0, 1, 4]] > 0.1) & (closing[[0, 1, 4]] < 1.0))
+    else:
+        assert "close_mode" not in result
 
 
 @pytest.mark.parametrize("args, message", [

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses as dc
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +49,23 @@ def register(subparsers) -> None:
                    help="where to put it (the sorting box's hole for its kind)")
     p.add_argument("--true-poses", action="store_true",
                    help="plan on the scenario's true object poses instead of perceiving")
+    p.add_argument("--scripted-close", action="store_true",
+                   help="close the hand with the open-loop ramp to the planned closing "
+                        "command instead of the reactive tactile close")
+    p.add_argument("--no-release-correction", action="store_true",
+                   help="release where the plan put the object in the hand, without "
+                        "measuring it there after the lift")
     p.add_argument("--html", type=Path, default=None, help="save a self-contained HTML replay")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--grasp-db", type=Path, default=None, metavar="PATH",
+                   help="grasp database to plan with (default: the shipped one, "
+                        "handle_drake/apps/pick/data/grasp_database.json)")
+    p.add_argument("--build-grasp-db", action="store_true",
+                   help="compute the grasp database for the scenario's sorting-box objects "
+                        "(every grasp class of pick's class order) into --grasp-db or the "
+                        "shipped file, and exit; entries it holds are kept unless --rebuild")
+    p.add_argument("--rebuild", action="store_true",
+                   help="with --build-grasp-db: recompute every entry")
     p.set_defaults(func=_cmd_pick)
 
 
@@ -100,8 +116,14 @@ def choose_target(objects, base_xy, index=None, kind=None) -> int:
                       f"{[objects[i].kind for i in order]})")
 
 
-def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None) -> dict:
-    """Perceive (or read the truth), plan and execute one pick; returns the result."""
+def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
+         grasp_db=None, execute: bool = True, close: str = "reactive",
+         correct_release: bool = True) -> dict:
+    """Perceive (or read the truth), plan and execute one pick; returns the result.
+    ``grasp_db``: a GraspDatabase (default: the shipped one); ``execute=False``
+    stops after planning; ``close``: "reactive" or "scripted", ``correct_release``:
+    measure the object in the hand after the lift and release it where it is
+    (``execute_pick``)."""
     from handle_drake.apps.pick.execute import execute_pick
     from handle_drake.apps.pick.plan import PickPlanningError, plan_pick
     from handle_drake.apps.pick.reach import ArmReach
@@ -134,18 +156,33 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None) -
         np.asarray(t[1].X_WO.translation[:2], dtype=float), p_seen[:2]))
     world = dc.replace(scenario, object=seen[0], objects=seen[1:])
     seen_name = "object" if i == 0 else f"object_{i}"
+    start = time.perf_counter()
     reach = ArmReach(world, ignore=(seen_name,))
+    result["reach_model_s"] = time.perf_counter() - start
     result.update(target=true_name, kind=target.kind, true_kind=true_object.kind,
                   planned_xy=p_seen[:2].round(4).tolist())
     try:
         plan = plan_pick(world, reach, seen_name, target.kind, target.size,
                          target.X_WO.GetDeterministicValue(),
-                         np.asarray(scenario.hand.mount.initial_position or np.zeros(6)))
+                         np.asarray(scenario.hand.mount.initial_position or np.zeros(6)),
+                         grasp_db=grasp_db)
     except PickPlanningError as error:
         result["outcome"] = f"not in the box: {error}"
         return result
-    result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds))
-    outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html)
+    result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
+                  planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored)
+    if not execute:
+        result["outcome"] = "planned (not executed)"
+        return result
+    outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html,
+                           close=close, reach=reach if correct_release else None)
+    result.update(close=close, release_corrected=outcome.release_corrected,
+                  in_hand_offset_mm=outcome.in_hand_offset_mm,
+                  in_hand_turn_deg=outcome.in_hand_turn_deg,
+                  in_hand_contacts=outcome.in_hand_contacts)
+    if outcome.close_mode is not None:
+        result.update(close_mode=outcome.close_mode, fingers_touched=outcome.fingers_touched,
+                      closing_at_squeeze=outcome.closing_at_squeeze)
     result.update(outcome=outcome.reason, in_box=outcome.in_box,
                   final_position=outcome.p_WO_final.round(4).tolist(),
                   sim_s=outcome.sim_seconds, wall_s=outcome.wall_seconds)
@@ -171,13 +208,31 @@ def _cmd_pick(args) -> int:
     if not args.true_poses and not scenario.cameras:
         raise ValueError("pick: the scenario has no camera to perceive with; add one or "
                          "give --true-poses")
+    from handle_drake.apps.pick.plan import GRASP_DB, build_grasp_database
+    from handle_drake.grasp.database import GraspDatabase
+
+    if args.build_grasp_db:
+        path = args.grasp_db or GRASP_DB
+        database = build_grasp_database(scenario, path, rebuild=args.rebuild)
+        print(f"grasp database: {len(database)} entries "
+              f"({sum(g is not None for g in database.entries.values())} with a grasp) "
+              f"written to {path}")
+        return 0
+    if args.rebuild:
+        raise ValueError("--rebuild: only with --build-grasp-db")
+    grasp_db = GraspDatabase.load(args.grasp_db) if args.grasp_db is not None else None
+    if grasp_db is not None and grasp_db.stale:
+        print(f"grasp database {args.grasp_db}: {len(grasp_db.stale)} entries of another "
+              f"planner version ignored (searched afresh; rebuild with --build-grasp-db)")
     if args.scene_seed is not None:
         if args.scene_seed < 0:
             raise ValueError(f"--scene-seed: expected an integer >= 0, got {args.scene_seed}")
         from handle_drake.apps.pick.scenes import random_scene
 
         scenario = random_scene(scenario, args.scene_seed)
-    result = pick(scenario, args.true_poses, args.object, args.kind, args.html)
+    result = pick(scenario, args.true_poses, args.object, args.kind, args.html,
+                  grasp_db=grasp_db, close="scripted" if args.scripted_close else "reactive",
+                  correct_release=not args.no_release_correction)
     if args.json:
         print(json.dumps(result, indent=1))
     else:

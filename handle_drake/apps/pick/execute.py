@@ -4,9 +4,32 @@ The arm follows the plan's waypoints (and the paths between them) through
 ``arm.position``: each segment lasts long enough for the slowest joint at half
 its speed limit (at least ``MIN_SEGMENT`` s), linear in joint space, and the
 driver's own rate limit applies on top. The hand holds each waypoint's command
-through ``hand.position``; the close ramps over ``CLOSE_TIME`` s and holds
-``HOLD_TIME`` s before the lift; the release opens to the pre-shape and waits
-``SETTLE_TIME`` s for the object to fall. Success: the object's centre is in
+through ``hand.position``; the release opens to the pre-shape and waits
+``SETTLE_TIME`` s for the object to fall.
+
+The close (``close="reactive"``, the default) is the project's reactive tactile
+grasp (:class:`~handle_drake.systems.reactive_grasp.ReactiveGrasp`, report section
+3.3) on the station's ``hand.tactile``: when the arm stands at the grasp pose, each
+finger of the class closes from the pre-shape towards the plan's closing command
+until its fingertip feels the object, then all squeeze together; its hand command
+drives ``hand.position`` from then until the release. The approach is the arm's
+(the controller's own wrist command is not used): the controller is told that
+the hand has arrived when the arm's timeline reaches the grasp
+(:class:`_CloseTrigger`), and feels nothing before. The arm waits
+``REACTIVE_CLOSE_TIME`` s there (the longest close, the squeeze and the hold)
+before it lifts. ``close="scripted"``: the open-loop ramp to the closing command
+over ``CLOSE_TIME`` s, held ``HOLD_TIME`` s.
+
+The release is corrected by what the fingers feel (given the arm's ``reach``):
+the close can move the object in the hand (2.4 cm in a replay of a cuboid that
+then jammed on its hole's rim), and the release pose assumed the planned grasp.
+After the lift the object is located in the hand from its contacts with the hand
+(:func:`measure_in_hand`: each contact's point and the object's surface normal
+there, as fingertip sensors with contact location would give them, and the
+hand's pose from the arm's joints), and the carry and release are planned again
+for the object where it is (:func:`handle_drake.apps.pick.plan.replan_release`);
+the arm's trajectory from the lift on is replaced. Without contacts, or when no
+release is reachable with the measured grasp, the plan stands. Success: the object's centre is in
 the box (:func:`handle_drake.scene.plant.in_box`). A failure is told by what
 the object did: not lifted with the hand, dropped on the way, or stopped on
 the lid.
@@ -22,19 +45,88 @@ from __future__ import annotations
 
 import dataclasses as dc
 import time
+import warnings
 
 import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.systems.framework import BasicVector, LeafSystem
+from scipy.spatial.transform import Rotation
 
+from handle_drake.apps.pick.plan import replan_release
+from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.arm.model import get_arm_spec
+from handle_drake.geometry.objects import dimensions
 from handle_drake.scene.config import in_box, object_instance_name
-from handle_drake.station import MakeHandStation
+from handle_drake.station import GetPlant, MakeHandStation
+from handle_drake.systems.reactive_grasp import (
+    ReactiveGrasp,
+    ReactiveGraspParams,
+    finger_command_groups,
+)
 
-__all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "MIN_SEGMENT"]
+__all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "MIN_SEGMENT", "CLOSES",
+           "REACTIVE_CLOSE_TIME", "measure_in_hand", "locate_object"]
 
 MIN_SEGMENT = 0.4  # s
-CLOSE_TIME = 0.6  # s
-HOLD_TIME = 0.3  # s
+CLOSE_TIME = 0.6  # s, the scripted close's ramp
+HOLD_TIME = 0.3  # s, and its hold before the lift
 SETTLE_TIME = 1.2  # s
+CLOSES = ("reactive", "scripted")
+#: The reactive close's parameters: the controller's defaults (the lift is the arm's).
+REACTIVE_PARAMS = ReactiveGraspParams()
+#: Seconds the arm stands at the grasp for the reactive close: every finger closing
+#: all the way (``max_closing / close_rate``), the squeeze, the hold, and 0.1 s.
+REACTIVE_CLOSE_TIME = (REACTIVE_PARAMS.max_closing / REACTIVE_PARAMS.close_rate
+                       + REACTIVE_PARAMS.squeeze_time + REACTIVE_PARAMS.hold_time + 0.1)
+_FAR = 10.0  # m, the pose the close trigger reports before the grasp
+PRIOR_WEIGHT = 0.01  # the predicted orientation's weight against each contact normal
+
+
+class _CloseTrigger(LeafSystem):
+    """Starts a :class:`ReactiveGrasp` whose approach is the arm's: before ``t_start`` it
+    passes no touch (``tactile`` reads zero) and reports the hand ``_FAR`` from the
+    goal; from ``t_start`` on, the tactile forces as measured and the hand at the
+    goal (the arm's driver holds it at the grasp pose), so the controller closes."""
+
+    def __init__(self, n: int, goal6, t_start: float):
+        super().__init__()
+        self._goal = np.asarray(goal6, dtype=float)
+        self._t = float(t_start)
+        self._tactile = self.DeclareVectorInputPort("tactile", n)
+        self.DeclareVectorOutputPort("tactile", n, self._gated_tactile)
+        self.DeclareVectorOutputPort("wrist_pose_measured", 6, self._pose)
+
+    def _gated_tactile(self, context, output: BasicVector):
+        started = context.get_time() >= self._t
+        output.SetFromVector(self._tactile.Eval(context) if started
+                             else np.zeros(output.size()))
+
+    def _pose(self, context, output: BasicVector):
+        pose = self._goal.copy()
+        if context.get_time() < self._t:
+            pose[0] += _FAR
+        output.SetFromVector(pose)
+
+
+class _HandSwitch(LeafSystem):
+    """``hand.position``: the scripted command, but the reactive controller's between
+    ``t_from`` and ``t_to`` (the close, the lift and the carry)."""
+
+    def __init__(self, nu: int, t_from: float, t_to: float):
+        super().__init__()
+        self._window = (float(t_from), float(t_to))
+        self._scripted = self.DeclareVectorInputPort("scripted", nu)
+        self._reactive = self.DeclareVectorInputPort("reactive", nu)
+        self.DeclareVectorOutputPort("hand_position", nu, self._output)
+
+    def set_window(self, t_from: float, t_to: float) -> None:
+        """Moves the reactive window (the release was planned again)."""
+        self._window = (float(t_from), float(t_to))
+
+    def _output(self, context, output: BasicVector):
+        t = context.get_time()
+        inside = self._window[0] <= t < self._window[1]
+        output.SetFromVector((self._reactive if inside else self._scripted).Eval(context))
 
 
 @dc.dataclass
@@ -44,14 +136,27 @@ class PickOutcome:
     p_WO_final: np.ndarray
     sim_seconds: float
     wall_seconds: float
+    # The reactive close at the lift (None when scripted): its mode's name, the fingers
+    # that stopped on a touch and each finger's closing fraction when the squeeze began.
+    close_mode: str | None = None
+    fingers_touched: list | None = None
+    closing_at_squeeze: list | None = None
+    # The object in the hand after the lift (with a reach): how far (mm) and how much
+    # turned (deg) from the planned grasp it was measured, from how many contacts, and
+    # whether the release was planned again for it.
+    in_hand_offset_mm: float | None = None
+    in_hand_turn_deg: float | None = None
+    in_hand_contacts: int = 0
+    release_corrected: bool = False
 
     @property
     def real_time_rate(self) -> float:
         return self.sim_seconds / self.wall_seconds
 
 
-def _timeline(plan, velocity):
-    """(times, arm knots, hand knots, labels->time)."""
+def _timeline(plan, velocity, close_time=CLOSE_TIME, hold_time=HOLD_TIME):
+    """(times, arm knots, hand knots, labels->time); the close lasts ``close_time`` s
+    and is held ``hold_time`` s."""
     times, arm, hand, marks = [0.0], [plan.waypoints[0].q], [plan.waypoints[0].hand], {}
     t = 0.0
     for a, b in zip(plan.waypoints, plan.waypoints[1:], strict=False):
@@ -60,20 +165,157 @@ def _timeline(plan, velocity):
         for q in points:
             dt = max(MIN_SEGMENT if q is b.q else 0.05,
                      float(np.max(np.abs(q - previous) / (0.5 * np.asarray(velocity)))))
-            if b.label in ("close", "open"):
+            if b.label == "close":
+                dt = close_time
+            elif b.label == "open":
                 dt = CLOSE_TIME
             t += dt
             times.append(t)
             arm.append(q)
             hand.append(b.hand if b.label in ("close", "open") else a.hand)
             previous = q
-        if b.label == "close":
-            t += HOLD_TIME
+        if b.label == "close" and hold_time > 0:
+            t += hold_time
             times.append(t)
             arm.append(b.q)
             hand.append(b.hand)
         marks[b.label] = t
     return np.array(times), np.array(arm), np.array(hand), marks
+
+
+def _connect_reactive_close(builder, station, scenario, plan, marks, scripted_port):
+    """The reactive close between the grasp and the release (see the module doc)."""
+    grasp = plan.grasp
+    kind = scenario.hand.kind
+    groups = finger_command_groups(kind)
+    goal = np.asarray(grasp.wrist(grasp.X_WB))
+    controller = builder.AddNamedSystem("reactive_close", ReactiveGrasp(
+        goal, goal, grasp.preshape_command, grasp.close_command, groups,
+        params=dc.replace(REACTIVE_PARAMS, arrival_timeout=1e3)))
+    trigger = builder.AddNamedSystem("close_trigger", _CloseTrigger(
+        len(groups), goal, marks["grasp"]))
+    switch = builder.AddNamedSystem("hand_switch", _HandSwitch(
+        get_hand_spec(kind).num_actuated, marks["grasp"], marks["release"]))
+    builder.Connect(station.GetOutputPort("hand.tactile"), trigger.get_input_port())
+    builder.Connect(trigger.GetOutputPort("tactile"), controller.get_tactile_input_port())
+    builder.Connect(trigger.GetOutputPort("wrist_pose_measured"),
+                    controller.get_wrist_pose_measured_input_port())
+    builder.Connect(scripted_port, switch.GetInputPort("scripted"))
+    builder.Connect(controller.GetOutputPort("hand_position"), switch.GetInputPort("reactive"))
+    builder.Connect(switch.get_output_port(), station.GetInputPort("hand.position"))
+    return switch
+
+
+def measure_in_hand(plant, plant_context, contacts, target_instance, hand_instance,
+                    base_body: str, spec, X_OB_planned: RigidTransform):
+    """``(X_OB, contacts used)``: the object's pose in the hand base frame B from its
+    contacts with the hand (``contacts``: the plant's ContactResults), or None with
+    fewer than two. The prediction is the planned grasp (``X_OB_planned``) on the hand
+    where it is now. A sphere's centre lies one radius inside each contact point along
+    the surface normal (their mean; orientation as predicted). A cuboid's faces: each
+    contact's normal is matched to the predicted face it is nearest to, the rotation
+    that best turns the predicted faces' normals onto the measured ones (Wahba's
+    problem, :meth:`scipy.spatial.transform.Rotation.align_vectors`, the predicted
+    axes added with weight ``PRIOR_WEIGHT``) corrects the orientation, and the centre
+    is the least-squares point whose faces pass through the contact points (held at
+    the prediction along directions no contact constrains)."""
+    object_bodies = {int(i) for i in plant.GetBodyIndices(target_instance)}
+    hand_bodies = {int(i) for i in plant.GetBodyIndices(hand_instance)}
+    points, normals = [], []
+    for k in range(contacts.num_point_pair_contacts()):
+        info = contacts.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        nhat = np.asarray(info.point_pair().nhat_BA_W)  # from B into A
+        if a in object_bodies and b in hand_bodies:
+            normal = -nhat
+        elif b in object_bodies and a in hand_bodies:
+            normal = nhat
+        else:
+            continue
+        points.append(np.asarray(info.contact_point()))
+        normals.append(normal / np.linalg.norm(normal))
+    if len(points) < 2:
+        return None
+    X_WB = plant.GetBodyByName(base_body, hand_instance).EvalPoseInWorld(plant_context)
+    X_WO = locate_object(spec, X_WB @ X_OB_planned.inverse(), points, normals)
+    return X_WO.inverse() @ X_WB, len(points)
+
+
+def locate_object(spec, X_WO_predicted: RigidTransform, points, normals) -> RigidTransform:
+    """The pose of a sphere or cuboid ``spec`` touched at ``points`` (k, 3) where its
+    outward surface normals are ``normals`` (k, 3), near ``X_WO_predicted`` (see
+    :func:`measure_in_hand`)."""
+    points, normals = np.asarray(points, dtype=float), np.asarray(normals, dtype=float)
+    R, c = X_WO_predicted.rotation().matrix(), X_WO_predicted.translation()
+    d = dimensions(spec)
+    if spec.kind == "sphere":
+        c = np.mean(points - 0.5 * d["diameter"] * normals, axis=0)
+    else:
+        half = 0.5 * np.array([d["width"], d["depth"], d["height"]])
+        axis = np.argmax(np.abs(normals @ R), axis=1)
+        sign = np.sign(np.einsum("ij,ij->i", normals, R[:, axis].T))
+        faces = (R[:, axis] * sign).T
+        # The predicted axes as weak observations of themselves: a rotation about a
+        # direction no contact normal constrains (two opposite faces only) stays as
+        # predicted instead of being arbitrary.
+        weights = np.r_[np.ones(len(normals)), np.full(3, PRIOR_WEIGHT)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            turn = Rotation.align_vectors(np.vstack([normals, R.T]), np.vstack([faces, R.T]),
+                                          weights=weights)[0].as_matrix()
+        R, faces = turn @ R, faces @ turn.T
+        A, rhs, weight = faces, np.einsum("ij,ij->i", faces, points) - half[axis], 1e-3
+        c = np.linalg.solve(A.T @ A + weight * np.eye(3), A.T @ rhs + weight * c)
+    return RigidTransform(RotationMatrix(_orthonormal(R)), c)
+
+
+def _orthonormal(R) -> np.ndarray:
+    u, _, vt = np.linalg.svd(R)
+    return u @ vt
+
+
+def _correct_release(simulator, diagram, station, scenario, plan, reach, close, sources):
+    """Measures the object in the hand (now, after the lift) and, if a release is
+    reachable with it, replaces the arm's and the hand's trajectories from the lift on.
+    Returns ``(plan, times, marks, report)``."""
+    from pydrake.trajectories import PiecewisePolynomial
+
+    plant = GetPlant(station)
+    context = plant.GetMyContextFromRoot(simulator.get_context())
+    hand = plant.GetModelInstanceByName("hand")
+    X_OB_planned = plan.X_WO.inverse() @ plan.grasp.X_WB
+    measured = measure_in_hand(plant, context,
+                               station.GetOutputPort("contact_results").Eval(
+                                   station.GetMyContextFromRoot(simulator.get_context())),
+                               plant.GetModelInstanceByName(plan.target), hand,
+                               get_hand_spec(scenario.hand.kind).base_body,
+                               plan.grasp.object_spec, X_OB_planned)
+    if measured is None:
+        return plan, None, None, {}
+    X_OB, count = measured
+    error = X_OB_planned.inverse() @ X_OB
+    report = dict(in_hand_offset_mm=round(float(np.linalg.norm(
+        X_OB.translation() - X_OB_planned.translation())) * 1000, 1),
+        in_hand_turn_deg=round(float(np.degrees(error.rotation().ToAngleAxis().angle())), 1),
+        in_hand_contacts=count)
+    again = replan_release(scenario, reach, plan, X_OB)
+    if again is None:
+        return plan, None, None, report
+    plan = dc.replace(plan, waypoints=again[0], X_WO_release=again[1])
+    times, arm, hand_knots, marks = _plan_timeline(plan, scenario, close)
+    arm_source, hand_source, switch = sources
+    arm_source.UpdateTrajectory(PiecewisePolynomial.FirstOrderHold(times, arm.T))
+    hand_source.UpdateTrajectory(PiecewisePolynomial.FirstOrderHold(times, hand_knots.T))
+    if switch is not None:
+        switch.set_window(marks["grasp"], marks["release"])
+    return plan, times, marks, dict(report, release_corrected=True)
+
+
+def _plan_timeline(plan, scenario, close):
+    spec = get_arm_spec(scenario.hand.mount.kind)
+    if close == "reactive":
+        return _timeline(plan, spec.velocity, REACTIVE_CLOSE_TIME, 0.0)
+    return _timeline(plan, spec.velocity)
 
 
 def weld_bystanders(scenario, target: str):
@@ -92,10 +334,15 @@ def weld_bystanders(scenario, target: str):
     return dc.replace(scenario, object=first, objects=others)
 
 
-def execute_pick(scenario, plan, html=None, still_bystanders: bool = False) -> PickOutcome:
+def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
+                 close: str = "reactive", reach=None) -> PickOutcome:
     """Simulates ``plan`` on ``scenario``'s station (cameras left out; the other
-    objects welded with ``still_bystanders``); writes an HTML replay to
+    objects welded with ``still_bystanders``; ``close``: one of ``CLOSES``; with
+    ``reach``, the ArmReach the plan was made with, the release is corrected by the
+    object measured in the hand: see the module doc); writes an HTML replay to
     ``html`` when given."""
+    if close not in CLOSES:
+        raise ValueError(f"close: expected one of {CLOSES}, got {close!r}")
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import TrajectorySource
@@ -111,8 +358,7 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False) -> P
 
         meshcat = StartMeshcat()
     station = MakeHandStation(scenario, meshcat=meshcat)
-    spec = get_arm_spec(scenario.hand.mount.kind)
-    times, arm, hand, marks = _timeline(plan, spec.velocity)
+    times, arm, hand, marks = _plan_timeline(plan, scenario, close)
     builder = DiagramBuilder()
     builder.AddSystem(station)
     arm_source = builder.AddSystem(TrajectorySource(
@@ -121,7 +367,12 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False) -> P
     hand_source = builder.AddSystem(TrajectorySource(
         PiecewisePolynomial.FirstOrderHold(times, hand.T)))
     builder.Connect(arm_source.get_output_port(), station.GetInputPort("arm.position"))
-    builder.Connect(hand_source.get_output_port(), station.GetInputPort("hand.position"))
+    switch = None
+    if close == "reactive":
+        switch = _connect_reactive_close(builder, station, scenario, plan, marks,
+                                         hand_source.get_output_port())
+    else:
+        builder.Connect(hand_source.get_output_port(), station.GetInputPort("hand.position"))
     diagram = builder.Build()
     simulator = Simulator(diagram)
     context = simulator.get_mutable_context()
@@ -133,6 +384,14 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False) -> P
     start = time.perf_counter()
     simulator.AdvanceTo(marks["lift"])
     p_lift = position.Eval(station_context).copy()
+    close_report = _close_report(diagram, context) if close == "reactive" else {}
+    if reach is not None:
+        plan, new_times, new_marks, measured = _correct_release(
+            simulator, diagram, station, scenario, plan, reach, close,
+            (arm_source, hand_source, switch))
+        close_report.update(measured)
+        if new_times is not None:
+            times, marks = new_times, new_marks
     simulator.AdvanceTo(marks["release"])
     p_release = position.Eval(station_context).copy()
     end = times[-1] + SETTLE_TIME
@@ -147,17 +406,29 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False) -> P
         Path(html).parent.mkdir(parents=True, exist_ok=True)
         Path(html).write_text(meshcat.StaticHtml())
     inside = in_box(scenario, p)
+    reason = _judge(plan, inside, p0, p_lift, p_release, p)
+    return PickOutcome(inside, reason, p, end, wall, **close_report)
+
+
+def _close_report(diagram, context) -> dict:
+    controller = diagram.GetSubsystemByName("reactive_close")
+    c = controller.GetMyContextFromRoot(context)
+    return dict(close_mode=controller.get_mode(c).name,
+                fingers_touched=controller.fingers_touched(c).tolist(),
+                closing_at_squeeze=controller.closing_at_squeeze(c).round(3).tolist())
+
+
+def _judge(plan, inside, p0, p_lift, p_release, p) -> str:
+    """"in the box", or what the object did instead."""
     lifted = p_lift[2] - p0[2]
+    off = np.linalg.norm(p_release[:2] - plan.X_WO_release.translation()[:2])
     if inside:
-        reason = "in the box"
-    elif lifted < 0.5 * plan.grasp.lift_height:
-        reason = (f"not in the box: the grasp did not lift the object (it rose "
-                  f"{lifted * 100:.1f} cm of {plan.grasp.lift_height * 100:.0f})")
-    elif np.linalg.norm(p_release[:2] - plan.X_WO_release.translation()[:2]) > 0.03:
-        reason = (f"not in the box: dropped on the way (at the release it was "
-                  f"{np.linalg.norm(p_release[:2] - plan.X_WO_release.translation()[:2]) * 100:.1f}"
-                  f" cm off the hole)")
-    else:
-        reason = (f"not in the box: let go over the hole but stopped at "
-                  f"{np.round(p, 3).tolist()} (on the lid or the rim)")
-    return PickOutcome(inside, reason, p, end, wall)
+        return "in the box"
+    if lifted < 0.5 * plan.grasp.lift_height:
+        return (f"not in the box: the grasp did not lift the object (it rose "
+                f"{lifted * 100:.1f} cm of {plan.grasp.lift_height * 100:.0f})")
+    if off > 0.03:
+        return (f"not in the box: dropped on the way (at the release it was "
+                f"{off * 100:.1f} cm off the hole)")
+    return (f"not in the box: let go over the hole but stopped at "
+            f"{np.round(p, 3).tolist()} (on the lid or the rim)")

@@ -22,20 +22,33 @@ reason.
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.geometry.objects import ObjectSpec, resting_height
-from handle_drake.grasp.planning import plan_grasp
+from handle_drake.grasp.database import GraspDatabase, build_database
+from handle_drake.grasp.planning import grasp_key, plan_grasp
 from handle_drake.scene.config import box_pose, hole_centres
 
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
-           "GRASP_TOTAL_BUDGET",
-           "free_path"]
+           "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
+           "default_grasp_database", "grasp_db_requests", "build_grasp_database",
+           "free_path", "replan_release"]
+
+#: The pick application's grasp database (``handle-drake pick SCENARIO
+#: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
+#: (:mod:`handle_drake.grasp.database`).
+GRASP_DB = Path(__file__).resolve().parent / "data" / "grasp_database.json"
+#: A perceived object whose size is this close to a catalogue object's of its kind (the
+#: sorting box's holes name the catalogue) is that object: it is planned with the
+#: catalogue size, resting on the table, so the stored grasps apply.
+SIZE_TOLERANCE = 0.005  # m
 
 #: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
 #: through lift and carry in bench_pick first (lateral tripod let a cuboid swing 32 deg).
@@ -62,6 +75,63 @@ class PickPlanningError(ValueError):
     """No grasp class gives a reachable, collision-free pick; the message says why."""
 
 
+@functools.lru_cache(maxsize=1)
+def default_grasp_database() -> GraspDatabase:
+    """The shipped database (:data:`GRASP_DB`), read once per process."""
+    return GraspDatabase.load(GRASP_DB)
+
+
+def catalogue_size(scenario, kind: str, size: float) -> float:
+    """The size of the sorting box's ``kind`` object if ``size`` is within
+    ``SIZE_TOLERANCE`` of it, else ``size``."""
+    box = scenario.sorting_box
+    sizes = [h.size for h in (box.holes if box is not None else []) if h.kind == kind
+             and h.size]
+    near = min(sizes, key=lambda s: abs(s - size), default=None)
+    return float(near) if near is not None and abs(near - size) <= SIZE_TOLERANCE \
+        else float(size)
+
+
+def _as_catalogue(scenario, kind, size, X_WO):
+    """``(size, X_WO)``: the catalogue object's size (:func:`catalogue_size`) and, if
+    it is not ``size``, the pose of that object resting on the table where it was seen."""
+    known = catalogue_size(scenario, kind, size)
+    if known == size:
+        return size, X_WO
+    z = scenario.table.top_height + resting_height(ObjectSpec(kind=kind, size=known))
+    return known, RigidTransform(X_WO.rotation(), [*X_WO.translation()[:2], z])
+
+
+def grasp_db_requests(scenario) -> list:
+    """``(class, (kind, size), height)`` of every class of ``CLASS_ORDER`` on each
+    pickable object the scenario's sorting box has a hole for, resting on the table."""
+    out = []
+    for hole in scenario.sorting_box.holes if scenario.sorting_box is not None else []:
+        if hole.kind not in CLASS_ORDER or not hole.size:
+            continue
+        spec = ObjectSpec(kind=hole.kind, size=float(hole.size))
+        out += [(cls, (hole.kind, float(hole.size)), resting_height(spec))
+                for cls in CLASS_ORDER[hole.kind]]
+    return out
+
+
+def build_grasp_database(scenario, path=GRASP_DB, rebuild: bool = False,
+                         time_budget: float | None = None, log=print) -> GraspDatabase:
+    """(Re)computes the database at ``path`` for ``scenario``'s catalogue objects
+    (:func:`grasp_db_requests`); keeps its current entries unless ``rebuild``."""
+    path = Path(path)
+    database = GraspDatabase()
+    if path.exists() and not rebuild:
+        old = GraspDatabase.load(path)
+        database = GraspDatabase(old.entries)
+    build_database(grasp_db_requests(scenario), database,
+                   coupling_ratio=scenario.hand.coupling_ratio or 1.0,
+                   time_budget=time_budget, rebuild=rebuild, log=log)
+    database.save(path, meta={"built_by": "handle-drake pick SCENARIO --build-grasp-db",
+                              "table_height": scenario.table.top_height})
+    return database
+
+
 @dc.dataclass
 class Waypoint:
     label: str
@@ -81,6 +151,7 @@ class PickPlan:
     X_WO_release: RigidTransform
     seconds: dict  # grasp planning, IK and path times (s)
     attempts: dict  # class -> reason it was not taken
+    grasp_stored: bool = False  # the grasp came from the grasp database
 
     def summary(self) -> str:
         t = self.seconds
@@ -179,14 +250,20 @@ def _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearanc
 
 def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidTransform,
               q_start, classes=None, grasp_budget: float | None = GRASP_BUDGET,
-              total_budget: float | None = GRASP_TOTAL_BUDGET) -> PickPlan:
+              total_budget: float | None = GRASP_TOTAL_BUDGET,
+              grasp_db: GraspDatabase | None = None) -> PickPlan:
     """Plans picking ``target`` (a ``kind`` of ``size`` at ``X_WO``) into its hole
     (see the module doc). ``reach`` is an :class:`~handle_drake.apps.pick.reach.ArmReach`
     of the scenario ignoring ``target``; ``q_start`` the arm's joints now;
     ``grasp_budget`` the seconds each class's grasp search may take, ``total_budget``
     all of them together (None: unbounded).
-    The grasp planner reuses its hand-IK answer for a kind and size it planned before
-    (``plan_grasp``'s ``cache``), so a second pick of the same kind and size skips it."""
+
+    The grasps come from ``grasp_db`` (default: the shipped :data:`GRASP_DB`; an
+    empty ``GraspDatabase()`` for none): an object within ``SIZE_TOLERANCE`` of a
+    catalogue size is planned as that catalogue object resting on the table, so
+    every class's grasp is a stored one and only the arm's IK and paths are
+    computed. A kind or size the database lacks is searched (within the budgets) and
+    the answer reused for the rest of the process (``plan_grasp``'s ``cache``)."""
 
     if kind not in CLASS_ORDER:
         raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
@@ -194,6 +271,8 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     ratio = scenario.hand.coupling_ratio or 1.0
     hand = get_hand_spec(scenario.hand.kind)
     base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()
+    grasp_db = default_grasp_database() if grasp_db is None else grasp_db
+    size, X_WO = _as_catalogue(scenario, kind, size, X_WO)
     spec = ObjectSpec(kind=kind, size=size)
     q_start = np.asarray(q_start, dtype=float)
     attempts, seconds = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}
@@ -206,10 +285,13 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                 continue
             budget = left if budget is None else min(budget, left)
         start = time.perf_counter()
+        stored = grasp_key(cls, spec, X_WO.translation()[2] - scenario.table.top_height,
+                           ratio) in grasp_db
         try:
             grasp = plan_grasp(cls, spec, X_WO, table_height=scenario.table.top_height,
                                reach_direction=X_WO.translation()[:2] - base[:2],
-                               coupling_ratio=ratio, time_budget=budget)
+                               coupling_ratio=ratio, time_budget=budget,
+                               database=grasp_db)
         except ValueError as error:
             attempts[cls] = f"no grasp plan: {str(error)[:100]}"
             seconds["grasp"] += time.perf_counter() - start
@@ -240,9 +322,40 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
         if reason:
             attempts[cls] = reason
             continue
-        return PickPlan(target, kind, cls, grasp, waypoints, X_WO, X_release, seconds, attempts)
+        return PickPlan(target, kind, cls, grasp, waypoints, X_WO, X_release, seconds, attempts,
+                        stored)
     raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
         f"{c}: {r}" for c, r in attempts.items()))
+
+
+def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransform):
+    """The carry, release and open waypoints again, for the object held at
+    ``X_OB_measured`` (object to hand base, as measured after the lift) instead of the
+    planned grasp: ``(waypoints, X_WO_release)`` with the plan's waypoints up to the
+    lift unchanged, or None when no turn over the hole is reachable and collision
+    free with it (the caller keeps the plan)."""
+    ratio = scenario.hand.coupling_ratio or 1.0
+    hand = get_hand_spec(scenario.hand.kind)
+    grasp = plan.grasp
+    q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
+    q_closed = actuated_to_joint_positions(hand, grasp.close_command, ratio)
+    labels = [w.label for w in plan.waypoints]
+    head = [dc.replace(w) for w in plan.waypoints[:labels.index("lift") + 1]]
+    spec = grasp.object_spec
+    X_WO_lift = reach.hand_pose(head[-1].q) @ X_OB_measured.inverse()
+    seconds = {"ik": 0.0, "path": 0.0}
+    for X_WO_rel, X_WB_rel in _release_poses(scenario, plan.kind, spec, X_WO_lift,
+                                              X_OB_measured):
+        tail = [("carry", _raised(X_WB_rel, CARRY_HEIGHT), q_closed, grasp.close_command),
+                ("release", X_WB_rel, q_closed, grasp.close_command),
+                ("open", None, q_open, grasp.preshape_command)]
+        trial = list(head)
+        if _solve_chain(reach, tail, trial, seconds):
+            continue
+        moved = trial[len(head) - 1:]
+        if not _connect(reach, moved, seconds):
+            return trial, X_WO_rel
+    return None
 
 
 def _solve_chain(reach, chain, waypoints, seconds) -> str:

@@ -1,0 +1,207 @@
+"""A grasp database: the planner's answers precomputed, stored in the object's frame.
+
+The grasp planner's hand-IK search (:func:`handle_drake.grasp.planning.plan_grasp`)
+takes seconds to a minute per grasp class, but its answer does not depend on where the
+object stands: :class:`~handle_drake.grasp.planning.ObjectFrameGrasp` holds the grasp
+frame in the palm, the palm in the hand base and the grasp, pre-shape and closing
+postures, and :func:`~handle_drake.grasp.planning.place_grasp` puts it on the object
+wherever it stands. A :class:`GraspDatabase` stores these answers (a failed search too,
+as "no grasp") per request, keyed by :func:`~handle_drake.grasp.planning.grasp_key`:
+(hand, grasp class, object kind, shape and dimensions, height above the table, coupling
+ratio). The file also records the planner version
+(:data:`~handle_drake.grasp.planning.PLANNER_VERSION`).
+
+Validation: an entry is used only for a request with the same key (another object size
+or resting height is another key), and only if the file's planner version is the
+planner's own; entries of another version are stale (:attr:`GraspDatabase.stale`) and
+are never returned, so the planner searches afresh. :func:`build_database` (re)computes
+entries; ``handle-drake pick SCENARIO --build-grasp-db`` builds the pick application's
+database for a scenario's catalogue objects.
+
+The file is JSON (numbers as Python writes them, so a loaded grasp is the computed one
+to the last bit).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from handle_drake.grasp.planning import (
+    PLANNER_VERSION,
+    GraspPlanningTimeout,
+    ObjectFrameGrasp,
+    grasp_key,
+    object_frame_grasp,
+)
+from handle_drake.grasp.taxonomy import grasp_info
+
+__all__ = ["GraspDatabase", "GraspDatabaseError", "build_database", "FORMAT"]
+
+FORMAT = "handle_drake.grasp_database/1"
+_MISSING = object()
+
+
+class GraspDatabaseError(ValueError):
+    """A grasp database file that cannot be read (names the file and the field)."""
+
+
+def _key_to_json(key: tuple) -> dict:
+    hand, cls, kind, shape, dims, height, ratio = key
+    return {"hand": hand, "grasp_class": cls, "kind": kind, "shape": shape,
+            "dims": list(dims), "height": height, "coupling_ratio": ratio}
+
+
+def _key_from_json(d: dict) -> tuple:
+    return (str(d["hand"]), str(d["grasp_class"]), str(d["kind"]), str(d["shape"]),
+            tuple(float(v) for v in d["dims"]), float(d["height"]),
+            float(d["coupling_ratio"]))
+
+
+def _grasp_to_json(g: ObjectFrameGrasp) -> dict:
+    return {
+        "X_PG": g.X_PG.GetAsMatrix4().tolist(), "up_G": g.up_G.tolist(),
+        "centre_source": g.centre_source, "X_BP": g.X_BP.GetAsMatrix4().tolist(),
+        "q_grasp": g.q_grasp.tolist(), "q_pre": g.q_pre.tolist(),
+        "q_close": g.q_close.tolist(), "contact_error": g.contact_error,
+        "amplitudes": None if g.amplitudes is None else g.amplitudes.tolist(),
+        "grasp_amplitudes": g.grasp_amplitudes.tolist(),
+    }
+
+
+def _grasp_from_json(key: tuple, d: dict) -> ObjectFrameGrasp:
+    def pose(name):
+        m = np.asarray(d[name], dtype=float)
+        if m.shape != (4, 4):
+            raise ValueError(f"{name}: expected a 4x4 matrix, got shape {m.shape}")
+        return RigidTransform(m)
+
+    def vector(name, n=None):
+        v = np.asarray(d[name], dtype=float)
+        if v.ndim != 1 or (n is not None and v.size != n) or not np.isfinite(v).all():
+            raise ValueError(f"{name}: expected {n or 'a list of'} finite numbers")
+        return v
+
+    return ObjectFrameGrasp(
+        key=key, X_PG=pose("X_PG"), up_G=vector("up_G", 3),
+        centre_source=str(d["centre_source"]), X_BP=pose("X_BP"),
+        q_grasp=vector("q_grasp", 24), q_pre=vector("q_pre", 24),
+        q_close=vector("q_close", 24), contact_error=float(d["contact_error"]),
+        amplitudes=None if d["amplitudes"] is None else vector("amplitudes"),
+        grasp_amplitudes=vector("grasp_amplitudes"))
+
+
+class GraspDatabase:
+    """Stored planner answers (see the module doc); ``get(key, default)`` is what
+    ``plan_grasp(database=)`` asks. ``stale``: keys read from the file that belong to
+    another planner version (never returned)."""
+
+    def __init__(self, entries: dict | None = None, version: int = PLANNER_VERSION,
+                 path: Path | None = None, stale: list | None = None):
+        self.entries: dict = dict(entries or {})
+        self.version = int(version)
+        self.path = path
+        self.stale: list = list(stale or [])
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __contains__(self, key) -> bool:
+        return self.version == PLANNER_VERSION and key in self.entries
+
+    def get(self, key, default=None):
+        """The stored answer for ``key`` (an ObjectFrameGrasp, or None: no grasp
+        exists), or ``default`` when there is none of this planner version."""
+        if self.version != PLANNER_VERSION:
+            return default
+        return self.entries.get(key, default)
+
+    def put(self, key, grasp: ObjectFrameGrasp | None) -> None:
+        if self.version != PLANNER_VERSION:
+            raise ValueError(f"cannot add to a database of planner version {self.version} "
+                             f"(this planner is version {PLANNER_VERSION})")
+        self.entries[key] = grasp
+
+    # ------------------------------------------------------------------ file
+
+    @classmethod
+    def load(cls, path) -> GraspDatabase:
+        """Reads ``path``; entries of another planner version are kept only in
+        :attr:`stale`. Raises :class:`GraspDatabaseError` naming the bad field."""
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text())
+        except FileNotFoundError:
+            raise GraspDatabaseError(f"grasp database {path}: no such file") from None
+        except (OSError, json.JSONDecodeError) as error:
+            raise GraspDatabaseError(f"grasp database {path}: not readable JSON "
+                                     f"({error})") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise GraspDatabaseError(f"grasp database {path}: format: expected {FORMAT!r}")
+        version = data.get("planner_version")
+        if not isinstance(version, int):
+            raise GraspDatabaseError(f"grasp database {path}: planner_version: expected an "
+                                     f"integer, got {version!r}")
+        entries, stale = {}, []
+        for i, item in enumerate(data.get("entries", [])):
+            try:
+                key = _key_from_json(item["key"])
+                grasp = None if item["grasp"] is None else _grasp_from_json(key,
+                                                                            item["grasp"])
+            except (KeyError, TypeError, ValueError) as error:
+                raise GraspDatabaseError(f"grasp database {path}: entries[{i}]: "
+                                         f"{error}") from None
+            if version == PLANNER_VERSION:
+                entries[key] = grasp
+            else:
+                stale.append(key)
+        if version != PLANNER_VERSION:
+            return cls({}, PLANNER_VERSION, path, stale)
+        return cls(entries, version, path)
+
+    def save(self, path=None, meta: dict | None = None) -> Path:
+        path = Path(path or self.path)
+        items = [{"key": _key_to_json(k),
+                  "grasp": None if g is None else _grasp_to_json(g)}
+                 for k, g in sorted(self.entries.items(), key=lambda kv: repr(kv[0]))]
+        data = {"format": FORMAT, "planner_version": self.version, "meta": meta or {},
+                "entries": items}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(data, indent=1) + "\n")
+        self.path = path
+        return path
+
+
+def build_database(requests, database: GraspDatabase | None = None,
+                   coupling_ratio: float = 1.0, time_budget: float | None = None,
+                   rebuild: bool = False, log=print) -> GraspDatabase:
+    """Computes the answers for ``requests`` (``(grasp_class, (kind, size), height)``:
+    the object's centre ``height`` above the table) into ``database`` (a new one by
+    default), skipping keys it holds unless ``rebuild``. A search that runs out of
+    ``time_budget`` is reported and not stored (the planner searches again when
+    asked)."""
+    database = GraspDatabase() if database is None else database
+    for grasp_class, obj, height in requests:
+        key = grasp_key(grasp_class, obj, height, coupling_ratio)
+        if key in database and not rebuild:
+            continue
+        start = time.perf_counter()
+        name = grasp_info(grasp_class).name
+        try:
+            grasp = object_frame_grasp(grasp_class, obj, height, coupling_ratio,
+                                       time_budget=time_budget)
+        except GraspPlanningTimeout:
+            log(f"{name} on {obj}: no answer within {time_budget} s (not stored)")
+            continue
+        except ValueError as error:  # the class does not take this size
+            log(f"{name} on {obj}: {error} (not stored)")
+            continue
+        database.put(key, grasp)
+        log(f"{name} on {obj} at {height:.4f} m: "
+            f"{'no grasp' if grasp is None else 'grasp'} "
+            f"({time.perf_counter() - start:.1f} s)")
+    return database

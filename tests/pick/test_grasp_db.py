@@ -1,0 +1,164 @@
+"""The grasp database: stored grasps equal fresh plans, stale ones are never used, and a
+pick plans with stored grasps only (issue 33)."""
+
+import json
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from handle_drake.apps.pick.plan import (
+    CLASS_ORDER,
+    GRASP_DB,
+    catalogue_size,
+    default_grasp_database,
+    grasp_db_requests,
+    plan_pick,
+)
+from handle_drake.apps.pick.reach import ArmReach
+from handle_drake.base.models import diagrams_dir
+from handle_drake.cli import main
+from handle_drake.grasp import planning
+from handle_drake.grasp.database import GraspDatabase, GraspDatabaseError, build_database
+from handle_drake.grasp.planning import (
+    PLANNER_VERSION,
+    clear_solution_cache,
+    grasp_key,
+    plan_grasp,
+    resting_pose,
+)
+from handle_drake.scenario import LoadScenario
+from handle_drake.scene.config import initial_pose, scene_objects
+
+PATH = diagrams_dir() / "hamburg_setup.yaml"
+
+
+@pytest.fixture(scope="module")
+def hamburg():
+    return LoadScenario(filename=PATH)
+
+
+@pytest.fixture
+def searches(monkeypatch):
+    """The hand-IK searches run (``_solve_contacts`` calls), with an empty cache."""
+    clear_solution_cache()
+    calls = []
+    solve = planning._solve_contacts
+
+    def counting(*args, **kwargs):
+        calls.append(args[0].grasp_class.value)
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(planning, "_solve_contacts", counting)
+    yield calls
+    clear_solution_cache()
+
+
+def _same_plan(a, b, atol=1e-9):
+    for name in ("X_WB", "X_WB_pregrasp", "X_WP", "X_WG"):
+        np.testing.assert_allclose(getattr(a, name).GetAsMatrix4(),
+                                   getattr(b, name).GetAsMatrix4(), atol=atol, err_msg=name)
+    for name in ("preshape_command", "grasp_command", "close_command", "q_grasp",
+                 "grasp_amplitudes", "p_PC", "approach_W"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), atol=atol,
+                                   err_msg=name)
+    assert a.centre_source == b.centre_source
+    assert a.contact_error == pytest.approx(b.contact_error, abs=atol)
+
+
+@pytest.mark.parametrize("grasp_class, kind", [("tripod", "sphere"),
+                                               ("parallel_extension", "cuboid")])
+def test_a_database_grasp_equals_the_freshly_planned_one(hamburg, searches, grasp_class,
+                                                         kind):
+    """The shipped database's grasp, placed on an object standing elsewhere and turned,
+    is the plan a fresh search gives there (the classes the picks take)."""
+    database = GraspDatabase.load(GRASP_DB)
+    X0 = resting_pose(kind, 0.06, table_height=hamburg.table.top_height)
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.9), X0.translation() + [0.12, -0.2, 0.0])
+    reach = (0.4, 1.0)
+    stored = plan_grasp(grasp_class, (kind, 0.06), X_WO, table_height=hamburg.table.top_height,
+                        reach_direction=reach, coupling_ratio=hamburg.hand.coupling_ratio,
+                        cache=False, database=database)
+    assert searches == []  # no hand-IK search: the grasp came from the file
+    fresh = plan_grasp(grasp_class, (kind, 0.06), X_WO, table_height=hamburg.table.top_height,
+                       reach_direction=reach, coupling_ratio=hamburg.hand.coupling_ratio,
+                       cache=False)
+    assert searches == [grasp_class]
+    _same_plan(stored, fresh)
+
+
+def test_the_shipped_database_answers_every_request_of_the_hamburg_catalogue(hamburg):
+    database = default_grasp_database()
+    assert database.stale == []
+    ratio = hamburg.hand.coupling_ratio
+    requests = grasp_db_requests(hamburg)
+    assert {obj[0] for _, obj, _ in requests} == set(CLASS_ORDER)
+    for grasp_class, obj, height in requests:
+        key = grasp_key(grasp_class, obj, height, ratio)
+        if key not in database:  # only the classes whose size range excludes the object
+            with pytest.raises(ValueError, match="too large|too small"):
+                planning.check_size(grasp_class, planning.grasp_dims(
+                    planning._object_spec(obj))[1][0])
+
+
+def test_a_stale_entry_is_searched_again_never_used(tmp_path, searches):
+    obj = ("sphere", 0.06)
+    X_WO = resting_pose(*obj)
+    database = build_database([("tripod", obj, X_WO.translation()[2])], log=lambda _: None)
+    assert searches == ["tripod"] and len(database) == 1
+    path = database.save(tmp_path / "db.json")
+    searches.clear()
+    clear_solution_cache()
+    plan_grasp("tripod", obj, X_WO, cache=False, database=GraspDatabase.load(path))
+    assert searches == []
+    # The same file written by another planner version: read as stale, not used.
+    data = json.loads(path.read_text())
+    data["planner_version"] = PLANNER_VERSION + 1
+    path.write_text(json.dumps(data))
+    stale = GraspDatabase.load(path)
+    assert len(stale) == 0 and len(stale.stale) == 1
+    plan_grasp("tripod", obj, X_WO, cache=False, database=stale)
+    assert searches == ["tripod"]
+    # Another size is another key: not answered by the 6 cm ball's entry.
+    searches.clear()
+    plan_grasp("tripod", ("sphere", 0.055), resting_pose("sphere", 0.055), cache=False,
+               database=database)
+    assert searches == ["tripod"]
+
+
+@pytest.mark.parametrize("text, field", [
+    ("{", "not readable JSON"),
+    ('{"format": "other"}', "format"),
+    ('{"format": "handle_drake.grasp_database/1", "planner_version": "1"}', "planner_version"),
+    ('{"format": "handle_drake.grasp_database/1", "planner_version": 1, '
+     '"entries": [{"key": {"hand": "shadow"}}]}', r"entries\[0\]"),
+])
+def test_a_bad_database_file_is_refused_naming_the_field(tmp_path, text, field):
+    path = tmp_path / "db.json"
+    path.write_text(text)
+    with pytest.raises(GraspDatabaseError, match=field):
+        GraspDatabase.load(path)
+
+
+def test_the_pick_command_refuses_a_bad_database_in_one_line(tmp_path, capsys):
+    path = tmp_path / "db.json"
+    path.write_text("{")
+    assert main(["pick", str(PATH), "--true-poses", "--grasp-db", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "grasp database" in err[0] and "Traceback" not in err[0]
+
+
+def test_a_pick_plans_with_stored_grasps_only_even_on_a_perceived_size(hamburg, searches):
+    """A perceived ball 2 mm small is the catalogue's 6 cm ball: planned with its size and
+    the stored grasp, no hand-IK search, the grasp resting on the table."""
+    assert catalogue_size(hamburg, "sphere", 0.058) == pytest.approx(0.06)
+    assert catalogue_size(hamburg, "sphere", 0.05) == pytest.approx(0.05)  # not the ball
+    name, sphere = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "sphere")
+    reach = ArmReach(hamburg, ignore=(name,))
+    X_true = initial_pose(sphere, hamburg.table)
+    X_seen = RigidTransform(X_true.rotation(), X_true.translation() - [0, 0, 0.001])
+    plan = plan_pick(hamburg, reach, name, "sphere", 0.058, X_seen,
+                     hamburg.hand.mount.initial_position)
+    assert searches == []
+    assert plan.grasp_stored and plan.grasp.object_spec.size == pytest.approx(0.06)
+    assert plan.X_WO.translation()[2] == pytest.approx(X_true.translation()[2], abs=1e-9)
