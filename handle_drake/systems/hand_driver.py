@@ -80,6 +80,7 @@ class PdHandDriver(LeafSystem):
         self._q_index, self._v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
         nq = len(spec.joint_names)
         self._initial = np.clip(initial_command, self._lower, self._upper)
+        self._desired_buffer = np.zeros(2 * nu)
 
         self._command_port = self.DeclareVectorInputPort("position", nu)
         self._plant_state_port = self.DeclareVectorInputPort(
@@ -121,20 +122,25 @@ class PdHandDriver(LeafSystem):
         if not self._command_port.HasValue(context):
             return self._initial
         target = self._command_port.Eval(context)
-        if not np.all(np.isfinite(target)):
+        if not np.isfinite(target).all():
             # A non-finite command is ignored (the hand holds), never sent to the PD loops.
             return context.get_discrete_state(self._command_state).value()
-        return np.clip(target, self._lower, self._upper)
+        # np.clip's values (min(max(.)) is what it computes), without its wrapper's cost:
+        # this runs every control period.
+        return np.minimum(np.maximum(target, self._lower), self._upper)
 
     def _desired(self, command) -> np.ndarray:
         return np.concatenate([command[self._actuator_order], np.zeros(len(command))])
 
     def _update_command(self, context, discrete_state):
         current = context.get_discrete_state(self._command_state).value()
-        step = np.clip(self.target(context) - current, -self._max_step, self._max_step)
+        step = np.minimum(np.maximum(self.target(context) - current, -self._max_step),
+                          self._max_step)
         command = current + step
         discrete_state.set_value(self._command_state, command)
-        discrete_state.set_value(self._desired_state, self._desired(command))
+        desired = self._desired_buffer  # [q_d; 0]: only the first half changes
+        desired[:len(command)] = command[self._actuator_order]
+        discrete_state.set_value(self._desired_state, desired)
 
     def set_initial_command(self, context, command):
         """Sets the held command (for resets); clamped to the limits."""
@@ -144,6 +150,10 @@ class PdHandDriver(LeafSystem):
 
 
 WRIST_JOINTS = ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw", "wrist_pitch", "wrist_roll")
+
+
+# pose_to_wrist_joints as an index: joints[i] = pose6[_POSE6_TO_WRIST_JOINTS[i]].
+_POSE6_TO_WRIST_JOINTS = np.array([0, 1, 2, 5, 4, 3])
 
 
 def pose_to_wrist_joints(pose6: np.ndarray) -> np.ndarray:
@@ -175,6 +185,10 @@ class WristDriver(LeafSystem):
         if initial.shape != (6,):
             raise ValueError(f"initial pose: expected 6 values, got {initial.shape}")
         self._actuator_order = actuated_order(plant, model_instance, WRIST_JOINTS)
+        # pose6 -> desired joint positions in one gather (pose_to_wrist_joints, then
+        # actuator order), and the [q_d; 0] buffer the update fills.
+        self._pose_to_desired = _POSE6_TO_WRIST_JOINTS[self._actuator_order]
+        self._desired_buffer = np.zeros(12)
         self._q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
         self._pose_port = self.DeclareVectorInputPort("pose", 6)
         self._plant_state_port = self.DeclareVectorInputPort(
@@ -198,8 +212,10 @@ class WristDriver(LeafSystem):
         if not self._pose_port.HasValue(context):
             return
         pose = self._pose_port.Eval(context)
-        if np.all(np.isfinite(pose)):
-            discrete_state.set_value(self._desired_state, self._desired(pose))
+        if np.isfinite(pose).all():
+            desired = self._desired_buffer
+            desired[:6] = pose[self._pose_to_desired]
+            discrete_state.set_value(self._desired_state, desired)
 
     def _calc_pose_measured(self, context, out):
         x, y, z, yaw, pitch, roll = self._plant_state_port.Eval(context)[self._q_index]
