@@ -96,3 +96,35 @@ def test_the_station_logs_what_the_reference_systems_log(monkeypatch, contact_mo
     assert fast_logs.keys() == reference_logs.keys()
     for name, log in fast_logs.items():
         np.testing.assert_array_equal(log.data(), reference_logs[name].data(), err_msg=name)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_non_finite_hand_command_is_ignored_and_a_finite_one_rate_limited(bad):
+    """The hand driver's update keeps its rules: a command with any non-finite entry
+    holds the current command; a finite one moves it by at most max_joint_velocity x
+    control_period per update, clamped to the joint limits."""
+    from pydrake.systems.analysis import Simulator
+
+    from handle_drake.station import MakeHandStation
+
+    scenario = LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO)
+    station = MakeHandStation(scenario)
+    driver = station.GetSubsystemByName("hand_driver")
+    simulator = Simulator(station)
+    context = simulator.get_mutable_context()
+    commanded = station.GetOutputPort("hand.position_commanded")
+    initial = commanded.Eval(context).copy()
+    command = initial.copy()
+    command[3] = bad
+    station.GetInputPort("hand.position").FixValue(context, command)
+    simulator.AdvanceTo(0.02)
+    np.testing.assert_array_equal(commanded.Eval(context), initial)
+
+    target = initial + 10.0  # far beyond every upper limit
+    station.GetInputPort("hand.position").FixValue(context, target)
+    period = scenario.driver.control_period
+    simulator.AdvanceTo(0.02 + 2.5 * period)  # three updates: 0.02, +T, +2T
+    moved = commanded.Eval(context) - initial
+    step = scenario.driver.max_joint_velocity * period
+    upper = driver._upper
+    np.testing.assert_allclose(moved, np.minimum(3 * step, upper - initial), rtol=0, atol=1e-12)
