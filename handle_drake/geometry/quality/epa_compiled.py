@@ -1,0 +1,220 @@
+"""The EPA loop of :mod:`.hull` for a finite wrench set, compiled with numba.
+
+The same steps as ``hull._Epa`` (nearest facet, support point, visible facets, the
+horizon by the facets' Zobrist ridge keys, new facets' normals by one 6x6 LAPACK
+``gesv`` each, the exact ridge-structure check at the end), on plain arrays in one
+compiled call instead of ~50 numpy calls per added vertex. The arithmetic is numpy's,
+bit for bit: the support values and the visibility test by the same BLAS calls (gemm
+``u W^T``, gemv ``N s``; numba calls the OpenBLAS scipy ships), the normal by the same
+LAPACK ``gesv``, its norm summed in order as ``np.add.reduce`` does for 6 terms, and
+the offset summed as ``np.einsum("ij,ij->i")`` does (two SSE2 lanes:
+``(p0 + p2 + p4) + (p1 + p3 + p5)``); ``tests/quality`` compares the radii with the
+numpy EPA bit for bit. (With plain loops for the support values, 36 of 364 random
+grasps took another path on near-ties and ended 1e-14 away.)
+
+``epa_loop`` returns a status: 0 converged (radius and normal valid), 1 the EPA gave
+up (no visible facet, iteration limit, broken ridge structure): the caller falls back
+to qhull as the numpy EPA does; 2 too many vertices (the numpy EPA's OverflowError).
+The first call compiles (cached on disk by numba: ``cache=True``).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["epa_loop"]
+
+DIM = 6
+
+
+@numba.njit(cache=True)
+def _oriented(V, center, ridge, vi, n_out):
+    """Unit outward normal and offset of the facet ``ridge + [vi]`` (as hull._Epa._oriented)."""
+    A = np.empty((DIM, DIM))
+    for c in range(DIM):
+        p0 = V[ridge[0], c]
+        for k in range(1, DIM - 1):
+            A[k - 1, c] = V[ridge[k], c] - p0
+        A[DIM - 2, c] = V[vi, c] - p0
+        A[DIM - 1, c] = p0 - center[c]
+    rhs = np.zeros((DIM, 1))
+    rhs[DIM - 1, 0] = 1.0
+    x = np.linalg.solve(A, rhs)
+    sq = 0.0  # np.add.reduce of 6 terms: in order from 0
+    for c in range(DIM):
+        sq += x[c, 0] * x[c, 0]
+    norm = np.sqrt(sq)
+    for c in range(DIM):
+        n_out[c] = x[c, 0] / norm
+    # np.einsum("ij,ij->i") of 6 terms (SSE2, two lanes): (p0 + p2 + p4) + (p1 + p3 + p5)
+    even = n_out[0] * V[ridge[0], 0]
+    odd = n_out[1] * V[ridge[0], 1]
+    even += n_out[2] * V[ridge[0], 2]
+    odd += n_out[3] * V[ridge[0], 3]
+    even += n_out[4] * V[ridge[0], 4]
+    odd += n_out[5] * V[ridge[0], 5]
+    return even + odd
+
+
+@numba.njit(cache=True)
+def epa_loop(W, V0, F0, N0, b0, H0, center, vertex_hash, eps, gap_tol, max_iterations):
+    """Runs the EPA from the initial simplex (``V0`` 7 vertices, facets ``F0/N0/b0/H0``).
+
+    Returns ``(status, radius, u)``.
+    """
+    m = W.shape[0]
+    max_vertices = vertex_hash.shape[0]
+    V = np.empty((64, DIM))
+    nv = V0.shape[0]
+    V[:nv] = V0
+    cap_f = 256
+    F = np.zeros((cap_f, DIM), dtype=np.int64)
+    N = np.zeros((cap_f, DIM))
+    b = np.full(cap_f, np.inf)
+    H = np.zeros(cap_f, dtype=np.int64)
+    nf = F0.shape[0]
+    F[:nf], N[:nf], b[:nf], H[:nf] = F0, N0, b0, H0
+    u = np.zeros(DIM)
+    ridge = np.empty(DIM - 1, dtype=np.int64)
+    WT = W.T  # F-contiguous view, as numpy's W.T
+    for _ in range(max_iterations):
+        j = 0
+        for i in range(1, nf):
+            if b[i] < b[j]:
+                j = i
+        # support point of conv(W) in N[j] (hull.finite_support)
+        vals = np.dot(N[j:j + 1], WT)  # BLAS gemm, as numpy's u[None, :] @ W.T
+        best, arg = -np.inf, 0
+        for r in range(m):
+            if vals[0, r] > best:
+                best, arg = vals[0, r], r
+        if best - b[j] <= gap_tol:
+            u[:] = N[j]
+            if _consistent(V, nv, F, N, b, nf):
+                return 0, b[j], u
+            return 1, 0.0, u
+        s = W[arg]
+        # visible facets
+        d = np.dot(N[:nf], s) - b[:nf]  # BLAS gemv, as numpy's N @ s - b
+        vis = np.empty(nf, dtype=np.int64)
+        nvis = 0
+        for i in range(nf):
+            if d[i] > eps:
+                vis[nvis] = i
+                nvis += 1
+        if nvis == 0:
+            return 1, 0.0, u
+        if nv >= max_vertices:
+            return 2, 0.0, u
+        if nv == V.shape[0]:
+            V = np.concatenate((V, np.empty_like(V)))
+        V[nv] = s
+        vi = nv
+        nv += 1
+        new, nnew = _horizon(F, H, vis, nvis, vertex_hash)
+        if nf + nnew > cap_f:
+            cap_f = 2 * (nf + nnew)
+            F, N, b, H = _grown(F, N, b, H, nf, cap_f)
+        for q in range(nnew):
+            f = vis[new[q] // DIM]
+            jj = new[q] % DIM
+            w = 0
+            for k in range(DIM):
+                if k != jj:
+                    ridge[w] = F[f, k]
+                    w += 1
+            row = nf + q
+            for k in range(DIM - 1):
+                F[row, k] = ridge[k]
+            F[row, DIM - 1] = vi
+            b[row] = _oriented(V, center, ridge, vi, N[row])
+            H[row] = H[f] ^ vertex_hash[F[f, jj]] ^ vertex_hash[vi]
+        for a in range(nvis):
+            b[vis[a]] = np.inf
+            N[vis[a]] = 0.0
+        nf += nnew
+    return 1, 0.0, u
+
+
+@numba.njit(cache=True)
+def _horizon(F, H, vis, nvis, vertex_hash):
+    """Ridges of exactly one visible facet, as ``facet slot * 6 + opposite vertex``, in the
+    order of their keys (as numpy's argsort of the keys, then the keys seen once)."""
+    keys = np.empty(nvis * DIM, dtype=np.int64)
+    for a in range(nvis):
+        f = vis[a]
+        for k in range(DIM):
+            keys[a * DIM + k] = H[f] ^ vertex_hash[F[f, k]]
+    order = np.argsort(keys)
+    nk = keys.shape[0]
+    new = np.empty(nk, dtype=np.int64)
+    nnew = 0
+    for q in range(nk):
+        key = keys[order[q]]
+        if q > 0 and keys[order[q - 1]] == key:
+            continue
+        if q + 1 < nk and keys[order[q + 1]] == key:
+            continue
+        new[nnew] = order[q]
+        nnew += 1
+    return new, nnew
+
+
+@numba.njit(cache=True)
+def _grown(F, N, b, H, nf, cap):
+    F2 = np.zeros((cap, DIM), dtype=np.int64)
+    N2 = np.zeros((cap, DIM))
+    b2 = np.full(cap, np.inf)
+    H2 = np.zeros(cap, dtype=np.int64)
+    F2[:nf], N2[:nf], b2[:nf], H2[:nf] = F[:nf], N[:nf], b[:nf], H[:nf]
+    return F2, N2, b2, H2
+
+
+@numba.njit(cache=True)
+def _consistent(V, nv, F, N, b, nf):
+    """Every ridge in exactly two live facets (exact keys), every vertex inside every facet."""
+    live = np.empty(nf, dtype=np.int64)
+    nl = 0
+    for i in range(nf):
+        if np.isfinite(b[i]):
+            live[nl] = i
+            nl += 1
+    if nl == 0:
+        return False
+    keys = np.empty(nl * DIM, dtype=np.int64)
+    ridge = np.empty(DIM - 1, dtype=np.int64)
+    for a in range(nl):
+        f = live[a]
+        for jj in range(DIM):
+            w = 0
+            for k in range(DIM):
+                if k != jj:
+                    ridge[w] = F[f, k]
+                    w += 1
+            ridge.sort()
+            key = 0
+            for k in range(DIM - 1):
+                key += ridge[k] << (12 * k)
+            keys[a * DIM + jj] = key
+    keys.sort()
+    if keys.shape[0] % 2:
+        return False
+    for q in range(0, keys.shape[0], 2):
+        if keys[q] != keys[q + 1]:
+            return False
+        if q + 2 < keys.shape[0] and keys[q + 2] == keys[q + 1]:
+            return False
+    worst = 0.0
+    for a in range(nl):
+        worst = max(worst, abs(b[live[a]]))
+    limit = 1e-8 * max(1.0, worst)
+    for a in range(nl):
+        f = live[a]
+        for r in range(nv):
+            dot = 0.0
+            for c in range(DIM):
+                dot += V[r, c] * N[f, c]
+            if dot - b[f] > limit:
+                return False
+    return True
