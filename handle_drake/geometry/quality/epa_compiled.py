@@ -22,6 +22,12 @@ from __future__ import annotations
 
 import numba
 import numpy as np
+from numba.np.linalg import _LAPACK, F_INT_nptype
+
+# numba's own binding of LAPACK ?gesv (the one its np.linalg.solve calls: scipy's
+# OpenBLAS); a private numba name, hence numba pinned below 0.70 in pyproject.toml.
+_XGESV = _LAPACK().numba_xgesv(numba.float64)
+_KIND = ord("d")
 
 __all__ = ["epa_loop"]
 
@@ -29,24 +35,29 @@ DIM = 6
 
 
 @numba.njit(cache=True)
-def _oriented(V, center, ridge, vi, n_out):
-    """Unit outward normal and offset of the facet ``ridge + [vi]`` (as hull._Epa._oriented)."""
-    A = np.empty((DIM, DIM))
+def _oriented(V, center, ridge, vi, n_out, A, x, ipiv):
+    """Unit outward normal and offset of the facet ``ridge + [vi]`` (as hull._Epa._oriented);
+    NaN when the facet is degenerate (numpy's LinAlgError). ``A`` (6, 6), ``x`` (6,) and
+    ``ipiv`` (6,) are work buffers: ``A`` holds the matrix column-major (``A[c, k]`` is
+    row k, column c), as numpy and numba's solve hand it to LAPACK."""
     for c in range(DIM):
         p0 = V[ridge[0], c]
         for k in range(1, DIM - 1):
-            A[k - 1, c] = V[ridge[k], c] - p0
-        A[DIM - 2, c] = V[vi, c] - p0
-        A[DIM - 1, c] = p0 - center[c]
-    rhs = np.zeros((DIM, 1))
-    rhs[DIM - 1, 0] = 1.0
-    x = np.linalg.solve(A, rhs)
+            A[c, k - 1] = V[ridge[k], c] - p0
+        A[c, DIM - 2] = V[vi, c] - p0
+        A[c, DIM - 1] = p0 - center[c]
+    x[:] = 0.0
+    x[DIM - 1] = 1.0
+    # LAPACK dgesv as np.linalg.solve calls it, without its copies and checks.
+    if _XGESV(_KIND, DIM, 1, A.ctypes, DIM, ipiv.ctypes, x.ctypes, DIM) != 0:
+        n_out[:] = np.nan
+        return np.nan
     sq = 0.0  # np.add.reduce of 6 terms: in order from 0
     for c in range(DIM):
-        sq += x[c, 0] * x[c, 0]
+        sq += x[c] * x[c]
     norm = np.sqrt(sq)
     for c in range(DIM):
-        n_out[c] = x[c, 0] / norm
+        n_out[c] = x[c] / norm
     # np.einsum("ij,ij->i") of 6 terms (SSE2, two lanes): (p0 + p2 + p4) + (p1 + p3 + p5)
     even = n_out[0] * V[ridge[0], 0]
     odd = n_out[1] * V[ridge[0], 1]
@@ -77,6 +88,7 @@ def epa_loop(W, V0, F0, N0, b0, H0, center, vertex_hash, eps, gap_tol, max_itera
     F[:nf], N[:nf], b[:nf], H[:nf] = F0, N0, b0, H0
     u = np.zeros(DIM)
     ridge = np.empty(DIM - 1, dtype=np.int64)
+    A, x, ipiv = np.empty((DIM, DIM)), np.empty(DIM), np.empty(DIM, dtype=F_INT_nptype)
     WT = W.T  # F-contiguous view, as numpy's W.T
     for _ in range(max_iterations):
         j = 0
@@ -128,7 +140,9 @@ def epa_loop(W, V0, F0, N0, b0, H0, center, vertex_hash, eps, gap_tol, max_itera
             for k in range(DIM - 1):
                 F[row, k] = ridge[k]
             F[row, DIM - 1] = vi
-            b[row] = _oriented(V, center, ridge, vi, N[row])
+            b[row] = _oriented(V, center, ridge, vi, N[row], A, x, ipiv)
+            if np.isnan(b[row]):
+                return 1, 0.0, u
             H[row] = H[f] ^ vertex_hash[F[f, jj]] ^ vertex_hash[vi]
         for a in range(nvis):
             b[vis[a]] = np.inf
