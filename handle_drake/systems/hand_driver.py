@@ -82,7 +82,6 @@ class PdHandDriver(LeafSystem):
         self._q_index, self._v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
         nq = len(spec.joint_names)
         self._initial = np.clip(initial_command, self._lower, self._upper)
-        self._desired_buffer = np.zeros(2 * nu)
 
         self._command_port = self.DeclareVectorInputPort("position", nu)
         self._plant_state_port = self.DeclareVectorInputPort(
@@ -124,7 +123,7 @@ class PdHandDriver(LeafSystem):
         if not self._command_port.HasValue(context):
             return self._initial
         target = self._command_port.Eval(context)
-        if not all(map(math.isfinite, target)):  # np.isfinite(.).all(), a third of the cost
+        if not all(map(math.isfinite, target)):  # np.all(np.isfinite(.)) at a third of its cost
             # A non-finite command is ignored (the hand holds), never sent to the PD loops.
             return context.get_discrete_state(self._command_state).value()
         # np.clip's values (min(max(.)) is what it computes), without its wrapper's cost:
@@ -140,8 +139,8 @@ class PdHandDriver(LeafSystem):
                           self._max_step)
         command = current + step
         discrete_state.set_value(self._command_state, command)
-        desired = self._desired_buffer  # [q_d; 0]: only the first half changes
-        desired[:len(command)] = command[self._actuator_order]
+        desired = np.zeros(2 * len(command))  # [q_d; 0] (a new array: systems keep no
+        desired[:len(command)] = command[self._actuator_order]  # scratch, contexts may run at once)
         discrete_state.set_value(self._desired_state, desired)
 
     def set_initial_command(self, context, command):
@@ -188,9 +187,8 @@ class WristDriver(LeafSystem):
             raise ValueError(f"initial pose: expected 6 values, got {initial.shape}")
         self._actuator_order = actuated_order(plant, model_instance, WRIST_JOINTS)
         # pose6 -> desired joint positions in one gather (pose_to_wrist_joints, then
-        # actuator order), and the [q_d; 0] buffer the update fills.
+        # actuator order).
         self._pose_to_desired = _POSE6_TO_WRIST_JOINTS[self._actuator_order]
-        self._desired_buffer = np.zeros(12)
         self._q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
         self._pose_port = self.DeclareVectorInputPort("pose", 6)
         self._plant_state_port = self.DeclareVectorInputPort(
@@ -215,7 +213,7 @@ class WristDriver(LeafSystem):
             return
         pose = self._pose_port.Eval(context)
         if all(map(math.isfinite, pose)):
-            desired = self._desired_buffer
+            desired = np.zeros(12)
             desired[:6] = pose[self._pose_to_desired]
             discrete_state.set_value(self._desired_state, desired)
 
