@@ -491,3 +491,21 @@ def test_the_compiled_epa_equals_the_numpy_epa_bit_for_bit(monkeypatch):
             checked += 1
     assert checked >= 10
     assert EPA_STATS["fallbacks"] == stats0["fallbacks"]
+
+
+def test_the_compiled_epa_asks_for_more_points_when_the_axes_support_a_flat(monkeypatch):
+    """Two far points (+-10 (1, .., 1)) are the support point of every axis: the axes give
+    a 1-D flat, the compiled initial simplex reports it and the numpy one asks the support
+    oracle in the orthogonal directions; the radius is still the numpy EPA's, bit for bit,
+    and qhull's."""
+    W = np.vstack([10 * np.ones(6), -10 * np.ones(6), np.eye(6), -np.eye(6)])
+    calls = []
+    compiled = hull_module._compiled_init_simplex
+    monkeypatch.setattr(hull_module, "_compiled_init_simplex",
+                        lambda *a: calls.append(compiled(*a)[0]) or compiled(*a))
+    r, _ = largest_ball_radius(W)
+    assert calls == [False]
+    monkeypatch.setitem(hull_module.COMPILED_EPA, "enabled", False)
+    assert r == largest_ball_radius(W)[0]
+    assert r == pytest.approx(qhull_ball_radius(W), rel=1e-12)
+    assert r > 0.1

@@ -1,4 +1,6 @@
-"""The EPA loop of :mod:`.hull` for a finite wrench set, compiled with numba.
+"""The EPA of :mod:`.hull` for a finite wrench set, compiled with numba: the initial
+simplex (``init_simplex``, when the axes' support points span R^6; else the numpy one,
+which asks the oracle for more) and the loop (``epa_loop``).
 
 The same steps as ``hull._Epa`` (nearest facet, support point, visible facets, the
 horizon by the facets' Zobrist ridge keys, new facets' normals by one 6x6 LAPACK
@@ -66,6 +68,65 @@ def _oriented(V, center, ridge, vi, n_out, A, x, ipiv):
     even += n_out[4] * V[ridge[0], 4]
     odd += n_out[5] * V[ridge[0], 5]
     return even + odd
+
+
+_SIMPLEX_FACETS = np.array([[c for c in range(DIM + 1) if c != j] for j in range(DIM + 1)],
+                           dtype=np.int64)
+
+
+@numba.njit(cache=True)
+def init_simplex(pts, tol, vertex_hash):
+    """``hull._Epa.init_simplex`` while the given points suffice: 7 affinely independent
+    points of ``pts`` chosen greedily (farthest from the flat of those chosen), and the 7
+    facets of their simplex. Returns ``(ok, V0, F0, N0, b0, H0, center)``; ``ok`` False when
+    the points span less than R^6 (the numpy code then asks the support oracle for more)
+    or a facet is degenerate."""
+    n = pts.shape[0]
+    V0 = np.empty((DIM + 1, DIM))
+    F0 = _SIMPLEX_FACETS.copy()
+    N0 = np.empty((DIM + 1, DIM))
+    b0 = np.empty(DIM + 1)
+    H0 = np.zeros(DIM + 1, dtype=np.int64)
+    center = np.empty(DIM)
+    V0[0] = pts[0]
+    basis = np.empty((DIM, DIM))
+    rel = np.empty((n, DIM))
+    for k in range(1, DIM + 1):
+        for r in range(n):
+            for c in range(DIM):
+                rel[r, c] = pts[r, c] - V0[0, c]
+        if k > 1:  # rel - (rel @ basis.T) @ basis, by BLAS as numpy does
+            B = basis[:k - 1]
+            resid = rel - np.dot(np.dot(rel, B.T), B)
+        else:
+            resid = rel.copy()
+        j, best = -1, -np.inf
+        for r in range(n):
+            sq = 0.0  # np.linalg.norm(axis=1): sqrt of add.reduce, in order
+            for c in range(DIM):
+                sq += resid[r, c] * resid[r, c]
+            dist = np.sqrt(sq)
+            if dist > best:
+                j, best = r, dist
+        if not best > tol:
+            return False, V0, F0, N0, b0, H0, center
+        V0[k] = pts[j]
+        for c in range(DIM):
+            basis[k - 1, c] = resid[j, c] / best
+    center[:] = V0[0]  # np.mean(axis=0): rows added in order, then / 7
+    for r in range(1, DIM + 1):
+        for c in range(DIM):
+            center[c] += V0[r, c]
+    for c in range(DIM):
+        center[c] /= DIM + 1
+    A, x, ipiv = np.empty((DIM, DIM)), np.empty(DIM), np.empty(DIM, dtype=F_INT_nptype)
+    for f in range(DIM + 1):
+        b0[f] = _oriented(V0, center, F0[f, :DIM - 1], F0[f, DIM - 1], N0[f], A, x, ipiv)
+        if np.isnan(b0[f]):
+            return False, V0, F0, N0, b0, H0, center
+        for k in range(DIM):
+            H0[f] ^= vertex_hash[F0[f, k]]
+    return True, V0, F0, N0, b0, H0, center
 
 
 @numba.njit(cache=True)

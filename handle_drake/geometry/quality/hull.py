@@ -44,8 +44,11 @@ from handle_drake.geometry.quality.contact import real_array
 
 try:  # the compiled EPA loop (numba, a dependency); the numpy EPA below if it cannot load
     from handle_drake.geometry.quality.epa_compiled import epa_loop as _compiled_epa_loop
+    from handle_drake.geometry.quality.epa_compiled import (
+        init_simplex as _compiled_init_simplex,
+    )
 except ImportError:  # pragma: no cover - numba is declared in pyproject.toml
-    _compiled_epa_loop = None
+    _compiled_epa_loop = _compiled_init_simplex = None
 
 __all__ = [
     "min_norm_point",
@@ -356,22 +359,28 @@ def largest_ball_radius(
     if scale is None:
         scale = max(1.0, float(np.max(np.abs(h))))
     epa = _Epa(support, scale)
-    if not epa.init_simplex(pts, scale):
-        return 0.0, np.zeros(DIM)
     gap_tol = max(tol * scale, 4 * epa.eps)
     if W is not None and _compiled_epa_loop is not None and COMPILED_EPA["enabled"]:
-        # The same loop compiled (epa_compiled.py), from the same initial simplex.
-        k = DIM + 1
+        # The same steps compiled (epa_compiled.py); the numpy initial simplex when the
+        # axes' support points do not span R^6 (it asks the oracle for more).
+        ok, *simplex = _compiled_init_simplex(pts, 1e-9 * scale, _VERTEX_HASH)
+        if not ok:
+            if not epa.init_simplex(pts, scale):
+                return 0.0, np.zeros(DIM)
+            k = DIM + 1
+            simplex = [epa.V[:k], epa.F[:k], epa.N[:k], epa.b[:k], epa.H[:k], epa.center]
         try:
-            status, radius, u = _compiled_epa_loop(
-                np.ascontiguousarray(W), epa.V[:k], epa.F[:k], epa.N[:k], epa.b[:k], epa.H[:k],
-                epa.center, _VERTEX_HASH, epa.eps, gap_tol, max_iterations)
+            status, radius, u = _compiled_epa_loop(np.ascontiguousarray(W), *simplex,
+                                                   _VERTEX_HASH, epa.eps, gap_tol,
+                                                   max_iterations)
         except np.linalg.LinAlgError:
             status = 1
         if status == 0:
             return float(radius), u
         EPA_STATS["fallbacks"] += 1
         return qhull_ball_radius(W), np.zeros(DIM)
+    if not epa.init_simplex(pts, scale):
+        return 0.0, np.zeros(DIM)
     try:
         for _ in range(max_iterations):
             j = int(np.argmin(epa.b[: epa.nf]))
