@@ -12,7 +12,9 @@ LAPACK ``gesv``, its norm summed in order as ``np.add.reduce`` does for 6 terms,
 the offset summed as ``np.einsum("ij,ij->i")`` does (two SSE2 lanes:
 ``(p0 + p2 + p4) + (p1 + p3 + p5)``); ``tests/quality`` compares the radii with the
 numpy EPA bit for bit. (With plain loops for the support values, 36 of 364 random
-grasps took another path on near-ties and ended 1e-14 away.)
+grasps took another path on near-ties and ended 1e-14 away.) The summation orders are
+numpy's x86-64 ones; on another architecture (e.g. NEON's fused multiply-add in einsum) or
+with another BLAS build the last bits may differ, which that test would show.
 
 ``epa_loop`` returns a status: 0 converged (radius and normal valid), 1 the EPA gave
 up (no visible facet, iteration limit, broken ridge structure): the caller falls back
