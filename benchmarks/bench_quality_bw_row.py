@@ -5,7 +5,9 @@ same 20 closure grasps as the full benchmark's n=4 k=8 row (its random stream wa
 the earlier rows), then times, interleaved in each round, qhull of the grasp's wrenches
 (GraspIt's epsilon, the floor), ``grasp_quality`` on this tree and, with ``--baseline``,
 ``grasp_quality`` with ``hull.py`` as of git revision REV (before/after). Also checks that
-both give bit-identical values. CPU seconds of the process. Writes
+both give bit-identical values. CPU seconds of the process. Also times the first call of
+a fresh process (numba compiles the EPA loop, then caches it on disk): with an empty
+numba cache and again with the cache written. Writes
 ``benchmarks/results/quality_bw_row.json``.
 """
 
@@ -69,6 +71,31 @@ def baseline_quality(revision: str):
     return quality
 
 
+_FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+from handle_drake.geometry.quality import ContactParams, grasp_quality
+t1 = time.perf_counter()
+p = 0.05 * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0.0]])
+grasp_quality(p, -p / 0.05, ContactParams(mu=0.5, num_edges=8, characteristic_length=0.05))
+t2 = time.perf_counter()
+print(t1 - t0, t2 - t1)
+"""
+
+
+def first_call_seconds() -> dict:
+    """Import and first ``grasp_quality`` call of a fresh process, cold and warm numba cache."""
+    cache = tempfile.mkdtemp(prefix="numba_cache_")
+    out = {}
+    for name in ("empty_cache", "cache_written"):
+        run = subprocess.run([sys.executable, "-c", _FIRST_CALL], capture_output=True, text=True,
+                             check=True, env={**os.environ, "NUMBA_CACHE_DIR": cache})
+        imp, first = map(float, run.stdout.split())
+        out[name] = {"import_s": imp, "first_call_s": first}
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=6)
@@ -109,6 +136,11 @@ def main(argv=None):
               "baseline": args.baseline, "rounds": rounds, "median_s": med,
               "median_ratio_qhull_over": ratio, "load_average": load,
               "bit_identical_to_baseline": identical if args.baseline else None}
+    first = first_call_seconds()
+    for name, t in first.items():
+        print(f"fresh process, numba {name.replace('_', ' ')}: import {t['import_s']:.2f} s, "
+              f"first grasp_quality call {t['first_call_s']:.2f} s")
+    result["first_call"] = first
     results_run.finish([{"method": k, "median_ms": 1e3 * v,
                          "qhull_over_method": ratio.get(k, 1.0)} for k, v in med.items()],
                        result, Path(args.out))

@@ -38,8 +38,14 @@ the client process) the predicted efficiency is
 ``min(1, cap x T / W)`` for the tightest cap; the table prints it for
 W = 128 and 1000 and T = 0.05 ... 1 s, beside the measured 128.
 
-Run: ``python benchmarks/bench_scale.py [--quick]``; prints the tables,
-writes ``benchmarks/results/scale.json``.
+Diagnosis of the scheduler's hand-off: ``--saturation 1.0 1.25`` runs every case with each
+``distributed.scheduler.worker-saturation`` (1.0: a worker thread that finishes waits for
+the scheduler to send it the next queued task; 1.25: each 8-thread worker also holds 2
+tasks of its own to start at once), interleaved in each round; ``--workers`` and
+``--seconds`` restrict the cases.
+
+Run: ``python benchmarks/bench_scale.py [--quick] [--workers W ..] [--seconds T ..]
+[--saturation S ..]``; prints the tables, writes ``benchmarks/results/scale.json``.
 """
 
 from __future__ import annotations
@@ -125,11 +131,11 @@ def _cpu_by_group(before, after, names) -> dict[str, float]:
 
 
 @contextlib.contextmanager
-def _cluster(workers: int):
+def _cluster(workers: int, saturation: float = 1.0):
     import dask
     from distributed import Client, LocalCluster
 
-    config = {"distributed.scheduler.worker-saturation": 1.0, **QUIET_WORKER}
+    config = {"distributed.scheduler.worker-saturation": saturation, **QUIET_WORKER}
     with dask.config.set(config):
         n = max(1, workers // THREADS_PER_WORKER)
         cluster = LocalCluster(n_workers=n, threads_per_worker=workers // n, processes=False,
@@ -208,10 +214,21 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=None, help="rounds (default 2, quick 1)")
     parser.add_argument("--waves", type=int, default=None,
                         help="trials per case = waves x workers (default 6, quick 3)")
+    parser.add_argument("--workers", type=int, nargs="+", default=list(WORKERS),
+                        help=f"worker threads per case (default {' '.join(map(str, WORKERS))})")
+    parser.add_argument("--seconds", type=float, nargs="+", default=list(SECONDS),
+                        help="trial seconds per case (default "
+                             f"{' '.join(f'{t:g}' for t in SECONDS)})")
+    parser.add_argument("--saturation", type=float, nargs="+", default=[1.0],
+                        help="Dask worker-saturation values, each case with each (default 1.0)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "scale.json")
     add_page_arguments(parser, "scale")
     args = parser.parse_args(argv)
+    for name in ("workers", "seconds", "saturation"):
+        if any(not v > 0 for v in getattr(args, name)):
+            parser.error(f"--{name}: expected values > 0, got {getattr(args, name)}")
+    workers_list, seconds_list, saturations = args.workers, args.seconds, args.saturation
     results_run = ResultsRun("Scaling the trial executor: efficiency per workers and trial time",
                              args)
     rounds = args.rounds or (1 if args.quick else 2)
@@ -222,48 +239,57 @@ def main(argv=None) -> int:
     log_ms = []
     with tempfile.TemporaryDirectory() as folder:
         for r in range(rounds):
-            for workers in (WORKERS if r % 2 == 0 else WORKERS[::-1]):
-                with _cluster(workers) as executor:
+            for workers, saturation in ([(w, z) for w in workers_list for z in saturations]
+                                        if r % 2 == 0 else
+                                        [(w, z) for w in workers_list[::-1]
+                                         for z in saturations[::-1]]):
+                with _cluster(workers, saturation) as executor:
                     # warm up: the objective reaches every worker, threads start
                     run_experiment(SleepTrial(0.01), BOUNDS, "random", 2 * workers, 1,
                                    Path(folder) / f"warm-{workers}-{r}.sqlite",
                                    executor=executor, progress=False, objective_name="warm")
-                    for seconds in (SECONDS if r % 2 == 0 else SECONDS[::-1]):
+                    for seconds in (seconds_list if r % 2 == 0 else seconds_list[::-1]):
                         case = _case(executor, folder, workers, seconds, waves)
                         case["round"] = r + 1
+                        case["saturation"] = saturation
                         cases.append(case)
                         c = case["cpu_per_trial_ms"]
-                        print(f"  round {r + 1}: W={workers:4d} T={seconds:5.2f} s: "
+                        print(f"  round {r + 1}: W={workers:4d} T={seconds:5.2f} s "
+                              f"saturation {saturation:g}: "
                               f"efficiency {case['efficiency']:.3f} ({case['trials']} trials, "
                               f"{case['elapsed']:.2f} s, load {case['load']}, "
                               f"{case['core_share']:.2f} core); CPU ms/trial "
                               + ", ".join(f"{k} {v:.2f}" for k, v in c.items()), flush=True)
             log_ms.append(_log_only(folder))
 
-    print("\n| workers | trial s | efficiency (median) | rounds | load | core share |"
-          " client loop ms/trial | dask loop | callbacks | trial threads |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| workers | trial s | saturation | efficiency (median) | rounds | load |"
+          " core share | client loop ms/trial | dask loop | callbacks | trial threads |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     table = {}
-    for w in WORKERS:
-        for t in SECONDS:
-            mine = [c for c in cases if c["workers"] == w and c["seconds"] == t]
-            eff = [c["efficiency"] for c in mine]
-            cost = {g: _median([c["cpu_per_trial_ms"][g] for c in mine]) for g in GROUPS}
-            share = _median([c["core_share"] for c in mine])
-            table[f"{w}|{t:g}"] = dict(efficiency=_median(eff), rounds=eff,
-                                       load=[c["load"] for c in mine], core_share=share,
-                                       cpu_per_trial_ms=cost)
-            print(f"| {w} | {t:g} | {_median(eff):.3f} | "
-                  + " ".join(f"{e:.3f}" for e in eff)
-                  + f" | {'/'.join(str(c['load']) for c in mine)} | {share:.2f} | "
-                    f"{cost['client loop']:.2f} | "
-                    f"{cost['dask loop']:.2f} | {cost['dask callbacks']:.2f} | "
-                    f"{cost['trial threads']:.2f} |")
+    for w, t, z in [(w, t, z) for w in workers_list for t in seconds_list for z in saturations]:
+        mine = [c for c in cases if c["workers"] == w and c["seconds"] == t
+                and c["saturation"] == z]
+        eff = [c["efficiency"] for c in mine]
+        cost = {g: _median([c["cpu_per_trial_ms"][g] for c in mine]) for g in GROUPS}
+        share = _median([c["core_share"] for c in mine])
+        # keyed as before for the default saturation (1.0)
+        key = f"{w}|{t:g}" if z == 1.0 else f"{w}|{t:g}|saturation {z:g}"
+        table[key] = dict(efficiency=_median(eff), rounds=eff,
+                          load=[c["load"] for c in mine], core_share=share,
+                          cpu_per_trial_ms=cost, saturation=z)
+        print(f"| {w} | {t:g} | {z:g} | {_median(eff):.3f} | "
+              + " ".join(f"{e:.3f}" for e in eff)
+              + f" | {'/'.join(str(c['load']) for c in mine)} | {share:.2f} | "
+                f"{cost['client loop']:.2f} | "
+                f"{cost['dask loop']:.2f} | {cost['dask callbacks']:.2f} | "
+                f"{cost['trial threads']:.2f} |")
     # Per-task costs for the extrapolation: the 128-worker cases (most tasks in flight).
-    big = [c for c in cases if c["workers"] == max(WORKERS)]
+    big = [c for c in cases if c["workers"] == max(workers_list)
+           and c["saturation"] == saturations[0]]
     costs = {g: _median([c["cpu_per_trial_ms"][g] for c in big]) for g in GROUPS}
     costs["log (alone)"] = _median(log_ms)
-    print("\nper-task CPU ms at 128 workers (median): "
+    print(f"\nper-task CPU ms at {max(workers_list)} workers, saturation {saturations[0]:g} "
+          "(median): "
           + ", ".join(f"{k} {v:.3f}" for k, v in costs.items()))
     paper = extrapolate(costs, (128, 1000), (0.05, 0.2, 0.5, 1.0))
     print("\n| workers | trial s | trials/s needed | bound | its cap /s | predicted efficiency"
@@ -273,7 +299,7 @@ def main(argv=None) -> int:
         w, t = key.split("|")
         print(f"| {w} | {t} | {p['needed_per_s']:.0f} | {p['bound']} | {p['cap_per_s']:.0f} | "
               f"{p['efficiency']:.2f} | {p['efficiency_one_process']:.2f} |")
-    result = dict(benchmark="scale", rounds=rounds, waves=waves,
+    result = dict(benchmark="scale", rounds=rounds, waves=waves, saturations=saturations,
                   threads_per_worker=THREADS_PER_WORKER, commit_every=COMMIT_EVERY,
                   commit_seconds=COMMIT_SECONDS, cases=cases, table=table,
                   per_task_cpu_ms=costs, extrapolation=paper,
@@ -286,8 +312,10 @@ def main(argv=None) -> int:
           **{f"{g} ms/trial": c for g, c in v["cpu_per_trial_ms"].items()}}
          for k, v in table.items()], result, args.out)
     print(f"\nwritten to {args.out}")
-    e = table[f"{max(WORKERS)}|0.5"]["efficiency"]
-    print(f"efficiency at {max(WORKERS)} workers, 0.5 s trials: {e:.3f} (target >= 0.9)")
+    for key, row in table.items():
+        if key.startswith(f"{max(WORKERS)}|0.5"):
+            print(f"efficiency at {max(WORKERS)} workers, 0.5 s trials, saturation "
+                  f"{row['saturation']:g}: {row['efficiency']:.3f} (target >= 0.9)")
     return 0
 
 

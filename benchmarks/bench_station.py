@@ -18,14 +18,22 @@ at every step; the object's trajectory is checked bit-identical), the floor
 that isolates what the station's Python systems and loggers cost; CPU
 seconds of this process are kept beside wall time (the machine is shared).
 
-Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo]``
+With ``--baseline REV`` the demo station is also built with the tactile sensor and
+the hand and wrist drivers of ``handle_drake/systems/{tactile,hand_driver}.py`` at git
+revision ``REV`` ("before" in the same run; its logged signals are checked equal to
+this tree's).
+
+Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo] [--baseline REV]``
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import statistics
+import subprocess
+import tempfile
 import time
 from pathlib import Path
 
@@ -40,6 +48,7 @@ from handle_drake.scenario import LoadScenario  # noqa: E402
 from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 
 TRIAL_SECONDS = 2.0
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _scenario(contact_model: str, time_step: float, approximation: str = "sap"):
@@ -88,9 +97,51 @@ def _station_case(contact_model, time_step, approximation, log=None) -> _Case:
                             **({} if log is None else {"log": log}))
     plant = GetPlant(runner.station)
     body = object_body(plant)
-    return _Case(runner.simulator, runner.reset,  # what ScenarioRunner.run does first
+    case = _Case(runner.simulator, runner.reset,  # what ScenarioRunner.run does first
                  lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
                      runner.simulator.get_context())).translation()[2])
+    case.runner = runner
+    return case
+
+
+def _baseline_module(revision: str, relative: str, name: str):
+    """The module ``relative`` (a path in this repository) as it was at ``revision``."""
+    source = subprocess.run(["git", "show", f"{revision}:{relative}"], cwd=ROOT,
+                            capture_output=True, text=True, check=True).stdout
+    path = Path(tempfile.mkdtemp()) / f"{name}.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _baseline_station_case(revision: str) -> _Case:
+    """The demo station with the tactile sensor and drivers of ``revision``."""
+    from handle_drake import station as station_module
+
+    tactile = _baseline_module(revision, "handle_drake/systems/tactile.py", "tactile_before")
+    drivers = _baseline_module(revision, "handle_drake/systems/hand_driver.py", "driver_before")
+    names = {"FingertipTactile": tactile.FingertipTactile,
+             "PdHandDriver": drivers.PdHandDriver, "WristDriver": drivers.WristDriver}
+    saved = {name: getattr(station_module, name) for name in names}
+    try:
+        for name, value in names.items():
+            setattr(station_module, name, value)
+        return _station_case(*STATION_CASES[0])
+    finally:
+        for name, value in saved.items():
+            setattr(station_module, name, value)
+
+
+def _same_logs(a: _Case, b: _Case) -> bool:
+    """Both cases' last runs logged the same signals, bit for bit."""
+    import numpy as np
+
+    logs_a, logs_b = a.runner.harness.logs(), b.runner.harness.logs()
+    return logs_a.keys() == logs_b.keys() and all(
+        np.array_equal(logs_a[k].data(), logs_b[k].data())
+        and np.array_equal(logs_a[k].sample_times(), logs_b[k].sample_times()) for k in logs_a)
 
 
 def _plant_case(variant: str) -> _Case:
@@ -239,7 +290,7 @@ def _paired(top: _Case, bottom: _Case, what: str) -> dict:
             "rounds": values}
 
 
-def bench_realtime(repeats: int, demo_only: bool = False):
+def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None = None):
     """Every case once per round, ``repeats`` rounds: the cases see the same
     machine conditions, so their ratios hold even when the machine's speed
     drifts (it does here, by up to 40 % over minutes)."""
@@ -254,9 +305,12 @@ def bench_realtime(repeats: int, demo_only: bool = False):
     ablation = {"no tactile log": _station_case(*STATION_CASES[0], log=(
                     "hand.position_measured", "object.position")),
                 "no loggers": _station_case(*STATION_CASES[0], log=())}
+    before = None if baseline is None else _baseline_station_case(baseline)
     for _ in range(repeats):
         # the demo case and its floors back to back, then the rest
         first = [station[STATION_CASES[0]], replay, *ablation.values(), plant["model"]]
+        if before is not None:
+            first.insert(1, before)
         rest = [c for c in [*station.values(), *plant.values()] if c not in first]
         for case in [*first, *rest]:
             case.run_once()
@@ -274,6 +328,13 @@ def bench_realtime(repeats: int, demo_only: bool = False):
                 "station_over_model_cpu": _paired(demo, plant["model"], "cpus"),
                 "ablation_over_replay_cpu": {k: _paired(c, replay, "cpus")
                                              for k, c in ablation.items()}}
+    if before is not None:
+        overhead["baseline"] = {
+            "revision": baseline, "station": before.row(variant=f"station at {baseline}"),
+            "same_logs_as_this_tree": _same_logs(demo, before),
+            "before_over_replay_cpu": _paired(before, replay, "cpus"),
+            "before_over_replay_wall": _paired(before, replay, "walls"),
+            "after_over_before_cpu": _paired(demo, before, "cpus")}
     return rows, floors, overhead
 
 
@@ -303,6 +364,8 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="one repeat")
     parser.add_argument("--demo", action="store_true",
                         help="only the demo case (point, 1 ms, sap) and its floors")
+    parser.add_argument("--baseline", default=None,
+                        help="git revision of the tactile sensor and drivers for 'before'")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station.json")
     add_page_arguments(parser, "station")
@@ -310,7 +373,7 @@ def main(argv=None) -> int:
     results_run = ResultsRun("Station speed: Shadow grasp trial against the bare plant", args)
     repeats = 1 if args.quick else args.repeats
     load_before = os.getloadavg()[0]
-    rows, floors, overhead = bench_realtime(repeats, args.demo)
+    rows, floors, overhead = bench_realtime(repeats, args.demo, args.baseline)
     reset = bench_reset(repeats)
     print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats} "
           f"(load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, "
@@ -336,6 +399,15 @@ def main(argv=None) -> int:
                        ("station_over_model_cpu", "station / model plant, CPU")):
         r = overhead[key]
         print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+    if "baseline" in overhead:
+        b = overhead["baseline"]
+        print(f"station at {b['revision']} (before): logged signals "
+              f"{'bit-identical' if b['same_logs_as_this_tree'] else 'DIFFERENT'} to this tree's")
+        for key, label in (("before_over_replay_cpu", "before / replay, CPU"),
+                           ("before_over_replay_wall", "before / replay, wall"),
+                           ("after_over_before_cpu", "this tree / before, CPU")):
+            r = b[key]
+            print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
     for name, r in overhead["ablation_over_replay_cpu"].items():
         print(f"station, {name} / replay, CPU: {r['median']:.3f}x "
               f"(rounds {r['min']:.3f}-{r['max']:.3f})")

@@ -8,6 +8,8 @@ joint order of :class:`handle_drake.base.hands.HandSpec`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.math import RollPitchYaw
 from pydrake.systems.framework import LeafSystem
@@ -121,20 +123,25 @@ class PdHandDriver(LeafSystem):
         if not self._command_port.HasValue(context):
             return self._initial
         target = self._command_port.Eval(context)
-        if not np.all(np.isfinite(target)):
+        if not all(map(math.isfinite, target)):  # np.all(np.isfinite(.)) at a third of its cost
             # A non-finite command is ignored (the hand holds), never sent to the PD loops.
             return context.get_discrete_state(self._command_state).value()
-        return np.clip(target, self._lower, self._upper)
+        # np.clip's values (min(max(.)) is what it computes), without its wrapper's cost:
+        # this runs every control period.
+        return np.minimum(np.maximum(target, self._lower), self._upper)
 
     def _desired(self, command) -> np.ndarray:
         return np.concatenate([command[self._actuator_order], np.zeros(len(command))])
 
     def _update_command(self, context, discrete_state):
         current = context.get_discrete_state(self._command_state).value()
-        step = np.clip(self.target(context) - current, -self._max_step, self._max_step)
+        step = np.minimum(np.maximum(self.target(context) - current, -self._max_step),
+                          self._max_step)
         command = current + step
         discrete_state.set_value(self._command_state, command)
-        discrete_state.set_value(self._desired_state, self._desired(command))
+        desired = np.zeros(2 * len(command))  # [q_d; 0] (a new array: systems keep no
+        desired[:len(command)] = command[self._actuator_order]  # scratch, contexts may run at once)
+        discrete_state.set_value(self._desired_state, desired)
 
     def set_initial_command(self, context, command):
         """Sets the held command (for resets); clamped to the limits."""
@@ -144,6 +151,10 @@ class PdHandDriver(LeafSystem):
 
 
 WRIST_JOINTS = ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw", "wrist_pitch", "wrist_roll")
+
+
+# pose_to_wrist_joints as an index: joints[i] = pose6[_POSE6_TO_WRIST_JOINTS[i]].
+_POSE6_TO_WRIST_JOINTS = np.array([0, 1, 2, 5, 4, 3])
 
 
 def pose_to_wrist_joints(pose6: np.ndarray) -> np.ndarray:
@@ -175,6 +186,9 @@ class WristDriver(LeafSystem):
         if initial.shape != (6,):
             raise ValueError(f"initial pose: expected 6 values, got {initial.shape}")
         self._actuator_order = actuated_order(plant, model_instance, WRIST_JOINTS)
+        # pose6 -> desired joint positions in one gather (pose_to_wrist_joints, then
+        # actuator order).
+        self._pose_to_desired = _POSE6_TO_WRIST_JOINTS[self._actuator_order]
         self._q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
         self._pose_port = self.DeclareVectorInputPort("pose", 6)
         self._plant_state_port = self.DeclareVectorInputPort(
@@ -198,8 +212,10 @@ class WristDriver(LeafSystem):
         if not self._pose_port.HasValue(context):
             return
         pose = self._pose_port.Eval(context)
-        if np.all(np.isfinite(pose)):
-            discrete_state.set_value(self._desired_state, self._desired(pose))
+        if all(map(math.isfinite, pose)):
+            desired = np.zeros(12)
+            desired[:6] = pose[self._pose_to_desired]
+            discrete_state.set_value(self._desired_state, desired)
 
     def _calc_pose_measured(self, context, out):
         x, y, z, yaw, pitch, roll = self._plant_state_port.Eval(context)[self._q_index]

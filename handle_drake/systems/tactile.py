@@ -27,24 +27,52 @@ def fingertip_normal_forces(contact_results: ContactResults, fingertip_bodies,
     for hydroelastic contacts, which name geometries, not bodies). A contact
     between two fingertips counts for both.
     """
-    slot = {index: i for i, index in enumerate(fingertip_bodies)}
-    forces = np.zeros(len(fingertip_bodies))
-    for i in range(contact_results.num_point_pair_contacts()):
-        info = contact_results.point_pair_contact_info(i)
-        magnitude = abs(float(np.dot(info.contact_force(), info.point_pair().nhat_BA_W)))
-        for body in (info.bodyA_index(), info.bodyB_index()):
-            if body in slot:
-                forces[slot[body]] += magnitude
-    if geometry_to_body:
-        for i in range(contact_results.num_hydroelastic_contacts()):
-            info = contact_results.hydroelastic_contact_info(i)
-            surface = info.contact_surface()
-            magnitude = abs(float(np.dot(info.F_Ac_W().translational(), _mean_normal(surface))))
-            for geometry in (surface.id_M(), surface.id_N()):
-                body = geometry_to_body.get(geometry)
-                if body in slot:
-                    forces[slot[body]] += magnitude
-    return forces
+    return _NormalForces(fingertip_bodies, geometry_to_body)(contact_results)
+
+
+class _NormalForces:
+    """:func:`fingertip_normal_forces` with its lookups built once (the tactile
+    sensor calls it every sample): body and geometry -> output slot as plain
+    ints and dicts, and a contact's force read only when one of its bodies is a
+    fingertip (each pydrake accessor is a call into C++; a sample sees ~10
+    contacts, half of them hand-hand, palm or table contacts)."""
+
+    def __init__(self, fingertip_bodies, geometry_to_body=None):
+        self._size = len(fingertip_bodies)
+        self._slot = {int(index): i for i, index in enumerate(fingertip_bodies)}
+        self._geometry_slot = {
+            geometry: self._slot[int(body)] for geometry, body in (geometry_to_body or {}).items()
+            if int(body) in self._slot}
+        self._hydroelastic = bool(geometry_to_body)
+
+    def __call__(self, contact_results: ContactResults) -> np.ndarray:
+        forces = np.zeros(self._size)
+        slot = self._slot.get
+        for i in range(contact_results.num_point_pair_contacts()):
+            info = contact_results.point_pair_contact_info(i)
+            a, b = slot(int(info.bodyA_index())), slot(int(info.bodyB_index()))
+            if a is None and b is None:
+                continue
+            magnitude = abs(float(np.dot(info.contact_force(), info.point_pair().nhat_BA_W)))
+            if a is not None:
+                forces[a] += magnitude
+            if b is not None:
+                forces[b] += magnitude
+        if self._hydroelastic:
+            slot = self._geometry_slot.get
+            for i in range(contact_results.num_hydroelastic_contacts()):
+                info = contact_results.hydroelastic_contact_info(i)
+                surface = info.contact_surface()
+                m, n = slot(surface.id_M()), slot(surface.id_N())
+                if m is None and n is None:
+                    continue
+                magnitude = abs(float(np.dot(info.F_Ac_W().translational(),
+                                             _mean_normal(surface))))
+                if m is not None:
+                    forces[m] += magnitude
+                if n is not None:
+                    forces[n] += magnitude
+        return forces
 
 
 def _mean_normal(surface) -> np.ndarray:
@@ -74,6 +102,7 @@ class FingertipTactile(LeafSystem):
             for body in fingertip_bodies
             for geometry in plant.GetCollisionGeometriesForBody(body)
         }
+        self._forces = _NormalForces(self._bodies, self._geometry_to_body)
         self._contact_port = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults())
         )
@@ -83,8 +112,7 @@ class FingertipTactile(LeafSystem):
         return self._contact_port
 
     def _calc(self, context, out):
-        out.SetFromVector(fingertip_normal_forces(
-            self._contact_port.Eval(context), self._bodies, self._geometry_to_body))
+        out.SetFromVector(self._forces(self._contact_port.Eval(context)))
 
 
 class BodyPoseSelector(LeafSystem):

@@ -467,3 +467,45 @@ def test_moving_the_reference_point_can_reorder_grasps():
     b = np.array([bw_metric(p - shift, n, params) for p, n in grasps])
     swapped = np.sign(a[:, None] - a[None, :]) * np.sign(b[:, None] - b[None, :]) < 0
     assert len(grasps) >= 6 and swapped.any()
+
+
+def test_the_compiled_epa_equals_the_numpy_epa_bit_for_bit(monkeypatch):
+    """epa_compiled.epa_loop (numba) against hull._Epa's numpy loop: the same radius and
+    normal, bit for bit, on random 3-5 contact grasps with 4 and 8 friction-cone edges."""
+    rng = np.random.default_rng(3434)
+    stats0 = dict(EPA_STATS)
+    checked = 0
+    for k in (4, 8):
+        params = ContactParams(mu=0.5, gamma=0.002, num_edges=k, characteristic_length=R_SPHERE)
+        for p, n in random_grasps(rng, pick(60, 25), n_range=(3, 5), spread=0.15):
+            W = params.wrenches(p, n).reshape(-1, 6)
+            if min_norm_point(W)[1] > 1e-9:
+                continue
+            monkeypatch.setitem(hull_module.COMPILED_EPA, "enabled", True)
+            r, u = largest_ball_radius(W)
+            monkeypatch.setitem(hull_module.COMPILED_EPA, "enabled", False)
+            r_numpy, u_numpy = largest_ball_radius(W)
+            assert r > 0
+            assert r == r_numpy
+            np.testing.assert_array_equal(u, u_numpy)
+            checked += 1
+    assert checked >= 10
+    assert EPA_STATS["fallbacks"] == stats0["fallbacks"]
+
+
+def test_the_compiled_epa_asks_for_more_points_when_the_axes_support_a_flat(monkeypatch):
+    """Two far points (+-10 (1, .., 1)) are the support point of every axis: the axes give
+    a 1-D flat, the compiled initial simplex reports it and the numpy one asks the support
+    oracle in the orthogonal directions; the radius is still the numpy EPA's, bit for bit,
+    and qhull's."""
+    W = np.vstack([10 * np.ones(6), -10 * np.ones(6), np.eye(6), -np.eye(6)])
+    calls = []
+    compiled = hull_module._compiled_init_simplex
+    monkeypatch.setattr(hull_module, "_compiled_init_simplex",
+                        lambda *a: calls.append(compiled(*a)[0]) or compiled(*a))
+    r, _ = largest_ball_radius(W)
+    assert calls == [False]
+    monkeypatch.setitem(hull_module.COMPILED_EPA, "enabled", False)
+    assert r == largest_ball_radius(W)[0]
+    assert r == pytest.approx(qhull_ball_radius(W), rel=1e-12)
+    assert r > 0.1

@@ -42,6 +42,14 @@ from scipy.spatial import ConvexHull, QhullError
 
 from handle_drake.geometry.quality.contact import real_array
 
+try:  # the compiled EPA loop (numba, a dependency); the numpy EPA below if it cannot load
+    from handle_drake.geometry.quality.epa_compiled import epa_loop as _compiled_epa_loop
+    from handle_drake.geometry.quality.epa_compiled import (
+        init_simplex as _compiled_init_simplex,
+    )
+except (ImportError, AttributeError):  # numba missing, or its private LAPACK binding moved
+    _compiled_epa_loop = _compiled_init_simplex = None
+
 __all__ = [
     "min_norm_point",
     "largest_ball_radius",
@@ -57,6 +65,9 @@ _MAX_VERTICES = 1 << _BITS
 
 # Counters for diagnostics: how often EPA fell back to qhull.
 EPA_STATS = {"calls": 0, "fallbacks": 0}
+# The compiled EPA loop for wrench sets (set "enabled" False for the numpy loop, e.g. to
+# compare the two).
+COMPILED_EPA = {"enabled": True}
 
 
 def _check_wrenches(W) -> np.ndarray:
@@ -348,10 +359,29 @@ def largest_ball_radius(
     if scale is None:
         scale = max(1.0, float(np.max(np.abs(h))))
     epa = _Epa(support, scale)
+    gap_tol = max(tol * scale, 4 * epa.eps)
+    if W is not None and _compiled_epa_loop is not None and COMPILED_EPA["enabled"]:
+        # The same steps compiled (epa_compiled.py); the numpy initial simplex when the
+        # axes' support points do not span R^6 (it asks the oracle for more).
+        ok, *simplex = _compiled_init_simplex(pts, 1e-9 * scale, _VERTEX_HASH)
+        if not ok:
+            if not epa.init_simplex(pts, scale):
+                return 0.0, np.zeros(DIM)
+            k = DIM + 1
+            simplex = [epa.V[:k], epa.F[:k], epa.N[:k], epa.b[:k], epa.H[:k], epa.center]
+        try:
+            status, radius, u = _compiled_epa_loop(np.ascontiguousarray(W), *simplex,
+                                                   _VERTEX_HASH, epa.eps, gap_tol,
+                                                   max_iterations)
+        except np.linalg.LinAlgError:
+            status = 1
+        if status == 0:
+            return float(radius), u
+        EPA_STATS["fallbacks"] += 1
+        return qhull_ball_radius(W), np.zeros(DIM)
     if not epa.init_simplex(pts, scale):
         return 0.0, np.zeros(DIM)
     try:
-        gap_tol = max(tol * scale, 4 * epa.eps)
         for _ in range(max_iterations):
             j = int(np.argmin(epa.b[: epa.nf]))
             u = epa.N[j]
