@@ -73,7 +73,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
-from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions, target_score
+from handle_drake.apps.inhand.evaluation import (
+    incremental_score,
+    part_dimensions,
+    sample_credit,
+    target_score,
+)
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
@@ -400,6 +405,11 @@ class ScrewCapTask:
     # trial that missed check 3 alike (S_b = d, S_a = 0.4): 100 ipso trials, one score.
     benchmark: tuple | None = None
     tolerance_deg: float = 2.0
+    # eq. 48 with partial credit (evaluation.sample_credit): a sample below its benchmark
+    # scores the share of it reached, so S_a ranks trials by how far they turned the
+    # object; False: the binary match (S_a flat below the thresholds: the swarm had no
+    # gradient, docs/results/inhand.md). Checks and target are the same either way.
+    partial_credit: bool = True
     sample_period: float = 0.025  # eq. 48's L = 48 samples for one gait and its hold
     time_step: float = 0.002
     settle_time: float = 0.5
@@ -440,6 +450,9 @@ class ScrewCapTask:
         if self.benchmark is not None and len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
+        if not isinstance(self.partial_credit, bool):
+            raise ValueError(f"partial_credit: expected true or false, got "
+                             f"{self.partial_credit!r}")
         if len(self.cap_position) != 3:
             raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
 
@@ -657,7 +670,7 @@ class ScrewCapTrial(GistTrial):
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
         step = 1e-3 * c.time_step
-        matches = np.zeros(samples.size, dtype=bool)
+        matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
         st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
                   palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
@@ -671,7 +684,8 @@ class ScrewCapTrial(GistTrial):
                 turns.append(turn)
                 truths.append(truth)
                 contacts.append(summary["touching"])
-                matches[i] = gripped and turn >= c.benchmark_at(t) - c.tolerance_deg
+                matches[i] = sample_credit(gripped, turn, float(c.benchmark_at(t)),
+                                           c.tolerance_deg, c.partial_credit)
                 k = st["next_check"]
                 if k < checks.size and t >= checks[k] - step:
                     ok = gripped and turn >= c.target_deg * fractions[k] - c.tolerance_deg
@@ -697,7 +711,7 @@ class ScrewCapTrial(GistTrial):
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
                        and not st["palm"] and survived is not False)
         if st["failed"]:
-            matches[samples > checks[passed] + step] = False
+            matches[samples > checks[passed] + step] = 0.0
         score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
         return ScrewCapOutcome(
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
