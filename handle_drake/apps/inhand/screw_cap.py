@@ -480,6 +480,11 @@ class ScrewCapTask:
         n = int(round(self.total_time / self.sample_period))
         return np.arange(1, n + 1) * self.total_time / n
 
+    def reversal_sample_times(self) -> np.ndarray:
+        """The free cylinder's samples while its weight is reversed (after the hold)."""
+        n = max(1, int(round(self.reverse_time / self.sample_period)))
+        return self.total_time + np.arange(1, n + 1) * self.reverse_time / n
+
     def benchmark_at(self, t) -> np.ndarray:
         """Turn (deg) the benchmark expects at times ``t``: linear between the checks."""
         return self.target_deg * np.interp(t, np.r_[0.0, self.check_times()],
@@ -499,6 +504,8 @@ class ScrewCapOutcome:
     palm_weight_share: float
     # free cylinder: still held after its weight was reversed (None: not run, or a cap)
     survived_reversal: bool | None
+    # eq. 48's credits of the reversal's samples (free cylinder; empty for the cap)
+    reversal_credits: list
     checks_passed: int
     completed: bool
     reached_target: bool
@@ -631,18 +638,30 @@ class ScrewCapTrial(GistTrial):
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
 
-    def _survives_reversal(self, built: dict, plant_context) -> bool:
+    def _survives_reversal(self, built: dict, plant_context) -> tuple[bool, np.ndarray]:
         """Weight reversed for ``reverse_time`` (the hand turned palm down, for the free
-        cylinder): still within ``reverse_travel`` and touched by a finger."""
+        cylinder): still within ``reverse_travel`` and touched by a finger at the end.
+
+        Also returns eq. 48's credits of the reversal's samples (every ``sample_period``;
+        the benchmark: held, moved less than ``reverse_travel``): 1 when so, with
+        ``partial_credit`` ``reverse_travel / travel`` when it slid further while a
+        finger still touches it (0 when none does), without it 0."""
         c, plant, body = self.config, built["plant"], built["cap"]
-        context, reverse = built["simulator"].get_mutable_context(), built["reverse"]
+        simulator = built["simulator"]
+        context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
-        built["simulator"].AdvanceTo(c.total_time + c.reverse_time)
-        p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
-        touching = contact_summary(plant, plant_context, built)["touching"]
-        return bool(np.linalg.norm(p - p_end) < c.reverse_travel
-                    and any(b != "palm" for b in touching))
+        credits, held = [], False
+        for t in c.reversal_sample_times():
+            simulator.AdvanceTo(float(t))
+            travel = float(np.linalg.norm(
+                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
+            touching = contact_summary(plant, plant_context, built)["touching"]
+            touched = any(b != "palm" for b in touching)
+            held = touched and travel < c.reverse_travel
+            credits.append(1.0 if held else (min(1.0, c.reverse_travel / travel)
+                                             if touched and c.partial_credit else 0.0))
+        return bool(held), np.asarray(credits)
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> ScrewCapOutcome:
         """Runs one trial from the settled grasp (deterministic)."""
@@ -701,8 +720,11 @@ class ScrewCapTrial(GistTrial):
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
         survived = None
+        # the free cylinder's reversal samples are planned samples of eq. 48 too (0 when
+        # the trial stopped before them)
+        reversal = np.zeros(c.reversal_sample_times().size if joint is None else 0)
         if joint is None and not st["stopped"]:
-            survived = self._survives_reversal(built, plant_context)
+            survived, reversal = self._survives_reversal(built, plant_context)
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
@@ -712,12 +734,14 @@ class ScrewCapTrial(GistTrial):
                        and not st["palm"] and survived is not False)
         if st["failed"]:
             matches[samples > checks[passed] + step] = 0.0
-        score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
+        score, s_b, s_a = incremental_score(self.dims_per_part, passed,
+                                            np.r_[matches, reversal], reached)
         return ScrewCapOutcome(
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
             max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
             palm_touched=st["palm"], palm_force_max=st["palm_max"],
             palm_weight_share=float(palm_share), survived_reversal=survived,
+            reversal_credits=[float(v) for v in reversal],
             checks_passed=passed,
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
