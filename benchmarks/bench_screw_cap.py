@@ -40,7 +40,7 @@ from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
 from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
-OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
 
 
 def base_rate(n, seed, db, workers, options) -> dict:

@@ -25,6 +25,9 @@
 - :class:`CMAES`: the ``cma`` package's CMA-ES in the unit cube (mean at the
   centre, sigma 0.3, population = particles), ask/tell per individual.
 - random search: :class:`handle_drake.learning.RandomSearch`.
+- ``ipso`` (``make_optimizer``) adds velocity clamping (``v_max``), re-drawn
+  stagnant particles (``reinit_after``) and other coefficients
+  (``factory.IPSO_SETTINGS``); ``ipso-report`` keeps the report's literal settings.
 - ``ipso-restart``: Algorithm 2 with the report's restarts (5.5.4: "rather than
   increasing N_Iter, we prefer to restart the babbling learning process"): after
   3 iterations without a better personal best the swarm starts anew.
@@ -44,7 +47,7 @@ from handle_drake.learning.optim.base import Optimizer, RandomSearch, _derived_s
 __all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "INHAND_OPTIMIZERS"]
 
 # the optimisers the in-hand command offers (built by optim.factory.make_optimizer)
-INHAND_OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+INHAND_OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
 
 
 def _positive_int(name, value) -> int:
