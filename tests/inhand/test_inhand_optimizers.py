@@ -292,3 +292,21 @@ def test_velocity_clamp_and_reinitialised_stagnant_particles():
                             ({"reinit_after": 0}, "reinit_after")):
         with pytest.raises(ValueError, match=message):
             IncrementalPSO([[0, 1]] * 2, **kwargs)
+
+
+def test_ipso_is_the_interpreted_algorithm_2_and_its_settings_are_part_of_the_run():
+    from handle_drake.apps.inhand.experiment import _config
+    from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
+    from handle_drake.learning.optim.factory import IPSO_SETTINGS
+
+    ipso = make_optimizer("ipso", [[0, 1]] * 4, 0)
+    literal = make_optimizer("ipso-report", [[0, 1]] * 4, 0)
+    assert (ipso.w, ipso.phi_p, ipso.phi_c, ipso.v_max, ipso.reinit_after) == (
+        IPSO_SETTINGS["w"], IPSO_SETTINGS["phi_p"], IPSO_SETTINGS["phi_c"],
+        IPSO_SETTINGS["v_max"], IPSO_SETTINGS["reinit_after"])
+    assert (literal.w, literal.phi_p, literal.phi_c) == (0.4, 0.4, 0.4)  # report 5.5.4
+    assert literal.v_max is None and literal.reinit_after is None and literal.incremental
+    trial = ScrewCapTrial(ScrewCapTask())
+    assert _config(trial, "ipso", 10)["ipso_settings"] == IPSO_SETTINGS
+    assert "ipso_settings" not in _config(trial, "ipso-report", 10)
+    assert _config(trial, "ipso", 10)["task"]["partial_credit"] is True
