@@ -638,6 +638,16 @@ class ScrewCapTrial(GistTrial):
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
 
+    def _reversal(self, built: dict, plant_context, stopped: bool):
+        """``(survived, credits)``: for the free cylinder whose trial was not stopped,
+        :meth:`_survives_reversal`; its reversal samples are planned samples of eq. 48
+        too, so they count 0 when the trial stopped before them (the cap has none)."""
+        if built["joint"] is not None:
+            return None, np.zeros(0)
+        if stopped:
+            return None, np.zeros(self.config.reversal_sample_times().size)
+        return self._survives_reversal(built, plant_context)
+
     def _survives_reversal(self, built: dict, plant_context) -> tuple[bool, np.ndarray]:
         """Weight reversed for ``reverse_time`` (the hand turned palm down, for the free
         cylinder): still within ``reverse_travel`` and touched by a finger at the end.
@@ -719,12 +729,7 @@ class ScrewCapTrial(GistTrial):
         # the palm's share of the object's weight at the end (before any reversal)
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
-        survived = None
-        # the free cylinder's reversal samples are planned samples of eq. 48 too (0 when
-        # the trial stopped before them)
-        reversal = np.zeros(c.reversal_sample_times().size if joint is None else 0)
-        if joint is None and not st["stopped"]:
-            survived, reversal = self._survives_reversal(built, plant_context)
+        survived, reversal = self._reversal(built, plant_context, st["stopped"])
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
