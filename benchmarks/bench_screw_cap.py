@@ -43,7 +43,7 @@ from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows
 from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
-OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
 PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP, "regrasp": REGRASP_GAITS}
 
 
@@ -113,10 +113,11 @@ def resimulate(best_trials) -> list:
         truth = simulate_scenario(scenario)
         out.append({"run_id": run_id, "trial": index, "logged_turn_deg": logged,
                     "resimulated_turn_deg": truth["turn_deg"],
-                    "palm_force_max": truth["palm_force_max"]})
+                    "palm_force_max": truth["palm_force_max"],
+                    "survived_reversal": truth.get("survived_reversal")})
         print(f"{run_id} trial {index}: logged {logged:.1f} deg, re-simulated "
-              f"{truth['turn_deg']:.1f} deg, palm force max {truth['palm_force_max']:.2f} N",
-              flush=True)
+              f"{truth['turn_deg']:.1f} deg, palm force max {truth['palm_force_max']:.2f} N, "
+              f"survived reversal {truth.get('survived_reversal')}", flush=True)
     return out
 
 
@@ -211,6 +212,44 @@ def summarize(db, budget, resim: bool = False) -> dict:
     return {"rows": out, "resimulated": resimulated}
 
 
+def diagnose(db, batch: int = 10) -> dict:
+    """Per run of the log and per iteration (``batch`` trials): the swarm's spread (mean
+    per-dimension standard deviation of the trials' parameters, as a share of the box),
+    the scores' min / median / max and how many distinct scores (to 3 decimals) the
+    iteration's trials got, and the largest turn of a trial that passed 3 checks."""
+    out = {}
+    with TrialLog(db) as log:
+        for info in log.runs():
+            records = [r for r in log.trials(info.run_id) if r.status == "done"]
+            if not records:
+                continue
+            b = np.asarray(info.bounds, dtype=float)
+            width = np.where(b[:, 1] > b[:, 0], b[:, 1] - b[:, 0], 1.0)
+            U = (np.array([r.parameters for r in records]) - b[:, 0]) / width
+            f = np.array([r.metric for r in records])
+            rows = []
+            for start in range(0, len(records), batch):
+                sl = slice(start, start + batch)
+                done3 = [r.contacts["turn_deg"] for r in records[sl]
+                         if r.contacts.get("checks_passed", 0) >= 3]
+                rows.append({"iteration": start // batch + 1,
+                             "spread": float(U[sl].std(axis=0).mean()),
+                             "score_min_median_max": [float(f[sl].min()),
+                                                      float(np.median(f[sl])),
+                                                      float(f[sl].max())],
+                             "distinct_scores": int(np.unique(np.round(f[sl], 3)).size),
+                             "trials": int(f[sl].size),
+                             "max_turn_3_checks": max(done3) if done3 else None})
+            out[info.run_id] = rows
+            print(f"{info.run_id}:", flush=True)
+            for r in rows:
+                lo, med, hi = r["score_min_median_max"]
+                print(f"  it {r['iteration']:2d}: spread {r['spread']:.3f}  score "
+                      f"{lo:.2f}/{med:.2f}/{hi:.2f}  distinct {r['distinct_scores']}/"
+                      f"{r['trials']}  turn (3 checks) {r['max_turn_3_checks']}", flush=True)
+    return out
+
+
 def figures(db, task, options, directory, html: bool = True) -> dict:
     """Figure 34 (best score per iteration, every run of the log) and an HTML replay of the
     best trial of all runs (re-run from its parameters with a Meshcat recording)."""
@@ -251,6 +290,9 @@ def main(argv=None) -> int:
     p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
                    help="learning curve of every run in --db and the best trial's HTML replay")
+    p.add_argument("--diagnose", action="store_true",
+                   help="per run in --db and per iteration: the swarm's spread and the "
+                        "scores' distribution")
     p.add_argument("--summarize", action="store_true",
                    help="the table from the trial log as it is (with --resimulate: re-simulate "
                         "each run's best trial from its logged scenario)")
@@ -288,6 +330,8 @@ def main(argv=None) -> int:
         entry["speed"] = speed(args.speed, options)
     if args.figures is not None:
         entry["figures"] = figures(args.db, args.task, options, args.figures)
+    if args.diagnose:
+        entry["diagnosis"] = diagnose(args.db)
     if args.summarize:
         entry["summary"] = summarize(args.db, args.budget, args.resimulate)
     if args.base_rate:

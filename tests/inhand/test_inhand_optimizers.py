@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from handle_drake.apps.inhand.evaluation import incremental_score, target_score
+from handle_drake.apps.inhand.evaluation import incremental_score, sample_credit, target_score
 from handle_drake.apps.inhand.experiment import run_inhand
 from handle_drake.learning import InlineExecutor, TrialLog, TrialRunner
 from handle_drake.learning.optim.factory import OPTIMIZERS, make_optimizer
@@ -226,3 +226,87 @@ def test_restarts_of_section_5_5_4_after_iterations_without_progress():
     with pytest.raises(ValueError, match="restart_after"):
         IncrementalPSO([[0, 1]] * 2, restart_after=0)
     assert make_optimizer("ipso-restart", [[0, 1]] * 2).restart_after == 3
+
+
+def test_partial_credit_ranks_trials_below_the_check_thresholds():
+    # issue 35 item 4: with the binary eq. 48 every trial that missed check 3 scored alike
+    # (one seed: 94 of 100 ipso trials had the same score). Two trials held all along that
+    # fail the same check, one turning the object twice as far: the binary S_a ties them,
+    # the partial credit ranks the further turn higher; matching samples still count 1,
+    # so S_a <= 1 and the target score d + 2 is still reached only by the target.
+    dims = np.array([10, 3, 13, 0])
+    t = np.arange(1, 49) / 48 * 1.2
+    bench = 90.0 * np.interp(t, [0, 0.25, 0.5, 0.75, 1.2], [0, 0, 0.05, 0.3, 1.0])
+    stopped = t > 0.75  # both fail check 3 (27 deg at 0.75 s) and stop there
+
+    def score(turns, partial):
+        q = [sample_credit(True, v, b, 2.0, partial) for v, b in zip(turns, bench, strict=True)]
+        q = np.where(stopped, 0.0, q)
+        return incremental_score(dims, 2, q, reached=False)[0]
+
+    # both on the benchmark until check 2 (0.5 s), then below it: one stalls at 2.5 deg,
+    # the other keeps turning at 80 % of the benchmark's pace (19.6 deg at 0.75 s)
+    slow = np.where(t <= 0.5, bench, 2.5)
+    fast = np.where(t <= 0.5, bench, np.maximum(2.5, 0.8 * (bench - 2.0)))
+    assert score(slow, False) == score(fast, False)  # the binary match cannot rank them
+    assert score(fast, True) > score(slow, True) > score(slow, False)
+    # a match is 1 either way; not held is 0; the wrong way is 0; the credit is the share
+    assert sample_credit(True, 30.0, 27.0, 2.0) == sample_credit(True, 30.0, 27.0, 2.0,
+                                                                   False) == 1.0
+    assert sample_credit(False, 30.0, 27.0, 2.0) == 0.0
+    assert sample_credit(True, -5.0, 27.0, 2.0) == 0.0
+    assert sample_credit(True, 12.5, 27.0, 2.0) == pytest.approx(0.5)
+    assert sample_credit(True, -1.0, 0.0, 2.0) == 1.0  # a grip-only benchmark asks "held"
+    best_unreached = incremental_score(dims, 4, np.ones(48), reached=False)[0]
+    assert best_unreached < target_score(26, "incremental")
+    with pytest.raises(ValueError, match="matches"):
+        incremental_score(dims, 1, [0.5, 1.2])
+
+
+def test_velocity_clamp_and_reinitialised_stagnant_particles():
+    # a flat objective: Algorithm 2 with the report's coefficients contracts around its
+    # start (the collapse measured on the screw cap); with stagnant particles re-drawn the
+    # swarm keeps exploring while the best cluster (here the first ceil(N/5)) is kept
+    def run(**kw):
+        opt = IncrementalPSO([[0, 1]] * 6, seed=3, n_particles=10, min_active=6, **kw)
+        spreads, elite = [], None
+        for g in range(8):
+            xs = [opt.ask() for _ in range(opt.batch_size)]
+            for k, x in enumerate(xs):
+                opt.tell(x, 1.0 + 0.1 * (k == 0 and g == 0))  # particle 0's first trial best
+            spreads.append(float(opt.x.std(axis=0).mean()))
+            if g == 0:
+                elite = opt.p[0].copy()
+        return opt, spreads, elite
+
+    plain, plain_spread, _ = run()
+    kept, spread, elite = run(reinit_after=2, v_max=0.2)
+    assert plain.reinits == 0 and kept.reinits > 0
+    assert max(plain_spread[3:]) < 0.15  # contracted from U(0, 1)'s 0.29
+    assert np.mean(spread[2:]) > 1.4 * np.mean(plain_spread[2:])  # re-drawn, wider
+    np.testing.assert_array_equal(kept.p[0], elite)  # the best particle is never re-drawn
+    assert np.all(np.abs(kept.v) <= 0.2 + 1e-12)
+    again, _, _ = run(reinit_after=2, v_max=0.2)
+    np.testing.assert_array_equal(again.x, kept.x)  # seeded: a replay rebuilds it
+    for kwargs, message in (({"v_max": 0.0}, "v_max"), ({"v_max": 1.5}, "v_max"),
+                            ({"reinit_after": 0}, "reinit_after")):
+        with pytest.raises(ValueError, match=message):
+            IncrementalPSO([[0, 1]] * 2, **kwargs)
+
+
+def test_ipso_is_the_interpreted_algorithm_2_and_its_settings_are_part_of_the_run():
+    from handle_drake.apps.inhand.experiment import _config
+    from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
+    from handle_drake.learning.optim.factory import IPSO_SETTINGS
+
+    ipso = make_optimizer("ipso", [[0, 1]] * 4, 0)
+    literal = make_optimizer("ipso-report", [[0, 1]] * 4, 0)
+    assert (ipso.w, ipso.phi_p, ipso.phi_c, ipso.v_max, ipso.reinit_after) == (
+        IPSO_SETTINGS["w"], IPSO_SETTINGS["phi_p"], IPSO_SETTINGS["phi_c"],
+        IPSO_SETTINGS["v_max"], IPSO_SETTINGS["reinit_after"])
+    assert (literal.w, literal.phi_p, literal.phi_c) == (0.4, 0.4, 0.4)  # report 5.5.4
+    assert literal.v_max is None and literal.reinit_after is None and literal.incremental
+    trial = ScrewCapTrial(ScrewCapTask())
+    assert _config(trial, "ipso", 10)["ipso_settings"] == IPSO_SETTINGS
+    assert "ipso_settings" not in _config(trial, "ipso-report", 10)
+    assert _config(trial, "ipso", 10)["task"]["partial_credit"] is True

@@ -193,6 +193,15 @@ def test_the_fingertip_cylinder_is_held_by_the_fingers_and_survives_palm_down(fi
     demo = fingertip.evaluate(fingertip.gist.initial_parameters(), early_stop=False)
     assert demo.survived_reversal is False and not demo.reached_target
     assert demo.score < fingertip.target_score
+    # the reversal's samples are eq. 48 samples: all 1 for the stroke that holds; for the
+    # demonstration's, graded as the cylinder slides out (1 at first, then the share
+    # reverse_travel / travel while a finger touches, 0 once none does; measured: it
+    # slides about 43 mm and stays touched)
+    n = fingertip.config.reversal_sample_times().size
+    assert outcome.reversal_credits == [1.0] * n
+    graded = np.array(demo.reversal_credits)
+    assert graded.size == n and graded[0] == 1.0 and graded[-1] < 1.0
+    assert np.any((graded > 0) & (graded < 1))  # slid further than 10 mm, still touched
 
 
 def test_the_fingertip_scenario_re_simulates_alone_with_its_palm_down_check(fingertip):

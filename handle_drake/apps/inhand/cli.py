@@ -51,7 +51,9 @@ def register(subparsers) -> None:
     p.add_argument("--gaits", type=positive_int, default=1,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
-                   help="ipso: Algorithm 2 (incremental PSO); pso: standard PSO; cmaes: CMA-ES; "
+                   help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
+                        "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
+                        "with the restarts of 5.5.4; pso: standard PSO; cmaes: CMA-ES; "
                         "random: random search")
     p.add_argument("--trials", type=positive_int, default=200,
                    help="budget of trials (the run stops earlier at the target)")

@@ -14,7 +14,11 @@ are active from the start, passing check ``k`` activates those of part
 
 - ``S_b`` (eq. 47) = number of activated parameters,
 - ``S_a`` (eq. 48) = share of the ``L`` planned samples whose state matches
-  the benchmark (samples after an early stop count as not matching),
+  the benchmark (samples after an early stop count as not matching); with
+  partial credit (:func:`sample_credit`, the finger tasks' default) a sample
+  below its benchmark counts the share of the benchmark it reached, so a trial
+  that turns the object further scores higher even below the checks' thresholds
+  (eq. 48 with ``q_i`` in ``[0, 1]``: our interpretation of ``s_i = t_i``),
 - ``f = S_a + S_b`` (eq. 49), plus 2 when the target is reached: the final
   check passes *and* the state meets the target strictly (our addition:
   passing the last check activates nothing new, and without it a motion that
@@ -34,7 +38,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["old_score", "incremental_score", "part_dimensions", "target_score", "BONUS"]
+__all__ = ["old_score", "incremental_score", "part_dimensions", "target_score", "BONUS",
+           "sample_credit"]
 
 #: Added to eq. 49 when the target is reached (> the largest S_a, so reached is f >= d + 2).
 BONUS = 2.0
@@ -65,13 +70,39 @@ def part_dimensions(starts, sizes, n_parts: int) -> np.ndarray:
     return np.bincount(parts, weights=sizes, minlength=n_parts).astype(int)
 
 
+def sample_credit(held: bool, value: float, benchmark: float, tolerance: float = 0.0,
+                  partial: bool = True) -> float:
+    """Eq. 48's ``q_i`` of one sample: 1 when the object is held and ``value`` (its turn) is
+    at least ``benchmark - tolerance``, 0 when it is not held; below the benchmark, with
+    ``partial``, the share of it reached, ``clip(value / (benchmark - tolerance), 0, 1)``
+    (a turn the wrong way: 0), without ``partial`` 0 (the literal ``s_i = t_i``).
+
+    A benchmark within the tolerance of 0 asks only "held". The credit is 1 exactly where
+    the binary match is, and below 1 elsewhere, so ``S_a <= 1`` still, the checks, the
+    parameters they activate and the target are unchanged: only the ranking of trials
+    below the thresholds gains a gradient.
+    """
+    if not (np.isfinite(value) and np.isfinite(benchmark) and tolerance >= 0):
+        raise ValueError(f"sample_credit: expected finite value and benchmark and a tolerance "
+                         f">= 0, got {value!r}, {benchmark!r}, {tolerance!r}")
+    if not held:
+        return 0.0
+    need = benchmark - tolerance
+    if value >= need:
+        return 1.0
+    if not partial or need <= 0:
+        return 0.0
+    return float(np.clip(value / need, 0.0, 1.0))
+
+
 def incremental_score(dims_per_part, checks_passed: int, matches,
                       reached: bool | None = None) -> tuple[float, float, float]:
     """``(f, S_b, S_a)`` of eqs. 47-49 (see the module doc).
 
     ``dims_per_part`` (K,): parameters per part; ``checks_passed``: how many
     checks passed in a row (0..K); ``matches`` (L,): per planned sample, whether
-    its state matched the benchmark (False for samples not reached);
+    its state matched the benchmark (False for samples not reached), or its
+    credit in ``[0, 1]`` (:func:`sample_credit`);
     ``reached``: whether the final state meets the target strictly (None: the
     last check decides alone). The bonus needs both the last check and it.
     """
@@ -79,9 +110,11 @@ def incremental_score(dims_per_part, checks_passed: int, matches,
     K = dims.size
     if not (0 <= checks_passed <= K):
         raise ValueError(f"checks_passed: expected 0..{K}, got {checks_passed}")
-    matches = np.asarray(matches, dtype=bool)
+    matches = np.asarray(matches, dtype=float)
     if matches.size == 0:
         raise ValueError("matches: expected at least one planned sample")
+    if not np.all((matches >= 0) & (matches <= 1)):
+        raise ValueError("matches: expected values in [0, 1] (booleans or credits)")
     s_b = float(dims[: min(checks_passed + 1, K)].sum())
     s_a = float(matches.mean())
     bonus = checks_passed == K and (reached is None or bool(reached))

@@ -28,7 +28,7 @@ from handle_drake.learning.cluster import as_executor, executor_workers, max_loc
 from handle_drake.learning.executors import InlineExecutor
 from handle_drake.learning.log import TrialLog
 from handle_drake.learning.loop import TrialRunner
-from handle_drake.learning.optim.factory import make_optimizer
+from handle_drake.learning.optim.factory import IPSO_SETTINGS, make_optimizer
 from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
 
 __all__ = ["run_inhand", "InHandRun", "run_summary", "learning_curve", "plot_learning_curve",
@@ -50,6 +50,13 @@ class InHandRun:
 
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
+    config = _task_config(trial, optimizer, n_particles)
+    if optimizer == "ipso":  # its interpretation is part of the run: another, another run
+        config["ipso_settings"] = dict(IPSO_SETTINGS)
+    return config
+
+
+def _task_config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
     task = dc.asdict(trial.config)
     if isinstance(trial, JogWheelTrial):  # scored from MIDI (handle_drake.apps.inhand.jog_wheel)
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,

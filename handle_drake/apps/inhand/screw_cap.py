@@ -75,7 +75,12 @@ from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions, target_score
+from handle_drake.apps.inhand.evaluation import (
+    incremental_score,
+    part_dimensions,
+    sample_credit,
+    target_score,
+)
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
@@ -519,6 +524,11 @@ class ScrewCapTask:
     # trial that missed check 3 alike (S_b = d, S_a = 0.4): 100 ipso trials, one score.
     benchmark: tuple | None = None
     tolerance_deg: float = 2.0
+    # eq. 48 with partial credit (evaluation.sample_credit): a sample below its benchmark
+    # scores the share of it reached, so S_a ranks trials by how far they turned the
+    # object; False: the binary match (S_a flat below the thresholds: the swarm had no
+    # gradient, docs/results/inhand.md). Checks and target are the same either way.
+    partial_credit: bool = True
     sample_period: float = 0.025  # eq. 48's L = 48 samples for one gait and its hold
     time_step: float = 0.002
     settle_time: float = 0.5
@@ -565,6 +575,9 @@ class ScrewCapTask:
         if self.benchmark is not None and len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
+        if not isinstance(self.partial_credit, bool):
+            raise ValueError(f"partial_credit: expected true or false, got "
+                             f"{self.partial_credit!r}")
         if len(self.cap_position) != 3:
             raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
         if not 0.02 <= self.cap_diameter <= 0.06:
@@ -604,6 +617,11 @@ class ScrewCapTask:
         n = int(round(self.total_time / self.sample_period))
         return np.arange(1, n + 1) * self.total_time / n
 
+    def reversal_sample_times(self) -> np.ndarray:
+        """The free cylinder's samples while its weight is reversed (after the hold)."""
+        n = max(1, int(round(self.reverse_time / self.sample_period)))
+        return self.total_time + np.arange(1, n + 1) * self.reverse_time / n
+
     def benchmark_at(self, t) -> np.ndarray:
         """Turn (deg) the benchmark expects at times ``t``: linear between the checks."""
         return self.target_deg * np.interp(t, np.r_[0.0, self.check_times()],
@@ -623,6 +641,8 @@ class ScrewCapOutcome:
     palm_weight_share: float
     # free cylinder: still held after its weight was reversed (None: not run, or a cap)
     survived_reversal: bool | None
+    # eq. 48's credits of the reversal's samples (free cylinder; empty for the cap)
+    reversal_credits: list
     checks_passed: int
     completed: bool
     reached_target: bool
@@ -768,18 +788,40 @@ class ScrewCapTrial(GistTrial):
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
 
-    def _survives_reversal(self, built: dict, plant_context) -> bool:
+    def _reversal(self, built: dict, plant_context, stopped: bool):
+        """``(survived, credits)``: for the free cylinder whose trial was not stopped,
+        :meth:`_survives_reversal`; its reversal samples are planned samples of eq. 48
+        too, so they count 0 when the trial stopped before them (the cap has none)."""
+        if built["joint"] is not None:
+            return None, np.zeros(0)
+        if stopped:
+            return None, np.zeros(self.config.reversal_sample_times().size)
+        return self._survives_reversal(built, plant_context)
+
+    def _survives_reversal(self, built: dict, plant_context) -> tuple[bool, np.ndarray]:
         """Weight reversed for ``reverse_time`` (the hand turned palm down, for the free
-        cylinder): still within ``reverse_travel`` and touched by a finger."""
+        cylinder): still within ``reverse_travel`` and touched by a finger at the end.
+
+        Also returns eq. 48's credits of the reversal's samples (every ``sample_period``;
+        the benchmark: held, moved less than ``reverse_travel``): 1 when so, with
+        ``partial_credit`` ``reverse_travel / travel`` when it slid further while a
+        finger still touches it (0 when none does), without it 0."""
         c, plant, body = self.config, built["plant"], built["cap"]
-        context, reverse = built["simulator"].get_mutable_context(), built["reverse"]
+        simulator = built["simulator"]
+        context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
-        built["simulator"].AdvanceTo(c.total_time + c.reverse_time)
-        p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
-        touching = contact_summary(plant, plant_context, built)["touching"]
-        return bool(np.linalg.norm(p - p_end) < c.reverse_travel
-                    and any(b != "palm" for b in touching))
+        credits, held = [], False
+        for t in c.reversal_sample_times():
+            simulator.AdvanceTo(float(t))
+            travel = float(np.linalg.norm(
+                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
+            touching = contact_summary(plant, plant_context, built)["touching"]
+            touched = any(b != "palm" for b in touching)
+            held = touched and travel < c.reverse_travel
+            credits.append(1.0 if held else (min(1.0, c.reverse_travel / travel)
+                                             if touched and c.partial_credit else 0.0))
+        return bool(held), np.asarray(credits)
 
     def _reset(self, built: dict, x):
         """The simulator at the settled grasp, time 0, with the parameters ``x`` (and their
@@ -823,7 +865,7 @@ class ScrewCapTrial(GistTrial):
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
         step = 1e-3 * c.time_step
-        matches = np.zeros(samples.size, dtype=bool)
+        matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
         st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
                   palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
@@ -837,7 +879,8 @@ class ScrewCapTrial(GistTrial):
                 turns.append(turn)
                 truths.append(truth)
                 contacts.append(summary["touching"])
-                matches[i] = gripped and turn >= c.benchmark_at(t) - c.tolerance_deg
+                matches[i] = sample_credit(gripped, turn, float(c.benchmark_at(t)),
+                                           c.tolerance_deg, c.partial_credit)
                 k = st["next_check"]
                 if k < checks.size and t >= checks[k] - step:
                     ok = gripped and turn >= c.target_deg * fractions[k] - c.tolerance_deg
@@ -852,9 +895,7 @@ class ScrewCapTrial(GistTrial):
         # the palm's share of the object's weight at the end (before any reversal)
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
-        survived = None
-        if joint is None and not st["stopped"]:
-            survived = self._survives_reversal(built, plant_context)
+        survived, reversal = self._reversal(built, plant_context, st["stopped"])
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
@@ -863,13 +904,15 @@ class ScrewCapTrial(GistTrial):
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
                        and not st["palm"] and survived is not False)
         if st["failed"]:
-            matches[samples > checks[passed] + step] = False
-        score, s_b, s_a = incremental_score(self.dims_per_part, passed, matches, reached)
+            matches[samples > checks[passed] + step] = 0.0
+        score, s_b, s_a = incremental_score(self.dims_per_part, passed,
+                                            np.r_[matches, reversal], reached)
         return ScrewCapOutcome(
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
             max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
             palm_touched=st["palm"], palm_force_max=st["palm_max"],
             palm_weight_share=float(palm_share), survived_reversal=survived,
+            reversal_credits=[float(v) for v in reversal],
             checks_passed=passed,
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,

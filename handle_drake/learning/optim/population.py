@@ -25,6 +25,9 @@
 - :class:`CMAES`: the ``cma`` package's CMA-ES in the unit cube (mean at the
   centre, sigma 0.3, population = particles), ask/tell per individual.
 - random search: :class:`handle_drake.learning.RandomSearch`.
+- ``ipso`` (``make_optimizer``) adds velocity clamping (``v_max``), re-drawn
+  stagnant particles (``reinit_after``) and other coefficients
+  (``factory.IPSO_SETTINGS``); ``ipso-report`` keeps the report's literal settings.
 - ``ipso-restart``: Algorithm 2 with the report's restarts (5.5.4: "rather than
   increasing N_Iter, we prefer to restart the babbling learning process"): after
   3 iterations without a better personal best the swarm starts anew.
@@ -44,7 +47,7 @@ from handle_drake.learning.optim.base import Optimizer, RandomSearch, _derived_s
 __all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "INHAND_OPTIMIZERS"]
 
 # the optimisers the in-hand command offers (built by optim.factory.make_optimizer)
-INHAND_OPTIMIZERS = ("ipso", "ipso-restart", "pso", "cmaes", "random")
+INHAND_OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
 
 
 def _positive_int(name, value) -> int:
@@ -149,8 +152,21 @@ class IncrementalPSO(_Generational):
                  phi_p: float = 0.4, phi_c: float = 0.4, incremental: bool = True,
                  min_active: int = 1, cluster_size: int | None = None,
                  freeze_inactive: bool = True, stop_score: float | None = None,
-                 restart_after: int | None = None):
+                 restart_after: int | None = None, v_max: float | None = None,
+                 reinit_after: int | None = None):
         super().__init__(bounds, seed, n_particles, stop_score)
+        # velocity clamping: |v_d| <= v_max (a share of the box's width); None: unclamped
+        if v_max is not None and not (isinstance(v_max, int | float)
+                                      and not isinstance(v_max, bool) and 0 < v_max <= 1):
+            raise ValueError(f"v_max: expected a number in (0, 1] (share of the box), got "
+                             f"{v_max!r}")
+        self.v_max = None if v_max is None else float(v_max)
+        # re-initialisation of stagnant particles: a particle outside the best-solution
+        # cluster whose personal best has not improved for this many iterations is drawn
+        # anew (uniform position and velocity) and forgets its personal best; None: never
+        self.reinit_after = None if reinit_after is None else _positive_int(
+            "reinit_after", reinit_after)
+        self.reinits = 0
         # 5.5.4: "rather than increasing N_Iter, we prefer to restart the babbling learning
         # process": after this many iterations without a better personal best, every
         # particle starts anew (uniform position and velocity, no memory); None: never
@@ -174,6 +190,7 @@ class IncrementalPSO(_Generational):
         self.p = self.x.copy()
         self.f_p = np.full(self.batch_size, -math.inf)
         self.active = np.full(self.batch_size, self.dim if not incremental else self.min_active)
+        self._stagnant = np.zeros(self.batch_size, dtype=int)  # iterations without a better p_i
 
     def _new_population(self) -> np.ndarray:
         return self.x.copy()
@@ -195,6 +212,7 @@ class IncrementalPSO(_Generational):
         better = scores > self.f_p
         self.p[better] = self.x[better]
         self.f_p[better] = scores[better]
+        self._stagnant = np.where(better, 0, self._stagnant + 1)
         if self.restart_after is not None:
             best = float(np.max(self.f_p))
             self._stale = 0 if best > self._best_seen else self._stale + 1
@@ -207,21 +225,41 @@ class IncrementalPSO(_Generational):
                 self.f_p = np.full(self.batch_size, -math.inf)
                 self.active[:] = self.min_active
                 self._stale, self._best_seen = 0, -math.inf
+                self._stagnant[:] = 0
                 self.restarts += 1
                 return
         c = self.cluster_centre
+        elite = set(np.argsort(-self.f_p, kind="stable")[: self.cluster_size].tolist())
         for i in range(self.batch_size):
+            rng = np.random.default_rng([self.seed, 0x15A0, self.generation + 1, i])
+            if self.reinit_after is not None and i not in elite \
+                    and self._stagnant[i] >= self.reinit_after:
+                self._reinitialise(i, rng)
+                continue
             m = self.active_dimensions(self.f_p[i])
             self.active[i] = m
-            rng = np.random.default_rng([self.seed, 0x15A0, self.generation + 1, i])
             r_p, r_c = rng.random(m), rng.random(m)
             self.v[i, :m] = (self.w * self.v[i, :m] + self.phi_p * r_p * (self.p[i, :m]
                              - self.x[i, :m]) + self.phi_c * r_c * (c[:m] - self.x[i, :m]))
+            if self.v_max is not None:
+                self.v[i] = np.clip(self.v[i], -self.v_max, self.v_max)
             moving = slice(None) if not self.freeze_inactive else slice(0, m)
             new = self.x[i, moving] + self.v[i, moving]
             clipped = np.clip(new, 0.0, 1.0)
             self.v[i, moving] = np.where(clipped != new, 0.0, self.v[i, moving])
             self.x[i, moving] = clipped
+
+    def _reinitialise(self, i: int, rng) -> None:
+        """Particle ``i`` drawn anew (uniform in the box, velocity within ``v_max``); its
+        personal best is forgotten, the others' (and so the cluster) are kept."""
+        limit = 1.0 if self.v_max is None else self.v_max
+        self.x[i] = rng.random(self.dim)
+        self.v[i] = rng.uniform(-limit, limit, self.dim)
+        self.p[i] = self.x[i]
+        self.f_p[i] = -math.inf
+        self.active[i] = self.dim if not self.incremental else self.min_active
+        self._stagnant[i] = 0
+        self.reinits += 1
 
 
 class CMAES(_Generational):
