@@ -193,3 +193,79 @@ def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
         assert reach.path_is_free(p, q, hand)
         assert np.all(q >= np.array(reach.spec.lower) - 1e-6)
         assert np.all(q <= np.array(reach.spec.upper) + 1e-6)
+
+
+def _geometries(plant, name):
+    instance = plant.GetModelInstanceByName(name)
+    return plant.CollectRegisteredGeometries(
+        [plant.get_body(i) for i in plant.GetBodyIndices(instance)])
+
+
+def test_idle_contact_filter_excludes_only_the_pairs_no_pick_has(hamburg):
+    """Arm against table, box and objects, and the resting bystanders against the box
+    and each other, are excluded; every pair the hand or the picked object can make,
+    and the bystanders on the table, stays."""
+    import dataclasses as dc
+    import itertools
+
+    from pydrake.geometry import Role
+
+    from handle_drake.apps.pick.execute import filter_idle_contacts
+    from handle_drake.station import GetPlant, MakeHandStation
+
+    scene = dc.replace(random_scene(hamburg, 0), cameras=[])
+    names = [n for n, _ in scene_objects(scene)]
+    target, bystanders = names[-1], names[:-1]
+    station = MakeHandStation(scene)
+    plant = GetPlant(station)
+    context = station.CreateDefaultContext()
+
+    def inspector():
+        return station.GetOutputPort("query_object").Eval(context).inspector()
+
+    def filtered(a, b):
+        ins = inspector()
+        ga = ins.GetGeometryIds(_geometries(plant, a), Role.kProximity)
+        gb = ins.GetGeometryIds(_geometries(plant, b), Role.kProximity)
+        assert ga and gb
+        return [ins.CollisionFiltered(g, h) for g in ga for h in gb]
+
+    excluded = ([("arm", n) for n in ("table", "sorting_box", *names)]
+                + [(n, "sorting_box") for n in bystanders]
+                + list(itertools.combinations(bystanders, 2)))
+    kept = ([("hand", n) for n in ("table", "sorting_box", *names)]
+            + [(target, n) for n in ("table", "sorting_box", *bystanders)]
+            + [(n, "table") for n in bystanders])
+    # Before: each pair is simulated (the arm's base, welded to the world like the
+    # table and the box, is the plant's own exclusion).
+    for a, b in excluded:
+        assert not all(filtered(a, b)), (a, b)
+    for a, b in kept:
+        assert not any(filtered(a, b)), (a, b)
+    pairs = filter_idle_contacts(station, context, target)
+    assert sorted(pairs) == sorted(excluded)
+    for a, b in excluded:
+        assert all(filtered(a, b)), (a, b)
+    for a, b in kept:
+        assert not any(filtered(a, b)), (a, b)
+    with pytest.raises(ValueError, match="not an object"):
+        filter_idle_contacts(station, context, "object_9")
+
+
+def test_the_idle_contact_filter_leaves_a_pick_unchanged(hamburg):
+    """The same plan simulated with every pair and with the filter: the same outcome,
+    the picked object's final position equal to 1e-6 m (bitwise here: the filtered
+    pairs never touch, so the contact problem is the same)."""
+    import dataclasses as dc
+
+    from handle_drake.apps.pick.execute import execute_pick
+
+    scene = dc.replace(random_scene(hamburg, 1), cameras=[])
+    name, target = next((n, o) for n, o in scene_objects(scene) if o.kind == "sphere")
+    reach = ArmReach(scene, ignore=(name,))
+    plan = plan_pick(scene, reach, name, "sphere", target.size,
+                     initial_pose(target, scene.table), scene.hand.mount.initial_position)
+    every = execute_pick(scene, plan, filter_contacts=False)
+    filtered = execute_pick(scene, plan)
+    assert every.in_box and filtered.in_box
+    np.testing.assert_allclose(filtered.p_WO_final, every.p_WO_final, atol=1e-6)
