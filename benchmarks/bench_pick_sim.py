@@ -1,8 +1,8 @@
 """Simulation speed of pick runs, side by side (issue 33): each seeded Hamburg scene's
 true-pose pick (:func:`handle_drake.apps.pick.cli.pick`'s plan) is simulated in one
 process once per mode, next to the floor (the station with the arm and hand alone, 1 s)
-measured just before. Modes: ``every`` (every collision pair simulated, as before the
-filter), ``filtered`` (``execute_pick``'s default: the pairs of
+measured just before. Modes: ``every`` (every collision pair simulated,
+``execute_pick``'s default), ``filtered`` (``filter_contacts=True``: the pairs of
 ``filter_idle_contacts`` excluded), ``welded`` (the filter, and the bystanders welded
 where they rest). Each mode's outcome and the picked object's final position are
 compared with the first mode's. With ``--census`` the contact pairs of every 20th step

@@ -40,12 +40,12 @@ The other objects on the table (bystanders) are free bodies; with
 runs the gain was within the machine's noise and one of the seeded scenes
 ended differently (docs/results/pick.md, benchmarks/bench_pick_sim.py).
 
-Collision pairs that no successful pick has are excluded from the simulation
-(:func:`filter_idle_contacts`, ``filter_contacts=False`` to keep every pair): the
-arm against the table, the box and the objects, the bystanders against the box and
-each other. They never touch in a pick, so the contact problem, and the outcome,
-are the same (the picked object's final position bitwise equal on the seeds of
-docs/results/pick.md).
+``filter_contacts=True`` excludes the collision pairs that no successful pick has
+(:func:`filter_idle_contacts`): the arm against the table, the box and the objects,
+the bystanders against the box and each other. Off by default: the gain was within
+the machine's noise (docs/results/pick.md, fourth pass), and the filter would hide
+the very events a pick can fail by (an arm sweeping an object, a dropped object
+knocking a bystander against the box: seed 6).
 """
 
 from __future__ import annotations
@@ -385,12 +385,12 @@ def filter_idle_contacts(station, root_context, target: str) -> list[tuple[str, 
 
 def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
                  close: str = "reactive", reach=None,
-                 filter_contacts: bool = True, monitor=None) -> PickOutcome:
+                 filter_contacts: bool = False, monitor=None) -> PickOutcome:
     """Simulates ``plan`` on ``scenario``'s station (cameras left out; the other
     objects welded with ``still_bystanders``; ``close``: one of ``CLOSES``; with
     ``reach``, the ArmReach the plan was made with, the release is corrected by the
     object measured in the hand: see the module doc; ``filter_contacts``: the pairs
-    of :func:`filter_idle_contacts` excluded, False to simulate every pair;
+    of :func:`filter_idle_contacts` excluded (default: every pair simulated);
     ``monitor(station, station_context)``, if given, is called after every step);
     writes an HTML replay to ``html`` when given."""
     if close not in CLOSES:
