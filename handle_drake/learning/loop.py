@@ -189,7 +189,10 @@ class TrialRunner:
                 # queue, on the Dask scheduler), so a worker starts it as soon as it
                 # finishes one instead of idling while this process gets the result,
                 # logs it and submits the next (measured: ~30 ms a trial on Dask).
-                batch_size = 2 * workers
+                # An executor that runs several trials per task (a chunked
+                # DaskExecutor) gets a chunk running and one queued per worker.
+                chunk = getattr(executor, "chunk", 1)
+                batch_size = 2 * workers * (chunk if isinstance(chunk, int) else 1)
         if commit_every is not None:
             check_group(commit_every, commit_seconds)
         self.commit_every, self.commit_seconds = commit_every, commit_seconds

@@ -256,6 +256,105 @@ def test_random_search_queues_a_trial_per_worker_and_bo_keeps_its_batch(tmp_path
     assert _rows(queued) == _rows(reference)
 
 
+class MapSizes:
+    """A Dask client that records, per ``map``, how many calls each task carries."""
+
+    def __init__(self, client):
+        self._client, self.tasks = client, []
+
+    def map(self, fn, *iterables, **kwargs):
+        iterables = [list(i) for i in iterables]
+        chunked = getattr(fn, "func", None) is not None and fn.func.__name__ == "_run_chunk"
+        self.tasks += [len(g) for g in iterables[0]] if chunked else [1] * len(iterables[0])
+        return self._client.map(fn, *iterables, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._client, name)
+
+
+def _chunked(dask_executor, chunk):
+    return DaskExecutor(MapSizes(dask_executor.client), chunk=chunk)
+
+
+def test_a_chunked_run_equals_the_inline_reference_with_fewer_tasks(tmp_path, dask_executor):
+    """Trials in chunks of 3 per Dask task: the same trials, results and log as one trial at
+    a time in this process, each trial logged once, in tasks of at most 3 trials; the
+    runner keeps a chunk running and one queued per worker (2 x 2 x 3 = 12 at first)."""
+    executor = _chunked(dask_executor, 3)
+    chunked = _run(tmp_path / "dask.sqlite", "random", 20, executor)
+    reference = _run(tmp_path / "ref.sqlite", "random", 20, InlineExecutor())
+    assert _rows(chunked) == _rows(reference)
+    assert chunked.n_done == 20
+    sizes = executor.client.tasks
+    assert sum(sizes) == 20 and max(sizes) == 3 and sizes[:4] == [3, 3, 3, 3]
+    assert len(sizes) < 10
+    bo = _run(tmp_path / "dask.sqlite", "bo", 8, _chunked(dask_executor, 2))
+    assert _rows(bo) == _rows(_run(tmp_path / "ref.sqlite", "bo", 8, InlineExecutor()))
+    with pytest.raises(ValueError, match="chunk"):
+        DaskExecutor(dask_executor.client, chunk=0)
+    with pytest.raises(ValueError, match="chunk: only for a Dask executor"):
+        with trial_executor("local", 1, chunk=2):
+            pass
+
+
+def _raises_above_five(x):
+    if x[0] > 5.0:
+        raise ValueError(f"no trial at x[0] = {x[0]:.3f}")
+    return BRANIN(x)
+
+
+def test_a_failure_inside_a_chunk_fails_that_trial_only(tmp_path, dask_executor):
+    """A call that raises inside a chunk fails its own future; the others of the chunk
+    return. Through the runner: the trials that raise are failed with their error, the
+    rest done, the log equal to the inline run's."""
+    executor = DaskExecutor(dask_executor.client, chunk=4)
+    futures = executor.submit_many(divmod, [7, 1, 9, 8], [2, 0, 4, 3])
+    assert futures[0].result(timeout=60) == (3, 1)
+    with pytest.raises(ZeroDivisionError):
+        futures[1].result(timeout=60)
+    assert [f.result(timeout=60) for f in futures[2:]] == [(2, 1), (2, 2)]
+    chunked = _run(tmp_path / "dask.sqlite", "random", 12, _chunked(dask_executor, 4),
+                   _raises_above_five)
+    reference = _run(tmp_path / "ref.sqlite", "random", 12, InlineExecutor(),
+                     _raises_above_five)
+    assert _rows(chunked) == _rows(reference)
+    failed = [r for r in chunked.trials if r.status == "failed"]
+    assert failed and len(failed) < 12
+    assert all("no trial at x[0]" in r.error for r in failed)
+    assert all((r.status == "failed") == (r.parameters[0] > 5.0) for r in chunked.trials)
+
+
+def test_a_worker_killed_mid_chunk_reruns_its_trials_and_repeats_nothing(
+        tmp_path, dask_executor):
+    """A worker dies in the middle of a chunk: Dask runs the chunk again on another worker;
+    the log holds each trial once, equal to an undisturbed run here."""
+    marker = tmp_path / "deaths"
+    killed = _run(tmp_path / "dask.sqlite", "random", 9, _chunked(dask_executor, 3),
+                  DiesOnce(marker))
+    assert len(marker.read_text().split()) == 1
+    reference = _run(tmp_path / "ref.sqlite", "random", 9, InlineExecutor())
+    assert _rows(killed) == _rows(reference)
+    with TrialLog(tmp_path / "dask.sqlite") as log:
+        count = log._conn.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    assert count == 9
+
+
+def test_a_trial_that_always_kills_its_worker_fails_alone_out_of_its_chunk(
+        tmp_path, dask_executor):
+    """The chunk dies WORKER_DEATHS times, then its trials run one per task: the killer
+    is failed after its own WORKER_DEATHS deaths, its chunk mates are done."""
+    marker = tmp_path / "deaths"
+    result = _run(tmp_path / "dask.sqlite", "random", 4, _chunked(dask_executor, 2),
+                  DiesOnce(marker, threshold=8.0, always=True), seed=2)
+    dead = [r for r in result.trials if r.parameters[0] > 8.0]
+    assert len(dead) == 1, "seed 2 proposes one point with x[0] > 8 in 4 trials"
+    assert dead[0].status == "failed"
+    assert f"died while running the trial, {WORKER_DEATHS} times" in dead[0].error
+    assert len(marker.read_text().split()) == 2 * WORKER_DEATHS  # as a chunk, then alone
+    assert all(r.status == "done" for r in result.trials if r.parameters[0] <= 8.0)
+    assert len(result.trials) == 4
+
+
 def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
     marker = tmp_path / "deaths"
     with LocalPool(2) as pool:
