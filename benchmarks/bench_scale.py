@@ -331,7 +331,9 @@ def main(argv=None) -> int:
                                platform=platform.platform()))
     results_run.finish(
         [{"workers": int(k.split("|")[0]), "trial_s": float(k.split("|")[1]),
+          "saturation": v["saturation"], "chunk": v["chunk"],
           "efficiency": v["efficiency"], "core_share": v["core_share"],
+          "central ms/trial": v["central_ms_per_trial"],
           **{f"{g} ms/trial": c for g, c in v["cpu_per_trial_ms"].items()}}
          for k, v in table.items()], result, args.out)
     print(f"\nwritten to {args.out}")

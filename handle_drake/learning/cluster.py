@@ -310,7 +310,7 @@ class DaskExecutor(Executor):
         has its calls sent again one per task, so only the call that kills its worker
         fails, after its own deaths."""
         if self.chunk > 1:
-            return self._submit_chunks(fn, list(zip(*iterables)))
+            return self._submit_chunks(fn, list(zip(*iterables, strict=True)))
         tasks = self.client.map(fn, *iterables, pure=False)
         bridges = []
         for task in tasks:
@@ -325,7 +325,7 @@ class DaskExecutor(Executor):
     def _submit_chunks(self, fn, calls: list) -> list:
         parts = math.ceil(len(calls) / self.chunk)
         edges = [round(i * len(calls) / parts) for i in range(parts + 1)]
-        groups = [calls[a:b] for a, b in zip(edges, edges[1:])]
+        groups = [calls[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
         bridges = []
         for _ in calls:
             bridge = Future()
@@ -397,7 +397,7 @@ class DaskExecutor(Executor):
             # The chunk's worker died WORKER_DEATHS times: its calls again, one per task,
             # so each has deaths of its own (the chunk=1 path from here on).
             try:
-                tasks = self.client.map(chunk.fn, *zip(*chunk.calls), pure=False)
+                tasks = self.client.map(chunk.fn, *zip(*chunk.calls, strict=True), pure=False)
             except BaseException as lost:  # noqa: BLE001 - e.g. the scheduler is gone
                 for bridge in chunk.bridges:
                     bridge.set_exception(lost)
