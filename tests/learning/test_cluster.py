@@ -260,12 +260,14 @@ class MapSizes:
     """A Dask client that records, per ``map``, how many calls each task carries."""
 
     def __init__(self, client):
-        self._client, self.tasks = client, []
+        self._client, self.tasks, self.calls = client, [], []
 
     def map(self, fn, *iterables, **kwargs):
         iterables = [list(i) for i in iterables]
         chunked = getattr(fn, "func", None) is not None and fn.func.__name__ == "_run_chunk"
-        self.tasks += [len(g) for g in iterables[0]] if chunked else [1] * len(iterables[0])
+        sizes = [len(g) for g in iterables[0]] if chunked else [1] * len(iterables[0])
+        self.tasks += sizes
+        self.calls.append(sizes)
         return self._client.map(fn, *iterables, **kwargs)
 
     def __getattr__(self, name):
@@ -288,6 +290,8 @@ def test_a_chunked_run_equals_the_inline_reference_with_fewer_tasks(tmp_path, da
     sizes = executor.client.tasks
     assert sum(sizes) == 20 and max(sizes) == 3 and sizes[:4] == [3, 3, 3, 3]
     assert len(sizes) < 10
+    # the first chunk is sent alone, before the rest of the first fill (12) is asked
+    assert executor.client.calls[:2] == [[3], [3, 3]]
     bo = _run(tmp_path / "dask.sqlite", "bo", 8, _chunked(dask_executor, 2))
     assert _rows(bo) == _rows(_run(tmp_path / "ref.sqlite", "bo", 8, InlineExecutor()))
     with pytest.raises(ValueError, match="chunk"):
