@@ -77,6 +77,7 @@ __all__ = [
     "LocalPool",
     "max_local_workers",
     "add_executor_arguments",
+    "add_chunk_argument",
     "check_executor_arguments",
     "as_executor",
     "executor_workers",
@@ -180,6 +181,24 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
              f"(default {CONNECT_TIMEOUT:g})")
 
 
+def _chunk_type(text: str) -> int:
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1 (trials per Dask task), "
+                                         f"got {text!r}")
+    return int(text)
+
+
+def add_chunk_argument(parser: argparse.ArgumentParser) -> None:
+    """Adds ``--chunk N`` (trials per Dask task, :meth:`DaskExecutor.submit_many`) to a
+    command that runs trials with ``--executor``; open with ``trial_executor(...,
+    chunk=args.chunk or 1)``. :func:`check_executor_arguments` refuses it without Dask."""
+    parser.add_argument(
+        "--chunk", type=_chunk_type, default=None, metavar="N",
+        help="dask: run N trials one after another in each Dask task (default 1): fewer "
+             "tasks for the scheduler when trials are short or workers many; N x 2 trials "
+             "per worker are then in flight")
+
+
 def check_executor_arguments(args) -> None:
     """Before any work: ``--connect-timeout`` is refused without ``--executor
     dask://HOST:PORT`` (it would be silently ignored), and a ``dask://`` address
@@ -192,6 +211,10 @@ def check_executor_arguments(args) -> None:
     if timeout is not None and spec.address is None:
         raise ValueError(f"--connect-timeout: only for --executor dask://HOST:PORT (a running "
                          f"scheduler), got --executor {spec}")
+    chunk = getattr(args, "chunk", None)
+    if chunk is not None and chunk != 1 and spec.kind != "dask":
+        raise ValueError(f"--chunk: only for --executor dask or dask://HOST:PORT, got "
+                         f"--executor {spec}")
     if spec.address is not None:
 
         probe_scheduler(spec.address, CONNECT_TIMEOUT if timeout is None else timeout)

@@ -301,6 +301,23 @@ def test_a_chunked_run_equals_the_inline_reference_with_fewer_tasks(tmp_path, da
             pass
 
 
+def test_chunk_flag_is_checked_with_the_flag_named(tmp_path, capsys):
+    """``--chunk``: an integer >= 1 (exit 2 naming the flag), and only with Dask."""
+    from handle_drake.apps.babbling.cli import main
+
+    base = ["babble", "--object", "sphere", "--trials", "2", "--db", str(tmp_path / "b.sqlite"),
+            "--no-progress", "--no-plot"]
+    for bad in ("0", "two", "-1"):
+        with pytest.raises(SystemExit) as stop:
+            main([*base, "--executor", "dask", "--chunk", bad])
+        assert stop.value.code == 2
+        assert "--chunk" in capsys.readouterr().err
+    assert main([*base, "--chunk", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "--chunk: only for --executor dask" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "b.sqlite").exists()
+
+
 def _raises_above_five(x):
     if x[0] > 5.0:
         raise ValueError(f"no trial at x[0] = {x[0]:.3f}")
@@ -466,16 +483,19 @@ def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
     assert _rows(resumed) == _rows(reference)
 
 
-def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path):
+@pytest.mark.parametrize("chunk", [[], ["--chunk", "2"]], ids=["one-per-task", "chunk-2"])
+def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path, chunk):
     """The real grasp trial: ``babble --executor dask`` (2 worker processes) logs each
-    trial once, and each metric is what the same simulation gives in this process."""
+    trial once, and each metric is what the same simulation gives in this process; the
+    same with 2 trials per Dask task (``--chunk 2``)."""
     from handle_drake.apps.babbling.cli import main
     from handle_drake.trial.grasp_trial import GraspTrial
 
     db = tmp_path / "babble.sqlite"
     assert main(["babble", "--object", "sphere", "--dims", "2", "--strategy", "random",
                  "--trials", "4", "--seed", "2", "--noise", "0.01", "--executor", "dask",
-                 "--workers", "2", "--db", str(db), "--no-progress", "--no-plot"]) == 0
+                 "--workers", "2", "--db", str(db), "--no-progress", "--no-plot",
+                 *chunk]) == 0
     with TrialLog(db) as log:
         (run,) = log.runs()
         rows = log.trials(run.run_id)
