@@ -44,8 +44,14 @@ the scheduler to send it the next queued task; 1.25: each 8-thread worker also h
 tasks of its own to start at once), interleaved in each round; ``--workers`` and
 ``--seconds`` restrict the cases.
 
+Several trials per Dask task: ``--chunk 1 2 4`` runs every case with each
+:class:`~handle_drake.learning.cluster.DaskExecutor` ``chunk`` (trials per task; the runner
+then keeps ``2 x W x chunk`` trials in flight), interleaved in each round on the same cluster.
+The central CPU per trial (client loop + dask loop + callbacks) is the figure to compare: it
+is less sensitive to the machine's load than the efficiency.
+
 Run: ``python benchmarks/bench_scale.py [--quick] [--workers W ..] [--seconds T ..]
-[--saturation S ..]``; prints the tables, writes ``benchmarks/results/scale.json``.
+[--saturation S ..] [--chunk C ..]``; prints the tables, writes ``benchmarks/results/scale.json``.
 """
 
 from __future__ import annotations
@@ -221,14 +227,19 @@ def main(argv=None) -> int:
                              f"{' '.join(f'{t:g}' for t in SECONDS)})")
     parser.add_argument("--saturation", type=float, nargs="+", default=[1.0],
                         help="Dask worker-saturation values, each case with each (default 1.0)")
+    parser.add_argument("--chunk", type=int, nargs="+", default=[1],
+                        help="trials per Dask task, each case with each (default 1)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "scale.json")
     add_page_arguments(parser, "scale")
     args = parser.parse_args(argv)
-    for name in ("workers", "seconds", "saturation"):
+    for name in ("workers", "seconds", "saturation", "chunk"):
         if any(not v > 0 for v in getattr(args, name)):
             parser.error(f"--{name}: expected values > 0, got {getattr(args, name)}")
     workers_list, seconds_list, saturations = args.workers, args.seconds, args.saturation
+    chunks = args.chunk
+    if any(int(c) != c for c in chunks):
+        parser.error(f"--chunk: expected integers >= 1, got {chunks}")
     results_run = ResultsRun("Scaling the trial executor: efficiency per workers and trial time",
                              args)
     rounds = args.rounds or (1 if args.quick else 2)
@@ -248,48 +259,59 @@ def main(argv=None) -> int:
                     run_experiment(SleepTrial(0.01), BOUNDS, "random", 2 * workers, 1,
                                    Path(folder) / f"warm-{workers}-{r}.sqlite",
                                    executor=executor, progress=False, objective_name="warm")
-                    for seconds in (seconds_list if r % 2 == 0 else seconds_list[::-1]):
-                        case = _case(executor, folder, workers, seconds, waves)
+                    for seconds, chunk in [
+                            (t, k) for t in (seconds_list if r % 2 == 0 else seconds_list[::-1])
+                            for k in (chunks if r % 2 == 0 else chunks[::-1])]:
+                        case = _case(DaskExecutor(executor.client, chunk), folder, workers,
+                                     seconds, waves)
                         case["round"] = r + 1
                         case["saturation"] = saturation
+                        case["chunk"] = chunk
                         cases.append(case)
                         c = case["cpu_per_trial_ms"]
                         print(f"  round {r + 1}: W={workers:4d} T={seconds:5.2f} s "
-                              f"saturation {saturation:g}: "
+                              f"saturation {saturation:g} chunk {chunk}: "
                               f"efficiency {case['efficiency']:.3f} ({case['trials']} trials, "
                               f"{case['elapsed']:.2f} s, load {case['load']}, "
                               f"{case['core_share']:.2f} core); CPU ms/trial "
                               + ", ".join(f"{k} {v:.2f}" for k, v in c.items()), flush=True)
             log_ms.append(_log_only(folder))
 
-    print("\n| workers | trial s | saturation | efficiency (median) | rounds | load |"
-          " core share | client loop ms/trial | dask loop | callbacks | trial threads |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| workers | trial s | saturation | chunk | efficiency (median) | rounds | load |"
+          " core share | client loop ms/trial | dask loop | callbacks | trial threads |"
+          " central ms/trial |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     table = {}
-    for w, t, z in [(w, t, z) for w in workers_list for t in seconds_list for z in saturations]:
+    for w, t, z, k in [(w, t, z, k) for w in workers_list for t in seconds_list
+                       for z in saturations for k in chunks]:
         mine = [c for c in cases if c["workers"] == w and c["seconds"] == t
-                and c["saturation"] == z]
+                and c["saturation"] == z and c["chunk"] == k]
         eff = [c["efficiency"] for c in mine]
         cost = {g: _median([c["cpu_per_trial_ms"][g] for c in mine]) for g in GROUPS}
         share = _median([c["core_share"] for c in mine])
         # keyed as before for the default saturation (1.0)
-        key = f"{w}|{t:g}" if z == 1.0 else f"{w}|{t:g}|saturation {z:g}"
+        key = f"{w}|{t:g}" + ("" if z == 1.0 else f"|saturation {z:g}") + (
+            "" if k == 1 else f"|chunk {k}")
+        # central: the serial CPU per trial (all but the sleeping trial threads)
+        central = _median([sum(v for g, v in c["cpu_per_trial_ms"].items()
+                               if g != "trial threads") for c in mine])
         table[key] = dict(efficiency=_median(eff), rounds=eff,
                           load=[c["load"] for c in mine], core_share=share,
-                          cpu_per_trial_ms=cost, saturation=z)
-        print(f"| {w} | {t:g} | {z:g} | {_median(eff):.3f} | "
+                          cpu_per_trial_ms=cost, central_ms_per_trial=central, saturation=z,
+                          chunk=k)
+        print(f"| {w} | {t:g} | {z:g} | {k} | {_median(eff):.3f} | "
               + " ".join(f"{e:.3f}" for e in eff)
               + f" | {'/'.join(str(c['load']) for c in mine)} | {share:.2f} | "
                 f"{cost['client loop']:.2f} | "
                 f"{cost['dask loop']:.2f} | {cost['dask callbacks']:.2f} | "
-                f"{cost['trial threads']:.2f} |")
+                f"{cost['trial threads']:.2f} | {central:.2f} |")
     # Per-task costs for the extrapolation: the 128-worker cases (most tasks in flight).
     big = [c for c in cases if c["workers"] == max(workers_list)
-           and c["saturation"] == saturations[0]]
+           and c["saturation"] == saturations[0] and c["chunk"] == chunks[0]]
     costs = {g: _median([c["cpu_per_trial_ms"][g] for c in big]) for g in GROUPS}
     costs["log (alone)"] = _median(log_ms)
-    print(f"\nper-task CPU ms at {max(workers_list)} workers, saturation {saturations[0]:g} "
-          "(median): "
+    print(f"\nper-trial CPU ms at {max(workers_list)} workers, saturation {saturations[0]:g}, "
+          f"chunk {chunks[0]} (median): "
           + ", ".join(f"{k} {v:.3f}" for k, v in costs.items()))
     paper = extrapolate(costs, (128, 1000), (0.05, 0.2, 0.5, 1.0))
     print("\n| workers | trial s | trials/s needed | bound | its cap /s | predicted efficiency"
@@ -300,6 +322,7 @@ def main(argv=None) -> int:
         print(f"| {w} | {t} | {p['needed_per_s']:.0f} | {p['bound']} | {p['cap_per_s']:.0f} | "
               f"{p['efficiency']:.2f} | {p['efficiency_one_process']:.2f} |")
     result = dict(benchmark="scale", rounds=rounds, waves=waves, saturations=saturations,
+                  chunks=chunks,
                   threads_per_worker=THREADS_PER_WORKER, commit_every=COMMIT_EVERY,
                   commit_seconds=COMMIT_SECONDS, cases=cases, table=table,
                   per_task_cpu_ms=costs, extrapolation=paper,
@@ -308,14 +331,17 @@ def main(argv=None) -> int:
                                platform=platform.platform()))
     results_run.finish(
         [{"workers": int(k.split("|")[0]), "trial_s": float(k.split("|")[1]),
+          "saturation": v["saturation"], "chunk": v["chunk"],
           "efficiency": v["efficiency"], "core_share": v["core_share"],
+          "central ms/trial": v["central_ms_per_trial"],
           **{f"{g} ms/trial": c for g, c in v["cpu_per_trial_ms"].items()}}
          for k, v in table.items()], result, args.out)
     print(f"\nwritten to {args.out}")
     for key, row in table.items():
         if key.startswith(f"{max(WORKERS)}|0.5"):
             print(f"efficiency at {max(WORKERS)} workers, 0.5 s trials, saturation "
-                  f"{row['saturation']:g}: {row['efficiency']:.3f} (target >= 0.9)")
+                  f"{row['saturation']:g}, chunk {row['chunk']}: {row['efficiency']:.3f} "
+                  f"(target >= 0.9); central CPU {row['central_ms_per_trial']:.2f} ms/trial")
     return 0
 
 

@@ -46,6 +46,7 @@ Failures:
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import logging
 import math
@@ -76,6 +77,7 @@ __all__ = [
     "LocalPool",
     "max_local_workers",
     "add_executor_arguments",
+    "add_chunk_argument",
     "check_executor_arguments",
     "as_executor",
     "executor_workers",
@@ -179,6 +181,24 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
              f"(default {CONNECT_TIMEOUT:g})")
 
 
+def _chunk_type(text: str) -> int:
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1 (trials per Dask task), "
+                                         f"got {text!r}")
+    return int(text)
+
+
+def add_chunk_argument(parser: argparse.ArgumentParser) -> None:
+    """Adds ``--chunk N`` (trials per Dask task, :meth:`DaskExecutor.submit_many`) to a
+    command that runs trials with ``--executor``; open with ``trial_executor(...,
+    chunk=args.chunk or 1)``. :func:`check_executor_arguments` refuses it without Dask."""
+    parser.add_argument(
+        "--chunk", type=_chunk_type, default=None, metavar="N",
+        help="dask: run N trials one after another in each Dask task (default 1): fewer "
+             "tasks for the scheduler when trials are short or workers many; N x 2 trials "
+             "per worker are then in flight")
+
+
 def check_executor_arguments(args) -> None:
     """Before any work: ``--connect-timeout`` is refused without ``--executor
     dask://HOST:PORT`` (it would be silently ignored), and a ``dask://`` address
@@ -191,6 +211,10 @@ def check_executor_arguments(args) -> None:
     if timeout is not None and spec.address is None:
         raise ValueError(f"--connect-timeout: only for --executor dask://HOST:PORT (a running "
                          f"scheduler), got --executor {spec}")
+    chunk = getattr(args, "chunk", None)
+    if chunk is not None and chunk != 1 and spec.kind != "dask":
+        raise ValueError(f"--chunk: only for --executor dask or dask://HOST:PORT, got "
+                         f"--executor {spec}")
     if spec.address is not None:
 
         probe_scheduler(spec.address, CONNECT_TIMEOUT if timeout is None else timeout)
@@ -257,10 +281,14 @@ class DaskExecutor(Executor):
     deaths) or :class:`ExecutorError` (lost scheduler).
     """
 
-    def __init__(self, client):
+    def __init__(self, client, chunk: int = 1):
+        if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+            raise ValueError(f"chunk: expected an integer >= 1 (trials per Dask task), "
+                             f"got {chunk!r}")
         self.client = client
-        self._tasks: dict = {}  # Dask future not yet settled -> its bridge (a dropped one
-        # is cancelled)
+        self.chunk = chunk  # trials per Dask task in submit_many (1: one task per trial)
+        self._tasks: dict = {}  # Dask future not yet settled -> its bridge, or the
+        # _Chunk of its trials' bridges (a dropped one is cancelled)
         self._lock = threading.Lock()
 
     @property
@@ -294,7 +322,18 @@ class DaskExecutor(Executor):
     def submit_many(self, fn, *iterables) -> list:
         """``fn(*args)`` for every ``args`` of ``zip(*iterables)``, sent to the scheduler
         as one batch (``client.map``: one graph update for all, ~1 ms of the loop per
-        task instead of ~2.7 ms for one ``submit`` each here); their futures in order."""
+        task instead of ~2.7 ms for one ``submit`` each here); their futures in order.
+
+        With ``chunk`` > 1 the calls go in tasks of at most ``chunk`` calls each (sizes
+        as even as can be), run one after another in one worker thread: the scheduler,
+        the comms and the workers' state machines handle one task per chunk instead of
+        one per trial. Each call still has its own future, settled when its chunk
+        returns; a call that raises fails its own future only. A chunk whose worker
+        died :data:`WORKER_DEATHS` times (Dask re-runs a lost chunk whole before that)
+        has its calls sent again one per task, so only the call that kills its worker
+        fails, after its own deaths."""
+        if self.chunk > 1:
+            return self._submit_chunks(fn, list(zip(*iterables, strict=True)))
         tasks = self.client.map(fn, *iterables, pure=False)
         bridges = []
         for task in tasks:
@@ -304,6 +343,24 @@ class DaskExecutor(Executor):
                 self._tasks[task] = bridge
             task.add_done_callback(self._settle)
             bridges.append(bridge)
+        return bridges
+
+    def _submit_chunks(self, fn, calls: list) -> list:
+        parts = math.ceil(len(calls) / self.chunk)
+        edges = [round(i * len(calls) / parts) for i in range(parts + 1)]
+        groups = [calls[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True)]
+        bridges = []
+        for _ in calls:
+            bridge = Future()
+            bridge.set_running_or_notify_cancel()
+            bridges.append(bridge)
+        if not groups:
+            return bridges
+        tasks = self.client.map(functools.partial(_run_chunk, fn), groups, pure=False)
+        for task, a, b, group in zip(tasks, edges[:-1], edges[1:], groups, strict=True):
+            with self._lock:
+                self._tasks[task] = _Chunk(fn, group, bridges[a:b])
+            task.add_done_callback(self._settle)
         return bridges
 
     def _settle(self, task):
@@ -342,10 +399,39 @@ class DaskExecutor(Executor):
             bridge = self._tasks.pop(task, None)
         if bridge is None:
             return
+        if isinstance(bridge, _Chunk):
+            self._resolve_chunk(bridge, result, error)
+            return
         if error is None:
             bridge.set_result(result)
         else:
             bridge.set_exception(error)
+
+    def _resolve_chunk(self, chunk: _Chunk, results, error):
+        from distributed.scheduler import KilledWorker
+
+        if error is None:
+            for bridge, (ok, value) in zip(chunk.bridges, results, strict=True):
+                if ok:
+                    bridge.set_result(value)
+                else:
+                    bridge.set_exception(value)
+        elif isinstance(error, KilledWorker) and len(chunk.calls) > 1:
+            # The chunk's worker died WORKER_DEATHS times: its calls again, one per task,
+            # so each has deaths of its own (the chunk=1 path from here on).
+            try:
+                tasks = self.client.map(chunk.fn, *zip(*chunk.calls, strict=True), pure=False)
+            except BaseException as lost:  # noqa: BLE001 - e.g. the scheduler is gone
+                for bridge in chunk.bridges:
+                    bridge.set_exception(lost)
+                return
+            for task, bridge in zip(tasks, chunk.bridges, strict=True):
+                with self._lock:
+                    self._tasks[task] = bridge
+                task.add_done_callback(self._settle)
+        else:
+            for bridge in chunk.bridges:
+                bridge.set_exception(error)
 
     def ship(self, objective):
         return _ShippedOnce(objective)
@@ -381,6 +467,27 @@ class DaskExecutor(Executor):
             wait_for(tasks)
 
 
+@dataclass(frozen=True)
+class _Chunk:
+    """The calls of one chunked Dask task and their futures, in order."""
+
+    fn: object
+    calls: list
+    bridges: list
+
+
+def _run_chunk(fn, calls) -> list:
+    """Runs ``fn(*args)`` for each ``args`` of ``calls`` in turn (in a worker):
+    ``(True, result)`` or ``(False, exception)`` per call, in order."""
+    results = []
+    for args in calls:
+        try:
+            results.append((True, fn(*args)))
+        except Exception as error:  # noqa: BLE001 - that call's failure, not the chunk's
+            results.append((False, error))
+    return results
+
+
 def as_executor(executor):
     """``executor``; a ``distributed.Client`` or its ``get_executor()`` made a DaskExecutor."""
     module = type(executor).__module__ or ""
@@ -409,7 +516,7 @@ def executor_workers(executor) -> int:
 # ---------------------------------------------------------------- factory
 @contextmanager
 def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float = CONNECT_TIMEOUT,
-                   worker_deaths: int = WORKER_DEATHS):
+                   worker_deaths: int = WORKER_DEATHS, chunk: int = 1):
     """Opens the executor ``executor`` names (see :class:`ExecutorSpec`) and closes it after.
 
     Yields an ``InlineExecutor`` (``local``, one worker), a :class:`LocalPool`
@@ -417,7 +524,8 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     of ``workers`` processes, ``dask://HOST:PORT``: the scheduler's workers,
     ``workers`` is then not used here). Raises :class:`ExecutorError` when no
     scheduler answers at the address, or it has no worker, within
-    ``connect_timeout`` s. A ``dask`` executor holds its Dask settings while
+    ``connect_timeout`` s. ``chunk``: trials per Dask task (:meth:`DaskExecutor.submit_many`;
+    Dask only). A ``dask`` executor holds its Dask settings while
     open: close several in the reverse order of opening (nested ``with``
     blocks or a ``contextlib.ExitStack`` do).
     """
@@ -434,6 +542,10 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
                          f"got {connect_timeout!r}")
     if not (isinstance(worker_deaths, int) and worker_deaths >= 1):
         raise ValueError(f"worker_deaths: expected an integer >= 1, got {worker_deaths!r}")
+    if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
+        raise ValueError(f"chunk: expected an integer >= 1 (trials per Dask task), got {chunk!r}")
+    if chunk != 1 and spec.kind == "local":
+        raise ValueError(f"chunk: only for a Dask executor, got chunk {chunk} with {spec}")
     if spec.kind == "local":
         pool = InlineExecutor() if workers == 1 else LocalPool(workers)
         try:
@@ -467,7 +579,7 @@ def trial_executor(executor="local", workers: int = 1, *, connect_timeout: float
     with dask.config.set(local_config if spec.address is None else {}):
         client, cluster = _connect(spec, workers, connect_timeout)
         try:
-            yield DaskExecutor(client)
+            yield DaskExecutor(client, chunk)
         finally:
             client.close()
             if cluster is not None:

@@ -189,7 +189,10 @@ class TrialRunner:
                 # queue, on the Dask scheduler), so a worker starts it as soon as it
                 # finishes one instead of idling while this process gets the result,
                 # logs it and submits the next (measured: ~30 ms a trial on Dask).
-                batch_size = 2 * workers
+                # An executor that runs several trials per task (a chunked
+                # DaskExecutor) gets a chunk running and one queued per worker.
+                chunk = getattr(executor, "chunk", 1)
+                batch_size = 2 * workers * (chunk if isinstance(chunk, int) else 1)
         if commit_every is not None:
             check_group(commit_every, commit_seconds)
         self.commit_every, self.commit_seconds = commit_every, commit_seconds
@@ -261,6 +264,11 @@ class TrialRunner:
             # An executor that takes a batch (Dask) gets the trials of this fill at once.
             many = None if self._owns_executor else getattr(self._executor, "submit_many", None)
             batch: list[TrialRecord] = []
+            # One that runs several trials per task (a chunked DaskExecutor) gets the
+            # first chunk at once and then 2, 4, ... chunks at a time, so the workers
+            # start while the rest of a large fill (2 x W x chunk trials) is asked and logged.
+            chunk = 1 if many is None else getattr(self._executor, "chunk", 1)
+            send_at = chunk if isinstance(chunk, int) and chunk > 1 else None
             while room > 0 and (queue or (not stop and next_index < n_trials)):
                 if queue and self._deaths.get(queue[0].index):
                     if in_flight or batch:  # it saw its pool die: it runs alone
@@ -284,11 +292,11 @@ class TrialRunner:
                     in_flight[self._submit(record.parameters, record.seed)] = record
                 else:
                     batch.append(record)
+                    if send_at is not None and len(batch) >= send_at:
+                        self._send_many(many, batch, in_flight)
+                        batch, send_at = [], 2 * send_at
             if batch:
-                futures = many(functools.partial(_evaluate, self._shipped),
-                               [r.parameters for r in batch], [r.seed for r in batch],
-                               [self._pass_seed] * len(batch))
-                in_flight.update(zip(futures, batch, strict=True))
+                self._send_many(many, batch, in_flight)
             if not in_flight:
                 break
             # Woken when the log's group is due too, so a finished trial is on
@@ -314,6 +322,12 @@ class TrialRunner:
                 best = None if bar.disable else self.optimizer.best  # O(trials): if shown
                 if best is not None:
                     bar.set_postfix(best=f"{best.y:.4g}")
+
+    def _send_many(self, many, batch, in_flight) -> None:
+        futures = many(functools.partial(_evaluate, self._shipped),
+                       [r.parameters for r in batch], [r.seed for r in batch],
+                       [self._pass_seed] * len(batch))
+        in_flight.update(zip(futures, batch, strict=True))
 
     def _finish(self, record: TrialRecord, future: Future):
         """Logs the trial's outcome; returns the call that tells the optimiser, or None

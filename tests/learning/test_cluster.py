@@ -256,6 +256,126 @@ def test_random_search_queues_a_trial_per_worker_and_bo_keeps_its_batch(tmp_path
     assert _rows(queued) == _rows(reference)
 
 
+class MapSizes:
+    """A Dask client that records, per ``map``, how many calls each task carries."""
+
+    def __init__(self, client):
+        self._client, self.tasks, self.calls = client, [], []
+
+    def map(self, fn, *iterables, **kwargs):
+        iterables = [list(i) for i in iterables]
+        chunked = getattr(fn, "func", None) is not None and fn.func.__name__ == "_run_chunk"
+        sizes = [len(g) for g in iterables[0]] if chunked else [1] * len(iterables[0])
+        self.tasks += sizes
+        self.calls.append(sizes)
+        return self._client.map(fn, *iterables, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._client, name)
+
+
+def _chunked(dask_executor, chunk):
+    return DaskExecutor(MapSizes(dask_executor.client), chunk=chunk)
+
+
+def test_a_chunked_run_equals_the_inline_reference_with_fewer_tasks(tmp_path, dask_executor):
+    """Trials in chunks of 3 per Dask task: the same trials, results and log as one trial at
+    a time in this process, each trial logged once, in tasks of at most 3 trials; the
+    runner keeps a chunk running and one queued per worker (2 x 2 x 3 = 12 at first)."""
+    executor = _chunked(dask_executor, 3)
+    chunked = _run(tmp_path / "dask.sqlite", "random", 20, executor)
+    reference = _run(tmp_path / "ref.sqlite", "random", 20, InlineExecutor())
+    assert _rows(chunked) == _rows(reference)
+    assert chunked.n_done == 20
+    sizes = executor.client.tasks
+    assert sum(sizes) == 20 and max(sizes) == 3 and sizes[:4] == [3, 3, 3, 3]
+    assert len(sizes) < 10
+    # the first chunk is sent alone, before the rest of the first fill (12) is asked
+    assert executor.client.calls[:2] == [[3], [3, 3]]
+    bo = _run(tmp_path / "dask.sqlite", "bo", 8, _chunked(dask_executor, 2))
+    assert _rows(bo) == _rows(_run(tmp_path / "ref.sqlite", "bo", 8, InlineExecutor()))
+    with pytest.raises(ValueError, match="chunk"):
+        DaskExecutor(dask_executor.client, chunk=0)
+    with pytest.raises(ValueError, match="chunk: only for a Dask executor"):
+        with trial_executor("local", 1, chunk=2):
+            pass
+
+
+def test_chunk_flag_is_checked_with_the_flag_named(tmp_path, capsys):
+    """``--chunk``: an integer >= 1 (exit 2 naming the flag), and only with Dask."""
+    from handle_drake.apps.babbling.cli import main
+
+    base = ["babble", "--object", "sphere", "--trials", "2", "--db", str(tmp_path / "b.sqlite"),
+            "--no-progress", "--no-plot"]
+    for bad in ("0", "two", "-1"):
+        with pytest.raises(SystemExit) as stop:
+            main([*base, "--executor", "dask", "--chunk", bad])
+        assert stop.value.code == 2
+        assert "--chunk" in capsys.readouterr().err
+    assert main([*base, "--chunk", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "--chunk: only for --executor dask" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "b.sqlite").exists()
+
+
+def _raises_above_five(x):
+    if x[0] > 5.0:
+        raise ValueError(f"no trial at x[0] = {x[0]:.3f}")
+    return BRANIN(x)
+
+
+def test_a_failure_inside_a_chunk_fails_that_trial_only(tmp_path, dask_executor):
+    """A call that raises inside a chunk fails its own future; the others of the chunk
+    return. Through the runner: the trials that raise are failed with their error, the
+    rest done, the log equal to the inline run's."""
+    executor = DaskExecutor(dask_executor.client, chunk=4)
+    futures = executor.submit_many(divmod, [7, 1, 9, 8], [2, 0, 4, 3])
+    assert futures[0].result(timeout=60) == (3, 1)
+    with pytest.raises(ZeroDivisionError):
+        futures[1].result(timeout=60)
+    assert [f.result(timeout=60) for f in futures[2:]] == [(2, 1), (2, 2)]
+    chunked = _run(tmp_path / "dask.sqlite", "random", 12, _chunked(dask_executor, 4),
+                   _raises_above_five)
+    reference = _run(tmp_path / "ref.sqlite", "random", 12, InlineExecutor(),
+                     _raises_above_five)
+    assert _rows(chunked) == _rows(reference)
+    failed = [r for r in chunked.trials if r.status == "failed"]
+    assert failed and len(failed) < 12
+    assert all("no trial at x[0]" in r.error for r in failed)
+    assert all((r.status == "failed") == (r.parameters[0] > 5.0) for r in chunked.trials)
+
+
+def test_a_worker_killed_mid_chunk_reruns_its_trials_and_repeats_nothing(
+        tmp_path, dask_executor):
+    """A worker dies in the middle of a chunk: Dask runs the chunk again on another worker;
+    the log holds each trial once, equal to an undisturbed run here."""
+    marker = tmp_path / "deaths"
+    killed = _run(tmp_path / "dask.sqlite", "random", 9, _chunked(dask_executor, 3),
+                  DiesOnce(marker))
+    assert len(marker.read_text().split()) == 1
+    reference = _run(tmp_path / "ref.sqlite", "random", 9, InlineExecutor())
+    assert _rows(killed) == _rows(reference)
+    with TrialLog(tmp_path / "dask.sqlite") as log:
+        count = log._conn.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+    assert count == 9
+
+
+def test_a_trial_that_always_kills_its_worker_fails_alone_out_of_its_chunk(
+        tmp_path, dask_executor):
+    """The chunk dies WORKER_DEATHS times, then its trials run one per task: the killer
+    is failed after its own WORKER_DEATHS deaths, its chunk mates are done."""
+    marker = tmp_path / "deaths"
+    result = _run(tmp_path / "dask.sqlite", "random", 4, _chunked(dask_executor, 2),
+                  DiesOnce(marker, threshold=8.0, always=True), seed=2)
+    dead = [r for r in result.trials if r.parameters[0] > 8.0]
+    assert len(dead) == 1, "seed 2 proposes one point with x[0] > 8 in 4 trials"
+    assert dead[0].status == "failed"
+    assert f"died while running the trial, {WORKER_DEATHS} times" in dead[0].error
+    assert len(marker.read_text().split()) == 2 * WORKER_DEATHS  # as a chunk, then alone
+    assert all(r.status == "done" for r in result.trials if r.parameters[0] <= 8.0)
+    assert len(result.trials) == 4
+
+
 def test_a_worker_killed_in_the_local_pool_reruns_its_trial_once(tmp_path):
     marker = tmp_path / "deaths"
     with LocalPool(2) as pool:
@@ -363,16 +483,19 @@ def test_a_lost_scheduler_is_a_clear_error_and_the_log_resumes(tmp_path):
     assert _rows(resumed) == _rows(reference)
 
 
-def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path):
+@pytest.mark.parametrize("chunk", [[], ["--chunk", "2"]], ids=["one-per-task", "chunk-2"])
+def test_babble_on_a_dask_cluster_logs_real_grasp_trials_as_simulated_here(tmp_path, chunk):
     """The real grasp trial: ``babble --executor dask`` (2 worker processes) logs each
-    trial once, and each metric is what the same simulation gives in this process."""
+    trial once, and each metric is what the same simulation gives in this process; the
+    same with 2 trials per Dask task (``--chunk 2``)."""
     from handle_drake.apps.babbling.cli import main
     from handle_drake.trial.grasp_trial import GraspTrial
 
     db = tmp_path / "babble.sqlite"
     assert main(["babble", "--object", "sphere", "--dims", "2", "--strategy", "random",
                  "--trials", "4", "--seed", "2", "--noise", "0.01", "--executor", "dask",
-                 "--workers", "2", "--db", str(db), "--no-progress", "--no-plot"]) == 0
+                 "--workers", "2", "--db", str(db), "--no-progress", "--no-plot",
+                 *chunk]) == 0
     with TrialLog(db) as log:
         (run,) = log.runs()
         rows = log.trials(run.run_id)

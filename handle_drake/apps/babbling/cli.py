@@ -36,7 +36,7 @@ from handle_drake.apps.cli_support import (
     refuse_without_mesh,
 )
 from handle_drake.geometry.objects import KINDS
-from handle_drake.learning.cluster import add_executor_arguments
+from handle_drake.learning.cluster import add_chunk_argument, add_executor_arguments
 
 __all__ = ["register", "main", "build_parser", "SPACE_OF_DIMS"]
 
@@ -91,6 +91,7 @@ def register(subparsers) -> None:
                         "otherwise, and random search runs as many trials at once as the "
                         "cluster has workers")
     add_executor_arguments(p)
+    add_chunk_argument(p)
     p.add_argument("--run-id", type=non_empty, default=None, help="name of the run in the log")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="figure of the run: metric per trial with the best so far, and the "
@@ -186,8 +187,8 @@ def _cmd_babble(args) -> int:
     # process builds the trial's diagram once (CachedTrial holds the config).
     in_process = args.executor.kind == "local" and workers == 1
     objective = trial if in_process else CachedTrial(config)
-    with trial_executor(args.executor, workers,
-                        connect_timeout=args.connect_timeout) as executor:
+    with trial_executor(args.executor, workers, connect_timeout=args.connect_timeout,
+                        chunk=args.chunk or 1) as executor:
         batch = bo_batch_size(args.strategy, args.executor, args.workers, executor)
         if batch > 1:
             options["batch_size"] = batch  # batches of parallel trials (kriging believer)
