@@ -1,6 +1,7 @@
 """The jog wheel learned from MIDI (issue 35 item 3): the score sees only the device's messages."""
 
 import inspect
+import math
 
 import mido
 import numpy as np
@@ -146,6 +147,22 @@ def test_the_committed_scenario_is_the_demonstration_trial_and_its_midi_agrees(t
     # evaluator counted from the port: the same net jog ticks.
     result = run_midi_scenario(scenario)
     assert int(result.midi(JOG)[-1]) == trial.evaluate(trial.config.demonstration()).ticks
+    # the hand turns the wheel and nothing else: every other control stays where it was
+    # (the plant's joints; before the free fingers were tucked, knob9 turned 87 deg)
+    assert abs(math.degrees(result.position(JOG)[-1] - result.position(JOG)[0])) > 50.0
+    assert_other_controls_still(result, JOG)
+
+
+def assert_other_controls_still(result, moved: str) -> None:
+    """Every control but ``moved`` within 1 deg (knobs) or 0.5 mm (faders, buttons) of its
+    start over the whole run, read from the plant's joint positions."""
+    for name in result.control_names:
+        if name == moved:
+            continue
+        s = result.position(name)
+        swing = float(np.abs(s - s[0]).max())
+        limit = math.radians(1.0) if name.startswith("knob") else 0.5e-3
+        assert swing < limit, f"{name} moved {swing:.4g} (limit {limit:.4g})"
 
 
 def _drain(host) -> list:

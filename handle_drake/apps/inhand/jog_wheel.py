@@ -337,7 +337,7 @@ class JogWheelTrial(GistTrial):
         c = self.config
         x = c.demonstration() if x is None else self._check(x)
         pinch = self._pinch
-        openc = pinch.plan.command_dict(pinch.plan.preshape_command)
+        openc = pinch.open_command()
         script = pinch.grasp_script(grip=float(x[0]))
         theta = 0.0
         for k in range(c.n_parts):
