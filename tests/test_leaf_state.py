@@ -61,7 +61,8 @@ def _mutations(func) -> list[tuple[int, str]]:
     aliases: dict[str, str] = {}  # local name -> self attribute it was bound to
     for node in ast.walk(func):
         if isinstance(node, ast.Assign) and len(node.targets) == 1 \
-                and isinstance(node.targets[0], ast.Name) and isinstance(node.value, ast.Attribute) \
+                and isinstance(node.targets[0], ast.Name) \
+                and isinstance(node.value, ast.Attribute) \
                 and isinstance(node.value.value, ast.Name) and node.value.value.id == "self":
             aliases[node.targets[0].id] = node.value.attr
 
