@@ -112,41 +112,56 @@ def _base_names(cls: ast.ClassDef) -> list[str]:
 
 
 def _classes() -> dict[str, tuple[str, ast.ClassDef]]:
+    """``"module:Class"`` -> (module, class definition), modules relative to handle_drake/."""
     out = {}
     for path in sorted(PACKAGE.rglob("*.py")):
-        tree = ast.parse(path.read_text(), filename=str(path))
-        for node in ast.walk(tree):
+        module = str(path.relative_to(PACKAGE))
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
             if isinstance(node, ast.ClassDef):
-                out.setdefault(node.name, (str(path.relative_to(PACKAGE)), node))
+                out[f"{module}:{node.name}"] = (module, node)
+    return out
+
+
+def _bases(key, classes) -> list[str]:
+    """Keys of ``key``'s bases defined in the package (the same module's first)."""
+    module, cls = classes[key]
+    out = []
+    for name in _base_names(cls):
+        same = f"{module}:{name}"
+        if same in classes:
+            out.append(same)
+        else:
+            out += [k for k in classes if k.endswith(f":{name}")][:1]
     return out
 
 
 def _leaf_systems(classes) -> list[str]:
-    """Classes deriving from LeafSystem (transitively through the package's classes)."""
-    leaf = {"LeafSystem"}
+    """Keys of the classes deriving from LeafSystem (transitively through the package's)."""
+    leaf = set()
     changed = True
     while changed:
         changed = False
-        for name, (_, cls) in classes.items():
-            if name not in leaf and any(b in leaf for b in _base_names(cls)):
-                leaf.add(name)
+        for key, (_, cls) in classes.items():
+            if key not in leaf and ("LeafSystem" in _base_names(cls)
+                                    or any(b in leaf for b in _bases(key, classes))):
+                leaf.add(key)
                 changed = True
-    return sorted(leaf - {"LeafSystem"})
+    return sorted(leaf)
 
 
-def _methods(name, classes, seen=None) -> dict[str, tuple[str, str, ast.FunctionDef]]:
+def _methods(key, classes, seen=None) -> dict[str, tuple[str, str, ast.FunctionDef]]:
     """method name -> (module, class, def), the class's own first, then its bases'."""
     seen = set() if seen is None else seen
-    if name not in classes or name in seen:
+    if key not in classes or key in seen:
         return {}
-    seen.add(name)
-    module, cls = classes[name]
+    seen.add(key)
+    module, cls = classes[key]
     out = {}
-    for base in reversed(_base_names(cls)):
+    for base in reversed(_bases(key, classes)):
         out.update(_methods(base, classes, seen))
     for node in cls.body:
         if isinstance(node, ast.FunctionDef):
-            out[node.name] = (module, name, node)
+            out[node.name] = (module, cls.name, node)
     return out
 
 
@@ -195,7 +210,7 @@ def callback_mutations() -> list[tuple[str, str, str, int, str]]:
 
 def test_the_scan_finds_leaf_systems_and_their_callbacks():
     classes = _classes()
-    leaves = _leaf_systems(classes)
+    leaves = {key.split(":")[1] for key in _leaf_systems(classes)}
     # known systems of each area are seen (the scan cannot pass by finding nothing)
     for name in ("MidiControllerEncoder", "MidiReceiver", "MidiHandControl", "MidiPortWriter",
                  "ReactiveGrasp", "GuardedGrasp"):
@@ -220,7 +235,7 @@ def test_the_scan_catches_each_kind_of_change(monkeypatch):
         "        d.accepted = 0\n"
         "        d.rejected.clear()\n"
     )
-    classes = {"S": ("probe.py", ast.parse(src).body[0])}
+    classes = {"probe.py:S": ("probe.py", ast.parse(src).body[0])}
     monkeypatch.setitem(globals(), "_classes", lambda: classes)
     found = {(m, what) for _, _, m, _, what in callback_mutations()}
     assert found == {
