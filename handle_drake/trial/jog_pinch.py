@@ -32,15 +32,15 @@ from handle_drake.scenario import (
     default_plant_config,
 )
 
-__all__ = ["GRASP_TIME", "JogPinch", "controller_scenario", "plan_jog_pinch", "pose6",
+__all__ = ["GRASP_TIME", "TUCKED", "JogPinch", "controller_scenario", "plan_jog_pinch", "pose6",
            "unwrap_wrist"]
 
 #: End of the grasp phase (s): reach 0.5, settle 0.1, close 0.4, settle 0.2.
 GRASP_TIME = 1.2
 
 #: The fingers the pinch (thumb and first finger) leaves free, curled into the palm (rad)
-#: for the whole script. In the planner's pre-shape the ring and little fingers hang
-#: below the tops of the neighbouring knobs: turned about the wheel's axis, their
+#: for the whole script. In the planner's pre-shape the ring and little fingers reach
+#: down to the height of the neighbouring knobs' tops: turned about the wheel's axis, their
 #: distal phalanges swept knob9 (+87 deg in the jog-wheel demonstration, -58 deg in
 #: Figure 9's +60/-20 run, read from the plant's contact results).
 TUCKED = {"RFJ3": 1.5, "RFJ2": 1.5, "LFJ3": 1.5, "LFJ2": 1.5}

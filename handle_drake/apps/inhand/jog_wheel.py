@@ -239,7 +239,7 @@ class MidiPortWriter(LeafSystem):
     every message stamped with the simulation time (``message.time``, s).
 
     The port write is a periodic publish event (as Drake's ``LcmPublisherSystem``);
-    which batch was last considered is the system's discrete state ``last_seq``,
+    the seq of the last batch considered is the system's own discrete state,
     copied from ``midi_in`` by a periodic unrestricted update of the same period.
     Drake handles the publish at ``t`` at the end of the step reaching ``t`` and the
     updates at ``t`` at the start of the next step, all unrestricted updates computed
