@@ -32,11 +32,18 @@ from handle_drake.scenario import (
     default_plant_config,
 )
 
-__all__ = ["GRASP_TIME", "JogPinch", "controller_scenario", "plan_jog_pinch", "pose6",
+__all__ = ["GRASP_TIME", "TUCKED", "JogPinch", "controller_scenario", "plan_jog_pinch", "pose6",
            "unwrap_wrist"]
 
 #: End of the grasp phase (s): reach 0.5, settle 0.1, close 0.4, settle 0.2.
 GRASP_TIME = 1.2
+
+#: The fingers the pinch (thumb and first finger) leaves free, curled into the palm (rad)
+#: for the whole script. In the planner's pre-shape the ring and little fingers reach
+#: down to the height of the neighbouring knobs' tops: turned about the wheel's axis, their
+#: distal phalanges swept knob9 (+87 deg in the jog-wheel demonstration, -58 deg in
+#: Figure 9's +60/-20 run, read from the plant's contact results).
+TUCKED = {"RFJ3": 1.5, "RFJ2": 1.5, "LFJ3": 1.5, "LFJ2": 1.5}
 
 
 def pose6(X: RigidTransform) -> list[float]:
@@ -59,13 +66,18 @@ class JogPinch:
         p = self.centre + R.multiply(X.translation() - self.centre)
         return pose6(RigidTransform(R.multiply(X.rotation()), p))
 
+    def open_command(self) -> dict[str, float]:
+        """The planned pre-shape with the free fingers tucked (:data:`TUCKED`)."""
+        return {**self.plan.command_dict(self.plan.preshape_command), **TUCKED}
+
     def grasp_script(self, grip: float | None = None) -> list[Keyframe]:
         """The grasp phase (0 to :data:`GRASP_TIME` s): open at the pre-grasp pose,
         reach the grasp pose, close (by ``grip`` when given: 0 the pre-shape, 1 the
-        planned closure; None: the planned closure), settle."""
+        planned closure; None: the planned closure), settle. The free fingers stay
+        tucked throughout."""
         plan = self.plan
-        openc = plan.command_dict(plan.preshape_command)
-        close = plan.command_dict(plan.close_command)
+        openc = self.open_command()
+        close = {**plan.command_dict(plan.close_command), **TUCKED}
         if grip is not None:
             close = {n: float(openc.get(n, 0.0) + grip * (v - openc.get(n, 0.0)))
                      for n, v in close.items()}

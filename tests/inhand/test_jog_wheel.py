@@ -1,6 +1,7 @@
 """The jog wheel learned from MIDI (issue 35 item 3): the score sees only the device's messages."""
 
 import inspect
+import math
 
 import mido
 import numpy as np
@@ -146,3 +147,73 @@ def test_the_committed_scenario_is_the_demonstration_trial_and_its_midi_agrees(t
     # evaluator counted from the port: the same net jog ticks.
     result = run_midi_scenario(scenario)
     assert int(result.midi(JOG)[-1]) == trial.evaluate(trial.config.demonstration()).ticks
+    # the hand turns the wheel and nothing else: every other control stays where it was
+    # (the plant's joints; before the free fingers were tucked, knob9 turned 87 deg)
+    assert abs(math.degrees(result.position(JOG)[-1] - result.position(JOG)[0])) > 50.0
+    assert_other_controls_still(result, JOG)
+
+
+def assert_other_controls_still(result, moved: str) -> None:
+    """Every control but ``moved`` within 1 deg (knobs) or 0.5 mm (faders, buttons) of its
+    start over the whole run, read from the plant's joint positions."""
+    for name in result.control_names:
+        if name == moved:
+            continue
+        s = result.position(name)
+        swing = float(np.abs(s - s[0]).max())
+        limit = math.radians(1.0) if name.startswith("knob") else 0.5e-3
+        assert swing < limit, f"{name} moved {swing:.4g} (limit {limit:.4g})"
+
+
+def _drain(host) -> list:
+    return [(m.time, tuple(m.bytes())) for m in host.iter_pending()]
+
+
+def test_the_port_writer_sends_each_batch_once_and_again_from_a_fresh_context(trial):
+    """The writer keeps no Python state: what it sends is each batch the device made, once,
+    stamped with the first writer period that saw it (truth: the device's ``midi`` output
+    read between scans), and a fresh context sends the same messages again."""
+    from handle_drake.apps.inhand.jog_wheel import MidiPortWriter
+    from handle_drake.trial.simulate import script_trajectories
+
+    built = trial._build()
+    harness, host = built["harness"], built["host"]
+    writer = harness.controller
+    assert isinstance(writer, MidiPortWriter) and not hasattr(writer, "reset")
+    period = trial.scenario().midi_controller.scan_period
+    midi = harness.station.GetOutputPort("midi_controller.midi")
+    station_context = harness.station.GetMyContextFromRoot(harness.context)
+    hand, wrist = script_trajectories(trial.scenario(), built["q0"])  # the demonstration
+    built["sources"]["hand"].UpdateTrajectory(hand)
+    built["sources"]["wrist"].UpdateTrajectory(wrist)
+    harness.reset()
+    _drain(host)
+    harness.initialize()
+    expected, last = [], 0
+    n = int(round(trial.config.total_time / period))
+    for k in range(1, n + 1):
+        t = k * period
+        harness.simulator.AdvanceTo(t)
+        batch = midi.Eval(station_context)
+        if batch.seq != last:  # made by the scan at t - period, first seen now
+            last = batch.seq
+            expected += [(pytest.approx(t, abs=1e-9), tuple(m.bytes())) for m in batch.messages]
+    sent = _drain(host)
+    assert last > 10 and len(sent) == len(expected)  # the demonstration turns the wheel
+    assert sent == expected
+    # a second simulation from a fresh context, on its own simulator, run while the first
+    # is half way (nothing on the writer reset by hand): each sends the whole trial, once
+    from pydrake.systems.analysis import Simulator
+
+    first = min(t for t, _ in sent)
+    harness.context.SetTimeStateAndParametersFrom(harness.diagram.CreateDefaultContext())
+    harness.initialize()
+    harness.advance(first + period / 2)
+    part = _drain(host)
+    assert part == [m for m in sent if m[0] <= first]
+    other = Simulator(harness.diagram)
+    other.Initialize()
+    other.AdvanceTo(trial.config.total_time)
+    assert _drain(host) == sent
+    harness.advance(trial.config.total_time)
+    assert part + _drain(host) == sent

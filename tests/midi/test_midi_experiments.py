@@ -29,6 +29,11 @@ def test_palmar_pinch_turns_the_jog_wheel_and_midi_counts_its_rotation():
     assert abs(s["midi_ticks"] - s["true_ticks"]) < 1.0
     assert s["peak_midi_ticks"] > s["midi_ticks"]
     assert result.counts["rejected"] == 0
+    # only the wheel moved (before the free fingers were tucked: knob9 -58 deg, mode pressed)
+    for name in result.control_names:
+        if name != "jog":
+            swing = float(np.abs(result.position(name) - result.position(name)[0]).max())
+            assert swing < (math.radians(1.0) if name.startswith("knob") else 0.5e-3), name
 
 
 def test_fingertip_pushes_a_fader_and_the_midi_value_follows():

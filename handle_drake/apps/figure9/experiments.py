@@ -79,7 +79,7 @@ def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
         raise ValueError(f"turn_time: expected a positive duration (s), got {turn_time}")
     pinch = plan_jog_pinch(reach_direction)
     plan = pinch.plan
-    openc = plan.command_dict(plan.preshape_command)
+    openc = pinch.open_command()
     turned = pinch.turned
     script = pinch.grasp_script()
     t = GRASP_TIME
@@ -108,7 +108,7 @@ def jog_pinch_scenario(turn_deg: float = 60.0, back_deg: float = 20.0,
 
 #: How far (deg) the wheel's net turn may differ from the wrist's before ``midi jog``
 #: says the pinch did not carry it: the larger of this and half the wrist's turn. The
-#: planned pinches land within 11 deg (+60/-20: wheel +50.9; -75/+25: -90.8; +25: +31.8).
+#: planned pinches land within 11 deg (+60/-20: wheel +50.6; -75/+25: -90.8; +25: +31.8).
 JOG_FOLLOW_TOL_DEG = 15.0
 
 

@@ -331,7 +331,9 @@ class GistMotionSource(LeafSystem):
         return int(min(self._n, max(1, np.floor(t / self._duration * self._n + 1e-9) + 1)))
 
     def _frames(self, c) -> np.ndarray:
-        # All N frames at once, kept for the parameter vector last seen (one per trial).
+        # A cache of a pure function: all N frames of the parameter vector ``c`` read from
+        # the context, kept for the last ``c`` seen (one per trial). Keyed by ``c`` itself,
+        # so any context gets its own parameters' frames (tests/test_leaf_state.py ALLOWED).
         key = c.tobytes()
         if self._cache_key != key:
             self._cache = frames(self._gist, c, self._q0, self._n, self._ratio)

@@ -236,24 +236,41 @@ class MidiJogEvaluator:
 
 class MidiPortWriter(LeafSystem):
     """Sends each new :class:`MidiBatch` on ``midi_in`` to a mido output ``port``,
-    every message stamped with the simulation time (``message.time``, s)."""
+    every message stamped with the simulation time (``message.time``, s).
+
+    The port write is a periodic publish event (as Drake's ``LcmPublisherSystem``);
+    the seq of the last batch considered is the system's own discrete state,
+    copied from ``midi_in`` by a periodic unrestricted update of the same period.
+    Drake handles the publish at ``t`` at the end of the step reaching ``t`` and the
+    updates at ``t`` at the start of the next step, all unrestricted updates computed
+    from the same context: the update at ``t`` therefore records the batch the publish
+    at ``t`` saw (not the one the device's scan at ``t`` makes), and a batch is sent by
+    the first publish that sees it, once. A fresh context sends everything again.
+    """
 
     def __init__(self, port, period: float):
         super().__init__()
         self._port = port
-        self._seq = 0
         self._in = self.DeclareAbstractInputPort("midi_in", _batch())
+        self._last_seq = self.DeclareDiscreteState(1)  # seq of the last batch considered
         self.DeclarePeriodicPublishEvent(period, 0.0, self._publish)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._record)
 
-    def reset(self) -> None:
-        self._seq = 0
+    def _seq(self, context) -> int | None:
+        batch = self._in.Eval(context)
+        return batch.seq if isinstance(batch, MidiBatch) else None
 
     def _publish(self, context):
         batch = self._in.Eval(context)
-        if isinstance(batch, MidiBatch) and batch.seq != self._seq:
-            self._seq = batch.seq
+        last = context.get_discrete_state(self._last_seq).value()[0]
+        if isinstance(batch, MidiBatch) and batch.seq != last:
             for message in batch.messages:
                 self._port.send(message.copy(time=float(context.get_time())))
+
+    def _record(self, context, state):
+        seq = self._seq(context)
+        if seq is not None:
+            state.get_mutable_discrete_state(self._last_seq).SetFromVector([float(seq)])
 
 
 def _batch() -> Value:
@@ -320,7 +337,7 @@ class JogWheelTrial(GistTrial):
         c = self.config
         x = c.demonstration() if x is None else self._check(x)
         pinch = self._pinch
-        openc = pinch.plan.command_dict(pinch.plan.preshape_command)
+        openc = pinch.open_command()
         script = pinch.grasp_script(grip=float(x[0]))
         theta = 0.0
         for k in range(c.n_parts):
@@ -401,7 +418,6 @@ class JogWheelTrial(GistTrial):
         harness.reset()
         built["sources"]["hand"].UpdateTrajectory(hand)
         built["sources"]["wrist"].UpdateTrajectory(wrist)
-        harness.controller.reset()
         for _ in built["host"].iter_pending():  # nothing of an earlier trial is scored
             pass
         harness.initialize()

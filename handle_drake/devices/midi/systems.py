@@ -175,7 +175,6 @@ class _MidiInput:
             raise ValueError("max_messages_per_update: expected an integer > 0, got "
                              f"{max_messages_per_update!r}")
         self._mapping = mapping
-        self._decoder = MidiDecoder(mapping)
         self._port = port
         self._budget = max_messages_per_update
         self._midi_in = self.DeclareAbstractInputPort("midi_in", _batch_value())
@@ -213,9 +212,7 @@ class _MidiInput:
         counts = context.get_discrete_state(self._counts).value().copy()
         if seq is not None:
             counts[0] = seq
-        decoder = self._decoder
-        decoder.accepted = 0
-        decoder.rejected.clear()
+        decoder = MidiDecoder(self._mapping)  # this update's counts only; the totals are state
         if len(raw) > self._budget:
             # A flood (a stuck controller, a feedback loop) cannot stall the
             # control loop: the oldest messages beyond the budget are dropped.
