@@ -19,7 +19,6 @@ import argparse
 import collections
 import contextlib
 import cProfile
-import json
 import logging
 import pstats
 import sys
@@ -30,6 +29,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_scale as bs  # noqa: E402 - pins BLAS, as every benchmark
+
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 
 GROUPS = (
     ("idle (epoll wait)", lambda f, name: name == "<method 'poll' of 'select.epoll' objects>"),
@@ -118,7 +119,9 @@ def main(argv=None) -> int:
     parser.add_argument("--waves", type=int, default=10)
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "scale_loop_profile.json")
+    add_page_arguments(parser, "scale")
     args = parser.parse_args(argv)
+    results_run = ResultsRun("Scale: where the Dask event loop's time goes", args)
     for name in ("workers", "seconds", "waves"):
         if not getattr(args, name) > 0:
             parser.error(f"--{name}: expected a value > 0, got {getattr(args, name)}")
@@ -141,9 +144,11 @@ def main(argv=None) -> int:
     for group, seconds in groups.most_common():
         busy_share = "" if group.startswith("idle") else f"{100 * seconds / busy:.0f} %"
         print(f"| {group} | {seconds:.2f} | {100 * seconds / total:.0f} % | {busy_share} |")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"case": case, "loop_self_seconds": dict(groups),
-                                    "busy_seconds": busy}, indent=1))
+    rows = [{"group": group, "seconds": round(seconds, 3),
+             "share_of_busy": "" if group.startswith("idle") else round(seconds / busy, 3)}
+            for group, seconds in groups.most_common()]
+    results_run.finish(rows, {"case": case, "loop_self_seconds": dict(groups),
+                              "busy_seconds": busy}, args.out)
     print(f"\nwritten to {args.out}")
     return 0
 
