@@ -30,7 +30,11 @@ of Algorithm 1 (:class:`GaitMotionSource`: the gist's frames, repeated
 joint as an incremental encoder would (``encoder_counts`` per turn,
 quantised): the total turn in the demonstrated direction (positive = the way
 the flexing fingers turn the cap). The palm never touching the bottle or the
-cap is part of the target.
+cap is part of the target. Over several gaits (``n_gaits > 1``) the cap, on its
+thread joint, cannot fall: from the end of the last gait's turn stroke (the latest
+end of a finger's flex, FF/MF/RF, in the trial's schedule) on, "gripped" asks for a
+finger on the cap within ``contact_window`` before that end, not before the sample:
+the last release leaves the cap free by design (one gait: unchanged).
 
 Every trial is a :class:`ScrewCapScenario` (a dataclass dumped whole as YAML
 with Drake's ``yaml_dump_typed``; the parameters are data in it), so a logged
@@ -81,7 +85,13 @@ from handle_drake.apps.inhand.evaluation import (
     sample_credit,
     target_score,
 )
-from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
+from handle_drake.apps.inhand.gist import (
+    ActionGist,
+    GistMotionSource,
+    extract_gist,
+    frames,
+    schedule,
+)
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
 from handle_drake.apps.inhand.task import (
@@ -783,10 +793,25 @@ class ScrewCapTrial(GistTrial):
         st["palm_max"] = max(st["palm_max"], summary["palm_force"])
         st["palm"] = st["palm"] or summary["palm_force"] > 0
         gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+        end = st.get("stroke_end")
+        if end is not None:  # a cap over several gaits: the touch at the last stroke's end
+            if fingers and end - c.contact_window - 1e-9 <= t <= end + 1e-9:
+                st["touch_at_stroke_end"] = True
+            if t > end + 1e-9:
+                gripped = st["touch_at_stroke_end"] and not st["palm"]
         if built["joint"] is None:  # a free cylinder must also not have dropped
             p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation()
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
+
+    def last_stroke_end(self, x) -> float:
+        """The end (s) of the last gait's turn stroke with parameters ``x``: the latest end
+        of a finger's flexing meta motion (FF, MF, RF; the thumb opposes) in the schedule."""
+        c = self.config
+        ends = [end for m, (_, end, _) in zip(self.gist.motions, schedule(self.gist, x),
+                                              strict=True)
+                if m.finger != "TH" and m.variation[0] > 0]
+        return (c.n_gaits - 1 + max(ends)) * c.gait_duration
 
     def _reversal(self, built: dict, plant_context, stopped: bool):
         """``(survived, credits)``: for the free cylinder whose trial was not stopped,
@@ -868,7 +893,9 @@ class ScrewCapTrial(GistTrial):
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
         st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                  palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
+                  palm_max=0.0, next_check=0, angle=0.0, previous=0.0,
+                  stroke_end=self.last_stroke_end(x) if joint is not None and c.n_gaits > 1
+                  else None, touch_at_stroke_end=False)
 
         try:
             for i, t in enumerate(samples):
