@@ -28,6 +28,7 @@ port                              dir    size                      units / frame
 ``object.slip``                   out    1                         1.0 while slipping (*)
 ``contact_results``               out    ``ContactResults``        world
 ``query_object``                  out    ``QueryObject``
+``applied_spatial_force``         in     forces on bodies          the plant's (optional)
 ``body_poses``                    out    ``vector<RigidTransform>``  ``X_WB`` per body
 ``plant_state``                   out    plant nq + nv
 ``midi_controller.control_positions``  out  controls                m / rad (with a MIDI controller)
