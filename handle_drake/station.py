@@ -28,6 +28,7 @@ port                              dir    size                      units / frame
 ``object.slip``                   out    1                         1.0 while slipping (*)
 ``contact_results``               out    ``ContactResults``        world
 ``query_object``                  out    ``QueryObject``
+``applied_spatial_force``         in     forces on bodies          the plant's (optional)
 ``body_poses``                    out    ``vector<RigidTransform>``  ``X_WB`` per body
 ``plant_state``                   out    plant nq + nv
 ``midi_controller.control_positions``  out  controls                m / rad (with a MIDI controller)
@@ -152,6 +153,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     if scenario.object is not None:
         _add_object_systems(builder, plant, scenario)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+    # external forces on bodies (e.g. an object's weight reversed: the in-hand held test)
+    builder.ExportInput(plant.get_applied_spatial_force_input_port(), "applied_spatial_force")
     builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
     builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
     builder.ExportOutput(plant.get_state_output_port(), "plant_state")

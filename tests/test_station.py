@@ -82,7 +82,8 @@ def test_ports_have_documented_names_and_sizes(hand, nq, nu, tips):
     inputs = {station.get_input_port(i).get_name(): station.get_input_port(i)
               for i in range(station.num_input_ports())}
     assert DOCUMENTED_OUTPUTS | {"wrist.pose_measured"} == set(outputs)
-    assert {"hand.position", "wrist.pose"} == set(inputs)
+    # applied_spatial_force: the plant's external forces (optional, simulation only)
+    assert {"hand.position", "wrist.pose", "applied_spatial_force"} == set(inputs)
     assert inputs["hand.position"].size() == nu
     assert inputs["wrist.pose"].size() == 6
     assert outputs["hand.position_commanded"].size() == nu

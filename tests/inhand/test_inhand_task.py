@@ -52,10 +52,35 @@ def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
     # eqs. 47-49: passing check 1 activated part 2; the samples up to ~0.3 s matched
     assert rest.s_b == trial.dims_per_part[:2].sum()
     assert 0.1 < rest.s_a < 0.3 and rest.score == rest.s_b + rest.s_a
-    # run to the end anyway: same score, the cylinder still lies in the hand, unrotated
+    # run to the end anyway: same score, the cylinder still lies in the hand, unrotated,
+    # through the hold; but the cradle does not grip it: reversed weight lifts it out
     full = trial.evaluate(still, early_stop=False)
-    assert full.completed and full.held and abs(full.rotation_deg) < 2.0
+    assert full.completed and full.held_time == pytest.approx(trial.config.total_time)
+    assert abs(full.rotation_deg) < 2.0
+    assert full.survived_reversal is False and not full.held
     assert full.score == rest.score and full.checks_passed == 1
+
+
+def test_a_palm_carried_cylinder_that_falls_under_reversed_weight_is_not_held():
+    # the stroke, then a release back along its path: the fingers leave the cylinder lying
+    # on the palm, rolled past the target. Before the held test at the end this trial was
+    # held and reached the target (score 29.0 >= 28); the palm carries all its weight
+    trial = InHandTrial(InHandTask())
+    x = _stroke(trial)
+    for m, sl in zip(trial.gist.motions, trial.gist.slices(), strict=True):
+        if m.finger != "TH" and m.variation[0] < 0:
+            x[sl][1:] = [1.0, 0.9]
+    outcome = trial.evaluate(x)
+    assert outcome.completed and outcome.checks_passed == 4 and outcome.rotation_deg >= 30.0
+    assert outcome.contacts[-1] == ["palm"]
+    assert outcome.palm_weight_share == pytest.approx(1.0, abs=0.05)
+    # with its weight reversed (the hand palm down) it leaves the hand: not held, not reached
+    assert outcome.survived_reversal is False
+    assert not outcome.held and not outcome.held_truth and not outcome.reached_target
+    assert outcome.score < trial.target_score
+    # the hand-written stroke alone keeps the fingers on it: it survives, held, reached
+    kept = trial.evaluate(_stroke(trial))
+    assert kept.survived_reversal and kept.held and kept.reached_target
 
 
 def test_old_evaluation_scores_held_time_and_rotation():

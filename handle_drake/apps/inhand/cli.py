@@ -41,8 +41,12 @@ def register(subparsers) -> None:
     p.add_argument("--task", choices=sorted([*TASKS, "screw_cap", "fingertip_cylinder",
                                              "jog_wheel"]),
                    default="cylinder_rotation",
-                   help="screw_cap: the report's Fig. 32, a cap on a fixed bottle turned by the "
-                        "fingers (score: the cap joint's encoder turn; --target-deg default 90); "
+                   help="cylinder_rotation, star_rotation: palm up, the object lies across "
+                        "the palm, which supports it; held only if it survives its weight "
+                        "reversed for 0.5 s at the end (the palm's share of the weight "
+                        "logged); screw_cap: the report's Fig. 32, a cap on a fixed bottle "
+                        "turned by the fingers (score: the cap joint's encoder turn; "
+                        "--target-deg default 90); "
                         "fingertip_cylinder: a free cylinder pinched by thumb and fingers, held "
                         "only if it survives its weight reversed at the end (default 60); "
                         "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored "

@@ -30,7 +30,11 @@ of Algorithm 1 (:class:`GaitMotionSource`: the gist's frames, repeated
 joint as an incremental encoder would (``encoder_counts`` per turn,
 quantised): the total turn in the demonstrated direction (positive = the way
 the flexing fingers turn the cap). The palm never touching the bottle or the
-cap is part of the target.
+cap is part of the target. Over several gaits (``n_gaits > 1``) the cap, on its
+thread joint, cannot fall: from the end of the last gait's turn stroke (the latest
+end of a finger's flex, FF/MF/RF, in the trial's schedule) on, "gripped" asks for a
+finger on the cap within ``contact_window`` before that end, not before the sample:
+the last release leaves the cap free by design (one gait: unchanged).
 
 Every trial is a :class:`ScrewCapScenario` (a dataclass dumped whole as YAML
 with Drake's ``yaml_dump_typed``; the parameters are data in it), so a logged
@@ -45,7 +49,6 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from pydrake.common.value import AbstractValue
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.geometry import (
     AddContactMaterial,
@@ -55,11 +58,9 @@ from pydrake.geometry import (
     ProximityProperties,
 )
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
-from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
     CoulombFriction,
-    ExternallyAppliedSpatialForce,
     MultibodyPlantConfig,
 )
 from pydrake.multibody.tree import (
@@ -71,7 +72,7 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -81,13 +82,20 @@ from handle_drake.apps.inhand.evaluation import (
     sample_credit,
     target_score,
 )
-from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist, frames
+from handle_drake.apps.inhand.gist import (
+    ActionGist,
+    GistMotionSource,
+    extract_gist,
+    frames,
+    schedule,
+)
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
 from handle_drake.apps.inhand.task import (
     DATA_DIR,
     GistMotionData,
     GistTrial,
+    ReversedGravity,
     gist_data,
     gist_from_data,
 )
@@ -435,34 +443,6 @@ class PlannedCommands:
         self.player.UpdateTrajectory(self.trajectory(self.commands(targets)))
 
 
-class ReversedGravity(LeafSystem):
-    """From ``start`` (s, a numeric parameter; default never) on, a force ``-2 m g`` on the
-    body at its centre of mass: its weight reversed (the hand turned palm down, for it)."""
-
-    def __init__(self, plant, body):
-        super().__init__()
-        self._index = body.index()
-        self._force = -2.0 * body.default_mass() * plant.gravity_field().gravity_vector()
-        self._start = self.DeclareNumericParameter(BasicVector([np.inf]))
-        self.DeclareAbstractOutputPort(
-            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
-            self._calc)
-
-    def set_start(self, context, start: float) -> None:
-        context.get_mutable_numeric_parameter(self._start).SetAtIndex(0, float(start))
-
-    def _calc(self, context, output):
-        start = context.get_numeric_parameter(self._start).GetAtIndex(0)
-        forces = []
-        if context.get_time() >= start - 1e-9:
-            f = ExternallyAppliedSpatialForce()
-            f.body_index = self._index
-            f.p_BoBq_B = np.zeros(3)
-            f.F_Bq_W = SpatialForce(np.zeros(3), self._force)
-            forces.append(f)
-        output.set_value(forces)
-
-
 def contact_summary(plant, plant_context, built) -> dict:
     """From the plant's contact results: hand bodies touching the cap (or free cylinder),
     the palm's contact force on bottle and cap (N, magnitude), and the upward force (N,
@@ -783,10 +763,34 @@ class ScrewCapTrial(GistTrial):
         st["palm_max"] = max(st["palm_max"], summary["palm_force"])
         st["palm"] = st["palm"] or summary["palm_force"] > 0
         gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+        end = st.get("stroke_end")
+        if end is not None:  # a cap over several gaits: the touch at the last stroke's end
+            if fingers and end - c.contact_window - 1e-9 <= t <= end + 1e-9:
+                st["touch_at_stroke_end"] = True
+            if t > end + 1e-9:
+                gripped = st["touch_at_stroke_end"] and not st["palm"]
         if built["joint"] is None:  # a free cylinder must also not have dropped
             p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation()
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
+
+    def _start_state(self, x, joint) -> dict:
+        """A trial's running record; ``stroke_end``: a cap over several gaits (see the
+        module doc), None otherwise (one gait, or the free cylinder)."""
+        several = joint is not None and self.config.n_gaits > 1
+        return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
+                    palm_max=0.0, next_check=0, angle=0.0, previous=0.0,
+                    stroke_end=self.last_stroke_end(x) if several else None,
+                    touch_at_stroke_end=False)
+
+    def last_stroke_end(self, x) -> float:
+        """The end (s) of the last gait's turn stroke with parameters ``x``: the latest end
+        of a finger's flexing meta motion (FF, MF, RF; the thumb opposes) in the schedule."""
+        c = self.config
+        ends = [end for m, (_, end, _) in zip(self.gist.motions, schedule(self.gist, x),
+                                              strict=True)
+                if m.finger != "TH" and m.variation[0] > 0]
+        return (c.n_gaits - 1 + max(ends)) * c.gait_duration
 
     def _reversal(self, built: dict, plant_context, stopped: bool):
         """``(survived, credits)``: for the free cylinder whose trial was not stopped,
@@ -867,8 +871,7 @@ class ScrewCapTrial(GistTrial):
         step = 1e-3 * c.time_step
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
-        st = dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                  palm_max=0.0, next_check=0, angle=0.0, previous=0.0)
+        st = self._start_state(x, joint)
 
         try:
             for i, t in enumerate(samples):

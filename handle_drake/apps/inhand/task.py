@@ -15,6 +15,12 @@ the palm, so 30 deg held is physically reachable
 The grasp is settled once per trial object (``settle_time`` of simulation with the
 initial command) and every trial starts from a copy of that context: time 0,
 the settled state, the trial's parameters on the :class:`GistMotionSource`.
+The palm supports these palm-up objects; the held rule is the fingertip cylinder's
+(issue 35): after the hold the object's weight is reversed for ``reverse_time``
+(:class:`ReversedGravity`, the hand palm down for it) and the trial is held, and can
+reach its target, only if the object moved less than ``reverse_travel`` and a hand body
+other than the palm still touches it; the palm's share of the weight at the end of the
+hold is logged (``palm_weight_share``).
 The trial samples every ``sample_period``: object pose (rotation about its
 axis from the plant, unwrapped; positive = the direction the flexing fingers
 roll it; with ``accelerometer`` set, the object is the report's instrumented
@@ -47,7 +53,11 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
+from pydrake.common.value import AbstractValue
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.multibody.math import SpatialForce
+from pydrake.multibody.plant import ExternallyAppliedSpatialForce
+from pydrake.systems.framework import BasicVector, LeafSystem
 
 from handle_drake.apps.inhand.evaluation import (
     incremental_score,
@@ -73,12 +83,12 @@ from handle_drake.scenario import (
     SimHandDriver,
     default_plant_config,
 )
-from handle_drake.station import object_body
+from handle_drake.station import GetPlant, object_body
 from handle_drake.trial.harness import TrialHarness
 
 __all__ = ["TASKS", "InHandTask", "InHandTrial", "InHandScenario", "TrialOutcome", "EVALUATIONS",
-           "task_gist", "build_inhand", "inhand_fingerprint", "GistMotionData", "gist_data",
-           "gist_from_data"]
+           "task_gist", "build_inhand", "ReversedGravity", "inhand_fingerprint", "GistMotionData",
+           "gist_data", "gist_from_data"]
 
 DATA_DIR = Path(__file__).parent / "data"
 EVALUATIONS = ("incremental", "old")
@@ -104,6 +114,34 @@ TASKS: dict[str, TaskSpec] = {
     "star_rotation": TaskSpec("star_rotation.json", "star_prism", 0.05,
                               (("height", 0.06),), (0.322, 0.0, 0.048)),
 }
+
+
+class ReversedGravity(LeafSystem):
+    """From ``start`` (s, a numeric parameter; default never) on, a force ``-2 m g`` on the
+    body at its centre of mass: its weight reversed (the hand turned palm down, for it)."""
+
+    def __init__(self, plant, body):
+        super().__init__()
+        self._index = body.index()
+        self._force = -2.0 * body.default_mass() * plant.gravity_field().gravity_vector()
+        self._start = self.DeclareNumericParameter(BasicVector([np.inf]))
+        self.DeclareAbstractOutputPort(
+            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
+            self._calc)
+
+    def set_start(self, context, start: float) -> None:
+        context.get_mutable_numeric_parameter(self._start).SetAtIndex(0, float(start))
+
+    def _calc(self, context, output):
+        start = context.get_numeric_parameter(self._start).GetAtIndex(0)
+        forces = []
+        if context.get_time() >= start - 1e-9:
+            f = ExternallyAppliedSpatialForce()
+            f.body_index = self._index
+            f.p_BoBq_B = np.zeros(3)
+            f.F_Bq_W = SpatialForce(np.zeros(3), self._force)
+            forces.append(f)
+        output.set_value(forces)
 
 
 def task_gist(task: str) -> ActionGist:
@@ -136,6 +174,12 @@ class InHandTask:
     mu: float = 0.8
     # "" or an accelerometer profile (handle_drake.devices.accelerometer.PROFILES) in the object
     accelerometer: str = ""
+    # The held test at the end (issue 35, as the fingertip cylinder's): the object's weight
+    # reversed for ``reverse_time`` (the hand palm down, for it); held only if it moves less
+    # than ``reverse_travel`` and a hand body other than the palm still touches it. The palm
+    # supports these palm-up tasks: its share of the weight is logged (palm_weight_share).
+    reverse_time: float = 0.5
+    reverse_travel: float = 0.01  # m
 
     def __post_init__(self):
         if self.task not in TASKS:
@@ -144,7 +188,8 @@ class InHandTask:
             raise ValueError(f"evaluation: expected one of {EVALUATIONS}, got "
                              f"{self.evaluation!r}")
         for name in ("target_deg", "motion_duration", "sample_period", "time_step", "drop",
-                     "max_travel", "mu", "settle_time", "contact_window"):
+                     "max_travel", "mu", "settle_time", "contact_window", "reverse_time",
+                     "reverse_travel"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and np.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
@@ -222,6 +267,11 @@ class TrialOutcome:
     # contact window). With an accelerometer ``held`` is the object's own: no free fall
     # flagged by its instrument at any sample; this is the truth logged beside it
     held_truth: bool | None = None
+    # the palm's upward force on the object / its weight at the end of the hold (the palm
+    # carries these palm-up objects), and whether the object then survived its weight
+    # reversed for reverse_time (None: the trial stopped early)
+    palm_weight_share: float | None = None
+    survived_reversal: bool | None = None
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
@@ -319,10 +369,17 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     gist = scenario.action_gist()
     q0 = scenario.initial_command()
 
+    reverse = []
+
     def add_motion(builder, station):
         source = builder.AddNamedSystem("motion", GistMotionSource(
             gist, q0, scenario.motion_duration, scenario.n_frames))
         builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
+        plant = GetPlant(station)
+        reverse.append(builder.AddNamedSystem("reversed_gravity",
+                                              ReversedGravity(plant, object_body(plant))))
+        builder.Connect(reverse[0].get_output_port(),
+                        station.GetInputPort("applied_spatial_force"))
         return source
 
     harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat)
@@ -342,7 +399,9 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     settled = harness.context.Clone()
     settled.SetTime(0.0)
     accelerometer = scenario.station.object.accelerometer is not None
-    return dict(harness=harness, settled=settled, body=object_body(plant),
+    body = object_body(plant)
+    weight = body.default_mass() * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
+    return dict(harness=harness, settled=settled, body=body, reverse=reverse[0], weight=weight,
                 hand_bodies=hand_bodies,
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
                 if accelerometer else None,
@@ -510,7 +569,28 @@ class InHandTrial(GistTrial):
                             at_each=lambda: self._sample(st, built))
         except _EarlyStop:
             st.stopped = True
+        if not st.stopped and st.i == samples.size:
+            self._reversal(st, built)
         return self._outcome(st, time.perf_counter() - start_wall)
+
+    def _reversal(self, st: "_Sampling", built: dict) -> None:
+        """The held test at the end: the palm's share of the weight now, then the object's
+        weight reversed for ``reverse_time`` (the hand palm down, for it): survived if it
+        moved less than ``reverse_travel`` and a hand body other than the palm touches it."""
+        c, harness, body = self.config, built["harness"], built["body"]
+        plant, plant_context = harness.plant, st.plant_context
+        results = plant.get_contact_results_output_port().Eval(plant_context)
+        st.palm_share = _lift(results, body, built["hand_bodies"]).get("palm", 0.0) / \
+            built["weight"]
+        reverse = built["reverse"]
+        reverse.set_start(reverse.GetMyContextFromRoot(harness.context), c.total_time)
+        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+        harness.advance(c.total_time + c.reverse_time)
+        travel = float(np.linalg.norm(
+            plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
+        touching = _touching(plant.get_contact_results_output_port().Eval(plant_context),
+                             body, built["hand_bodies"])
+        st.survived = bool(travel < c.reverse_travel and any(b != "palm" for b in touching))
 
     def _sample(self, st: "_Sampling", built: dict) -> None:
         """One sample of the running trial: rotation, held, contacts, the checks."""
@@ -578,7 +658,8 @@ class InHandTrial(GistTrial):
         # the instrumented object's own estimate when it has one (sensed = scored)
         angle = st.acc_angle if st.acc_prev is not None else st.angle
         passed = st.passed
-        held_end = st.held and not st.stopped
+        # held at the end: through the hold and then through the reversed weight
+        held_end = st.held and not st.stopped and st.survived is True
         # The target itself is strict (the checks' tolerance lets a run stop within
         # tolerance_deg of it; such a trial does not count as reaching it).
         reached = bool(held_end and passed == c.n_checks and angle >= c.target)
@@ -597,7 +678,8 @@ class InHandTrial(GistTrial):
             times=samples[: len(rotations)].tolist(), rotation_deg_series=rotations,
             accelerometer_rotation_deg_series=st.accel_rotations, contacts=st.contacts,
             sim_time=float(samples[len(rotations) - 1]), wall_time=wall_time,
-            held_truth=st.held_truth and not st.stopped)
+            held_truth=st.held_truth and not st.stopped and st.survived is True,
+            palm_weight_share=st.palm_share, survived_reversal=st.survived)
 
 
 @dc.dataclass(eq=False)
@@ -625,6 +707,8 @@ class _Sampling:
     failed: bool = False  # a check failed: no later check counts (the checks pass in a row)
     last_touch: float = 0.0
     acc_prev: float | None = None
+    palm_share: float | None = None  # the palm's share of the weight at the end of the hold
+    survived: bool | None = None  # the reversed-weight test (None: not run)
     acc_angle: float = 0.0
     rotations: list = dc.field(default_factory=list)  # deg per sample
     accel_rotations: list = dc.field(default_factory=list)
@@ -633,6 +717,20 @@ class _Sampling:
 
 class _EarlyStop(Exception):
     """A check failed (incremental) or the object dropped (old): the trial ends here."""
+
+
+def _lift(results, body, hand_bodies) -> dict:
+    """The upward force (N, against gravity: world +z) each hand body exerts on ``body``."""
+    index, lift = int(body.index()), {}
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        for mine, other, sign in ((a, b, -1.0), (b, a, 1.0)):
+            if mine == index and other in hand_bodies:
+                # contact_force() is the force on body B: on the object it is sign * it
+                name = hand_bodies[other]
+                lift[name] = lift.get(name, 0.0) + sign * float(info.contact_force()[2])
+    return lift
 
 
 def _touching(results, body, hand_bodies) -> list[str]:
