@@ -62,7 +62,9 @@ def main(argv=None) -> int:
                         help="plan each pick, do not simulate it (planning times only)")
     add_page_arguments(parser, "pick")
     args = parser.parse_args(argv)
-    results_run = ResultsRun("Pick and place on the arm: objects in the box", args)
+    results_run = (ResultsRun("Pick planning time per pick (grasp database, arm IK, paths)",
+                              args, section="--plan-only") if args.plan_only else
+                   ResultsRun("Pick and place on the arm: objects in the box", args))
 
     from handle_drake.apps.pick.cli import pick
     from handle_drake.apps.pick.plan import default_grasp_database
@@ -103,6 +105,7 @@ def main(argv=None) -> int:
         print(f"{mode:10s} {len(ok):3d}/{len(mine):<3d}      "
               + "   ".join(f"{a}/{b}" for a, b in per_kind.values()))
     planned = [r for r in rows if "planning_s" in r]
+    timing = []
     if planned:
         for key in ("grasp", "ik", "path"):
             values = [r["planning_s"][key] for r in planned]
@@ -111,6 +114,15 @@ def main(argv=None) -> int:
         ik_path = [r["planning_s"]["ik"] + r["planning_s"]["path"] for r in planned]
         print(f"IK + paths: median {np.median(ik_path):.2f} s, max {np.max(ik_path):.2f} s")
         whole = [sum(r["planning_s"].values()) for r in planned]
+        for stage, values in (("grasp", [r["planning_s"]["grasp"] for r in planned]),
+                              ("arm IK", [r["planning_s"]["ik"] for r in planned]),
+                              ("paths", [r["planning_s"]["path"] for r in planned]),
+                              ("whole plan", whole),
+                              ("arm collision model", [r["reach_model_s"] for r in planned])):
+            timing.append({"stage": stage, "median_s": float(np.median(values)),
+                           "p90_s": float(np.percentile(values, 90)),
+                           "max_s": float(np.max(values)),
+                           "at_most_2s": f"{sum(v <= 2.0 for v in values)}/{len(values)}"})
         print(f"whole plan (grasp + IK + paths): median {np.median(whole):.2f} s, "
               f"90 % {np.percentile(whole, 90):.2f} s, max {np.max(whole):.2f} s; "
               f"<= 2 s in {sum(w <= 2.0 for w in whole)}/{len(whole)}; grasp stored in "
@@ -127,7 +139,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / ("pick_plan.json" if args.plan_only else "pick.json")
-    results_run.finish(table_rows(summary, "mode"),
+    results_run.finish(timing if args.plan_only else table_rows(summary, "mode"),
                        {"summary": summary, "floor_rate": floor, "rows": rows,
                         "grasp_db_load_s": db_load}, path)
     print(f"wrote {path}")

@@ -114,3 +114,19 @@ def test_results_run_without_args_writes_json_only(tmp_path):
     run = ResultsRun("t")
     assert run.finish([{"a": 1}], {"x": 1}, tmp_path / "x.json") is None
     assert json.loads((tmp_path / "x.json").read_text())["x"] == 1
+
+
+def test_two_kinds_of_run_of_one_benchmark_keep_a_section_each(tmp_path):
+    """bench_pick's --plan-only run writes its own section: it must not replace the
+    executed run's success table (nor the other way round)."""
+    import argparse
+
+    page = tmp_path / "pick.md"
+    args = argparse.Namespace(results_page=page, no_page=False)
+    ResultsRun("executed", args, source="bench_x.py").finish([{"in_box": 17}])
+    ResultsRun("planning", args, source="bench_x.py", section="--plan-only").finish(
+        [{"median_s": 0.04}])
+    ResultsRun("executed", args, source="bench_x.py").finish([{"in_box": 18}])
+    text = page.read_text()
+    assert text.count("### executed") == 1 and text.count("### planning") == 1
+    assert "| 18 |" in text and "| 17 |" not in text and "| 0.04 |" in text

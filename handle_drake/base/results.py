@@ -135,9 +135,12 @@ class ResultsRun:
     """One benchmark run: the date, command line and load average at its start,
     then :meth:`finish` writes its JSON and its page section."""
 
-    def __init__(self, title: str, args=None, source: str | None = None):
+    def __init__(self, title: str, args=None, source: str | None = None,
+                 section: str | None = None):
         self.title = title
         self.source = source or _source()
+        # a benchmark with two kinds of run (e.g. --plan-only) keeps one section each
+        self.marker = self.source if section is None else f"{self.source} {section}"
         self.command = " ".join(["python", self.source, *map(shlex.quote, sys.argv[1:])])
         self.date = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
         self.load_start = os.getloadavg()[0]
@@ -180,7 +183,7 @@ class ResultsRun:
             f"`{self.command}`, {self.date}, load average {self.load_start:.2f} at the start "
             f"and {load_end:.2f} at the end ({os.cpu_count()} CPUs){where}.", "",
             markdown_table(rows), *([""] + list(notes) if notes else [])])
-        path = update_page(self.page, self.source, section, self.title)
+        path = update_page(self.page, self.marker, section, self.title)
         print(f"updated {path}")
         return path
 
