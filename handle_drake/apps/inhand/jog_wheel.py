@@ -354,14 +354,8 @@ class JogWheelTrial(GistTrial):
             f"# jog-wheel trial {self.name}; parameters [grip, turns deg]: "
             f"{[float(v) for v in np.asarray(x).reshape(-1)]}\n")
 
-    def _check(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float).reshape(-1)
-        if x.size != self.dimension:
-            raise ValueError(f"parameters: expected {self.dimension} values [grip, "
-                             f"{self.config.n_parts} turns], got {x.size}")
-        if not np.all(np.isfinite(x)):
-            raise ValueError("parameters: expected finite values")
-        return x
+    def _parameters_text(self) -> str:
+        return f"{self.dimension} values [grip, {self.config.n_parts} turns]"
 
     def _build(self, meshcat=None):
         if self._built is not None and meshcat is None:

@@ -705,15 +705,6 @@ class ScrewCapTrial(GistTrial):
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
             hold=c.hold, parameters=[float(v) for v in parameters])
 
-    def _check(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float).reshape(-1)
-        if x.size != self.dimension:
-            raise ValueError(f"parameters: expected {self.dimension} values (eq. 45), got "
-                             f"{x.size}")
-        if not np.all(np.isfinite(x)):
-            raise ValueError("parameters: expected finite values")
-        return x
-
     def _build(self, meshcat=None, driver: bool = False):
         """The diagram, settled (kept per process). ``driver``: with the Python hand
         driver (the reference of the default build's planned commands; also used with

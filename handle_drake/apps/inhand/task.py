@@ -436,6 +436,18 @@ class GistTrial:
     def bounds(self) -> np.ndarray:
         return self.gist.bounds()
 
+    def _parameters_text(self) -> str:
+        """What the parameter vector holds, for the size error."""
+        return f"{self.dimension} values (eq. 45)"
+
+    def _check(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float).reshape(-1)
+        if x.size != self.dimension:
+            raise ValueError(f"parameters: expected {self._parameters_text()}, got {x.size}")
+        if not np.all(np.isfinite(x)):
+            raise ValueError("parameters: expected finite values")
+        return x
+
 
 class InHandTrial(GistTrial):
     """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
@@ -517,15 +529,6 @@ class InHandTrial(GistTrial):
         if meshcat is None:
             self._built = built
         return built
-
-    def _check(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float).reshape(-1)
-        if x.size != self.dimension:
-            raise ValueError(f"parameters: expected {self.dimension} values (eq. 45), got "
-                             f"{x.size}")
-        if not np.all(np.isfinite(x)):
-            raise ValueError("parameters: expected finite values")
-        return x
 
     # -------------------------------------------------------------- trial
     def __call__(self, x, seed: int = 0) -> TrialResult:
