@@ -106,13 +106,7 @@ class Detection:
 
 
 def _check_points(points) -> np.ndarray:
-    points = np.asarray(points)
-    if np.iscomplexobj(points):
-        raise TypeError("points must be real, got a complex array")
-    if points.dtype not in (np.float32, np.float64):
-        points = points.astype(float)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points must be an N x 3 array (m), got shape {points.shape}")
+    points = _check_rows(points)
     # One pass: a row with an inf or nan sums to a non-finite value (inf - inf
     # is nan). float32 input (Drake's clouds) stays float32 here; the few
     # points above the table are made float64 for the fits.
