@@ -191,8 +191,7 @@ class TrialRunner:
                 # logs it and submits the next (measured: ~30 ms a trial on Dask).
                 # An executor that runs several trials per task (a chunked
                 # DaskExecutor) gets a chunk running and one queued per worker.
-                chunk = getattr(executor, "chunk", 1)
-                batch_size = 2 * workers * (chunk if isinstance(chunk, int) else 1)
+                batch_size = 2 * workers * getattr(executor, "chunk", 1)
         if commit_every is not None:
             check_group(commit_every, commit_seconds)
         self.commit_every, self.commit_seconds = commit_every, commit_seconds
@@ -268,7 +267,7 @@ class TrialRunner:
             # first chunk at once and then 2, 4, ... chunks at a time, so the workers
             # start while the rest of a large fill (2 x W x chunk trials) is asked and logged.
             chunk = 1 if many is None else getattr(self._executor, "chunk", 1)
-            send_at = chunk if isinstance(chunk, int) and chunk > 1 else None
+            send_at = chunk if chunk > 1 else None
             while room > 0 and (queue or (not stop and next_index < n_trials)):
                 if queue and self._deaths.get(queue[0].index):
                     if in_flight or batch:  # it saw its pool die: it runs alone
