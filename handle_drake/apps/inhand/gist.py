@@ -43,6 +43,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 
 __all__ = [
+    "check_parameter_vector",
     "FINGERS",
     "FINGER_JOINTS",
     "MetaMotion",
@@ -240,13 +241,20 @@ def extract_gist(times, commands, fingers=FINGERS, smooth=0.1, min_speed=0.3,
     return ActionGist(tuple(motions), name)
 
 
-def _check_parameters(gist: ActionGist, c) -> np.ndarray:
+def check_parameter_vector(c, size: int, what: str | None = None) -> np.ndarray:
+    """``c`` as a flat float vector of ``size`` finite values (``what``: how the size
+    error names them; default "N values (eq. 45)")."""
     c = np.asarray(c, dtype=float).reshape(-1)
-    if c.size != gist.dimension:
-        raise ValueError(f"parameters: expected {gist.dimension} values (eq. 45), got {c.size}")
+    if c.size != size:
+        raise ValueError(f"parameters: expected {what or f'{size} values (eq. 45)'}, "
+                         f"got {c.size}")
     if not np.all(np.isfinite(c)):
         raise ValueError("parameters: expected finite values")
     return c
+
+
+def _check_parameters(gist: ActionGist, c) -> np.ndarray:
+    return check_parameter_vector(c, gist.dimension)
 
 
 def schedule(gist: ActionGist, c):

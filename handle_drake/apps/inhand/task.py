@@ -65,7 +65,12 @@ from handle_drake.apps.inhand.evaluation import (
     part_dimensions,
     target_score,
 )
-from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource, extract_gist
+from handle_drake.apps.inhand.gist import (
+    ActionGist,
+    GistMotionSource,
+    check_parameter_vector,
+    extract_gist,
+)
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import ABDUCTION_RULES, glove_to_shadow
 from handle_drake.base.checks import LIMITS
@@ -441,12 +446,7 @@ class GistTrial:
         return f"{self.dimension} values (eq. 45)"
 
     def _check(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float).reshape(-1)
-        if x.size != self.dimension:
-            raise ValueError(f"parameters: expected {self._parameters_text()}, got {x.size}")
-        if not np.all(np.isfinite(x)):
-            raise ValueError("parameters: expected finite values")
-        return x
+        return check_parameter_vector(x, self.dimension, self._parameters_text())
 
 
 class InHandTrial(GistTrial):
