@@ -276,12 +276,7 @@ def locate_object(spec, X_WO_predicted: RigidTransform, points, normals) -> Rigi
         R, faces = turn @ R, faces @ turn.T
         A, rhs, weight = faces, np.einsum("ij,ij->i", faces, points) - half[axis], 1e-3
         c = np.linalg.solve(A.T @ A + weight * np.eye(3), A.T @ rhs + weight * c)
-    return RigidTransform(RotationMatrix(_orthonormal(R)), c)
-
-
-def _orthonormal(R) -> np.ndarray:
-    u, _, vt = np.linalg.svd(R)
-    return u @ vt
+    return RigidTransform(RotationMatrix.ProjectToRotationMatrix(R), c)
 
 
 def _correct_release(simulator, diagram, station, scenario, plan, reach, close, sources):
