@@ -10,6 +10,7 @@ from handle_drake.apps.inhand.screw_cap import (
     ScrewCapScenario,
     ScrewCapTask,
     ScrewCapTrial,
+    contact_forces,
     contact_summary,
     simulate_scenario,
 )
@@ -272,6 +273,43 @@ def test_new_settings_at_their_defaults_keep_logged_run_ids():
     from handle_drake.apps.inhand.experiment import _config
 
     task = _config(ScrewCapTrial(ScrewCapTask()), "ipso", 10)["task"]
-    assert not {"cap_diameter", "cap_axis_yaw_deg", "grasp_closure"} & set(task)
+    assert not {"cap_diameter", "cap_axis_yaw_deg", "cap_length", "cap_axis_reversed",
+                "grasp_closure"} & set(task)
     grip = _config(ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP)), "ipso", 10)["task"]
     assert grip["cap_diameter"] == 0.04 and len(grip["grasp_closure"]) == 4
+
+
+def _run_to(trial, x, t):
+    """The plant's context after ``t`` s of the trial with parameters ``x``."""
+    built = trial._build()
+    plant_context = trial._reset(built, x)
+    built["simulator"].Initialize()
+    built["simulator"].AdvanceTo(t)
+    return built, plant_context
+
+
+def test_contact_torques_balance_the_thread_while_the_cap_turns(trial):
+    # the cap's balance about its axis (its inertia is 2e-6 kg m^2): while it turns steadily,
+    # the hand's contact torques (contact_forces, from the plant's contact results) sum to
+    # the thread's friction, Coulomb 0.01 N m + viscous 1e-3 N m s/rad * speed
+    built, plant_context = _run_to(trial, _stroke(trial), 0.8)
+    speed = built["joint"].get_angular_rate(plant_context)
+    assert speed > 0.5  # turning the demonstrated way
+    forces = contact_forces(built["plant"], plant_context, built)
+    total = sum(torque for _, _, torque in forces.values())
+    assert total == pytest.approx(0.01 + 1e-3 * speed, abs=2e-3)
+    for normal, tangential, _ in forces.values():
+        assert normal >= 0 and 0 <= tangential <= 1.0 * normal + 1e-6  # mu = 1
+
+
+def test_a_reversed_axis_reads_the_same_motion_as_the_opposite_turn(trial):
+    # the cap is a cylinder: turning its joint axis over changes nothing but the sign
+    reversed_ = ScrewCapTrial(ScrewCapTask(cap_axis_reversed=True))
+    forward = trial.evaluate(_stroke(trial), early_stop=False)
+    backward = reversed_.evaluate(_stroke(reversed_), early_stop=False)
+    assert backward.turn_deg_truth == pytest.approx(-forward.turn_deg_truth, abs=0.5)
+    assert not backward.reached_target
+    with pytest.raises(ValueError, match="cap_axis_reversed"):
+        ScrewCapTask(cap_axis_reversed=1)
+    with pytest.raises(ValueError, match="cap_length"):
+        ScrewCapTask(cap_length=0.5)

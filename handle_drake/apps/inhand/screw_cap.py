@@ -112,7 +112,7 @@ from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
 __all__ = ["FOUR_FINGER_GRIP", "REGRASP_GAITS", "ScrewCapModel", "ScrewCapScenario",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
-           "build_screw_cap", "simulate_scenario",
+           "build_screw_cap", "contact_forces", "simulate_scenario",
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
@@ -149,6 +149,9 @@ class ScrewCapModel:
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
     # the axis: world y turned about world z by this angle (deg)
     axis_yaw_deg: float = 0.0
+    # True: the cap's axis (its body z, the joint's axis: the positive turn) along the
+    # opposite direction (world -y before the yaw); the bottle stays on the +y side
+    axis_reversed: bool = False
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
     # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
     # "fingertip cylinder"); its turn is read from its pose
@@ -244,7 +247,8 @@ def _add_cap(plant, cap: ScrewCapModel):
     its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
     # The axis along world y (a cylinder's z axis turned onto y), then yawed about world z.
     R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
-    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(-np.pi / 2, 0, 0))
+    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(np.pi / 2 if cap.axis_reversed else
+                                                 -np.pi / 2, 0, 0))
     centre = np.asarray(cap.position, dtype=float)
     instance = plant.AddModelInstance("screw_cap")
     body = plant.AddRigidBody("cap", instance, SpatialInertia(
@@ -467,6 +471,36 @@ def contact_summary(plant, plant_context, built) -> dict:
     return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
 
 
+def contact_forces(plant, plant_context, built) -> dict:
+    """Per hand body touching the cap (or free cylinder), from the plant's contact results:
+    ``(normal, tangential, torque)``: the magnitudes (N) of the normal and tangential parts
+    of its contact force on the object and that force's torque (N m) about the object's
+    axis (its body z: the cap joint's axis), positive as the cap's turn counts. A finger
+    that drags the cap round pushes along the tangent (tangential >> normal, torque of
+    the turn's sign); one that pushes into it, normal >> tangential."""
+    results = plant.get_contact_results_output_port().Eval(plant_context)
+    body = built["cap"]
+    cap_i, hand = int(body.index()), built["hand_bodies"]
+    X = plant.EvalBodyPoseInWorld(plant_context, body)
+    centre, axis = X.translation(), X.rotation().col(2)
+    out = {}
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        if cap_i not in (a, b) or (b if a == cap_i else a) not in hand:
+            continue
+        # contact_force() acts on body B; nhat_BA_W points from B into A
+        force = np.asarray(info.contact_force()) * (1.0 if b == cap_i else -1.0)
+        normal = np.asarray(info.point_pair().nhat_BA_W)
+        fn = float(force @ normal)
+        ft = float(np.linalg.norm(force - fn * normal))
+        torque = float(np.cross(np.asarray(info.contact_point()) - centre, force) @ axis)
+        name = hand[b if a == cap_i else a]
+        n0, t0, q0 = out.get(name, (0.0, 0.0, 0.0))
+        out[name] = (n0 + abs(fn), t0 + ft, q0 + torque)
+    return out
+
+
 def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
     """The per-sample read without the contact solver: (hand bodies whose collision
     geometry penetrates the cap, whether the palm's penetrates the cap or bottle), from
@@ -518,6 +552,9 @@ class ScrewCapTask:
     cap_position: tuple = (0.405, -0.02, 0.07)
     cap_diameter: float = 0.035
     cap_axis_yaw_deg: float = 0.0
+    cap_length: float = 0.060  # along the axis
+    # True: the turn counts positive the other way round (ScrewCapModel.axis_reversed)
+    cap_axis_reversed: bool = False
     # The grasp: the demonstration's first frame mapped by the four rules, plus these
     # offsets ((actuated joint name, rad), ...): the hand closing on the object before
     # the motion (FOUR_FINGER_GRIP); () by default.
@@ -560,6 +597,12 @@ class ScrewCapTask:
                              f"{self.partial_credit!r}")
         if len(self.cap_position) != 3:
             raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
+        if not isinstance(self.cap_axis_reversed, bool):
+            raise ValueError(f"cap_axis_reversed: expected true or false, got "
+                             f"{self.cap_axis_reversed!r}")
+        if not (isinstance(self.cap_length, int | float) and 0.01 <= self.cap_length <= 0.12):
+            raise ValueError(f"cap_length: expected a value in [0.01, 0.12] m, got "
+                             f"{self.cap_length!r}")
         if not 0.02 <= self.cap_diameter <= 0.06:
             raise ValueError(f"cap_diameter: expected a value in [0.02, 0.06] m, got "
                              f"{self.cap_diameter!r}")
@@ -696,6 +739,7 @@ class ScrewCapTrial(GistTrial):
         return ScrewCapScenario(
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
                               diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
+                              length=c.cap_length, axis_reversed=c.cap_axis_reversed,
                               position=[float(v) for v in c.cap_position]) if not c.free else
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
                           position=[float(v) for v in c.free_position]),
