@@ -34,6 +34,7 @@ import numpy as np  # noqa: E402
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     FOUR_FINGER_GRIP,
+    FOUR_FINGER_TURN,
     REGRASP_GAITS,
     ScrewCapTask,
     ScrewCapTrial,
@@ -130,8 +131,9 @@ _SQUEEZE = dict(FOUR_FINGER_GRIP)
 _YAWED = dict(cap_position=(0.3936, -0.0276, 0.0726), cap_diameter=0.04,
               cap_axis_yaw_deg=-24.0, grasp_closure=(("THJ5", 0.3), ("FFJ2", 0.15),
                                                      ("MFJ2", 0.15), ("RFJ2", 0.15)))
-_HOOK = dict(cap_position=(0.365, -0.02, 0.058), cap_diameter=0.035, cap_length=0.07,
-             grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.6), ("MFJ2", 0.6), ("RFJ2", 0.6)))
+_DISTAL = dict(cap_position=(0.383, -0.03, 0.068), cap_diameter=0.04, cap_length=0.08,
+               grasp_closure=(("THJ5", 0.3), ("FFJ2", 0.3), ("MFJ2", 0.3), ("RFJ2", 0.3)))
+_HOOK = dict(FOUR_FINGER_TURN)
 # (name, task settings, motion name, motion: thumb flex (THJ5, THJ2, THJ1), thumb release,
 # its start, fingers' flex (J3, J2), fingers' release, its start; None: the gist's start)
 DESIGNS = [
@@ -145,6 +147,10 @@ DESIGNS = [
                                                         (1.0, 0.9), (0, 0), None)),
     ("distal, axis yawed -24 deg", _YAWED, "fingers flex, thumb releases",
      ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.0, 0.9), (0, 0), None)),
+    ("distal, axis along the flexion axes", _DISTAL, "fingers flex, thumb releases",
+     ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.0, 0.9), (0, 0), None)),
+    ("distal, axis along the flexion axes", _DISTAL, "fingers flex (J3 1.5, J2 0.3), thumb "
+     "releases", ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.5, 0.3), (0, 0), None)),
     ("hook (fingers curled round)", _HOOK, "all flex (J3)", ((0.4, 0.4, 0.4), (0, 0, 0), None,
                                                             (1.0, 0.3), (0, 0), None)),
     ("hook (fingers curled round)", _HOOK, "fingers flex, thumb releases",
@@ -156,7 +162,7 @@ DESIGNS = [
 ]
 DIGITS = ("th", "ff", "mf", "rf")
 PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP, "regrasp": REGRASP_GAITS,
-              "four-finger-hook": _HOOK}
+              "four-finger-turn": FOUR_FINGER_TURN}
 
 
 def design_motion(trial, motion) -> np.ndarray:
@@ -412,7 +418,8 @@ def main(argv=None) -> int:
     p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
                    help="the screw cap's placement: one-gait (the 90 deg task), four-finger "
                         "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg), "
-                        "four-finger-hook (DESIGNS' hook: measured, not a solved task)")
+                        "four-finger-turn (FOUR_FINGER_TURN: four digits on the cap, the "
+                        "fingers turn it)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
@@ -435,9 +442,6 @@ def main(argv=None) -> int:
     entry = result.setdefault(key, {})
     if args.designs:
         result["four_finger_designs"] = designs()
-        results_run.finish(result["four_finger_designs"],
-                           json.loads(json.dumps(result, default=float)), args.out)
-        return 0
     if args.speed:
         entry["speed"] = speed(args.speed, options)
     if args.figures is not None:
@@ -455,7 +459,8 @@ def main(argv=None) -> int:
         entry["budget"] = args.budget
         if args.resimulate:
             entry["resimulated"] = resimulate(t["best_trials"])
-    printed = []
+    printed = [{"task": "designs", "part": "designs", **row}
+               for row in result.get("four_finger_designs", []) if args.designs]
     for part in ("speed", "base_rate", "summary", "table"):
         if part in entry:
             printed += [{"task": key, "part": part, **row}

@@ -5,6 +5,7 @@ import pytest
 
 from handle_drake.apps.inhand.screw_cap import (
     FOUR_FINGER_GRIP,
+    FOUR_FINGER_TURN,
     REGRASP_GAITS,
     GaitMotionSource,
     ScrewCapScenario,
@@ -12,6 +13,7 @@ from handle_drake.apps.inhand.screw_cap import (
     ScrewCapTrial,
     contact_forces,
     contact_summary,
+    four_finger_turn_motion,
     simulate_scenario,
 )
 
@@ -313,3 +315,79 @@ def test_a_reversed_axis_reads_the_same_motion_as_the_opposite_turn(trial):
         ScrewCapTask(cap_axis_reversed=1)
     with pytest.raises(ValueError, match="cap_length"):
         ScrewCapTask(cap_length=0.5)
+
+
+@pytest.fixture(scope="module")
+def four_finger():
+    return ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN))
+
+
+_DIGITS = ("thdistal", "ffdistal", "mfdistal", "rfdistal")
+
+
+def test_the_four_finger_turn_grasp_holds_the_cap_with_thumb_and_three_fingers(four_finger):
+    # settled from the demonstration's first frame (rule 3's thumb abductions kept) plus the
+    # grasp closure; read from the plant's contact results
+    q0 = four_finger.scenario().initial_position
+    assert q0["THJ4"] == pytest.approx(0.61, abs=0.02)
+    assert q0["THJ3"] == pytest.approx(0.21, abs=0.02)
+    built = four_finger._build()
+    plant = built["plant"]
+    context = plant.GetMyContextFromRoot(built["settled"])
+    forces = contact_forces(plant, context, built)
+    assert set(forces) == set(_DIGITS)  # the distal phalanges, nothing else
+    assert all(forces[b][0] > 1.0 for b in _DIGITS)  # each presses with more than 1 N
+    assert contact_summary(plant, context, built)["palm_force"] == 0.0
+
+
+def test_the_hand_written_motion_turns_the_cap_90_deg_with_four_digits_on_it(four_finger):
+    x = four_finger_turn_motion(four_finger.gist)
+    b = four_finger.bounds
+    assert np.all((x >= b[:, 0]) & (x <= b[:, 1]))  # inside the gist's box
+    outcome = four_finger.evaluate(x)
+    assert outcome.completed and outcome.reached_target and outcome.score >= 28
+    assert outcome.turn_deg >= 90.0 and not outcome.palm_touched
+    assert abs(outcome.turn_deg - outcome.turn_deg_truth) <= ONE_COUNT_DEG / 2 + 1e-9
+    # the part of the turn made while all four digits touched the cap (25 ms samples)
+    step = np.diff(np.r_[0.0, outcome.turn_deg_series])
+    four = np.array([set(_DIGITS) <= set(c) for c in outcome.contacts])
+    assert step[four].sum() >= 60.0
+    # the logged scenario re-simulates alone (own build, reads the plant's joint)
+    again = simulate_scenario(four_finger(x).scenario)
+    assert again["turn_deg"] == pytest.approx(outcome.turn_deg_truth, abs=0.5)
+    assert again["palm_force_max"] == 0.0
+
+
+def test_in_the_four_finger_turn_first_and_middle_finger_drive_and_the_ring_brakes(
+        four_finger):
+    # contact torques about the cap's axis over the stroke (0.3-0.9 s, every 50 ms): the
+    # first and middle fingers' J2 flexion drags the cap round (torque of the turn's sign),
+    # the ring finger holds against it; the thumb stays on the cap (at >= 80 % of the
+    # samples; its torque changes sign: measured + to 0.6 s, - after); no contact beyond
+    # friction's mu = 1
+    built = four_finger._build()
+    plant_context = four_finger._reset(built, four_finger_turn_motion(four_finger.gist))
+    simulator = built["simulator"]
+    simulator.Initialize()
+    torque, thumb_on, times = dict.fromkeys(_DIGITS, 0.0), 0, np.arange(0.3, 0.91, 0.05)
+    for t in times:
+        simulator.AdvanceTo(t)
+        forces = contact_forces(built["plant"], plant_context, built)
+        thumb_on += "thdistal" in forces
+        for body, (normal, tangential, tau) in forces.items():
+            assert tangential <= normal + 1e-6
+            if body in torque:
+                torque[body] += tau
+    assert torque["ffdistal"] > 0 and torque["mfdistal"] > 0 and torque["rfdistal"] < 0
+    assert thumb_on >= 0.8 * times.size
+
+
+def test_from_the_four_finger_grasp_the_demonstration_and_a_still_hand_do_not_turn_it(
+        four_finger):
+    still = four_finger.evaluate(four_finger.gist.initial_parameters() * _starts_only(
+        four_finger), early_stop=False)
+    # measured 5.2 deg: the squeezed grasp still creeps after the 0.5 s settling
+    assert abs(still.turn_deg) < 10.0 and not still.reached_target
+    demo = four_finger.evaluate(four_finger.gist.initial_parameters(), early_stop=False)
+    assert demo.turn_deg < 90.0 and not demo.reached_target
+    assert demo.score < four_finger.target_score

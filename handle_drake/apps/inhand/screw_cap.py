@@ -110,7 +110,8 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["FOUR_FINGER_GRIP", "REGRASP_GAITS", "ScrewCapModel", "ScrewCapScenario",
+__all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "REGRASP_GAITS", "ScrewCapModel",
+           "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario",
            "scenario_fingerprint"]
@@ -125,6 +126,40 @@ _NAMES = get_hand_spec("shadow").actuated_joint_names
 FOUR_FINGER_GRIP = dict(
     cap_position=(0.385, -0.02, 0.058), cap_diameter=0.04,
     grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.15), ("MFJ2", 0.15), ("RFJ2", 0.15)))
+# The four-finger grip from which the fingers turn the cap (issue 35, item 2): the cap
+# (35 mm across, 70 mm long so that the thumb at the index side reaches its end) lower and
+# nearer the knuckles, the three fingers curled round it (J2 +0.6 rad: their distal pads
+# face the knuckles, the "hook"), the thumb closed onto it (THJ2 +0.3 rad; THJ4/THJ3 rule
+# 3's). Settled: thumb, first, middle and ring distal phalanges on the cap, palm 0 N. The
+# turn (positive, the default axis) is made by the first and middle fingers' J2 flexion
+# dragging the cap round while the ring finger's J3 extension eases its squeeze (its contact
+# torque opposes the turn); the thumb stays on the cap (its torque + to 0.6 s, - after):
+# measured in docs/results/inhand.md (2026-11-27, issue-35g), with the other designs' jams.
+FOUR_FINGER_TURN = dict(
+    cap_position=(0.365, -0.02, 0.058), cap_diameter=0.035, cap_length=0.07,
+    grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.6), ("MFJ2", 0.6), ("RFJ2", 0.6)))
+# Its hand-written motion (four_finger_turn_motion): per meta motion (finger, its k-th in
+# the gist) the start and magnitudes; every other magnitude 0 (the thumb stays), starts as
+# demonstrated. The first and middle fingers flex J2; the ring finger flexes J3 early and
+# extends it from 0.6 of the gait.
+FOUR_FINGER_TURN_MOTION = {("FF", 0): (0.2, (0.0, 1.1)), ("MF", 0): (0.25, (0.0, 1.2)),
+                           ("RF", 0): (0.1, (1.4, 0.0)), ("RF", 1): (0.6, (1.5, 0.0))}
+
+
+def four_finger_turn_motion(gist: ActionGist, motion=None) -> np.ndarray:
+    """The gist parameter vector (eq. 45) of ``motion`` (default FOUR_FINGER_TURN_MOTION:
+    ``{(finger, k): (start, magnitudes)}``, k counting that finger's meta motions in gist
+    order); the other meta motions keep their demonstrated start with magnitudes 0."""
+    motion = FOUR_FINGER_TURN_MOTION if motion is None else motion
+    x = gist.initial_parameters()
+    seen: dict[str, int] = {}
+    for m, sl in zip(gist.motions, gist.slices(), strict=True):
+        k = seen[m.finger] = seen.get(m.finger, -1) + 1
+        start, magnitudes = motion.get((m.finger, k), (x[sl][0], np.zeros(len(m.joints))))
+        x[sl] = [start, *magnitudes]
+    return x
+
+
 # Repeated gaits (grip, turn, release, regrasp) towards 360 deg: the cap 5 mm higher than
 # the one-gait task's, so that the first frame's fingers hold it lightly (in the one-gait
 # placement they press it with 50-70 N in the settled grasp and drag it back on every
