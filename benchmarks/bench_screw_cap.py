@@ -35,11 +35,13 @@ from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     FOUR_FINGER_GRIP,
     FOUR_FINGER_TURN,
-    REGRASP_GAITS,
+    FOUR_FINGER_TURN_MOTION,
+    PLACEMENTS,
     ScrewCapTask,
     ScrewCapTrial,
     contact_forces,
     contact_summary,
+    four_finger_turn_motion,
     simulate_scenario,
 )
 from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows  # noqa: E402
@@ -159,15 +161,18 @@ DESIGNS = [
      ((0.4, 0.4, 0.4), (0, 0, 0), None, (0, 0), (0.6, 0.6), 0.2)),
     ("hook (fingers curled round)", _HOOK, "thumb flexes (THJ5 1.5), fingers release",
      ((1.5, 0.3, 0.3), (0, 0, 0), None, (0, 0), (0.3, 0.3), 0.2)),
+    ("hook = FOUR_FINGER_TURN", _HOOK, "FOUR_FINGER_TURN_MOTION: FF, MF J2 flex; RF J3 "
+     "flex, then extension; thumb still", FOUR_FINGER_TURN_MOTION),
 ]
 DIGITS = ("th", "ff", "mf", "rf")
-PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP, "regrasp": REGRASP_GAITS,
-              "four-finger-turn": FOUR_FINGER_TURN}
 
 
 def design_motion(trial, motion) -> np.ndarray:
     """A gist parameter vector from a DESIGNS motion (magnitudes per meta motion, in the
-    gist's directions; starts as demonstrated unless given)."""
+    gist's directions; starts as demonstrated unless given; a dict: per finger's meta
+    motion, as :func:`four_finger_turn_motion`)."""
+    if isinstance(motion, dict):
+        return four_finger_turn_motion(trial.gist, motion)
     th_flex, th_release, th_start, f_flex, f_release, f_start = motion
     x = trial.gist.initial_parameters()
     for m, sl in zip(trial.gist.motions, trial.gist.slices(), strict=True):

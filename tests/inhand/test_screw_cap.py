@@ -391,3 +391,28 @@ def test_from_the_four_finger_grasp_the_demonstration_and_a_still_hand_do_not_tu
     demo = four_finger.evaluate(four_finger.gist.initial_parameters(), early_stop=False)
     assert demo.turn_deg < 90.0 and not demo.reached_target
     assert demo.score < four_finger.target_score
+
+
+def test_cli_runs_the_four_finger_turn_placement_and_refuses_it_elsewhere(tmp_path, capsys):
+    from handle_drake.cli import main as cli_main
+    from handle_drake.learning.log import TrialLog
+
+    rc = cli_main(["inhand", "--task", "cylinder_rotation", "--placement", "four-finger-turn",
+                   "--db", str(tmp_path / "x.sqlite")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "--placement four-finger-turn" in err and "Traceback" not in err
+    db = tmp_path / "cap.sqlite"
+    rc = cli_main(["inhand", "--task", "screw_cap", "--placement", "four-finger-turn",
+                   "--optimizer", "random", "--trials", "1", "--particles", "1", "--no-plot",
+                   "--no-html", "--no-progress", "--db", str(db)])
+    assert rc == 0
+    with TrialLog(db) as log:
+        (info,) = log.runs()
+        task = info.config["task"]
+        (record,) = [r for r in log.trials(info.run_id) if r.status == "done"]
+    # (settings at their defaults, as the 35 mm diameter, are left out of the run's config)
+    assert list(task["cap_position"]) == [0.365, -0.02, 0.058] and task["cap_length"] == 0.07
+    assert [list(c) for c in task["grasp_closure"]] == [list(c) for c in
+                                                        FOUR_FINGER_TURN["grasp_closure"]]
+    assert set(_DIGITS) <= set(record.contacts["gripped_at_start"])

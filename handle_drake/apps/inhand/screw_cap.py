@@ -110,7 +110,7 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "REGRASP_GAITS", "ScrewCapModel",
+__all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario",
@@ -165,6 +165,10 @@ def four_finger_turn_motion(gist: ActionGist, motion=None) -> np.ndarray:
 # placement they press it with 50-70 N in the settled grasp and drag it back on every
 # regrasp: the thread's 0.01 N m cannot hold against that).
 REGRASP_GAITS = dict(cap_position=(0.405, -0.02, 0.075), n_gaits=5, target_deg=360.0)
+#: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
+#: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
+PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
+              "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS}
 
 
 @dc.dataclass
