@@ -425,6 +425,9 @@ def main(argv=None) -> int:
                         "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg), "
                         "four-finger-turn (FOUR_FINGER_TURN: four digits on the cap, the "
                         "fingers turn it)")
+    p.add_argument("--grip-digits", type=int, default=None, choices=range(1, 6),
+                   metavar="N", help="screw_cap: digits that must each touch the cap within "
+                   "the contact window for a check (ScrewCapTask.grip_digits; default 1)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
@@ -440,10 +443,13 @@ def main(argv=None) -> int:
         args.gaits = preset.get("n_gaits", 1)
     options = {**preset, "target_deg": args.target_deg, "n_gaits": args.gaits,
                "free": args.task == "fingertip_cylinder"}
+    if args.grip_digits is not None:
+        options["grip_digits"] = args.grip_digits
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
-        f"-{args.placement}" if preset else "")
+        f"-{args.placement}" if preset else "") + (
+        f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "")
     entry = result.setdefault(key, {})
     if args.designs:
         result["four_finger_designs"] = designs()

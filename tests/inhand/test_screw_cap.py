@@ -276,7 +276,7 @@ def test_new_settings_at_their_defaults_keep_logged_run_ids():
 
     task = _config(ScrewCapTrial(ScrewCapTask()), "ipso", 10)["task"]
     assert not {"cap_diameter", "cap_axis_yaw_deg", "cap_length", "cap_axis_reversed",
-                "grasp_closure"} & set(task)
+                "grasp_closure", "grip_digits"} & set(task)
     grip = _config(ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP)), "ipso", 10)["task"]
     assert grip["cap_diameter"] == 0.04 and len(grip["grasp_closure"]) == 4
 
@@ -416,3 +416,26 @@ def test_cli_runs_the_four_finger_turn_placement_and_refuses_it_elsewhere(tmp_pa
     assert [list(c) for c in task["grasp_closure"]] == [list(c) for c in
                                                         FOUR_FINGER_TURN["grasp_closure"]]
     assert set(_DIGITS) <= set(record.contacts["gripped_at_start"])
+
+
+# draw 44 (index 43) of the four-finger-turn base rate (seed 1000): it reaches the target as
+# first scored, turning the cap 138 deg, but only 1 deg of it with all four digits on the cap
+_DRAW_43 = [0.6498555341862423, 0.35181051050634626, 0.3685449687555527, 0.16518461721030175,
+            0.9410103707691737, 1.7790256167322065, 1.2511512087574406, 0.5219775479466948,
+            0.04016449611999835, 0.7083958933826481, 0.7317347402487742, 0.29232415171433623,
+            1.5289507485412044, 0.0691399762180609, 1.215894490858605, 1.178916155005173,
+            0.5869131111523996, 1.9047745259991646, 0.76672785201425, 0.339317458465269,
+            0.9130855186580884, 0.8285882156964999, 0.5887929333215602, 0.003571537752446563,
+            0.9168033987160289, 0.35974235056626386]
+
+
+def test_grip_digits_refuses_a_turn_made_after_the_grip_was_given_up(four_finger):
+    loose = four_finger.evaluate(_DRAW_43)  # grip_digits 1: any finger within 0.3 s
+    assert loose.reached_target and loose.turn_deg >= 90.0
+    strict = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN, grip_digits=4))
+    refused = strict.evaluate(_DRAW_43)
+    assert not refused.reached_target and refused.score < strict.target_score
+    # the hand-written motion keeps all four digits on the cap at every check
+    assert strict.evaluate(four_finger_turn_motion(strict.gist)).reached_target
+    with pytest.raises(ValueError, match="grip_digits"):
+        ScrewCapTask(grip_digits=0)

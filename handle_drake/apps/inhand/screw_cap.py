@@ -117,6 +117,7 @@ __all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS"
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
+_DIGITS = {"th", "ff", "mf", "rf", "lf"}  # the hand's bodies of a digit start so
 # The report's grip (5.7: "the four fingers tightly grip the screwcap"): ScrewCapTask
 # settings under which the settled grasp touches the cap with the thumb's distal phalanx
 # and the first, middle and ring fingers' (palm 0 N). With the demonstration's first frame
@@ -586,6 +587,10 @@ class ScrewCapTask:
     time_step: float = 0.002
     settle_time: float = 0.5
     contact_window: float = 0.3  # s: a finger touched the cap at a sample this recent
+    # digits (thumb, first, middle, ring, little finger: any of their bodies) that must each
+    # have touched the object within contact_window for "gripped"; 1: any hand body but the
+    # palm (the first design). The four-finger grip: 3 or 4
+    grip_digits: int = 1
     coulomb_torque: float = 0.01  # N m
     viscous: float = 1.0e-3  # N m s / rad
     cap_position: tuple = (0.405, -0.02, 0.07)
@@ -625,6 +630,9 @@ class ScrewCapTask:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+        if isinstance(self.grip_digits, bool) or self.grip_digits not in (1, 2, 3, 4, 5):
+            raise ValueError(f"grip_digits: expected an integer in 1..5, got "
+                             f"{self.grip_digits!r}")
         if not 1e-4 <= self.time_step <= 0.01:
             raise ValueError(f"time_step: expected a value in [0.0001, 0.01] s, got "
                              f"{self.time_step!r}")
@@ -837,6 +845,12 @@ class ScrewCapTrial(GistTrial):
         st["palm_max"] = max(st["palm_max"], summary["palm_force"])
         st["palm"] = st["palm"] or summary["palm_force"] > 0
         gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+        if c.grip_digits > 1:  # so many digits, each within the window
+            for digit in {b[:2] for b in fingers} & _DIGITS:
+                st["digit_touch"][digit] = float(t)
+            recent = sum(t - when <= c.contact_window + 1e-9
+                         for when in st["digit_touch"].values())
+            gripped = gripped and recent >= c.grip_digits
         end = st.get("stroke_end")
         if end is not None:  # a cap over several gaits: the touch at the last stroke's end
             if fingers and end - c.contact_window - 1e-9 <= t <= end + 1e-9:
@@ -855,7 +869,7 @@ class ScrewCapTrial(GistTrial):
         return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
                     palm_max=0.0, next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if several else None,
-                    touch_at_stroke_end=False)
+                    touch_at_stroke_end=False, digit_touch={})
 
     def last_stroke_end(self, x) -> float:
         """The end (s) of the last gait's turn stroke with parameters ``x``: the latest end
