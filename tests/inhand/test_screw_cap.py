@@ -402,6 +402,11 @@ def test_cli_runs_the_four_finger_turn_placement_and_refuses_it_elsewhere(tmp_pa
     assert rc == 2
     err = capsys.readouterr().err
     assert "--placement four-finger-turn" in err and "Traceback" not in err
+    for bad in (["--task", "cylinder_rotation", "--grip-digits", "4"],
+                ["--task", "screw_cap", "--grip-digits", "6"]):
+        assert cli_main(["inhand", *bad, "--db", str(tmp_path / "x.sqlite")]) == 2
+        err = capsys.readouterr().err
+        assert "--grip-digits" in err and "Traceback" not in err
     db = tmp_path / "cap.sqlite"
     rc = cli_main(["inhand", "--task", "screw_cap", "--placement", "four-finger-turn",
                    "--optimizer", "random", "--trials", "1", "--particles", "1", "--no-plot",

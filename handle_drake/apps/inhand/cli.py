@@ -61,6 +61,9 @@ def register(subparsers) -> None:
                         "cap), four-finger-turn (thumb, first, middle and ring finger on it; "
                         "the fingers turn it), four-finger (FOUR_FINGER_GRIP: four digits, "
                         "squeezed: they jam), regrasp (5 gaits, 360 deg)")
+    p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
+                   help="screw_cap: digits (thumb and fingers) that must each touch the cap "
+                        "within the contact window at a check (default 1: any finger)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
@@ -112,6 +115,8 @@ def _cmd_inhand(args) -> int:
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")
+    if args.grip_digits is not None and (args.task != "screw_cap" or args.grip_digits > 5):
+        raise ValueError(f"--grip-digits {args.grip_digits}: 1..5, only with --task screw_cap")
     if args.task == "jog_wheel":
         if args.accelerometer or args.evaluation != "incremental" or args.gaits not in (None, 1):
             raise ValueError("--task jog_wheel: the incremental evaluation from MIDI only (no "
@@ -126,6 +131,8 @@ def _cmd_inhand(args) -> int:
         options = dict(preset, progress=not args.no_progress,
                        n_gaits=preset.get("n_gaits", 1) if args.gaits is None else args.gaits,
                        target_deg=default if args.target_deg is None else args.target_deg)
+        if args.grip_digits is not None:
+            options["grip_digits"] = args.grip_digits
     else:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
