@@ -515,9 +515,9 @@ def contact_forces(plant, plant_context, built) -> dict:
     """Per hand body touching the cap (or free cylinder), from the plant's contact results:
     ``(normal, tangential, torque)``: the magnitudes (N) of the normal and tangential parts
     of its contact force on the object and that force's torque (N m) about the object's
-    axis (its body z: the cap joint's axis), positive as the cap's turn counts. A finger
-    that drags the cap round pushes along the tangent (tangential >> normal, torque of
-    the turn's sign); one that pushes into it, normal >> tangential."""
+    axis (its body z: the cap joint's axis), positive as the cap's turn counts: a finger
+    that drags the cap round has a torque of the turn's sign, one that holds against it
+    the opposite (the tangential part is at most mu times the normal one)."""
     results = plant.get_contact_results_output_port().Eval(plant_context)
     body = built["cap"]
     cap_i, hand = int(body.index()), built["hand_bodies"]
@@ -589,7 +589,7 @@ class ScrewCapTask:
     contact_window: float = 0.3  # s: a finger touched the cap at a sample this recent
     # digits (thumb, first, middle, ring, little finger: any of their bodies) that must each
     # have touched the object within contact_window for "gripped"; 1: any hand body but the
-    # palm (the first design). The four-finger grip: 3 or 4
+    # palm (the first design). The four-finger grip: 4
     grip_digits: int = 1
     coulomb_torque: float = 0.01  # N m
     viscous: float = 1.0e-3  # N m s / rad
