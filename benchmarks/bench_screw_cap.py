@@ -34,9 +34,14 @@ import numpy as np  # noqa: E402
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     FOUR_FINGER_GRIP,
-    REGRASP_GAITS,
+    FOUR_FINGER_TURN,
+    FOUR_FINGER_TURN_MOTION,
+    PLACEMENTS,
     ScrewCapTask,
     ScrewCapTrial,
+    contact_forces,
+    contact_summary,
+    four_finger_turn_motion,
     simulate_scenario,
 )
 from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows  # noqa: E402
@@ -44,7 +49,6 @@ from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
 OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
-PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP, "regrasp": REGRASP_GAITS}
 
 
 def base_rate(n, seed, db, workers, options) -> dict:
@@ -119,6 +123,116 @@ def resimulate(best_trials) -> list:
               f"{truth['turn_deg']:.1f} deg, palm force max {truth['palm_force_max']:.2f} N, "
               f"survived reversal {truth.get('survived_reversal')}", flush=True)
     return out
+
+
+# Four-finger grasp designs tried for issue 35's grip (thumb, first, middle and ring distal
+# phalanges on the cap in the settled grasp, palm 0 N), each with hand-written motions in the
+# gist's box: ``--designs`` measures the turn and, from the contact results, each digit's
+# normal force and torque about the cap's axis (docs/results/inhand.md, 2026-11-27 issue-35g).
+_SQUEEZE = dict(FOUR_FINGER_GRIP)
+_YAWED = dict(cap_position=(0.3936, -0.0276, 0.0726), cap_diameter=0.04,
+              cap_axis_yaw_deg=-24.0, grasp_closure=(("THJ5", 0.3), ("FFJ2", 0.15),
+                                                     ("MFJ2", 0.15), ("RFJ2", 0.15)))
+_DISTAL = dict(cap_position=(0.383, -0.03, 0.068), cap_diameter=0.04, cap_length=0.08,
+               grasp_closure=(("THJ5", 0.3), ("FFJ2", 0.3), ("MFJ2", 0.3), ("RFJ2", 0.3)))
+_HOOK = dict(FOUR_FINGER_TURN)
+# (name, task settings, motion name, motion: thumb flex (THJ5, THJ2, THJ1), thumb release,
+# its start, fingers' flex (J3, J2), fingers' release, its start; None: the gist's start)
+DESIGNS = [
+    ("one-gait (reference)", {}, "fingers flex", ((0, 0, 0), (0, 0, 0), None,
+                                                  (1.0, 0.9), (0, 0), None)),
+    ("squeeze (FOUR_FINGER_GRIP)", _SQUEEZE, "all flex", ((0.4, 0.4, 0.4), (0, 0, 0), None,
+                                                         (1.0, 0.9), (0, 0), None)),
+    ("squeeze (FOUR_FINGER_GRIP)", _SQUEEZE, "fingers flex, thumb releases",
+     ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.0, 0.9), (0, 0), None)),
+    ("distal, axis yawed -24 deg", _YAWED, "all flex", ((0.4, 0.4, 0.4), (0, 0, 0), None,
+                                                        (1.0, 0.9), (0, 0), None)),
+    ("distal, axis yawed -24 deg", _YAWED, "fingers flex, thumb releases",
+     ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.0, 0.9), (0, 0), None)),
+    ("distal, axis along the flexion axes", _DISTAL, "fingers flex, thumb releases",
+     ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.0, 0.9), (0, 0), None)),
+    ("distal, axis along the flexion axes", _DISTAL, "fingers flex (J3 1.5, J2 0.3), thumb "
+     "releases", ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.5, 0.3), (0, 0), None)),
+    ("hook (fingers curled round)", _HOOK, "all flex (J3)", ((0.4, 0.4, 0.4), (0, 0, 0), None,
+                                                            (1.0, 0.3), (0, 0), None)),
+    ("hook (fingers curled round)", _HOOK, "fingers flex, thumb releases",
+     ((0, 0, 0), (0.4, 0.4, 0.4), 0.2, (1.0, 0.3), (0, 0), None)),
+    ("hook (fingers curled round)", _HOOK, "thumb flexes, fingers release",
+     ((0.4, 0.4, 0.4), (0, 0, 0), None, (0, 0), (0.6, 0.6), 0.2)),
+    ("hook (fingers curled round)", _HOOK, "thumb flexes (THJ5 1.5), fingers release",
+     ((1.5, 0.3, 0.3), (0, 0, 0), None, (0, 0), (0.3, 0.3), 0.2)),
+    ("hook = FOUR_FINGER_TURN", _HOOK, "FOUR_FINGER_TURN_MOTION: FF, MF J2 flex; RF J3 "
+     "flex, then extension; thumb still", FOUR_FINGER_TURN_MOTION),
+]
+DIGITS = ("th", "ff", "mf", "rf")
+
+
+def design_motion(trial, motion) -> np.ndarray:
+    """A gist parameter vector from a DESIGNS motion (magnitudes per meta motion, in the
+    gist's directions; starts as demonstrated unless given; a dict: per finger's meta
+    motion, as :func:`four_finger_turn_motion`)."""
+    if isinstance(motion, dict):
+        return four_finger_turn_motion(trial.gist, motion)
+    th_flex, th_release, th_start, f_flex, f_release, f_start = motion
+    x = trial.gist.initial_parameters()
+    for m, sl in zip(trial.gist.motions, trial.gist.slices(), strict=True):
+        flex = m.variation[0] > 0
+        if m.finger == "TH":
+            x[sl][1:] = th_flex if flex else th_release
+            start = None if flex else th_start
+        else:
+            x[sl][1:] = f_flex if flex else f_release
+            start = None if flex else f_start
+        if start is not None:
+            x[sl][0] = start
+    return x
+
+
+def designs() -> list:
+    """Each DESIGNS row run to its end (the trial's own build and settled grasp), sampled
+    every 25 ms: the settled digits on the cap, the encoder's turn, the part of it made
+    while all four digits touched the cap, the palm's largest force and, per digit, its
+    mean normal force (N) and torque about the cap's axis (mN m, + drives the turn)
+    over the samples of the stroke (0.15-0.8 s) where it touches the cap."""
+    rows = []
+    for name, settings, motion_name, motion in DESIGNS:
+        trial = ScrewCapTrial(ScrewCapTask(**settings))
+        x = design_motion(trial, motion)
+        built = trial._build()
+        plant = built["plant"]
+        settled = contact_summary(plant, plant.GetMyContextFromRoot(built["settled"]), built)
+        plant_context = trial._reset(built, x)
+        simulator = built["simulator"]
+        simulator.Initialize()
+        joint = built["joint"]
+        q0 = joint.get_angle(plant_context)
+        turn, four, palm, per = 0.0, 0.0, 0.0, {d: [] for d in DIGITS}
+        for t in trial.config.sample_times():
+            simulator.AdvanceTo(float(t))
+            now = float(np.degrees(joint.get_angle(plant_context) - q0))
+            forces = contact_forces(plant, plant_context, built)
+            on = {b[:2] for b in forces} & set(DIGITS)
+            if len(on) == 4:
+                four += now - turn
+            turn = now
+            palm = max(palm, contact_summary(plant, plant_context, built)["palm_force"])
+            if 0.15 <= t <= 0.8:
+                for d in DIGITS:
+                    fn = sum(v[0] for b, v in forces.items() if b.startswith(d))
+                    if fn > 0:
+                        per[d].append((fn, sum(v[2] for b, v in forces.items()
+                                               if b.startswith(d))))
+        digits = "".join(d.upper() for d in DIGITS
+                         if any(b.startswith(d) for b in settled["touching"]))
+        row = {"design": name, "motion": motion_name, "settled_digits": digits,
+               "settled_palm_N": settled["palm_force"], "turn_deg": round(turn, 1),
+               "turn_4_digits_deg": round(four, 1), "palm_max_N": round(palm, 2)}
+        for d in DIGITS:
+            a = np.array(per[d]) if per[d] else np.zeros((1, 2))
+            row[f"{d}_N_mNm"] = f"{a[:, 0].mean():.0f} / {1e3 * a[:, 1].mean():+.0f}"
+        rows.append(row)
+        print(" | ".join(str(v) for v in row.values()), flush=True)
+    return rows
 
 
 def speed(rounds: int, options) -> dict:
@@ -288,6 +402,9 @@ def main(argv=None) -> int:
     p.add_argument("--table", action="store_true")
     p.add_argument("--resimulate", action="store_true")
     p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
+    p.add_argument("--designs", action="store_true",
+                   help="the four-finger grasp designs tried (DESIGNS): turn, the turn made "
+                        "with all four digits on the cap, each digit's force and torque")
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
                    help="learning curve of every run in --db and the best trial's HTML replay")
     p.add_argument("--diagnose", action="store_true",
@@ -305,7 +422,12 @@ def main(argv=None) -> int:
     p.add_argument("--gaits", type=int, default=None, help="default: 1 (the placement's)")
     p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
                    help="the screw cap's placement: one-gait (the 90 deg task), four-finger "
-                        "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg)")
+                        "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg), "
+                        "four-finger-turn (FOUR_FINGER_TURN: four digits on the cap, the "
+                        "fingers turn it)")
+    p.add_argument("--grip-digits", type=int, default=None, choices=range(1, 6),
+                   metavar="N", help="screw_cap: digits that must each touch the cap within "
+                   "the contact window for a check (ScrewCapTask.grip_digits; default 1)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
@@ -321,11 +443,16 @@ def main(argv=None) -> int:
         args.gaits = preset.get("n_gaits", 1)
     options = {**preset, "target_deg": args.target_deg, "n_gaits": args.gaits,
                "free": args.task == "fingertip_cylinder"}
+    if args.grip_digits is not None:
+        options["grip_digits"] = args.grip_digits
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
-        f"-{args.placement}" if preset else "")
+        f"-{args.placement}" if preset else "") + (
+        f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "")
     entry = result.setdefault(key, {})
+    if args.designs:
+        result["four_finger_designs"] = designs()
     if args.speed:
         entry["speed"] = speed(args.speed, options)
     if args.figures is not None:
@@ -343,7 +470,8 @@ def main(argv=None) -> int:
         entry["budget"] = args.budget
         if args.resimulate:
             entry["resimulated"] = resimulate(t["best_trials"])
-    printed = []
+    printed = [{"task": "designs", "part": "designs", **row}
+               for row in result.get("four_finger_designs", []) if args.designs]
     for part in ("speed", "base_rate", "summary", "table"):
         if part in entry:
             printed += [{"task": key, "part": part, **row}

@@ -5,12 +5,15 @@ import pytest
 
 from handle_drake.apps.inhand.screw_cap import (
     FOUR_FINGER_GRIP,
+    FOUR_FINGER_TURN,
     REGRASP_GAITS,
     GaitMotionSource,
     ScrewCapScenario,
     ScrewCapTask,
     ScrewCapTrial,
+    contact_forces,
     contact_summary,
+    four_finger_turn_motion,
     simulate_scenario,
 )
 
@@ -272,6 +275,172 @@ def test_new_settings_at_their_defaults_keep_logged_run_ids():
     from handle_drake.apps.inhand.experiment import _config
 
     task = _config(ScrewCapTrial(ScrewCapTask()), "ipso", 10)["task"]
-    assert not {"cap_diameter", "cap_axis_yaw_deg", "grasp_closure"} & set(task)
+    assert not {"cap_diameter", "cap_axis_yaw_deg", "cap_length", "cap_axis_reversed",
+                "grasp_closure", "grip_digits"} & set(task)
     grip = _config(ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_GRIP)), "ipso", 10)["task"]
     assert grip["cap_diameter"] == 0.04 and len(grip["grasp_closure"]) == 4
+
+
+def _run_to(trial, x, t):
+    """The plant's context after ``t`` s of the trial with parameters ``x``."""
+    built = trial._build()
+    plant_context = trial._reset(built, x)
+    built["simulator"].Initialize()
+    built["simulator"].AdvanceTo(t)
+    return built, plant_context
+
+
+def test_contact_torques_balance_the_thread_while_the_cap_turns(trial):
+    # the cap's balance about its axis (its inertia is 2e-6 kg m^2): while it turns steadily,
+    # the hand's contact torques (contact_forces, from the plant's contact results) sum to
+    # the thread's friction, Coulomb 0.01 N m + viscous 1e-3 N m s/rad * speed
+    built, plant_context = _run_to(trial, _stroke(trial), 0.8)
+    speed = built["joint"].get_angular_rate(plant_context)
+    assert speed > 0.5  # turning the demonstrated way
+    forces = contact_forces(built["plant"], plant_context, built)
+    total = sum(torque for _, _, torque in forces.values())
+    assert total == pytest.approx(0.01 + 1e-3 * speed, abs=2e-3)
+    for normal, tangential, _ in forces.values():
+        assert normal >= 0 and 0 <= tangential <= 1.0 * normal + 1e-6  # mu = 1
+
+
+def test_a_reversed_axis_reads_the_same_motion_as_the_opposite_turn(trial):
+    # the cap is a cylinder: turning its joint axis over changes nothing but the sign
+    reversed_ = ScrewCapTrial(ScrewCapTask(cap_axis_reversed=True))
+    forward = trial.evaluate(_stroke(trial), early_stop=False)
+    backward = reversed_.evaluate(_stroke(reversed_), early_stop=False)
+    assert backward.turn_deg_truth == pytest.approx(-forward.turn_deg_truth, abs=0.5)
+    assert not backward.reached_target
+    with pytest.raises(ValueError, match="cap_axis_reversed"):
+        ScrewCapTask(cap_axis_reversed=1)
+    with pytest.raises(ValueError, match="cap_length"):
+        ScrewCapTask(cap_length=0.5)
+
+
+@pytest.fixture(scope="module")
+def four_finger():
+    return ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN))
+
+
+_DIGITS = ("thdistal", "ffdistal", "mfdistal", "rfdistal")
+
+
+def test_the_four_finger_turn_grasp_holds_the_cap_with_thumb_and_three_fingers(four_finger):
+    # settled from the demonstration's first frame (rule 3's thumb abductions kept) plus the
+    # grasp closure; read from the plant's contact results
+    q0 = four_finger.scenario().initial_position
+    assert q0["THJ4"] == pytest.approx(0.61, abs=0.02)
+    assert q0["THJ3"] == pytest.approx(0.21, abs=0.02)
+    built = four_finger._build()
+    plant = built["plant"]
+    context = plant.GetMyContextFromRoot(built["settled"])
+    forces = contact_forces(plant, context, built)
+    assert set(forces) == set(_DIGITS)  # the distal phalanges, nothing else
+    assert all(forces[b][0] > 1.0 for b in _DIGITS)  # each presses with more than 1 N
+    assert contact_summary(plant, context, built)["palm_force"] == 0.0
+
+
+def test_the_hand_written_motion_turns_the_cap_90_deg_with_four_digits_on_it(four_finger):
+    x = four_finger_turn_motion(four_finger.gist)
+    b = four_finger.bounds
+    assert np.all((x >= b[:, 0]) & (x <= b[:, 1]))  # inside the gist's box
+    outcome = four_finger.evaluate(x)
+    assert outcome.completed and outcome.reached_target and outcome.score >= 28
+    assert outcome.turn_deg >= 90.0 and not outcome.palm_touched
+    assert abs(outcome.turn_deg - outcome.turn_deg_truth) <= ONE_COUNT_DEG / 2 + 1e-9
+    # the part of the turn made while all four digits touched the cap (25 ms samples)
+    step = np.diff(np.r_[0.0, outcome.turn_deg_series])
+    four = np.array([set(_DIGITS) <= set(c) for c in outcome.contacts])
+    assert step[four].sum() >= 60.0
+    # the logged scenario re-simulates alone (own build, reads the plant's joint)
+    again = simulate_scenario(four_finger(x).scenario)
+    assert again["turn_deg"] == pytest.approx(outcome.turn_deg_truth, abs=0.5)
+    assert again["palm_force_max"] == 0.0
+
+
+def test_in_the_four_finger_turn_first_and_middle_finger_drive_and_the_ring_brakes(
+        four_finger):
+    # contact torques about the cap's axis over the stroke (0.3-0.9 s, every 50 ms): the
+    # first and middle fingers' J2 flexion drags the cap round (torque of the turn's sign),
+    # the ring finger holds against it; the thumb stays on the cap (at >= 80 % of the
+    # samples; its torque changes sign: measured + to 0.6 s, - after); no contact beyond
+    # friction's mu = 1
+    built = four_finger._build()
+    plant_context = four_finger._reset(built, four_finger_turn_motion(four_finger.gist))
+    simulator = built["simulator"]
+    simulator.Initialize()
+    torque, thumb_on, times = dict.fromkeys(_DIGITS, 0.0), 0, np.arange(0.3, 0.91, 0.05)
+    for t in times:
+        simulator.AdvanceTo(t)
+        forces = contact_forces(built["plant"], plant_context, built)
+        thumb_on += "thdistal" in forces
+        for body, (normal, tangential, tau) in forces.items():
+            assert tangential <= normal + 1e-6
+            if body in torque:
+                torque[body] += tau
+    assert torque["ffdistal"] > 0 and torque["mfdistal"] > 0 and torque["rfdistal"] < 0
+    assert thumb_on >= 0.8 * times.size
+
+
+def test_from_the_four_finger_grasp_the_demonstration_and_a_still_hand_do_not_turn_it(
+        four_finger):
+    still = four_finger.evaluate(four_finger.gist.initial_parameters() * _starts_only(
+        four_finger), early_stop=False)
+    # measured 5.2 deg: the squeezed grasp still creeps after the 0.5 s settling
+    assert abs(still.turn_deg) < 10.0 and not still.reached_target
+    demo = four_finger.evaluate(four_finger.gist.initial_parameters(), early_stop=False)
+    assert demo.turn_deg < 90.0 and not demo.reached_target
+    assert demo.score < four_finger.target_score
+
+
+def test_cli_runs_the_four_finger_turn_placement_and_refuses_it_elsewhere(tmp_path, capsys):
+    from handle_drake.cli import main as cli_main
+    from handle_drake.learning.log import TrialLog
+
+    rc = cli_main(["inhand", "--task", "cylinder_rotation", "--placement", "four-finger-turn",
+                   "--db", str(tmp_path / "x.sqlite")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "--placement four-finger-turn" in err and "Traceback" not in err
+    for bad in (["--task", "cylinder_rotation", "--grip-digits", "4"],
+                ["--task", "screw_cap", "--grip-digits", "6"]):
+        assert cli_main(["inhand", *bad, "--db", str(tmp_path / "x.sqlite")]) == 2
+        err = capsys.readouterr().err
+        assert "--grip-digits" in err and "Traceback" not in err
+    db = tmp_path / "cap.sqlite"
+    rc = cli_main(["inhand", "--task", "screw_cap", "--placement", "four-finger-turn",
+                   "--optimizer", "random", "--trials", "1", "--particles", "1", "--no-plot",
+                   "--no-html", "--no-progress", "--db", str(db)])
+    assert rc == 0
+    with TrialLog(db) as log:
+        (info,) = log.runs()
+        task = info.config["task"]
+        (record,) = [r for r in log.trials(info.run_id) if r.status == "done"]
+    # (settings at their defaults, as the 35 mm diameter, are left out of the run's config)
+    assert list(task["cap_position"]) == [0.365, -0.02, 0.058] and task["cap_length"] == 0.07
+    assert [list(c) for c in task["grasp_closure"]] == [list(c) for c in
+                                                        FOUR_FINGER_TURN["grasp_closure"]]
+    assert set(_DIGITS) <= set(record.contacts["gripped_at_start"])
+
+
+# draw 44 (index 43) of the four-finger-turn base rate (seed 1000): it reaches the target as
+# first scored, turning the cap 138 deg, but only 1 deg of it with all four digits on the cap
+_DRAW_43 = [0.6498555341862423, 0.35181051050634626, 0.3685449687555527, 0.16518461721030175,
+            0.9410103707691737, 1.7790256167322065, 1.2511512087574406, 0.5219775479466948,
+            0.04016449611999835, 0.7083958933826481, 0.7317347402487742, 0.29232415171433623,
+            1.5289507485412044, 0.0691399762180609, 1.215894490858605, 1.178916155005173,
+            0.5869131111523996, 1.9047745259991646, 0.76672785201425, 0.339317458465269,
+            0.9130855186580884, 0.8285882156964999, 0.5887929333215602, 0.003571537752446563,
+            0.9168033987160289, 0.35974235056626386]
+
+
+def test_grip_digits_refuses_a_turn_made_after_the_grip_was_given_up(four_finger):
+    loose = four_finger.evaluate(_DRAW_43)  # grip_digits 1: any finger within 0.3 s
+    assert loose.reached_target and loose.turn_deg >= 90.0
+    strict = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN, grip_digits=4))
+    refused = strict.evaluate(_DRAW_43)
+    assert not refused.reached_target and refused.score < strict.target_score
+    # the hand-written motion keeps all four digits on the cap at every check
+    assert strict.evaluate(four_finger_turn_motion(strict.gist)).reached_target
+    with pytest.raises(ValueError, match="grip_digits"):
+        ScrewCapTask(grip_digits=0)

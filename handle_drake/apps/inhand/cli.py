@@ -26,6 +26,7 @@ from pathlib import Path
 
 from handle_drake.apps.cli_support import non_negative_int, positive_int, run_command
 from handle_drake.apps.cli_support import positive_float as _positive_float
+from handle_drake.apps.inhand.screw_cap import PLACEMENTS
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
@@ -52,8 +53,17 @@ def register(subparsers) -> None:
                         "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored "
                         "from its MIDI ticks alone, the true wheel angle logged beside "
                         "(default 60)")
-    p.add_argument("--gaits", type=positive_int, default=1,
-                   help="screw_cap: repetitions of the gait (grip, turn, release, regrasp)")
+    p.add_argument("--gaits", type=positive_int, default=None,
+                   help="screw_cap: repetitions of the gait (grip, turn, release, regrasp); "
+                        "default 1 (the placement's)")
+    p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
+                   help="screw_cap: the cap and grasp: one-gait (first and ring finger on the "
+                        "cap), four-finger-turn (thumb, first, middle and ring finger on it; "
+                        "the fingers turn it), four-finger (FOUR_FINGER_GRIP: four digits, "
+                        "squeezed: they jam), regrasp (5 gaits, 360 deg)")
+    p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
+                   help="screw_cap: digits (thumb and fingers) that must each touch the cap "
+                        "within the contact window at a check (default 1: any finger)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
@@ -102,8 +112,13 @@ def _cmd_inhand(args) -> int:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
     except TrialLogError as error:
         raise ValueError(f"--db: {error}") from None
+    preset = PLACEMENTS[args.placement]
+    if args.placement != "one-gait" and args.task != "screw_cap":
+        raise ValueError(f"--placement {args.placement}: only with --task screw_cap")
+    if args.grip_digits is not None and (args.task != "screw_cap" or args.grip_digits > 5):
+        raise ValueError(f"--grip-digits {args.grip_digits}: 1..5, only with --task screw_cap")
     if args.task == "jog_wheel":
-        if args.accelerometer or args.evaluation != "incremental" or args.gaits != 1:
+        if args.accelerometer or args.evaluation != "incremental" or args.gaits not in (None, 1):
             raise ValueError("--task jog_wheel: the incremental evaluation from MIDI only (no "
                              "--accelerometer, --evaluation old, --gaits)")
         options = dict(progress=not args.no_progress,
@@ -112,9 +127,12 @@ def _cmd_inhand(args) -> int:
         if args.accelerometer or args.evaluation != "incremental":
             raise ValueError(f"--task {args.task}: the incremental evaluation from the plant "
                              "only (no --accelerometer, --evaluation old)")
-        default = 90.0 if args.task == "screw_cap" else 60.0
-        options = dict(progress=not args.no_progress, n_gaits=args.gaits,
+        default = preset.get("target_deg", 90.0) if args.task == "screw_cap" else 60.0
+        options = dict(preset, progress=not args.no_progress,
+                       n_gaits=preset.get("n_gaits", 1) if args.gaits is None else args.gaits,
                        target_deg=default if args.target_deg is None else args.target_deg)
+        if args.grip_digits is not None:
+            options["grip_digits"] = args.grip_digits
     else:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)

@@ -110,12 +110,14 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["FOUR_FINGER_GRIP", "REGRASP_GAITS", "ScrewCapModel", "ScrewCapScenario",
+__all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS", "ScrewCapModel",
+           "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
-           "build_screw_cap", "simulate_scenario",
+           "build_screw_cap", "contact_forces", "simulate_scenario",
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
+_DIGITS = {"th", "ff", "mf", "rf", "lf"}  # the hand's bodies of a digit start so
 # The report's grip (5.7: "the four fingers tightly grip the screwcap"): ScrewCapTask
 # settings under which the settled grasp touches the cap with the thumb's distal phalanx
 # and the first, middle and ring fingers' (palm 0 N). With the demonstration's first frame
@@ -125,11 +127,49 @@ _NAMES = get_hand_spec("shadow").actuated_joint_names
 FOUR_FINGER_GRIP = dict(
     cap_position=(0.385, -0.02, 0.058), cap_diameter=0.04,
     grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.15), ("MFJ2", 0.15), ("RFJ2", 0.15)))
+# The four-finger grip from which the fingers turn the cap (issue 35, item 2): the cap
+# (35 mm across, 70 mm long so that the thumb at the index side reaches its end) lower and
+# nearer the knuckles, the three fingers curled round it (J2 +0.6 rad: their distal pads
+# face the knuckles, the "hook"), the thumb closed onto it (THJ2 +0.3 rad; THJ4/THJ3 rule
+# 3's). Settled: thumb, first, middle and ring distal phalanges on the cap, palm 0 N. The
+# turn (positive, the default axis) is made by the first and middle fingers' J2 flexion
+# dragging the cap round while the ring finger's J3 extension eases its squeeze (its contact
+# torque opposes the turn); the thumb stays on the cap (its torque + to 0.6 s, - after):
+# measured in docs/results/inhand.md (2026-11-27, issue-35g), with the other designs' jams.
+FOUR_FINGER_TURN = dict(
+    cap_position=(0.365, -0.02, 0.058), cap_diameter=0.035, cap_length=0.07,
+    grasp_closure=(("THJ2", 0.3), ("FFJ2", 0.6), ("MFJ2", 0.6), ("RFJ2", 0.6)))
+# Its hand-written motion (four_finger_turn_motion): per meta motion (finger, its k-th in
+# the gist) the start and magnitudes; every other magnitude 0 (the thumb stays), starts as
+# demonstrated. The first and middle fingers flex J2; the ring finger flexes J3 early and
+# extends it from 0.6 of the gait.
+FOUR_FINGER_TURN_MOTION = {("FF", 0): (0.2, (0.0, 1.1)), ("MF", 0): (0.25, (0.0, 1.2)),
+                           ("RF", 0): (0.1, (1.4, 0.0)), ("RF", 1): (0.6, (1.5, 0.0))}
+
+
+def four_finger_turn_motion(gist: ActionGist, motion=None) -> np.ndarray:
+    """The gist parameter vector (eq. 45) of ``motion`` (default FOUR_FINGER_TURN_MOTION:
+    ``{(finger, k): (start, magnitudes)}``, k counting that finger's meta motions in gist
+    order); the other meta motions keep their demonstrated start with magnitudes 0."""
+    motion = FOUR_FINGER_TURN_MOTION if motion is None else motion
+    x = gist.initial_parameters()
+    seen: dict[str, int] = {}
+    for m, sl in zip(gist.motions, gist.slices(), strict=True):
+        k = seen[m.finger] = seen.get(m.finger, -1) + 1
+        start, magnitudes = motion.get((m.finger, k), (x[sl][0], np.zeros(len(m.joints))))
+        x[sl] = [start, *magnitudes]
+    return x
+
+
 # Repeated gaits (grip, turn, release, regrasp) towards 360 deg: the cap 5 mm higher than
 # the one-gait task's, so that the first frame's fingers hold it lightly (in the one-gait
 # placement they press it with 50-70 N in the settled grasp and drag it back on every
 # regrasp: the thread's 0.01 N m cannot hold against that).
 REGRASP_GAITS = dict(cap_position=(0.405, -0.02, 0.075), n_gaits=5, target_deg=360.0)
+#: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
+#: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
+PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
+              "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS}
 
 
 @dc.dataclass
@@ -149,6 +189,9 @@ class ScrewCapModel:
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
     # the axis: world y turned about world z by this angle (deg)
     axis_yaw_deg: float = 0.0
+    # True: the cap's axis (its body z, the joint's axis: the positive turn) along the
+    # opposite direction (world -y before the yaw); the bottle stays on the +y side
+    axis_reversed: bool = False
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
     # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
     # "fingertip cylinder"); its turn is read from its pose
@@ -244,7 +287,8 @@ def _add_cap(plant, cap: ScrewCapModel):
     its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
     # The axis along world y (a cylinder's z axis turned onto y), then yawed about world z.
     R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
-    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(-np.pi / 2, 0, 0))
+    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(np.pi / 2 if cap.axis_reversed else
+                                                 -np.pi / 2, 0, 0))
     centre = np.asarray(cap.position, dtype=float)
     instance = plant.AddModelInstance("screw_cap")
     body = plant.AddRigidBody("cap", instance, SpatialInertia(
@@ -467,6 +511,36 @@ def contact_summary(plant, plant_context, built) -> dict:
     return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
 
 
+def contact_forces(plant, plant_context, built) -> dict:
+    """Per hand body touching the cap (or free cylinder), from the plant's contact results:
+    ``(normal, tangential, torque)``: the magnitudes (N) of the normal and tangential parts
+    of its contact force on the object and that force's torque (N m) about the object's
+    axis (its body z: the cap joint's axis), positive as the cap's turn counts: a finger
+    that drags the cap round has a torque of the turn's sign, one that holds against it
+    the opposite (the tangential part is at most mu times the normal one)."""
+    results = plant.get_contact_results_output_port().Eval(plant_context)
+    body = built["cap"]
+    cap_i, hand = int(body.index()), built["hand_bodies"]
+    X = plant.EvalBodyPoseInWorld(plant_context, body)
+    centre, axis = X.translation(), X.rotation().col(2)
+    out = {}
+    for k in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(k)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        if cap_i not in (a, b) or (b if a == cap_i else a) not in hand:
+            continue
+        # contact_force() acts on body B; nhat_BA_W points from B into A
+        force = np.asarray(info.contact_force()) * (1.0 if b == cap_i else -1.0)
+        normal = np.asarray(info.point_pair().nhat_BA_W)
+        fn = float(force @ normal)
+        ft = float(np.linalg.norm(force - fn * normal))
+        torque = float(np.cross(np.asarray(info.contact_point()) - centre, force) @ axis)
+        name = hand[b if a == cap_i else a]
+        n0, t0, q0 = out.get(name, (0.0, 0.0, 0.0))
+        out[name] = (n0 + abs(fn), t0 + ft, q0 + torque)
+    return out
+
+
 def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
     """The per-sample read without the contact solver: (hand bodies whose collision
     geometry penetrates the cap, whether the palm's penetrates the cap or bottle), from
@@ -513,11 +587,18 @@ class ScrewCapTask:
     time_step: float = 0.002
     settle_time: float = 0.5
     contact_window: float = 0.3  # s: a finger touched the cap at a sample this recent
+    # digits (thumb, first, middle, ring, little finger: any of their bodies) that must each
+    # have touched the object within contact_window for "gripped"; 1: any hand body but the
+    # palm (the first design). The four-finger grip: 4
+    grip_digits: int = 1
     coulomb_torque: float = 0.01  # N m
     viscous: float = 1.0e-3  # N m s / rad
     cap_position: tuple = (0.405, -0.02, 0.07)
     cap_diameter: float = 0.035
     cap_axis_yaw_deg: float = 0.0
+    cap_length: float = 0.060  # along the axis
+    # True: the turn counts positive the other way round (ScrewCapModel.axis_reversed)
+    cap_axis_reversed: bool = False
     # The grasp: the demonstration's first frame mapped by the four rules, plus these
     # offsets ((actuated joint name, rad), ...): the hand closing on the object before
     # the motion (FOUR_FINGER_GRIP); () by default.
@@ -549,6 +630,9 @@ class ScrewCapTask:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {value!r}")
+        if isinstance(self.grip_digits, bool) or self.grip_digits not in (1, 2, 3, 4, 5):
+            raise ValueError(f"grip_digits: expected an integer in 1..5, got "
+                             f"{self.grip_digits!r}")
         if not 1e-4 <= self.time_step <= 0.01:
             raise ValueError(f"time_step: expected a value in [0.0001, 0.01] s, got "
                              f"{self.time_step!r}")
@@ -560,6 +644,12 @@ class ScrewCapTask:
                              f"{self.partial_credit!r}")
         if len(self.cap_position) != 3:
             raise ValueError(f"cap_position: expected 3 values, got {self.cap_position!r}")
+        if not isinstance(self.cap_axis_reversed, bool):
+            raise ValueError(f"cap_axis_reversed: expected true or false, got "
+                             f"{self.cap_axis_reversed!r}")
+        if not (isinstance(self.cap_length, int | float) and 0.01 <= self.cap_length <= 0.12):
+            raise ValueError(f"cap_length: expected a value in [0.01, 0.12] m, got "
+                             f"{self.cap_length!r}")
         if not 0.02 <= self.cap_diameter <= 0.06:
             raise ValueError(f"cap_diameter: expected a value in [0.02, 0.06] m, got "
                              f"{self.cap_diameter!r}")
@@ -696,6 +786,7 @@ class ScrewCapTrial(GistTrial):
         return ScrewCapScenario(
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
                               diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
+                              length=c.cap_length, axis_reversed=c.cap_axis_reversed,
                               position=[float(v) for v in c.cap_position]) if not c.free else
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
                           position=[float(v) for v in c.free_position]),
@@ -754,6 +845,12 @@ class ScrewCapTrial(GistTrial):
         st["palm_max"] = max(st["palm_max"], summary["palm_force"])
         st["palm"] = st["palm"] or summary["palm_force"] > 0
         gripped = t - st["last_touch"] <= c.contact_window + 1e-9 and not st["palm"]
+        if c.grip_digits > 1:  # so many digits, each within the window
+            for digit in {b[:2] for b in fingers} & _DIGITS:
+                st["digit_touch"][digit] = float(t)
+            recent = sum(t - when <= c.contact_window + 1e-9
+                         for when in st["digit_touch"].values())
+            gripped = gripped and recent >= c.grip_digits
         end = st.get("stroke_end")
         if end is not None:  # a cap over several gaits: the touch at the last stroke's end
             if fingers and end - c.contact_window - 1e-9 <= t <= end + 1e-9:
@@ -772,7 +869,7 @@ class ScrewCapTrial(GistTrial):
         return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
                     palm_max=0.0, next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if several else None,
-                    touch_at_stroke_end=False)
+                    touch_at_stroke_end=False, digit_touch={})
 
     def last_stroke_end(self, x) -> float:
         """The end (s) of the last gait's turn stroke with parameters ``x``: the latest end
