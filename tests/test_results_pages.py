@@ -101,6 +101,19 @@ def test_markdown_table_columns_in_first_seen_order():
         markdown_table([1])
 
 
+def test_table_rows_pivots_measures_keyed_alike():
+    """A speed result ({"sim_time": .., "median_wall": {path: s}, "ratio_to_bare":
+    {path: r}}) becomes a row per path with both measures: before, the page kept
+    only sim_time."""
+    speed = {"sim_time": 1.9, "median_wall": {"trial": 0.62, "bare": 0.5},
+             "ratio_to_bare": {"trial": 1.24, "bare": 1.0}}
+    assert table_rows(speed, "path") == [
+        {"path": "trial", "median_wall": 0.62, "ratio_to_bare": 1.24, "sim_time": 1.9},
+        {"path": "bare", "median_wall": 0.5, "ratio_to_bare": 1.0, "sim_time": 1.9}]
+    # measures keyed differently: not pivoted (one row of the scalars, as before)
+    assert table_rows({"n": 1, "a": {"x": 1}, "b": {"y": 2}}) == [{"n": 1}]
+
+
 @pytest.mark.parametrize("path", BENCHMARKS, ids=[p.stem for p in BENCHMARKS])
 def test_every_benchmark_is_wired_to_its_page(path):
     """Each benchmark makes a ResultsRun at its start and finishes it with its table;

@@ -75,7 +75,9 @@ def _cell(value) -> str:
 def table_rows(value, key: str = "case") -> list[dict]:
     """A benchmark's result as table rows: a list of dicts as it is; a dict of
     dicts (or of lists of dicts) as one row per entry, its name in column
-    ``key``; any other dict as one row."""
+    ``key``; a dict whose dict entries are measures keyed by the same names as
+    one row per name (a column per measure, the scalar entries repeated); any
+    other dict as one row."""
     if isinstance(value, list):
         return [row if isinstance(row, dict) else {"value": row} for row in value]
     if isinstance(value, dict):
@@ -86,7 +88,16 @@ def table_rows(value, key: str = "case") -> list[dict]:
         if value and all(isinstance(v, list) and all(isinstance(x, dict) for x in v)
                          for v in value.values()):
             return [{key: name, **row} for name, rows in value.items() for row in rows]
-        return [{k: v for k, v in value.items() if not isinstance(v, (list, dict))}]
+        scalars = {k: v for k, v in value.items() if not isinstance(v, (list, dict))}
+        columns = {k: v for k, v in value.items() if isinstance(v, dict) and v}
+        names = [list(v) for v in columns.values()]
+        if columns and all(n == names[0] for n in names) and all(
+                not isinstance(x, (list, dict)) for v in columns.values() for x in v.values()):
+            # Measures keyed alike ({"wall": {"a": .., "b": ..}, "ratio": {"a": .., ...}}):
+            # one row per name, one column per measure (the scalars repeated).
+            return [{key: name, **{m: v[name] for m, v in columns.items()}, **scalars}
+                    for name in names[0]]
+        return [scalars]
     return [{"value": value}]
 
 

@@ -138,6 +138,31 @@ def test_commit_schedule_passes_jittered_commands_at_the_limit_and_bounds_any_wi
     assert schedule.earliest() == pytest.approx(0.01 + 0.5 * slot)
 
 
+def test_commit_schedule_queues_a_client_faster_than_the_limit_by_up_to_half_a_slot():
+    """A 1 kHz client whose clock drifts one slot per 4 s against the 1 kHz limit:
+    slower, it never waits; faster, the second half of its commands wait, growing to
+    the tolerance (half a slot), as GCRA's closed form says (k (slot - P) - slot / 2)."""
+    rate, n = 1000.0, 4000
+    slot = 1.0 / rate
+    for sign in (+1, -1):
+        period = slot + sign * slot / n
+        schedule, waits = CommitSchedule(rate), []
+        for k in range(n):
+            now = k * period
+            commit = max(now, schedule.earliest())
+            waits.append(commit - now)
+            schedule.commit(commit)
+        waits = np.array(waits)
+        if sign > 0:
+            assert waits.max() == 0.0
+        else:
+            k = np.arange(n)
+            expected = np.maximum(0.0, k * (slot - period) - 0.5 * slot)
+            assert np.allclose(waits, expected, atol=1e-12)
+            assert (waits > 0).mean() == pytest.approx(0.5, abs=0.01)
+            assert waits.max() == pytest.approx(0.5 * slot, rel=1e-3)
+
+
 def test_velocity_estimator_matches_a_first_order_filter_of_the_slope():
     dt, tau, slope = 0.001, 0.01, 0.7
     estimator = VelocityEstimator(1, tau)
