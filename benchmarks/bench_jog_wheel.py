@@ -28,14 +28,14 @@ pin_blas(force=False)
 import numpy as np  # noqa: E402
 
 from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
-from handle_drake.apps.inhand.jog_wheel import JogWheelTrial, MidiJogEvaluator  # noqa: E402
+from handle_drake.apps.inhand.jog_wheel import JogWheelTask, JogWheelTrial, MidiJogEvaluator  # noqa: E402
 from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "jog_wheel.json"
 
 
-def base_rate(n: int, seed: int) -> dict:
-    trial = JogWheelTrial()
+def base_rate(n: int, seed: int, target_deg: float) -> dict:
+    trial = JogWheelTrial(JogWheelTask(target_deg=target_deg))
     bounds = trial.bounds
     rng = np.random.default_rng(seed)
     rows = []
@@ -65,14 +65,15 @@ def base_rate(n: int, seed: int) -> dict:
                 trials=rows)
 
 
-def optimisers(names, seeds, trials: int, db: Path) -> list:
+def optimisers(names, seeds, trials: int, db: Path, target_deg: float) -> list:
     out = []
     for name in names:
         for seed in seeds:
-            run = run_inhand("jog_wheel", name, trials, 1, seed, db, 10, progress=False)
+            run = run_inhand("jog_wheel", name, trials, 1, seed, db, 10, progress=False,
+                             target_deg=target_deg)
             s = run.summary()
             best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
-            out.append(dict(optimizer=name, seed=seed, trials=s["done"],
+            out.append(dict(optimizer=name, seed=seed, target_deg=target_deg, trials=s["done"],
                             trials_to_target=s["trials_to_target"], best_score=s["best_score"],
                             best_midi_turn_deg=best.contacts["turn_deg"],
                             best_true_turn_deg=best.contacts["true_turn_deg"]))
@@ -87,16 +88,23 @@ def main(argv=None) -> int:
     p.add_argument("--optimizers", nargs="*", default=[])
     p.add_argument("--seeds", nargs="+", type=int, default=[41, 42, 43])
     p.add_argument("--trials", type=int, default=30)
+    p.add_argument("--target-deg", type=float, default=JogWheelTask.target_deg,
+                   help="the wheel's net turn to reach (deg, default %(default)s)")
     p.add_argument("--db", type=Path, default=Path("out/inhand/jog_wheel.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
     add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
+    try:
+        JogWheelTask(target_deg=args.target_deg)
+    except ValueError as error:
+        p.error(f"--target-deg: {error}")
     run = ResultsRun("Jog wheel: base rate and optimisers (MIDI ticks only)", args)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     if args.base_rate:
-        result["base_rate"] = base_rate(args.base_rate, args.seed)
+        result["base_rate"] = base_rate(args.base_rate, args.seed, args.target_deg)
     if args.optimizers:
-        result["optimisers"] = optimisers(args.optimizers, args.seeds, args.trials, args.db)
+        result["optimisers"] = optimisers(args.optimizers, args.seeds, args.trials, args.db,
+                                          args.target_deg)
     table = []
     if "base_rate" in result:
         table.append({"optimizer": "random (base rate)", **{
