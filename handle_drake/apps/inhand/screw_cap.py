@@ -222,10 +222,6 @@ class GaitMotionSource(GistMotionSource):
             raise ValueError(f"n_gaits: expected an integer >= 1, got {n_gaits!r}")
         self._n_gaits = n_gaits
 
-    def frames_for(self, parameters) -> np.ndarray:
-        """The (N, 20) frames of one gait for ``parameters`` (as the output sends them)."""
-        return self._frames(np.asarray(parameters, dtype=float))
-
     def frame_index(self, t: float) -> int:
         cycle = math.floor(t / self._duration + 1e-9)
         if cycle >= self._n_gaits:
@@ -237,9 +233,8 @@ class GaitMotionSource(GistMotionSource):
         floating-point operations in the same order, element-wise."""
         t = np.asarray(times, dtype=float)
         cycle = np.floor(t / self._duration + 1e-9)
-        index = np.floor((t - cycle * self._duration) / self._duration * self._n + 1e-9) + 1
-        index = np.minimum(self._n, np.maximum(1, index)).astype(int)
-        return np.where(cycle >= self._n_gaits, self._n, index)
+        return np.where(cycle >= self._n_gaits, self._n,
+                        super().frame_indices(t - cycle * self._duration))
 
 
 def _proximity(mu: float) -> ProximityProperties:
@@ -821,7 +816,7 @@ class ScrewCapTrial(GistTrial):
         simulator = built["simulator"]
         context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
-        reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
+        reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         credits, held = [], False
         for t in c.reversal_sample_times():
             simulator.AdvanceTo(float(t))
@@ -846,7 +841,7 @@ class ScrewCapTrial(GistTrial):
                                                              if built["joint"] is None else 0))
         reverse = built["reverse"]
         if reverse is not None:
-            reverse.set_start(reverse.GetMyContextFromRoot(context), np.inf)
+            reverse.set_reversed(reverse.GetMyContextFromRoot(context), False)
         return built["plant"].GetMyContextFromRoot(context)
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
@@ -1003,7 +998,7 @@ def simulate_scenario(text: str, reverse_time: float = 0.5) -> dict:
     if joint is None:
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse = built["reverse"]
-        reverse.set_start(reverse.GetMyContextFromRoot(context), scenario.total_time)
+        reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         simulator.AdvanceTo(scenario.total_time + reverse_time)
         p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
         touching = contact_summary(plant, plant_context, built)["touching"]
