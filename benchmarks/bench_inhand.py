@@ -102,15 +102,15 @@ def _bare_plant(trial: InHandTrial, x, duration: float):
     return run
 
 
-def speed(rounds: int) -> dict:
+def speed(rounds: int, baseline: str | None = None) -> dict:
+    from trial_worker import BaselineTrial, outcome_dict, stroke
+
     trial = InHandTrial()
-    g = trial.gist
-    x = g.initial_parameters()
-    for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written full stroke
-        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    x = stroke(trial.gist)  # the hand-written full stroke
     trial._build()
     # the trial simulates its motion, then (when it ran to the end) 0.5 s of reversed weight
-    reversed_test = trial.evaluate(x).survived_reversal is not None
+    mine = trial.evaluate(x)
+    reversed_test = mine.survived_reversal is not None
     sim = trial.config.total_time + (trial.config.reverse_time if reversed_test else 0.0)
     bare = _bare_plant(trial, x, sim)
     instrumented = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
@@ -119,17 +119,45 @@ def speed(rounds: int) -> dict:
              "bare plant, same frames": bare,
              "trial built anew": lambda: _fresh(trial, x),
              "trial, instrumented object": lambda: instrumented.evaluate(x).wall_time}
+    before = same = None
+    if baseline:
+        before = BaselineTrial(baseline, "inhand", {})
+        same = before.run()[2] == outcome_dict(mine)
+        print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
+        cases[f"trial at {baseline} (before)"] = lambda: before.run()[0]
     times = {k: [] for k in cases}
-    for _ in range(rounds):
-        for name, case in cases.items():
-            times[name].append(case())
+    try:
+        for _ in range(rounds):
+            for name, case in cases.items():
+                times[name].append(case())
+    finally:
+        if before is not None:
+            before.close()
     med = {k: float(np.median(v)) for k, v in times.items()}
     floor = med["bare plant, same frames"]
-    print(f"{'case':28s} {'median s':>9s} {'x real time':>11s} {'/ bare':>7s}")
+    print(f"{'case':28s} {'median s':>9s} {'x real time':>11s} {'/ bare':>7s}  rounds / bare")
+    table = []
     for k, v in med.items():
-        print(f"{k:28s} {v:9.3f} {sim / v:11.2f} {v / floor:7.2f}")
-    return {"sim_time": sim, "median_wall": med, "ratio_to_bare": {k: v / floor
-                                                                   for k, v in med.items()}}
+        per_round = np.array(times[k]) / np.array(times["bare plant, same frames"])
+        print(f"{k:28s} {v:9.3f} {sim / v:11.2f} {v / floor:7.2f}  "
+              f"{per_round.min():.2f}-{per_round.max():.2f}")
+        table.append({"case": k, "sim_time": sim, "median_wall_s": round(v, 4),
+                      "ratio_to_bare": round(v / floor, 3),
+                      "ratio_per_round_median": round(float(np.median(per_round)), 3),
+                      "rounds_range": f"{per_round.min():.2f}-{per_round.max():.2f}"})
+    out = {"sim_time": sim, "median_wall": med, "rounds": times, "table": table,
+           "ratio_to_bare": {k: v / floor for k, v in med.items()},
+           "load_end": os.getloadavg()[0]}
+    if before is not None:
+        paired = np.array(times["trial (reset, checks)"]) / np.array(
+            times[f"trial at {baseline} (before)"])
+        print(f"after / before, paired by round: median {np.median(paired):.3f} "
+              f"({' '.join(f'{r:.2f}' for r in paired)})")
+        out.update(baseline=baseline, baseline_outcome_identical=same,
+                   after_over_before_median=float(np.median(paired)),
+                   after_over_before=paired.tolist())
+    print(f"load average now {out['load_end']:.2f}")
+    return out
 
 
 def _fresh(trial, x):
@@ -201,6 +229,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--speed", action="store_true")
     p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--baseline", default=None, metavar="REV",
+                   help="with --speed: also time the trial of git revision REV (a worker "
+                        "process on its handle_drake), every round, its outcome checked")
     p.add_argument("--table", action="store_true")
     p.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     p.add_argument("--optimizers", nargs="+", default=list(INHAND_OPTIMIZERS),
@@ -222,7 +253,7 @@ def main(argv=None) -> int:
     if args.out.exists():
         result = {**json.loads(args.out.read_text()), **result}
     if args.speed:
-        result["speed"] = speed(args.rounds)
+        result["speed"] = speed(args.rounds, args.baseline)
     if args.table:
         key = "table_" + "_".join(f"{t:g}" for t in args.targets) + f"_{args.evaluation}"
         with trial_executor(args.executor, args.workers,
@@ -232,7 +263,7 @@ def main(argv=None) -> int:
                                 args.evaluation)
     printed = []
     if args.speed:
-        printed += table_rows(result["speed"], "speed")
+        printed += result["speed"].get("table") or table_rows(result["speed"], "speed")
     if args.table:
         printed += table_rows(result[key], "task")
     run.finish(printed, result, args.out)
