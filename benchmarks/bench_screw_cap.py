@@ -163,22 +163,25 @@ def speed(rounds: int, options, baseline: str | None = None) -> dict:
              "trial, driver + contact results": lambda: trial.evaluate(
                  x, early_stop=False, contact_results=True, driver=True).wall_time,
              "bare plant, same frames": run_bare}
-    before = None
+    before = after = None
     if baseline:
         before = BaselineTrial(baseline, "screw_cap", options)
         _, _, outcome = before.run()
         same = outcome == outcome_dict(mine)
         print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
         cases[f"trial at {baseline} (before)"] = lambda: before.run()[0]
+        after = BaselineTrial(None, "screw_cap", options)  # this tree, in a worker too
+        cases["trial, this tree, in a worker"] = lambda: after.run()[0]
     try:
         times = _rounds(cases, rounds)
     finally:
-        if before is not None:
-            before.close()
+        for worker in (before, after):
+            if worker is not None:
+                worker.close()
     out = _ratios(times, "bare plant, same frames", total)
     if before is not None:
         out.update(baseline=baseline, baseline_outcome_identical=same,
-                   **_paired(times, "trial (reset, samples, checks)",
+                   **_paired(times, "trial, this tree, in a worker",
                              f"trial at {baseline} (before)"))
     return out
 
@@ -213,7 +216,7 @@ def _ratios(times: dict, floor_name: str, sim_time: float) -> dict:
 
 
 def _paired(times: dict, after: str, before: str) -> dict:
-    """This tree's trial / the baseline's, paired by round."""
+    """This tree's trial / the baseline's (both in worker processes), paired by round."""
     ratio = np.array(times[after]) / np.array(times[before])
     print(f"after / before, paired by round: median {np.median(ratio):.3f} "
           f"({' '.join(f'{r:.2f}' for r in ratio)})", flush=True)

@@ -57,18 +57,24 @@ def outcome_dict(outcome) -> dict:
 
 
 class BaselineTrial:
-    """The trial of git revision ``revision`` in a worker process (its ``handle_drake``
-    extracted from git); :meth:`run` times one evaluation there."""
+    """The trial of git revision ``revision`` (None: this checkout, as it is) in a worker
+    process (its ``handle_drake`` extracted from git); :meth:`run` times one evaluation
+    there. Time both sides in workers: on a loaded machine the scheduler favours a process
+    that has been waiting, which biases a worker against the benchmark's own process."""
 
-    def __init__(self, revision: str, kind: str, options: dict):
+    def __init__(self, revision: str | None, kind: str, options: dict):
         self.revision = revision
-        self._dir = tempfile.mkdtemp(prefix=f"baseline-{revision}-")
-        archive = subprocess.run(["git", "archive", revision, "handle_drake", "models",
-                                  "diagrams"], cwd=ROOT, capture_output=True, check=True).stdout
-        path = Path(self._dir) / "tree.tar"
-        path.write_bytes(archive)
-        with tarfile.open(path) as tar:
-            tar.extractall(self._dir, filter="data")
+        if revision is None:
+            self._dir = str(ROOT)
+        else:
+            self._dir = tempfile.mkdtemp(prefix=f"baseline-{revision}-")
+            archive = subprocess.run(["git", "archive", revision, "handle_drake", "models",
+                                      "diagrams"], cwd=ROOT, capture_output=True,
+                                     check=True).stdout
+            path = Path(self._dir) / "tree.tar"
+            path.write_bytes(archive)
+            with tarfile.open(path) as tar:
+                tar.extractall(self._dir, filter="data")
         env = {**os.environ, "PYTHONPATH": self._dir, "OPENBLAS_NUM_THREADS": "1"}
         self._process = subprocess.Popen(
             [sys.executable, str(Path(__file__).resolve()), kind, json.dumps(options)],
