@@ -179,6 +179,7 @@ def _replay_plant(trial: InHandTrial, x, duration: float):
 
 
 def speed(rounds: int, baseline: str | None = None) -> dict:
+    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from trial_worker import BaselineTrial, outcome_dict, stroke
 
     trial = InHandTrial()

@@ -130,6 +130,7 @@ def speed(rounds: int, options, baseline: str | None = None) -> dict:
     import time
 
     from pydrake.systems.analysis import Simulator
+    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from trial_worker import BaselineTrial, outcome_dict, stroke
 
     from handle_drake.apps.inhand.screw_cap import build_screw_cap

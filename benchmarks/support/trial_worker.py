@@ -1,6 +1,6 @@
 """A trial timed in another process, for a benchmark's before/after in one run.
 
-``python benchmarks/trial_worker.py KIND OPTIONS_JSON`` builds the in-hand trial KIND
+``python benchmarks/support/trial_worker.py KIND OPTIONS_JSON`` builds the in-hand trial
 (``screw_cap``: ``ScrewCapTrial(ScrewCapTask(**options))``; ``inhand``:
 ``InHandTrial(InHandTask(**options))``) with whatever ``handle_drake`` the process imports
 first (``PYTHONPATH`` pointing at a tree extracted from a git revision: the "before"),
@@ -20,7 +20,7 @@ import tarfile
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def stroke(gist):
