@@ -4,9 +4,14 @@
    reset from the settled context) against the bare plant simulating the same
    scenario over the same time from the same state (MultibodyPlant +
    SceneGraph, the hand's PD inputs fed by a TrajectorySource of the same
-   frames: no Python system), against building the trial's diagram anew, and
-   the same trial with an instrumented object (the JoyWarrior model in it);
-   every case once per round, ratios of medians.
+   frames: no Python system), against the bare plant replaying the trial's own
+   plant inputs (its driver's rate-limited desired states and the reversed
+   weight: the same physics, final object pose checked equal), against building
+   the trial's diagram anew, and the same trial with an instrumented object (the
+   JoyWarrior model in it); every case once per round, ratios of medians. With
+   ``--baseline REV`` the trial of git revision REV and this tree's trial are
+   also timed, each in a worker process (``benchmarks/support/trial_worker.py``),
+   the outcome checked identical, after/before paired by round.
 2. Table (``--table``): optimiser x task x seed runs of ``run_inhand`` (all
    runs in one SQLite log, resumable: whatever already ran is read back), each
    until a trial reaches the target or the budget is spent. Per optimiser and
@@ -17,8 +22,8 @@
 The table's trials run where ``--executor`` says (``local`` with ``--workers``,
 ``dask`` LocalCluster, ``dask://HOST:PORT``: ``handle_drake.learning.cluster``).
 
-Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]
-[--evaluation old]``;
+Run: ``python benchmarks/bench_inhand.py --speed [--baseline REV] --table [--trials N]
+[--seeds 0 1 2] [--evaluation old]``;
 writes ``benchmarks/results/inhand.json``.
 """
 

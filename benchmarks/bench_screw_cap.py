@@ -13,6 +13,11 @@
    scenario YAML alone by ``handle_drake.apps.inhand.screw_cap.simulate_scenario``
    (a separate build that reads the cap joint from the plant).
 
+4. ``--speed ROUNDS [--baseline REV]``: a trial against the bare plant on the same frames
+   and simulated time; with ``--baseline`` the trial of git revision REV and this tree's,
+   each in a worker process (``benchmarks/support/trial_worker.py``), outcome checked
+   identical, after/before paired by round.
+
 Run: ``python benchmarks/bench_screw_cap.py --base-rate 200 --table --seeds 0 1 2 3 4
 --budget 60 --resimulate``; writes ``benchmarks/results/screw_cap.json`` and prints
 markdown tables (``docs/results/inhand.md``).
