@@ -4,9 +4,14 @@
    reset from the settled context) against the bare plant simulating the same
    scenario over the same time from the same state (MultibodyPlant +
    SceneGraph, the hand's PD inputs fed by a TrajectorySource of the same
-   frames: no Python system), against building the trial's diagram anew, and
-   the same trial with an instrumented object (the JoyWarrior model in it);
-   every case once per round, ratios of medians.
+   frames: no Python system), against the bare plant replaying the trial's own
+   plant inputs (its driver's rate-limited desired states and the reversed
+   weight: the same physics, final object pose checked equal), against building
+   the trial's diagram anew, and the same trial with an instrumented object (the
+   JoyWarrior model in it); every case once per round, ratios of medians. With
+   ``--baseline REV`` the trial of git revision REV and this tree's trial are
+   also timed, each in a worker process (``benchmarks/support/trial_worker.py``),
+   the outcome checked identical, after/before paired by round.
 2. Table (``--table``): optimiser x task x seed runs of ``run_inhand`` (all
    runs in one SQLite log, resumable: whatever already ran is read back), each
    until a trial reaches the target or the budget is spent. Per optimiser and
@@ -17,8 +22,8 @@
 The table's trials run where ``--executor`` says (``local`` with ``--workers``,
 ``dask`` LocalCluster, ``dask://HOST:PORT``: ``handle_drake.learning.cluster``).
 
-Run: ``python benchmarks/bench_inhand.py --speed --table [--trials N] [--seeds 0 1 2]
-[--evaluation old]``;
+Run: ``python benchmarks/bench_inhand.py --speed [--baseline REV] --table [--trials N]
+[--seeds 0 1 2] [--evaluation old]``;
 writes ``benchmarks/results/inhand.json``.
 """
 
@@ -102,34 +107,153 @@ def _bare_plant(trial: InHandTrial, x, duration: float):
     return run
 
 
-def speed(rounds: int) -> dict:
+def _replay_plant(trial: InHandTrial, x, duration: float):
+    """The bare plant (+ SceneGraph) on the trial's own plant inputs: the desired states
+    its hand driver hands the plant at every step (recorded from one trial, held in a
+    ``TrajectorySource`` zero-order hold) and, from the end of the hold, the reversed
+    weight (a fixed value of the plant's force input), from the trial's settled state:
+    the same physics (the object's final pose is checked equal to the trial's), no
+    Python system, no samples, no checks. Returns ``(run, identical)``."""
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from handle_drake.station import AddPlantModels
+
+    c = trial.config
+    built = trial._build()
+    harness, reverse = built["harness"], built["reverse"]
+    driver = harness.station.GetSubsystemByName("hand_driver")
+    context = harness.context
+    context.SetTimeStateAndParametersFrom(built["settled"])
+    harness.controller.set_parameters(harness.controller_context(), x)
+    built["player"].UpdateTrajectory(harness.controller.held_frames(
+        x, built["period"], c.total_time + c.reverse_time))
+    plant_ref = harness.plant
+    x0 = plant_ref.GetPositionsAndVelocities(plant_ref.GetMyContextFromRoot(context)).copy()
+    forces = None
+    harness.initialize()
+    h, steps = c.time_step, int(round(duration / c.time_step))
+    reversal_step = int(round(c.total_time / h))
+    desired = []
+    for j in range(steps + 1):
+        if j:
+            harness.simulator.AdvanceTo(j * h)  # stops before the events at j h
+        if j == reversal_step:
+            reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
+            forces = reverse.get_output_port().Eval(reverse.GetMyContextFromRoot(context))
+        desired.append(driver.GetOutputPort("desired_state").Eval(
+            driver.GetMyContextFromRoot(context)).copy())
+    final = built["body"].EvalPoseInWorld(plant_ref.GetMyContextFromRoot(context))
+
+    scenario = trial.scenario().station
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=c.time_step, discrete_contact_approximation="sap",
+        use_sampled_output_ports=False, contact_model="point"), builder)
+    hand = AddPlantModels(plant, scenario)
+    plant.Finalize()
+    breaks = np.concatenate([[0.0], (np.arange(1, steps + 1) - 0.5) * h, [duration + h]])
+    values = np.array(desired).T
+    source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+        breaks, np.hstack([values, values[:, -1:]]))))
+    builder.Connect(source.get_output_port(), plant.get_desired_state_input_port(hand))
+    simulator = Simulator(builder.Build())
+    root = simulator.get_mutable_context()
+    plant_context = plant.GetMyMutableContextFromRoot(root)
+    force_port = plant.get_applied_spatial_force_input_port()
+    body = plant.GetBodyByName(built["body"].name())
+
+    def run():
+        root.SetTime(0.0)
+        plant.SetPositionsAndVelocities(plant_context, x0)
+        force_port.FixValue(plant_context, [])
+        simulator.Initialize()
+        start = time.perf_counter()
+        simulator.AdvanceTo(reversal_step * h)
+        force_port.FixValue(plant_context, forces)
+        simulator.AdvanceTo(duration)
+        return time.perf_counter() - start
+
+    run()
+    mine = body.EvalPoseInWorld(plant_context)
+    identical = bool(np.array_equal(mine.GetAsMatrix34(), final.GetAsMatrix34()))
+    return run, identical
+
+
+def speed(rounds: int, baseline: str | None = None) -> dict:
+    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+    from trial_worker import BaselineTrial, outcome_dict, stroke
+
     trial = InHandTrial()
-    g = trial.gist
-    x = g.initial_parameters()
-    for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written full stroke
-        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    x = stroke(trial.gist)  # the hand-written full stroke
     trial._build()
     # the trial simulates its motion, then (when it ran to the end) 0.5 s of reversed weight
-    reversed_test = trial.evaluate(x).survived_reversal is not None
+    mine = trial.evaluate(x)
+    reversed_test = mine.survived_reversal is not None
     sim = trial.config.total_time + (trial.config.reverse_time if reversed_test else 0.0)
     bare = _bare_plant(trial, x, sim)
+    replay, identical = _replay_plant(trial, x, sim)
+    print(f"replay of the trial's plant inputs: final object pose identical to the "
+          f"trial's: {identical}", flush=True)
     instrumented = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
     instrumented._build()
     cases = {"trial (reset, checks)": lambda: trial.evaluate(x).wall_time,
              "bare plant, same frames": bare,
+             "bare plant, the trial's own inputs (replay)": replay,
              "trial built anew": lambda: _fresh(trial, x),
              "trial, instrumented object": lambda: instrumented.evaluate(x).wall_time}
+    before = after = same = None
+    if baseline:
+        before = BaselineTrial(baseline, "inhand", {})
+        same = before.run()[2] == outcome_dict(mine)
+        print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
+        cases[f"trial at {baseline} (before)"] = lambda: before.run()[0]
+        after = BaselineTrial(None, "inhand", {})  # this tree, in a worker too
+        cases["trial, this tree, in a worker"] = lambda: after.run()[0]
     times = {k: [] for k in cases}
-    for _ in range(rounds):
-        for name, case in cases.items():
-            times[name].append(case())
+    try:
+        for _ in range(rounds):
+            for name, case in cases.items():
+                times[name].append(case())
+    finally:
+        for worker in (before, after):
+            if worker is not None:
+                worker.close()
     med = {k: float(np.median(v)) for k, v in times.items()}
     floor = med["bare plant, same frames"]
-    print(f"{'case':28s} {'median s':>9s} {'x real time':>11s} {'/ bare':>7s}")
+    print(f"{'case':28s} {'median s':>9s} {'x real time':>11s} {'/ bare':>7s}  rounds / bare")
+    table = []
     for k, v in med.items():
-        print(f"{k:28s} {v:9.3f} {sim / v:11.2f} {v / floor:7.2f}")
-    return {"sim_time": sim, "median_wall": med, "ratio_to_bare": {k: v / floor
-                                                                   for k, v in med.items()}}
+        per_round = np.array(times[k]) / np.array(times["bare plant, same frames"])
+        print(f"{k:28s} {v:9.3f} {sim / v:11.2f} {v / floor:7.2f}  "
+              f"{per_round.min():.2f}-{per_round.max():.2f}")
+        table.append({"case": k, "sim_time": sim, "median_wall_s": round(v, 4),
+                      "ratio_to_bare": round(v / floor, 3),
+                      "ratio_per_round_median": round(float(np.median(per_round)), 3),
+                      "rounds_range": f"{per_round.min():.2f}-{per_round.max():.2f}"})
+    to_replay = np.array(times["trial (reset, checks)"]) / np.array(
+        times["bare plant, the trial's own inputs (replay)"])
+    print(f"trial / replay, paired by round: median {np.median(to_replay):.3f} "
+          f"({' '.join(f'{r:.2f}' for r in to_replay)})")
+    out = {"sim_time": sim, "median_wall": med, "rounds": times, "table": table,
+           "replay_final_pose_identical": identical,
+           "trial_over_replay_median": float(np.median(to_replay)),
+           "ratio_to_bare": {k: v / floor for k, v in med.items()},
+           "load_end": os.getloadavg()[0]}
+    if before is not None:
+        paired = np.array(times["trial, this tree, in a worker"]) / np.array(
+            times[f"trial at {baseline} (before)"])
+        print(f"after / before (both in workers), paired by round: median "
+              f"{np.median(paired):.3f} "
+              f"({' '.join(f'{r:.2f}' for r in paired)})")
+        out.update(baseline=baseline, baseline_outcome_identical=same,
+                   after_over_before_median=float(np.median(paired)),
+                   after_over_before=paired.tolist())
+    print(f"load average now {out['load_end']:.2f}")
+    return out
 
 
 def _fresh(trial, x):
@@ -201,6 +325,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--speed", action="store_true")
     p.add_argument("--rounds", type=int, default=5)
+    p.add_argument("--baseline", default=None, metavar="REV",
+                   help="with --speed: also time the trial of git revision REV (a worker "
+                        "process on its handle_drake), every round, its outcome checked")
     p.add_argument("--table", action="store_true")
     p.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     p.add_argument("--optimizers", nargs="+", default=list(INHAND_OPTIMIZERS),
@@ -222,7 +349,7 @@ def main(argv=None) -> int:
     if args.out.exists():
         result = {**json.loads(args.out.read_text()), **result}
     if args.speed:
-        result["speed"] = speed(args.rounds)
+        result["speed"] = speed(args.rounds, args.baseline)
     if args.table:
         key = "table_" + "_".join(f"{t:g}" for t in args.targets) + f"_{args.evaluation}"
         with trial_executor(args.executor, args.workers,
@@ -232,7 +359,7 @@ def main(argv=None) -> int:
                                 args.evaluation)
     printed = []
     if args.speed:
-        printed += table_rows(result["speed"], "speed")
+        printed += result["speed"].get("table") or table_rows(result["speed"], "speed")
     if args.table:
         printed += table_rows(result[key], "task")
     run.finish(printed, result, args.out)

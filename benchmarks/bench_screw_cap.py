@@ -13,6 +13,11 @@
    scenario YAML alone by ``handle_drake.apps.inhand.screw_cap.simulate_scenario``
    (a separate build that reads the cap joint from the plant).
 
+4. ``--speed ROUNDS [--baseline REV]``: a trial against the bare plant on the same frames
+   and simulated time; with ``--baseline`` the trial of git revision REV and this tree's,
+   each in a worker process (``benchmarks/support/trial_worker.py``), outcome checked
+   identical, after/before paired by round.
+
 Run: ``python benchmarks/bench_screw_cap.py --base-rate 200 --table --seeds 0 1 2 3 4
 --budget 60 --resimulate``; writes ``benchmarks/results/screw_cap.json`` and prints
 markdown tables (``docs/results/inhand.md``).
@@ -235,19 +240,22 @@ def designs() -> list:
     return rows
 
 
-def speed(rounds: int, options) -> dict:
-    """A screw-cap trial against the bare plant on the same frames from the same state."""
+def speed(rounds: int, options, baseline: str | None = None) -> dict:
+    """A screw-cap trial against the bare plant on the same frames from the same state
+    (and the same simulated time: the fingertip cylinder's trial runs its 0.5 s of reversed
+    weight, which the bare plant then simulates too, holding the last frame). With
+    ``baseline``: the same trial at that git revision, in a worker process, every round
+    (its outcome checked equal to this tree's)."""
     import time
 
     from pydrake.systems.analysis import Simulator
+    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+    from trial_worker import BaselineTrial, outcome_dict, stroke
 
     from handle_drake.apps.inhand.screw_cap import build_screw_cap
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
-    g = trial.gist
-    x = g.initial_parameters()
-    for m, sl in zip(g.motions, g.slices(), strict=True):  # the hand-written stroke
-        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    x = stroke(trial.gist)  # the hand-written stroke
     built = trial._build()
     trial._build(driver=True)  # settled before the timing
     bare = build_screw_cap(trial.scenario(x), bare=True)
@@ -256,7 +264,9 @@ def speed(rounds: int, options) -> dict:
     plant = bare["plant"]
     ref = built["plant"].GetMyContextFromRoot(built["settled"])
     q, v = built["plant"].GetPositions(ref), built["plant"].GetVelocities(ref)
-    total = trial.config.total_time
+    mine = trial.evaluate(x, early_stop=False)
+    total = mine.sim_time + (trial.config.reverse_time if mine.survived_reversal is not None
+                             else 0.0)
 
     def run_bare():
         context.SetTime(0.0)
@@ -273,16 +283,65 @@ def speed(rounds: int, options) -> dict:
              "trial, driver + contact results": lambda: trial.evaluate(
                  x, early_stop=False, contact_results=True, driver=True).wall_time,
              "bare plant, same frames": run_bare}
+    before = after = None
+    if baseline:
+        before = BaselineTrial(baseline, "screw_cap", options)
+        _, _, outcome = before.run()
+        same = outcome == outcome_dict(mine)
+        print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
+        cases[f"trial at {baseline} (before)"] = lambda: before.run()[0]
+        after = BaselineTrial(None, "screw_cap", options)  # this tree, in a worker too
+        cases["trial, this tree, in a worker"] = lambda: after.run()[0]
+    try:
+        times = _rounds(cases, rounds)
+    finally:
+        for worker in (before, after):
+            if worker is not None:
+                worker.close()
+    out = _ratios(times, "bare plant, same frames", total)
+    if before is not None:
+        out.update(baseline=baseline, baseline_outcome_identical=same,
+                   **_paired(times, "trial, this tree, in a worker",
+                             f"trial at {baseline} (before)"))
+    return out
+
+
+def _rounds(cases: dict, rounds: int) -> dict:
+    """Every case once per round (ratios hold while the machine's speed drifts)."""
     times = {k: [] for k in cases}
     for _ in range(rounds):
         for name, case in cases.items():
             times[name].append(case())
+    return times
+
+
+def _ratios(times: dict, floor_name: str, sim_time: float) -> dict:
+    import os
+
     med = {k: float(np.median(t)) for k, t in times.items()}
-    floor = med["bare plant, same frames"]
+    floor = med[floor_name]
+    load = os.getloadavg()[0]
+    table = []
     for k, t in med.items():
-        print(f"{k:32s} {t:8.3f} s  x{t / floor:5.2f} of the bare plant", flush=True)
-    return {"sim_time": total, "median_wall": med,
-            "ratio_to_bare": {k: t / floor for k, t in med.items()}}
+        per_round = np.array(times[k]) / np.array(times[floor_name])
+        print(f"{k:36s} {t:8.3f} s  x{t / floor:5.2f} of the bare plant (rounds "
+              f"{per_round.min():.2f}-{per_round.max():.2f})", flush=True)
+        table.append({"case": k, "sim_time": sim_time, "median_wall_s": round(t, 4),
+                      "ratio_to_bare": round(t / floor, 3),
+                      "ratio_per_round_median": round(float(np.median(per_round)), 3),
+                      "rounds_range": f"{per_round.min():.2f}-{per_round.max():.2f}"})
+    print(f"load average now {load:.2f}", flush=True)
+    return {"sim_time": sim_time, "median_wall": med, "rounds": times, "table": table,
+            "ratio_to_bare": {k: t / floor for k, t in med.items()}, "load_end": load}
+
+
+def _paired(times: dict, after: str, before: str) -> dict:
+    """This tree's trial / the baseline's (both in worker processes), paired by round."""
+    ratio = np.array(times[after]) / np.array(times[before])
+    print(f"after / before, paired by round: median {np.median(ratio):.3f} "
+          f"({' '.join(f'{r:.2f}' for r in ratio)})", flush=True)
+    return {"after_over_before_median": float(np.median(ratio)),
+            "after_over_before": ratio.tolist()}
 
 
 def summarize(db, budget, resim: bool = False) -> dict:
@@ -405,6 +464,9 @@ def main(argv=None) -> int:
     p.add_argument("--designs", action="store_true",
                    help="the four-finger grasp designs tried (DESIGNS): turn, the turn made "
                         "with all four digits on the cap, each digit's force and torque")
+    p.add_argument("--baseline", default=None, metavar="REV",
+                   help="with --speed: also time the trial of git revision REV (a worker "
+                        "process on its handle_drake), every round, its outcome checked")
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
                    help="learning curve of every run in --db and the best trial's HTML replay")
     p.add_argument("--diagnose", action="store_true",
@@ -436,7 +498,8 @@ def main(argv=None) -> int:
     preset = PLACEMENTS[args.placement]
     if preset and args.task != "screw_cap":
         p.error("--placement: only with --task screw_cap")
-    results_run = ResultsRun(f"In-hand {args.task}: base rate, optimisers and speed", args)
+    results_run = ResultsRun(f"In-hand {args.task}: base rate, optimisers and speed", args,
+                             section="--speed" if args.speed else None)  # a section each
     if args.target_deg is None:
         args.target_deg = preset.get("target_deg", 90.0 if args.task == "screw_cap" else 60.0)
     if args.gaits is None:
@@ -454,7 +517,7 @@ def main(argv=None) -> int:
     if args.designs:
         result["four_finger_designs"] = designs()
     if args.speed:
-        entry["speed"] = speed(args.speed, options)
+        entry["speed"] = speed(args.speed, options, args.baseline)
     if args.figures is not None:
         entry["figures"] = figures(args.db, args.task, options, args.figures)
     if args.diagnose:
@@ -474,8 +537,9 @@ def main(argv=None) -> int:
                for row in result.get("four_finger_designs", []) if args.designs]
     for part in ("speed", "base_rate", "summary", "table"):
         if part in entry:
+            rows = entry[part].get("table") if part == "speed" else None
             printed += [{"task": key, "part": part, **row}
-                        for row in table_rows(entry[part], "case")]
+                        for row in (rows or table_rows(entry[part], "case"))]
     results_run.finish(printed, json.loads(json.dumps(result, default=float)), args.out)
     return 0
 

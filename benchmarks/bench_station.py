@@ -90,10 +90,14 @@ class _Case:
                 "object_lift_cm_at_2s": self.lift_cm}
 
 
-def _station_case(contact_model, time_step, approximation, log=None) -> _Case:
+def _station_case(contact_model, time_step, approximation, log=None,
+                  finite_commands=None) -> _Case:
+    """The station as ``ScenarioRunner`` builds it (its script's drivers in Drake
+    primitives); ``finite_commands=False``: with the Python drivers."""
     from handle_drake.station import GetPlant, object_body
 
     runner = ScenarioRunner(_scenario(contact_model, time_step, approximation),
+                            finite_commands=finite_commands,
                             **({} if log is None else {"log": log}))
     plant = GetPlant(runner.station)
     body = object_body(plant)
@@ -128,7 +132,7 @@ def _baseline_station_case(revision: str) -> _Case:
     try:
         for name, value in names.items():
             setattr(station_module, name, value)
-        return _station_case(*STATION_CASES[0])
+        return _station_case(*STATION_CASES[0], finite_commands=False)  # its drivers
     finally:
         for name, value in saved.items():
             setattr(station_module, name, value)
@@ -305,10 +309,17 @@ def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None =
     ablation = {"no tactile log": _station_case(*STATION_CASES[0], log=(
                     "hand.position_measured", "object.position")),
                 "no loggers": _station_case(*STATION_CASES[0], log=())}
+    python = _station_case(*STATION_CASES[0], finite_commands=False)  # the Python drivers
     before = None if baseline is None else _baseline_station_case(baseline)
+    everything = [*station.values(), *plant.values(), replay, python, *ablation.values(),
+                  *([before] if before is not None else [])]
+    for case in everything:  # one warm-up run each, not counted (first-run allocations)
+        case.run_once()
+        case.walls.clear(), case.cpus.clear(), case.loads.clear()
     for _ in range(repeats):
         # the demo case and its floors back to back, then the rest
-        first = [station[STATION_CASES[0]], replay, *ablation.values(), plant["model"]]
+        first = [station[STATION_CASES[0]], replay, python, *ablation.values(),
+                 plant["model"]]
         if before is not None:
             first.insert(1, before)
         rest = [c for c in [*station.values(), *plant.values()] if c not in first]
@@ -327,7 +338,12 @@ def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None =
                 "station_over_replay_wall": _paired(demo, replay, "walls"),
                 "station_over_model_cpu": _paired(demo, plant["model"], "cpus"),
                 "ablation_over_replay_cpu": {k: _paired(c, replay, "cpus")
-                                             for k, c in ablation.items()}}
+                                             for k, c in ablation.items()},
+                "python_drivers": {
+                    "same_logs_as_primitives": _same_logs(demo, python),
+                    "python_over_replay_cpu": _paired(python, replay, "cpus"),
+                    "python_over_replay_wall": _paired(python, replay, "walls"),
+                    "primitives_over_python_cpu": _paired(demo, python, "cpus")}}
     if before is not None:
         overhead["baseline"] = {
             "revision": baseline, "station": before.row(variant=f"station at {baseline}"),
@@ -398,6 +414,14 @@ def main(argv=None) -> int:
                        ("station_over_replay_wall", "station / replay, wall"),
                        ("station_over_model_cpu", "station / model plant, CPU")):
         r = overhead[key]
+        print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+    d = overhead["python_drivers"]
+    print(f"station with the Python drivers (finite_commands=False): logged signals "
+          f"{'bit-identical' if d['same_logs_as_primitives'] else 'DIFFERENT'} to this tree's")
+    for key, label in (("python_over_replay_cpu", "Python drivers / replay, CPU"),
+                       ("python_over_replay_wall", "Python drivers / replay, wall"),
+                       ("primitives_over_python_cpu", "primitive drivers / Python drivers, CPU")):
+        r = d[key]
         print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
     if "baseline" in overhead:
         b = overhead["baseline"]

@@ -88,7 +88,14 @@ from handle_drake.scenario import (
     validate_scenario,
 )
 from handle_drake.scene.plant import AddSceneModels, ExportSceneObjects
-from handle_drake.systems.hand_driver import WRIST_JOINTS, PdHandDriver, WristDriver, rpy_pose6
+from handle_drake.systems.hand_driver import (
+    WRIST_JOINTS,
+    HandDriverDiagram,
+    PdHandDriver,
+    WristDriver,
+    WristDriverDiagram,
+    rpy_pose6,
+)
 from handle_drake.systems.tactile import (
     BodyPoseSelector,
     FingertipTactile,
@@ -109,7 +116,8 @@ WRIST_INSTANCE = WRIST
 OBJECT_INSTANCE = "object"
 
 
-def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
+def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
+                    finite_commands: bool = False):
     """Builds the station diagram for ``scenario``.
 
     Args:
@@ -118,6 +126,13 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
         hardware: build the interface to the real hand (the scenario's driver
             must then be a ``CanHandDriver``); the plant is used only for
             visualisation.
+        finite_commands: the caller connects ``hand.position`` (and ``wrist.pose``) to
+            commands that are finite by construction (planned or validated before the
+            run: a scenario's keyframe script, an in-hand trial's frames). The simulated
+            drivers are then Drake primitives (:class:`HandDriverDiagram`,
+            :class:`WristDriverDiagram`: the same commands, no Python call per control
+            period) instead of the Python drivers that hold on a non-finite or
+            unconnected command.
     """
     validate_scenario(scenario)
     if hardware:
@@ -143,13 +158,13 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
     hand = AddPlantModels(plant, scenario)
     plant.Finalize()
-    _add_hand_systems(builder, plant, hand, scenario)
+    _add_hand_systems(builder, plant, hand, scenario, finite_commands)
     if isinstance(scenario.hand.mount, Arm):
         AddArmDriver(builder, plant, scenario.hand.mount)
     if scenario.objects:
         ExportSceneObjects(builder, plant, scenario)
     if isinstance(scenario.hand.mount, FloatingWrist):
-        _add_wrist_driver(builder, plant, scenario)
+        _add_wrist_driver(builder, plant, scenario, finite_commands)
     if scenario.object is not None:
         _add_object_systems(builder, plant, scenario)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
@@ -169,7 +184,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False):
     return diagram
 
 
-def _add_hand_systems(builder, plant, hand, scenario: Scenario) -> None:
+def _add_hand_systems(builder, plant, hand, scenario: Scenario,
+                      finite_commands: bool = False) -> None:
     """The simulated hand driver and the fingertip sensors; exports the ``hand.*`` ports."""
     spec = get_hand_spec(scenario.hand.kind)
     lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
@@ -178,7 +194,7 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario) -> None:
 
     driver = builder.AddNamedSystem(
         "hand_driver",
-        PdHandDriver(
+        (HandDriverDiagram if finite_commands else PdHandDriver)(
             plant, hand, spec, initial, lower, upper,
             max_joint_velocity=scenario.driver.max_joint_velocity,
             control_period=scenario.driver.control_period,
@@ -198,13 +214,15 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario) -> None:
         builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
 
-def _add_wrist_driver(builder, plant, scenario: Scenario) -> None:
+def _add_wrist_driver(builder, plant, scenario: Scenario,
+                      finite_commands: bool = False) -> None:
     """The floating wrist's driver; exports ``wrist.pose`` and ``wrist.pose_measured``."""
     wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
     wrist_driver = builder.AddNamedSystem(
         "wrist_driver",
-        WristDriver(plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue()),
-                    control_period=scenario.driver.control_period),
+        (WristDriverDiagram if finite_commands else WristDriver)(
+            plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue()),
+            control_period=scenario.driver.control_period),
     )
     builder.Connect(plant.get_state_output_port(), wrist_driver.get_plant_state_input_port())
     builder.Connect(wrist_driver.GetOutputPort("desired_state"),

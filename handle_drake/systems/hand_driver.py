@@ -12,9 +12,11 @@ import math
 
 import numpy as np
 from pydrake.math import RollPitchYaw
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import Adder, AffineSystem, Gain, MatrixGain, Saturation
 
-__all__ = ["PdHandDriver", "WristDriver", "actuated_order"]
+__all__ = ["PdHandDriver", "WristDriver", "HandDriverDiagram", "WristDriverDiagram",
+           "actuated_order"]
 
 
 def actuated_order(plant, model_instance, joint_names) -> np.ndarray:
@@ -150,6 +152,105 @@ class PdHandDriver(LeafSystem):
         context.SetDiscreteState(self._desired_state, self._desired(command))
 
 
+def _selection(rows, size) -> np.ndarray:
+    """The 0/1 matrix ``S`` with ``(S u)[i] = u[rows[i]]`` (a zero row where ``rows[i]`` < 0)."""
+    S = np.zeros((len(rows), size))
+    for i, j in enumerate(rows):
+        if j >= 0:
+            S[i, j] = 1.0
+    return S
+
+
+def _held_state(builder, initial, period, name):
+    """A discrete state ``x`` (default ``initial``) that takes its input's value every
+    ``period`` (from t = 0) and outputs it: ``x_k+1 = u(t_k)``, ``y = x`` (an AffineSystem
+    with A = 0, B = C = I: the products by 0 and 1 are exact)."""
+    n = len(initial)
+    hold = builder.AddNamedSystem(name, AffineSystem(
+        A=np.zeros((n, n)), B=np.eye(n), f0=np.zeros(n), C=np.eye(n), D=np.zeros((n, n)),
+        y0=np.zeros(n), time_period=period))
+    hold.configure_default_state(np.asarray(initial, dtype=float))
+    return hold
+
+
+def _export_selections(builder, size, selections) -> None:
+    """Exports a ``plant_state`` input (``size``) and, per ``(name, rows)``, an output
+    ``name`` of its entries ``rows`` (a 0/1 MatrixGain: exact copies of finite values)."""
+    first = True
+    for name, rows in selections:
+        select = builder.AddNamedSystem(name, MatrixGain(_selection(rows, size)))
+        if first:
+            builder.ExportInput(select.get_input_port(), "plant_state")
+            first = False
+        else:
+            builder.ConnectInput("plant_state", select.get_input_port())
+        builder.ExportOutput(select.get_output_port(), name)
+
+
+class HandDriverDiagram(Diagram):
+    """:class:`PdHandDriver`'s rate limit and clamp in Drake primitives: no Python call per
+    control period. Same ports, same arithmetic in the same order, every ``control_period``:
+    ``target = clamp(command, lower, upper)``, ``cmd += clamp(target - cmd, -s, s)``
+    (``s = max_joint_velocity * control_period``), ``desired_state = [cmd[order]; 0]``
+    (tested bit-identical to :class:`PdHandDriver` on the demo grasp).
+
+    For commands that are connected and finite by construction (planned or validated
+    before the run: the station's ``finite_commands``): unlike :class:`PdHandDriver` it
+    does not hold on a non-finite command, and its ``position`` input must be connected.
+    """
+
+    def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
+                 max_joint_velocity=4.0, control_period=0.002):
+        super().__init__()
+        nu = len(spec.actuated_joint_names)
+        initial_command = np.asarray(initial_command, dtype=float)
+        if initial_command.shape != (nu,):
+            raise ValueError(f"initial_command: expected {nu} values, got {initial_command.shape}")
+        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+        step = max_joint_velocity * control_period if max_joint_velocity > 0 else np.inf
+        order = actuated_order(plant, model_instance, spec.actuated_joint_names)
+        q_index, v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
+        self._lower, self._upper = lower, upper
+        nx = plant.num_positions() + plant.num_velocities()
+        builder = DiagramBuilder()
+        target = builder.AddNamedSystem("limits", Saturation(lower, upper))
+        self._hold = _held_state(builder, np.clip(initial_command, lower, upper),
+                                 control_period, "command")
+        negated = builder.AddNamedSystem("negated", Gain(-1.0, nu))
+        error = builder.AddNamedSystem("error", Adder(2, nu))  # target + (-cmd)
+        limited = builder.AddNamedSystem("rate_limit", Saturation(np.full(nu, -step),
+                                                                  np.full(nu, step)))
+        moved = builder.AddNamedSystem("moved", Adder(2, nu))  # cmd + step
+        builder.Connect(self._hold.get_output_port(), negated.get_input_port())
+        builder.Connect(target.get_output_port(), error.get_input_port(0))
+        builder.Connect(negated.get_output_port(), error.get_input_port(1))
+        builder.Connect(error.get_output_port(), limited.get_input_port())
+        builder.Connect(self._hold.get_output_port(), moved.get_input_port(0))
+        builder.Connect(limited.get_output_port(), moved.get_input_port(1))
+        builder.Connect(moved.get_output_port(), self._hold.get_input_port())
+        desired = builder.AddNamedSystem("desired", MatrixGain(
+            _selection(np.r_[order, np.full(nu, -1)], nu)))
+        builder.Connect(self._hold.get_output_port(), desired.get_input_port())
+        builder.ExportInput(target.get_input_port(), "position")
+        builder.ExportOutput(desired.get_output_port(), "desired_state")
+        builder.ExportOutput(self._hold.get_output_port(), "position_commanded")
+        _export_selections(builder, nx, (("position_measured", q_index),
+                                         ("velocity_estimated", v_index),
+                                         ("state_estimated", np.r_[q_index, v_index])))
+        builder.BuildInto(self)
+
+    def get_command_input_port(self):
+        return self.GetInputPort("position")
+
+    def get_plant_state_input_port(self):
+        return self.GetInputPort("plant_state")
+
+    def set_initial_command(self, context, command):
+        """Sets the held command (for resets); clamped to the limits."""
+        command = np.clip(np.asarray(command, dtype=float), self._lower, self._upper)
+        self.GetMutableSubsystemContext(self._hold, context).SetDiscreteState(command)
+
+
 WRIST_JOINTS = ("wrist_x", "wrist_y", "wrist_z", "wrist_yaw", "wrist_pitch", "wrist_roll")
 
 
@@ -220,6 +321,39 @@ class WristDriver(LeafSystem):
     def _calc_pose_measured(self, context, out):
         x, y, z, yaw, pitch, roll = self._plant_state_port.Eval(context)[self._q_index]
         out.SetFromVector([x, y, z, roll, pitch, yaw])
+
+
+class WristDriverDiagram(Diagram):
+    """:class:`WristDriver` in Drake primitives: the pose sampled every ``control_period``
+    into the desired state (the same permutation, exact copies), ``pose_measured`` from the
+    plant state; no Python call per period. For a connected, finite ``pose`` command (see
+    :class:`HandDriverDiagram`): it does not hold on a non-finite one."""
+
+    def __init__(self, plant, model_instance, initial_pose6, control_period=0.002):
+        super().__init__()
+        initial = np.asarray(initial_pose6, dtype=float)
+        if initial.shape != (6,):
+            raise ValueError(f"initial pose: expected 6 values, got {initial.shape}")
+        order = actuated_order(plant, model_instance, WRIST_JOINTS)
+        q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
+        builder = DiagramBuilder()
+        to_desired = builder.AddNamedSystem("to_desired", MatrixGain(
+            _selection(np.r_[_POSE6_TO_WRIST_JOINTS[order], np.full(6, -1)], 6)))
+        initial_desired = np.concatenate([pose_to_wrist_joints(initial)[order], np.zeros(6)])
+        hold = _held_state(builder, initial_desired, control_period, "desired")
+        builder.Connect(to_desired.get_output_port(), hold.get_input_port())
+        builder.ExportInput(to_desired.get_input_port(), "pose")
+        builder.ExportOutput(hold.get_output_port(), "desired_state")
+        # [x y z roll pitch yaw] from the joints [x y z yaw pitch roll]
+        _export_selections(builder, plant.num_positions() + plant.num_velocities(),
+                           (("pose_measured", q_index[[0, 1, 2, 5, 4, 3]]),))
+        builder.BuildInto(self)
+
+    def get_pose_input_port(self):
+        return self.GetInputPort("pose")
+
+    def get_plant_state_input_port(self):
+        return self.GetInputPort("plant_state")
 
 
 def rpy_pose6(X) -> np.ndarray:

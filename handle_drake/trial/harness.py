@@ -149,6 +149,9 @@ class TrialHarness:
             hand bodies' contacts on the object; simulation with an object only).
         meshcat: optional Meshcat for live view and :meth:`advance` recordings.
         hardware: drive the real (CAN) hand; the simulator then keeps real time.
+        finite_commands: ``add_controller`` feeds the station's command inputs with
+            commands finite by construction (see :func:`MakeHandStation`: the simulated
+            drivers are then Drake primitives).
 
     Attributes: ``scenario``, ``station``, ``plant`` (None on hardware),
     ``controller``, ``diagram``, ``simulator``, ``context`` (the root context).
@@ -156,7 +159,7 @@ class TrialHarness:
 
     def __init__(self, scenario: Scenario, add_controller: Callable | None = None, *,
                  log=DEFAULT_LOG, object_contacts: bool = False, meshcat=None,
-                 hardware: bool = False):
+                 hardware: bool = False, finite_commands: bool = False):
         if object_contacts and (hardware or scenario.object is None):
             raise ValueError("object_contacts needs a simulated scenario with an object")
         self.scenario = scenario
@@ -164,7 +167,8 @@ class TrialHarness:
         self.hardware = hardware
         builder = DiagramBuilder()
         self.station = builder.AddNamedSystem(
-            "station", MakeHandStation(scenario, meshcat, hardware=hardware))
+            "station", MakeHandStation(scenario, meshcat, hardware=hardware,
+                                       finite_commands=finite_commands))
         self.plant = None if hardware else GetPlant(self.station)
         self.controller = None if add_controller is None else add_controller(builder, self.station)
         self._loggers = {}

@@ -116,10 +116,15 @@ class ScenarioRunner:
         hardware: drive the real (CAN) hand instead of the simulation, in
             real time; ``reset`` then only restarts the script and the logs.
         log: port names to record (see :class:`TrialHarness`).
+        finite_commands: the station's drivers as Drake primitives (no Python call per
+            control period; see :func:`~handle_drake.station.MakeHandStation`). Default:
+            when the scenario's validated keyframe script drives every command input
+            (no controller; a floating wrist has a script), where the Python drivers'
+            hold on a non-finite command cannot act; False keeps the Python drivers.
     """
 
     def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False,
-                 log=DEFAULT_LOG):
+                 log=DEFAULT_LOG, finite_commands: bool | None = None):
         if hardware and scenario.controller is not None:
             raise ValueError("a scenario controller (the guarded grasp) reads simulated contact "
                              "results: it cannot drive the hardware; use a script")
@@ -127,9 +132,13 @@ class ScenarioRunner:
         self.meshcat = meshcat
         self.hardware = hardware
         self.initial_command = hand_initial_command(scenario)
+        if finite_commands is None:
+            finite_commands = scenario.controller is None and (
+                bool(scenario.script) or not isinstance(scenario.hand.mount, FloatingWrist))
         self.harness = TrialHarness(
             scenario, self.add_driver, log=log, meshcat=meshcat, hardware=hardware,
-            object_contacts=scenario.object is not None and not hardware)
+            object_contacts=scenario.object is not None and not hardware,
+            finite_commands=finite_commands)
         self.station = self.harness.station
         self.controller = self.harness.controller
         self.diagram = self.harness.diagram

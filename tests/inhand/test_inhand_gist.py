@@ -136,3 +136,28 @@ def test_motion_source_sends_the_frames_as_a_zero_order_hold():
     for t, value in zip(data.sample_times(), data.data().T, strict=True):
         j = min(10, int(np.floor(t / 0.1 + 1e-9)) + 1)
         np.testing.assert_allclose(value, F[j - 1])
+
+
+def test_held_frames_give_a_sampling_driver_the_sources_commands():
+    # what a driver sampling every period reads: the source's output at each sample time
+    # (evaluated in its context) and the planned hold's value there, bit for bit, for the
+    # in-hand task's gist (50 frames over 1 s, the station's 5 ms driver) and a gist whose
+    # frame boundaries fall between samples (10 frames over 0.7 s, 2 ms)
+    cases = [(task_gist("cylinder_rotation"), 1.0, 50, 0.005, 1.9),
+             (_gist(), 0.7, 10, 0.002, 1.0)]
+    rng = np.random.default_rng(3)
+    for g, duration, n, period, end in cases:
+        b = g.bounds()
+        c = b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])
+        source = GistMotionSource(g, np.full(20, 0.05), duration, n)
+        context = source.CreateDefaultContext()
+        source.set_parameters(context, c)
+        held = source.held_frames(c, period, end)
+        times = np.arange(int(round(end / period)) + 1) * period
+        assert held.get_number_of_segments() < len(times) / 2  # one per frame, not per sample
+        for t in times:
+            context.SetTime(t)
+            np.testing.assert_array_equal(held.value(t).ravel(),
+                                          source.get_output_port().Eval(context))
+        np.testing.assert_array_equal(source.frame_indices(times),
+                                      [source.frame_index(t) for t in times])

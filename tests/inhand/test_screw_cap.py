@@ -210,6 +210,38 @@ def test_gaits_repeat_the_frames(trial):
         GaitMotionSource(trial.gist, np.zeros(20), 1.0, 50, n_gaits=0)
 
 
+def test_frame_indices_are_frame_index_at_every_time(trial):
+    # the planned commands' targets (one numpy pass) against the source's own per-time
+    # index, at every 2 ms step and on every frame boundary (k duration / N, where the
+    # 1e-9 guard decides), for one and several gaits
+    for duration, n_gaits in ((1.0, 3), (0.6, 1), (1.2, 2)):
+        source = GaitMotionSource(trial.gist, np.zeros(20), duration, 50, n_gaits=n_gaits)
+        end = (n_gaits + 1) * duration
+        times = np.r_[np.arange(int(end / 0.002) + 1) * 0.002,
+                      np.arange(50 * (n_gaits + 1) + 1) * duration / 50]
+        expected = [source.frame_index(float(t)) for t in times]
+        np.testing.assert_array_equal(source.frame_indices(times), expected)
+
+
+def test_planned_commands_hold_one_segment_per_change(trial):
+    # equal consecutive commands share one zero-order-hold segment: the same value as a
+    # segment per step at every step time (bit for bit), with fewer segments
+    planned = trial._build()["planned"]
+    x = _stroke(trial)
+    source = trial._build()["source"]
+    n = 601
+    targets = source.frames_for(x)[source.frame_indices(np.arange(n) * planned.period) - 1]
+    cmd = planned.commands(targets)
+    trajectory = planned.trajectory(cmd)
+    held = (cmd[1:] == cmd[:-1]).all(axis=1).sum()
+    assert held > 100 and trajectory.get_number_of_segments() == len(cmd) - held
+    for k in range(len(cmd) + 3):
+        expected = cmd[min(k, len(cmd) - 1)][planned._order]
+        value = trajectory.value(k * planned.period).ravel()
+        np.testing.assert_array_equal(value[:20], expected)
+        assert not value[20:].any()
+
+
 def test_bad_settings():
     with pytest.raises(ValueError, match="target_deg"):
         ScrewCapTask(target_deg=-1)

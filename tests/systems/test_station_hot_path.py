@@ -69,33 +69,40 @@ class ReferenceWristDriver(WristDriver):
                 [pose_to_wrist_joints(pose)[self._actuator_order], np.zeros(6)]))
 
 
-def _demo_logs(contact_model="point", duration=1.3):
+def _demo_logs(contact_model="point", duration=1.3, finite_commands=None):
     """The demo grasp (reach, close on the sphere: contacts from ~0.9 s) with every logger."""
     scenario = LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO,
                             data=f"plant_config: {{contact_model: {contact_model}}}")
-    runner = ScenarioRunner(scenario)
+    runner = ScenarioRunner(scenario, finite_commands=finite_commands)
     result = runner.run(duration)
     return result, runner.harness.logs()
 
 
 @pytest.mark.parametrize("contact_model", ["point", "hydroelastic_with_fallback"])
 def test_the_station_logs_what_the_reference_systems_log(monkeypatch, contact_model):
+    # the script's run: the drivers in Drake primitives (finite_commands, the default of a
+    # scripted scenario); the station's Python drivers; the reference Python systems
     duration = 1.3 if contact_model == "point" else 1.05
     fast, fast_logs = _demo_logs(contact_model, duration)
+    runner = ScenarioRunner(LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO))
+    assert not isinstance(runner.station.GetSubsystemByName("hand_driver"), PdHandDriver)
+    python, python_logs = _demo_logs(contact_model, duration, finite_commands=False)
     with monkeypatch.context() as patch:
         patch.setattr(station_module, "FingertipTactile", ReferenceTactile)
         patch.setattr(station_module, "PdHandDriver", ReferenceHandDriver)
         patch.setattr(station_module, "WristDriver", ReferenceWristDriver)
-        reference, reference_logs = _demo_logs(contact_model, duration)
+        reference, reference_logs = _demo_logs(contact_model, duration, finite_commands=False)
     assert len(fast.times) == len(reference.times) == round(duration / 0.01) + 1
     # The trial touches: several fingertips carry load (else the tactile check is empty).
     assert np.count_nonzero(reference.tactile[-1] > 0.1) >= 3
-    np.testing.assert_array_equal(fast.tactile, reference.tactile)
-    np.testing.assert_array_equal(fast.hand_position, reference.hand_position)
-    np.testing.assert_array_equal(fast.object_position, reference.object_position)
-    assert fast_logs.keys() == reference_logs.keys()
-    for name, log in fast_logs.items():
-        np.testing.assert_array_equal(log.data(), reference_logs[name].data(), err_msg=name)
+    for run, logs in ((fast, fast_logs), (python, python_logs)):
+        np.testing.assert_array_equal(run.tactile, reference.tactile)
+        np.testing.assert_array_equal(run.hand_position, reference.hand_position)
+        np.testing.assert_array_equal(run.object_position, reference.object_position)
+        assert logs.keys() == reference_logs.keys()
+        for name, log in logs.items():
+            np.testing.assert_array_equal(log.data(), reference_logs[name].data(),
+                                          err_msg=name)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf])

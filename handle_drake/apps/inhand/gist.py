@@ -39,6 +39,7 @@ import dataclasses as dc
 
 import numpy as np
 from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 
@@ -337,6 +338,33 @@ class GistMotionSource(LeafSystem):
     def frame_index(self, t: float) -> int:
         """The frame (1..N) sent at time ``t`` (s)."""
         return int(min(self._n, max(1, np.floor(t / self._duration * self._n + 1e-9) + 1)))
+
+    def frame_indices(self, times) -> np.ndarray:
+        """:meth:`frame_index` of every time in ``times`` (s), in one numpy pass: the same
+        floating-point operations in the same order, element-wise."""
+        t = np.asarray(times, dtype=float)
+        index = np.floor(t / self._duration * self._n + 1e-9) + 1
+        return np.minimum(self._n, np.maximum(1, index)).astype(int)
+
+    def frames_for(self, parameters) -> np.ndarray:
+        """The (N, 20) frames of ``parameters`` (as the output sends them)."""
+        return self._frames(np.asarray(parameters, dtype=float))
+
+    def held_frames(self, parameters, period: float, end_time: float):
+        """What the output sends at the times ``k period`` (k = 0.. up to ``end_time``, s)
+        as a zero-order-hold trajectory whose breaks sit half a period before each such
+        time (no ambiguity there; one segment per run of equal frames): played by a
+        ``TrajectorySource`` into a driver that samples its command every ``period``, it
+        gives the driver the same command at every sample as this system, without a
+        Python call per sample."""
+        n = int(np.ceil(end_time / period - 1e-9)) + 1
+        values = self.frames_for(parameters)[self.frame_indices(np.arange(n) * period) - 1]
+        if not np.isfinite(values).all():  # where the commands enter (a driver in Drake
+            raise ValueError("parameters: their frames are not finite")  # primitives)
+        breaks = (np.arange(n) - 0.5) * period
+        keep = np.r_[True, np.any(values[1:] != values[:-1], axis=1)]
+        breaks, values = np.append(breaks[keep], breaks[-1] + period), values[keep]
+        return PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([values, values[-1]]).T)
 
     def _frames(self, c) -> np.ndarray:
         # A cache of a pure function: all N frames of the parameter vector ``c`` read from

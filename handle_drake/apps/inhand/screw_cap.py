@@ -265,15 +265,19 @@ class GaitMotionSource(GistMotionSource):
             raise ValueError(f"n_gaits: expected an integer >= 1, got {n_gaits!r}")
         self._n_gaits = n_gaits
 
-    def frames_for(self, parameters) -> np.ndarray:
-        """The (N, 20) frames of one gait for ``parameters`` (as the output sends them)."""
-        return self._frames(np.asarray(parameters, dtype=float))
-
     def frame_index(self, t: float) -> int:
         cycle = math.floor(t / self._duration + 1e-9)
         if cycle >= self._n_gaits:
             return self._n
         return super().frame_index(t - cycle * self._duration)
+
+    def frame_indices(self, times) -> np.ndarray:
+        """:meth:`frame_index` of every time in ``times`` (s), in one numpy pass: the same
+        floating-point operations in the same order, element-wise."""
+        t = np.asarray(times, dtype=float)
+        cycle = np.floor(t / self._duration + 1e-9)
+        return np.where(cycle >= self._n_gaits, self._n,
+                        super().frame_indices(t - cycle * self._duration))
 
 
 def _proximity(mu: float) -> ProximityProperties:
@@ -467,15 +471,22 @@ class PlannedCommands:
         """(K + 1, nu) commands cmd_0..cmd_K for targets (K, nu) at t_0..t_K-1."""
         cmd = np.empty((len(targets) + 1, self.q0.size))
         cmd[0] = current = self.q0
+        low, high = -self._max_step, self._max_step
+        # np.clip's values (it computes min(max(.))) without its wrapper: 600 steps a trial
         for k, target in enumerate(np.clip(targets, self._lower, self._upper)):
-            current = current + np.clip(target - current, -self._max_step, self._max_step)
+            current = current + np.minimum(np.maximum(target - current, low), high)
             cmd[k + 1] = current
         return cmd
 
     def trajectory(self, cmd: np.ndarray):
+        """The zero-order hold of ``cmd`` (``cmd_k`` from ``(k - 0.5) period``), one
+        segment per run of equal commands (a held command is one segment, not one per
+        step: the same value at every time, a quarter of the segments to build)."""
         desired = np.hstack([cmd[:, self._order], np.zeros((len(cmd), self.q0.size))])
         breaks = (np.arange(len(cmd)) - 0.5) * self.period
-        breaks = np.append(breaks, breaks[-1] + self.period)
+        end = breaks[-1] + self.period
+        keep = np.r_[True, np.any(desired[1:] != desired[:-1], axis=1)]
+        breaks, desired = np.append(breaks[keep], end), desired[keep]
         return PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([desired, desired[-1]]).T)
 
     def plan(self, source, parameters, end_time: float) -> None:
@@ -483,7 +494,7 @@ class PlannedCommands:
         ``end_time`` (s)."""
         n = int(math.ceil(end_time / self.period - 1e-9)) + 1
         frames_ = source.frames_for(parameters)
-        targets = frames_[[source.frame_index(k * self.period) - 1 for k in range(n)]]
+        targets = frames_[source.frame_indices(np.arange(n) * self.period) - 1]
         self.player.UpdateTrajectory(self.trajectory(self.commands(targets)))
 
 
@@ -902,7 +913,7 @@ class ScrewCapTrial(GistTrial):
         simulator = built["simulator"]
         context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
-        reverse.set_start(reverse.GetMyContextFromRoot(context), c.total_time)
+        reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         credits, held = [], False
         for t in c.reversal_sample_times():
             simulator.AdvanceTo(float(t))
@@ -927,7 +938,7 @@ class ScrewCapTrial(GistTrial):
                                                              if built["joint"] is None else 0))
         reverse = built["reverse"]
         if reverse is not None:
-            reverse.set_start(reverse.GetMyContextFromRoot(context), np.inf)
+            reverse.set_reversed(reverse.GetMyContextFromRoot(context), False)
         return built["plant"].GetMyContextFromRoot(context)
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
@@ -956,6 +967,7 @@ class ScrewCapTrial(GistTrial):
             meshcat.StartRecording()
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
+        benchmark = c.benchmark_at(samples)  # per sample (np.interp's values, computed once)
         step = 1e-3 * c.time_step
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
@@ -970,7 +982,7 @@ class ScrewCapTrial(GistTrial):
                 turns.append(turn)
                 truths.append(truth)
                 contacts.append(summary["touching"])
-                matches[i] = sample_credit(gripped, turn, float(c.benchmark_at(t)),
+                matches[i] = sample_credit(gripped, turn, float(benchmark[i]),
                                            c.tolerance_deg, c.partial_credit)
                 k = st["next_check"]
                 if k < checks.size and t >= checks[k] - step:
@@ -1083,7 +1095,7 @@ def simulate_scenario(text: str, reverse_time: float = 0.5) -> dict:
     if joint is None:
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse = built["reverse"]
-        reverse.set_start(reverse.GetMyContextFromRoot(context), scenario.total_time)
+        reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         simulator.AdvanceTo(scenario.total_time + reverse_time)
         p = plant.EvalBodyPoseInWorld(plant_context, body).translation()
         touching = contact_summary(plant, plant_context, built)["touching"]

@@ -57,7 +57,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, LeafSystem, NumericParameterIndex
+from pydrake.systems.primitives import TrajectorySource
 
 from handle_drake.apps.inhand.evaluation import (
     incremental_score,
@@ -122,25 +123,30 @@ TASKS: dict[str, TaskSpec] = {
 
 
 class ReversedGravity(LeafSystem):
-    """From ``start`` (s, a numeric parameter; default never) on, a force ``-2 m g`` on the
-    body at its centre of mass: its weight reversed (the hand turned palm down, for it)."""
+    """While switched on (a numeric parameter; default off), a force ``-2 m g`` on the body
+    at its centre of mass: its weight reversed (the hand turned palm down, for it).
+
+    The output depends on that parameter alone (its only prerequisite), so Drake computes
+    it once per switch and the plant's every step reads the cached forces: no Python call
+    per step. Switch it on at the time the reversal starts (the trials do so at the end of
+    the hold: the steps from then on feel it)."""
 
     def __init__(self, plant, body):
         super().__init__()
         self._index = body.index()
         self._force = -2.0 * body.default_mass() * plant.gravity_field().gravity_vector()
-        self._start = self.DeclareNumericParameter(BasicVector([np.inf]))
+        self._on = self.DeclareNumericParameter(BasicVector([0.0]))
         self.DeclareAbstractOutputPort(
             "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
-            self._calc)
+            self._calc, prerequisites_of_calc={
+                self.numeric_parameter_ticket(NumericParameterIndex(self._on))})
 
-    def set_start(self, context, start: float) -> None:
-        context.get_mutable_numeric_parameter(self._start).SetAtIndex(0, float(start))
+    def set_reversed(self, context, on: bool) -> None:
+        context.get_mutable_numeric_parameter(self._on).SetAtIndex(0, 1.0 if on else 0.0)
 
     def _calc(self, context, output):
-        start = context.get_numeric_parameter(self._start).GetAtIndex(0)
         forces = []
-        if context.get_time() >= start - 1e-9:
+        if context.get_numeric_parameter(self._on).GetAtIndex(0) > 0.5:
             f = ExternallyAppliedSpatialForce()
             f.body_index = self._index
             f.p_BoBq_B = np.zeros(3)
@@ -374,12 +380,18 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     gist = scenario.action_gist()
     q0 = scenario.initial_command()
 
-    reverse = []
+    reverse, player = [], []
+    period = scenario.station.driver.control_period
 
     def add_motion(builder, station):
+        # The source holds the trial's parameters and its frames; what reaches the hand
+        # driver is their zero-order hold at the driver's sample times (GistMotionSource.
+        # held_frames, re-planned per trial): the same commands, no Python call per sample.
         source = builder.AddNamedSystem("motion", GistMotionSource(
             gist, q0, scenario.motion_duration, scenario.n_frames))
-        builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
+        player.append(builder.AddNamedSystem("motion_frames", TrajectorySource(
+            source.held_frames(gist.initial_parameters(), period, period))))
+        builder.Connect(player[0].get_output_port(), station.GetInputPort("hand.position"))
         plant = GetPlant(station)
         reverse.append(builder.AddNamedSystem("reversed_gravity",
                                               ReversedGravity(plant, object_body(plant))))
@@ -387,7 +399,9 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
                         station.GetInputPort("applied_spatial_force"))
         return source
 
-    harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat)
+    # the frames are finite (validated parameters): the station's driver in Drake primitives
+    harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat,
+                           finite_commands=True)
     plant, source = harness.plant, harness.controller
     hand = plant.GetModelInstanceByName("hand")
     hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
@@ -398,6 +412,7 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
         still[sl][1:] = 0.0
     harness.reset()
     source.set_parameters(harness.controller_context(), still)
+    player[0].UpdateTrajectory(source.held_frames(still, period, scenario.settle_time))
     harness.initialize()
     harness.advance(scenario.settle_time)
     # Trials start from this context, not from the scenario's default one.
@@ -407,6 +422,7 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     body = object_body(plant)
     weight = body.default_mass() * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
     return dict(harness=harness, settled=settled, body=body, reverse=reverse[0], weight=weight,
+                player=player[0], period=period,
                 hand_bodies=hand_bodies,
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
                 if accelerometer else None,
@@ -553,6 +569,8 @@ class InHandTrial(GistTrial):
         context, plant = harness.context, harness.plant
         context.SetTimeStateAndParametersFrom(built["settled"])
         harness.controller.set_parameters(harness.controller_context(), x)
+        built["player"].UpdateTrajectory(harness.controller.held_frames(
+            x, built["period"], c.total_time + c.reverse_time))
         plant_context = harness.plant_context()
         X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
         samples = c.sample_times()
@@ -586,7 +604,7 @@ class InHandTrial(GistTrial):
         st.palm_share = _lift(results, body, built["hand_bodies"]).get("palm", 0.0) / \
             built["weight"]
         reverse = built["reverse"]
-        reverse.set_start(reverse.GetMyContextFromRoot(harness.context), c.total_time)
+        reverse.set_reversed(reverse.GetMyContextFromRoot(harness.context), True)
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         harness.advance(c.total_time + c.reverse_time)
         travel = float(np.linalg.norm(

@@ -1,0 +1,116 @@
+"""A trial timed in another process, for a benchmark's before/after in one run.
+
+``python benchmarks/support/trial_worker.py KIND OPTIONS_JSON`` builds the in-hand trial
+(``screw_cap``: ``ScrewCapTrial(ScrewCapTask(**options))``; ``inhand``:
+``InHandTrial(InHandTask(**options))``) with whatever ``handle_drake`` the process imports
+first (``PYTHONPATH`` pointing at a tree extracted from a git revision: the "before"),
+settles it, prints ``ready`` and then, for each ``run`` line on stdin, evaluates the
+hand-written stroke once and prints one JSON line: the trial's wall time and its outcome
+(for the bit-identity check against this tree's). :class:`BaselineTrial` runs it from a
+revision.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def stroke(gist):
+    """The hand-written stroke (J3 1.0, J2 0.9 on the fingers' flexing meta motions)."""
+    x = gist.initial_parameters()
+    for m, sl in zip(gist.motions, gist.slices(), strict=True):
+        x[sl][1:] = [1.0, 0.9] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    return x
+
+
+def make_trial(kind: str, options: dict):
+    """``(trial, run)``: the trial and ``run() -> outcome`` of the stroke."""
+    if kind == "screw_cap":
+        from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
+
+        trial = ScrewCapTrial(ScrewCapTask(**options))
+        x = stroke(trial.gist)
+        trial._build()
+        return trial, lambda: trial.evaluate(x, early_stop=False)
+    if kind == "inhand":
+        from handle_drake.apps.inhand.task import InHandTask, InHandTrial
+
+        trial = InHandTrial(InHandTask(**options))
+        x = stroke(trial.gist)
+        trial._build()
+        return trial, lambda: trial.evaluate(x)
+    raise ValueError(f"kind: expected screw_cap or inhand, got {kind!r}")
+
+
+def outcome_dict(outcome) -> dict:
+    d = outcome.as_dict()
+    d.pop("wall_time", None)
+    return json.loads(json.dumps(d, default=float))
+
+
+class BaselineTrial:
+    """The trial of git revision ``revision`` (None: this checkout, as it is) in a worker
+    process (its ``handle_drake`` extracted from git); :meth:`run` times one evaluation
+    there. Time both sides in workers: on a loaded machine the scheduler favours a process
+    that has been waiting, which biases a worker against the benchmark's own process."""
+
+    def __init__(self, revision: str | None, kind: str, options: dict):
+        self.revision = revision
+        if revision is None:
+            self._dir = str(ROOT)
+        else:
+            self._dir = tempfile.mkdtemp(prefix=f"baseline-{revision}-")
+            archive = subprocess.run(["git", "archive", revision, "handle_drake", "models",
+                                      "diagrams"], cwd=ROOT, capture_output=True,
+                                     check=True).stdout
+            path = Path(self._dir) / "tree.tar"
+            path.write_bytes(archive)
+            with tarfile.open(path) as tar:
+                tar.extractall(self._dir, filter="data")
+        env = {**os.environ, "PYTHONPATH": self._dir, "OPENBLAS_NUM_THREADS": "1"}
+        self._process = subprocess.Popen(
+            [sys.executable, str(Path(__file__).resolve()), kind, json.dumps(options)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env, cwd=self._dir)
+        line = self._process.stdout.readline().strip()
+        if line != "ready":
+            raise RuntimeError(f"baseline worker at {revision}: {line!r}")
+
+    def run(self) -> tuple[float, float, dict]:
+        """(wall s of the trial, CPU s of the worker, outcome)."""
+        self._process.stdin.write("run\n")
+        self._process.stdin.flush()
+        reply = json.loads(self._process.stdout.readline())
+        return reply["wall"], reply["cpu"], reply["outcome"]
+
+    def close(self) -> None:
+        self._process.stdin.close()
+        self._process.wait(timeout=30)
+
+
+def main() -> int:
+    import time
+
+    kind, options = sys.argv[1], json.loads(sys.argv[2])
+    _, run = make_trial(kind, options)
+    run()
+    print("ready", flush=True)
+    for line in sys.stdin:
+        if line.strip() != "run":
+            break
+        cpu = time.process_time()
+        outcome = run()
+        print(json.dumps({"wall": outcome.wall_time, "cpu": time.process_time() - cpu,
+                          "outcome": outcome_dict(outcome)}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
