@@ -143,7 +143,9 @@ def drive(client, layout, duration: float, pids=()) -> dict:
     for seconds in (WARMUP, duration):
         # One hand period of drift per run: the phase sweeps the hand cycle once.
         # Slower than the server's commit limit (RATE), never faster: see the docstring.
-        period = 1.0 / RATE + 1.0 / RATE / (seconds * RATE)
+        # (``procs-udp-fastclock`` keeps the clock this benchmark used before, for comparison.)
+        drift = -1.0 if os.environ.get("BENCH_CAN_CLOCK") == "faster" else 1.0
+        period = 1.0 / RATE + drift / RATE / (seconds * RATE)
         client.latencies.clear()
         stats0 = client.request_stats(2.0)
         t_stats0 = time.perf_counter()
@@ -392,6 +394,9 @@ def run_case(case: str, kind: str, frame_format: str) -> dict:
         return case_inproc(kind, frame_format)
     if case == "procs-udp":
         return case_procs(kind, frame_format)
+    if case == "procs-udp-fastclock":  # the earlier command clock, 1 period per run faster
+        os.environ["BENCH_CAN_CLOCK"] = "faster"
+        return case_procs(kind, frame_format)
     if case == "procs-udp-rt":
         return case_procs(kind, frame_format, RT_PRIORITY)
     if case == "floor-udp-1":
@@ -402,7 +407,8 @@ def run_case(case: str, kind: str, frame_format: str) -> dict:
         return case_floor_udp(1, 1, 48, 64)
     if case == "floor-tcp":
         return case_floor_tcp()
-    raise ValueError(f"case: expected one of {CHAIN_CASES + FLOOR_CASES}, got {case!r}")
+    cases = CHAIN_CASES + FLOOR_CASES + ("procs-udp-fastclock",)
+    raise ValueError(f"case: expected one of {cases}, got {case!r}")
 
 
 # -- the parent: one child process per case --------------------------------------------------
@@ -432,7 +438,7 @@ def child(code: Path, case: str, kind: str, frame_format: str = "-") -> dict:
     return value
 
 
-def rounds(n: int, run: ResultsRun) -> None:
+def rounds(n: int, run: ResultsRun, old_clock: bool = False) -> None:
     """Barrett against Shadow without RT priority, interleaved and repeated, floors in each round.
 
     Each round runs every procs-udp case and the UDP/TCP floors once, in a random order, so
@@ -440,6 +446,8 @@ def rounds(n: int, run: ResultsRun) -> None:
     and range over rounds of p50 and p99 and how often p99 met 2 ms.
     """
     names = [f"procs-udp/{k}/{f}" for k in KINDS for f in FORMATS] + list(FLOOR_CASES)
+    if old_clock:  # the same chains under the clock used before 2026-11-27 evening
+        names += [f"procs-udp-fastclock/{k}/{f}" for k in KINDS for f in FORMATS]
     rng = random.Random(0)
     runs: dict[str, list] = {name: [] for name in names}
     load_start = os.getloadavg()
@@ -496,6 +504,10 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=0,
                         help="repeat procs-udp (both hands, both formats) and the floors N times, "
                              "in a shuffled order each round; writes can_rounds.json")
+    parser.add_argument("--old-clock", action="store_true",
+                        help="with --rounds: also run each chain under the command clock used "
+                             "before (one hand period per run faster than 1 kHz: it queued in "
+                             "the server's 1 kHz commit limit), as procs-udp-fastclock/...")
     parser.add_argument("--child-echo-udp", nargs=5, help=argparse.SUPPRESS)
     parser.add_argument("--child-echo-tcp", nargs=1, type=int, help=argparse.SUPPRESS)
     add_page_arguments(parser, "can")
@@ -512,9 +524,11 @@ def main() -> None:
         return
     if args.rounds < 0:
         parser.error(f"--rounds: expected a count >= 0, got {args.rounds}")
+    if args.old_clock and not args.rounds:
+        parser.error("--old-clock: only with --rounds")
     if args.rounds:
         rounds(args.rounds, ResultsRun("CAN hand: interleaved rounds, Barrett against Shadow",
-                                       args))
+                                       args), old_clock=args.old_clock)
         return
     run = ResultsRun("CAN hand: full-hand setpoint round trip at 1 kHz", args)
 
