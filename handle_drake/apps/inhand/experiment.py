@@ -64,7 +64,7 @@ def _task_config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
     if "cap_position" in task:  # the screw cap (handle_drake.apps.inhand.screw_cap)
         # settings added later leave the config at their defaults: logs written before resume
         defaults = {f.name: f.default for f in dc.fields(trial.config)}
-        for name in ("cap_diameter", "cap_axis_yaw_deg", "grasp_closure"):
+        for name in ("cap_diameter", "cap_axis_yaw_deg", "grasp_closure", "stages", "held_turn"):
             if name in task and task[name] == defaults.get(name):
                 del task[name]
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
