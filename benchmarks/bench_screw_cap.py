@@ -227,6 +227,7 @@ def _summary_table(rows, budget, resimulated) -> dict:
                                                                  for r in runs]))}
         line = ", ".join(f"seed {r['seed']}: {r['to_target'] or '-'}/{r['trials']}"
                          for r in runs)
+        out[optimizer].update(n_runs=len(runs), per_seed=line)
         print(f"| {optimizer} | {out[optimizer]['reached']}/{len(runs)} | "
               f"{out[optimizer]['median_trials_to_target']:g} | "
               f"{out[optimizer]['median_best_score']:.2f} | {line} |", flush=True)
@@ -381,8 +382,13 @@ def main(argv=None) -> int:
     printed = []
     for part in ("speed", "base_rate", "summary", "table"):
         if part in entry:
+            value = entry[part]
+            if part == "summary":  # one row per optimiser, then the base rate
+                value = [*table_rows(value["rows"], "optimizer"),
+                         {"optimizer": "base rate (random search's draws)",
+                          **value["base_rate_from_random"]}]
             printed += [{"task": key, "part": part, **row}
-                        for row in table_rows(entry[part], "case")]
+                        for row in table_rows(value, "case")]
     results_run.finish(printed, json.loads(json.dumps(result, default=float)), args.out)
     return 0
 
