@@ -366,3 +366,23 @@ def test_held_turn_ranks_a_cylinder_lost_below_a_smaller_turn_held():
     # held_turn asks for the free cylinder (a cap on its joint cannot be lost)
     with pytest.raises(ValueError, match="held_turn"):
         ScrewCapTask(held_turn=True)
+
+
+def test_cli_runs_the_two_strokes_target_and_refuses_strokes_elsewhere(tmp_path, capsys):
+    from handle_drake.cli import main as cli_main
+
+    db = tmp_path / "t.sqlite"
+    rc = cli_main(["inhand", "--task", "fingertip_cylinder", "--strokes", "2", "--trials", "1",
+                   "--optimizer", "random", "--db", str(db), "--no-plot", "--no-html",
+                   "--no-progress"])
+    assert rc == 0
+    from handle_drake.learning.log import TrialLog
+
+    with TrialLog(db) as log:
+        (info,) = log.runs()
+        assert "100deg" in info.run_id and "2strokes" in info.run_id
+        assert len(info.bounds) == 52
+    capsys.readouterr()
+    rc = cli_main(["inhand", "--task", "screw_cap", "--strokes", "2", "--db", str(db)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--strokes" in err and "Traceback" not in err

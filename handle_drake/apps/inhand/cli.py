@@ -54,6 +54,10 @@ def register(subparsers) -> None:
                         "(default 60)")
     p.add_argument("--gaits", type=positive_int, default=1,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp)")
+    p.add_argument("--strokes", type=int, choices=(1, 2), default=1,
+                   help="fingertip_cylinder: 2 = the harder target (TWO_STROKES: the gist "
+                        "twice in sequence, each stroke its own parameters, 100 deg held, the "
+                        "turn counted only while held; --target-deg default 100)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
@@ -97,6 +101,9 @@ def _cmd_inhand(args) -> int:
     for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
         if path is not None and path.suffix.lower() != suffix:
             raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
+    if args.strokes != 1 and args.task != "fingertip_cylinder":
+        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
+                         f"{args.task}")
     args.db.parent.mkdir(parents=True, exist_ok=True)
     try:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
@@ -113,8 +120,13 @@ def _cmd_inhand(args) -> int:
             raise ValueError(f"--task {args.task}: the incremental evaluation from the plant "
                              "only (no --accelerometer, --evaluation old)")
         default = 90.0 if args.task == "screw_cap" else 60.0
-        options = dict(progress=not args.no_progress, n_gaits=args.gaits,
-                       target_deg=default if args.target_deg is None else args.target_deg)
+        options = dict(progress=not args.no_progress, n_gaits=args.gaits)
+        if args.strokes == 2:
+            from handle_drake.apps.inhand.screw_cap import TWO_STROKES
+
+            options.update({k: v for k, v in TWO_STROKES.items() if k != "free"})
+            default = TWO_STROKES["target_deg"]
+        options["target_deg"] = default if args.target_deg is None else args.target_deg
     else:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
