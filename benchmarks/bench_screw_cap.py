@@ -42,6 +42,7 @@ from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     FOUR_FINGER_TURN,
     FOUR_FINGER_TURN_MOTION,
     PLACEMENTS,
+    TWO_STROKES,
     ScrewCapTask,
     ScrewCapTrial,
     contact_forces,
@@ -54,6 +55,8 @@ from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
 OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
+# the fingertip cylinder's targets: the 60 deg pinch (default) and TWO_STROKES
+FINGERTIP = {"pinch": {}, "two-strokes": {k: v for k, v in TWO_STROKES.items() if k != "free"}}
 
 
 def base_rate(n, seed, db, workers, options) -> dict:
@@ -344,9 +347,17 @@ def _paired(times: dict, after: str, before: str) -> dict:
             "after_over_before": ratio.tolist()}
 
 
-def summarize(db, budget, resim: bool = False) -> dict:
-    """The table from whatever the trial log holds (also of an interrupted table run)."""
+def summarize(db, budget, resim: bool = False, more=()) -> dict:
+    """The table from whatever the trial logs hold (also of an interrupted table run):
+    ``db`` and the logs ``more``. Random search's trials are uniform draws: their share
+    that reached the target is reported as the base rate (``base_rate_from_random``)."""
     rows, resimulated = {}, []
+    for path in (db, *more):
+        _summarize_log(path, budget, resim, rows)
+    return _summary_table(rows, budget, resimulated)
+
+
+def _summarize_log(db, budget, resim, rows) -> None:
     with TrialLog(db) as log:
         for info in log.runs():
             if info.run_id.startswith("base-rate"):
@@ -369,20 +380,35 @@ def summarize(db, budget, resim: bool = False) -> dict:
                 run["resimulated_palm_force_max"] = truth["palm_force_max"]
                 if "survived_reversal" in truth:
                     run["resimulated_survived_reversal"] = truth["survived_reversal"]
+                print(f"{info.run_id} best trial {best.index} (score {best.metric:.3f}): "
+                      f"logged turn {best.contacts['turn_deg']:.1f} deg, re-simulated "
+                      f"{truth['turn_deg']:.1f} deg, palm force max "
+                      f"{truth['palm_force_max']:.2f} N, survives reversed weight "
+                      f"{truth.get('survived_reversal')}", flush=True)
             rows.setdefault(info.strategy, []).append(run)
+
+
+def _summary_table(rows, budget, resimulated) -> dict:
     out = {}
     for optimizer, runs in rows.items():
-        to = [r["to_target"] if r["to_target"] else budget + 1 for r in runs]
+        # not reached: its own budget + 1 (a run that did not reach the target ran to its
+        # budget: its trials, at most --budget)
+        to = [r["to_target"] if r["to_target"] else r["trials"] + 1 for r in runs]
         out[optimizer] = {"runs": runs, "median_trials_to_target": float(np.median(to)),
                           "reached": sum(bool(r["to_target"]) for r in runs),
                           "median_best_score": float(np.median([r["best_score"]
                                                                  for r in runs]))}
         line = ", ".join(f"seed {r['seed']}: {r['to_target'] or '-'}/{r['trials']}"
                          for r in runs)
+        out[optimizer].update(n_runs=len(runs), per_seed=line)
         print(f"| {optimizer} | {out[optimizer]['reached']}/{len(runs)} | "
               f"{out[optimizer]['median_trials_to_target']:g} | "
               f"{out[optimizer]['median_best_score']:.2f} | {line} |", flush=True)
-    return {"rows": out, "resimulated": resimulated}
+    draws = sum(r["trials"] for r in rows.get("random", []))
+    hits = sum(bool(r["to_target"]) for r in rows.get("random", []))
+    base = {"draws": draws, "reached": hits, "base_rate": hits / draws if draws else None}
+    print(f"base rate (random search's uniform draws): {hits}/{draws}", flush=True)
+    return {"rows": out, "resimulated": resimulated, "base_rate_from_random": base}
 
 
 def diagnose(db, batch: int = 10) -> dict:
@@ -490,16 +516,29 @@ def main(argv=None) -> int:
     p.add_argument("--grip-digits", type=int, default=None, choices=range(1, 6),
                    metavar="N", help="screw_cap: digits that must each touch the cap within "
                    "the contact window for a check (ScrewCapTask.grip_digits; default 1)")
+    p.add_argument("--fingertip", choices=sorted(FINGERTIP), default="pinch",
+                   help="the fingertip cylinder's target: pinch (60 deg in one stroke, the "
+                        "default) or two-strokes (TWO_STROKES: 100 deg in two strokes, the "
+                        "turn counted only while held)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
+    p.add_argument("--more-db", nargs="+", type=Path, default=[], metavar="DB",
+                   help="--summarize: trial logs read after --db (e.g. each optimiser's own)")
     p.add_argument("--out", type=Path, default=RESULTS)
     add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
     preset = PLACEMENTS[args.placement]
     if preset and args.task != "screw_cap":
         p.error("--placement: only with --task screw_cap")
+    if args.fingertip != "pinch" and args.task != "fingertip_cylinder":
+        p.error("--fingertip: only with --task fingertip_cylinder")
+    if args.task == "fingertip_cylinder":
+        preset = FINGERTIP[args.fingertip]
+    # a section of the page each: the screw cap's runs, the fingertip cylinder's, speed
+    section = " ".join(([f"--task {args.task}"] if args.task != "screw_cap" else [])
+                       + (["--speed"] if args.speed else [])) or None
     results_run = ResultsRun(f"In-hand {args.task}: base rate, optimisers and speed", args,
-                             section="--speed" if args.speed else None)  # a section each
+                             section=section)
     if args.target_deg is None:
         args.target_deg = preset.get("target_deg", 90.0 if args.task == "screw_cap" else 60.0)
     if args.gaits is None:
@@ -511,8 +550,8 @@ def main(argv=None) -> int:
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
-        f"-{args.placement}" if preset else "") + (
-        f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "")
+        f"-{args.placement if args.task == 'screw_cap' else args.fingertip}" if preset else ""
+    ) + (f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "")
     entry = result.setdefault(key, {})
     if args.designs:
         result["four_finger_designs"] = designs()
@@ -523,7 +562,7 @@ def main(argv=None) -> int:
     if args.diagnose:
         entry["diagnosis"] = diagnose(args.db)
     if args.summarize:
-        entry["summary"] = summarize(args.db, args.budget, args.resimulate)
+        entry["summary"] = summarize(args.db, args.budget, args.resimulate, args.more_db)
     if args.base_rate:
         entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)
         print(json.dumps(entry["base_rate"]), flush=True)
@@ -537,9 +576,15 @@ def main(argv=None) -> int:
                for row in result.get("four_finger_designs", []) if args.designs]
     for part in ("speed", "base_rate", "summary", "table"):
         if part in entry:
-            rows = entry[part].get("table") if part == "speed" else None
+            value = entry[part]
+            if part == "speed":
+                value = value.get("table") or value
+            if part == "summary":  # one row per optimiser, then the base rate
+                value = [*table_rows(value["rows"], "optimizer"),
+                         {"optimizer": "base rate (random search's draws)",
+                          **value["base_rate_from_random"]}]
             printed += [{"task": key, "part": part, **row}
-                        for row in (rows or table_rows(entry[part], "case"))]
+                        for row in table_rows(value, "case")]
     results_run.finish(printed, json.loads(json.dumps(result, default=float)), args.out)
     return 0
 

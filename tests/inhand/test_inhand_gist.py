@@ -13,6 +13,7 @@ from handle_drake.apps.inhand.gist import (
     extract_gist,
     frames,
     parameter_dimension,
+    staged_gist,
 )
 from handle_drake.apps.inhand.task import task_gist
 from handle_drake.base.hands import get_hand_spec
@@ -161,3 +162,29 @@ def test_held_frames_give_a_sampling_driver_the_sources_commands():
                                           source.get_output_port().Eval(context))
         np.testing.assert_array_equal(source.frame_indices(times),
                                       [source.frame_index(t) for t in times])
+
+
+def test_a_staged_gist_is_the_gist_performed_in_sequence_with_its_own_parameters():
+    g = _gist()
+    two = staged_gist(g, 2)
+    assert staged_gist(g, 1) is g
+    assert two.dimension == 2 * g.dimension and len(two) == 2 * len(g)
+    # stage s: the gist's times mapped to [s / 2, (s + 1) / 2]
+    assert [(m.start, m.end) for m in two.motions[:3]] == [(0.05, 0.25), (0.1, 0.3), (0.3, 0.4)]
+    assert [(m.start, m.end) for m in two.motions[3:]] == [(0.55, 0.75), (0.6, 0.8),
+                                                           (0.8, 0.9)]
+    # eq. 46 sums over the stages: the second continues from where the first left the
+    # fingers (a finger's last motion of stage 1 ends where its stage 2 starts, eq. 46's
+    # rule), and stage 2's magnitudes do not move the frames before it starts (T = 0.55)
+    q0 = np.zeros(20)
+    c = two.initial_parameters()
+    F = frames(two, c, q0, 100)
+    one = frames(g, g.initial_parameters(), q0, 50)
+    np.testing.assert_allclose(F[99], 2 * one[-1], atol=1e-12)  # twice the net variation
+    c2 = c.copy()
+    c2[g.dimension + 1: g.dimension + 3] = 0.0  # stage 2's first FF magnitudes
+    F2 = frames(two, c2, q0, 100)
+    np.testing.assert_allclose(F2[:55], F[:55])
+    assert not np.allclose(F2[55:], F[55:])
+    with pytest.raises(ValueError, match="stages"):
+        staged_gist(g, 0)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from handle_drake.apps.cli_support import non_negative_int, positive_int, run_command
 from handle_drake.apps.cli_support import positive_float as _positive_float
-from handle_drake.apps.inhand.screw_cap import PLACEMENTS
+from handle_drake.apps.inhand.screw_cap import PLACEMENTS, TWO_STROKES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
@@ -64,6 +64,10 @@ def register(subparsers) -> None:
     p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
                    help="screw_cap: digits (thumb and fingers) that must each touch the cap "
                         "within the contact window at a check (default 1: any finger)")
+    p.add_argument("--strokes", type=int, choices=(1, 2), default=1,
+                   help="fingertip_cylinder: 2 = the harder target (TWO_STROKES: the gist "
+                        "twice in sequence, each stroke its own parameters, 100 deg held, the "
+                        "turn counted only while held; --target-deg default 100)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
@@ -107,6 +111,9 @@ def _cmd_inhand(args) -> int:
     for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
         if path is not None and path.suffix.lower() != suffix:
             raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
+    if args.strokes != 1 and args.task != "fingertip_cylinder":
+        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
+                         f"{args.task}")
     args.db.parent.mkdir(parents=True, exist_ok=True)
     try:
         TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
@@ -129,8 +136,11 @@ def _cmd_inhand(args) -> int:
                              "only (no --accelerometer, --evaluation old)")
         default = preset.get("target_deg", 90.0) if args.task == "screw_cap" else 60.0
         options = dict(preset, progress=not args.no_progress,
-                       n_gaits=preset.get("n_gaits", 1) if args.gaits is None else args.gaits,
-                       target_deg=default if args.target_deg is None else args.target_deg)
+                       n_gaits=preset.get("n_gaits", 1) if args.gaits is None else args.gaits)
+        if args.strokes == 2:
+            options.update({k: v for k, v in TWO_STROKES.items() if k != "free"})
+            default = TWO_STROKES["target_deg"]
+        options["target_deg"] = default if args.target_deg is None else args.target_deg
         if args.grip_digits is not None:
             options["grip_digits"] = args.grip_digits
     else:

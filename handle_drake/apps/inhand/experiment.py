@@ -65,7 +65,7 @@ def _task_config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
         # settings added later leave the config at their defaults: logs written before resume
         defaults = {f.name: f.default for f in dc.fields(trial.config)}
         for name in ("cap_diameter", "cap_axis_yaw_deg", "cap_length", "cap_axis_reversed",
-                     "grasp_closure", "grip_digits"):
+                     "grasp_closure", "grip_digits", "stages", "held_turn"):
             if name in task and task[name] == defaults.get(name):
                 del task[name]
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,

@@ -53,6 +53,7 @@ __all__ = [
     "parameter_dimension",
     "frames",
     "GistMotionSource",
+    "staged_gist",
 ]
 
 FINGERS = ("TH", "FF", "MF", "RF", "LF")
@@ -176,6 +177,20 @@ class ActionGist:
         except (KeyError, TypeError) as error:
             raise ValueError(f"gist: malformed meta motion ({error})") from None
         return cls(motions, str(data.get("name", "")))
+
+
+def staged_gist(gist: ActionGist, stages: int) -> ActionGist:
+    """The gist performed ``stages`` times in sequence (strokes): stage ``s`` (0-based) is
+    the gist's meta motions with their times mapped to ``[s / S, (s + 1) / S]``, each stage
+    with its own parameters (eq. 45: ``S * d_m``). The frames of eq. 46 sum over all
+    stages, so a stage continues from where the one before left the fingers."""
+    if isinstance(stages, bool) or not isinstance(stages, int) or stages < 1:
+        raise ValueError(f"stages: expected an integer >= 1, got {stages!r}")
+    if stages == 1:
+        return gist
+    motions = [MetaMotion(m.finger, (s + m.start) / stages, (s + m.end) / stages, m.variation)
+               for s in range(stages) for m in gist.motions]
+    return ActionGist(tuple(motions), f"{gist.name}-{stages}stages")
 
 
 def parameter_dimension(fingers) -> int:
