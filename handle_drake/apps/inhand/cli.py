@@ -103,22 +103,8 @@ def register(subparsers) -> None:
     p.set_defaults(func=_cmd_inhand)
 
 
-def _cmd_inhand(args) -> int:
-    from handle_drake.apps.inhand.experiment import plot_learning_curve, replay_best, run_inhand
-    from handle_drake.learning.cluster import trial_executor
-    from handle_drake.learning.log import TrialLog, TrialLogError
-
-    for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
-        if path is not None and path.suffix.lower() != suffix:
-            raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
-    if args.strokes != 1 and args.task != "fingertip_cylinder":
-        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
-                         f"{args.task}")
-    args.db.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
-    except TrialLogError as error:
-        raise ValueError(f"--db: {error}") from None
+def _task_options(args) -> dict:
+    """The task's settings from the command line (refusing flags of other tasks)."""
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")
@@ -146,6 +132,26 @@ def _cmd_inhand(args) -> int:
     else:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
+    return options
+
+
+def _cmd_inhand(args) -> int:
+    from handle_drake.apps.inhand.experiment import plot_learning_curve, replay_best, run_inhand
+    from handle_drake.learning.cluster import trial_executor
+    from handle_drake.learning.log import TrialLog, TrialLogError
+
+    for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
+        if path is not None and path.suffix.lower() != suffix:
+            raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
+    if args.strokes != 1 and args.task != "fingertip_cylinder":
+        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
+                         f"{args.task}")
+    args.db.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
+    except TrialLogError as error:
+        raise ValueError(f"--db: {error}") from None
+    options = _task_options(args)
     print(f"inhand: {args.task}, {args.optimizer}, seed {args.seed}, up to {args.trials} trials "
           f"in {args.db} ({args.executor} executor)", flush=True)
     if args.accelerometer:
