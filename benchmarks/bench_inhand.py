@@ -53,27 +53,35 @@ from handle_drake.learning.optim.population import INHAND_OPTIMIZERS  # noqa: E4
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
 
+def _bare_builder(trial):
+    """A builder with the trial's plant alone (SAP, point contact, its time step) and
+    its models: ``(builder, plant, hand instance)``."""
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.framework import DiagramBuilder
+
+    from handle_drake.station import AddPlantModels
+
+    builder = DiagramBuilder()
+    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+        time_step=trial.config.time_step, discrete_contact_approximation="sap",
+        use_sampled_output_ports=False, contact_model="point"), builder)
+    hand = AddPlantModels(plant, trial.scenario().station)
+    plant.Finalize()
+    return builder, plant, hand
+
+
 def _bare_plant(trial: InHandTrial, x, duration: float):
     """Plant + SceneGraph of the trial's scenario, PD targets from a TrajectorySource,
     simulated for ``duration`` s (the trial's own simulated time, its reversed-weight
     test included)."""
-    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import TrajectorySource
     from pydrake.trajectories import PiecewisePolynomial
 
     from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
-    from handle_drake.station import AddPlantModels
 
-    scenario = trial.scenario().station
     c = trial.config
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=c.time_step, discrete_contact_approximation="sap",
-        use_sampled_output_ports=False, contact_model="point"), builder)
-    hand = AddPlantModels(plant, scenario)
-    plant.Finalize()
+    builder, plant, hand = _bare_builder(trial)
     spec = get_hand_spec("shadow")
     F = frames(trial.gist, x, trial.initial_command(), c.n_frames)
     times = np.arange(c.n_frames + 1) * c.motion_duration / c.n_frames
@@ -114,13 +122,10 @@ def _replay_plant(trial: InHandTrial, x, duration: float):
     weight (a fixed value of the plant's force input), from the trial's settled state:
     the same physics (the object's final pose is checked equal to the trial's), no
     Python system, no samples, no checks. Returns ``(run, identical)``."""
-    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import TrajectorySource
     from pydrake.trajectories import PiecewisePolynomial
 
-    from handle_drake.station import AddPlantModels
 
     c = trial.config
     built = trial._build()
@@ -148,13 +153,7 @@ def _replay_plant(trial: InHandTrial, x, duration: float):
             driver.GetMyContextFromRoot(context)).copy())
     final = built["body"].EvalPoseInWorld(plant_ref.GetMyContextFromRoot(context))
 
-    scenario = trial.scenario().station
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=c.time_step, discrete_contact_approximation="sap",
-        use_sampled_output_ports=False, contact_model="point"), builder)
-    hand = AddPlantModels(plant, scenario)
-    plant.Finalize()
+    builder, plant, hand = _bare_builder(trial)
     breaks = np.concatenate([[0.0], (np.arange(1, steps + 1) - 0.5) * h, [duration + h]])
     values = np.array(desired).T
     source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
