@@ -573,16 +573,26 @@ def test_cli_runs_the_two_strokes_target_and_refuses_strokes_elsewhere(tmp_path,
     from handle_drake.cli import main as cli_main
 
     db = tmp_path / "t.sqlite"
-    rc = cli_main(["inhand", "--task", "fingertip_cylinder", "--strokes", "2", "--trials", "1",
-                   "--optimizer", "random", "--db", str(db), "--no-plot", "--no-html",
-                   "--no-progress"])
-    assert rc == 0
+    # the default: the two strokes (the learning task), as with --strokes 2 (the same run)
+    for strokes in ([], ["--strokes", "2"]):
+        rc = cli_main(["inhand", "--task", "fingertip_cylinder", *strokes, "--trials", "1",
+                       "--optimizer", "random", "--db", str(db), "--no-plot", "--no-html",
+                       "--no-progress"])
+        assert rc == 0
     from handle_drake.learning.log import TrialLog
 
     with TrialLog(db) as log:
         (info,) = log.runs()
         assert "100deg" in info.run_id and "2strokes" in info.run_id
         assert len(info.bounds) == 52
+    # --strokes 1: the 60 deg pinch in one stroke, another run
+    rc = cli_main(["inhand", "--task", "fingertip_cylinder", "--strokes", "1", "--trials", "1",
+                   "--optimizer", "random", "--db", str(db), "--no-plot", "--no-html",
+                   "--no-progress"])
+    assert rc == 0
+    with TrialLog(db) as log:
+        pinch = [r for r in log.runs() if r.run_id != info.run_id]
+        assert len(pinch) == 1 and "60deg" in pinch[0].run_id and len(pinch[0].bounds) == 26
     capsys.readouterr()
     rc = cli_main(["inhand", "--task", "screw_cap", "--strokes", "2", "--db", str(db)])
     err = capsys.readouterr().err
