@@ -516,10 +516,11 @@ def main(argv=None) -> int:
     p.add_argument("--grip-digits", type=int, default=None, choices=range(1, 6),
                    metavar="N", help="screw_cap: digits that must each touch the cap within "
                    "the contact window for a check (ScrewCapTask.grip_digits; default 1)")
-    p.add_argument("--fingertip", choices=sorted(FINGERTIP), default="pinch",
-                   help="the fingertip cylinder's target: pinch (60 deg in one stroke, the "
-                        "default) or two-strokes (TWO_STROKES: 100 deg in two strokes, the "
-                        "turn counted only while held)")
+    p.add_argument("--fingertip", choices=sorted(FINGERTIP), default=None,
+                   help="the fingertip cylinder's target: two-strokes (the default, as "
+                        "`handle-drake inhand`: TWO_STROKES, 100 deg in two strokes, the turn "
+                        "counted only while held) or pinch (60 deg in one stroke; the tables "
+                        "before 2026-11-27 evening)")
     p.add_argument("--workers", type=int, default=1)
     p.add_argument("--db", type=Path, default=Path("out/inhand/screw_cap.sqlite"))
     p.add_argument("--more-db", nargs="+", type=Path, default=[], metavar="DB",
@@ -530,8 +531,10 @@ def main(argv=None) -> int:
     preset = PLACEMENTS[args.placement]
     if preset and args.task != "screw_cap":
         p.error("--placement: only with --task screw_cap")
-    if args.fingertip != "pinch" and args.task != "fingertip_cylinder":
+    if args.fingertip is not None and args.task != "fingertip_cylinder":
         p.error("--fingertip: only with --task fingertip_cylinder")
+    if args.task == "fingertip_cylinder" and args.fingertip is None:
+        args.fingertip = "two-strokes"
     if args.task == "fingertip_cylinder":
         preset = FINGERTIP[args.fingertip]
     # a section of the page each: the screw cap's runs, the fingertip cylinder's, speed
