@@ -374,6 +374,13 @@ def bench_reset(repeats: int):
     }
 
 
+def _print_ratios(block: dict, labels) -> None:
+    """One line per ``(key, label)``: the ratio's median and its rounds' range."""
+    for key, label in labels:
+        r = block[key]
+        print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=3)
@@ -410,28 +417,22 @@ def main(argv=None) -> int:
     print(f"replay of the station's frames: final object z {same['replay_final_object_z']!r} vs "
           f"station {same['station_final_object_z']!r}: "
           f"{'bit-identical' if same['bit_identical'] else 'DIFFERENT'}")
-    for key, label in (("station_over_replay_cpu", "station / replay, CPU"),
-                       ("station_over_replay_wall", "station / replay, wall"),
-                       ("station_over_model_cpu", "station / model plant, CPU")):
-        r = overhead[key]
-        print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+    _print_ratios(overhead, (("station_over_replay_cpu", "station / replay, CPU"),
+                             ("station_over_replay_wall", "station / replay, wall"),
+                             ("station_over_model_cpu", "station / model plant, CPU")))
     d = overhead["python_drivers"]
     print(f"station with the Python drivers (finite_commands=False): logged signals "
           f"{'bit-identical' if d['same_logs_as_primitives'] else 'DIFFERENT'} to this tree's")
-    for key, label in (("python_over_replay_cpu", "Python drivers / replay, CPU"),
-                       ("python_over_replay_wall", "Python drivers / replay, wall"),
-                       ("primitives_over_python_cpu", "primitive drivers / Python drivers, CPU")):
-        r = d[key]
-        print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+    _print_ratios(d, (("python_over_replay_cpu", "Python drivers / replay, CPU"),
+                      ("python_over_replay_wall", "Python drivers / replay, wall"),
+                      ("primitives_over_python_cpu", "primitive drivers / Python drivers, CPU")))
     if "baseline" in overhead:
         b = overhead["baseline"]
         print(f"station at {b['revision']} (before): logged signals "
               f"{'bit-identical' if b['same_logs_as_this_tree'] else 'DIFFERENT'} to this tree's")
-        for key, label in (("before_over_replay_cpu", "before / replay, CPU"),
-                           ("before_over_replay_wall", "before / replay, wall"),
-                           ("after_over_before_cpu", "this tree / before, CPU")):
-            r = b[key]
-            print(f"{label}: {r['median']:.3f}x (rounds {r['min']:.3f}-{r['max']:.3f})")
+        _print_ratios(b, (("before_over_replay_cpu", "before / replay, CPU"),
+                          ("before_over_replay_wall", "before / replay, wall"),
+                          ("after_over_before_cpu", "this tree / before, CPU")))
     for name, r in overhead["ablation_over_replay_cpu"].items():
         print(f"station, {name} / replay, CPU: {r['median']:.3f}x "
               f"(rounds {r['min']:.3f}-{r['max']:.3f})")
