@@ -48,6 +48,23 @@ def _joint_state_indices(plant, model_instance, joint_names):
     return np.array(q_index), np.array(v_index)
 
 
+def _driver_setup(plant, model_instance, spec, initial_command, lower, upper,
+                  max_joint_velocity, control_period):
+    """What both hand drivers derive from their arguments: ``(nu, initial command clamped
+    to the limits, lower, upper, rate-limit step per period, actuator order, q index,
+    v index)``; a wrong-sized initial command is refused."""
+    nu = len(spec.actuated_joint_names)
+    initial_command = np.asarray(initial_command, dtype=float)
+    if initial_command.shape != (nu,):
+        raise ValueError(f"initial_command: expected {nu} values, got {initial_command.shape}")
+    lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    step = max_joint_velocity * control_period if max_joint_velocity > 0 else np.inf
+    order = actuated_order(plant, model_instance, spec.actuated_joint_names)
+    q_index, v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
+    return (nu, np.clip(initial_command, lower, upper), lower, upper, step, order,
+            q_index, v_index)
+
+
 class PdHandDriver(LeafSystem):
     """Tracks a joint position command with the plant's PD actuators.
 
@@ -73,17 +90,11 @@ class PdHandDriver(LeafSystem):
     def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
                  max_joint_velocity=4.0, control_period=0.002):
         super().__init__()
-        nu = len(spec.actuated_joint_names)
-        initial_command = np.asarray(initial_command, dtype=float)
-        if initial_command.shape != (nu,):
-            raise ValueError(f"initial_command: expected {nu} values, got {initial_command.shape}")
-        self._lower = np.asarray(lower, dtype=float)
-        self._upper = np.asarray(upper, dtype=float)
-        self._max_step = max_joint_velocity * control_period if max_joint_velocity > 0 else np.inf
-        self._actuator_order = actuated_order(plant, model_instance, spec.actuated_joint_names)
-        self._q_index, self._v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
+        (nu, self._initial, self._lower, self._upper, self._max_step, self._actuator_order,
+         self._q_index, self._v_index) = _driver_setup(
+            plant, model_instance, spec, initial_command, lower, upper, max_joint_velocity,
+            control_period)
         nq = len(spec.joint_names)
-        self._initial = np.clip(initial_command, self._lower, self._upper)
 
         self._command_port = self.DeclareVectorInputPort("position", nu)
         self._plant_state_port = self.DeclareVectorInputPort(
@@ -202,20 +213,14 @@ class HandDriverDiagram(Diagram):
     def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
                  max_joint_velocity=4.0, control_period=0.002):
         super().__init__()
-        nu = len(spec.actuated_joint_names)
-        initial_command = np.asarray(initial_command, dtype=float)
-        if initial_command.shape != (nu,):
-            raise ValueError(f"initial_command: expected {nu} values, got {initial_command.shape}")
-        lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
-        step = max_joint_velocity * control_period if max_joint_velocity > 0 else np.inf
-        order = actuated_order(plant, model_instance, spec.actuated_joint_names)
-        q_index, v_index = _joint_state_indices(plant, model_instance, spec.joint_names)
+        nu, initial, lower, upper, step, order, q_index, v_index = _driver_setup(
+            plant, model_instance, spec, initial_command, lower, upper, max_joint_velocity,
+            control_period)
         self._lower, self._upper = lower, upper
         nx = plant.num_positions() + plant.num_velocities()
         builder = DiagramBuilder()
         target = builder.AddNamedSystem("limits", Saturation(lower, upper))
-        self._hold = _held_state(builder, np.clip(initial_command, lower, upper),
-                                 control_period, "command")
+        self._hold = _held_state(builder, initial, control_period, "command")
         negated = builder.AddNamedSystem("negated", Gain(-1.0, nu))
         error = builder.AddNamedSystem("error", Adder(2, nu))  # target + (-cmd)
         limited = builder.AddNamedSystem("rate_limit", Saturation(np.full(nu, -step),
