@@ -27,15 +27,9 @@ from handle_drake.grasp.planning import (
     plan_grasp,
     resting_pose,
 )
-from handle_drake.scenario import LoadScenario
 from handle_drake.scene.config import initial_pose, scene_objects
 
-PATH = diagrams_dir() / "hamburg_setup.yaml"
-
-
-@pytest.fixture(scope="module")
-def hamburg():
-    return LoadScenario(filename=PATH)
+PATH = diagrams_dir() / "hamburg_setup.yaml"  # the scenario of conftest's ``hamburg``
 
 
 @pytest.fixture

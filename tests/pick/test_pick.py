@@ -10,7 +10,7 @@ from handle_drake.apps.pick.reach import ArmReach
 from handle_drake.apps.pick.scenes import GAP, REGION, random_scene
 from handle_drake.base.models import diagrams_dir
 from handle_drake.cli import main
-from handle_drake.scenario import LoadScenario, validate_scenario
+from handle_drake.scenario import validate_scenario
 from handle_drake.scene.config import (
     footprint_radius,
     hole_centres,
@@ -19,12 +19,7 @@ from handle_drake.scene.config import (
     spec_of,
 )
 
-PATH = diagrams_dir() / "hamburg_setup.yaml"
-
-
-@pytest.fixture(scope="module")
-def hamburg():
-    return LoadScenario(filename=PATH)
+PATH = diagrams_dir() / "hamburg_setup.yaml"  # the scenario of conftest's ``hamburg``
 
 
 def test_random_scenes_are_seeded_valid_and_spread(hamburg):
