@@ -358,7 +358,7 @@ def main(argv=None) -> int:
                                 args.evaluation)
     printed = []
     if args.speed:
-        printed += result["speed"].get("table") or table_rows(result["speed"], "speed")
+        printed += table_rows(result["speed"], "speed")
     if args.table:
         printed += table_rows(result[key], "task")
     run.finish(printed, result, args.out)

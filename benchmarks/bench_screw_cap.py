@@ -580,8 +580,6 @@ def main(argv=None) -> int:
     for part in ("speed", "base_rate", "summary", "table"):
         if part in entry:
             value = entry[part]
-            if part == "speed":
-                value = value.get("table") or value
             if part == "summary":  # one row per optimiser, then the base rate
                 value = [*table_rows(value["rows"], "optimizer"),
                          {"optimizer": "base rate (random search's draws)",

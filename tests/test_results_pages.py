@@ -143,3 +143,12 @@ def test_two_kinds_of_run_of_one_benchmark_keep_a_section_each(tmp_path):
     text = page.read_text()
     assert text.count("### executed") == 1 and text.count("### planning") == 1
     assert "| 18 |" in text and "| 17 |" not in text and "| 0.04 |" in text
+
+
+def test_table_rows_takes_a_results_own_rows():
+    """A speed result carrying its rows (``"table"``: per case, with per-round ratios) is
+    printed as those rows, not pivoted from its measures."""
+    rows = [{"case": "trial", "ratio_to_bare": 1.2, "rounds_range": "1.1-1.3"}]
+    speed = {"sim_time": 1.9, "median_wall": {"trial": 0.6}, "rounds": {"trial": [0.6]},
+             "table": rows}
+    assert table_rows(speed, "speed") == rows

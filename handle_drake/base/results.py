@@ -75,12 +75,16 @@ def _cell(value) -> str:
 def table_rows(value, key: str = "case") -> list[dict]:
     """A benchmark's result as table rows: a list of dicts as it is; a dict of
     dicts (or of lists of dicts) as one row per entry, its name in column
-    ``key``; a dict whose dict entries are measures keyed by the same names as
+    ``key``; a dict with its own rows (a list of dicts under ``"table"``) as
+    those rows; a dict whose dict entries are measures keyed by the same names as
     one row per name (a column per measure, the scalar entries repeated); any
     other dict as one row."""
     if isinstance(value, list):
         return [row if isinstance(row, dict) else {"value": row} for row in value]
     if isinstance(value, dict):
+        own = value.get("table")
+        if isinstance(own, list) and own and all(isinstance(row, dict) for row in own):
+            return list(own)  # a result that carries its own rows
         if value and all(isinstance(v, dict) for v in value.values()):
             return [{key: name, **{k: v for k, v in entry.items()
                                    if not isinstance(v, (list, dict))}}
