@@ -519,21 +519,28 @@ def contact_summary(plant, plant_context, built) -> dict:
     results = plant.get_contact_results_output_port().Eval(plant_context)
     cap_i = int(built["cap"].index())
     bottle_i = int(built["bottle"].index()) if built["bottle"] is not None else -1
-    hand = built["hand_bodies"]
     touching, palm_force, lift = set(), 0.0, {}
+    for name, mine, force, _ in _hand_contacts(results, built["hand_bodies"],
+                                               (cap_i, bottle_i)):
+        if mine == cap_i:
+            touching.add(name)
+            lift[name] = lift.get(name, 0.0) + float(force[2])
+        if name == "palm":
+            palm_force += float(np.linalg.norm(force))
+    return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
+
+
+def _hand_contacts(results, hand: dict, objects):
+    """The point contacts between a hand body (``hand``: body index -> name) and one of
+    ``objects`` (body indices): ``(hand body's name, object's index, contact force on
+    the object (N, world), the contact's info)``, in the results' order."""
     for k in range(results.num_point_pair_contacts()):
         info = results.point_pair_contact_info(k)
         a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        # contact_force() acts on body B: on the object (A or B) it is sign * it
         for mine, other, sign in ((a, b, -1.0), (b, a, 1.0)):
-            if mine in (cap_i, bottle_i) and other in hand:
-                name = hand[other]
-                if mine == cap_i:
-                    touching.add(name)
-                    # contact_force() is the force on body B: on the object it is sign * it
-                    lift[name] = lift.get(name, 0.0) + sign * float(info.contact_force()[2])
-                if name == "palm":
-                    palm_force += float(np.linalg.norm(info.contact_force()))
-    return {"touching": sorted(touching), "palm_force": palm_force, "lift": lift}
+            if mine in objects and other in hand:
+                yield hand[other], mine, sign * np.asarray(info.contact_force()), info
 
 
 def contact_forces(plant, plant_context, built) -> dict:
@@ -545,22 +552,15 @@ def contact_forces(plant, plant_context, built) -> dict:
     the opposite (the tangential part is at most mu times the normal one)."""
     results = plant.get_contact_results_output_port().Eval(plant_context)
     body = built["cap"]
-    cap_i, hand = int(body.index()), built["hand_bodies"]
     X = plant.EvalBodyPoseInWorld(plant_context, body)
     centre, axis = X.translation(), X.rotation().col(2)
     out = {}
-    for k in range(results.num_point_pair_contacts()):
-        info = results.point_pair_contact_info(k)
-        a, b = int(info.bodyA_index()), int(info.bodyB_index())
-        if cap_i not in (a, b) or (b if a == cap_i else a) not in hand:
-            continue
-        # contact_force() acts on body B; nhat_BA_W points from B into A
-        force = np.asarray(info.contact_force()) * (1.0 if b == cap_i else -1.0)
-        normal = np.asarray(info.point_pair().nhat_BA_W)
+    for name, _, force, info in _hand_contacts(results, built["hand_bodies"],
+                                               (int(body.index()),)):
+        normal = np.asarray(info.point_pair().nhat_BA_W)  # from B into A
         fn = float(force @ normal)
         ft = float(np.linalg.norm(force - fn * normal))
         torque = float(np.cross(np.asarray(info.contact_point()) - centre, force) @ axis)
-        name = hand[b if a == cap_i else a]
         n0, t0, q0 = out.get(name, (0.0, 0.0, 0.0))
         out[name] = (n0 + abs(fn), t0 + ft, q0 + torque)
     return out
