@@ -44,7 +44,6 @@ pin_blas(force=False)
 import numpy as np  # noqa: E402
 
 from handle_drake.apps.inhand.experiment import plot_learning_curve, run_inhand  # noqa: E402
-from handle_drake.apps.inhand.gist import frames  # noqa: E402
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS, InHandTask, InHandTrial  # noqa: E402
 from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
@@ -53,137 +52,11 @@ from handle_drake.learning.optim.population import INHAND_OPTIMIZERS  # noqa: E4
 RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
 
-def _bare_builder(trial):
-    """A builder with the trial's plant alone (SAP, point contact, its time step) and
-    its models: ``(builder, plant, hand instance)``."""
-    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-    from pydrake.systems.framework import DiagramBuilder
-
-    from handle_drake.station import AddPlantModels
-
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=trial.config.time_step, discrete_contact_approximation="sap",
-        use_sampled_output_ports=False, contact_model="point"), builder)
-    hand = AddPlantModels(plant, trial.scenario().station)
-    plant.Finalize()
-    return builder, plant, hand
-
-
-def _bare_plant(trial: InHandTrial, x, duration: float):
-    """Plant + SceneGraph of the trial's scenario, PD targets from a TrajectorySource,
-    simulated for ``duration`` s (the trial's own simulated time, its reversed-weight
-    test included)."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.primitives import TrajectorySource
-    from pydrake.trajectories import PiecewisePolynomial
-
-    from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
-
-    c = trial.config
-    builder, plant, hand = _bare_builder(trial)
-    spec = get_hand_spec("shadow")
-    F = frames(trial.gist, x, trial.initial_command(), c.n_frames)
-    times = np.arange(c.n_frames + 1) * c.motion_duration / c.n_frames
-    F = np.vstack([F[0], F])
-    # desired state of the actuated joints in actuator order: positions then zero velocities
-    q_all = np.array([actuated_to_joint_positions(spec, f) for f in F])
-    names = [plant.get_joint_actuator(i).joint().name()
-             for i in plant.GetJointActuatorIndices(hand)]
-    cols = [spec.joint_names.index(n) for n in names]
-    desired = np.hstack([q_all[:, cols], np.zeros((len(times), len(cols)))])
-    source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(times,
-                                                                                  desired.T)))
-    builder.Connect(source.get_output_port(), plant.get_desired_state_input_port(hand))
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    built = trial._build()
-    plant_ref = built["harness"].plant  # the trial's plant; its settled state starts both
-    q = plant_ref.GetPositions(plant_ref.GetMyContextFromRoot(built["settled"]))
-    v = plant_ref.GetVelocities(plant_ref.GetMyContextFromRoot(built["settled"]))
-    context = simulator.get_mutable_context()
-
-    def run():
-        context.SetTime(0.0)
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
-        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
-        simulator.Initialize()
-        start = time.perf_counter()
-        simulator.AdvanceTo(duration)
-        return time.perf_counter() - start
-
-    return run
-
-
-def _replay_plant(trial: InHandTrial, x, duration: float):
-    """The bare plant (+ SceneGraph) on the trial's own plant inputs: the desired states
-    its hand driver hands the plant at every step (recorded from one trial, held in a
-    ``TrajectorySource`` zero-order hold) and, from the end of the hold, the reversed
-    weight (a fixed value of the plant's force input), from the trial's settled state:
-    the same physics (the object's final pose is checked equal to the trial's), no
-    Python system, no samples, no checks. Returns ``(run, identical)``."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.primitives import TrajectorySource
-    from pydrake.trajectories import PiecewisePolynomial
-
-
-    c = trial.config
-    built = trial._build()
-    harness, reverse = built["harness"], built["reverse"]
-    driver = harness.station.GetSubsystemByName("hand_driver")
-    context = harness.context
-    context.SetTimeStateAndParametersFrom(built["settled"])
-    harness.controller.set_parameters(harness.controller_context(), x)
-    built["player"].UpdateTrajectory(harness.controller.held_frames(
-        x, built["period"], c.total_time + c.reverse_time))
-    plant_ref = harness.plant
-    x0 = plant_ref.GetPositionsAndVelocities(plant_ref.GetMyContextFromRoot(context)).copy()
-    forces = None
-    harness.initialize()
-    h, steps = c.time_step, int(round(duration / c.time_step))
-    reversal_step = int(round(c.total_time / h))
-    desired = []
-    for j in range(steps + 1):
-        if j:
-            harness.simulator.AdvanceTo(j * h)  # stops before the events at j h
-        if j == reversal_step:
-            reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
-            forces = reverse.get_output_port().Eval(reverse.GetMyContextFromRoot(context))
-        desired.append(driver.GetOutputPort("desired_state").Eval(
-            driver.GetMyContextFromRoot(context)).copy())
-    final = built["body"].EvalPoseInWorld(plant_ref.GetMyContextFromRoot(context))
-
-    builder, plant, hand = _bare_builder(trial)
-    breaks = np.concatenate([[0.0], (np.arange(1, steps + 1) - 0.5) * h, [duration + h]])
-    values = np.array(desired).T
-    source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
-        breaks, np.hstack([values, values[:, -1:]]))))
-    builder.Connect(source.get_output_port(), plant.get_desired_state_input_port(hand))
-    simulator = Simulator(builder.Build())
-    root = simulator.get_mutable_context()
-    plant_context = plant.GetMyMutableContextFromRoot(root)
-    force_port = plant.get_applied_spatial_force_input_port()
-    body = plant.GetBodyByName(built["body"].name())
-
-    def run():
-        root.SetTime(0.0)
-        plant.SetPositionsAndVelocities(plant_context, x0)
-        force_port.FixValue(plant_context, [])
-        simulator.Initialize()
-        start = time.perf_counter()
-        simulator.AdvanceTo(reversal_step * h)
-        force_port.FixValue(plant_context, forces)
-        simulator.AdvanceTo(duration)
-        return time.perf_counter() - start
-
-    run()
-    mine = body.EvalPoseInWorld(plant_context)
-    identical = bool(np.array_equal(mine.GetAsMatrix34(), final.GetAsMatrix34()))
-    return run, identical
-
-
 def speed(rounds: int, baseline: str | None = None) -> dict:
     sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+    from floors import inhand_bare, inhand_replay
+    from speed import OWN, paired, ratios
+    from speed import rounds as run_rounds
     from trial_worker import BaselineTrial, outcome_dict, stroke
 
     trial = InHandTrial()
@@ -193,8 +66,8 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
     mine = trial.evaluate(x)
     reversed_test = mine.survived_reversal is not None
     sim = trial.config.total_time + (trial.config.reverse_time if reversed_test else 0.0)
-    bare = _bare_plant(trial, x, sim)
-    replay, identical = _replay_plant(trial, x, sim)
+    bare = inhand_bare(trial, x, sim)
+    replay, identical = inhand_replay(trial, x, sim)
     print(f"replay of the trial's plant inputs: final object pose identical to the "
           f"trial's: {identical}", flush=True)
     instrumented = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
@@ -204,54 +77,37 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
              "bare plant, the trial's own inputs (replay)": replay,
              "trial built anew": lambda: _fresh(trial, x),
              "trial, instrumented object": lambda: instrumented.evaluate(x).wall_time}
-    before = after = same = None
+    # the trial and its two floors again, each in a worker process of its own
+    workers = {"trial (reset, checks)" + OWN: BaselineTrial(None, "inhand", {}),
+               "bare plant, same frames" + OWN: BaselineTrial(None, "inhand:bare", {}),
+               "bare plant, replay" + OWN: BaselineTrial(None, "inhand:replay", {})}
+    same = None
     if baseline:
-        before = BaselineTrial(baseline, "inhand", {})
-        same = before.run()[2] == outcome_dict(mine)
+        workers[f"trial at {baseline} (before)" + OWN] = BaselineTrial(baseline, "inhand", {})
+        same = workers[f"trial at {baseline} (before)" + OWN].run()[2] == outcome_dict(mine)
         print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
-        cases[f"trial at {baseline} (before)"] = lambda: before.run()[0]
-        after = BaselineTrial(None, "inhand", {})  # this tree, in a worker too
-        cases["trial, this tree, in a worker"] = lambda: after.run()[0]
-    times = {k: [] for k in cases}
+    cases.update({k: (lambda w=w: w.run()[1]) for k, w in workers.items()})  # CPU s
     try:
-        for _ in range(rounds):
-            for name, case in cases.items():
-                times[name].append(case())
+        times = run_rounds(cases, rounds)
     finally:
-        for worker in (before, after):
-            if worker is not None:
-                worker.close()
-    med = {k: float(np.median(v)) for k, v in times.items()}
-    floor = med["bare plant, same frames"]
-    print(f"{'case':28s} {'median s':>9s} {'x real time':>11s} {'/ bare':>7s}  rounds / bare")
-    table = []
-    for k, v in med.items():
-        per_round = np.array(times[k]) / np.array(times["bare plant, same frames"])
-        print(f"{k:28s} {v:9.3f} {sim / v:11.2f} {v / floor:7.2f}  "
-              f"{per_round.min():.2f}-{per_round.max():.2f}")
-        table.append({"case": k, "sim_time": sim, "median_wall_s": round(v, 4),
-                      "ratio_to_bare": round(v / floor, 3),
-                      "ratio_per_round_median": round(float(np.median(per_round)), 3),
-                      "rounds_range": f"{per_round.min():.2f}-{per_round.max():.2f}"})
-    to_replay = np.array(times["trial (reset, checks)"]) / np.array(
-        times["bare plant, the trial's own inputs (replay)"])
-    print(f"trial / replay, paired by round: median {np.median(to_replay):.3f} "
-          f"({' '.join(f'{r:.2f}' for r in to_replay)})")
-    out = {"sim_time": sim, "median_wall": med, "rounds": times, "table": table,
-           "replay_final_pose_identical": identical,
-           "trial_over_replay_median": float(np.median(to_replay)),
-           "ratio_to_bare": {k: v / floor for k, v in med.items()},
-           "load_end": os.getloadavg()[0]}
-    if before is not None:
-        paired = np.array(times["trial, this tree, in a worker"]) / np.array(
-            times[f"trial at {baseline} (before)"])
-        print(f"after / before (both in workers), paired by round: median "
-              f"{np.median(paired):.3f} "
-              f"({' '.join(f'{r:.2f}' for r in paired)})")
+        for worker in workers.values():
+            worker.close()
+    out = ratios(times, "bare plant, same frames", sim)
+    out.update(replay_final_pose_identical=identical,
+               trial_over_replay=paired(times, "trial (reset, checks)",
+                                        "bare plant, the trial's own inputs (replay)",
+                                        "trial / replay, in the bench's process"),
+               own_worker_trial_over_bare=paired(
+                   times, "trial (reset, checks)" + OWN, "bare plant, same frames" + OWN,
+                   "trial / bare plant, each in its own worker"),
+               own_worker_trial_over_replay=paired(
+                   times, "trial (reset, checks)" + OWN, "bare plant, replay" + OWN,
+                   "trial / replay, each in its own worker"))
+    if baseline:
         out.update(baseline=baseline, baseline_outcome_identical=same,
-                   after_over_before_median=float(np.median(paired)),
-                   after_over_before=paired.tolist())
-    print(f"load average now {out['load_end']:.2f}")
+                   after_over_before=paired(times, "trial (reset, checks)" + OWN,
+                                            f"trial at {baseline} (before)" + OWN,
+                                            "after / before (both in workers)"))
     return out
 
 

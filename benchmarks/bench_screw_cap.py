@@ -246,39 +246,20 @@ def designs() -> list:
 def speed(rounds: int, options, baseline: str | None = None) -> dict:
     """A screw-cap trial against the bare plant on the same frames from the same state
     (and the same simulated time: the fingertip cylinder's trial runs its 0.5 s of reversed
-    weight, which the bare plant then simulates too, holding the last frame). With
-    ``baseline``: the same trial at that git revision, in a worker process, every round
-    (its outcome checked equal to this tree's)."""
-    import time
-
-    from pydrake.systems.analysis import Simulator
+    weight, which the bare plant then simulates too, holding the last frame), in the
+    benchmark's process and each in a worker process of its own. With ``baseline``: the
+    same trial at that git revision, in a worker process, every round (its outcome checked
+    equal to this tree's)."""
     sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+    from floors import screw_cap_bare
+    from speed import OWN, paired, ratios
+    from speed import rounds as run_rounds
     from trial_worker import BaselineTrial, outcome_dict, stroke
-
-    from handle_drake.apps.inhand.screw_cap import build_screw_cap
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
     x = stroke(trial.gist)  # the hand-written stroke
-    built = trial._build()
-    trial._build(driver=True)  # settled before the timing
-    bare = build_screw_cap(trial.scenario(x), bare=True)
-    simulator = Simulator(bare["diagram"])
-    context = simulator.get_mutable_context()
-    plant = bare["plant"]
-    ref = built["plant"].GetMyContextFromRoot(built["settled"])
-    q, v = built["plant"].GetPositions(ref), built["plant"].GetVelocities(ref)
+    run_bare, total = screw_cap_bare(trial, x)
     mine = trial.evaluate(x, early_stop=False)
-    total = mine.sim_time + (trial.config.reverse_time if mine.survived_reversal is not None
-                             else 0.0)
-
-    def run_bare():
-        context.SetTime(0.0)
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
-        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
-        simulator.Initialize()
-        start = time.perf_counter()
-        simulator.AdvanceTo(total)
-        return time.perf_counter() - start
 
     cases = {"trial (reset, samples, checks)": lambda: trial.evaluate(x, early_stop=False)
              .wall_time,
@@ -286,65 +267,30 @@ def speed(rounds: int, options, baseline: str | None = None) -> dict:
              "trial, driver + contact results": lambda: trial.evaluate(
                  x, early_stop=False, contact_results=True, driver=True).wall_time,
              "bare plant, same frames": run_bare}
-    before = after = None
+    workers = {"trial (reset, samples, checks)" + OWN: BaselineTrial(None, "screw_cap", options),
+               "bare plant, same frames" + OWN: BaselineTrial(None, "screw_cap:bare", options)}
+    same = None
     if baseline:
-        before = BaselineTrial(baseline, "screw_cap", options)
-        _, _, outcome = before.run()
-        same = outcome == outcome_dict(mine)
+        workers[f"trial at {baseline} (before)" + OWN] = BaselineTrial(baseline, "screw_cap",
+                                                                        options)
+        same = workers[f"trial at {baseline} (before)" + OWN].run()[2] == outcome_dict(mine)
         print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
-        cases[f"trial at {baseline} (before)"] = lambda: before.run()[0]
-        after = BaselineTrial(None, "screw_cap", options)  # this tree, in a worker too
-        cases["trial, this tree, in a worker"] = lambda: after.run()[0]
+    cases.update({k: (lambda w=w: w.run()[1]) for k, w in workers.items()})  # CPU s
     try:
-        times = _rounds(cases, rounds)
+        times = run_rounds(cases, rounds)
     finally:
-        for worker in (before, after):
-            if worker is not None:
-                worker.close()
-    out = _ratios(times, "bare plant, same frames", total)
-    if before is not None:
+        for worker in workers.values():
+            worker.close()
+    out = ratios(times, "bare plant, same frames", total)
+    out["own_worker_trial_over_bare"] = paired(
+        times, "trial (reset, samples, checks)" + OWN, "bare plant, same frames" + OWN,
+        "trial / bare plant, each in its own worker")
+    if baseline:
         out.update(baseline=baseline, baseline_outcome_identical=same,
-                   **_paired(times, "trial, this tree, in a worker",
-                             f"trial at {baseline} (before)"))
+                   after_over_before=paired(times, "trial (reset, samples, checks)" + OWN,
+                                            f"trial at {baseline} (before)" + OWN,
+                                            "after / before (both in workers)"))
     return out
-
-
-def _rounds(cases: dict, rounds: int) -> dict:
-    """Every case once per round (ratios hold while the machine's speed drifts)."""
-    times = {k: [] for k in cases}
-    for _ in range(rounds):
-        for name, case in cases.items():
-            times[name].append(case())
-    return times
-
-
-def _ratios(times: dict, floor_name: str, sim_time: float) -> dict:
-    import os
-
-    med = {k: float(np.median(t)) for k, t in times.items()}
-    floor = med[floor_name]
-    load = os.getloadavg()[0]
-    table = []
-    for k, t in med.items():
-        per_round = np.array(times[k]) / np.array(times[floor_name])
-        print(f"{k:36s} {t:8.3f} s  x{t / floor:5.2f} of the bare plant (rounds "
-              f"{per_round.min():.2f}-{per_round.max():.2f})", flush=True)
-        table.append({"case": k, "sim_time": sim_time, "median_wall_s": round(t, 4),
-                      "ratio_to_bare": round(t / floor, 3),
-                      "ratio_per_round_median": round(float(np.median(per_round)), 3),
-                      "rounds_range": f"{per_round.min():.2f}-{per_round.max():.2f}"})
-    print(f"load average now {load:.2f}", flush=True)
-    return {"sim_time": sim_time, "median_wall": med, "rounds": times, "table": table,
-            "ratio_to_bare": {k: t / floor for k, t in med.items()}, "load_end": load}
-
-
-def _paired(times: dict, after: str, before: str) -> dict:
-    """This tree's trial / the baseline's (both in worker processes), paired by round."""
-    ratio = np.array(times[after]) / np.array(times[before])
-    print(f"after / before, paired by round: median {np.median(ratio):.3f} "
-          f"({' '.join(f'{r:.2f}' for r in ratio)})", flush=True)
-    return {"after_over_before_median": float(np.median(ratio)),
-            "after_over_before": ratio.tolist()}
 
 
 def summarize(db, budget, resim: bool = False, more=()) -> dict:

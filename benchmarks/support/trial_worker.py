@@ -2,8 +2,10 @@
 
 ``python benchmarks/support/trial_worker.py KIND OPTIONS_JSON`` builds the in-hand trial
 (``screw_cap``: ``ScrewCapTrial(ScrewCapTask(**options))``; ``inhand``:
-``InHandTrial(InHandTask(**options))``) with whatever ``handle_drake`` the process imports
-first (``PYTHONPATH`` pointing at a tree extracted from a git revision: the "before"),
+``InHandTrial(InHandTask(**options))``; ``KIND:bare`` / ``inhand:replay``: that trial's
+floor from ``floors.py``, so that each case of a speed table can run in a process of its
+own) with whatever ``handle_drake`` the process imports first (``PYTHONPATH`` pointing at
+a tree extracted from a git revision: the "before"),
 settles it, prints ``ready`` and then, for each ``run`` line on stdin, evaluates the
 hand-written stroke once and prints one JSON line: the trial's wall time and its outcome
 (for the bit-identity check against this tree's). :class:`BaselineTrial` runs it from a
@@ -32,7 +34,11 @@ def stroke(gist):
 
 
 def make_trial(kind: str, options: dict):
-    """``(trial, run)``: the trial and ``run() -> outcome`` of the stroke."""
+    """``(trial, run)``: the trial and ``run() -> outcome`` of the stroke (a floor's
+    ``run() -> wall s``)."""
+    kind, _, floor = kind.partition(":")
+    if floor:
+        return _make_floor(kind, floor, options)
     if kind == "screw_cap":
         from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
 
@@ -48,6 +54,24 @@ def make_trial(kind: str, options: dict):
         trial._build()
         return trial, lambda: trial.evaluate(x)
     raise ValueError(f"kind: expected screw_cap or inhand, got {kind!r}")
+
+
+def _make_floor(kind: str, floor: str, options: dict):
+    import floors
+
+    trial, _ = make_trial(kind, options)
+    x = stroke(trial.gist)
+    if (kind, floor) == ("screw_cap", "bare"):
+        return trial, floors.screw_cap_bare(trial, x)[0]
+    if kind == "inhand" and floor in ("bare", "replay"):
+        outcome = trial.evaluate(x)
+        sim = trial.config.total_time + (trial.config.reverse_time
+                                         if outcome.survived_reversal is not None else 0.0)
+        if floor == "bare":
+            return trial, floors.inhand_bare(trial, x, sim)
+        return trial, floors.inhand_replay(trial, x, sim)[0]
+    raise ValueError(f"kind: expected screw_cap:bare, inhand:bare or inhand:replay, got "
+                     f"{kind}:{floor}")
 
 
 def outcome_dict(outcome) -> dict:
@@ -107,8 +131,12 @@ def main() -> int:
             break
         cpu = time.process_time()
         outcome = run()
-        print(json.dumps({"wall": outcome.wall_time, "cpu": time.process_time() - cpu,
-                          "outcome": outcome_dict(outcome)}), flush=True)
+        if isinstance(outcome, float):  # a floor: its wall time, no outcome
+            reply = {"wall": outcome, "cpu": time.process_time() - cpu, "outcome": None}
+        else:
+            reply = {"wall": outcome.wall_time, "cpu": time.process_time() - cpu,
+                     "outcome": outcome_dict(outcome)}
+        print(json.dumps(reply), flush=True)
     return 0
 
 

@@ -61,6 +61,34 @@ def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
     assert full.score == rest.score and full.checks_passed == 1
 
 
+def test_samples_read_the_touching_hand_bodies_from_the_geometry_query_as_from_the_results():
+    # Each sample reads which hand bodies touch the cylinder from the geometry query's point
+    # pairs (no contact solve); the point-contact results hold the same pairs. The whole
+    # outcome (every sample's contact set, rotation, score) equals the contact-results read
+    # for the hand-written stroke and random draws that end in different ways.
+    trial = InHandTrial()
+    built = trial._build()
+    query = built["touching_query"]
+    assert query is not None
+    bounds = trial.bounds
+    draws = [_stroke(trial)] + list(np.random.default_rng(3).uniform(
+        bounds[:, 0], bounds[:, 1], size=(3, trial.dimension)))
+    scores = set()
+    try:
+        for x in draws:
+            built["touching_query"] = query
+            fast = trial.evaluate(x, early_stop=False).as_dict()
+            built["touching_query"] = None
+            reference = trial.evaluate(x, early_stop=False).as_dict()
+            fast.pop("wall_time"), reference.pop("wall_time")
+            assert fast == reference
+            assert any(fast["contacts"])
+            scores.add(fast["score"])
+    finally:
+        built["touching_query"] = query
+    assert len(scores) >= 2  # the draws end differently
+
+
 def test_a_palm_carried_cylinder_that_falls_under_reversed_weight_is_not_held():
     # the stroke, then a release back along its path: the fingers leave the cylinder lying
     # on the palm, rolled past the target. Before the held test at the end this trial was

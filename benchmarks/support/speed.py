@@ -1,0 +1,60 @@
+"""The speed tables of the in-hand benchmarks: cases timed in rounds, ratios to a floor.
+
+Every case runs once per round (ratios hold while the machine's speed drifts). A case
+whose name ends in ``(own worker, CPU)`` ran in a worker process of its own
+(``trial_worker.py``: nothing else in that process), is timed in that process's CPU
+seconds (a worker is single-threaded; CPU time does not count the waits for a core on a
+loaded machine) and is divided by the floor that ran in its own worker too, round by
+round; the other cases by the floor timed in the benchmark's process. Both are printed:
+the benchmark's process interleaves every case (other diagrams, other allocations
+between two runs of one), a worker runs one case only, as a learning loop's worker runs
+only trials.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+OWN = " (own worker, CPU)"
+
+
+def rounds(cases: dict, n: int) -> dict:
+    """``{name: [wall s per round]}``: every case once per round."""
+    times = {k: [] for k in cases}
+    for _ in range(n):
+        for name, case in cases.items():
+            times[name].append(case())
+    return times
+
+
+def ratios(times: dict, floor_name: str, sim_time: float) -> dict:
+    """Each case's median and its ratio to its floor (``floor_name``, or ``floor_name``
+    + ``OWN`` for a case in its own worker), median of the per-round ratios and their
+    range; printed, and returned with the rows for the results page."""
+    med = {k: float(np.median(t)) for k, t in times.items()}
+    load = os.getloadavg()[0]
+    table, ratio = [], {}
+    for k, t in med.items():
+        floor = floor_name + OWN if k.endswith(OWN) and floor_name + OWN in times else floor_name
+        per_round = np.array(times[k]) / np.array(times[floor])
+        ratio[k] = t / med[floor]
+        print(f"{k:48s} {t:8.3f} s  x{ratio[k]:5.2f} of {floor} (per round: median "
+              f"{np.median(per_round):.2f}, {per_round.min():.2f}-{per_round.max():.2f})",
+              flush=True)
+        table.append({"case": k, "floor": floor, "sim_time": sim_time,
+                      "median_wall_s": round(t, 4), "ratio_to_floor": round(ratio[k], 3),
+                      "ratio_per_round_median": round(float(np.median(per_round)), 3),
+                      "rounds_range": f"{per_round.min():.2f}-{per_round.max():.2f}"})
+    print(f"load average now {load:.2f}", flush=True)
+    return {"sim_time": sim_time, "median_wall": med, "rounds": times, "table": table,
+            "ratio_to_floor": ratio, "load_end": load}
+
+
+def paired(times: dict, a: str, b: str, label: str) -> dict:
+    """``a / b`` round by round: its median and the rounds, printed."""
+    r = np.array(times[a]) / np.array(times[b])
+    print(f"{label}, paired by round: median {np.median(r):.3f} "
+          f"({' '.join(f'{v:.2f}' for v in r)})", flush=True)
+    return {"median": float(np.median(r)), "rounds": r.tolist()}
