@@ -15,6 +15,24 @@ from handle_drake.apps.inhand.gist import frames
 from handle_drake.apps.inhand.task import InHandTrial
 
 
+def _timed_run(simulator, plant, q, v, duration: float):
+    """``run() -> wall s``: the plant from positions ``q`` and velocities ``v`` at time 0,
+    simulated for ``duration`` (the timing starts after the reset)."""
+    context = simulator.get_mutable_context()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+
+    def run():
+        context.SetTime(0.0)
+        plant.SetPositions(plant_context, q)
+        plant.SetVelocities(plant_context, v)
+        simulator.Initialize()
+        start = time.perf_counter()
+        simulator.AdvanceTo(duration)
+        return time.perf_counter() - start
+
+    return run
+
+
 def bare_builder(trial):
     """A builder with the trial's plant alone (SAP, point contact, its time step) and
     its models: ``(builder, plant, hand instance)``."""
@@ -63,18 +81,7 @@ def inhand_bare(trial: InHandTrial, x, duration: float):
     plant_ref = built["harness"].plant  # the trial's plant; its settled state starts both
     q = plant_ref.GetPositions(plant_ref.GetMyContextFromRoot(built["settled"]))
     v = plant_ref.GetVelocities(plant_ref.GetMyContextFromRoot(built["settled"]))
-    context = simulator.get_mutable_context()
-
-    def run():
-        context.SetTime(0.0)
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
-        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
-        simulator.Initialize()
-        start = time.perf_counter()
-        simulator.AdvanceTo(duration)
-        return time.perf_counter() - start
-
-    return run
+    return _timed_run(simulator, plant, q, v, duration)
 
 
 def inhand_replay(trial: InHandTrial, x, duration: float):
@@ -157,21 +164,9 @@ def screw_cap_bare(trial, x):
     trial._build(driver=True)  # settled before the timing
     bare = build_screw_cap(trial.scenario(x), bare=True)
     simulator = Simulator(bare["diagram"])
-    context = simulator.get_mutable_context()
-    plant = bare["plant"]
     ref = built["plant"].GetMyContextFromRoot(built["settled"])
     q, v = built["plant"].GetPositions(ref), built["plant"].GetVelocities(ref)
     outcome = trial.evaluate(x, early_stop=False)
     total = outcome.sim_time + (trial.config.reverse_time
                                 if outcome.survived_reversal is not None else 0.0)
-
-    def run():
-        context.SetTime(0.0)
-        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q)
-        plant.SetVelocities(plant.GetMyMutableContextFromRoot(context), v)
-        simulator.Initialize()
-        start = time.perf_counter()
-        simulator.AdvanceTo(total)
-        return time.perf_counter() - start
-
-    return run, total
+    return _timed_run(simulator, bare["plant"], q, v, total), total
