@@ -20,7 +20,6 @@ ratios). Usage: ``python benchmarks/bench_station_parts.py [--rounds N]``
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import time
@@ -45,6 +44,7 @@ from pydrake.systems.primitives import (  # noqa: E402
 from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
 from handle_drake.base.hands import get_hand_spec  # noqa: E402
 from handle_drake.base.models import diagrams_dir  # noqa: E402
+from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
 from handle_drake.station import AddPlantModels, GetPlant, hand_initial_command  # noqa: E402
 from handle_drake.systems.hand_driver import WRIST_JOINTS, actuated_order  # noqa: E402
@@ -190,9 +190,12 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station_parts.json")
+    add_page_arguments(parser, "station")
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds: must be >= 1")
+    results_run = ResultsRun("Station parts: the tactile sample's solve, leaf systems, loggers",
+                             args)
     load = [os.getloadavg()[0]]
     reuse = contact_solve_reuse()
     print("1. the tactile sample at the end of the step to t_k, in contact (thread CPU, ms, "
@@ -229,10 +232,17 @@ def main(argv=None) -> int:
                   f"({' '.join(f'{v:.2f}' for v in r['rounds'])})")
     print(f"load average {load[0]:.2f} at the start, {load[1]:.2f} at the end "
           f"({os.cpu_count()} cpus)")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps({"contact_solve_reuse_ms": reuse, "leaf_systems": structure,
-                                    "loggers": loggers, "load_average": load,
-                                    "rounds": args.rounds}, indent=1))
+    rows = [{"measure": f"tactile sample: {key}", "median": reuse[key], "unit": "ms"}
+            for key in ("solve", "contact_results", "tactile_python", "step_after_sample",
+                        "step_cold", "sample_net")]
+    rows += [{"measure": f"{part}: {name}", "median": r["over_reference_median"],
+              "unit": f"x {reference}", "min": min(r["rounds"]), "max": max(r["rounds"])}
+             for part, reference, block in (("leaf systems", "bare plant", structure),
+                                            ("loggers", "no logger", loggers))
+             for name, r in block.items()]
+    results_run.finish(rows, {"contact_solve_reuse_ms": reuse, "leaf_systems": structure,
+                              "loggers": loggers, "load_average": load,
+                              "rounds": args.rounds}, args.out)
     print(f"wrote {args.out}")
     return 0
 
