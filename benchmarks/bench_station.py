@@ -18,12 +18,13 @@ at every step; the object's trajectory is checked bit-identical), the floor
 that isolates what the station's Python systems and loggers cost; CPU
 seconds of this process are kept beside wall time (the machine is shared).
 
-With ``--baseline REV`` the demo station is also built with the tactile sensor and
-the hand and wrist drivers of ``handle_drake/systems/{tactile,hand_driver}.py`` at git
-revision ``REV`` ("before" in the same run; its logged signals are checked equal to
-this tree's).
+With ``--baseline REV`` (repeatable) the demo station is also built with the tactile
+sensor and the hand and wrist drivers of ``handle_drake/systems/{tactile,hand_driver}.py``
+at git revision ``REV`` (its primitive drivers where ``REV`` has them, else its Python
+drivers; ``object.position`` through ``BodyPoseSelector`` where ``REV``'s station had no
+other way): "before" in the same run; its logged signals are checked equal to this tree's.
 
-Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo] [--baseline REV]``
+Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo] [--baseline REV]...``
 """
 
 from __future__ import annotations
@@ -121,18 +122,31 @@ def _baseline_module(revision: str, relative: str, name: str):
 
 
 def _baseline_station_case(revision: str) -> _Case:
-    """The demo station with the tactile sensor and drivers of ``revision``."""
+    """The demo station with the tactile sensor and drivers of ``revision``: its primitive
+    drivers (as ``ScenarioRunner`` builds the demo) where it has them, else its Python
+    drivers; ``object.position`` from ``BodyPoseSelector`` where its station had nothing
+    else."""
     from handle_drake import station as station_module
 
-    tactile = _baseline_module(revision, "handle_drake/systems/tactile.py", "tactile_before")
-    drivers = _baseline_module(revision, "handle_drake/systems/hand_driver.py", "driver_before")
+    tag = revision.replace("/", "_").replace("~", "_").replace("^", "_")
+    tactile = _baseline_module(revision, "handle_drake/systems/tactile.py", f"tactile_{tag}")
+    drivers = _baseline_module(revision, "handle_drake/systems/hand_driver.py", f"driver_{tag}")
     names = {"FingertipTactile": tactile.FingertipTactile,
              "PdHandDriver": drivers.PdHandDriver, "WristDriver": drivers.WristDriver}
+    primitives = hasattr(drivers, "HandDriverDiagram")
+    if primitives:
+        names.update(HandDriverDiagram=drivers.HandDriverDiagram,
+                     WristDriverDiagram=drivers.WristDriverDiagram)
+    station_source = subprocess.run(["git", "show", f"{revision}:handle_drake/station.py"],
+                                    cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    if "def _free_body_position" not in station_source:
+        names["_free_body_position"] = lambda *args: None
     saved = {name: getattr(station_module, name) for name in names}
     try:
         for name, value in names.items():
             setattr(station_module, name, value)
-        return _station_case(*STATION_CASES[0], finite_commands=False)  # its drivers
+        return _station_case(*STATION_CASES[0],
+                             finite_commands=None if primitives else False)
     finally:
         for name, value in saved.items():
             setattr(station_module, name, value)
@@ -294,7 +308,7 @@ def _paired(top: _Case, bottom: _Case, what: str) -> dict:
             "rounds": values}
 
 
-def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None = None):
+def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
     """Every case once per round, ``repeats`` rounds: the cases see the same
     machine conditions, so their ratios hold even when the machine's speed
     drifts (it does here, by up to 40 % over minutes)."""
@@ -310,9 +324,9 @@ def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None =
                     "hand.position_measured", "object.position")),
                 "no loggers": _station_case(*STATION_CASES[0], log=())}
     python = _station_case(*STATION_CASES[0], finite_commands=False)  # the Python drivers
-    before = None if baseline is None else _baseline_station_case(baseline)
+    befores = {revision: _baseline_station_case(revision) for revision in baselines or ()}
     everything = [*station.values(), *plant.values(), replay, python, *ablation.values(),
-                  *([before] if before is not None else [])]
+                  *befores.values()]
     for case in everything:  # one warm-up run each, not counted (first-run allocations)
         case.run_once()
         case.walls.clear(), case.cpus.clear(), case.loads.clear()
@@ -320,8 +334,7 @@ def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None =
         # the demo case and its floors back to back, then the rest
         first = [station[STATION_CASES[0]], replay, python, *ablation.values(),
                  plant["model"]]
-        if before is not None:
-            first.insert(1, before)
+        first[1:1] = befores.values()
         rest = [c for c in [*station.values(), *plant.values()] if c not in first]
         for case in [*first, *rest]:
             case.run_once()
@@ -344,13 +357,15 @@ def bench_realtime(repeats: int, demo_only: bool = False, baseline: str | None =
                     "python_over_replay_cpu": _paired(python, replay, "cpus"),
                     "python_over_replay_wall": _paired(python, replay, "walls"),
                     "primitives_over_python_cpu": _paired(demo, python, "cpus")}}
-    if before is not None:
-        overhead["baseline"] = {
-            "revision": baseline, "station": before.row(variant=f"station at {baseline}"),
-            "same_logs_as_this_tree": _same_logs(demo, before),
-            "before_over_replay_cpu": _paired(before, replay, "cpus"),
-            "before_over_replay_wall": _paired(before, replay, "walls"),
-            "after_over_before_cpu": _paired(demo, before, "cpus")}
+    overhead["baselines"] = [{
+        "revision": revision, "station": before.row(variant=f"station at {revision}"),
+        "same_logs_as_this_tree": _same_logs(demo, before),
+        "before_over_replay_cpu": _paired(before, replay, "cpus"),
+        "before_over_replay_wall": _paired(before, replay, "walls"),
+        "after_over_before_cpu": _paired(demo, before, "cpus")}
+        for revision, before in befores.items()]
+    if befores:
+        overhead["baseline"] = overhead["baselines"][0]
     return rows, floors, overhead
 
 
@@ -387,8 +402,9 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="one repeat")
     parser.add_argument("--demo", action="store_true",
                         help="only the demo case (point, 1 ms, sap) and its floors")
-    parser.add_argument("--baseline", default=None,
-                        help="git revision of the tactile sensor and drivers for 'before'")
+    parser.add_argument("--baseline", action="append", default=[],
+                        help="git revision of the tactile sensor and drivers for 'before' "
+                             "(repeatable)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station.json")
     add_page_arguments(parser, "station")
@@ -426,8 +442,7 @@ def main(argv=None) -> int:
     _print_ratios(d, (("python_over_replay_cpu", "Python drivers / replay, CPU"),
                       ("python_over_replay_wall", "Python drivers / replay, wall"),
                       ("primitives_over_python_cpu", "primitive drivers / Python drivers, CPU")))
-    if "baseline" in overhead:
-        b = overhead["baseline"]
+    for b in overhead["baselines"]:
         print(f"station at {b['revision']} (before): logged signals "
               f"{'bit-identical' if b['same_logs_as_this_tree'] else 'DIFFERENT'} to this tree's")
         _print_ratios(b, (("before_over_replay_cpu", "before / replay, CPU"),

@@ -39,8 +39,8 @@ port                              dir    size                      units / frame
 read through evdev); see ``handle_drake.devices.accelerometer``.
 
 The diagram's subsystems are named ``plant``, ``scene_graph``, ``hand_driver``,
-``wrist_driver``, ``tactile`` and ``object_pose``; :func:`GetPlant` returns the
-plant.
+``wrist_driver``, ``tactile``, ``object_pose`` and (a free object) ``object_position``;
+:func:`GetPlant` returns the plant.
 """
 
 from __future__ import annotations
@@ -52,11 +52,13 @@ from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.multibody.tree import (
     PdControllerGains,
     PrismaticJoint,
+    QuaternionFloatingJoint,
     RevoluteJoint,
     SpatialInertia,
     UnitInertia,
 )
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Demultiplexer
 from pydrake.visualization import ApplyVisualizationConfig
 
 from handle_drake.base.hands import (
@@ -251,10 +253,35 @@ def _add_object_systems(builder, plant, scenario: Scenario) -> None:
                     selector.GetInputPort("body_spatial_velocities"))
     builder.ExportOutput(selector.GetOutputPort("pose"), "object.pose")
     builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
-    builder.ExportOutput(selector.GetOutputPort("position"), "object.position")
+    position = _free_body_position(builder, plant, object_body(plant))
+    builder.ExportOutput(selector.GetOutputPort("position") if position is None else position,
+                         "object.position")
     if scenario.object.accelerometer is not None:
         AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
                                 object_spec(scenario))
+
+
+def _free_body_position(builder, plant, body):
+    """``p_WB`` of a free body as a copy out of the plant's state, or None.
+
+    For a body whose model instance has one joint, a quaternion floating joint from the
+    world frame to the body frame (no offset frames), ``X_WB`` is the joint's ``X_FM`` and
+    its translation is the joint's ``q[4:7]`` (``q = [qw qx qy qz x y z]``): a
+    ``Demultiplexer`` of the instance's state output port gives the same numbers, bit for
+    bit, as the body's pose, with no Python call (a logger samples ``object.position`` at
+    100 Hz). Anything else (welded, offset frames, other joints) returns None: the caller
+    keeps :class:`BodyPoseSelector`'s ``position``.
+    """
+    instance = body.model_instance()
+    joints = [plant.get_joint(i) for i in plant.GetJointIndices(instance)]
+    if (len(joints) != 1 or not isinstance(joints[0], QuaternionFloatingJoint)
+            or joints[0].frame_on_parent().index() != plant.world_frame().index()
+            or joints[0].frame_on_child().index() != body.body_frame().index()
+            or plant.num_positions(instance) != 7 or plant.num_velocities(instance) != 6):
+        return None
+    split = builder.AddNamedSystem("object_position", Demultiplexer([4, 3, 6]))
+    builder.Connect(plant.get_state_output_port(instance), split.get_input_port())
+    return split.get_output_port(1)
 
 
 def AddPlantModels(plant, scenario: Scenario):

@@ -16,6 +16,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import (
     Adder,
     AffineSystem,
+    Demultiplexer,
     Gain,
     MatrixGain,
     Saturation,
@@ -180,16 +181,36 @@ def _selection(rows, size) -> np.ndarray:
     return S
 
 
-def _held_state(builder, initial, period, name):
-    """A discrete state ``x`` (default ``initial``) that takes its input's value every
-    ``period`` (from t = 0) and outputs it: ``x_k+1 = u(t_k)``, ``y = x`` (an AffineSystem
-    with A = 0, B = C = I: the products by 0 and 1 are exact)."""
+def _held_state(builder, initial, period, name, A=None, B=None):
+    """A discrete state ``x`` (default ``initial``) updated every ``period`` (from t = 0)
+    and output: ``x_k+1 = A x_k + B u(t_k)``, ``y = x`` (an AffineSystem; by default
+    A = 0, B = I: the input's value is held). A and B are 0/1 matrices with at most one 1
+    a row, so each entry is an exact copy or an exact sum of two (A = B = I: ``x + u``)."""
     n = len(initial)
+    A = np.zeros((n, n)) if A is None else A
+    B = np.eye(n) if B is None else B
     hold = builder.AddNamedSystem(name, AffineSystem(
-        A=np.zeros((n, n)), B=np.eye(n), f0=np.zeros(n), C=np.eye(n), D=np.zeros((n, n)),
+        A=A, B=B, f0=np.zeros(n), C=np.eye(n), D=np.zeros((n, B.shape[1])),
         y0=np.zeros(n), time_period=period))
     hold.configure_default_state(np.asarray(initial, dtype=float))
     return hold
+
+
+def _export_measured(builder, size, q_index, v_index) -> None:
+    """Exports a ``plant_state`` input (``size``) and ``state_estimated`` (its entries
+    ``q_index`` then ``v_index``: one 0/1 MatrixGain, exact copies of finite values), split
+    into ``position_measured`` and ``velocity_estimated`` by a Demultiplexer (copies): two
+    systems for the three signals (each system in the diagram costs the simulator some
+    work at every step, read or not)."""
+    nq = len(q_index)
+    state = builder.AddNamedSystem("state_estimated", MatrixGain(
+        _selection(np.r_[q_index, v_index], size)))
+    split = builder.AddNamedSystem("measured", Demultiplexer([nq, len(v_index)]))
+    builder.Connect(state.get_output_port(), split.get_input_port())
+    builder.ExportInput(state.get_input_port(), "plant_state")
+    builder.ExportOutput(split.get_output_port(0), "position_measured")
+    builder.ExportOutput(split.get_output_port(1), "velocity_estimated")
+    builder.ExportOutput(state.get_output_port(), "state_estimated")
 
 
 def _export_selections(builder, size, selections) -> None:
@@ -228,28 +249,24 @@ class HandDriverDiagram(Diagram):
         nx = plant.num_positions() + plant.num_velocities()
         builder = DiagramBuilder()
         target = builder.AddNamedSystem("limits", Saturation(lower, upper))
-        self._hold = _held_state(builder, initial, control_period, "command")
+        # cmd_k+1 = I cmd_k + I step_k (A = B = I: cmd + step, the Adder's sum)
+        self._hold = _held_state(builder, initial, control_period, "command", A=np.eye(nu))
         negated = builder.AddNamedSystem("negated", Gain(-1.0, nu))
         error = builder.AddNamedSystem("error", Adder(2, nu))  # target + (-cmd)
         limited = builder.AddNamedSystem("rate_limit", Saturation(np.full(nu, -step),
                                                                   np.full(nu, step)))
-        moved = builder.AddNamedSystem("moved", Adder(2, nu))  # cmd + step
         builder.Connect(self._hold.get_output_port(), negated.get_input_port())
         builder.Connect(target.get_output_port(), error.get_input_port(0))
         builder.Connect(negated.get_output_port(), error.get_input_port(1))
         builder.Connect(error.get_output_port(), limited.get_input_port())
-        builder.Connect(self._hold.get_output_port(), moved.get_input_port(0))
-        builder.Connect(limited.get_output_port(), moved.get_input_port(1))
-        builder.Connect(moved.get_output_port(), self._hold.get_input_port())
+        builder.Connect(limited.get_output_port(), self._hold.get_input_port())
         desired = builder.AddNamedSystem("desired", MatrixGain(
             _selection(np.r_[order, np.full(nu, -1)], nu)))
         builder.Connect(self._hold.get_output_port(), desired.get_input_port())
         builder.ExportInput(target.get_input_port(), "position")
         builder.ExportOutput(desired.get_output_port(), "desired_state")
         builder.ExportOutput(self._hold.get_output_port(), "position_commanded")
-        _export_selections(builder, nx, (("position_measured", q_index),
-                                         ("velocity_estimated", v_index),
-                                         ("state_estimated", np.r_[q_index, v_index])))
+        _export_measured(builder, nx, q_index, v_index)
         builder.BuildInto(self)
 
     def get_command_input_port(self):
@@ -350,12 +367,11 @@ class WristDriverDiagram(Diagram):
         order = actuated_order(plant, model_instance, WRIST_JOINTS)
         q_index, _ = _joint_state_indices(plant, model_instance, WRIST_JOINTS)
         builder = DiagramBuilder()
-        to_desired = builder.AddNamedSystem("to_desired", MatrixGain(
-            _selection(np.r_[_POSE6_TO_WRIST_JOINTS[order], np.full(6, -1)], 6)))
         initial_desired = np.concatenate([pose_to_wrist_joints(initial)[order], np.zeros(6)])
-        hold = _held_state(builder, initial_desired, control_period, "desired")
-        builder.Connect(to_desired.get_output_port(), hold.get_input_port())
-        builder.ExportInput(to_desired.get_input_port(), "pose")
+        # the pose -> [joints in actuator order; 0] permutation as the hold's B (exact copies)
+        hold = _held_state(builder, initial_desired, control_period, "desired", B=_selection(
+            np.r_[_POSE6_TO_WRIST_JOINTS[order], np.full(6, -1)], 6))
+        builder.ExportInput(hold.get_input_port(), "pose")
         builder.ExportOutput(hold.get_output_port(), "desired_state")
         # [x y z roll pitch yaw] from the joints [x y z yaw pitch roll]
         _export_selections(builder, plant.num_positions() + plant.num_velocities(),
@@ -429,9 +445,8 @@ class PlannedHandDriver(Diagram):
         self._commanded = builder.AddNamedSystem("planned_command", TrajectorySource(commanded))
         builder.ExportOutput(self._desired.get_output_port(), "desired_state")
         builder.ExportOutput(self._commanded.get_output_port(), "position_commanded")
-        _export_selections(builder, plant.num_positions() + plant.num_velocities(),
-                           (("position_measured", q_index), ("velocity_estimated", v_index),
-                            ("state_estimated", np.r_[q_index, v_index])))
+        _export_measured(builder, plant.num_positions() + plant.num_velocities(), q_index,
+                         v_index)
         builder.BuildInto(self)
 
     @property
