@@ -474,17 +474,6 @@ class PlannedHandDriver(Diagram):
         self._commanded.UpdateTrajectory(commanded)
         return cmd
 
-    def plan_trajectory(self, trajectory, end_time: float) -> np.ndarray:
-        """:meth:`plan` for the commands ``trajectory`` (a ``Trajectory``, held at its end
-        value after its end) sampled at the driver's updates until ``end_time`` or its end,
-        and then until the command has reached its last value (a driver that samples the
-        trajectory would keep moving towards it: after that both hold it)."""
-        p = self._period
-        extra = (0 if not np.isfinite(self._step)
-                 else math.ceil(float(np.max(self._upper - self._lower)) / self._step))
-        n = int(np.ceil(max(end_time, trajectory.end_time()) / p - 1e-9)) + 1 + extra
-        return self.plan(np.array([trajectory.value(k * p).ravel() for k in range(n)]))
-
     def _trajectories(self, cmd):
         """Zero-order holds of ``[cmd_k[order]; 0]`` and ``cmd_k`` as the plant's steps read
         them: a driver updating at ``t_k = k period`` holds ``cmd_k`` from just after

@@ -120,9 +120,7 @@ class ScenarioRunner:
             control period; see :func:`~handle_drake.station.MakeHandStation`). Default:
             when the scenario's validated keyframe script drives every command input
             (no controller; a floating wrist has a script), where the Python drivers'
-            hold on a non-finite command cannot act, with the hand's script planned once
-            (``"planned"``: the same commands at every step); False keeps the Python
-            drivers.
+            hold on a non-finite command cannot act; False keeps the Python drivers.
     """
 
     def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False,
@@ -137,8 +135,6 @@ class ScenarioRunner:
         if finite_commands is None:
             finite_commands = scenario.controller is None and (
                 bool(scenario.script) or not isinstance(scenario.hand.mount, FloatingWrist))
-            if finite_commands and not hardware:  # the hand's script, planned once
-                finite_commands = "planned"
         self.harness = TrialHarness(
             scenario, self.add_driver, log=log, meshcat=meshcat, hardware=hardware,
             object_contacts=scenario.object is not None and not hardware,
@@ -161,17 +157,12 @@ class ScenarioRunner:
         if self.scenario.controller is not None:
             return _add_guarded_grasp(builder, station, self.scenario)
         hand_traj, wrist_traj = script_trajectories(self.scenario, self.initial_command)
-        if not station.HasInputPort("hand.position"):  # a planned driver plays the script
-            if hand_traj is None:
-                hand_traj = PiecewisePolynomial.ZeroOrderHold(
-                    [0.0, 1.0], np.tile(self.initial_command[:, None], (1, 2)))
-            station.GetSubsystemByName("hand_driver").plan_trajectory(
-                hand_traj, self.scenario.simulation_duration)
+        if hand_traj is not None:
+            source = builder.AddNamedSystem("hand_script", TrajectorySource(hand_traj))
         else:
-            source = builder.AddNamedSystem("hand_script", TrajectorySource(hand_traj)
-                                            if hand_traj is not None
-                                            else ConstantVectorSource(self.initial_command))
-            builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
+            source = builder.AddNamedSystem(
+                "hand_script", ConstantVectorSource(self.initial_command))
+        builder.Connect(source.get_output_port(), station.GetInputPort("hand.position"))
         if wrist_traj is not None:
             wrist_source = builder.AddNamedSystem("wrist_script", TrajectorySource(wrist_traj))
             builder.Connect(wrist_source.get_output_port(), station.GetInputPort("wrist.pose"))

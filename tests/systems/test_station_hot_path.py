@@ -10,12 +10,7 @@ from handle_drake import station as station_module
 from handle_drake.apps.demo import DEMO_SCENARIO
 from handle_drake.base.models import diagrams_dir
 from handle_drake.scenario import LoadScenario
-from handle_drake.systems.hand_driver import (
-    PdHandDriver,
-    PlannedHandDriver,
-    WristDriver,
-    pose_to_wrist_joints,
-)
+from handle_drake.systems.hand_driver import PdHandDriver, WristDriver, pose_to_wrist_joints
 from handle_drake.systems.tactile import FingertipTactile, _mean_normal
 from handle_drake.trial.simulate import ScenarioRunner
 
@@ -85,13 +80,12 @@ def _demo_logs(contact_model="point", duration=1.3, finite_commands=None):
 
 @pytest.mark.parametrize("contact_model", ["point", "hydroelastic_with_fallback"])
 def test_the_station_logs_what_the_reference_systems_log(monkeypatch, contact_model):
-    # the script's run: the hand's script planned once and the wrist's driver in Drake
-    # primitives (finite_commands="planned", the default of a scripted scenario); the
-    # station's Python drivers; the reference Python systems
+    # the script's run: the drivers in Drake primitives (finite_commands, the default of a
+    # scripted scenario); the station's Python drivers; the reference Python systems
     duration = 1.3 if contact_model == "point" else 1.05
     fast, fast_logs = _demo_logs(contact_model, duration)
     runner = ScenarioRunner(LoadScenario(filename=diagrams_dir() / DEMO_SCENARIO))
-    assert isinstance(runner.station.GetSubsystemByName("hand_driver"), PlannedHandDriver)
+    assert not isinstance(runner.station.GetSubsystemByName("hand_driver"), PdHandDriver)
     python, python_logs = _demo_logs(contact_model, duration, finite_commands=False)
     with monkeypatch.context() as patch:
         patch.setattr(station_module, "FingertipTactile", ReferenceTactile)
