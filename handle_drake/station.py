@@ -94,7 +94,6 @@ from handle_drake.systems.hand_driver import (
     WRIST_JOINTS,
     HandDriverDiagram,
     PdHandDriver,
-    PlannedHandDriver,
     WristDriver,
     WristDriverDiagram,
     rpy_pose6,
@@ -120,7 +119,7 @@ OBJECT_INSTANCE = "object"
 
 
 def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
-                    finite_commands: bool | str = False):
+                    finite_commands: bool = False):
     """Builds the station diagram for ``scenario``.
 
     Args:
@@ -135,15 +134,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
             drivers are then Drake primitives (:class:`HandDriverDiagram`,
             :class:`WristDriverDiagram`: the same commands, no Python call per control
             period) instead of the Python drivers that hold on a non-finite or
-            unconnected command. ``"planned"``: the hand's commands are all known
-            before the run (an in-hand trial): the hand driver is a
-            :class:`PlannedHandDriver` (its commands computed in one pass by its
-            ``plan`` and played back; the same plant inputs, no event per control
-            period) and the station has no ``hand.position`` input.
+            unconnected command.
     """
-    if finite_commands not in (False, True, "planned"):
-        raise ValueError(f"finite_commands: expected False, True or 'planned', got "
-                         f"{finite_commands!r}")
     validate_scenario(scenario)
     if hardware:
         if not isinstance(scenario.driver, CanHandDriver):
@@ -194,11 +186,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
     return diagram
 
 
-_HAND_DRIVERS = {False: PdHandDriver, True: HandDriverDiagram, "planned": PlannedHandDriver}
-
-
 def _add_hand_systems(builder, plant, hand, scenario: Scenario,
-                      finite_commands: bool | str = False) -> None:
+                      finite_commands: bool = False) -> None:
     """The simulated hand driver and the fingertip sensors; exports the ``hand.*`` ports."""
     spec = get_hand_spec(scenario.hand.kind)
     lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
@@ -207,7 +196,7 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
 
     driver = builder.AddNamedSystem(
         "hand_driver",
-        _HAND_DRIVERS[finite_commands](
+        (HandDriverDiagram if finite_commands else PdHandDriver)(
             plant, hand, spec, initial, lower, upper,
             max_joint_velocity=scenario.driver.max_joint_velocity,
             control_period=scenario.driver.control_period,
@@ -215,8 +204,7 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
     )
     builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
     builder.Connect(driver.GetOutputPort("desired_state"), plant.get_desired_state_input_port(hand))
-    if finite_commands != "planned":  # a planned driver plays its own commands
-        builder.ExportInput(driver.get_command_input_port(), f"{HAND}.{HAND_COMMAND}")
+    builder.ExportInput(driver.get_command_input_port(), f"{HAND}.{HAND_COMMAND}")
 
     tips = [plant.GetFrameByName(name, hand).body() for name in spec.fingertip_frames]
     tactile = builder.AddNamedSystem("tactile", FingertipTactile(plant, tips))

@@ -103,7 +103,8 @@ def inhand_replay(trial: InHandTrial, x, duration: float):
     context = harness.context
     context.SetTimeStateAndParametersFrom(built["settled"])
     harness.controller.set_parameters(harness.controller_context(), x)
-    built["play"](x, c.total_time + c.reverse_time)
+    built["player"].UpdateTrajectory(harness.controller.held_frames(
+        x, built["period"], c.total_time + c.reverse_time))
     plant_ref = harness.plant
     x0 = plant_ref.GetPositionsAndVelocities(plant_ref.GetMyContextFromRoot(context)).copy()
     forces = None

@@ -20,12 +20,10 @@ from pydrake.systems.primitives import (
     Gain,
     MatrixGain,
     Saturation,
-    TrajectorySource,
 )
-from pydrake.trajectories import PiecewisePolynomial
 
 __all__ = ["PdHandDriver", "WristDriver", "HandDriverDiagram", "WristDriverDiagram",
-           "PlannedHandDriver", "actuated_order", "plan_hand_commands"]
+           "actuated_order"]
 
 
 def actuated_order(plant, model_instance, joint_names) -> np.ndarray:
@@ -389,104 +387,3 @@ def rpy_pose6(X) -> np.ndarray:
     """A ``RigidTransform`` as ``[x y z roll pitch yaw]``."""
     rpy = RollPitchYaw(X.rotation()).vector()
     return np.concatenate([X.translation(), rpy])
-
-
-def plan_hand_commands(initial, targets, lower, upper, step) -> np.ndarray:
-    """The hand drivers' commands for a whole run, in their arithmetic: ``cmd_0 = initial``
-    and ``cmd_k+1 = cmd_k + clamp(clamp(target_k, lower, upper) - cmd_k, -step, step)``
-    for the targets ``(K, nu)`` sampled at the driver's updates ``t_0 .. t_K-1``; returns
-    ``(K + 1, nu)``. Min-of-max clamps and ``a - b`` give the same values as Drake's
-    ``Saturation`` and ``a + (-b)``, so the commands equal :class:`HandDriverDiagram`'s
-    bit for bit (tested). Within a run of equal targets a command that has reached its
-    target stays there (adding 0), so each run is iterated only until then."""
-    targets = np.minimum(np.maximum(np.asarray(targets, dtype=float), lower), upper)
-    n = len(targets)
-    cmd = np.empty((n + 1, len(initial)))
-    cmd[0] = current = np.asarray(initial, dtype=float)
-    change = np.flatnonzero(np.any(targets[1:] != targets[:-1], axis=1)) + 1
-    for a, b in zip(np.r_[0, change], np.r_[change, n], strict=True):
-        target = targets[a]
-        for k in range(a, b):
-            current = current + np.minimum(np.maximum(target - current, -step), step)
-            cmd[k + 1] = current
-            if np.array_equal(current, target):
-                cmd[k + 2:b + 1] = current
-                break
-    return cmd
-
-
-class PlannedHandDriver(Diagram):
-    """:class:`HandDriverDiagram` for a run whose commands are all known before it starts
-    (an in-hand trial's frames): its commands are computed in one pass
-    (:func:`plan_hand_commands`, :meth:`plan`) and played by two ``TrajectorySource``
-    zero-order holds, so the simulator has no event and evaluates nothing per control
-    period. The plant reads the same desired state at every step as from
-    :class:`HandDriverDiagram` (tested bit for bit on in-hand trials).
-
-    It has no ``position`` input: the commands come from :meth:`plan`. Outputs as
-    :class:`HandDriverDiagram`'s: ``desired_state``, ``position_commanded``,
-    ``position_measured``, ``velocity_estimated``, ``state_estimated``; input
-    ``plant_state``.
-    """
-
-    def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
-                 max_joint_velocity=4.0, control_period=0.002):
-        super().__init__()
-        nu, initial, lower, upper, step, order, q_index, v_index = _driver_setup(
-            plant, model_instance, spec, initial_command, lower, upper, max_joint_velocity,
-            control_period)
-        self._initial, self._lower, self._upper, self._step = initial, lower, upper, step
-        self._order, self._period, self._time_step = order, control_period, plant.time_step()
-        if self._time_step <= 0:
-            raise ValueError("plant: a PlannedHandDriver needs a discrete plant (time_step > 0)")
-        builder = DiagramBuilder()
-        desired, commanded = self._trajectories(initial[None, :])
-        self._desired = builder.AddNamedSystem("planned_desired_state", TrajectorySource(desired))
-        self._commanded = builder.AddNamedSystem("planned_command", TrajectorySource(commanded))
-        builder.ExportOutput(self._desired.get_output_port(), "desired_state")
-        builder.ExportOutput(self._commanded.get_output_port(), "position_commanded")
-        _export_measured(builder, plant.num_positions() + plant.num_velocities(), q_index,
-                         v_index)
-        builder.BuildInto(self)
-
-    @property
-    def initial_command(self) -> np.ndarray:
-        return self._initial.copy()
-
-    def get_plant_state_input_port(self):
-        return self.GetInputPort("plant_state")
-
-    def plan(self, targets, initial=None) -> np.ndarray:
-        """Plays from time 0 the commands for ``targets`` ``(K, nu)``, the command inputs
-        a driver would sample at ``k control_period`` (k = 0 .. K - 1), starting from the
-        command ``initial`` (default: the initial command); returns the commands
-        ``cmd_0 .. cmd_K`` (``cmd_k``: the driver's command after k updates)."""
-        targets = np.asarray(targets, dtype=float)
-        if targets.ndim != 2 or targets.shape[1] != self._initial.size or not len(targets):
-            raise ValueError(f"targets: expected (K >= 1, {self._initial.size}) values, got "
-                             f"shape {targets.shape}")
-        if not np.isfinite(targets).all():
-            raise ValueError("targets: not finite")
-        start = self._initial if initial is None else np.asarray(initial, dtype=float)
-        cmd = plan_hand_commands(start, targets, self._lower, self._upper, self._step)
-        desired, commanded = self._trajectories(cmd)
-        self._desired.UpdateTrajectory(desired)
-        self._commanded.UpdateTrajectory(commanded)
-        return cmd
-
-    def _trajectories(self, cmd):
-        """Zero-order holds of ``[cmd_k[order]; 0]`` and ``cmd_k`` as the plant's steps read
-        them: a driver updating at ``t_k = k period`` holds ``cmd_k`` from just after
-        ``t_k-1`` (its update there is made at the start of the step at ``t_k-1``, which
-        reads the command from before it) to ``t_k``. So ``cmd_k``'s segment starts a
-        millionth of a plant step after ``t_k-1`` (``cmd_0``'s half a step before 0): after
-        the step at ``t_k-1`` and before anything later that reads it. One segment per run
-        of equal commands."""
-        h, p = self._time_step, self._period
-        breaks = np.r_[-0.5 * h, (np.arange(1, len(cmd)) - 1) * p + 1e-6 * h]
-        keep = np.r_[True, np.any(cmd[1:] != cmd[:-1], axis=1)]
-        breaks, cmd = np.append(breaks[keep], breaks[-1] + p), cmd[keep]
-        nu = cmd.shape[1]
-        desired = np.hstack([cmd[:, self._order], np.zeros((len(cmd), nu))])
-        return (PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([desired, desired[-1]]).T),
-                PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([cmd, cmd[-1]]).T))

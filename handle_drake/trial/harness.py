@@ -151,8 +151,7 @@ class TrialHarness:
         hardware: drive the real (CAN) hand; the simulator then keeps real time.
         finite_commands: ``add_controller`` feeds the station's command inputs with
             commands finite by construction (see :func:`MakeHandStation`: the simulated
-            drivers are then Drake primitives); ``"planned"``: the hand driver plays the
-            commands its ``plan`` is given (no ``hand.position`` input).
+            drivers are then Drake primitives).
 
     Attributes: ``scenario``, ``station``, ``plant`` (None on hardware),
     ``controller``, ``diagram``, ``simulator``, ``context`` (the root context).
@@ -160,7 +159,7 @@ class TrialHarness:
 
     def __init__(self, scenario: Scenario, add_controller: Callable | None = None, *,
                  log=DEFAULT_LOG, object_contacts: bool = False, meshcat=None,
-                 hardware: bool = False, finite_commands: bool | str = False):
+                 hardware: bool = False, finite_commands: bool = False):
         if object_contacts and (hardware or scenario.object is None):
             raise ValueError("object_contacts needs a simulated scenario with an object")
         self.scenario = scenario

@@ -10,7 +10,6 @@ from handle_drake.apps.inhand.task import (
     InHandScenario,
     InHandTask,
     InHandTrial,
-    build_inhand,
     inhand_fingerprint,
 )
 from handle_drake.cli import main as cli_main
@@ -88,30 +87,6 @@ def test_samples_read_the_touching_hand_bodies_from_the_geometry_query_as_from_t
     finally:
         built["touching_query"] = query
     assert len(scores) >= 2  # the draws end differently
-
-
-def test_the_planned_hand_driver_runs_the_trial_the_sampling_driver_runs():
-    # The trial's hand driver plays commands computed once per trial (PlannedHandDriver);
-    # the driver in Drake primitives samples the frames during the run instead. Same
-    # settled grasp, same outcome and the same final plant state, bit for bit.
-    planned, sampled = InHandTrial(), InHandTrial()
-    planned._build()
-    sampled._built = build_inhand(sampled.scenario(), planned=False)
-    plants = [t._built["harness"].plant for t in (planned, sampled)]
-    settled = [p.GetPositionsAndVelocities(p.GetMyContextFromRoot(t._built["settled"]))
-               for p, t in zip(plants, (planned, sampled), strict=True)]
-    np.testing.assert_array_equal(*settled)
-    bounds = planned.bounds
-    draws = [_stroke(planned)] + list(np.random.default_rng(4).uniform(
-        bounds[:, 0], bounds[:, 1], size=(2, planned.dimension)))
-    for x in draws:
-        outcomes = [t.evaluate(x, early_stop=False).as_dict() for t in (planned, sampled)]
-        for o in outcomes:
-            o.pop("wall_time")
-        assert outcomes[0] == outcomes[1]
-        final = [p.GetPositionsAndVelocities(t._built["harness"].plant_context())
-                 for p, t in zip(plants, (planned, sampled), strict=True)]
-        np.testing.assert_array_equal(*final)
 
 
 def test_a_palm_carried_cylinder_that_falls_under_reversed_weight_is_not_held():

@@ -372,21 +372,14 @@ class GistMotionSource(LeafSystem):
         ``TrajectorySource`` into a driver that samples its command every ``period``, it
         gives the driver the same command at every sample as this system, without a
         Python call per sample."""
-        values = self.held_targets(parameters, period, end_time)
-        n = len(values)
-        breaks = (np.arange(n) - 0.5) * period
-        keep = np.r_[True, np.any(values[1:] != values[:-1], axis=1)]
-        breaks, values = np.append(breaks[keep], breaks[-1] + period), values[keep]
-        return PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([values, values[-1]]).T)
-
-    def held_targets(self, parameters, period: float, end_time: float) -> np.ndarray:
-        """What the output sends at the times ``k period`` (k = 0.. up to ``end_time``, s):
-        the commands a driver sampling every ``period`` reads, ``(K, nu)``."""
         n = int(np.ceil(end_time / period - 1e-9)) + 1
         values = self.frames_for(parameters)[self.frame_indices(np.arange(n) * period) - 1]
         if not np.isfinite(values).all():  # where the commands enter (a driver in Drake
             raise ValueError("parameters: their frames are not finite")  # primitives)
-        return values
+        breaks = (np.arange(n) - 0.5) * period
+        keep = np.r_[True, np.any(values[1:] != values[:-1], axis=1)]
+        breaks, values = np.append(breaks[keep], breaks[-1] + period), values[keep]
+        return PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([values, values[-1]]).T)
 
     def _frames(self, c) -> np.ndarray:
         # A cache of a pure function: all N frames of the parameter vector ``c`` read from

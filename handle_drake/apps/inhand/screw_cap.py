@@ -113,7 +113,7 @@ from handle_drake.base.hands import (
 from handle_drake.learning.executors import TrialResult
 from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
-from handle_drake.systems.hand_driver import PdHandDriver, actuated_order, plan_hand_commands
+from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
 __all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
            "TWO_STROKES", "ScrewCapModel",
@@ -482,9 +482,15 @@ class PlannedCommands:
         self.player = None
 
     def commands(self, targets: np.ndarray) -> np.ndarray:
-        """(K + 1, nu) commands cmd_0..cmd_K for targets (K, nu) at t_0..t_K-1
-        (:func:`~handle_drake.systems.hand_driver.plan_hand_commands`)."""
-        return plan_hand_commands(self.q0, targets, self._lower, self._upper, self._max_step)
+        """(K + 1, nu) commands cmd_0..cmd_K for targets (K, nu) at t_0..t_K-1."""
+        cmd = np.empty((len(targets) + 1, self.q0.size))
+        cmd[0] = current = self.q0
+        low, high = -self._max_step, self._max_step
+        # np.clip's values (it computes min(max(.))) without its wrapper: 600 steps a trial
+        for k, target in enumerate(np.clip(targets, self._lower, self._upper)):
+            current = current + np.minimum(np.maximum(target - current, low), high)
+            cmd[k + 1] = current
+        return cmd
 
     def trajectory(self, cmd: np.ndarray):
         """The zero-order hold of ``cmd`` (``cmd_k`` from ``(k - 0.5) period``), one

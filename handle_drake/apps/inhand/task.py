@@ -372,16 +372,11 @@ def inhand_fingerprint() -> str:
                             + sorted(DATA_DIR.glob("*.json")))
 
 
-def build_inhand(scenario: InHandScenario, meshcat=None, planned: bool = True) -> dict:
+def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     """The trial's diagram from its scenario, the grasp settled (all variations zero).
 
     Returns the harness, the settled context (time 0) the trials start from, the
-    object body, the hand's bodies by index, the accelerometer port (or None) and
-    ``play(parameters, end_time)``, which sets a trial's commands up to ``end_time``.
-    ``planned`` (the default): the station's hand driver is a ``PlannedHandDriver``, the
-    commands computed once per trial (no event per control period); False: the driver
-    in Drake primitives samples the frames played by a ``TrajectorySource`` (the same
-    plant inputs at every step: tested).
+    object body, the hand's bodies by index and the accelerometer port (or None).
     """
     gist = scenario.action_gist()
     q0 = scenario.initial_command()
@@ -391,14 +386,13 @@ def build_inhand(scenario: InHandScenario, meshcat=None, planned: bool = True) -
 
     def add_motion(builder, station):
         # The source holds the trial's parameters and its frames; what reaches the hand
-        # driver is their value at the driver's sample times (GistMotionSource.
-        # held_targets, re-planned per trial): the same commands, no Python call per sample.
+        # driver is their zero-order hold at the driver's sample times (GistMotionSource.
+        # held_frames, re-planned per trial): the same commands, no Python call per sample.
         source = builder.AddNamedSystem("motion", GistMotionSource(
             gist, q0, scenario.motion_duration, scenario.n_frames))
-        if not planned:
-            player.append(builder.AddNamedSystem("motion_frames", TrajectorySource(
-                source.held_frames(gist.initial_parameters(), period, period))))
-            builder.Connect(player[0].get_output_port(), station.GetInputPort("hand.position"))
+        player.append(builder.AddNamedSystem("motion_frames", TrajectorySource(
+            source.held_frames(gist.initial_parameters(), period, period))))
+        builder.Connect(player[0].get_output_port(), station.GetInputPort("hand.position"))
         plant = GetPlant(station)
         reverse.append(builder.AddNamedSystem("reversed_gravity",
                                               ReversedGravity(plant, object_body(plant))))
@@ -406,19 +400,10 @@ def build_inhand(scenario: InHandScenario, meshcat=None, planned: bool = True) -
                         station.GetInputPort("applied_spatial_force"))
         return source
 
-    # the frames are finite (validated parameters): the station's driver plays them
+    # the frames are finite (validated parameters): the station's driver in Drake primitives
     harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat,
-                           finite_commands="planned" if planned else True)
+                           finite_commands=True)
     plant, source = harness.plant, harness.controller
-    driver = harness.station.GetSubsystemByName("hand_driver")
-    start = [None]  # the settled command, the planned driver's start of every trial
-
-    def play(parameters, end_time: float) -> None:
-        if planned:
-            driver.plan(source.held_targets(parameters, period, end_time), start[0])
-        else:
-            player[0].UpdateTrajectory(source.held_frames(parameters, period, end_time))
-
     hand = plant.GetModelInstanceByName("hand")
     hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
                    for i in plant.GetBodyIndices(hand)}
@@ -428,19 +413,17 @@ def build_inhand(scenario: InHandScenario, meshcat=None, planned: bool = True) -
         still[sl][1:] = 0.0
     harness.reset()
     source.set_parameters(harness.controller_context(), still)
-    play(still, scenario.settle_time)
+    player[0].UpdateTrajectory(source.held_frames(still, period, scenario.settle_time))
     harness.initialize()
     harness.advance(scenario.settle_time)
-    # the command the driver holds now (its updates at settle_time not yet made)
-    start[0] = driver.GetOutputPort("position_commanded").Eval(
-        driver.GetMyContextFromRoot(harness.context)).copy()
+    # Trials start from this context, not from the scenario's default one.
     settled = harness.context.Clone()
     settled.SetTime(0.0)
     accelerometer = scenario.station.object.accelerometer is not None
     body = object_body(plant)
     weight = body.default_mass() * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
     return dict(harness=harness, settled=settled, body=body, reverse=reverse[0], weight=weight,
-                play=play, period=period,
+                player=player[0], period=period,
                 hand_bodies=hand_bodies, touching_query=_touching_query(plant, body, hand_bodies),
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
                 if accelerometer else None,
@@ -587,7 +570,8 @@ class InHandTrial(GistTrial):
         context, plant = harness.context, harness.plant
         context.SetTimeStateAndParametersFrom(built["settled"])
         harness.controller.set_parameters(harness.controller_context(), x)
-        built["play"](x, c.total_time + c.reverse_time)
+        built["player"].UpdateTrajectory(harness.controller.held_frames(
+            x, built["period"], c.total_time + c.reverse_time))
         plant_context = harness.plant_context()
         X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
         samples = c.sample_times()
