@@ -179,6 +179,7 @@ class SimulatedHandFirmware:
         self._on_request = self.feedback == "on_request"
         self._replying = False  # inside an on_request wait (the counters tell replies apart)
         self._published = False  # a feedback went out since the last step
+        self._unanswered = False  # a setpoint was applied since the last feedback
         self._last_sample = None  # (q, tactile, hand_time) of the last joint-model step
 
     def start(self) -> SimulatedHandFirmware:
@@ -261,12 +262,19 @@ class SimulatedHandFirmware:
         if message is None:
             return _TIMEOUT
         try:
-            if self._handle(message) and self._on_request:
-                self._publish()  # the reply: the last step's sample, this setpoint's seq
+            if self._handle(message):
+                self._unanswered = True
         except Exception as error:  # one frame never stops the hand
             self.counters["frame_errors"] += 1
             self._errors("frame_errors", error)
         return _FRAME
+
+    def _drain(self, limit: int) -> int:
+        """Handles the frames already waiting (at most ``limit``); returns how many."""
+        for n in range(max(0, limit)):
+            if self._receive(0.0) != _FRAME:
+                return n
+        return max(0, limit)
 
     def _sample(self, now: float) -> None:
         """Reads the sensors after a joint-model step (the feedback's values until the next)."""
@@ -277,6 +285,7 @@ class SimulatedHandFirmware:
     def _publish(self) -> None:
         """Sends one feedback: the last step's sample and the last applied setpoint's seq."""
         self._published = True
+        self._unanswered = False
         if self.silent.is_set():
             return
         q, tactile, hand_time = self._last_sample
@@ -314,11 +323,18 @@ class SimulatedHandFirmware:
                     if remaining <= 0:
                         break
                     got = self._receive(min(remaining, _MAX_WAIT))
-                    if got == _FRAME:
-                        frames += 1
-                    elif got == _FAILED:  # no busy retry: wait out this cycle
+                    if got == _FAILED:  # no busy retry: wait out this cycle
                         self._stop.wait(max(0.0, deadline - time.monotonic()))
                         break
+                    if got == _TIMEOUT:
+                        continue
+                    # Woken by a frame: take what else is waiting (a classic command's
+                    # other frames), answer the newest applied setpoint once, then take
+                    # our own reply's frames, which a multicast bus loops back at once.
+                    frames += 1 + self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+                    if self._unanswered:
+                        self._publish()  # the last step's sample, the newest seq
+                        frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
                 self._replying = False
             else:
                 # One wake-up per cycle, like a firmware that reads its CAN receive FIFO
@@ -329,9 +345,7 @@ class SimulatedHandFirmware:
                 remaining = deadline - time.monotonic()
                 if remaining > 0 and self._stop.wait(remaining):
                     break
-                for _ in range(_MAX_FRAMES_PER_CYCLE):
-                    if self._receive(0.0) != _FRAME:
-                        break
+                self._drain(_MAX_FRAMES_PER_CYCLE)
             if self._stop.is_set():
                 break
             now = time.monotonic()
