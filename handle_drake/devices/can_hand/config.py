@@ -251,9 +251,10 @@ class CanFirmwareConfig:
     ``feedback``: when the feedback that acknowledges a setpoint goes out.
     "cycle": once per control cycle (``rate``), acknowledging the setpoints
     read at the cycle's start. "on_request": as soon as a setpoint is
-    applied (FD: its one SETPOINT frame; classic: its SETPOINT_COMMIT),
-    carrying the state of the last joint-model step; a cycle in which no
-    setpoint came still publishes its own feedback. None: the hand's own
+    applied (FD: its one SETPOINT frame; classic: its SETPOINT_COMMIT; one
+    reply for the newest when several were waiting), carrying the state of
+    the last joint-model step; a cycle in which no setpoint came still
+    publishes its own feedback. None: the hand's own
     behaviour (:data:`DEFAULT_FEEDBACK`: Barrett on_request, Shadow cycle).
     """
 

@@ -16,8 +16,9 @@ When the feedback goes out (``CanFirmwareConfig.feedback``):
   second. A setpoint waits for the next cycle to be acknowledged (0 to one
   period).
 - ``on_request`` (the Barrett's default): the firmware blocks on the bus
-  until the next joint-model step is due and answers each applied setpoint
-  at once. That is how the real hand works: its pucks do not stream; the
+  until the next joint-model step is due and answers an applied setpoint at
+  once (when several frames were already waiting, after taking them all: one
+  reply acknowledging the newest). That is how the real hand works: its pucks do not stream; the
   host drives the loop. libbarrett's ``Hand::update`` (src/products/hand.cpp;
   ``Hand::updatePosition`` in older versions) sends one group get-property
   request for ``P`` and then receives each puck's reply
@@ -314,7 +315,7 @@ class SimulatedHandFirmware:
         while not self._stop.is_set():
             if self._on_request:
                 # Block on the bus until the next step is due (bounded, so stop() is
-                # prompt): each applied setpoint is answered as it arrives.
+                # prompt): an applied setpoint is answered as soon as it arrives.
                 self._replying = True
                 self._published = False
                 frames = 0
