@@ -411,13 +411,18 @@ def hop_summary(trace, frames, kind: str, frame_format: str) -> dict:
         t_ack = ack_times[i + covered[0]]
         if t_ack > acked:
             continue
-        rows.append((t_commit - sent, t_ack - t_commit, acked - t_ack, acked - sent))
+        rows.append((t_commit - sent, t_ack - t_commit, acked - t_ack, acked - sent, sent))
     if not rows:
         return {"matched": 0}
-    hops = np.array(rows) * 1e3  # ms
+    rows = np.array(rows)
+    hops = rows[:, :4] * 1e3  # ms
     names = ("to_bus", "hand", "to_client")
     total = hops[:, 3]
-    tail = hops[total >= np.percentile(total, 99)]
+    in_tail = total >= np.percentile(total, 99)
+    tail = hops[in_tail]
+    # When the slowest 1 % happened (s into the run): a few stalls, or spread out?
+    tail_times = np.sort(rows[in_tail, 4] - rows[0, 4])
+    episodes = 1 + int(np.sum(np.diff(tail_times) > 0.05)) if tail_times.size else 0
     worst = collections.Counter(names[k] for k in np.argmax(tail[:, :3], axis=1))
     return {
         "matched": len(rows), "commands": len(trace),
@@ -427,6 +432,8 @@ def hop_summary(trace, frames, kind: str, frame_format: str) -> dict:
         # the slowest 1 %: each hop's median there, and which hop was the largest how often
         "tail_median_ms": {n: float(np.median(tail[:, k])) for k, n in enumerate(names)},
         "tail_largest_hop": dict(worst), "tail_size": len(tail),
+        # the slowest 1 % grouped into episodes (gaps > 50 ms between them)
+        "tail_episodes": episodes, "tail_times_s": [round(float(t), 4) for t in tail_times],
     }
 
 
