@@ -9,6 +9,7 @@ in a small fraction of the cycle, the per-cycle one waits for the cycle (uniform
 0..20 ms). Every firmware and bus is stopped.
 """
 
+import argparse
 import os
 import random
 import time
@@ -18,6 +19,7 @@ import can
 import numpy as np
 import pytest
 
+from handle_drake.devices.can_hand import cli
 from handle_drake.devices.can_hand.cli import main as cli_main
 from handle_drake.devices.can_hand.config import BusConfig, CanFirmwareConfig
 from handle_drake.devices.can_hand.firmware import SimulatedHandFirmware
@@ -189,6 +191,12 @@ def test_bad_feedback_modes_are_refused_in_one_line(capsys):
         cli_main(["can-sim", "--bus", "virtual", "--feedback", "sometimes"])
     assert exit_info.value.code == 2
     assert "--feedback: invalid choice: 'sometimes'" in capsys.readouterr().err
+    # A valid --feedback reaches the firmware's config; without it, the hand's own.
+    parser = argparse.ArgumentParser()
+    cli.register(parser.add_subparsers(dest="command"))
+    for argv, expected in ((["--feedback", "cycle"], "cycle"), ([], "on_request")):
+        args = parser.parse_args(["can-sim", "--hand", "barrett", "--bus", "virtual", *argv])
+        assert cli._firmware_config(args, cli._bus(args)).feedback_mode() == expected
 
 
 def test_velocity_estimate_survives_a_repeated_sample():
