@@ -57,6 +57,8 @@ Targets: >= 1 kHz updates (state/s), p99 <= 2 ms. Writes
     python benchmarks/bench_can.py                      # 4 s per case
     python benchmarks/bench_can.py --baseline 7f4a6f5   # before/after
     HANDLE_DRAKE_REDUCED=1 python benchmarks/bench_can.py   # 1 s per case
+    python benchmarks/bench_can.py --rounds 3               # Barrett against Shadow, the page
+    python benchmarks/bench_can.py --rounds 2 --hops --no-page   # each round trip's hops
 """
 
 from __future__ import annotations
