@@ -1,9 +1,16 @@
 """Full-hand setpoint round trip through TCP and the CAN bus on loopback.
 
 A client sends a full-hand command at 1 kHz to the CAN bus server, which
-forwards it as setpoint frames to the simulated firmware (1 kHz hand cycle);
-the round trip ends when a STATE whose ``seq_ack`` covers the command comes
-back. Side by side in one run, each case in its own child process:
+forwards it as setpoint frames to the simulated firmware (1 kHz joint-model
+step); the round trip ends when a STATE whose ``seq_ack`` covers the command
+comes back. The firmware acknowledges as each hand does (``can-sim
+--feedback``, see :mod:`handle_drake.devices.can_hand.firmware`): the Shadow
+once per 1 kHz control cycle (a command waits 0-1 ms for the next cycle), the
+Barrett at once, on receipt of the setpoint (FD) or its commit (classic),
+with the last step's state, as the real hand's pucks answer the host's
+request; ``procs-udp-cycle/barrett/...`` runs the Barrett chain with the
+per-cycle firmware for comparison. Side by side in one run, each case in its
+own child process:
 
 - ``inproc-virtual``: server, firmware and client as threads of one process
   on python-can's virtual bus;
@@ -34,8 +41,8 @@ The floor, with no project code, measured in the same run:
 - ``floor-tcp``: a bare TCP_NODELAY ping-pong of a COMMAND-sized message.
 
 The chain's round trip cannot beat ``floor-tcp + floor-udp-shadow`` (classic)
-or ``floor-tcp + floor-udp-fd`` (fd) plus the wait for the hand's next cycle
-(uniform in 0..1 ms at 1 kHz). The command clock runs one hand period per
+or ``floor-tcp + floor-udp-fd`` (fd), plus, for a per-cycle hand, the wait for
+its next cycle (uniform in 0..1 ms at 1 kHz). The command clock runs one hand period per
 run slower than 1 kHz, so the phase between
 command and hand cycle sweeps once through the cycle, as between two
 independent clocks (otherwise a run's latency depends on its start phase).
@@ -50,11 +57,14 @@ Targets: >= 1 kHz updates (state/s), p99 <= 2 ms. Writes
     python benchmarks/bench_can.py                      # 4 s per case
     python benchmarks/bench_can.py --baseline 7f4a6f5   # before/after
     HANDLE_DRAKE_REDUCED=1 python benchmarks/bench_can.py   # 1 s per case
+    python benchmarks/bench_can.py --rounds 3               # Barrett against Shadow, the page
+    python benchmarks/bench_can.py --rounds 2 --hops --no-page   # each round trip's hops
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
 import gc
 import json
 import os
@@ -131,8 +141,41 @@ def sleep_until(deadline: float) -> None:
 
 
 # -- the chain -----------------------------------------------------------------------
-def drive(client, layout, duration: float, pids=()) -> dict:
-    """Sends commands at ~RATE for ``duration`` s; rates, latencies, CPU per process."""
+class _CommandTrace(collections.OrderedDict):
+    """Stands in for the client's table of unacknowledged commands: keeps, per seq, the
+    time the command was written (the client's own stamp) and the time its STATE came."""
+
+    def __init__(self):
+        super().__init__()
+        self.sent, self.acked = {}, {}
+
+    def __setitem__(self, seq, t):
+        self.sent[seq] = t
+        super().__setitem__(seq, t)
+
+    def pop(self, seq, *default):
+        self.acked[seq] = time.perf_counter()
+        return super().pop(seq, *default)
+
+
+_TAG_STEP, _TAG_COUNT = 4e-4, 500  # rad per tag value (4 counts), distinct tags
+
+
+def _tag_value(layout, seq: int) -> float:
+    """The last joint's command that tags command ``seq`` (seq mod 500, 4e-4 rad apart)."""
+    return float(layout.command_lower[-1]) + 0.05 + _TAG_STEP * (seq % _TAG_COUNT)
+
+
+def _tag_of(layout, q_last: float) -> int:
+    return int(round((q_last - float(layout.command_lower[-1]) - 0.05) / _TAG_STEP)) % _TAG_COUNT
+
+
+def drive(client, layout, duration: float, pids=(), trace: bool = False) -> dict:
+    """Sends commands at ~RATE for ``duration`` s; rates, latencies, CPU per process.
+
+    ``trace``: also return, under ``"trace"``, the measured window's per-command send
+    and acknowledgement times (``time.time`` scale) for :func:`hop_summary`.
+    """
     assert client.wait_for_state(15.0), client.last_error
     # As the CLI processes do: the start-up heap (numpy, cantools, hand models) leaves
     # the garbage collector's reach, or a full collection stalls every thread 30-50 ms.
@@ -147,6 +190,9 @@ def drive(client, layout, duration: float, pids=()) -> dict:
         drift = -1.0 if os.environ.get("BENCH_CAN_CLOCK") == "faster" else 1.0
         period = 1.0 / RATE + drift / RATE / (seconds * RATE)
         client.latencies.clear()
+        if trace:
+            with client._lock:
+                client._sent_times = _CommandTrace()
         stats0 = client.request_stats(2.0)
         t_stats0 = time.perf_counter()
         cpu0 = [cpu_seconds(None)] + [cpu_seconds(pid) for pid in pids]
@@ -157,7 +203,10 @@ def drive(client, layout, duration: float, pids=()) -> dict:
         while next_time - start < seconds:
             sleep_until(next_time)
             now = time.perf_counter()
-            client.send_command(base + span * (0.5 + 0.5 * np.sin(np.pi * (now - start))))
+            q = base + span * (0.5 + 0.5 * np.sin(np.pi * (now - start)))
+            if trace:  # the last joint carries the command's seq (see hop_summary)
+                q[-1] = _tag_value(layout, client._seq + 1)
+            client.send_command(q)
             sent += 1
             next_time += period
         elapsed = time.perf_counter() - start
@@ -166,6 +215,12 @@ def drive(client, layout, duration: float, pids=()) -> dict:
         time.sleep(0.05)  # let the last acknowledgements in
         stats1 = client.request_stats(2.0)
         stats_window = time.perf_counter() - t_stats0  # server counters: request to request
+    extra = {}
+    if trace:
+        offset = time.time() - time.perf_counter()  # perf_counter -> time.time (kernel stamps)
+        table = client._sent_times
+        extra["trace"] = [(seq, t + offset, table.acked[seq] + offset)
+                          for seq, t in table.sent.items() if seq in table.acked]
     frames = (stats1.get("frames_tx", 0) - stats0.get("frames_tx", 0)
               + stats1.get("frames_rx", 0) - stats0.get("frames_rx", 0)
               - (stats1.get("echo_frames", 0) - stats0.get("echo_frames", 0)))
@@ -175,7 +230,7 @@ def drive(client, layout, duration: float, pids=()) -> dict:
         "states_per_s": states / elapsed,
         "hand_cycles_per_s": (stats1["hand_cycles"] - stats0["hand_cycles"]) / stats_window,
         "can_frames_per_s": frames / stats_window,
-        **summary(client.latencies, elapsed, cpu0, cpu1),
+        **summary(client.latencies, elapsed, cpu0, cpu1), **extra,
     }
 
 
@@ -242,7 +297,8 @@ def _stop(processes) -> None:
             process.wait(5)
 
 
-def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0) -> dict:
+def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0,
+               feedback: str | None = None, hops: bool = False) -> dict:
     from handle_drake.devices.can_hand.client import CanHandClient
     from handle_drake.devices.can_hand.layout import hand_layout
 
@@ -257,7 +313,8 @@ def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0) -> dic
     port = free_port()
     processes = []
     try:
-        processes.append(_spawn(["can-sim", *bus, "--rate", str(RATE)]))
+        sim = ["--feedback", feedback] if feedback else []  # None: the hand's own
+        processes.append(_spawn(["can-sim", *bus, "--rate", str(RATE), *sim]))
         processes.append(_spawn(["can-server", *bus, "--listen", f"127.0.0.1:{port}",
                                  "--max-rate", str(RATE), "--max-step", "0.5"]))
         rt = {"realtime_priority": rt_priority} if rt_priority else {}
@@ -265,10 +322,121 @@ def case_procs(kind: str, frame_format: str | None, rt_priority: int = 0) -> dic
             from handle_drake.devices.can_hand.bus import use_realtime_priority
 
             use_realtime_priority(rt_priority)
+        tap_file = None
+        if hops:  # a passive listener on the bus: kernel receive stamps of every frame
+            tap_file = tempfile.NamedTemporaryFile(suffix=".json", delete=False).name
+            processes.append(_spawn(["--child-tap", group, str(bus_port), tap_file],
+                                    module=False))
         with CanHandClient(layout, "127.0.0.1", port, record_latency=True, **rt) as client:
-            return drive(client, layout, DURATION, pids=[p.pid for p in processes])
+            result = drive(client, layout, DURATION, pids=[p.pid for p in processes[:2]],
+                           trace=hops)
+        if hops:
+            _stop(processes[2:])
+            frames = json.loads(Path(tap_file).read_text())
+            Path(tap_file).unlink()
+            result["hops"] = hop_summary(result.pop("trace"), frames, kind, frame_format)
+        return result
     finally:
         _stop(processes)
+
+
+def tap_bus(group: str, port: int, path: str) -> None:
+    """Records ``(kernel receive time, id, data hex)`` of every frame until SIGTERM.
+
+    Wakes every 20 ms and drains the socket: the stamps are the kernel's (taken when
+    the datagram reached this socket, i.e. when it was sent on loopback), so this
+    process's own scheduling does not enter them, and it costs the chain few wake-ups.
+    """
+    bus = _udp_bus(group, port)
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
+    frames = []
+    print("ready", flush=True)
+    while not stop:
+        time.sleep(0.02)
+        while (message := bus.recv(0.0)) is not None:
+            frames.append((message.timestamp, message.arbitration_id, bytes(message.data).hex()))
+    while (message := bus.recv(0.0)) is not None:
+        frames.append((message.timestamp, message.arbitration_id, bytes(message.data).hex()))
+    bus.shutdown()
+    Path(path).write_text(json.dumps(frames))
+
+
+def hop_summary(trace, frames, kind: str, frame_format: str) -> dict:
+    """Splits each round trip into its hops, from the client's and the bus tap's stamps.
+
+    - ``to_bus``: client writes the COMMAND -> the server's commit frame is on the bus
+      (TCP, the server's I/O thread, encoding, send);
+    - ``hand``: commit frame on the bus -> the hand's feedback acknowledging it is on the
+      bus (classic: its STATUS frame, the cycle's last);
+    - ``to_client``: that feedback on the bus -> the client has the STATE (the server's
+      bus thread, TCP, the client's thread).
+
+    Commands map to commits by a tag: while tracing, the last joint's command is
+    ``_tag_value(seq)`` (commit seqs are the server's own, and a command coalesced by its
+    rate limit has no commit: those commands are left out).
+    """
+    from handle_drake.devices.can_hand.layout import hand_layout
+    from handle_drake.devices.can_hand.messages import make_codec
+
+    layout = hand_layout(kind)
+    codec = make_codec(layout, frame_format)
+    setpoints, feedback = codec.setpoint_receiver(), codec.feedback_receiver()
+    commits, acks = [], []  # (kernel time, commit seq, tag) / (kernel time, seq_ack)
+    for t, arbitration_id, data in sorted(frames):
+        data = bytes.fromhex(data)
+        if arbitration_id in codec.host_to_hand_ids:
+            applied = setpoints.feed(arbitration_id, data, codec.is_fd)
+            if applied is not None:  # FD: the setpoint frame; classic: the commit frame
+                commits.append((t, applied[0], _tag_of(layout, applied[1][-1])))
+        elif arbitration_id in codec.hand_to_host_ids:
+            snapshot = feedback.feed(arbitration_id, data, codec.is_fd)
+            if snapshot is not None:  # classic: the STATUS frame, the cycle's last
+                acks.append((t, snapshot.seq_ack))
+    ack_times = np.array([t for t, _ in acks])
+    ack_seqs = np.array([seq for _, seq in acks])
+    # Each command's commit: the first commit carrying its tag after the command was
+    # written (less 1 ms: the server may commit before the client's send() returns).
+    by_tag = collections.defaultdict(list)
+    for t, commit, tag in commits:
+        by_tag[tag].append((t, commit))
+    rows = []
+    for seq, sent, acked in trace:
+        found = [(t, c) for t, c in by_tag.get(seq % _TAG_COUNT, ()) if sent - 1e-3 <= t <= acked]
+        if not found:
+            continue  # coalesced into a later command by the server's rate limit
+        t_commit, commit = found[0]
+        i = np.searchsorted(ack_times, t_commit)
+        covered = np.nonzero((ack_seqs[i:] - commit) % 65536 < 32768)[0]
+        if covered.size == 0:
+            continue
+        t_ack = ack_times[i + covered[0]]
+        if t_ack > acked:
+            continue
+        rows.append((t_commit - sent, t_ack - t_commit, acked - t_ack, acked - sent, sent))
+    if not rows:
+        return {"matched": 0}
+    rows = np.array(rows)
+    hops = rows[:, :4] * 1e3  # ms
+    names = ("to_bus", "hand", "to_client")
+    total = hops[:, 3]
+    in_tail = total >= np.percentile(total, 99)
+    tail = hops[in_tail]
+    # When the slowest 1 % happened (s into the run): a few stalls, or spread out?
+    tail_times = np.sort(rows[in_tail, 4] - rows[0, 4])
+    episodes = 1 + int(np.sum(np.diff(tail_times) > 0.05)) if tail_times.size else 0
+    worst = collections.Counter(names[k] for k in np.argmax(tail[:, :3], axis=1))
+    return {
+        "matched": len(rows), "commands": len(trace),
+        "p50_ms": {n: float(np.percentile(hops[:, k], 50)) for k, n in enumerate(names)},
+        "p99_ms": {n: float(np.percentile(hops[:, k], 99)) for k, n in enumerate(names)},
+        "total_p99_ms": float(np.percentile(total, 99)),
+        # the slowest 1 %: each hop's median there, and which hop was the largest how often
+        "tail_median_ms": {n: float(np.median(tail[:, k])) for k, n in enumerate(names)},
+        "tail_largest_hop": dict(worst), "tail_size": len(tail),
+        # the slowest 1 % grouped into episodes (gaps > 50 ms between them)
+        "tail_episodes": episodes, "tail_times_s": [round(float(t), 4) for t in tail_times],
+    }
 
 
 # -- the floor: no project code ----------------------------------------------------------
@@ -392,11 +560,14 @@ def run_case(case: str, kind: str, frame_format: str) -> dict:
     frame_format = None if frame_format == "-" else frame_format
     if case == "inproc-virtual":
         return case_inproc(kind, frame_format)
+    hops = os.environ.get("BENCH_CAN_HOPS") == "1"
     if case == "procs-udp":
-        return case_procs(kind, frame_format)
+        return case_procs(kind, frame_format, hops=hops)
     if case == "procs-udp-fastclock":  # the earlier command clock, 1 period per run faster
         os.environ["BENCH_CAN_CLOCK"] = "faster"
         return case_procs(kind, frame_format)
+    if case == "procs-udp-cycle":  # the firmware acknowledging once per cycle
+        return case_procs(kind, frame_format, feedback="cycle", hops=hops)
     if case == "procs-udp-rt":
         return case_procs(kind, frame_format, RT_PRIORITY)
     if case == "floor-udp-1":
@@ -407,7 +578,7 @@ def run_case(case: str, kind: str, frame_format: str) -> dict:
         return case_floor_udp(1, 1, 48, 64)
     if case == "floor-tcp":
         return case_floor_tcp()
-    cases = CHAIN_CASES + FLOOR_CASES + ("procs-udp-fastclock",)
+    cases = CHAIN_CASES + FLOOR_CASES + ("procs-udp-fastclock", "procs-udp-cycle")
     raise ValueError(f"case: expected one of {cases}, got {case!r}")
 
 
@@ -438,14 +609,21 @@ def child(code: Path, case: str, kind: str, frame_format: str = "-") -> dict:
     return value
 
 
-def rounds(n: int, run: ResultsRun, old_clock: bool = False) -> None:
+def rounds(n: int, run: ResultsRun, old_clock: bool = False, hops: bool = False) -> None:
     """Barrett against Shadow without RT priority, interleaved and repeated, floors in each round.
 
-    Each round runs every procs-udp case and the UDP/TCP floors once, in a random order, so
+    Each round runs every procs-udp case, the Barrett with per-cycle feedback
+    (``procs-udp-cycle``) and the UDP/TCP floors once, in a random order, so
     the load of the machine falls on all cases alike; the table gives, per case, the median
     and range over rounds of p50 and p99 and how often p99 met 2 ms.
     """
     names = [f"procs-udp/{k}/{f}" for k in KINDS for f in FORMATS] + list(FLOOR_CASES)
+    # The Barrett's firmware acknowledging once per cycle, as before 2026-11-27 evening
+    # (the Shadow's behaviour): the same chain with and without the wait for the cycle.
+    names += [f"procs-udp-cycle/barrett/{f}" for f in FORMATS]
+    if hops:  # the chains only, each with a bus tap (see hop_summary)
+        names = [name for name in names if name.startswith("procs-")]
+        os.environ["BENCH_CAN_HOPS"] = "1"
     if old_clock:  # the same chains under the clock used before 2026-11-27 evening
         names += [f"procs-udp-fastclock/{k}/{f}" for k in KINDS for f in FORMATS]
     rng = random.Random(0)
@@ -463,6 +641,8 @@ def rounds(n: int, run: ResultsRun, old_clock: bool = False) -> None:
             print(f"  round {r} {name}: p50 {result['latency_ms_p50']:.2f} ms, "
                   f"p99 {result['latency_ms_p99']:.2f} ms, load {result['load_average'][0]:.1f}",
                   flush=True)
+            if "hops" in result:
+                print(f"    hops: {json.dumps(result['hops'])}", flush=True)
     load_end = os.getloadavg()
     print(f"\n{n} rounds, {DURATION:.0f} s per case, load average {load_start[0]:.1f} at start, "
           f"{load_end[0]:.1f} at end")
@@ -486,11 +666,12 @@ def rounds(n: int, run: ResultsRun, old_clock: bool = False) -> None:
               f"{t['p99_met']:>5}/{n}")
     out = ROOT / "benchmarks" / "results"
     out.mkdir(parents=True, exist_ok=True)
+    json_name = "can_rounds_hops.json" if hops else "can_rounds.json"
     run.finish([{"case": name, **t} for name, t in table.items()],
                {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(),
                 "rounds": n, "load_average_start": load_start, "load_average_end": load_end,
-                "summary": table, "runs": runs}, out / "can_rounds.json")
-    print(f"wrote {out / 'can_rounds.json'}")
+                "summary": table, "runs": runs}, out / json_name)
+    print(f"wrote {out / json_name}")
 
 
 def main() -> None:
@@ -508,7 +689,12 @@ def main() -> None:
                         help="with --rounds: also run each chain under the command clock used "
                              "before (one hand period per run faster than 1 kHz: it queued in "
                              "the server's 1 kHz commit limit), as procs-udp-fastclock/...")
+    parser.add_argument("--hops", action="store_true",
+                        help="with --rounds and --no-page: run the chains only, each with a "
+                             "passive bus tap, and split every round trip into its hops "
+                             "(client -> bus, hand, bus -> client); writes can_rounds_hops.json")
     parser.add_argument("--child-echo-udp", nargs=5, help=argparse.SUPPRESS)
+    parser.add_argument("--child-tap", nargs=3, help=argparse.SUPPRESS)
     parser.add_argument("--child-echo-tcp", nargs=1, type=int, help=argparse.SUPPRESS)
     add_page_arguments(parser, "can")
     args = parser.parse_args()
@@ -519,6 +705,10 @@ def main() -> None:
         group, port, n_in, n_out, size_out = args.child_echo_udp
         echo_udp(group, int(port), int(n_in), int(n_out), int(size_out))
         return
+    if args.child_tap:
+        group, port, path = args.child_tap
+        tap_bus(group, int(port), path)
+        return
     if args.child_echo_tcp:
         echo_tcp(args.child_echo_tcp[0])
         return
@@ -526,9 +716,12 @@ def main() -> None:
         parser.error(f"--rounds: expected a count >= 0, got {args.rounds}")
     if args.old_clock and not args.rounds:
         parser.error("--old-clock: only with --rounds")
+    if args.hops and not (args.rounds and args.no_page):
+        parser.error("--hops: only with --rounds and --no-page (its tap perturbs the chain: "
+                     "its figures do not go on the page)")
     if args.rounds:
         rounds(args.rounds, ResultsRun("CAN hand: interleaved rounds, Barrett against Shadow",
-                                       args), old_clock=args.old_clock)
+                                       args), old_clock=args.old_clock, hops=args.hops)
         return
     run = ResultsRun("CAN hand: full-hand setpoint round trip at 1 kHz", args)
 

@@ -25,9 +25,11 @@ import threading
 from handle_drake.apps.cli_support import non_empty
 from handle_drake.devices.can_hand.config import (
     BUS_INTERFACES,
+    DEFAULT_FEEDBACK,
     DEFAULT_MULTICAST_GROUP,
     DEFAULT_MULTICAST_PORT,
     DEFAULT_SERVER_PORT,
+    FEEDBACK_MODES,
     FRAME_FORMATS,
     BusConfig,
     CanFirmwareConfig,
@@ -112,6 +114,10 @@ def _add_firmware_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--object-closure", type=float, default=None,
                    help="fraction of the closing range where a virtual object stops the fingers")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--feedback", choices=FEEDBACK_MODES, default=None,
+                   help="when the hand acknowledges a setpoint: once per control cycle (cycle) "
+                        "or at once with the last step's state (on_request); default: the "
+                        f"hand's own ({DEFAULT_FEEDBACK})")
 
 
 def _bus(args) -> BusConfig:
@@ -129,7 +135,7 @@ def _firmware_config(args, bus: BusConfig) -> CanFirmwareConfig:
         max_velocity=getattr(args, "max_velocity", 4.0),
         position_noise=getattr(args, "noise", 0.0005),
         object_closure=getattr(args, "object_closure", None), seed=getattr(args, "seed", 0),
-        realtime_priority=args.rt_priority,
+        realtime_priority=args.rt_priority, feedback=getattr(args, "feedback", None),
     )
 
 

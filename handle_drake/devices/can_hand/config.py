@@ -18,6 +18,8 @@ __all__ = [
     "driver_config",
     "BUS_INTERFACES",
     "FRAME_FORMATS",
+    "FEEDBACK_MODES",
+    "DEFAULT_FEEDBACK",
     "DEFAULT_SERVER_PORT",
     "DEFAULT_MULTICAST_GROUP",
     "DEFAULT_MULTICAST_PORT",
@@ -29,6 +31,11 @@ __all__ = [
 
 BUS_INTERFACES = ("virtual", "udp_multicast", "socketcan")
 FRAME_FORMATS = ("classic", "fd")
+#: When the simulated hand sends the feedback that acknowledges a setpoint (CanFirmwareConfig).
+FEEDBACK_MODES = ("cycle", "on_request")
+#: Each hand's own behaviour: the Shadow's controller publishes once per control cycle; the
+#: Barrett's pucks answer the host's request (libbarrett drives the loop, see can_hand.firmware).
+DEFAULT_FEEDBACK = {"shadow": "cycle", "barrett": "on_request"}
 DEFAULT_SERVER_PORT = 47800
 DEFAULT_MULTICAST_GROUP = "239.74.163.2"  # python-can's IPv4 default group
 DEFAULT_MULTICAST_PORT = 43113
@@ -240,6 +247,15 @@ class CanFirmwareConfig:
 
     ``realtime_priority`` 1..99 runs the firmware thread under SCHED_FIFO (0:
     normal scheduling).
+
+    ``feedback``: when the feedback that acknowledges a setpoint goes out.
+    "cycle": once per control cycle (``rate``), acknowledging the setpoints
+    read at the cycle's start. "on_request": as soon as a setpoint is
+    applied (FD: its one SETPOINT frame; classic: its SETPOINT_COMMIT; one
+    reply for the newest when several were waiting), carrying the state of
+    the last joint-model step; a cycle in which no setpoint came still
+    publishes its own feedback. None: the hand's own
+    behaviour (:data:`DEFAULT_FEEDBACK`: Barrett on_request, Shadow cycle).
     """
 
     hand_kind: str = "shadow"
@@ -255,10 +271,20 @@ class CanFirmwareConfig:
     contact_stiffness: float = 20.0
     seed: int = 0
     realtime_priority: int = 0
+    feedback: str | None = None
+
+    def feedback_mode(self, hand_kind: str | None = None) -> str:
+        """``feedback``, or the default of ``hand_kind`` (this config's hand when None)."""
+        if self.feedback is not None:
+            return self.feedback
+        return DEFAULT_FEEDBACK[hand_kind or self.hand_kind]
 
     def validate(self) -> None:
         if self.hand_kind not in ("shadow", "barrett"):
             raise ValueError(f"hand: expected 'shadow' or 'barrett', got {self.hand_kind!r}")
+        if self.feedback is not None and self.feedback not in FEEDBACK_MODES:
+            raise ValueError(f"feedback: expected one of {list(FEEDBACK_MODES)} (or None: the "
+                             f"hand's default), got {self.feedback!r}")
         self.bus.validate()
         for name in ("rate", "natural_frequency", "damping_ratio", "max_velocity",
                      "contact_stiffness"):

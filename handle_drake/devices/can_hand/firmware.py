@@ -1,14 +1,37 @@
 """A simulated CAN-bus hand: joint position loops, noisy sensors, a virtual object.
 
-It speaks the hand's side of the configured layout (``config.bus.frame_format``),
-reading the bus once per cycle (at the cycle's start, like a firmware reading
-its receive FIFO).
-FD (``hand_fd.dbc``): it applies each ``<HAND>_SETPOINT`` frame on receipt
-and, ``rate`` times a second, publishes one ``<HAND>_FEEDBACK`` frame (which
-acknowledges the last applied setpoint). Classic (``hand.dbc``): it applies
-SETPOINT frames on each SETPOINT_COMMIT and publishes POSITION, TACTILE and
-then STATUS. With the bus server it lets the whole chain run without hardware
+It speaks the hand's side of the configured layout (``config.bus.frame_format``).
+FD (``hand_fd.dbc``): it applies each ``<HAND>_SETPOINT`` frame on receipt.
+Classic (``hand.dbc``): it applies SETPOINT frames on each SETPOINT_COMMIT.
+The feedback (FD: one ``<HAND>_FEEDBACK`` frame; classic: POSITION, TACTILE,
+then STATUS) acknowledges the last applied setpoint (``SEQ_ACK``). With the
+bus server it lets the whole chain run without hardware
 (``handle-drake can-sim``).
+
+When the feedback goes out (``CanFirmwareConfig.feedback``):
+
+- ``cycle`` (the Shadow's default): the firmware reads the bus once per
+  control cycle (at the cycle's start, like a firmware reading its receive
+  FIFO), steps the joint model and publishes one feedback, ``rate`` times a
+  second. A setpoint waits for the next cycle to be acknowledged (0 to one
+  period).
+- ``on_request`` (the Barrett's default): the firmware blocks on the bus
+  until the next joint-model step is due and answers an applied setpoint at
+  once (when several frames were already waiting, after taking them all: one
+  reply acknowledging the newest). That is how the real hand works: its pucks do not stream; the
+  host drives the loop. libbarrett's ``Hand::update`` (src/products/hand.cpp;
+  ``Hand::updatePosition`` in older versions) sends one group get-property
+  request for ``P`` and then receives each puck's reply
+  (``PuckGroup::sendGetPropertyRequest`` / ``receiveGetPropertyReply``,
+  include/barrett/detail/puck_group-inl.h), right after its setpoints went
+  out with ``Hand::setPositionCommand``. Here the setpoint frame is also the
+  request. The reply carries the sample of the last joint-model step
+  (positions and tactile with their noise, stamped with that step's time):
+  a puck answers ``P`` with the encoder count its control loop last read,
+  and a setpoint just received has not moved the motor yet. A cycle in
+  which no setpoint came publishes its own feedback, so a host that sends
+  nothing (the server before the first command, after its watchdog hold)
+  still sees the hand.
 
 Joint model (each actuated joint, see :class:`CanFirmwareConfig`): a
 second-order position loop ``q'' = wn^2 (q_sp - q) - 2 zeta wn q'`` with
@@ -53,6 +76,8 @@ log = logging.getLogger(__name__)
 
 _MAX_SUBSTEP = 0.001  # s; keeps the explicit integration stable for wn * dt << 1
 _MAX_FRAMES_PER_CYCLE = 4096  # a flood of frames cannot stop the cycle from publishing
+_MAX_WAIT = 0.05  # s, longest single wait on the bus (stop() stays prompt at low rates)
+_FRAME, _TIMEOUT, _FAILED = "frame", "timeout", "failed"  # what one _receive got
 
 
 class HandJointModel:
@@ -151,6 +176,12 @@ class SimulatedHandFirmware:
         self._t0 = time.monotonic()
         self.silent = threading.Event()  # set: stop publishing (a test's "hand unplugged")
         self._errors = ErrorLog(log)
+        self.feedback = config.feedback_mode(self.layout.kind)
+        self._on_request = self.feedback == "on_request"
+        self._replying = False  # inside an on_request wait (the counters tell replies apart)
+        self._published = False  # a feedback went out since the last step
+        self._unanswered = False  # a setpoint was applied since the last feedback
+        self._last_sample = None  # (q, tactile, hand_time) of the last joint-model step
 
     def start(self) -> SimulatedHandFirmware:
         if self._thread is not None:
@@ -179,91 +210,152 @@ class SimulatedHandFirmware:
     def is_alive(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
-    def _handle(self, message: can.Message) -> None:
+    def _handle(self, message: can.Message) -> bool:
+        """Processes one received frame; True when it applied a setpoint."""
         self.counters["frames_rx"] += 1
         try:
             arbitration_id, data, is_fd = check_frame(message)
         except MalformedFrameError:
             self.counters["malformed_frames"] += 1
-            return
+            return False
         if arbitration_id in self.codec.hand_to_host_ids:
             self.counters["echo_frames"] += 1  # our own feedback looped back
-            return
+            return False
         if message.is_error_frame or message.is_remote_frame or message.is_extended_id:
             self.counters["foreign_frames"] += 1
-            return
+            return False
         try:
             applied = self._assembler.feed(arbitration_id, data, is_fd)
         except ForeignFrameError:
             self.counters["foreign_frames"] += 1
-            return
+            return False
         except FrameFormatError:
             self.counters["wrong_format_frames"] += 1
-            return
+            return False
         except MalformedFrameError:
             self.counters["malformed_frames"] += 1
-            return
-        if applied is not None:
-            seq, setpoint = applied
-            with self._lock:
-                self.model.apply(setpoint)
-                self._seq_ack = seq
-            self.counters["commits_applied"] += 1
+            return False
         self.counters["rejected_commits"] = self._assembler.rejected_commits
+        if applied is None:
+            return False
+        seq, setpoint = applied
+        with self._lock:
+            self.model.apply(setpoint)
+            self._seq_ack = seq
+        self.counters["commits_applied"] += 1
+        return True
+
+    def _receive(self, timeout: float) -> str:
+        """Takes one frame from the bus (waiting up to ``timeout`` s) and handles it.
+
+        Returns ``_FRAME`` (a frame or a garbage datagram came), ``_TIMEOUT`` or
+        ``_FAILED`` (the bus failed: the caller must not retry at once).
+        """
+        message, why = receive(self._bus, timeout)
+        if why == GARBAGE:  # undecodable datagram: counted, next one at once
+            self.counters["frames_rx"] += 1
+            self.counters[GARBAGE] += 1
+            return _FRAME
+        if why is not None:
+            self.counters[why] += 1
+            self._errors(why, RuntimeError("firmware bus receive failed"))
+            return _FAILED
+        if message is None:
+            return _TIMEOUT
+        try:
+            if self._handle(message):
+                self._unanswered = True
+        except Exception as error:  # one frame never stops the hand
+            self.counters["frame_errors"] += 1
+            self._errors("frame_errors", error)
+        return _FRAME
+
+    def _drain(self, limit: int) -> int:
+        """Handles the frames already waiting (at most ``limit``); returns how many."""
+        for n in range(max(0, limit)):
+            if self._receive(0.0) != _FRAME:
+                return n
+        return max(0, limit)
+
+    def _sample(self, now: float) -> None:
+        """Reads the sensors after a joint-model step (the feedback's values until the next)."""
+        with self._lock:
+            self._last_sample = (self.model.measured_positions(), self.model.tactile(),
+                                 now - self._t0)
+
+    def _publish(self) -> None:
+        """Sends one feedback: the last step's sample and the last applied setpoint's seq."""
+        self._published = True
+        self._unanswered = False
+        if self.silent.is_set():
+            return
+        q, tactile, hand_time = self._last_sample
+        frames = self.codec.encode_feedback(q, tactile, self._seq_ack, self._counter, STATE_OK,
+                                            hand_time)
+        self._counter = (self._counter + 1) % 256
+        fd = self.codec.is_fd
+        try:
+            for arbitration_id, data in frames:
+                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
+                                           is_extended_id=False, is_fd=fd,
+                                           bitrate_switch=fd), timeout=0.01)
+            self.counters["cycles"] += 1
+            if self._on_request:
+                self.counters["feedback_replies" if self._replying else "feedback_idle"] += 1
+        except (can.CanError, OSError) as error:
+            self.counters["bus_tx_errors"] += 1
+            log.warning("firmware bus send failed: %s", error)
 
     def _loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
         period = 1.0 / self.config.rate
         last = time.monotonic()
         deadline = last + period
-        bus = self._bus
+        self._sample(last)
         while not self._stop.is_set():
-            # One wake-up per cycle, like a firmware that reads its CAN receive FIFO at
-            # the start of each control cycle: sleep to the deadline, then take every
-            # frame that arrived meanwhile. (Waking for each frame as well would double
-            # the context switches per cycle and gain nothing: the acknowledgement goes
-            # out with this cycle's feedback either way.)
-            remaining = deadline - time.monotonic()
-            if remaining > 0 and self._stop.wait(remaining):
+            if self._on_request:
+                # Block on the bus until the next step is due (bounded, so stop() is
+                # prompt): an applied setpoint is answered as soon as it arrives.
+                self._replying = True
+                self._published = False
+                frames = 0
+                while frames < _MAX_FRAMES_PER_CYCLE and not self._stop.is_set():
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    got = self._receive(min(remaining, _MAX_WAIT))
+                    if got == _FAILED:  # no busy retry: wait out this cycle
+                        self._stop.wait(max(0.0, deadline - time.monotonic()))
+                        break
+                    if got == _TIMEOUT:
+                        continue
+                    # Woken by a frame: take what else is waiting (a classic command's
+                    # other frames), answer the newest applied setpoint once, then take
+                    # our own reply's frames, which a multicast bus loops back at once.
+                    frames += 1 + self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+                    if self._unanswered:
+                        self._publish()  # the last step's sample, the newest seq
+                        frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+                self._replying = False
+            else:
+                # One wake-up per cycle, like a firmware that reads its CAN receive FIFO
+                # at the start of each control cycle: sleep to the deadline, then take
+                # every frame that arrived meanwhile. (Waking for each frame as well
+                # would double the context switches per cycle and gain nothing: the
+                # acknowledgement goes out with this cycle's feedback either way.)
+                remaining = deadline - time.monotonic()
+                if remaining > 0 and self._stop.wait(remaining):
+                    break
+                self._drain(_MAX_FRAMES_PER_CYCLE)
+            if self._stop.is_set():
                 break
-            for _ in range(_MAX_FRAMES_PER_CYCLE):
-                message, why = receive(bus, 0.0)
-                if why == GARBAGE:  # undecodable datagram: counted, next one at once
-                    self.counters["frames_rx"] += 1
-                    self.counters[GARBAGE] += 1
-                    continue
-                if why is not None:
-                    self.counters[why] += 1
-                    self._errors(why, RuntimeError("firmware bus receive failed"))
-                    break
-                if message is None:
-                    break
-                try:
-                    self._handle(message)
-                except Exception as error:  # one frame never stops the hand
-                    self.counters["frame_errors"] += 1
-                    self._errors("frame_errors", error)
             now = time.monotonic()
             with self._lock:
                 self.model.step(min(now - last, 0.05))
-                q, tactile, seq_ack = (self.model.measured_positions(), self.model.tactile(),
-                                       self._seq_ack)
+            self._sample(now)
             last = now
             deadline += period
             if deadline < now - 10 * period:  # fell far behind (a stall): do not burst
                 deadline = now + period
-            if self.silent.is_set():
-                continue
-            frames = self.codec.encode_feedback(q, tactile, seq_ack, self._counter, STATE_OK,
-                                                now - self._t0)
-            self._counter = (self._counter + 1) % 256
-            fd = self.codec.is_fd
-            try:
-                for arbitration_id, data in frames:
-                    self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                               is_extended_id=False, is_fd=fd,
-                                               bitrate_switch=fd), timeout=0.01)
-                self.counters["cycles"] += 1
-            except (can.CanError, OSError) as error:
-                self.counters["bus_tx_errors"] += 1
-                log.warning("firmware bus send failed: %s", error)
+            if not (self._on_request and self._published):
+                self._publish()  # cycle mode, or a cycle without a request

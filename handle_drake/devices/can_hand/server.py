@@ -121,6 +121,7 @@ class VelocityEstimator:
     Uses the hand's own clock (which wraps at ``wrap`` seconds: 2**32 us on
     the classic layout, 2**24 us on the FD one), so bus and scheduling jitter
     do not enter the difference quotient. ``tau = 0`` gives the raw difference.
+    A repeated sample (same stamp, same positions) keeps the estimate.
     """
 
     def __init__(self, n: int, tau: float, wrap: float = float(1 << 32) * 1e-6):
@@ -133,6 +134,10 @@ class VelocityEstimator:
         q = np.asarray(q, dtype=float)
         if self._q is not None:
             dt = (t - self._t) % self._wrap
+            if dt == 0 and np.array_equal(q, self._q):
+                # The same sample again (a hand that answers each request with its last
+                # control step's reading, ``feedback: on_request``): nothing new to learn.
+                return self.v.copy()
             if 0 < dt < 1.0:
                 raw = (q - self._q) / dt
                 alpha = dt / (self._tau + dt)
