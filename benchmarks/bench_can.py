@@ -36,6 +36,8 @@ The floor, with no project code, measured in the same run:
   two processes at 1 kHz;
 - ``floor-udp-shadow``: the same with a classic Shadow cycle's frame counts (7
   frames out, 9 back, the reply sent as soon as the 7th arrives);
+- ``floor-udp-barrett``: the same with a classic Barrett cycle's (2 out: its setpoint
+  frame and the commit; 4 back: 2 position, tactile, status);
 - ``floor-udp-fd``: one 48-byte CAN FD frame out, one 64-byte frame back (the
   FD Shadow cycle);
 - ``floor-tcp``: a bare TCP_NODELAY ping-pong of a COMMAND-sized message.
@@ -96,7 +98,8 @@ KINDS = ("shadow", "barrett")
 FORMATS = ("classic", "fd")
 CHAIN_CASES = ("inproc-virtual", "procs-udp", "procs-udp-rt")
 RT_PRIORITY = 50  # SCHED_FIFO priority of the bus threads in the -rt case
-FLOOR_CASES = ("floor-udp-1", "floor-udp-shadow", "floor-udp-fd", "floor-tcp")
+FLOOR_CASES = ("floor-udp-1", "floor-udp-shadow", "floor-udp-barrett", "floor-udp-fd",
+               "floor-tcp")
 
 
 def free_port() -> int:
@@ -574,6 +577,8 @@ def run_case(case: str, kind: str, frame_format: str) -> dict:
         return case_floor_udp(1, 1)
     if case == "floor-udp-shadow":
         return case_floor_udp(7, 9)
+    if case == "floor-udp-barrett":
+        return case_floor_udp(2, 4)
     if case == "floor-udp-fd":
         return case_floor_udp(1, 1, 48, 64)
     if case == "floor-tcp":
