@@ -88,7 +88,7 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
         print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
     cases.update({k: (lambda w=w: w.run()[1]) for k, w in workers.items()})  # CPU s
     try:
-        times = run_rounds(cases, rounds)
+        times = run_rounds(cases, rounds, workers.values())
     finally:
         for worker in workers.values():
             worker.close()

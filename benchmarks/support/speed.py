@@ -2,13 +2,13 @@
 
 Every case runs once per round (ratios hold while the machine's speed drifts). A case
 whose name ends in ``(own worker, CPU)`` ran in a worker process of its own
-(``trial_worker.py``: nothing else in that process), is timed in that process's CPU
-seconds (a worker is single-threaded; CPU time does not count the waits for a core on a
-loaded machine) and is divided by the floor that ran in its own worker too, round by
-round; the other cases by the floor timed in the benchmark's process. Both are printed:
-the benchmark's process interleaves every case (other diagrams, other allocations
-between two runs of one), a worker runs one case only, as a learning loop's worker runs
-only trials.
+(``trial_worker.py``: nothing else in that process; a new one every round), is timed in
+that process's CPU seconds (a worker is single-threaded; CPU time does not count the
+waits for a core on a loaded machine) and is divided by the floor that ran in its own
+worker too, round by round; the other cases by the floor timed in the benchmark's
+process. Both are printed: the benchmark's process interleaves every case (other
+diagrams, other allocations between two runs of one), a worker runs one case only, as a
+learning loop's worker runs only trials.
 """
 
 from __future__ import annotations
@@ -20,12 +20,20 @@ import numpy as np
 OWN = " (own worker, CPU)"
 
 
-def rounds(cases: dict, n: int) -> dict:
-    """``{name: [wall s per round]}``: every case once per round."""
+def rounds(cases: dict, n: int, workers=(), seed: int = 0) -> dict:
+    """``{name: [s per round]}``: every case once per round, in a shuffled order (a case
+    always timed at the same place in a round carries that place's bias: measured, two
+    workers of identical code at fixed places read 1.045-1.067x); the ``workers``
+    (``BaselineTrial``) are restarted before every round but the first (a new process
+    each round: one process's own bias averages out)."""
     times = {k: [] for k in cases}
-    for _ in range(n):
-        for name, case in cases.items():
-            times[name].append(case())
+    rng = np.random.default_rng(seed)
+    names = list(cases)
+    for i in range(n):
+        for worker in workers if i else ():
+            worker.restart()
+        for j in rng.permutation(len(names)):
+            times[names[j]].append(cases[names[j]]())
     return times
 
 

@@ -84,10 +84,14 @@ class BaselineTrial:
     """The trial of git revision ``revision`` (None: this checkout, as it is) in a worker
     process (its ``handle_drake`` extracted from git); :meth:`run` times one evaluation
     there. Time both sides in workers: on a loaded machine the scheduler favours a process
-    that has been waiting, which biases a worker against the benchmark's own process."""
+    that has been waiting, which biases a worker against the benchmark's own process.
+    :meth:`restart` replaces the process by a new one (same tree): one process runs the
+    same code up to ~7 % faster or slower than another (measured: two workers of one
+    tree, paired over 7 rounds, 1.067x), so a benchmark restarts its workers every round
+    and that bias averages out over the rounds."""
 
     def __init__(self, revision: str | None, kind: str, options: dict):
-        self.revision = revision
+        self.revision, self._kind, self._options = revision, kind, options
         if revision is None:
             self._dir = str(ROOT)
         else:
@@ -99,13 +103,22 @@ class BaselineTrial:
             path.write_bytes(archive)
             with tarfile.open(path) as tar:
                 tar.extractall(self._dir, filter="data")
+        self._start()
+
+    def _start(self) -> None:
         env = {**os.environ, "PYTHONPATH": self._dir, "OPENBLAS_NUM_THREADS": "1"}
         self._process = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), kind, json.dumps(options)],
+            [sys.executable, str(Path(__file__).resolve()), self._kind,
+             json.dumps(self._options)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env, cwd=self._dir)
         line = self._process.stdout.readline().strip()
         if line != "ready":
-            raise RuntimeError(f"baseline worker at {revision}: {line!r}")
+            raise RuntimeError(f"baseline worker at {self.revision}: {line!r}")
+
+    def restart(self) -> None:
+        """A new worker process in place of this one (built and warmed up the same way)."""
+        self.close()
+        self._start()
 
     def run(self) -> tuple[float, float, dict]:
         """(wall s of the trial, CPU s of the worker, outcome)."""
