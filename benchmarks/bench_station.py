@@ -34,13 +34,18 @@ import importlib.util
 import os
 import statistics
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+
 from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
+
+from script_floor import connect_script  # noqa: E402
 
 from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
 from handle_drake.base.models import diagrams_dir  # noqa: E402
@@ -172,17 +177,12 @@ def _plant_case(variant: str) -> _Case:
     - ``"no_self_collision"``: every hand-hand collision pair filtered;
     - ``"no_contact"``: no object and no table (the hand moves in free space).
     """
-    import numpy as np
     from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
     from pydrake.multibody.plant import AddMultibodyPlant
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import MatrixGain, TrajectorySource
 
-    from handle_drake.base.hands import get_hand_spec
-    from handle_drake.station import AddPlantModels, hand_initial_command, object_body
-    from handle_drake.systems.hand_driver import WRIST_JOINTS, actuated_order
-    from handle_drake.trial.simulate import script_trajectories
+    from handle_drake.station import AddPlantModels, object_body
 
     scenario = _scenario("point", 0.001)
     if variant == "no_contact":
@@ -196,23 +196,7 @@ def _plant_case(variant: str) -> _Case:
         scene_graph.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeWithin(GeometrySet(geometries)))
     plant.Finalize()
-    wrist = plant.GetModelInstanceByName("wrist")
-    hand_traj, wrist_traj = script_trajectories(scenario, hand_initial_command(scenario))
-    spec = get_hand_spec(scenario.hand.kind)
-    # Wrist command [x y z roll pitch yaw] -> joints [x y z yaw pitch roll].
-    wrist_map = np.eye(6)[[0, 1, 2, 5, 4, 3]]
-    for instance, trajectory, order, pre in (
-            (hand, hand_traj, actuated_order(plant, hand, spec.actuated_joint_names), None),
-            (wrist, wrist_traj, actuated_order(plant, wrist, WRIST_JOINTS), wrist_map)):
-        n = len(order)
-        gain = np.zeros((2 * n, n))
-        gain[np.arange(n), order] = 1.0
-        if pre is not None:
-            gain[:n] = gain[:n] @ pre
-        source = builder.AddSystem(TrajectorySource(trajectory))
-        matrix = builder.AddSystem(MatrixGain(gain))
-        builder.Connect(source.get_output_port(), matrix.get_input_port())
-        builder.Connect(matrix.get_output_port(), plant.get_desired_state_input_port(instance))
+    connect_script(builder, plant, hand, scenario)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     default = diagram.CreateDefaultContext()

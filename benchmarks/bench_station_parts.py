@@ -22,8 +22,11 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
 
 from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
@@ -36,19 +39,16 @@ from pydrake.systems.framework import DiagramBuilder  # noqa: E402
 from pydrake.systems.primitives import (  # noqa: E402
     ConstantVectorSource,
     Gain,
-    MatrixGain,
-    TrajectorySource,
     VectorLogSink,
 )
+from script_floor import connect_script  # noqa: E402
 
 from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
-from handle_drake.base.hands import get_hand_spec  # noqa: E402
 from handle_drake.base.models import diagrams_dir  # noqa: E402
 from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.scenario import LoadScenario  # noqa: E402
-from handle_drake.station import AddPlantModels, GetPlant, hand_initial_command  # noqa: E402
-from handle_drake.systems.hand_driver import WRIST_JOINTS, actuated_order  # noqa: E402
-from handle_drake.trial.simulate import ScenarioRunner, script_trajectories  # noqa: E402
+from handle_drake.station import AddPlantModels, GetPlant  # noqa: E402
+from handle_drake.trial.simulate import ScenarioRunner  # noqa: E402
 
 
 def _scenario():
@@ -109,22 +109,7 @@ def _bare_plant(extra_gains=0, extra_pairs=0, nested=False, loggers=0):
     plant, _ = AddMultibodyPlant(scenario.plant_config, inner)
     hand = AddPlantModels(plant, scenario)
     plant.Finalize()
-    wrist = plant.GetModelInstanceByName("wrist")
-    hand_traj, wrist_traj = script_trajectories(scenario, hand_initial_command(scenario))
-    spec = get_hand_spec(scenario.hand.kind)
-    wrist_map = np.eye(6)[[0, 1, 2, 5, 4, 3]]
-    for instance, trajectory, order, pre in (
-            (hand, hand_traj, actuated_order(plant, hand, spec.actuated_joint_names), None),
-            (wrist, wrist_traj, actuated_order(plant, wrist, WRIST_JOINTS), wrist_map)):
-        n = len(order)
-        gain = np.zeros((2 * n, n))
-        gain[np.arange(n), order] = 1.0
-        if pre is not None:
-            gain[:n] = gain[:n] @ pre
-        source = inner.AddSystem(TrajectorySource(trajectory))
-        matrix = inner.AddSystem(MatrixGain(gain))
-        inner.Connect(source.get_output_port(), matrix.get_input_port())
-        inner.Connect(matrix.get_output_port(), plant.get_desired_state_input_port(instance))
+    connect_script(inner, plant, hand, scenario)
     nx = plant.num_positions() + plant.num_velocities()
     for _ in range(extra_gains):
         gain = inner.AddSystem(Gain(1.0, nx))
