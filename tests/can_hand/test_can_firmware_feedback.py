@@ -142,12 +142,13 @@ def test_the_reply_carries_the_setpoint_seq_and_the_last_step_state(hosts, frame
     assert np.allclose(idle.q, q_start, atol=0.5e-4 + 1e-12)  # half a count of quantisation
     assert np.allclose(idle.tactile, 0.0)
     # A setpoint in the same 50 ms cycle: answered at once with that step's sample,
-    # which the new setpoint has not moved yet (same stamp, same positions).
+    # which the new setpoint has not moved yet (same stamp, same positions). On a loaded
+    # machine the next step may come first: then its stamp, the hand still at rest.
     target = layout.command_lower + 0.6 * (layout.command_upper - layout.command_lower)
     host.send_setpoint(target, 7)
     reply, _ = host.next_feedback()
     assert reply.seq_ack == 7
-    assert reply.hand_time == idle.hand_time
+    assert min(abs(reply.hand_time - idle.hand_time - k / 20.0) for k in (0, 1)) < 1e-9
     assert np.array_equal(reply.q, idle.q)
     assert host.firmware.counters["commits_applied"] == 1
     # Nothing more comes in: the step after the reply is not published (a request came in
