@@ -21,11 +21,11 @@ OWN = " (own worker, CPU)"
 
 
 def rounds(cases: dict, n: int, workers=(), seed: int = 0) -> dict:
-    """``{name: [s per round]}``: every case once per round, in a shuffled order (a case
-    always timed at the same place in a round carries that place's bias: measured, two
-    workers of identical code at fixed places read 1.045-1.067x); the ``workers``
-    (``BaselineTrial``) are restarted before every round but the first (a new process
-    each round: one process's own bias averages out)."""
+    """``{name: [s per round]}``: every case once per round, in a shuffled order (no case
+    keeps one place in the round); the ``workers`` (``BaselineTrial``) are restarted
+    before every round but the first (no case keeps one process). Measured, two workers of
+    identical code still read 1.007-1.055x (three 7-round runs; 1.045-1.067x without
+    either): a ratio within +-5 % of another is not resolved by one run."""
     times = {k: [] for k in cases}
     rng = np.random.default_rng(seed)
     names = list(cases)

@@ -85,10 +85,9 @@ class BaselineTrial:
     process (its ``handle_drake`` extracted from git); :meth:`run` times one evaluation
     there. Time both sides in workers: on a loaded machine the scheduler favours a process
     that has been waiting, which biases a worker against the benchmark's own process.
-    :meth:`restart` replaces the process by a new one (same tree): one process runs the
-    same code up to ~7 % faster or slower than another (measured: two workers of one
-    tree, paired over 7 rounds, 1.067x), so a benchmark restarts its workers every round
-    and that bias averages out over the rounds."""
+    :meth:`restart` replaces the process by a new one (same tree): one process ran the
+    same code 6.7 % slower than another (two workers of one tree, paired over 7 rounds),
+    so a benchmark restarts its workers every round (``speed.rounds``)."""
 
     def __init__(self, revision: str | None, kind: str, options: dict):
         self.revision, self._kind, self._options = revision, kind, options
