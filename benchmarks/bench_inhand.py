@@ -55,8 +55,7 @@ RESULTS = Path(__file__).parent / "results" / "inhand.json"
 def speed(rounds: int, baseline: str | None = None) -> dict:
     sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from floors import inhand_bare, inhand_replay
-    from speed import OWN, paired, ratios
-    from speed import rounds as run_rounds
+    from speed import OWN, paired, speed_table
     from trial_worker import BaselineTrial, outcome_dict, stroke
 
     trial = InHandTrial()
@@ -81,33 +80,16 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
     workers = {"trial (reset, checks)" + OWN: BaselineTrial(None, "inhand", {}),
                "bare plant, same frames" + OWN: BaselineTrial(None, "inhand:bare", {}),
                "bare plant, replay" + OWN: BaselineTrial(None, "inhand:replay", {})}
-    same = None
-    if baseline:
-        workers[f"trial at {baseline} (before)" + OWN] = BaselineTrial(baseline, "inhand", {})
-        same = workers[f"trial at {baseline} (before)" + OWN].run()[2] == outcome_dict(mine)
-        print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
-    cases.update({k: (lambda w=w: w.run()[1]) for k, w in workers.items()})  # CPU s
-    try:
-        times = run_rounds(cases, rounds, workers.values())
-    finally:
-        for worker in workers.values():
-            worker.close()
-    out = ratios(times, "bare plant, same frames", sim)
+    out, times = speed_table(cases, workers, rounds, trial="trial (reset, checks)",
+                             floor="bare plant, same frames", sim_time=sim, kind="inhand",
+                             options={}, baseline=baseline, outcome=outcome_dict(mine))
     out.update(replay_final_pose_identical=identical,
                trial_over_replay=paired(times, "trial (reset, checks)",
                                         "bare plant, the trial's own inputs (replay)",
                                         "trial / replay, in the bench's process"),
-               own_worker_trial_over_bare=paired(
-                   times, "trial (reset, checks)" + OWN, "bare plant, same frames" + OWN,
-                   "trial / bare plant, each in its own worker"),
                own_worker_trial_over_replay=paired(
                    times, "trial (reset, checks)" + OWN, "bare plant, replay" + OWN,
                    "trial / replay, each in its own worker"))
-    if baseline:
-        out.update(baseline=baseline, baseline_outcome_identical=same,
-                   after_over_before=paired(times, "trial (reset, checks)" + OWN,
-                                            f"trial at {baseline} (before)" + OWN,
-                                            "after / before (both in workers)"))
     return out
 
 

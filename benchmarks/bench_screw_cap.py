@@ -252,8 +252,7 @@ def speed(rounds: int, options, baseline: str | None = None) -> dict:
     equal to this tree's)."""
     sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from floors import screw_cap_bare
-    from speed import OWN, paired, ratios
-    from speed import rounds as run_rounds
+    from speed import OWN, speed_table
     from trial_worker import BaselineTrial, outcome_dict, stroke
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
@@ -269,28 +268,9 @@ def speed(rounds: int, options, baseline: str | None = None) -> dict:
              "bare plant, same frames": run_bare}
     workers = {"trial (reset, samples, checks)" + OWN: BaselineTrial(None, "screw_cap", options),
                "bare plant, same frames" + OWN: BaselineTrial(None, "screw_cap:bare", options)}
-    same = None
-    if baseline:
-        workers[f"trial at {baseline} (before)" + OWN] = BaselineTrial(baseline, "screw_cap",
-                                                                        options)
-        same = workers[f"trial at {baseline} (before)" + OWN].run()[2] == outcome_dict(mine)
-        print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
-    cases.update({k: (lambda w=w: w.run()[1]) for k, w in workers.items()})  # CPU s
-    try:
-        times = run_rounds(cases, rounds, workers.values())
-    finally:
-        for worker in workers.values():
-            worker.close()
-    out = ratios(times, "bare plant, same frames", total)
-    out["own_worker_trial_over_bare"] = paired(
-        times, "trial (reset, samples, checks)" + OWN, "bare plant, same frames" + OWN,
-        "trial / bare plant, each in its own worker")
-    if baseline:
-        out.update(baseline=baseline, baseline_outcome_identical=same,
-                   after_over_before=paired(times, "trial (reset, samples, checks)" + OWN,
-                                            f"trial at {baseline} (before)" + OWN,
-                                            "after / before (both in workers)"))
-    return out
+    return speed_table(cases, workers, rounds, trial="trial (reset, samples, checks)",
+                       floor="bare plant, same frames", sim_time=total, kind="screw_cap",
+                       options=options, baseline=baseline, outcome=outcome_dict(mine))[0]
 
 
 def summarize(db, budget, resim: bool = False, more=()) -> dict:

@@ -66,3 +66,37 @@ def paired(times: dict, a: str, b: str, label: str) -> dict:
     print(f"{label}, paired by round: median {np.median(r):.3f} "
           f"({' '.join(f'{v:.2f}' for v in r)})", flush=True)
     return {"median": float(np.median(r)), "rounds": r.tolist()}
+
+
+def speed_table(cases: dict, workers: dict, n: int, *, trial: str, floor: str,
+                sim_time: float, kind: str, options: dict, baseline: str | None,
+                outcome: dict) -> tuple[dict, dict]:
+    """Times ``cases`` (in this process) and ``workers`` (``{name: BaselineTrial}``, each
+    its own process, CPU s, named ``... + OWN``) in ``n`` rounds; with ``baseline`` also
+    the trial ``kind`` of that git revision in a worker, its outcome checked equal to
+    ``outcome``. Returns the :func:`ratios` table (plus the trial / floor ratio of the
+    workers and, with a baseline, after / before) and the per-round times."""
+    from trial_worker import BaselineTrial  # same folder
+
+    workers = dict(workers)
+    same = None
+    try:
+        if baseline:
+            before = workers[f"trial at {baseline} (before)" + OWN] = BaselineTrial(
+                baseline, kind, options)
+            same = before.run()[2] == outcome
+            print(f"trial at {baseline}: outcome identical to this tree's: {same}", flush=True)
+        timed = {**cases, **{k: (lambda w=w: w.run()[1]) for k, w in workers.items()}}
+        times = rounds(timed, n, workers.values())
+    finally:
+        for worker in workers.values():
+            worker.close()
+    out = ratios(times, floor, sim_time)
+    out["own_worker_trial_over_bare"] = paired(times, trial + OWN, floor + OWN,
+                                               "trial / bare plant, each in its own worker")
+    if baseline:
+        out.update(baseline=baseline, baseline_outcome_identical=same,
+                   after_over_before=paired(times, trial + OWN,
+                                            f"trial at {baseline} (before)" + OWN,
+                                            "after / before (both in workers)"))
+    return out, times
