@@ -103,6 +103,7 @@ from handle_drake.apps.inhand.task import (
     ReversedGravity,
     gist_data,
     gist_from_data,
+    penetrating_hand_bodies,
 )
 from handle_drake.base.hands import (
     AddHand,
@@ -572,17 +573,10 @@ def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
     the geometry query's point pairs: the same pairs as the point-contact results
     (tested: the trial's scores agree with reading :func:`contact_summary` every
     sample), whose forces are then needed only where the palm touches."""
-    query = plant.get_geometry_query_input_port().Eval(plant_context)
-    names = built["geometry"]
-    touching, palm = set(), False
-    for pair in query.ComputePointPairPenetration():
-        a, b = names.get(pair.id_A), names.get(pair.id_B)
-        for mine, other in ((a, b), (b, a)):
-            if mine in ("cap", "bottle") and other not in (None, "cap", "bottle"):
-                if mine == "cap":
-                    touching.add(other)
-                palm = palm or other == "palm"
-    return sorted(touching), palm
+    found = penetrating_hand_bodies(plant.get_geometry_query_input_port().Eval(plant_context),
+                                    built["geometry"], ("cap", "bottle"))
+    cap, bottle = found.get("cap", set()), found.get("bottle", set())
+    return sorted(cap), "palm" in cap or "palm" in bottle
 
 
 # ------------------------------------------------------------------ the trial

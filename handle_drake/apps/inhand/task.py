@@ -95,7 +95,7 @@ from handle_drake.trial.harness import TrialHarness
 
 __all__ = ["TASKS", "InHandTask", "InHandTrial", "InHandScenario", "TrialOutcome", "EVALUATIONS",
            "task_gist", "build_inhand", "ReversedGravity", "inhand_fingerprint", "GistMotionData",
-           "gist_data", "gist_from_data"]
+           "gist_data", "gist_from_data", "penetrating_hand_bodies"]
 
 DATA_DIR = Path(__file__).parent / "data"
 EVALUATIONS = ("incremental", "old")
@@ -758,28 +758,36 @@ def _lift(results, body, hand_bodies) -> dict:
     return lift
 
 
+def penetrating_hand_bodies(query_object, names: dict, objects) -> dict:
+    """``{object name: set of hand body names}`` from the geometry query's point pairs
+    (point contact's pairs, without solving for forces): ``names`` maps collision
+    geometry ids to names (the ``objects``' and the hand bodies'); pairs with an unnamed
+    geometry, and pairs between two objects or two hand bodies, are skipped."""
+    touching = {}
+    for pair in query_object.ComputePointPairPenetration():
+        a, b = names.get(pair.id_A), names.get(pair.id_B)
+        for mine, other in ((a, b), (b, a)):
+            if mine in objects and other is not None and other not in objects:
+                touching.setdefault(mine, set()).add(other)
+    return touching
+
+
 def _touching_query(plant, body, hand_bodies):
     """With point contact: ``touching(plant_context)``, :func:`_touching`'s names from the
-    geometry query's point pairs, which are the pairs the point-contact results report
-    (tested: equal at every sample), without solving for the forces (the contact results
-    evaluated at a sample are solved again by the next step: ~0.5 ms each). None with
-    hydroelastic contact (its results are not point pairs)."""
+    geometry query's point pairs (:func:`penetrating_hand_bodies`), which are the pairs the
+    point-contact results report (tested: equal at every sample), without solving for the
+    forces (the contact results evaluated at a sample are solved again by the next step:
+    ~0.5 ms each). None with hydroelastic contact (its results are not point pairs)."""
     if plant.get_contact_model() != ContactModel.kPoint:
         return None
-    mine = set(plant.GetCollisionGeometriesForBody(body))
-    hand = {g: name for i, name in hand_bodies.items()
-            for g in plant.GetCollisionGeometriesForBody(plant.get_body(BodyIndex(i)))}
+    names = {g: name for i, name in hand_bodies.items()
+             for g in plant.GetCollisionGeometriesForBody(plant.get_body(BodyIndex(i)))}
+    names.update({g: "object" for g in plant.GetCollisionGeometriesForBody(body)})
     port = plant.get_geometry_query_input_port()
 
     def touching(plant_context) -> list[str]:
-        names = set()
-        for pair in port.Eval(plant_context).ComputePointPairPenetration():
-            a, b = pair.id_A, pair.id_B
-            if a in mine and b in hand:
-                names.add(hand[b])
-            elif b in mine and a in hand:
-                names.add(hand[a])
-        return sorted(names)
+        found = penetrating_hand_bodies(port.Eval(plant_context), names, ("object",))
+        return sorted(found.get("object", ()))
 
     return touching
 
