@@ -257,8 +257,7 @@ def speed(rounds: int, options, baseline: str | None = None) -> dict:
 
     trial = ScrewCapTrial(ScrewCapTask(**options))
     x = stroke(trial.gist)  # the hand-written stroke
-    run_bare, total = screw_cap_bare(trial, x)
-    mine = trial.evaluate(x, early_stop=False)
+    run_bare, total, mine = screw_cap_bare(trial, x)  # mine: the trial's outcome of x
 
     cases = {"trial (reset, samples, checks)": lambda: trial.evaluate(x, early_stop=False)
              .wall_time,

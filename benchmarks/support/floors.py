@@ -155,7 +155,8 @@ def screw_cap_bare(trial, x):
     """The screw cap's floor: its plant alone (``build_screw_cap(bare=True)``: the same
     frames as zero-order holds, no Python system) from the trial's settled state over the
     trial's simulated time (with the reversed weight's 0.5 s when the trial runs it).
-    Returns ``(run, total)``: ``run() -> wall s`` and the simulated time."""
+    Returns ``(run, total, outcome)``: ``run() -> wall s``, the simulated time and the
+    trial's outcome of ``x`` (run to its end)."""
     from pydrake.systems.analysis import Simulator
 
     from handle_drake.apps.inhand.screw_cap import build_screw_cap
@@ -169,4 +170,4 @@ def screw_cap_bare(trial, x):
     outcome = trial.evaluate(x, early_stop=False)
     total = outcome.sim_time + (trial.config.reverse_time
                                 if outcome.survived_reversal is not None else 0.0)
-    return _timed_run(simulator, bare["plant"], q, v, total), total
+    return _timed_run(simulator, bare["plant"], q, v, total), total, outcome
