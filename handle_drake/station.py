@@ -113,13 +113,22 @@ __all__ = [
     "object_initial_pose",
 ]
 
+#: The simulated station's outputs of the table above (cameras, scene objects and the
+#: MIDI controller add their own).
+STATION_OUTPUTS = (
+    *(f"{HAND}.{s}" for s in HAND_SIGNALS), "wrist.pose_measured",
+    *(f"object.{s}" for s in ("pose", "spatial_velocity", "position", "acceleration",
+                              "acceleration_counts", "roll_pitch", "at_rest", "free_fall",
+                              "slip")),
+    "contact_results", "query_object", "body_poses", "plant_state")
+
 HAND_INSTANCE = HAND
 WRIST_INSTANCE = WRIST
 OBJECT_INSTANCE = "object"
 
 
 def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
-                    finite_commands: bool = False):
+                    finite_commands: bool = False, outputs=None):
     """Builds the station diagram for ``scenario``.
 
     Args:
@@ -135,6 +144,18 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
             :class:`WristDriverDiagram`: the same commands, no Python call per control
             period) instead of the Python drivers that hold on a non-finite or
             unconnected command.
+        outputs: the station outputs the caller reads (simulation only; None, the
+            default: all of them). Given, the systems that feed nothing but outputs
+            outside it are left out: the fingertip sensor (``hand.tactile``), the hand
+            driver's measured-state selectors (``hand.position_measured``,
+            ``hand.velocity_estimated``, ``hand.state_estimated``: a
+            :class:`HandDriverDiagram` only) and the object's pose selector and position
+            split (``object.pose``, ``object.spatial_velocity``, ``object.position``).
+            Every system in a diagram costs the simulator work at every step, read or
+            not (``docs/results/inhand.md``). Outputs that need no system of their own
+            (the plant's ports, ``hand.position_commanded``) and the scenario's devices
+            (instruments, cameras, MIDI) are always there. A name the scenario's
+            station does not have is refused.
     """
     validate_scenario(scenario)
     if hardware:
@@ -160,7 +181,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
     plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
     hand = AddPlantModels(plant, scenario)
     plant.Finalize()
-    _add_hand_systems(builder, plant, hand, scenario, finite_commands)
+    wanted = _Outputs(outputs)
+    _add_hand_systems(builder, plant, hand, scenario, finite_commands, wanted)
     if isinstance(scenario.hand.mount, Arm):
         AddArmDriver(builder, plant, scenario.hand.mount)
     if scenario.objects:
@@ -168,7 +190,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
     if isinstance(scenario.hand.mount, FloatingWrist):
         _add_wrist_driver(builder, plant, scenario, finite_commands)
     if scenario.object is not None:
-        _add_object_systems(builder, plant, scenario)
+        _add_object_systems(builder, plant, scenario, wanted)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     # external forces on bodies (e.g. an object's weight reversed: the in-hand held test)
     builder.ExportInput(plant.get_applied_spatial_force_input_port(), "applied_spatial_force")
@@ -183,37 +205,79 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
         _add_visualization(builder, plant, scene_graph, meshcat, scenario)
     diagram = builder.Build()
     diagram.set_name("hand_station")
+    wanted.check(diagram)
     return diagram
 
 
+class _Outputs:
+    """Which of the station's outputs to build (:func:`MakeHandStation`'s ``outputs``)."""
+
+    def __init__(self, names):
+        if names is not None and (isinstance(names, str) or not all(
+                isinstance(n, str) for n in names)):
+            raise ValueError(f"outputs: expected a collection of port names, got {names!r}")
+        self._names = None if names is None else frozenset(names)
+        self._left_out = set()
+
+    def __call__(self, *names) -> bool:
+        """Whether any of ``names`` is read; those not are noted as left out."""
+        if self._names is None or not self._names.isdisjoint(names):
+            return True
+        self._left_out.update(names)
+        return False
+
+    def check(self, diagram) -> None:
+        if self._names is None:
+            return
+        built = {diagram.get_output_port(i).get_name()
+                 for i in range(diagram.num_output_ports())}
+        # a documented output this scenario lacks (no object, no wrist) is simply absent
+        unknown = sorted(self._names - built - self._left_out - set(STATION_OUTPUTS))
+        if unknown:
+            raise ValueError(f"outputs: no station output is named {unknown[0]!r}; this "
+                             f"scenario's station has {sorted(built | self._left_out)}")
+
+
 def _add_hand_systems(builder, plant, hand, scenario: Scenario,
-                      finite_commands: bool = False) -> None:
-    """The simulated hand driver and the fingertip sensors; exports the ``hand.*`` ports."""
+                      finite_commands: bool = False, wanted=None) -> None:
+    """The simulated hand driver and the fingertip sensors; exports the ``hand.*`` ports
+    (those ``wanted`` reads: :class:`_Outputs`)."""
+    wanted = wanted or _Outputs(None)
     spec = get_hand_spec(scenario.hand.kind)
     lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
     initial = hand_initial_command(scenario)
     _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
 
+    measured = wanted(*(f"{HAND}.{s}" for s in _MEASURED))
+    options = {} if not finite_commands else {"measured": measured}
     driver = builder.AddNamedSystem(
         "hand_driver",
         (HandDriverDiagram if finite_commands else PdHandDriver)(
             plant, hand, spec, initial, lower, upper,
             max_joint_velocity=scenario.driver.max_joint_velocity,
-            control_period=scenario.driver.control_period,
+            control_period=scenario.driver.control_period, **options,
         ),
     )
-    builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
+    if driver.HasInputPort("plant_state"):
+        builder.Connect(plant.get_state_output_port(), driver.get_plant_state_input_port())
     builder.Connect(driver.GetOutputPort("desired_state"), plant.get_desired_state_input_port(hand))
     builder.ExportInput(driver.get_command_input_port(), f"{HAND}.{HAND_COMMAND}")
 
-    tips = [plant.GetFrameByName(name, hand).body() for name in spec.fingertip_frames]
-    tactile = builder.AddNamedSystem("tactile", FingertipTactile(plant, tips))
-    builder.Connect(plant.get_contact_results_output_port(),
-                    tactile.get_contact_results_input_port())
+    tactile = None
+    if wanted(f"{HAND}.tactile"):
+        tips = [plant.GetFrameByName(name, hand).body() for name in spec.fingertip_frames]
+        tactile = builder.AddNamedSystem("tactile", FingertipTactile(plant, tips))
+        builder.Connect(plant.get_contact_results_output_port(),
+                        tactile.get_contact_results_input_port())
     # The port contract (handle_drake.base.port_names), as the hardware branch exports it.
     for signal in HAND_SIGNALS:
         source = tactile if signal == "tactile" else driver
-        builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
+        if source is not None and source.HasOutputPort(signal):
+            builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
+
+
+# the hand driver's outputs read from the plant's state (its measured-state selectors)
+_MEASURED = ("position_measured", "velocity_estimated", "state_estimated")
 
 
 def _add_wrist_driver(builder, plant, scenario: Scenario,
@@ -233,17 +297,24 @@ def _add_wrist_driver(builder, plant, scenario: Scenario,
     builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
 
 
-def _add_object_systems(builder, plant, scenario: Scenario) -> None:
-    """The object's pose selector (``object.*`` ports) and its accelerometer, if any."""
-    selector = builder.AddNamedSystem("object_pose", BodyPoseSelector(object_body(plant)))
-    builder.Connect(plant.get_body_poses_output_port(), selector.GetInputPort("body_poses"))
-    builder.Connect(plant.get_body_spatial_velocities_output_port(),
-                    selector.GetInputPort("body_spatial_velocities"))
-    builder.ExportOutput(selector.GetOutputPort("pose"), "object.pose")
-    builder.ExportOutput(selector.GetOutputPort("spatial_velocity"), "object.spatial_velocity")
-    position = _free_body_position(builder, plant, object_body(plant))
-    builder.ExportOutput(selector.GetOutputPort("position") if position is None else position,
-                         "object.position")
+def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None:
+    """The object's pose selector (``object.*`` ports; those ``wanted`` reads:
+    :class:`_Outputs`) and its accelerometer, if any."""
+    wanted = wanted or _Outputs(None)
+    position = None
+    if wanted("object.position"):
+        position = _free_body_position(builder, plant, object_body(plant))
+    if wanted("object.pose", "object.spatial_velocity") or (
+            position is None and wanted("object.position")):
+        selector = builder.AddNamedSystem("object_pose", BodyPoseSelector(object_body(plant)))
+        builder.Connect(plant.get_body_poses_output_port(), selector.GetInputPort("body_poses"))
+        builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                        selector.GetInputPort("body_spatial_velocities"))
+        for name in ("pose", "spatial_velocity") + (("position",) if position is None else ()):
+            if wanted(f"object.{name}"):
+                builder.ExportOutput(selector.GetOutputPort(name), f"object.{name}")
+    if position is not None:
+        builder.ExportOutput(position, "object.position")
     if scenario.object.accelerometer is not None:
         AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
                                 object_spec(scenario))

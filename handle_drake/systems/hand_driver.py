@@ -235,10 +235,12 @@ class HandDriverDiagram(Diagram):
     For commands that are connected and finite by construction (planned or validated
     before the run: the station's ``finite_commands``): unlike :class:`PdHandDriver` it
     does not hold on a non-finite command, and its ``position`` input must be connected.
+    ``measured=False`` leaves out the measured-state selectors, with their outputs and
+    the ``plant_state`` input (for a caller that reads none of them).
     """
 
     def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
-                 max_joint_velocity=4.0, control_period=0.002):
+                 max_joint_velocity=4.0, control_period=0.002, measured: bool = True):
         super().__init__()
         nu, initial, lower, upper, step, order, q_index, v_index = _driver_setup(
             plant, model_instance, spec, initial_command, lower, upper, max_joint_velocity,
@@ -264,7 +266,8 @@ class HandDriverDiagram(Diagram):
         builder.ExportInput(target.get_input_port(), "position")
         builder.ExportOutput(desired.get_output_port(), "desired_state")
         builder.ExportOutput(self._hold.get_output_port(), "position_commanded")
-        _export_measured(builder, nx, q_index, v_index)
+        if measured:
+            _export_measured(builder, nx, q_index, v_index)
         builder.BuildInto(self)
 
     def get_command_input_port(self):

@@ -152,6 +152,9 @@ class TrialHarness:
         finite_commands: ``add_controller`` feeds the station's command inputs with
             commands finite by construction (see :func:`MakeHandStation`: the simulated
             drivers are then Drake primitives).
+        outputs: the station outputs read (:func:`MakeHandStation`'s ``outputs``: the
+            systems feeding only others are left out); None: all. The ``log`` ports
+            are added to it.
 
     Attributes: ``scenario``, ``station``, ``plant`` (None on hardware),
     ``controller``, ``diagram``, ``simulator``, ``context`` (the root context).
@@ -159,7 +162,7 @@ class TrialHarness:
 
     def __init__(self, scenario: Scenario, add_controller: Callable | None = None, *,
                  log=DEFAULT_LOG, object_contacts: bool = False, meshcat=None,
-                 hardware: bool = False, finite_commands: bool = False):
+                 hardware: bool = False, finite_commands: bool = False, outputs=None):
         if object_contacts and (hardware or scenario.object is None):
             raise ValueError("object_contacts needs a simulated scenario with an object")
         self.scenario = scenario
@@ -167,8 +170,10 @@ class TrialHarness:
         self.hardware = hardware
         builder = DiagramBuilder()
         self.station = builder.AddNamedSystem(
-            "station", MakeHandStation(scenario, meshcat, hardware=hardware,
-                                       finite_commands=finite_commands))
+            "station", MakeHandStation(
+                scenario, meshcat, hardware=hardware, finite_commands=finite_commands,
+                outputs=outputs if outputs is None or isinstance(outputs, str)
+                else tuple(outputs) + tuple(log)))
         self.plant = None if hardware else GetPlant(self.station)
         self.controller = None if add_controller is None else add_controller(builder, self.station)
         self._loggers = {}

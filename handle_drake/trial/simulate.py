@@ -121,10 +121,12 @@ class ScenarioRunner:
             when the scenario's validated keyframe script drives every command input
             (no controller; a floating wrist has a script), where the Python drivers'
             hold on a non-finite command cannot act; False keeps the Python drivers.
+        outputs: the station outputs read besides ``log`` (see :class:`TrialHarness`);
+            None: all of them.
     """
 
     def __init__(self, scenario: Scenario, meshcat=None, hardware: bool = False,
-                 log=DEFAULT_LOG, finite_commands: bool | None = None):
+                 log=DEFAULT_LOG, finite_commands: bool | None = None, outputs=None):
         if hardware and scenario.controller is not None:
             raise ValueError("a scenario controller (the guarded grasp) reads simulated contact "
                              "results: it cannot drive the hardware; use a script")
@@ -138,7 +140,7 @@ class ScenarioRunner:
         self.harness = TrialHarness(
             scenario, self.add_driver, log=log, meshcat=meshcat, hardware=hardware,
             object_contacts=scenario.object is not None and not hardware,
-            finite_commands=finite_commands)
+            finite_commands=finite_commands, outputs=outputs)
         self.station = self.harness.station
         self.controller = self.harness.controller
         self.diagram = self.harness.diagram
