@@ -98,12 +98,13 @@ class _Case:
 
 def _station_case(contact_model, time_step, approximation, log=None,
                   finite_commands=None) -> _Case:
-    """The station as ``ScenarioRunner`` builds it (its script's drivers in Drake
-    primitives); ``finite_commands=False``: with the Python drivers."""
+    """The station as ``run_demo`` builds it (``ScenarioRunner``: its script's drivers in
+    Drake primitives; the systems of the outputs it logs); ``finite_commands=False``: with
+    the Python drivers."""
     from handle_drake.station import GetPlant, object_body
 
     runner = ScenarioRunner(_scenario(contact_model, time_step, approximation),
-                            finite_commands=finite_commands,
+                            finite_commands=finite_commands, outputs=(),
                             **({} if log is None else {"log": log}))
     plant = GetPlant(runner.station)
     body = object_body(plant)

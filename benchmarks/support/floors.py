@@ -102,8 +102,7 @@ def inhand_replay(trial: InHandTrial, x, duration: float):
     driver = harness.station.GetSubsystemByName("hand_driver")
     context = harness.context
     context.SetTimeStateAndParametersFrom(built["settled"])
-    harness.controller.set_parameters(harness.controller_context(), x)
-    built["player"].UpdateTrajectory(harness.controller.held_frames(
+    built["player"].UpdateTrajectory(built["motion"].held_frames(
         x, built["period"], c.total_time + c.reverse_time))
     plant_ref = harness.plant
     x0 = plant_ref.GetPositionsAndVelocities(plant_ref.GetMyContextFromRoot(context)).copy()

@@ -14,7 +14,8 @@ the palm, so 30 deg held is physically reachable
 
 The grasp is settled once per trial object (``settle_time`` of simulation with the
 initial command) and every trial starts from a copy of that context: time 0,
-the settled state, the trial's parameters on the :class:`GistMotionSource`.
+the settled state, the frames the :class:`GistMotionSource` plans from the trial's
+parameters (played by a ``TrajectorySource``).
 The palm supports these palm-up objects; the held rule is the fingertip cylinder's
 (issue 35): after the hold the object's weight is reversed for ``reverse_time``
 (:class:`ReversedGravity`, the hand palm down for it) and the trial is held, and can
@@ -376,7 +377,8 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     """The trial's diagram from its scenario, the grasp settled (all variations zero).
 
     Returns the harness, the settled context (time 0) the trials start from, the
-    object body, the hand's bodies by index and the accelerometer port (or None).
+    object body, the motion (the :class:`GistMotionSource` that plans the frames) and
+    its player, the hand's bodies by index and the accelerometer port (or None).
     """
     gist = scenario.action_gist()
     q0 = scenario.initial_command()
@@ -384,12 +386,14 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     reverse, player = [], []
     period = scenario.station.driver.control_period
 
+    # The source plans the trial's frames; what reaches the hand driver is their
+    # zero-order hold at the driver's sample times (GistMotionSource.held_frames,
+    # re-planned per trial): the same commands, no Python call per sample. The source
+    # itself is not in the diagram (it would be an idle system there: every system costs
+    # the simulator work at every step).
+    source = GistMotionSource(gist, q0, scenario.motion_duration, scenario.n_frames)
+
     def add_motion(builder, station):
-        # The source holds the trial's parameters and its frames; what reaches the hand
-        # driver is their zero-order hold at the driver's sample times (GistMotionSource.
-        # held_frames, re-planned per trial): the same commands, no Python call per sample.
-        source = builder.AddNamedSystem("motion", GistMotionSource(
-            gist, q0, scenario.motion_duration, scenario.n_frames))
         player.append(builder.AddNamedSystem("motion_frames", TrajectorySource(
             source.held_frames(gist.initial_parameters(), period, period))))
         builder.Connect(player[0].get_output_port(), station.GetInputPort("hand.position"))
@@ -398,12 +402,16 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
                                               ReversedGravity(plant, object_body(plant))))
         builder.Connect(reverse[0].get_output_port(),
                         station.GetInputPort("applied_spatial_force"))
-        return source
+        return player[0]
 
-    # the frames are finite (validated parameters): the station's driver in Drake primitives
+    accelerometer = scenario.station.object.accelerometer is not None
+    # the frames are finite (validated parameters): the station's driver in Drake
+    # primitives; the station's systems are those of the outputs the samples read
     harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat,
-                           finite_commands=True)
-    plant, source = harness.plant, harness.controller
+                           finite_commands=True,
+                           outputs=("object.acceleration", "object.free_fall")
+                           if accelerometer else ())
+    plant = harness.plant
     hand = plant.GetModelInstanceByName("hand")
     hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
                    for i in plant.GetBodyIndices(hand)}
@@ -412,18 +420,16 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     for sl in gist.slices():
         still[sl][1:] = 0.0
     harness.reset()
-    source.set_parameters(harness.controller_context(), still)
     player[0].UpdateTrajectory(source.held_frames(still, period, scenario.settle_time))
     harness.initialize()
     harness.advance(scenario.settle_time)
     # Trials start from this context, not from the scenario's default one.
     settled = harness.context.Clone()
     settled.SetTime(0.0)
-    accelerometer = scenario.station.object.accelerometer is not None
     body = object_body(plant)
     weight = body.default_mass() * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
     return dict(harness=harness, settled=settled, body=body, reverse=reverse[0], weight=weight,
-                player=player[0], period=period,
+                motion=source, player=player[0], period=period,
                 hand_bodies=hand_bodies, touching_query=_touching_query(plant, body, hand_bodies),
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
                 if accelerometer else None,
@@ -470,7 +476,7 @@ class InHandTrial(GistTrial):
     """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
 
     Every trial is an :class:`InHandScenario` (logged whole). The diagram
-    (station + :class:`GistMotionSource`) is built on the first call and kept on
+    (station + the frames :class:`GistMotionSource` plans) is built on the first call and kept on
     this object (not pickled: a worker builds its own; the executors unpickle an
     objective once per worker).
     """
@@ -569,8 +575,7 @@ class InHandTrial(GistTrial):
         start_wall = time.perf_counter()
         context, plant = harness.context, harness.plant
         context.SetTimeStateAndParametersFrom(built["settled"])
-        harness.controller.set_parameters(harness.controller_context(), x)
-        built["player"].UpdateTrajectory(harness.controller.held_frames(
+        built["player"].UpdateTrajectory(built["motion"].held_frames(
             x, built["period"], c.total_time + c.reverse_time))
         plant_context = harness.plant_context()
         X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
@@ -580,6 +585,8 @@ class InHandTrial(GistTrial):
                        R0_inv=X0.rotation().inverse(), p0=X0.translation().copy(),
                        early_stop=early_stop and html is None,  # a replay shows it all
                        samples=samples, checks=c.check_times(),
+                       # the benchmark's rotation at every sample, less the tolerance
+                       expected=c.benchmark_at(samples) - np.radians(c.tolerance_deg),
                        matches=np.zeros(samples.size, dtype=bool))
         harness.initialize()
         accelerometer = built["accelerometer"]
@@ -664,7 +671,7 @@ class InHandTrial(GistTrial):
         # the rotation scored: the instrumented object's own estimate when it has one
         # (the plant's, logged beside, is then never scored), else the plant's
         sensed = st.acc_angle if accelerometer is not None else st.angle
-        st.matches[i] = st.held and sensed >= c.benchmark_at(t) - tolerance
+        st.matches[i] = st.held and sensed >= st.expected[i]
         if st.next_check < st.checks.size and t >= st.checks[st.next_check] - 1e-3 * c.time_step:
             ok = st.held and sensed >= c.target * c.benchmark[st.next_check] - tolerance
             if ok and not st.failed:
@@ -718,6 +725,7 @@ class _Sampling:
     early_stop: bool
     samples: np.ndarray  # sample times
     checks: np.ndarray  # check times
+    expected: np.ndarray  # per sample: the least rotation (rad) on the benchmark
     matches: np.ndarray  # per sample: held and on the benchmark
     i: int = 0  # the next sample
     next_check: int = 0
