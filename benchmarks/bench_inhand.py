@@ -12,6 +12,10 @@
    ``--baseline REV`` the trial of git revision REV and this tree's trial are
    also timed, each in a worker process (``benchmarks/support/trial_worker.py``),
    the outcome checked identical, after/before paired by round.
+   ``--instructions``: the instructions each of the trial, its two floors (and with
+   ``--baseline`` the revision's trial) executes per run, counted by valgrind in a
+   process of its own (``benchmarks/support/instructions.py``): exact, where the times
+   of identical code vary by +-5 % between processes here.
 2. Table (``--table``): optimiser x task x seed runs of ``run_inhand`` (all
    runs in one SQLite log, resumable: whatever already ran is read back), each
    until a trial reaches the target or the budget is spent. Per optimiser and
@@ -22,8 +26,8 @@
 The table's trials run where ``--executor`` says (``local`` with ``--workers``,
 ``dask`` LocalCluster, ``dask://HOST:PORT``: ``handle_drake.learning.cluster``).
 
-Run: ``python benchmarks/bench_inhand.py --speed [--baseline REV] --table [--trials N]
-[--seeds 0 1 2] [--evaluation old]``;
+Run: ``python benchmarks/bench_inhand.py --speed [--instructions] [--baseline REV] --table
+[--trials N] [--seeds 0 1 2] [--evaluation old]``;
 writes ``benchmarks/results/inhand.json``.
 """
 
@@ -91,6 +95,24 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
                    times, "trial (reset, checks)" + OWN, "bare plant, replay" + OWN,
                    "trial / replay, each in its own worker"))
     return out
+
+
+def instructions(baseline: str | None = None, runs: int = 2) -> dict:
+    """The trial and its floors' instructions per run (``support/instructions.py``: exact,
+    where their times vary by +-5 % between processes), each in a process of its own
+    under callgrind; with ``baseline`` also the trial of that git revision."""
+    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+    from instructions import count_cases, ratio_table
+
+    cases = {"trial (reset, checks)": ("inhand", {}, None),
+             "bare plant, same frames": ("inhand:bare", {}, None),
+             "bare plant, replay": ("inhand:replay", {}, None)}
+    if baseline:
+        cases[f"trial (reset, checks) at {baseline}"] = ("inhand", {}, baseline)
+    counts = count_cases(cases, runs)
+    rows = ratio_table(counts, {"bare": "bare plant, same frames",
+                                "replay": "bare plant, replay"})
+    return {"runs_counted": runs, "table": rows, "load_end": os.getloadavg()[0]}
 
 
 def _fresh(trial, x):
@@ -164,7 +186,11 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=5)
     p.add_argument("--baseline", default=None, metavar="REV",
                    help="with --speed: also time the trial of git revision REV (a worker "
-                        "process on its handle_drake), every round, its outcome checked")
+                        "process on its handle_drake), every round, its outcome checked; "
+                        "with --instructions: also count it")
+    p.add_argument("--instructions", action="store_true",
+                   help="count the instructions of the trial and its floors (valgrind; "
+                        "with --baseline REV also that revision's trial)")
     p.add_argument("--table", action="store_true")
     p.add_argument("--tasks", nargs="+", default=list(TASKS), choices=list(TASKS))
     p.add_argument("--optimizers", nargs="+", default=list(INHAND_OPTIMIZERS),
@@ -187,6 +213,13 @@ def main(argv=None) -> int:
         result = {**json.loads(args.out.read_text()), **result}
     if args.speed:
         result["speed"] = speed(args.rounds, args.baseline)
+    if args.instructions:  # a section and a JSON of its own
+        counted = ResultsRun("In-hand trial: instructions per run against the bare plant",
+                             args, section="instructions")
+        data = instructions(args.baseline)
+        counted.finish(data["table"], data, args.out.with_name("inhand_instructions.json"))
+        if not (args.speed or args.table):
+            return 0
     if args.table:
         key = "table_" + "_".join(f"{t:g}" for t in args.targets) + f"_{args.evaluation}"
         with trial_executor(args.executor, args.workers,

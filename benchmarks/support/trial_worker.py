@@ -9,7 +9,8 @@ a tree extracted from a git revision: the "before"),
 settles it, prints ``ready`` and then, for each ``run`` line on stdin, evaluates the
 hand-written stroke once and prints one JSON line: the trial's wall time and its outcome
 (for the bit-identity check against this tree's). :class:`BaselineTrial` runs it from a
-revision.
+revision. ``trial_worker.py --count KIND OPTIONS_JSON N`` runs it once, then ``N`` times
+inside ``itertools.starmap`` (the C function ``instructions.py`` counts in).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ def make_trial(kind: str, options: dict):
     """``(trial, run)``: the trial and ``run() -> outcome`` of the stroke (a floor's
     ``run() -> wall s``)."""
     kind, _, floor = kind.partition(":")
+    if kind == "station":
+        return None, _station_run(floor, options)
     if floor:
         return _make_floor(kind, floor, options)
     if kind == "screw_cap":
@@ -74,10 +77,47 @@ def _make_floor(kind: str, floor: str, options: dict):
                      f"{kind}:{floor}")
 
 
+def _station_run(which: str, options: dict):
+    """``run()`` of one case of ``bench_station`` (the 2 s demo grasp, 1 ms, point contact):
+    ``demo`` the station as the demo builds it, ``replay`` the bare plant on its own
+    frames, ``model`` the bare plant on its script, ``baseline`` the station of git
+    revision ``options["revision"]`` (its tactile sensor, drivers and station module)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import bench_station
+
+    if which == "demo":
+        case = bench_station._station_case(*bench_station.STATION_CASES[0])
+    elif which == "replay":
+        case = bench_station._replay_case()[0]
+    elif which == "model":
+        case = bench_station._plant_case("model")
+    elif which == "baseline":
+        case = bench_station._baseline_station_case(options["revision"])
+    else:
+        raise ValueError(f"kind: expected station:demo, station:replay, station:model or "
+                         f"station:baseline, got station:{which}")
+    return case.run_once
+
+
 def outcome_dict(outcome) -> dict:
     d = outcome.as_dict()
     d.pop("wall_time", None)
     return json.loads(json.dumps(d, default=float))
+
+
+def source_tree(revision: str | None) -> str:
+    """A folder whose ``handle_drake`` (with its models and scenarios) is that of git
+    ``revision`` (extracted into a temporary folder); None: this checkout."""
+    if revision is None:
+        return str(ROOT)
+    folder = tempfile.mkdtemp(prefix=f"baseline-{revision}-")
+    archive = subprocess.run(["git", "archive", revision, "handle_drake", "models",
+                              "diagrams"], cwd=ROOT, capture_output=True, check=True).stdout
+    path = Path(folder) / "tree.tar"
+    path.write_bytes(archive)
+    with tarfile.open(path) as tar:
+        tar.extractall(folder, filter="data")
+    return folder
 
 
 class BaselineTrial:
@@ -91,17 +131,7 @@ class BaselineTrial:
 
     def __init__(self, revision: str | None, kind: str, options: dict):
         self.revision, self._kind, self._options = revision, kind, options
-        if revision is None:
-            self._dir = str(ROOT)
-        else:
-            self._dir = tempfile.mkdtemp(prefix=f"baseline-{revision}-")
-            archive = subprocess.run(["git", "archive", revision, "handle_drake", "models",
-                                      "diagrams"], cwd=ROOT, capture_output=True,
-                                     check=True).stdout
-            path = Path(self._dir) / "tree.tar"
-            path.write_bytes(archive)
-            with tarfile.open(path) as tar:
-                tar.extractall(self._dir, filter="data")
+        self._dir = source_tree(revision)
         self._start()
 
     def _start(self) -> None:
@@ -134,6 +164,14 @@ class BaselineTrial:
 def main() -> int:
     import time
 
+    if sys.argv[1] == "--count":  # instructions.py: the counted runs inside starmap
+        import itertools
+
+        _, run = make_trial(sys.argv[2], json.loads(sys.argv[3]))
+        run()  # warm-up, not counted (first-run allocations)
+        list(itertools.starmap(run, [()] * int(sys.argv[4])))
+        print("counted", flush=True)
+        return 0
     kind, options = sys.argv[1], json.loads(sys.argv[2])
     _, run = make_trial(kind, options)
     run()
