@@ -27,16 +27,19 @@ from __future__ import annotations
 
 import logging
 import os
+import select
 import socket
 import struct
+import time
 
 import can
+import msgpack
 
 from handle_drake.devices.can_hand.config import BusConfig
 from handle_drake.devices.can_hand.messages import MalformedFrameError
 
-__all__ = ["open_bus", "receive", "check_frame", "ErrorLog", "socketcan_available",
-           "socketcan_fd_capable", "use_realtime_priority"]
+__all__ = ["open_bus", "receive", "FrameSource", "check_frame", "ErrorLog",
+           "socketcan_available", "socketcan_fd_capable", "use_realtime_priority"]
 
 log = logging.getLogger(__name__)
 
@@ -149,11 +152,13 @@ def _scope_multicast(bus: can.BusABC, config: BusConfig) -> None:
                          f"{config.multicast_interface}: {error.strerror}") from None
     multicast._socket = sock
     multicast._last_send_timeout = None
+    bus._handle_drake_scoped = True  # FrameSource may read this socket directly
     old.close()
 
 
-#: ``receive`` outcomes other than a frame or a timeout (the counter names).
-GARBAGE, BUS_ERROR = "garbage_frames", "bus_rx_errors"
+#: ``receive`` outcomes other than a frame or a timeout (the counter names);
+#: :class:`FrameSource` adds ``ECHO``: a frame with one of the reader's own ids.
+GARBAGE, BUS_ERROR, ECHO = "garbage_frames", "bus_rx_errors", "echo_frames"
 
 
 def receive(bus: can.BusABC, timeout: float) -> tuple[can.Message | None, str | None]:
@@ -176,6 +181,117 @@ def receive(bus: can.BusABC, timeout: float) -> tuple[can.Message | None, str | 
         return None, BUS_ERROR
     except Exception:  # python-can decoding a hostile datagram  # noqa: BLE001
         return None, GARBAGE
+
+
+class FrameSource:
+    """Reads a bus a wake-up at a time: every frame already waiting, in one call.
+
+    ``read(timeout, limit)`` waits up to ``timeout`` s for the first frame and
+    returns it with every frame that is already waiting behind it (at most
+    ``limit``), as :func:`receive` pairs ``(message, None)`` / ``(None, why)``;
+    ``[]`` on timeout. A bus failure ends the batch with ``(None, BUS_ERROR)``.
+
+    On a udp_multicast bus whose socket :func:`open_bus` scoped (the default),
+    it reads that socket itself, one wait per wake-up and one ``recvmsg`` per
+    datagram (python-can's ``recv`` costs a ``select`` per frame, and, for the
+    frames already waiting, ~18 us against ~5 us here), and decodes each
+    datagram as python-can's ``unpack_message`` does (msgpack, then a checked
+    ``can.Message`` with the kernel receive stamp). A frame whose id is in
+    ``echo_ids`` (a standard, non-remote, non-error frame: what this node
+    sends itself, which a multicast bus loops back to it) is returned as
+    ``(None, ECHO)`` before any ``can.Message`` is built. Any other bus is
+    read through :func:`receive` (``bus.recv``), waiting once and then
+    taking the waiting frames with a zero timeout; it has no echoes.
+    """
+
+    def __init__(self, bus: can.BusABC, echo_ids=frozenset()):
+        self._bus = bus
+        self._echo_ids = frozenset(echo_ids)
+        self._socket = None
+        sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
+        if getattr(bus, "_handle_drake_scoped", False) and isinstance(sock, socket.socket):
+            # A second handle on the bus socket with its own (zero) timeout: python-can's
+            # send() sets a timeout on the original, which would make a Python recv poll.
+            self._socket = sock.dup()
+            self._socket.setblocking(False)
+            self._ancillary = socket.CMSG_SPACE(struct.calcsize("@ll"))
+            self._max_buffer = int(getattr(bus._multicast, "max_buffer", 4096))
+
+    @property
+    def direct(self) -> bool:
+        """True when it reads the udp_multicast socket itself (echoes dropped undecoded)."""
+        return self._socket is not None
+
+    def close(self) -> None:
+        if self._socket is not None:
+            self._socket.close()
+            self._socket = None
+
+    def read(self, timeout: float, limit: int = 64) -> list:
+        if self._socket is None:
+            return self._read_bus(timeout, limit)
+        return self._read_socket(timeout, limit)
+
+    def _read_bus(self, timeout: float, limit: int) -> list:
+        out = []
+        wait = timeout
+        while len(out) < limit:
+            message, why = receive(self._bus, wait)
+            if message is None and why is None:
+                break
+            out.append((message, why))
+            if why == BUS_ERROR:
+                break
+            wait = 0.0
+        return out
+
+    def _read_socket(self, timeout: float, limit: int) -> list:
+        sock, out = self._socket, []
+        waited = False
+        while len(out) < limit:
+            try:
+                data, ancillary, _, _ = sock.recvmsg(self._max_buffer, self._ancillary,
+                                                     socket.MSG_DONTWAIT)
+            except (BlockingIOError, InterruptedError):
+                if out or waited or timeout <= 0:
+                    break
+                try:  # nothing was waiting: one wait for the first frame
+                    ready, _, _ = select.select([sock], [], [], timeout)
+                except (OSError, ValueError):
+                    out.append((None, BUS_ERROR))
+                    break
+                if not ready:
+                    break
+                waited = True
+                continue
+            except OSError:
+                out.append((None, BUS_ERROR))
+                break
+            out.append(self._decode(data, ancillary))
+        return out
+
+    def _decode(self, data: bytes, ancillary) -> tuple:
+        try:
+            fields = msgpack.unpackb(data, raw=False)
+            if (type(fields) is dict and fields.get("arbitration_id") in self._echo_ids
+                    and type(fields["arbitration_id"]) is int
+                    and fields.get("is_extended_id") is False
+                    and fields.get("is_remote_frame") is False
+                    and fields.get("is_error_frame") is False):
+                return None, ECHO
+            fields["timestamp"] = _stamp(ancillary)
+            return can.Message(check=True, **fields), None
+        except Exception:  # what python-can's recv reports as "could not unpack"  # noqa: BLE001
+            return None, GARBAGE
+
+
+def _stamp(ancillary) -> float:
+    """The kernel receive time (SO_TIMESTAMPNS) of a datagram, else the time now."""
+    for level, kind, data in ancillary:
+        if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(data) >= 16:
+            seconds, nanoseconds = struct.unpack_from("@ll", data)
+            return seconds + nanoseconds * 1e-9
+    return time.time()
 
 
 def check_frame(message) -> tuple[int, bytes, bool]:

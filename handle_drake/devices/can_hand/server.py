@@ -51,11 +51,12 @@ import numpy as np
 
 from handle_drake.devices.can_hand import protocol as P
 from handle_drake.devices.can_hand.bus import (
+    ECHO,
     GARBAGE,
     ErrorLog,
+    FrameSource,
     check_frame,
     open_bus,
-    receive,
     use_realtime_priority,
 )
 from handle_drake.devices.can_hand.config import CanServerConfig
@@ -77,6 +78,8 @@ _READ_CHUNK = 4096  # bytes read from one client per round of the I/O loop
 # shows up in its (capped) output backlog within ~0.1 s of STATE at 1 kHz, instead
 # of hiding megabytes in an autotuned loopback buffer.
 _CLIENT_SNDBUF = 64 * 1024
+# s: the I/O selector's wait resolution (epoll_wait counts whole milliseconds, rounding up).
+_SELECTOR_RESOLUTION = 1e-3
 
 
 def clamp_command(q, lower, upper) -> tuple[np.ndarray, bool]:
@@ -191,6 +194,7 @@ class CanBusServer:
         self._threads: list[threading.Thread] = []
         self._counters = collections.Counter()
         self._listen = None
+        self._source = None  # the bus thread's FrameSource
         self._wake_r = self._wake_w = None
         self._selector = None
         self._clients: list[_Client] = []
@@ -234,6 +238,7 @@ class CanBusServer:
                 listen.close()
                 raise
         self._listen = listen
+        self._source = FrameSource(self._bus, echo_ids=self.codec.host_to_hand_ids)
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -273,6 +278,9 @@ class CanBusServer:
         if self._selector is not None:
             self._selector.close()
             self._selector = None
+        if self._source is not None:
+            self._source.close()
+            self._source = None
         if self._owns_bus and self._bus is not None:
             self._bus.shutdown()
             self._bus = None
@@ -305,36 +313,40 @@ class CanBusServer:
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
-        # Frame counts are kept here and merged under the lock once per hand
-        # cycle, idle wait or 64 frames, not per frame.
+        # Every waiting frame per wake-up (FrameSource); our own setpoint frames, which a
+        # multicast bus loops back, come back as ECHO without being decoded. Frame counts
+        # are kept here and merged under the lock once per hand cycle, idle wait or 64
+        # frames, not per frame.
+        source = self._source
         pending = collections.Counter()
         failures = 0  # consecutive bus errors: the back-off grows with them
         while not self._stop.is_set():
-            message, why = receive(self._bus, 0.05)
-            if why == GARBAGE:  # an undecodable datagram costs its decoding, no wait
-                pending["frames_rx"] += 1
-                pending[GARBAGE] += 1
-                if pending["frames_rx"] >= 64:
+            batch = source.read(0.05, 64)
+            if not batch:
+                self._merge_counts(pending)
+                continue
+            for message, why in batch:
+                if why == GARBAGE or why == ECHO:  # costs its decoding at most, no wait
+                    pending["frames_rx"] += 1
+                    pending[why] += 1
+                    if pending["frames_rx"] >= 64:
+                        self._merge_counts(pending)
+                    continue
+                if why is not None:
+                    failures += 1
+                    pending[why] += 1
                     self._merge_counts(pending)
-                continue
-            if why is not None:
-                failures += 1
-                pending[why] += 1
-                self._merge_counts(pending)
-                self._errors(why, RuntimeError("bus receive failed"))
-                self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
-                continue
-            failures = 0
-            if message is None:
-                self._merge_counts(pending)
-                continue
-            pending["frames_rx"] += 1
-            try:
-                self._on_frame(message, pending)
-            except Exception as error:  # one frame never takes the bus thread down
-                pending["frame_errors"] += 1
-                self._merge_counts(pending)
-                self._errors("frame_errors", error)
+                    self._errors(why, RuntimeError("bus receive failed"))
+                    self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
+                    break
+                failures = 0
+                pending["frames_rx"] += 1
+                try:
+                    self._on_frame(message, pending)
+                except Exception as error:  # one frame never takes the bus thread down
+                    pending["frame_errors"] += 1
+                    self._merge_counts(pending)
+                    self._errors("frame_errors", error)
 
     def _on_frame(self, message, pending: collections.Counter) -> None:
         try:
@@ -397,7 +409,15 @@ class CanBusServer:
         failures = 0
         while not self._stop.is_set():
             try:
-                events = self._selector.select(self._select_timeout(time.monotonic()))
+                timeout = self._select_timeout(time.monotonic())
+                if 0 < timeout < _SELECTOR_RESOLUTION:
+                    # The next commit slot is due in under a millisecond, and epoll rounds a
+                    # wait up to whole milliseconds: a command held for 0.1 ms would wait
+                    # 1 ms and the next command replace it. Sleep to the slot instead; what
+                    # arrived meanwhile is read below (select(0)) before the commit.
+                    time.sleep(timeout)
+                    timeout = 0.0
+                events = self._selector.select(timeout)
             except (OSError, ValueError) as error:
                 if self._stop.is_set():
                     return
