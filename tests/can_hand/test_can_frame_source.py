@@ -43,14 +43,15 @@ def _group():
 
 
 @pytest.fixture
-def buses():
+def buses(request):
+    kernel_filter = getattr(request, "param", True)
     group, port = _group()
     config = BusConfig("udp_multicast", group, port=port, frame_format="classic")
     node = open_bus(config)  # the reader's own node (scoped socket)
     other = open_bus(config)  # another node on the same bus
     reference = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=1,
                         fd=True)  # python-can's own socket and recv: the reference
-    source = FrameSource(node, echo_ids=OWN)
+    source = FrameSource(node, echo_ids=OWN, kernel_filter=kernel_filter)
     yield group, port, node, other, reference, source
     source.close()
     for bus in (node, other, reference):
@@ -113,8 +114,10 @@ def test_limit_bounds_a_batch_and_the_rest_waits_for_the_next_call(buses):
     assert [m.data[0] for m, _ in second] == list(range(4, 10))
 
 
+@pytest.mark.parametrize("buses", [False], indirect=True)
 def test_own_frames_come_back_as_echo_without_building_a_message(buses, monkeypatch):
     _, _, node, other, _, source = buses
+    assert not source.kernel_filter
     node.send(_message(0x100))  # our own setpoint and commit: looped back by the bus
     node.send(_message(0x10F))
     other.send(_message(0x220))  # a frame from the hand
@@ -132,6 +135,26 @@ def test_own_frames_come_back_as_echo_without_building_a_message(buses, monkeypa
     assert [why for _, why in batch] == [ECHO, ECHO, None, ECHO]
     assert batch[2][0].arbitration_id == 0x220
     assert built == [0x220]  # only the frame that is not an echo was decoded
+
+
+def test_the_kernel_filter_keeps_own_frames_from_waking_the_reader_only(buses):
+    _, _, node, other, reference, source = buses
+    assert source.kernel_filter  # Linux
+    node.send(_message(0x100))
+    node.send(_message(0x10F))
+    other.send(_message(0x220))
+    other.send(_message(0x100))  # an own id from another node: dropped as well
+    node.send(can.Message(arbitration_id=0x100, data=b"", is_extended_id=True))  # not ours
+    _settle()
+    batch = source.read(0.5)
+    assert [(m.arbitration_id, m.is_extended_id) for m, _ in batch] == [(0x220, False),
+                                                                       (0x100, True)]
+    assert source.read(0.0) == []
+    # The filter is this node's alone: the other nodes receive every frame.
+    seen = []
+    while (message := reference.recv(0.1)) is not None:
+        seen.append(message.arbitration_id)
+    assert seen == [0x100, 0x10F, 0x220, 0x100, 0x100]
 
 
 def _datagram(**fields):
@@ -161,6 +184,7 @@ def _summary(message, why):
             message.is_remote_frame, message.is_fd)
 
 
+@pytest.mark.parametrize("buses", [True, False], indirect=True)
 def test_every_datagram_is_classified_as_python_can_classifies_it(buses):
     group, port, _, _, reference, source = buses
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
@@ -171,10 +195,14 @@ def test_every_datagram_is_classified_as_python_can_classifies_it(buses):
     _settle()
     ours = [_summary(m, why) for m, why in source.read(0.5, limit=100)]
     theirs = [_summary(*receive(reference, 0.2)) for _ in HOSTILE]
-    assert len(ours) == len(HOSTILE)
-    # python-can decodes an own-id frame; here only a plain one is dropped as an echo.
-    expected = [ECHO if isinstance(t, tuple) and t[0] in OWN and not t[2] and not t[3]
-                else t for t in theirs]
+    # python-can decodes an own-id frame; here only a plain one is an echo: dropped in the
+    # kernel by the filter, else returned as ECHO undecoded. Everything else as python-can.
+    echo = [isinstance(t, tuple) and t[0] in OWN and not t[2] and not t[3] for t in theirs]
+    assert sum(echo) == 1
+    if source.kernel_filter:
+        expected = [t for t, e in zip(theirs, echo, strict=True) if not e]
+    else:
+        expected = [ECHO if e else t for t, e in zip(theirs, echo, strict=True)]
     assert ours == expected
     assert ours.count(GARBAGE) >= 8 and BUS_ERROR not in ours
 
@@ -205,24 +233,29 @@ def test_a_closed_source_reports_a_bus_error_not_a_crash(buses):
 
 # -- the server's wait for a commit slot ----------------------------------------------
 def test_the_server_never_asks_epoll_for_a_sub_millisecond_wait():
-    """epoll_wait counts whole milliseconds, rounding up: a command the rate limit holds
+    """epoll_wait counts whole milliseconds, rounding up: a command the rate limit held
     for 0.3 ms waited 1 ms, and at 1 kHz the next command replaced it (the classic
     Barrett chain committed ~600 of 1000 commands a second). The server sleeps to the
-    slot instead, so every held command is committed, none coalesced."""
+    slot instead."""
     layout = hand_layout("barrett")
     bus = BusConfig("virtual", f"test-{uuid.uuid4().hex}", frame_format="classic")
     server = CanBusServer(CanServerConfig(port=0, hand_kind="barrett", bus=bus,
-                                          max_setpoint_rate=1000.0, max_step=0.5),
+                                          max_setpoint_rate=200.0, max_step=0.5),
                           layout=layout).start()
     firmware = SimulatedHandFirmware(CanFirmwareConfig(hand_kind="barrett", bus=bus,
                                                        rate=1000.0), layout=layout).start()
-    timeouts = []
-    select_events = server._selector.select
+    timeouts, wanted = [], []
+    select_events, select_timeout = server._selector.select, server._select_timeout
 
     def recorded(timeout=None):
         timeouts.append(timeout)
         return select_events(timeout)
 
+    def asked(now):
+        wanted.append(select_timeout(now))
+        return wanted[-1]
+
+    server._select_timeout = asked
     server._selector.select = recorded
     try:
         with socket.create_connection(("127.0.0.1", server.address[1]), timeout=2.0) as sock:
@@ -232,10 +265,10 @@ def test_the_server_never_asks_epoll_for_a_sub_millisecond_wait():
             while server.stats().get("hand_cycles", 0) < 5 and time.monotonic() < deadline:
                 time.sleep(0.01)
             base = np.clip(np.zeros(layout.nu), layout.command_lower, layout.command_upper)
-            pairs = 20
-            for k in range(pairs):  # two commands 0.2 ms apart: the second waits ~0.8 ms
+            pairs = 30
+            for k in range(pairs):  # 200 Hz: a command 2 ms after a commit waits ~0.5 ms
                 sock.sendall(P.pack_command(2 * k + 1, base + 0.01 * k))
-                time.sleep(0.0002)
+                time.sleep(0.002)
                 sock.sendall(P.pack_command(2 * k + 2, base + 0.01 * k + 0.005))
                 time.sleep(0.01)
             while server.stats().get("commands_rx", 0) < 2 * pairs and \
@@ -247,8 +280,9 @@ def test_the_server_never_asks_epoll_for_a_sub_millisecond_wait():
         firmware.stop()
         server.stop()
     assert stats["commands_rx"] == 2 * pairs
-    short = [t for t in timeouts if t is not None and 0 < t < 1e-3]
-    assert short == []
-    # Held, not replaced: each pair's second command got its own slot.
-    assert stats.get("commands_coalesced", 0) <= 2
-    assert stats["commits_tx"] >= 2 * pairs - 2
+    # The rate limit did hold commands for under a millisecond (a pair's second command
+    # arriving in its own read; on a loaded machine some pairs arrive in one read) ...
+    assert any(0 < t < 1e-3 for t in wanted)
+    # ... and no such wait reached epoll, which would have made it a whole millisecond.
+    assert [t for t in timeouts if t is not None and 0 < t < 1e-3] == []
+    assert stats["commits_tx"] + stats.get("commands_coalesced", 0) == 2 * pairs

@@ -25,6 +25,7 @@ node and is rejected and counted instead of vanishing inside python-can.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import select
@@ -199,15 +200,19 @@ class FrameSource:
     ``can.Message`` with the kernel receive stamp). A frame whose id is in
     ``echo_ids`` (a standard, non-remote, non-error frame: what this node
     sends itself, which a multicast bus loops back to it) is returned as
-    ``(None, ECHO)`` before any ``can.Message`` is built. Any other bus is
+    ``(None, ECHO)`` before any ``can.Message`` is built; on Linux a socket
+    filter (``kernel_filter``, see :func:`_attach_echo_filter`) drops such
+    datagrams in the kernel already, so they do not even wake the reader
+    (and are not counted). Any other bus is
     read through :func:`receive` (``bus.recv``), waiting once and then
     taking the waiting frames with a zero timeout; it has no echoes.
     """
 
-    def __init__(self, bus: can.BusABC, echo_ids=frozenset()):
+    def __init__(self, bus: can.BusABC, echo_ids=frozenset(), kernel_filter: bool = True):
         self._bus = bus
         self._echo_ids = frozenset(echo_ids)
         self._socket = None
+        self.kernel_filter = False
         sock = getattr(getattr(bus, "_multicast", None), "_socket", None)
         if getattr(bus, "_handle_drake_scoped", False) and isinstance(sock, socket.socket):
             # A second handle on the bus socket with its own (zero) timeout: python-can's
@@ -216,6 +221,8 @@ class FrameSource:
             self._socket.setblocking(False)
             self._ancillary = socket.CMSG_SPACE(struct.calcsize("@ll"))
             self._max_buffer = int(getattr(bus._multicast, "max_buffer", 4096))
+            if kernel_filter and self._echo_ids:
+                self.kernel_filter = _attach_echo_filter(self._socket, self._echo_ids)
 
     @property
     def direct(self) -> bool:
@@ -283,6 +290,68 @@ class FrameSource:
             return can.Message(check=True, **fields), None
         except Exception:  # what python-can's recv reports as "could not unpack"  # noqa: BLE001
             return None, GARBAGE
+
+
+# Classic BPF (linux/filter.h): opcodes and the socket option.
+_BPF_LDB, _BPF_LDH, _BPF_LDW = 0x30, 0x28, 0x20  # BPF_LD | B/H/W | BPF_ABS
+_BPF_LEN = 0x80  # BPF_LD | BPF_W | BPF_LEN: the packet's length
+_BPF_JEQ, _BPF_JGE, _BPF_RET = 0x15, 0x35, 0x06  # BPF_JMP | JEQ/JGE | BPF_K, BPF_RET | BPF_K
+_SO_ATTACH_FILTER = getattr(socket, "SO_ATTACH_FILTER", 26)
+_UDP_HEADER = 8  # a UDP socket's filter sees the datagram from its UDP header on
+
+
+def _echo_filter_program(echo_ids) -> list[tuple[int, int, int, int]]:
+    """A socket filter that drops python-can udp_multicast frames with one of ``echo_ids``.
+
+    python-can packs a frame as a msgpack map in a fixed key order (``pack_message``):
+    ``timestamp`` (a float64), ``arbitration_id``, ``is_extended_id``,
+    ``is_remote_frame``, ``is_error_frame``, ... For a frame stamped with a float, an
+    id in 0x100..0x7FF (a uint16) and the three flags False, every byte the program
+    reads sits at a fixed offset; it checks the keys' first letters there too, and
+    passes any datagram that does not match that shape in full (decoded in Python,
+    where an own id is still caught as ECHO).
+    """
+    p = _UDP_HEADER
+    # (offset, width, value): the map header, each key's header and first letters, the
+    # id's uint16 marker and the three flags False.
+    checks = [(p + 0, 1, 0x8B), (p + 1, 1, 0xA9), (p + 2, 4, int.from_bytes(b"time", "big")),
+              (p + 11, 1, 0xCB), (p + 20, 1, 0xAE), (p + 21, 4, int.from_bytes(b"arbi", "big")),
+              (p + 35, 1, 0xCD),
+              (p + 38, 1, 0xAE), (p + 39, 4, int.from_bytes(b"is_e", "big")), (p + 53, 1, 0xC2),
+              (p + 54, 1, 0xAF), (p + 55, 4, int.from_bytes(b"is_r", "big")), (p + 70, 1, 0xC2),
+              (p + 71, 1, 0xAE), (p + 72, 4, int.from_bytes(b"is_e", "big")), (p + 86, 1, 0xC2)]
+    ids = sorted(i for i in echo_ids if 0x100 <= i < 0x800)
+    load = {1: _BPF_LDB, 2: _BPF_LDH, 4: _BPF_LDW}
+    accept = 2 + 2 * len(checks) + 1 + len(ids)  # index of "ret accept"; "ret drop" follows
+    program = []  # (code, jt, jf, k); a jump goes to (its index + 1 + offset)
+    # Shorter datagrams pass untouched (a load past the end would end the program: drop).
+    program.append((_BPF_LEN, 0, 0, 0))
+    program.append((_BPF_JGE, 0, accept - len(program) - 1, p + 87))
+    for offset, width, value in checks:
+        program.append((load[width], 0, 0, offset))
+        program.append((_BPF_JEQ, 0, accept - len(program) - 1, value))
+    program.append((_BPF_LDH, 0, 0, p + 36))  # the id, big-endian
+    for frame_id in ids:
+        program.append((_BPF_JEQ, accept - len(program), 0, frame_id))
+    program.append((_BPF_RET, 0, 0, 0xFFFFFFFF))  # accept: the whole datagram
+    program.append((_BPF_RET, 0, 0, 0))  # drop
+    return program
+
+
+def _attach_echo_filter(sock: socket.socket, echo_ids) -> bool:
+    """Attaches :func:`_echo_filter_program` to ``sock``; False where the OS has no BPF."""
+    if not any(0x100 <= i < 0x800 for i in echo_ids) or os.uname().sysname != "Linux":
+        return False
+    program = _echo_filter_program(echo_ids)
+    code = b"".join(struct.pack("HBBI", *instruction) for instruction in program)
+    buffer = ctypes.create_string_buffer(code, len(code))
+    fprog = struct.pack("HL", len(program), ctypes.addressof(buffer))  # struct sock_fprog
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_ATTACH_FILTER, fprog)
+    except OSError as error:
+        log.info("udp_multicast: no socket filter for the echoes (%s); dropped in Python", error)
+        return False
+    return True
 
 
 def _stamp(ancillary) -> float:
