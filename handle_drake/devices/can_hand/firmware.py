@@ -308,11 +308,13 @@ class SimulatedHandFirmware:
                                             hand_time)
         self._counter = (self._counter + 1) % 256
         fd = self.codec.is_fd
+        # Every frame built first, then sent back to back: a receiver woken by the first
+        # finds the rest already waiting (one wake-up for the cycle, not one per frame).
+        messages = [can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False,
+                                is_fd=fd, bitrate_switch=fd) for arbitration_id, data in frames]
         try:
-            for arbitration_id, data in frames:
-                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                           is_extended_id=False, is_fd=fd,
-                                           bitrate_switch=fd), timeout=0.01)
+            for message in messages:
+                self._bus.send(message, timeout=0.01)
             self.counters["cycles"] += 1
             if self._on_request:
                 self.counters["feedback_replies" if self._replying else "feedback_idle"] += 1

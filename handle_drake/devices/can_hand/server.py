@@ -391,11 +391,13 @@ class CanBusServer:
 
     def _send_frames(self, frames) -> bool:
         fd = self.codec.is_fd
+        # Built first, then sent back to back: the hand woken by the first frame finds the
+        # commit already waiting (one wake-up per command, not one per frame).
+        messages = [can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False,
+                                is_fd=fd, bitrate_switch=fd) for arbitration_id, data in frames]
         try:
-            for arbitration_id, data in frames:
-                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                           is_extended_id=False, is_fd=fd, bitrate_switch=fd),
-                               timeout=0.01)
+            for message in messages:
+                self._bus.send(message, timeout=0.01)
         except (can.CanError, OSError) as error:
             self._count("bus_tx_errors")
             log.warning("bus send failed: %s", error)
