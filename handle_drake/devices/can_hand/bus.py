@@ -3,7 +3,8 @@
 - ``virtual``: python-can's in-process bus (all ends in one process).
 - ``udp_multicast``: frames as UDP multicast datagrams, across processes on
   one host (loopback, TTL 1). A socket also receives its own frames, so every
-  node ignores the ids it sends itself. python-can (4.x) offers only the
+  node ignores the ids it sends itself (:class:`FrameSource` drops them in the
+  kernel, or before decoding them). python-can (4.x) offers only the
   group, port and hop limit: its socket is bound to ``("", port)`` (every
   interface, so also unicast datagrams sent to any local address at that
   port, and, with Linux's default ``IP_MULTICAST_ALL``, other groups'
