@@ -78,8 +78,6 @@ _READ_CHUNK = 4096  # bytes read from one client per round of the I/O loop
 # shows up in its (capped) output backlog within ~0.1 s of STATE at 1 kHz, instead
 # of hiding megabytes in an autotuned loopback buffer.
 _CLIENT_SNDBUF = 64 * 1024
-# s: the I/O selector's wait resolution (epoll_wait counts whole milliseconds, rounding up).
-_SELECTOR_RESOLUTION = 1e-3
 
 
 def clamp_command(q, lower, upper) -> tuple[np.ndarray, bool]:
@@ -411,15 +409,7 @@ class CanBusServer:
         failures = 0
         while not self._stop.is_set():
             try:
-                timeout = self._select_timeout(time.monotonic())
-                if 0 < timeout < _SELECTOR_RESOLUTION:
-                    # The next commit slot is due in under a millisecond, and epoll rounds a
-                    # wait up to whole milliseconds: a command held for 0.1 ms would wait
-                    # 1 ms and the next command replace it. Sleep to the slot instead; what
-                    # arrived meanwhile is read below (select(0)) before the commit.
-                    time.sleep(timeout)
-                    timeout = 0.0
-                events = self._selector.select(timeout)
+                events = self._selector.select(self._select_timeout(time.monotonic()))
             except (OSError, ValueError) as error:
                 if self._stop.is_set():
                     return
