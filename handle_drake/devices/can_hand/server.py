@@ -2,9 +2,11 @@
 
 Two threads:
 
-- the bus thread receives frames, accepts only the hand's feedback ids
-  (foreign ids and malformed frames are dropped and counted; our own
-  setpoint frames echoed by a multicast bus are ignored), assembles one
+- the bus thread receives frames, every waiting one per wake-up
+  (:class:`~handle_drake.devices.can_hand.bus.FrameSource`), accepts only the
+  hand's feedback ids (foreign ids and malformed frames are dropped and
+  counted; our own setpoint frames echoed by a multicast bus are dropped,
+  in the kernel where it can), assembles one
   snapshot per hand cycle, estimates joint velocities and sends the new
   hand state to every client itself (no hand-off to the other thread on the
   way back: one wake-up less per cycle on the latency path);
