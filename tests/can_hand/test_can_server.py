@@ -469,3 +469,24 @@ def _closed(sock):
         return sock.recv(65536) == b""
     except OSError:
         return True
+
+
+def test_welcome_comes_before_any_state_while_the_hand_streams(chain):
+    """The I/O thread handles a HELLO outside its I/O lock but marks the client greeted and
+    queues WELCOME under it: the bus thread, streaming STATEs meanwhile, never gets a STATE
+    in first. Also a command handled between the hand's cycles still reaches the hand."""
+    layout = chain.layout
+    info = P.HandInfo("shadow", layout.nq, layout.nu, layout.num_tactile)
+    assert wait_until(lambda: chain.server.stats().get("hand_cycles", 0) > 10, 3.0)
+    firsts = []
+    for _ in range(30):
+        with socket.create_connection(("127.0.0.1", chain.port), timeout=2.0) as sock:
+            sock.sendall(P.pack_hello(info))
+            reader, deadline, messages = P.FrameReader(), time.monotonic() + 2.0, []
+            while not messages and time.monotonic() < deadline:
+                messages = reader.feed(sock.recv(65536))
+            firsts.append(messages[0][0] if messages else None)
+            sock.sendall(P.pack_command(1, np.clip(np.full(layout.nu, 0.3),
+                                                   layout.command_lower, layout.command_upper)))
+    assert firsts == [P.WELCOME] * 30
+    assert wait_until(lambda: chain.server.stats().get("commits_tx", 0) >= 1, 2.0)

@@ -53,11 +53,12 @@ import can
 import numpy as np
 
 from handle_drake.devices.can_hand.bus import (
+    ECHO,
     GARBAGE,
     ErrorLog,
+    FrameSource,
     check_frame,
     open_bus,
-    receive,
     use_realtime_priority,
 )
 from handle_drake.devices.can_hand.config import CanFirmwareConfig
@@ -169,6 +170,7 @@ class SimulatedHandFirmware:
         self._owns_bus = bus is None
         self._stop = threading.Event()
         self._thread = None
+        self._source = None  # FrameSource, from start()
         self._lock = threading.Lock()
         self.counters = collections.Counter()
         self._seq_ack = 0
@@ -188,6 +190,7 @@ class SimulatedHandFirmware:
             raise RuntimeError("firmware already started")
         if self._bus is None:
             self._bus = open_bus(self.config.bus)
+        self._source = FrameSource(self._bus, echo_ids=self.codec.hand_to_host_ids)
         self._thread = threading.Thread(target=self._loop, name="can-sim", daemon=True)
         self._thread.start()
         return self
@@ -197,6 +200,9 @@ class SimulatedHandFirmware:
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None
+        if self._source is not None:
+            self._source.close()
+            self._source = None
         if self._owns_bus and self._bus is not None:
             self._bus.shutdown()
             self._bus = None
@@ -245,37 +251,45 @@ class SimulatedHandFirmware:
         self.counters["commits_applied"] += 1
         return True
 
-    def _receive(self, timeout: float) -> str:
-        """Takes one frame from the bus (waiting up to ``timeout`` s) and handles it.
+    def _receive(self, timeout: float, limit: int) -> tuple[str, int]:
+        """Handles one wake-up's frames: waits up to ``timeout`` s for the first, then takes
+        every frame already waiting behind it (at most ``limit``).
 
-        Returns ``_FRAME`` (a frame or a garbage datagram came), ``_TIMEOUT`` or
-        ``_FAILED`` (the bus failed: the caller must not retry at once).
+        Returns ``(outcome, frames)``: ``_FRAME`` (frames or garbage datagrams came),
+        ``_TIMEOUT`` or ``_FAILED`` (the bus failed: the caller must not retry at once).
         """
-        message, why = receive(self._bus, timeout)
-        if why == GARBAGE:  # undecodable datagram: counted, next one at once
-            self.counters["frames_rx"] += 1
-            self.counters[GARBAGE] += 1
-            return _FRAME
-        if why is not None:
-            self.counters[why] += 1
-            self._errors(why, RuntimeError("firmware bus receive failed"))
-            return _FAILED
-        if message is None:
-            return _TIMEOUT
-        try:
-            if self._handle(message):
-                self._unanswered = True
-        except Exception as error:  # one frame never stops the hand
-            self.counters["frame_errors"] += 1
-            self._errors("frame_errors", error)
-        return _FRAME
+        batch = self._source.read(timeout, max(1, limit))
+        if not batch:
+            return _TIMEOUT, 0
+        counters, n = self.counters, 0
+        for message, why in batch:
+            if why == ECHO or why == GARBAGE:  # our own feedback looped back; undecodable
+                counters["frames_rx"] += 1
+                counters[why] += 1
+                n += 1
+                continue
+            if why is not None:
+                counters[why] += 1
+                self._errors(why, RuntimeError("firmware bus receive failed"))
+                return _FAILED, n
+            n += 1
+            try:
+                if self._handle(message):
+                    self._unanswered = True
+            except Exception as error:  # one frame never stops the hand
+                counters["frame_errors"] += 1
+                self._errors("frame_errors", error)
+        return _FRAME, n
 
     def _drain(self, limit: int) -> int:
         """Handles the frames already waiting (at most ``limit``); returns how many."""
-        for n in range(max(0, limit)):
-            if self._receive(0.0) != _FRAME:
-                return n
-        return max(0, limit)
+        n = 0
+        while n < limit:
+            got, k = self._receive(0.0, limit - n)
+            n += k
+            if got != _FRAME:
+                break
+        return n
 
     def _sample(self, now: float) -> None:
         """Reads the sensors after a joint-model step (the feedback's values until the next)."""
@@ -294,11 +308,13 @@ class SimulatedHandFirmware:
                                             hand_time)
         self._counter = (self._counter + 1) % 256
         fd = self.codec.is_fd
+        # Every frame built first, then sent back to back: a receiver woken by the first
+        # finds the rest already waiting (one wake-up for the cycle, not one per frame).
+        messages = [can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False,
+                                is_fd=fd, bitrate_switch=fd) for arbitration_id, data in frames]
         try:
-            for arbitration_id, data in frames:
-                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                           is_extended_id=False, is_fd=fd,
-                                           bitrate_switch=fd), timeout=0.01)
+            for message in messages:
+                self._bus.send(message, timeout=0.01)
             self.counters["cycles"] += 1
             if self._on_request:
                 self.counters["feedback_replies" if self._replying else "feedback_idle"] += 1
@@ -323,16 +339,19 @@ class SimulatedHandFirmware:
                     remaining = deadline - time.monotonic()
                     if remaining <= 0:
                         break
-                    got = self._receive(min(remaining, _MAX_WAIT))
+                    got, n = self._receive(min(remaining, _MAX_WAIT),
+                                           _MAX_FRAMES_PER_CYCLE - frames)
+                    frames += n
                     if got == _FAILED:  # no busy retry: wait out this cycle
                         self._stop.wait(max(0.0, deadline - time.monotonic()))
                         break
                     if got == _TIMEOUT:
                         continue
-                    # Woken by a frame: take what else is waiting (a classic command's
-                    # other frames), answer the newest applied setpoint once, then take
-                    # our own reply's frames, which a multicast bus loops back at once.
-                    frames += 1 + self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+                    # Woken by a frame, with what else was waiting (a classic command's
+                    # other frames): take any that came meanwhile, answer the newest
+                    # applied setpoint once, then take our own reply's frames, which a
+                    # multicast bus loops back at once (dropped undecoded, as ECHO).
+                    frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
                     if self._unanswered:
                         self._publish()  # the last step's sample, the newest seq
                         frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)

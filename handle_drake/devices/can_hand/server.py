@@ -2,9 +2,11 @@
 
 Two threads:
 
-- the bus thread receives frames, accepts only the hand's feedback ids
-  (foreign ids and malformed frames are dropped and counted; our own
-  setpoint frames echoed by a multicast bus are ignored), assembles one
+- the bus thread receives frames, every waiting one per wake-up
+  (:class:`~handle_drake.devices.can_hand.bus.FrameSource`), accepts only the
+  hand's feedback ids (foreign ids and malformed frames are dropped and
+  counted; our own setpoint frames echoed by a multicast bus are dropped,
+  in the kernel where it can), assembles one
   snapshot per hand cycle, estimates joint velocities and sends the new
   hand state to every client itself (no hand-off to the other thread on the
   way back: one wake-up less per cycle on the latency path);
@@ -51,11 +53,12 @@ import numpy as np
 
 from handle_drake.devices.can_hand import protocol as P
 from handle_drake.devices.can_hand.bus import (
+    ECHO,
     GARBAGE,
     ErrorLog,
+    FrameSource,
     check_frame,
     open_bus,
-    receive,
     use_realtime_priority,
 )
 from handle_drake.devices.can_hand.config import CanServerConfig
@@ -191,6 +194,7 @@ class CanBusServer:
         self._threads: list[threading.Thread] = []
         self._counters = collections.Counter()
         self._listen = None
+        self._source = None  # the bus thread's FrameSource
         self._wake_r = self._wake_w = None
         self._selector = None
         self._clients: list[_Client] = []
@@ -234,6 +238,7 @@ class CanBusServer:
                 listen.close()
                 raise
         self._listen = listen
+        self._source = FrameSource(self._bus, echo_ids=self.codec.host_to_hand_ids)
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -273,6 +278,9 @@ class CanBusServer:
         if self._selector is not None:
             self._selector.close()
             self._selector = None
+        if self._source is not None:
+            self._source.close()
+            self._source = None
         if self._owns_bus and self._bus is not None:
             self._bus.shutdown()
             self._bus = None
@@ -305,36 +313,40 @@ class CanBusServer:
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
-        # Frame counts are kept here and merged under the lock once per hand
-        # cycle, idle wait or 64 frames, not per frame.
+        # Every waiting frame per wake-up (FrameSource); our own setpoint frames, which a
+        # multicast bus loops back, come back as ECHO without being decoded. Frame counts
+        # are kept here and merged under the lock once per hand cycle, idle wait or 64
+        # frames, not per frame.
+        source = self._source
         pending = collections.Counter()
         failures = 0  # consecutive bus errors: the back-off grows with them
         while not self._stop.is_set():
-            message, why = receive(self._bus, 0.05)
-            if why == GARBAGE:  # an undecodable datagram costs its decoding, no wait
-                pending["frames_rx"] += 1
-                pending[GARBAGE] += 1
-                if pending["frames_rx"] >= 64:
+            batch = source.read(0.05, 64)
+            if not batch:
+                self._merge_counts(pending)
+                continue
+            for message, why in batch:
+                if why == GARBAGE or why == ECHO:  # costs its decoding at most, no wait
+                    pending["frames_rx"] += 1
+                    pending[why] += 1
+                    if pending["frames_rx"] >= 64:
+                        self._merge_counts(pending)
+                    continue
+                if why is not None:
+                    failures += 1
+                    pending[why] += 1
                     self._merge_counts(pending)
-                continue
-            if why is not None:
-                failures += 1
-                pending[why] += 1
-                self._merge_counts(pending)
-                self._errors(why, RuntimeError("bus receive failed"))
-                self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
-                continue
-            failures = 0
-            if message is None:
-                self._merge_counts(pending)
-                continue
-            pending["frames_rx"] += 1
-            try:
-                self._on_frame(message, pending)
-            except Exception as error:  # one frame never takes the bus thread down
-                pending["frame_errors"] += 1
-                self._merge_counts(pending)
-                self._errors("frame_errors", error)
+                    self._errors(why, RuntimeError("bus receive failed"))
+                    self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
+                    break
+                failures = 0
+                pending["frames_rx"] += 1
+                try:
+                    self._on_frame(message, pending)
+                except Exception as error:  # one frame never takes the bus thread down
+                    pending["frame_errors"] += 1
+                    self._merge_counts(pending)
+                    self._errors("frame_errors", error)
 
     def _on_frame(self, message, pending: collections.Counter) -> None:
         try:
@@ -379,11 +391,13 @@ class CanBusServer:
 
     def _send_frames(self, frames) -> bool:
         fd = self.codec.is_fd
+        # Built first, then sent back to back: the hand woken by the first frame finds the
+        # commit already waiting (one wake-up per command, not one per frame).
+        messages = [can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False,
+                                is_fd=fd, bitrate_switch=fd) for arbitration_id, data in frames]
         try:
-            for arbitration_id, data in frames:
-                self._bus.send(can.Message(arbitration_id=arbitration_id, data=data,
-                                           is_extended_id=False, is_fd=fd, bitrate_switch=fd),
-                               timeout=0.01)
+            for message in messages:
+                self._bus.send(message, timeout=0.01)
         except (can.CanError, OSError) as error:
             self._count("bus_tx_errors")
             log.warning("bus send failed: %s", error)
@@ -406,11 +420,14 @@ class CanBusServer:
                 self._stop.wait(0.01)
                 continue
             try:
+                # Each event takes the I/O lock only around what the bus thread shares
+                # (the client list, output buffers, selector registrations): parsing and
+                # applying a command run outside it, so a STATE the bus thread is sending
+                # does not wait for them (nor for this thread's wake-up after a syscall).
+                for key, mask in events:
+                    self._on_event(key, mask)
                 with self._io_lock:
-                    for key, mask in events:
-                        self._on_event(key, mask)
                     self._housekeeping(time.monotonic())
-                # Outside the I/O lock: the bus thread streams states meanwhile.
                 self._service_setpoint(time.monotonic())
                 failures = 0
             except Exception as error:  # the I/O thread outlives any bug a client triggers
@@ -421,7 +438,8 @@ class CanBusServer:
 
     def _on_event(self, key, mask) -> None:
         if key.data == "listen":
-            self._accept()
+            with self._io_lock:
+                self._accept()
         elif key.data == "wake":
             try:
                 while self._wake_r.recv(4096):
@@ -435,14 +453,16 @@ class CanBusServer:
             try:
                 if mask & selectors.EVENT_READ:
                     self._read(client)
-                if mask & selectors.EVENT_WRITE and not client.closing and \
-                        client in self._clients:
-                    self._flush(client)
+                if mask & selectors.EVENT_WRITE:
+                    with self._io_lock:
+                        if not client.closing and client in self._clients:
+                            self._flush(client)
             except Exception as error:  # one client's trouble is that client's alone
                 self._count("client_errors")
                 self._errors("client_errors", error)
-                if client in self._clients:
-                    self._close_client(client)
+                with self._io_lock:
+                    if client in self._clients:
+                        self._close_client(client)
 
     def _housekeeping(self, now: float) -> None:
         """Closes clients that never said HELLO or stopped reading; resumes accepting."""
@@ -508,21 +528,26 @@ class CanBusServer:
         client.sock.close()
 
     def _read(self, client: _Client) -> None:
+        """Reads and handles one client's messages (I/O thread; takes the I/O lock itself)."""
+        with self._io_lock:  # the socket is only closed under the lock
+            if client.closing or client not in self._clients:
+                return
+            try:
+                # A bounded read: a flooding client gets one slice of work per round.
+                data = client.sock.recv(_READ_CHUNK)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                data = b""
+            if not data:
+                self._close_client(client)
+                return
         try:
-            # A bounded read: a flooding client gets one slice of work per round.
-            data = client.sock.recv(_READ_CHUNK)
-        except (BlockingIOError, InterruptedError):
-            return
-        except OSError:
-            data = b""
-        if not data:
-            self._close_client(client)
-            return
-        try:
-            messages = client.reader.feed(data)
+            messages = client.reader.feed(data)  # the reader is this thread's alone
         except P.ProtocolError as error:
             self._count("malformed_messages")
-            self._reject(client, f"protocol error: {error}")
+            with self._io_lock:
+                self._reject(client, f"protocol error: {error}")
             return
         stats_wanted = False
         for message_type, payload in messages:
@@ -532,11 +557,15 @@ class CanBusServer:
                 stats_wanted = True  # one reply answers every request of this read
                 continue
             self._handle(client, message_type, payload)
-        if stats_wanted and client in self._clients and not client.closing:
-            self._reply(client, P.pack_stats(self.stats()))
+        if stats_wanted:
+            stats = P.pack_stats(self.stats())
+            with self._io_lock:
+                if client in self._clients and not client.closing:
+                    self._reply(client, stats)
 
     def _reply(self, client: _Client, data: bytes) -> None:
-        """Queues a reply; a client whose unread output passed the cap is disconnected."""
+        """Queues a reply (under the I/O lock); a client whose unread output passed the cap
+        is disconnected."""
         if len(client.out) + len(data) > self.config.max_client_backlog:
             self._count("slow_clients_closed")
             self._close_client(client)
@@ -545,7 +574,7 @@ class CanBusServer:
         self._flush(client)
 
     def _reject(self, client: _Client, text: str) -> None:
-        """Sends ERROR and closes once it is written."""
+        """Sends ERROR and closes once it is written (under the I/O lock)."""
         client.out += P.pack(P.ERROR, text.encode()[:P.MAX_PAYLOAD])
         client.closing = True
         self._flush(client)
@@ -553,36 +582,44 @@ class CanBusServer:
             self._close_client(client)
 
     def _handle(self, client: _Client, message_type: int, payload: bytes) -> None:
+        """One message (I/O thread, without the I/O lock: replies take it)."""
         if message_type == P.HELLO:
             try:
                 info = P.unpack_hello(payload)
             except P.PayloadError as error:
                 self._count("malformed_messages")
-                self._reject(client, str(error))
+                with self._io_lock:
+                    self._reject(client, str(error))
                 return
             if info != self._info:
                 self._count("rejected_clients")
-                self._reject(client, f"this server drives a {self._info.kind} hand (nq "
-                                     f"{self._info.nq}, nu {self._info.nu}, tactile "
-                                     f"{self._info.nt}); client expected {info.kind} (nq "
-                                     f"{info.nq}, nu {info.nu}, tactile {info.nt})")
+                with self._io_lock:
+                    self._reject(client, f"this server drives a {self._info.kind} hand (nq "
+                                         f"{self._info.nq}, nu {self._info.nu}, tactile "
+                                         f"{self._info.nt}); client expected {info.kind} (nq "
+                                         f"{info.nq}, nu {info.nu}, tactile {info.nt})")
                 return
-            client.greeted = True
-            self._reply(client, P.pack_hello(self._info, P.WELCOME))
+            with self._io_lock:  # WELCOME is queued before the bus thread's first STATE
+                client.greeted = True
+                self._reply(client, P.pack_hello(self._info, P.WELCOME))
         elif not client.greeted:
             self._count("malformed_messages")
-            self._reject(client, "expected HELLO first")
+            with self._io_lock:
+                self._reject(client, "expected HELLO first")
         elif message_type == P.COMMAND:
             try:
                 seq, q = P.unpack_command(payload, self.layout.nu)
             except P.PayloadError as error:
                 self._count("commands_rejected")
-                self._reply(client, P.pack(P.ERROR, str(error).encode()[:1024]))
+                with self._io_lock:
+                    self._reply(client, P.pack(P.ERROR, str(error).encode()[:1024]))
                 return
             self._on_command(seq, q, time.monotonic())
         else:
             self._count("malformed_messages")
-            self._reply(client, P.pack(P.ERROR, f"unexpected message type {message_type}".encode()))
+            with self._io_lock:
+                self._reply(client, P.pack(P.ERROR,
+                                           f"unexpected message type {message_type}".encode()))
 
     def _flush(self, client: _Client) -> None:
         """Writes what the socket takes now; the rest waits for EVENT_WRITE (under _io_lock)."""
