@@ -24,13 +24,19 @@ at git revision ``REV`` (its primitive drivers where ``REV`` has them, else its 
 drivers; ``object.position`` through ``BodyPoseSelector`` where ``REV``'s station had no
 other way): "before" in the same run; its logged signals are checked equal to this tree's.
 
-Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo] [--baseline REV]...``
+``--instructions`` counts instead the instructions of the demo station, its two floors (and
+each ``--baseline``'s station) per run, each under valgrind in a process of its own
+(``benchmarks/support/instructions.py``): exact where times vary by +-5 % between processes.
+
+Usage: ``python benchmarks/bench_station.py [--repeats N] [--quick] [--demo] [--baseline REV]...
+[--instructions]``
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import inspect
 import os
 import statistics
 import subprocess
@@ -97,14 +103,14 @@ class _Case:
 
 
 def _station_case(contact_model, time_step, approximation, log=None,
-                  finite_commands=None) -> _Case:
+                  finite_commands=None, outputs=()) -> _Case:
     """The station as ``run_demo`` builds it (``ScenarioRunner``: its script's drivers in
     Drake primitives; the systems of the outputs it logs); ``finite_commands=False``: with
-    the Python drivers."""
+    the Python drivers; ``outputs=None``: every output's systems."""
     from handle_drake.station import GetPlant, object_body
 
     runner = ScenarioRunner(_scenario(contact_model, time_step, approximation),
-                            finite_commands=finite_commands, outputs=(),
+                            finite_commands=finite_commands, outputs=outputs,
                             **({} if log is None else {"log": log}))
     plant = GetPlant(runner.station)
     body = object_body(plant)
@@ -141,8 +147,11 @@ def _baseline_station_case(revision: str) -> _Case:
              "PdHandDriver": drivers.PdHandDriver, "WristDriver": drivers.WristDriver}
     primitives = hasattr(drivers, "HandDriverDiagram")
     if primitives:
-        names.update(HandDriverDiagram=drivers.HandDriverDiagram,
-                     WristDriverDiagram=drivers.WristDriverDiagram)
+        hand = drivers.HandDriverDiagram
+        if "measured" not in inspect.signature(hand).parameters:  # built them always
+            def hand(*args, measured=True, _old=drivers.HandDriverDiagram, **kwargs):
+                return _old(*args, **kwargs)
+        names.update(HandDriverDiagram=hand, WristDriverDiagram=drivers.WristDriverDiagram)
     station_source = subprocess.run(["git", "show", f"{revision}:handle_drake/station.py"],
                                     cwd=ROOT, capture_output=True, text=True, check=True).stdout
     if "def _free_body_position" not in station_source:
@@ -151,8 +160,9 @@ def _baseline_station_case(revision: str) -> _Case:
     try:
         for name, value in names.items():
             setattr(station_module, name, value)
+        # every output's systems: the station as it was before it built those read only
         return _station_case(*STATION_CASES[0],
-                             finite_commands=None if primitives else False)
+                             finite_commands=None if primitives else False, outputs=None)
     finally:
         for name, value in saved.items():
             setattr(station_module, name, value)
@@ -392,8 +402,13 @@ def main(argv=None) -> int:
                              "(repeatable)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station.json")
+    parser.add_argument("--instructions", action="store_true",
+                        help="only count the instructions of the demo station, its replay "
+                             "and model floors (and each --baseline's station; valgrind)")
     add_page_arguments(parser, "station")
     args = parser.parse_args(argv)
+    if args.instructions:
+        return _instructions_main(args)
     results_run = ResultsRun("Station speed: Shadow grasp trial against the bare plant", args)
     repeats = 1 if args.quick else args.repeats
     load_before = os.getloadavg()[0]
@@ -461,6 +476,29 @@ def main(argv=None) -> int:
                                  "station_overhead": overhead, "cpu_count": os.cpu_count(),
                                  "load_average": os.getloadavg()}, args.out)
     print(f"wrote {args.out}")
+    return 0
+
+
+def _instructions_main(args) -> int:
+    """``--instructions``: each case's instructions per 2 s run, counted by valgrind in a
+    process of its own (``support/instructions.py``: exact, where the times of identical
+    code vary by +-5 % between processes here), and its ratio to the floors."""
+    from instructions import count_cases, ratio_table
+
+    results_run = ResultsRun("Station: instructions per demo run against the bare plant",
+                             args, section="instructions")
+    cases = {"demo station": ("station:demo", {}, None),
+             "bare plant, the station's frames (replay)": ("station:replay", {}, None),
+             "bare plant, the script (model)": ("station:model", {}, None)}
+    for revision in args.baseline:
+        cases[f"demo station at {revision}"] = ("station:baseline", {"revision": revision},
+                                                None)
+    rows = ratio_table(count_cases(cases), {
+        "replay": "bare plant, the station's frames (replay)",
+        "model": "bare plant, the script (model)"})
+    out = args.out.with_name("station_instructions.json")
+    results_run.finish(rows, {"instructions": rows, "load_average": os.getloadavg()}, out)
+    print(f"wrote {out}")
     return 0
 
 
