@@ -154,8 +154,9 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
             Every system in a diagram costs the simulator work at every step, read or
             not (``docs/results/inhand.md``). Outputs that need no system of their own
             (the plant's ports, ``hand.position_commanded``) and the scenario's devices
-            (instruments, cameras, MIDI) are always there. A name the scenario's
-            station does not have is refused.
+            (instruments, cameras, MIDI) are always there. A name that is no station
+            output is refused; one of the table this scenario lacks (``object.*``
+            without an object) is simply absent.
     """
     validate_scenario(scenario)
     if hardware:
