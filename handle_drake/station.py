@@ -145,18 +145,15 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
             period) instead of the Python drivers that hold on a non-finite or
             unconnected command.
         outputs: the station outputs the caller reads (simulation only; None, the
-            default: all of them). Given, the systems that feed nothing but outputs
-            outside it are left out: the fingertip sensor (``hand.tactile``), the hand
-            driver's measured-state selectors (``hand.position_measured``,
-            ``hand.velocity_estimated``, ``hand.state_estimated``: a
-            :class:`HandDriverDiagram` only) and the object's pose selector and position
-            split (``object.pose``, ``object.spatial_velocity``, ``object.position``).
-            Every system in a diagram costs the simulator work at every step, read or
-            not (``docs/results/inhand.md``). Outputs that need no system of their own
-            (the plant's ports, ``hand.position_commanded``) and the scenario's devices
-            (instruments, cameras, MIDI) are always there. A name that is no station
-            output is refused; one of the table this scenario lacks (``object.*``
-            without an object) is simply absent.
+            default: all). Given, the systems feeding only other outputs are left out:
+            the fingertip sensor (``hand.tactile``), the measured-state selectors of a
+            :class:`HandDriverDiagram` (``hand.position_measured``,
+            ``hand.velocity_estimated``, ``hand.state_estimated``), the object's pose
+            selector and position split (``object.pose``, ``object.spatial_velocity``,
+            ``object.position``): every system costs the simulator work at every step.
+            Outputs needing no system of their own (the plant's, the commanded
+            position) and the scenario's devices are always there. A name that is no
+            station output is refused; one this scenario lacks is absent.
     """
     validate_scenario(scenario)
     if hardware:
