@@ -314,7 +314,8 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
     replay, station_z = _replay_case()
     # Where the demo station's time goes: the same station without the tactile
     # logger (its every sample evaluates the plant's contact results), and without
-    # any logger (run results then lack the logged signals: diagnosis only).
+    # any logger (run results then lack the logged signals: diagnosis only); like the
+    # demo, each builds only the systems of what it logs.
     ablation = {"no tactile log": _station_case(*STATION_CASES[0], log=(
                     "hand.position_measured", "object.position")),
                 "no loggers": _station_case(*STATION_CASES[0], log=())}
