@@ -546,8 +546,7 @@ class CanBusServer:
             messages = client.reader.feed(data)  # the reader is this thread's alone
         except P.ProtocolError as error:
             self._count("malformed_messages")
-            with self._io_lock:
-                self._reject(client, f"protocol error: {error}")
+            self._reject(client, f"protocol error: {error}")
             return
         stats_wanted = False
         for message_type, payload in messages:
@@ -574,12 +573,18 @@ class CanBusServer:
         self._flush(client)
 
     def _reject(self, client: _Client, text: str) -> None:
-        """Sends ERROR and closes once it is written (under the I/O lock)."""
-        client.out += P.pack(P.ERROR, text.encode()[:P.MAX_PAYLOAD])
-        client.closing = True
-        self._flush(client)
-        if client in self._clients:
-            self._close_client(client)
+        """Sends ERROR and closes once it is written (takes the I/O lock)."""
+        with self._io_lock:
+            client.out += P.pack(P.ERROR, text.encode()[:P.MAX_PAYLOAD])
+            client.closing = True
+            self._flush(client)
+            if client in self._clients:
+                self._close_client(client)
+
+    def _reply_error(self, client: _Client, text: str) -> None:
+        """Queues an ERROR and keeps the client (takes the I/O lock)."""
+        with self._io_lock:
+            self._reply(client, P.pack(P.ERROR, text.encode()[:1024]))
 
     def _handle(self, client: _Client, message_type: int, payload: bytes) -> None:
         """One message (I/O thread, without the I/O lock: replies take it)."""
@@ -588,38 +593,32 @@ class CanBusServer:
                 info = P.unpack_hello(payload)
             except P.PayloadError as error:
                 self._count("malformed_messages")
-                with self._io_lock:
-                    self._reject(client, str(error))
+                self._reject(client, str(error))
                 return
             if info != self._info:
                 self._count("rejected_clients")
-                with self._io_lock:
-                    self._reject(client, f"this server drives a {self._info.kind} hand (nq "
-                                         f"{self._info.nq}, nu {self._info.nu}, tactile "
-                                         f"{self._info.nt}); client expected {info.kind} (nq "
-                                         f"{info.nq}, nu {info.nu}, tactile {info.nt})")
+                self._reject(client, f"this server drives a {self._info.kind} hand (nq "
+                                     f"{self._info.nq}, nu {self._info.nu}, tactile "
+                                     f"{self._info.nt}); client expected {info.kind} (nq "
+                                     f"{info.nq}, nu {info.nu}, tactile {info.nt})")
                 return
             with self._io_lock:  # WELCOME is queued before the bus thread's first STATE
                 client.greeted = True
                 self._reply(client, P.pack_hello(self._info, P.WELCOME))
         elif not client.greeted:
             self._count("malformed_messages")
-            with self._io_lock:
-                self._reject(client, "expected HELLO first")
+            self._reject(client, "expected HELLO first")
         elif message_type == P.COMMAND:
             try:
                 seq, q = P.unpack_command(payload, self.layout.nu)
             except P.PayloadError as error:
                 self._count("commands_rejected")
-                with self._io_lock:
-                    self._reply(client, P.pack(P.ERROR, str(error).encode()[:1024]))
+                self._reply_error(client, str(error))
                 return
             self._on_command(seq, q, time.monotonic())
         else:
             self._count("malformed_messages")
-            with self._io_lock:
-                self._reply(client, P.pack(P.ERROR,
-                                           f"unexpected message type {message_type}".encode()))
+            self._reply_error(client, f"unexpected message type {message_type}")
 
     def _flush(self, client: _Client) -> None:
         """Writes what the socket takes now; the rest waits for EVENT_WRITE (under _io_lock)."""
