@@ -123,11 +123,7 @@ class HandCodec(_CodecIds):
         ``q`` (nq, rad) and ``tactile`` (N) are saturated to the frame ranges.
         ``hand_time`` (s) wraps at 2**32 microseconds.
         """
-        # np.minimum/np.maximum: np.clip's values (finite inputs) without its wrappers.
-        q = np.minimum(np.maximum(_checked(q, self.layout.nq, "q"), -self._q_limit),
-                       self._q_limit)
-        f = np.minimum(np.maximum(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0),
-                       self._f_limit)
+        q, f = self._saturated(q, tactile)
         frames = self._position_frames.encode(q) + self._tactile_frames.encode(f)
         status = self._status_struct
         if not 0 <= int(state) <= 15:

@@ -142,11 +142,7 @@ class FdHandCodec(_CodecIds):
         field here (the TIME stamps show lost cycles). ``hand_time`` (s) wraps
         at 2**24 microseconds (16.8 s).
         """
-        # np.minimum/np.maximum: np.clip's values (finite inputs) without its wrappers.
-        q = np.minimum(np.maximum(_checked(q, self.layout.nq, "q"), -self._q_limit),
-                       self._q_limit)
-        f = np.minimum(np.maximum(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0),
-                       self._f_limit)
+        q, f = self._saturated(q, tactile)
         if not 0 <= int(state) <= 15:
             raise ValueError(f"state: expected 0..15, got {state}")
         time_raw = int(round(hand_time / self.time_scale)) % (1 << 24)

@@ -221,10 +221,22 @@ def _frames_for(n: int) -> int:
 
 
 class _CodecIds:
-    """The ids a codec accepts in each direction (both layouts)."""
+    """The ids a codec accepts in each direction (both layouts), and the feedback's
+    values saturated to its frame ranges."""
 
     _host_to_hand_ids: frozenset[int]
     _hand_to_host_ids: frozenset[int]
+    _q_limit: float
+    _f_limit: float
+
+    def _saturated(self, q, tactile) -> tuple[np.ndarray, np.ndarray]:
+        """``q`` (nq) to +-the position range, ``tactile`` to 0..the force range (checked
+        finite; np.minimum/np.maximum: np.clip's values without its wrappers)."""
+        q = np.minimum(np.maximum(_checked(q, self.layout.nq, "q"), -self._q_limit),
+                       self._q_limit)
+        f = np.minimum(np.maximum(_checked(tactile, self.layout.num_tactile, "tactile"), 0.0),
+                       self._f_limit)
+        return q, f
 
     @property
     def host_to_hand_ids(self) -> frozenset[int]:
