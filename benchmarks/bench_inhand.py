@@ -97,22 +97,23 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
     return out
 
 
-def instructions(baseline: str | None = None, runs: int = 2) -> dict:
+def instructions(args) -> dict:
     """The trial and its floors' instructions per run (``support/instructions.py``: exact,
     where their times vary by +-5 % between processes), each in a process of its own
-    under callgrind; with ``baseline`` also the trial of that git revision."""
+    under callgrind; with ``--baseline`` also the trial of that git revision. Written to a
+    section and a JSON of their own."""
     sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
-    from instructions import count_cases, ratio_table
+    from instructions import write_section
 
     cases = {"trial (reset, checks)": ("inhand", {}, None),
              "bare plant, same frames": ("inhand:bare", {}, None),
              "bare plant, replay": ("inhand:replay", {}, None)}
-    if baseline:
-        cases[f"trial (reset, checks) at {baseline}"] = ("inhand", {}, baseline)
-    counts = count_cases(cases, runs)
-    rows = ratio_table(counts, {"bare": "bare plant, same frames",
-                                "replay": "bare plant, replay"})
-    return {"runs_counted": runs, "table": rows, "load_end": os.getloadavg()[0]}
+    if args.baseline:
+        cases[f"trial (reset, checks) at {args.baseline}"] = ("inhand", {}, args.baseline)
+    return write_section("In-hand trial: instructions per run against the bare plant", args,
+                         cases, {"bare": "bare plant, same frames",
+                                 "replay": "bare plant, replay"},
+                         args.out.with_name("inhand_instructions.json"))
 
 
 def _fresh(trial, x):
@@ -213,11 +214,8 @@ def main(argv=None) -> int:
         result = {**json.loads(args.out.read_text()), **result}
     if args.speed:
         result["speed"] = speed(args.rounds, args.baseline)
-    if args.instructions:  # a section and a JSON of its own
-        counted = ResultsRun("In-hand trial: instructions per run against the bare plant",
-                             args, section="instructions")
-        data = instructions(args.baseline)
-        counted.finish(data["table"], data, args.out.with_name("inhand_instructions.json"))
+    if args.instructions:
+        instructions(args)
         if not (args.speed or args.table):
             return 0
     if args.table:

@@ -484,21 +484,18 @@ def _instructions_main(args) -> int:
     """``--instructions``: each case's instructions per 2 s run, counted by valgrind in a
     process of its own (``support/instructions.py``: exact, where the times of identical
     code vary by +-5 % between processes here), and its ratio to the floors."""
-    from instructions import count_cases, ratio_table
+    from instructions import write_section
 
-    results_run = ResultsRun("Station: instructions per demo run against the bare plant",
-                             args, section="instructions")
     cases = {"demo station": ("station:demo", {}, None),
              "bare plant, the station's frames (replay)": ("station:replay", {}, None),
              "bare plant, the script (model)": ("station:model", {}, None)}
     for revision in args.baseline:
         cases[f"demo station at {revision}"] = ("station:baseline", {"revision": revision},
                                                 None)
-    rows = ratio_table(count_cases(cases), {
-        "replay": "bare plant, the station's frames (replay)",
-        "model": "bare plant, the script (model)"})
     out = args.out.with_name("station_instructions.json")
-    results_run.finish(rows, {"instructions": rows, "load_average": os.getloadavg()}, out)
+    write_section("Station: instructions per demo run against the bare plant", args, cases,
+                  {"replay": "bare plant, the station's frames (replay)",
+                   "model": "bare plant, the script (model)"}, out)
     print(f"wrote {out}")
     return 0
 

@@ -81,3 +81,17 @@ def ratio_table(counts: dict, floors: dict) -> list[dict]:
         print(f"{name:48s} " + "  ".join(f"x{row[f'ratio_to_{k}']:.4f} of {k}"
                                           for k in floors), flush=True)
     return rows
+
+
+def write_section(title: str, args, cases: dict, floors: dict, json_path, runs: int = 2) -> dict:
+    """Counts ``cases`` (:func:`count_cases`), tabulates them against ``floors``
+    (:func:`ratio_table`) and writes the rows to ``json_path`` and to the benchmark's page,
+    in a section of their own (``ResultsRun(..., section="instructions")``); returns the
+    data written."""
+    from handle_drake.base.results import ResultsRun
+
+    run = ResultsRun(title, args, section="instructions")
+    rows = ratio_table(count_cases(cases, runs), floors)
+    data = {"runs_counted": runs, "table": rows, "load_end": os.getloadavg()[0]}
+    run.finish(rows, data, json_path)
+    return data
