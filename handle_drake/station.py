@@ -246,8 +246,9 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
     initial = hand_initial_command(scenario)
     _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
 
-    measured = wanted(*(f"{HAND}.{s}" for s in _MEASURED))
-    options = {} if not finite_commands else {"measured": measured}
+    # the Python driver computes its measured outputs itself (no systems to leave out)
+    options = {"measured": wanted(*(f"{HAND}.{s}" for s in _MEASURED))} \
+        if finite_commands else {}
     driver = builder.AddNamedSystem(
         "hand_driver",
         (HandDriverDiagram if finite_commands else PdHandDriver)(

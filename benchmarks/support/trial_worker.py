@@ -80,8 +80,9 @@ def _make_floor(kind: str, floor: str, options: dict):
 def _station_run(which: str, options: dict):
     """``run()`` of one case of ``bench_station`` (the 2 s demo grasp, 1 ms, point contact):
     ``demo`` the station as the demo builds it, ``replay`` the bare plant on its own
-    frames, ``model`` the bare plant on its script, ``baseline`` the station of git
-    revision ``options["revision"]`` (its tactile sensor, drivers and station module)."""
+    frames, ``model`` the bare plant on its script, ``baseline`` the station with the
+    tactile sensor and drivers of git revision ``options["revision"]``
+    (``bench_station._baseline_station_case``)."""
     sys.path.insert(0, str(ROOT / "benchmarks"))
     import bench_station
 
