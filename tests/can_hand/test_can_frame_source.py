@@ -247,6 +247,8 @@ def test_server_and_hand_never_receive_their_own_frames(frame_format):
     client = CanHandClient(layout, "127.0.0.1", server.address[1]).start()
     try:
         assert server._source.kernel_filter and firmware._source.kernel_filter
+        # one thread serves the clients and the bus (see the server's docstring)
+        assert server.one_thread and [t.name for t in server._threads] == ["can-server-io"]
         assert client.wait_for_state(5.0)
         for k in range(50):
             client.send_command(layout.command_lower + 0.1 + 0.001 * k)
@@ -262,3 +264,51 @@ def test_server_and_hand_never_receive_their_own_frames(frame_format):
     assert stats["commits_tx"] >= 40 and firmware.counters["commits_applied"] >= 40
     assert stats["hand_cycles"] >= 40
     assert stats.get("echo_frames", 0) == 0 and firmware.counters["echo_frames"] == 0
+
+
+def test_a_one_thread_server_backs_off_a_failing_bus_and_keeps_serving_clients():
+    """The bus socket is waited on with the clients' sockets: a bus whose reads fail (and
+    which stays readable) is polled again after a doubling back-off, not in a spin; a
+    client is served meanwhile, and the hand's state flows again once the bus recovers."""
+    group, port = _group()
+    bus = BusConfig("udp_multicast", group, port=port, frame_format="classic")
+    layout = hand_layout("barrett")
+    server = CanBusServer(CanServerConfig(port=0, hand_kind="barrett", bus=bus), layout=layout)
+    firmware = SimulatedHandFirmware(CanFirmwareConfig(hand_kind="barrett", bus=bus, rate=500.0),
+                                     layout=layout)
+    server.start()
+    firmware.start()
+    clients = [CanHandClient(layout, "127.0.0.1", server.address[1]).start()]
+    failing = {"on": False, "reads": 0}
+    read = server._source.read
+
+    def flaky_read(timeout, limit=64):
+        if failing["on"]:
+            failing["reads"] += 1
+            return [(None, BUS_ERROR)]
+        return read(timeout, limit)
+
+    server._source.read = flaky_read
+    try:
+        assert server.one_thread and clients[0].wait_for_state(5.0)
+        failing["on"] = True
+        start = time.monotonic()
+        clients.append(CanHandClient(layout, "127.0.0.1", server.address[1]).start())
+        assert clients[1].wait_for_state(2.0, state=1)  # handshake served during the failure
+        time.sleep(max(0.0, 0.4 - (time.monotonic() - start)))
+        failing["on"] = False
+        errors = server.stats().get("bus_rx_errors", 0)
+        # the hand's frames kept the socket readable all along: 1, 2, 4 ... 256 ms apart
+        assert 3 <= failing["reads"] <= 12 and errors == failing["reads"]
+        states = clients[1].counters["states_received"]
+        deadline = time.monotonic() + 3.0
+        while clients[1].counters["states_received"] < states + 20 and \
+                time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert clients[1].counters["states_received"] >= states + 20  # the bus is back
+        assert all(t.is_alive() for t in server._threads)
+    finally:
+        for client in clients:
+            client.close()
+        firmware.stop()
+        server.stop()

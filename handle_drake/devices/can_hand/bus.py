@@ -230,6 +230,11 @@ class FrameSource:
         """True when it reads the udp_multicast socket itself (echoes dropped undecoded)."""
         return self._socket is not None
 
+    def fileno(self) -> int | None:
+        """The socket :meth:`read` waits on when :attr:`direct` (to wait on it with other
+        sockets, then ``read(0.0)``); None otherwise."""
+        return None if self._socket is None else self._socket.fileno()
+
     def close(self) -> None:
         if self._socket is not None:
             self._socket.close()

@@ -1,21 +1,27 @@
 """The CAN bus server: TCP clients on one side, the CAN-bus hand on the other.
 
-Two threads:
+Two jobs:
 
-- the bus thread receives frames, every waiting one per wake-up
+- the bus side receives frames, every waiting one per wake-up
   (:class:`~handle_drake.devices.can_hand.bus.FrameSource`), accepts only the
   hand's feedback ids (foreign ids and malformed frames are dropped and
   counted; our own setpoint frames echoed by a multicast bus are dropped,
   in the kernel where it can), assembles one
   snapshot per hand cycle, estimates joint velocities and sends the new
-  hand state to every client itself (no hand-off to the other thread on the
-  way back: one wake-up less per cycle on the latency path);
-- the I/O thread (one ``selectors`` loop) accepts clients, reads their
+  hand state to every client at once;
+- the I/O side (one ``selectors`` loop) accepts clients, reads their
   commands (:mod:`~handle_drake.devices.can_hand.protocol`), sends setpoints to the
   bus and writes what a slow client could not take at once.
 
-The clients' sockets and output buffers are shared under ``_io_lock``
-(never held while waiting on the selector or sending on the bus).
+When the bus can be waited on in that selector (a udp_multicast bus whose
+socket :class:`~handle_drake.devices.can_hand.bus.FrameSource` reads itself),
+one thread does both: a command and the hand's reply are handled by the
+thread that is already awake, with no second thread to wake, no lock to wait
+for and no hand-over of Python's GIL between the two (measured on the Barrett
+classic chain: the two threads spent up to ~100 us per cycle waiting for each
+other's lock and GIL). Any other bus (python-can's ``recv``) gets a bus
+thread of its own. The clients' sockets and output buffers are shared under
+``_io_lock`` (never held while waiting on the selector or sending on the bus).
 
 Setpoint policy (what a command becomes on the bus):
 
@@ -94,6 +100,11 @@ def limit_setpoint(previous, target, max_step: float, lower, upper) -> np.ndarra
     previous = np.asarray(previous, dtype=float)
     step = np.clip(np.asarray(target, dtype=float) - previous, -max_step, max_step)
     return np.clip(previous + step, lower, upper)
+
+
+def _backoff(failures: int) -> float:
+    """s to wait after ``failures`` consecutive bus receive errors (1 ms doubling, <= 0.5 s)."""
+    return min(0.5, 0.001 * 2 ** min(failures, 9))
 
 
 class CommitSchedule:
@@ -216,6 +227,11 @@ class CanBusServer:
                                              self.codec.time_wrap)
         self._errors = ErrorLog(log)
         self._accept_paused_until = 0.0  # out of file descriptors: accept again then
+        # One-thread mode's bus side (see _on_bus_ready): its counts, its back-off.
+        self._pending = collections.Counter()
+        self._bus_failures = 0
+        self._bus_paused_until = 0.0  # a failing bus socket: poll it again then
+        self.one_thread = False  # set by start(): see the module docstring
 
     # -- life cycle ----------------------------------------------------------
     def start(self) -> CanBusServer:
@@ -245,10 +261,14 @@ class CanBusServer:
         self._selector = selectors.DefaultSelector()
         self._selector.register(listen, selectors.EVENT_READ, "listen")
         self._selector.register(self._wake_r, selectors.EVENT_READ, "wake")
-        self._threads = [
-            threading.Thread(target=self._bus_loop, name="can-server-bus", daemon=True),
-            threading.Thread(target=self._io_loop, name="can-server-io", daemon=True),
-        ]
+        self._threads = [threading.Thread(target=self._io_loop, name="can-server-io",
+                                          daemon=True)]
+        self.one_thread = self._source.direct  # the bus is waited on with the clients
+        if self.one_thread:
+            self._selector.register(self._source.fileno(), selectors.EVENT_READ, "bus")
+        else:
+            self._threads.append(threading.Thread(target=self._bus_loop, name="can-server-bus",
+                                                  daemon=True))
         for thread in self._threads:
             thread.start()
         log.info("CAN bus server for the %s hand on %s:%d, bus %s %s", self.layout.kind,
@@ -312,11 +332,8 @@ class CanBusServer:
 
     # -- bus side ----------------------------------------------------------------
     def _bus_loop(self) -> None:
+        """The bus thread, for a bus the I/O selector cannot wait on."""
         use_realtime_priority(self.config.realtime_priority)
-        # Every waiting frame per wake-up (FrameSource); our own setpoint frames, which a
-        # multicast bus loops back, come back as ECHO without being decoded. Frame counts
-        # are kept here and merged under the lock once per hand cycle, idle wait or 64
-        # frames, not per frame.
         source = self._source
         pending = collections.Counter()
         failures = 0  # consecutive bus errors: the back-off grows with them
@@ -325,28 +342,51 @@ class CanBusServer:
             if not batch:
                 self._merge_counts(pending)
                 continue
-            for message, why in batch:
-                if why == GARBAGE or why == ECHO:  # costs its decoding at most, no wait
-                    pending["frames_rx"] += 1
-                    pending[why] += 1
-                    if pending["frames_rx"] >= 64:
-                        self._merge_counts(pending)
-                    continue
-                if why is not None:
-                    failures += 1
-                    pending[why] += 1
-                    self._merge_counts(pending)
-                    self._errors(why, RuntimeError("bus receive failed"))
-                    self._stop.wait(min(0.5, 0.001 * 2 ** min(failures, 9)))
-                    break
+            if self._take_frames(batch, pending):
                 failures = 0
+            else:
+                failures += 1
+                self._stop.wait(_backoff(failures))
+
+    def _on_bus_ready(self, now: float) -> None:
+        """The bus socket is readable (one-thread mode): handles the frames waiting."""
+        pending = self._pending
+        if self._take_frames(self._source.read(0.0, 64), pending):
+            self._bus_failures = 0
+        else:  # a failing socket stays readable: stop polling it for a back-off
+            self._bus_failures += 1
+            self._selector.unregister(self._source.fileno())
+            self._bus_paused_until = now + _backoff(self._bus_failures)
+        self._merge_counts(pending)
+
+    def _take_frames(self, batch, pending: collections.Counter) -> bool:
+        """Handles one wake-up's frames; False when the bus failed (the caller backs off).
+
+        Every waiting frame comes per wake-up (FrameSource); our own setpoint frames,
+        which a multicast bus loops back, come as ECHO without being decoded. Frame
+        counts are kept in ``pending`` and merged under the lock once per hand cycle,
+        idle wait or 64 frames, not per frame.
+        """
+        for message, why in batch:
+            if why == GARBAGE or why == ECHO:  # costs its decoding at most, no wait
                 pending["frames_rx"] += 1
-                try:
-                    self._on_frame(message, pending)
-                except Exception as error:  # one frame never takes the bus thread down
-                    pending["frame_errors"] += 1
+                pending[why] += 1
+                if pending["frames_rx"] >= 64:
                     self._merge_counts(pending)
-                    self._errors("frame_errors", error)
+                continue
+            if why is not None:
+                pending[why] += 1
+                self._merge_counts(pending)
+                self._errors(why, RuntimeError("bus receive failed"))
+                return False
+            pending["frames_rx"] += 1
+            try:
+                self._on_frame(message, pending)
+            except Exception as error:  # one frame never takes the bus side down
+                pending["frame_errors"] += 1
+                self._merge_counts(pending)
+                self._errors("frame_errors", error)
+        return True
 
     def _on_frame(self, message, pending: collections.Counter) -> None:
         try:
@@ -380,7 +420,7 @@ class CanBusServer:
             self._counters.update(pending)
         pending.clear()
         self._broadcast_state(snapshot, velocity)
-        if self._setpoint is None and self._target is not None:
+        if self._setpoint is None and self._target is not None and not self.one_thread:
             self._wake()  # a first command waits for the measured position
 
     def _merge_counts(self, pending: collections.Counter) -> None:
@@ -440,6 +480,8 @@ class CanBusServer:
         if key.data == "listen":
             with self._io_lock:
                 self._accept()
+        elif key.data == "bus":
+            self._on_bus_ready(time.monotonic())
         elif key.data == "wake":
             try:
                 while self._wake_r.recv(4096):
@@ -469,6 +511,9 @@ class CanBusServer:
         if self._accept_paused_until and now >= self._accept_paused_until:
             self._accept_paused_until = 0.0
             self._selector.register(self._listen, selectors.EVENT_READ, "listen")
+        if self._bus_paused_until and now >= self._bus_paused_until:
+            self._bus_paused_until = 0.0
+            self._selector.register(self._source.fileno(), selectors.EVENT_READ, "bus")
         config = self.config
         for client in list(self._clients):
             if not client.greeted and now - client.since > config.hello_timeout:
