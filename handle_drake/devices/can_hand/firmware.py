@@ -347,14 +347,16 @@ class SimulatedHandFirmware:
                         break
                     if got == _TIMEOUT:
                         continue
-                    # Woken by a frame, with what else was waiting (a classic command's
-                    # other frames): take any that came meanwhile, answer the newest
-                    # applied setpoint once, then take our own reply's frames, which a
-                    # multicast bus loops back at once (dropped undecoded, as ECHO).
-                    frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+                    # Woken by a frame, with every frame already waiting behind it (a
+                    # classic command's other frames; FrameSource reads until none is
+                    # left): answer the newest applied setpoint once. A multicast bus
+                    # loops our reply back at once: unless the kernel drops it (the
+                    # source's filter), take it now (dropped undecoded, as ECHO) rather
+                    # than wake for it.
                     if self._unanswered:
                         self._publish()  # the last step's sample, the newest seq
-                        frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+                        if not self._source.kernel_filter:
+                            frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
                 self._replying = False
             else:
                 # One wake-up per cycle, like a firmware that reads its CAN receive FIFO

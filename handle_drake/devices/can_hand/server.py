@@ -86,6 +86,9 @@ _READ_CHUNK = 4096  # bytes read from one client per round of the I/O loop
 # shows up in its (capped) output backlog within ~0.1 s of STATE at 1 kHz, instead
 # of hiding megabytes in an autotuned loopback buffer.
 _CLIENT_SNDBUF = 64 * 1024
+# s between two rounds of the I/O loop's housekeeping (client timeouts, paused polls),
+# not after every event: the loop wakes twice per hand cycle.
+_HOUSEKEEPING_PERIOD = 0.01
 
 
 def clamp_command(q, lower, upper) -> tuple[np.ndarray, bool]:
@@ -216,6 +219,7 @@ class CanBusServer:
         self._target_seq = 0
         self._setpoint = None
         self._unsent = False
+        self._reached = False  # the setpoint equals the target (both set)
         self._holding = False
         self._clamped = False
         self._last_command_time = 0.0
@@ -227,6 +231,7 @@ class CanBusServer:
                                              self.codec.time_wrap)
         self._errors = ErrorLog(log)
         self._accept_paused_until = 0.0  # out of file descriptors: accept again then
+        self._next_housekeeping = 0.0
         # One-thread mode's bus side (see _on_bus_ready): its counts, its back-off.
         self._pending = collections.Counter()
         self._bus_failures = 0
@@ -466,9 +471,12 @@ class CanBusServer:
                 # does not wait for them (nor for this thread's wake-up after a syscall).
                 for key, mask in events:
                     self._on_event(key, mask)
-                with self._io_lock:
-                    self._housekeeping(time.monotonic())
-                self._service_setpoint(time.monotonic())
+                now = time.monotonic()
+                if now >= self._next_housekeeping:  # its timeouts are 0.2 s and more
+                    self._next_housekeeping = now + _HOUSEKEEPING_PERIOD
+                    with self._io_lock:
+                        self._housekeeping(now)
+                self._service_setpoint(now)
                 failures = 0
             except Exception as error:  # the I/O thread outlives any bug a client triggers
                 failures += 1
@@ -686,7 +694,7 @@ class CanBusServer:
         timeout = 0.05
         if self._target is not None and not self._holding:
             timeout = min(timeout, max(0.0, self._last_command_time + self.config.watchdog - now))
-            if self._unsent or not np.array_equal(self._setpoint, self._target):
+            if self._unsent or not self._reached:
                 next_commit = self._schedule.earliest()
                 timeout = min(timeout, max(0.0, next_commit - now))
         return timeout
@@ -701,6 +709,7 @@ class CanBusServer:
             self._count("commands_coalesced")
         self._clamped = clamped
         self._target, self._target_seq = q, seq
+        self._reached = self._setpoint is not None and np.array_equal(self._setpoint, q)
         self._unsent = True
         self._holding = False
         self._last_command_time = now
@@ -721,11 +730,12 @@ class CanBusServer:
                 self._target = None
             else:
                 self._target = self._setpoint.copy()
+            self._reached = self._setpoint is not None
             return
         base = self._setpoint if self._setpoint is not None else self._measured_command()
         if base is None:  # no hand state yet: the first step needs the measured position
             return
-        if not self._unsent and np.array_equal(base, self._target):
+        if not self._unsent and self._reached:
             return
         if now < self._schedule.earliest():
             return  # too early for the next slot; the selector wakes us then
@@ -737,6 +747,7 @@ class CanBusServer:
             return
         self._commit_seq = (self._commit_seq + 1) % 65536
         self._setpoint = setpoint
+        self._reached = np.array_equal(setpoint, self._target)
         self._unsent = False
         self._schedule.commit(now)
         self._count("commits_tx")
