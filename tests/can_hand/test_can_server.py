@@ -108,45 +108,70 @@ def test_limit_setpoint_steps_at_most_max_step_and_stays_in_limits():
     assert clamp_command([0.5, 0.5, 0.5], lower, upper)[1] is False
 
 
-def test_commit_schedule_passes_jittered_commands_at_the_limit_and_bounds_any_window():
+@pytest.mark.parametrize("tolerance", [0.5, 1.0])
+def test_commit_schedule_passes_jittered_commands_at_the_limit_and_bounds_any_window(tolerance):
     rate = 1000.0
     slot = 1.0 / rate
     rng = np.random.default_rng(3)
-    # A client at exactly the limit whose commands arrive up to half a slot late
+    # A client at exactly the limit whose commands arrive up to `tolerance` slots late
     # (a sleeping sender wakes late, never early) never waits.
-    schedule = CommitSchedule(rate)
+    schedule = CommitSchedule(rate, tolerance)
     for k in range(2000):
-        now = k * slot + rng.uniform(0.0, 0.5) * slot
+        now = k * slot + rng.uniform(0.0, tolerance) * slot
         assert now >= schedule.earliest()
         schedule.commit(now)
+    # ... but one later than that holds the next, on-time command for the difference.
+    schedule = CommitSchedule(rate, tolerance)
+    schedule.commit(0.0)
+    schedule.commit(slot + (tolerance + 0.3) * slot)
+    assert schedule.earliest() - 2 * slot == pytest.approx(0.3 * slot)
     # A flood: commit whenever allowed, with arrivals every 0.05 slot.
-    schedule, commits = CommitSchedule(rate), []
+    schedule, commits = CommitSchedule(rate, tolerance), []
     for now in np.arange(0.0, 0.5, 0.05 * slot):
         if now >= schedule.earliest():
             schedule.commit(now)
             commits.append(now)
     commits = np.array(commits)
-    # GCRA bound: any window of T seconds holds at most 1.5 + rate * T commits.
+    # GCRA bound: any window of T seconds holds at most 1 + tolerance + rate * T commits,
+    # and the bound is reached (a burst of floor(1 + tolerance) commits, one arrival apart).
     for width in (0.0, 0.5 * slot, 3 * slot, 100 * slot):
         counts = np.searchsorted(commits, commits + width, side="right") - np.arange(commits.size)
-        assert counts.max() <= 1.5 + rate * width + 1e-9, (width, counts.max())
+        assert counts.max() <= 1 + tolerance + rate * width + 1e-9, (width, counts.max())
+    assert counts.max() >= rate * 100 * slot
+    burst = np.searchsorted(commits, commits[0] + 0.05 * slot + 1e-12, side="right")
+    assert burst == int(1 + tolerance)
     assert len(commits) == pytest.approx(rate * 0.5, abs=2)  # and the long-run rate is the limit
     # A late commit does not push the next slot back beyond now + slot.
-    schedule = CommitSchedule(rate)
+    schedule = CommitSchedule(rate, tolerance)
     schedule.commit(0.0)
     schedule.commit(0.01)  # 9 slots late
-    assert schedule.earliest() == pytest.approx(0.01 + 0.5 * slot)
+    assert schedule.earliest() == pytest.approx(0.01 + (1 - tolerance) * slot)
 
 
-def test_commit_schedule_queues_a_client_faster_than_the_limit_by_up_to_half_a_slot():
+def test_bad_rate_tolerances_are_refused_in_one_line(capsys):
+    from handle_drake.devices.can_hand.cli import main as cli_main
+
+    for bad in (-0.5, float("nan"), float("inf"), 11.0, "1", True):
+        with pytest.raises(ValueError, match="^rate_tolerance: expected"):
+            CanServerConfig(rate_tolerance=bad).validate()
+    bus = BusConfig("virtual", f"tolerance-{uuid.uuid4().hex}")
+    server = CanBusServer(CanServerConfig(port=0, bus=bus, rate_tolerance=0.5))
+    assert server._schedule._tolerance == pytest.approx(0.5e-3)  # 0.5 slot at 1 kHz
+    assert cli_main(["can-server", "--bus", "virtual", "--rate-tolerance", "-1"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "handle-drake can-server: rate_tolerance: expected a finite number >= 0, got -1.0")
+
+
+@pytest.mark.parametrize("tolerance", [0.5, 1.0])
+def test_commit_schedule_queues_a_client_faster_than_the_limit_by_up_to_the_tolerance(tolerance):
     """A 1 kHz client whose clock drifts one slot per 4 s against the 1 kHz limit:
-    slower, it never waits; faster, the second half of its commands wait, growing to
-    the tolerance (half a slot), as GCRA's closed form says (k (slot - P) - slot / 2)."""
+    slower, it never waits; faster, its commands wait once the drift passes the tolerance,
+    growing to it, as GCRA's closed form says (k (slot - P) - tolerance slot)."""
     rate, n = 1000.0, 4000
     slot = 1.0 / rate
     for sign in (+1, -1):
         period = slot + sign * slot / n
-        schedule, waits = CommitSchedule(rate), []
+        schedule, waits = CommitSchedule(rate, tolerance), []
         for k in range(n):
             now = k * period
             commit = max(now, schedule.earliest())
@@ -157,10 +182,10 @@ def test_commit_schedule_queues_a_client_faster_than_the_limit_by_up_to_half_a_s
             assert waits.max() == 0.0
         else:
             k = np.arange(n)
-            expected = np.maximum(0.0, k * (slot - period) - 0.5 * slot)
+            expected = np.maximum(0.0, k * (slot - period) - tolerance * slot)
             assert np.allclose(waits, expected, atol=1e-12)
-            assert (waits > 0).mean() == pytest.approx(0.5, abs=0.01)
-            assert waits.max() == pytest.approx(0.5 * slot, rel=1e-3)
+            assert (waits > 0).mean() == pytest.approx(1 - tolerance, abs=0.01)
+            assert waits.max() == pytest.approx((1 - tolerance) * slot, abs=1e-3 * slot)
 
 
 def test_velocity_estimator_matches_a_first_order_filter_of_the_slope():
@@ -359,13 +384,14 @@ def test_setpoint_flood_is_rate_limited_and_the_last_command_wins(chain):
     assert len(commits) >= 10
     assert stats["commits_tx"] == len(commits)
     # Every commit of the flood was booked by the rate limit at the time it was sent, and
-    # 100 Hz with half a slot of tolerance (GCRA): at most 1.5 + 100 T in any T seconds.
+    # 100 Hz with one slot of tolerance (GCRA): at most 2 + 100 T in any T seconds.
+    assert chain.server.config.rate_tolerance == 1.0
     assert len(booked) >= 10 and len(booked) <= len(commits)
     t = np.asarray(booked)
     for i in range(len(t)):
         in_window = np.searchsorted(t, t[i] + 0.2, side="right") - i
-        assert in_window <= 1.5 + 100.0 * 0.2 + 1e-9
-    assert len(t) <= 1.5 + 100.0 * (t[-1] - t[0]) + 1e-9
+        assert in_window <= 2 + 100.0 * 0.2 + 1e-9
+    assert len(t) <= 2 + 100.0 * (t[-1] - t[0]) + 1e-9
     assert stats["commands_coalesced"] >= sent - stats["commits_tx"] - 1
     # No lost state: the last command is what the hand tracks.
     assert np.allclose(chain.firmware.model.setpoint, final, atol=0.5e-4 + 1e-12)

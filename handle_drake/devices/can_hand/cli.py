@@ -86,6 +86,9 @@ def register(subparsers) -> None:
                    help="HOST:PORT to accept clients on (loopback by default; port 0 = any)")
     _add_bus_arguments(p)
     p.add_argument("--max-rate", type=float, default=1000.0, help="Hz, most setpoint commits/s")
+    p.add_argument("--rate-tolerance", type=float, default=1.0,
+                   help="slots of command jitter the rate limit passes (a burst of at most "
+                        "1 + this many commits)")
     p.add_argument("--max-step", type=float, default=0.02, help="rad per joint per commit")
     p.add_argument("--watchdog", type=float, default=0.25,
                    help="s without a command before the setpoint freezes")
@@ -177,7 +180,8 @@ def _cmd_server(args) -> int:
     bus = _bus(args)
     config = CanServerConfig(host=host, port=port, hand_kind=args.hand,
                              coupling_ratio=args.coupling_ratio, bus=bus,
-                             max_setpoint_rate=args.max_rate, max_step=args.max_step,
+                             max_setpoint_rate=args.max_rate,
+                             rate_tolerance=args.rate_tolerance, max_step=args.max_step,
                              watchdog=args.watchdog, realtime_priority=args.rt_priority,
                              max_clients=args.max_clients, hello_timeout=args.hello_timeout,
                              max_client_backlog=args.max_client_backlog)

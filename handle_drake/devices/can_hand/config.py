@@ -177,6 +177,15 @@ class CanServerConfig:
         bus: the CAN bus.
         max_setpoint_rate: Hz, most commits sent per second (newer commands
             replace pending ones).
+        rate_tolerance: slots (of ``1 / max_setpoint_rate`` s) of arrival
+            jitter the rate limit passes without holding a command (GCRA's
+            tolerance): any window of ``T`` seconds holds at most
+            ``1 + rate_tolerance + max_setpoint_rate * T`` commits. One slot
+            lets a client at exactly the limit whose command came up to a
+            slot late be followed at once by its next, on-time command (a
+            burst of two commits); half a slot held 1.4 % of a 1 kHz
+            client's commands on a loaded 2-core machine (measured), each
+            then replaced by the next and acknowledged a period later.
         max_step: rad, largest change of any joint between two commits.
         watchdog: s, without a command for this long the setpoint freezes
             (the hand holds where its setpoint is).
@@ -201,6 +210,7 @@ class CanServerConfig:
     coupling_ratio: float | None = None
     bus: BusConfig = dc.field(default_factory=BusConfig)
     max_setpoint_rate: float = 1000.0
+    rate_tolerance: float = 1.0
     max_step: float = 0.02
     watchdog: float = 0.25
     velocity_time_constant: float = 0.01
@@ -227,6 +237,10 @@ class CanServerConfig:
         for name in ("max_setpoint_rate", "max_step", "watchdog"):
             _positive(name, getattr(self, name))
         _nonnegative("velocity_time_constant", self.velocity_time_constant)
+        _nonnegative("rate_tolerance", self.rate_tolerance)
+        if self.rate_tolerance > 10:
+            raise ValueError(f"rate_tolerance: expected at most 10 slots, got "
+                             f"{self.rate_tolerance!r}")
         _priority(self.realtime_priority)
 
 

@@ -27,12 +27,13 @@ Setpoint policy (what a command becomes on the bus):
 
 1. clamp the command to the joint limits (counted as ``commands_clamped``);
 2. at most ``max_setpoint_rate`` commits per second, on a schedule of one
-   slot per ``1 / max_setpoint_rate`` s that tolerates half a slot of jitter
-   (GCRA, the ATM cell-rate rule): any window of ``T`` seconds holds at most
-   ``1.5 + rate * T`` commits, yet a client sending at exactly the limit is
-   not delayed when its commands arrive up to half a slot late (a strict
-   minimum interval lets every late command push all later ones back). A command arriving
-   before its slot waits, and a newer command replaces it
+   slot per ``1 / max_setpoint_rate`` s that tolerates ``rate_tolerance``
+   slots of jitter (GCRA, the ATM cell-rate rule; one slot by default): any
+   window of ``T`` seconds holds at most ``1 + rate_tolerance + rate * T``
+   commits, yet a client sending at exactly the limit is not delayed when
+   its commands arrive up to ``rate_tolerance`` slots late (a strict minimum
+   interval lets every late command push all later ones back). A command
+   arriving before its slot waits, and a newer command replaces it
    (``commands_coalesced``);
 3. each commit moves every joint at most ``max_step`` towards the command
    (the first step starts from the measured position);
@@ -120,7 +121,7 @@ class CommitSchedule:
     ``1 + tolerance + rate * T`` commits.
     """
 
-    def __init__(self, rate: float, tolerance: float = 0.5):
+    def __init__(self, rate: float, tolerance: float = 1.0):
         self.slot = 1.0 / rate
         self._tolerance = tolerance * self.slot
         self._next = -np.inf  # theoretical time of the next commit
@@ -223,7 +224,7 @@ class CanBusServer:
         self._holding = False
         self._clamped = False
         self._last_command_time = 0.0
-        self._schedule = CommitSchedule(config.max_setpoint_rate)
+        self._schedule = CommitSchedule(config.max_setpoint_rate, config.rate_tolerance)
         self._commit_seq = 1
         self._commit_to_client = np.zeros(65536, dtype=np.int64)
         self._assembler = self.codec.feedback_receiver()
