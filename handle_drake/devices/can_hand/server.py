@@ -470,14 +470,23 @@ class CanBusServer:
                 # (the client list, output buffers, selector registrations): parsing and
                 # applying a command run outside it, so a STATE the bus thread is sending
                 # does not wait for them (nor for this thread's wake-up after a syscall).
+                # Commands before the bus (one-thread mode): a commit sent first sets the
+                # hand to work while this thread turns the bus's frames into STATE.
+                bus_ready = False
                 for key, mask in events:
-                    self._on_event(key, mask)
+                    if key.data == "bus":
+                        bus_ready = True
+                    else:
+                        self._on_event(key, mask)
                 now = time.monotonic()
+                self._service_setpoint(now)
+                if bus_ready:
+                    self._on_bus_ready(now)
+                    self._service_setpoint(time.monotonic())  # a first command's base
                 if now >= self._next_housekeeping:  # its timeouts are 0.2 s and more
                     self._next_housekeeping = now + _HOUSEKEEPING_PERIOD
                     with self._io_lock:
                         self._housekeeping(now)
-                self._service_setpoint(now)
                 failures = 0
             except Exception as error:  # the I/O thread outlives any bug a client triggers
                 failures += 1
@@ -489,8 +498,6 @@ class CanBusServer:
         if key.data == "listen":
             with self._io_lock:
                 self._accept()
-        elif key.data == "bus":
-            self._on_bus_ready(time.monotonic())
         elif key.data == "wake":
             try:
                 while self._wake_r.recv(4096):
