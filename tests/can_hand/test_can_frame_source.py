@@ -232,10 +232,8 @@ def test_a_closed_source_reports_a_bus_error_not_a_crash(buses):
     assert source.read(0.01) == [(None, BUS_ERROR)]
 
 
-@pytest.mark.parametrize("frame_format", ["classic", "fd"])
-def test_server_and_hand_never_receive_their_own_frames(frame_format):
-    """Before, each got its own frames back from the multicast bus and decoded them (the
-    server 2 per classic Barrett command, the hand 4 per reply), a wake-up each."""
+def _barrett_chain(frame_format):
+    """A started server and simulated Barrett hand on a fresh udp_multicast group."""
     group, port = _group()
     bus = BusConfig("udp_multicast", group, port=port, frame_format=frame_format)
     layout = hand_layout("barrett")
@@ -244,6 +242,14 @@ def test_server_and_hand_never_receive_their_own_frames(frame_format):
                                      layout=layout)
     server.start()
     firmware.start()
+    return layout, server, firmware
+
+
+@pytest.mark.parametrize("frame_format", ["classic", "fd"])
+def test_server_and_hand_never_receive_their_own_frames(frame_format):
+    """Before, each got its own frames back from the multicast bus and decoded them (the
+    server 2 per classic Barrett command, the hand 4 per reply), a wake-up each."""
+    layout, server, firmware = _barrett_chain(frame_format)
     client = CanHandClient(layout, "127.0.0.1", server.address[1]).start()
     try:
         assert server._source.kernel_filter and firmware._source.kernel_filter
@@ -270,14 +276,7 @@ def test_a_one_thread_server_backs_off_a_failing_bus_and_keeps_serving_clients()
     """The bus socket is waited on with the clients' sockets: a bus whose reads fail (and
     which stays readable) is polled again after a doubling back-off, not in a spin; a
     client is served meanwhile, and the hand's state flows again once the bus recovers."""
-    group, port = _group()
-    bus = BusConfig("udp_multicast", group, port=port, frame_format="classic")
-    layout = hand_layout("barrett")
-    server = CanBusServer(CanServerConfig(port=0, hand_kind="barrett", bus=bus), layout=layout)
-    firmware = SimulatedHandFirmware(CanFirmwareConfig(hand_kind="barrett", bus=bus, rate=500.0),
-                                     layout=layout)
-    server.start()
-    firmware.start()
+    layout, server, firmware = _barrett_chain("classic")
     clients = [CanHandClient(layout, "127.0.0.1", server.address[1]).start()]
     failing = {"on": False, "reads": 0}
     read = server._source.read
