@@ -162,6 +162,39 @@ def test_the_reply_carries_the_setpoint_seq_and_the_last_step_state(hosts, frame
     assert np.all((progress[closing] > 0.01) & (progress[closing] < 1.0)), progress
 
 
+@pytest.mark.parametrize("frame_format", ["fd", "classic"])
+def test_a_request_every_cycle_costs_one_wake_up_and_the_model_keeps_its_grid(hosts,
+                                                                             frame_format):
+    """On request, the joint model steps on a fixed grid; the steps due while the hand
+    slept are taken when a request wakes it. A host sending once per cycle wakes it once
+    per cycle (before: twice, the step's own wake-up and the request's), every reply is
+    stamped on the grid, and no cycle with a request publishes a second feedback."""
+    rate = 200.0
+    period = 1.0 / rate
+    host = hosts("barrett", frame_format, rate=rate)
+    idle, _ = host.next_feedback()
+    lower, upper = host.layout.command_lower, host.layout.command_upper
+    wakeups0 = host.firmware.counters["wakeups"]
+    stamps, n = [], 60
+    start = time.monotonic()
+    for k in range(1, n + 1):
+        time.sleep(max(0.0, start + k * period - time.monotonic()))
+        host.send_setpoint(lower + (0.2 + 0.005 * k) * (upper - lower), k)
+        while True:
+            snapshot, _ = host.next_feedback()
+            if snapshot.seq_ack == k:
+                break
+        stamps.append(snapshot.hand_time)
+    wakeups = host.firmware.counters["wakeups"] - wakeups0
+    assert host.firmware.counters["feedback_replies"] == n
+    # one wake-up per request, plus the few cycles a late request left without one
+    assert wakeups <= n + 0.25 * n, wakeups
+    # each reply carries a grid step's sample (1 us stamps), one per cycle at most
+    offsets = (np.array(stamps) - idle.hand_time) / period
+    assert np.allclose(offsets, np.round(offsets), atol=2e-6 / period)
+    assert np.all(np.diff(np.round(offsets)) >= 0)
+
+
 def test_without_commands_the_hand_still_streams_and_does_not_spin(hosts):
     host = hosts("barrett", "fd", rate=100.0)
     host.next_feedback()

@@ -16,9 +16,13 @@ When the feedback goes out (``CanFirmwareConfig.feedback``):
   second. A setpoint waits for the next cycle to be acknowledged (0 to one
   period).
 - ``on_request`` (the Barrett's default): the firmware blocks on the bus
-  until the next joint-model step is due and answers an applied setpoint at
-  once (when several frames were already waiting, after taking them all: one
-  reply acknowledging the newest). That is how the real hand works: its pucks do not stream; the
+  until a frame comes or a control cycle without a request ends, and answers
+  an applied setpoint at once (when several frames were already waiting,
+  after taking them all: one reply acknowledging the newest). Its joint model
+  runs on a fixed grid of ``1 / rate``: the steps due while it slept are
+  taken when it wakes, before the new setpoint applies, so a cycle with a
+  request costs one wake-up, not two (the simulated hand shares the host's
+  cores; the real one does not). That is how the real hand works: its pucks do not stream; the
   host drives the loop. libbarrett's ``Hand::update`` (src/products/hand.cpp;
   ``Hand::updatePosition`` in older versions) sends one group get-property
   request for ``P`` and then receives each puck's reply
@@ -180,9 +184,10 @@ class SimulatedHandFirmware:
         self._errors = ErrorLog(log)
         self.feedback = config.feedback_mode(self.layout.kind)
         self._on_request = self.feedback == "on_request"
-        self._replying = False  # inside an on_request wait (the counters tell replies apart)
-        self._published = False  # a feedback went out since the last step
+        self._replying = False  # publishing a reply (the counters tell replies apart)
         self._unanswered = False  # a setpoint was applied since the last feedback
+        self._grid_start = self._t0  # on_request: the joint model's step k is at
+        self._grid_index = 0  # _grid_start + k / rate; the last step taken
         self._last_sample = None  # (q, tactile, hand_time) of the last joint-model step
 
     def start(self) -> SimulatedHandFirmware:
@@ -261,6 +266,8 @@ class SimulatedHandFirmware:
         batch = self._source.read(timeout, max(1, limit))
         if not batch:
             return _TIMEOUT, 0
+        if self._on_request:  # the steps due before these frames' setpoints apply
+            self._catch_up(time.monotonic())
         counters, n = self.counters, 0
         for message, why in batch:
             if why == ECHO or why == GARBAGE:  # our own feedback looped back; undecodable
@@ -299,7 +306,6 @@ class SimulatedHandFirmware:
 
     def _publish(self) -> None:
         """Sends one feedback: the last step's sample and the last applied setpoint's seq."""
-        self._published = True
         self._unanswered = False
         if self.silent.is_set():
             return
@@ -324,52 +330,25 @@ class SimulatedHandFirmware:
 
     def _loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
-        period = 1.0 / self.config.rate
+        if self._on_request:
+            self._loop_on_request(1.0 / self.config.rate)
+        else:
+            self._loop_cycle(1.0 / self.config.rate)
+
+    def _loop_cycle(self, period: float) -> None:
+        """``feedback: cycle``: one wake-up per control cycle, like a firmware that reads
+        its CAN receive FIFO at the start of each cycle: sleep to the deadline, take every
+        frame that arrived meanwhile, step, publish. (Waking for each frame as well would
+        double the context switches per cycle and gain nothing: the acknowledgement goes
+        out with this cycle's feedback either way.)"""
         last = time.monotonic()
         deadline = last + period
         self._sample(last)
         while not self._stop.is_set():
-            if self._on_request:
-                # Block on the bus until the next step is due (bounded, so stop() is
-                # prompt): an applied setpoint is answered as soon as it arrives.
-                self._replying = True
-                self._published = False
-                frames = 0
-                while frames < _MAX_FRAMES_PER_CYCLE and not self._stop.is_set():
-                    remaining = deadline - time.monotonic()
-                    if remaining <= 0:
-                        break
-                    got, n = self._receive(min(remaining, _MAX_WAIT),
-                                           _MAX_FRAMES_PER_CYCLE - frames)
-                    frames += n
-                    if got == _FAILED:  # no busy retry: wait out this cycle
-                        self._stop.wait(max(0.0, deadline - time.monotonic()))
-                        break
-                    if got == _TIMEOUT:
-                        continue
-                    # Woken by a frame, with every frame already waiting behind it (a
-                    # classic command's other frames; FrameSource reads until none is
-                    # left): answer the newest applied setpoint once. A multicast bus
-                    # loops our reply back at once: unless the kernel drops it (the
-                    # source's filter), take it now (dropped undecoded, as ECHO) rather
-                    # than wake for it.
-                    if self._unanswered:
-                        self._publish()  # the last step's sample, the newest seq
-                        if not self._source.kernel_filter:
-                            frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
-                self._replying = False
-            else:
-                # One wake-up per cycle, like a firmware that reads its CAN receive FIFO
-                # at the start of each control cycle: sleep to the deadline, then take
-                # every frame that arrived meanwhile. (Waking for each frame as well
-                # would double the context switches per cycle and gain nothing: the
-                # acknowledgement goes out with this cycle's feedback either way.)
-                remaining = deadline - time.monotonic()
-                if remaining > 0 and self._stop.wait(remaining):
-                    break
-                self._drain(_MAX_FRAMES_PER_CYCLE)
-            if self._stop.is_set():
+            remaining = deadline - time.monotonic()
+            if remaining > 0 and self._stop.wait(remaining):
                 break
+            self._drain(_MAX_FRAMES_PER_CYCLE)
             now = time.monotonic()
             with self._lock:
                 self.model.step(min(now - last, 0.05))
@@ -378,5 +357,62 @@ class SimulatedHandFirmware:
             deadline += period
             if deadline < now - 10 * period:  # fell far behind (a stall): do not burst
                 deadline = now + period
-            if not (self._on_request and self._published):
-                self._publish()  # cycle mode, or a cycle without a request
+            self._publish()
+
+    def _loop_on_request(self, period: float) -> None:
+        """``feedback: on_request``: the joint model runs on a grid of ``period`` (step k at
+        ``t0 + k period``), and the firmware sleeps until a frame comes or a cycle without
+        a request ends. Woken by frames, it first brings the model to the last grid time
+        (``_catch_up``), then applies the setpoints and answers the newest once with that
+        step's sample; a cycle that ends without a request publishes its own feedback.
+        Cycles with a request cost one wake-up, not two: the steps they skip are taken
+        at the next wake-up, on the same grid, so the model's trajectory is the one a
+        step at every deadline gives (the steps skipped are integrated in one call,
+        with the same ``<= 1 ms`` substeps)."""
+        start = self._grid_start = time.monotonic()
+        self._grid_index = 0
+        self._sample(start)
+        answered = -1  # the last cycle in which a setpoint was answered
+        frames = 0  # frames handled in the current cycle (a flood cannot stop publishing)
+        cycle_of_frames = 0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            cycle = int((now - start) // period)
+            if cycle != cycle_of_frames:
+                cycle_of_frames, frames = cycle, 0
+            # Due without a request: the end of the first cycle not yet answered.
+            due = start + ((cycle if answered < cycle else cycle + 1) + 1) * period
+            if frames >= _MAX_FRAMES_PER_CYCLE:  # flooded: publish at the due time anyway
+                self._stop.wait(max(0.0, due - now))
+                got, n = _TIMEOUT, 0
+            else:
+                got, n = self._receive(min(max(0.0, due - now), _MAX_WAIT),
+                                       _MAX_FRAMES_PER_CYCLE - frames)
+                frames += n
+            if got == _FAILED:  # no busy retry: wait out this cycle
+                self._stop.wait(max(0.0, due - time.monotonic()))
+            self.counters["wakeups"] += 1
+            now = time.monotonic()
+            if got == _FRAME and self._unanswered:
+                self._replying = True
+                self._publish()  # the last grid step's sample, the newest seq
+                self._replying = False
+                answered = self._grid_index  # the cycle whose step the reply carries
+                if not self._source.kernel_filter:  # take our looped-back reply now
+                    frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
+            elif now >= due and not self._stop.is_set():
+                self._catch_up(now)  # the cycle ended without a request: its own feedback
+                self._publish()
+
+    def _catch_up(self, now: float) -> None:
+        """On-request mode: steps the joint model to the last grid time at or before ``now``
+        (one call for the steps skipped; at most 50 ms after a stall) and samples it."""
+        period = 1.0 / self.config.rate
+        index = int((now - self._grid_start) // period)
+        steps = index - self._grid_index
+        if steps <= 0:
+            return
+        with self._lock:
+            self.model.step(min(steps * period, 0.05))
+        self._grid_index = index
+        self._sample(self._grid_start + index * period)
