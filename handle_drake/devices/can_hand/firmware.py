@@ -349,6 +349,8 @@ class SimulatedHandFirmware:
             if remaining > 0 and self._stop.wait(remaining):
                 break
             self._drain(_MAX_FRAMES_PER_CYCLE)
+            if self._stop.is_set():
+                break
             now = time.monotonic()
             with self._lock:
                 self.model.step(min(now - last, 0.05))
