@@ -187,8 +187,9 @@ def test_a_request_every_cycle_costs_one_wake_up_and_the_model_keeps_its_grid(ho
         stamps.append(snapshot.hand_time)
     wakeups = host.firmware.counters["wakeups"] - wakeups0
     assert host.firmware.counters["feedback_replies"] == n
-    # one wake-up per request, plus the few cycles a late request left without one
-    assert wakeups <= n + 0.25 * n, wakeups
+    # one wake-up per request, plus the cycles a late request (a loaded machine) left
+    # without one; a step of its own at every deadline would make it ~2 n
+    assert wakeups <= 1.5 * n, wakeups
     # each reply carries a grid step's sample (1 us stamps), one per cycle at most
     offsets = (np.array(stamps) - idle.hand_time) / period
     assert np.allclose(offsets, np.round(offsets), atol=2e-6 / period)
