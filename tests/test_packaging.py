@@ -35,11 +35,14 @@ def test_parser_resolves_the_package():
 
 
 def test_wheel_contains_models_scenarios_and_data(tmp_path):
-    subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
+    build = subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-v",
          "-w", str(tmp_path), str(ROOT)],
-        check=True, capture_output=True, timeout=300,
+        check=True, capture_output=True, text=True, timeout=300,
     )
+    # Every data folder is a listed package: setuptools warns ("Package would be
+    # ignored") for an importable folder that is not, and plans to drop its files.
+    assert "absent from the `packages` configuration" not in build.stdout + build.stderr
     (wheel,) = tmp_path.glob("handle_drake-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     for required in ("handle_drake/_models/package.xml",
