@@ -426,7 +426,7 @@ class CanBusServer:
             self._counters.update(pending)
         pending.clear()
         self._broadcast_state(snapshot, velocity)
-        if self._setpoint is None and self._target is not None and not self.one_thread:
+        if self._setpoint is None and self._target is not None:
             self._wake()  # a first command waits for the measured position
 
     def _merge_counts(self, pending: collections.Counter) -> None:
@@ -482,7 +482,6 @@ class CanBusServer:
                 self._service_setpoint(now)
                 if bus_ready:
                     self._on_bus_ready(now)
-                    self._service_setpoint(time.monotonic())  # a first command's base
                 if now >= self._next_housekeeping:  # its timeouts are 0.2 s and more
                     self._next_housekeeping = now + _HOUSEKEEPING_PERIOD
                     with self._io_lock:
