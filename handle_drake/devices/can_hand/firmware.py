@@ -18,12 +18,9 @@ When the feedback goes out (``CanFirmwareConfig.feedback``):
 - ``on_request`` (the Barrett's default): the firmware blocks on the bus
   until a frame comes or a control cycle without a request ends, and answers
   an applied setpoint at once (when several frames were already waiting,
-  after taking them all: one reply acknowledging the newest). Its joint model
-  runs on a fixed grid of ``1 / rate``: the steps due while it slept are
-  taken when it wakes, before the new setpoint applies, so a cycle with a
-  request costs one wake-up, not two (the simulated hand shares the host's
-  cores; the real one does not). That is how the real hand works: its pucks do not stream; the
-  host drives the loop. libbarrett's ``Hand::update`` (src/products/hand.cpp;
+  after taking them all: one reply acknowledging the newest). That is how the
+  real hand works: its pucks do not stream; the host drives the loop.
+  libbarrett's ``Hand::update`` (src/products/hand.cpp;
   ``Hand::updatePosition`` in older versions) sends one group get-property
   request for ``P`` and then receives each puck's reply
   (``PuckGroup::sendGetPropertyRequest`` / ``receiveGetPropertyReply``,
@@ -35,7 +32,10 @@ When the feedback goes out (``CanFirmwareConfig.feedback``):
   and a setpoint just received has not moved the motor yet. A cycle in
   which no setpoint came publishes its own feedback, so a host that sends
   nothing (the server before the first command, after its watchdog hold)
-  still sees the hand.
+  still sees the hand. The joint model runs on a fixed grid of ``1 / rate``:
+  the steps due while the firmware slept are taken when it wakes, before the
+  new setpoint applies, so a cycle with a request costs one wake-up, not two
+  (the simulated hand shares the host's cores; the real one does not).
 
 Joint model (each actuated joint, see :class:`CanFirmwareConfig`): a
 second-order position loop ``q'' = wn^2 (q_sp - q) - 2 zeta wn q'`` with
@@ -184,10 +184,10 @@ class SimulatedHandFirmware:
         self._errors = ErrorLog(log)
         self.feedback = config.feedback_mode(self.layout.kind)
         self._on_request = self.feedback == "on_request"
-        self._replying = False  # publishing a reply (the counters tell replies apart)
         self._unanswered = False  # a setpoint was applied since the last feedback
+        self._period = 1.0 / config.rate  # s, the control cycle
         self._grid_start = self._t0  # on_request: the joint model's step k is at
-        self._grid_index = 0  # _grid_start + k / rate; the last step taken
+        self._grid_index = 0  # _grid_start + k period; the last step taken
         self._last_sample = None  # (q, tactile, hand_time) of the last joint-model step
 
     def start(self) -> SimulatedHandFirmware:
@@ -304,8 +304,9 @@ class SimulatedHandFirmware:
             self._last_sample = (self.model.measured_positions(), self.model.tactile(),
                                  now - self._t0)
 
-    def _publish(self) -> None:
-        """Sends one feedback: the last step's sample and the last applied setpoint's seq."""
+    def _publish(self, reply: bool = False) -> None:
+        """Sends one feedback: the last step's sample and the last applied setpoint's seq
+        (``reply``: answering a request, counted apart on request)."""
         self._unanswered = False
         if self.silent.is_set():
             return
@@ -323,7 +324,7 @@ class SimulatedHandFirmware:
                 self._bus.send(message, timeout=0.01)
             self.counters["cycles"] += 1
             if self._on_request:
-                self.counters["feedback_replies" if self._replying else "feedback_idle"] += 1
+                self.counters["feedback_replies" if reply else "feedback_idle"] += 1
         except (can.CanError, OSError) as error:
             self.counters["bus_tx_errors"] += 1
             log.warning("firmware bus send failed: %s", error)
@@ -331,9 +332,9 @@ class SimulatedHandFirmware:
     def _loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
         if self._on_request:
-            self._loop_on_request(1.0 / self.config.rate)
+            self._loop_on_request(self._period)
         else:
-            self._loop_cycle(1.0 / self.config.rate)
+            self._loop_cycle(self._period)
 
     def _loop_cycle(self, period: float) -> None:
         """``feedback: cycle``: one wake-up per control cycle, like a firmware that reads
@@ -396,9 +397,7 @@ class SimulatedHandFirmware:
             self.counters["wakeups"] += 1
             now = time.monotonic()
             if got == _FRAME and self._unanswered:
-                self._replying = True
-                self._publish()  # the last grid step's sample, the newest seq
-                self._replying = False
+                self._publish(reply=True)  # the last grid step's sample, the newest seq
                 answered = self._grid_index  # the cycle whose step the reply carries
                 if not self._source.kernel_filter:  # take our looped-back reply now
                     frames += self._drain(_MAX_FRAMES_PER_CYCLE - frames)
@@ -409,7 +408,7 @@ class SimulatedHandFirmware:
     def _catch_up(self, now: float) -> None:
         """On-request mode: steps the joint model to the last grid time at or before ``now``
         (one call for the steps skipped; at most 50 ms after a stall) and samples it."""
-        period = 1.0 / self.config.rate
+        period = self._period
         index = int((now - self._grid_start) // period)
         steps = index - self._grid_index
         if steps <= 0:
