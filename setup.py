@@ -20,7 +20,5 @@ def _under(directory: str, package: str) -> list[str]:
                         for name in find_namespace_packages(where=directory, exclude=_SKIP)]
 
 
-setup(packages=find_namespace_packages(include=["handle_drake", "handle_drake.*"],
-                                       exclude=_SKIP)
-      + _under("models", "handle_drake._models")
+setup(packages=_under("handle_drake", "handle_drake") + _under("models", "handle_drake._models")
       + _under("diagrams", "handle_drake._diagrams"))
