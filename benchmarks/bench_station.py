@@ -17,6 +17,10 @@ The demo case is also run against the bare plant on the station's own frames
 at every step; the object's trajectory is checked bit-identical), the floor
 that isolates what the station's Python systems and loggers cost; CPU
 seconds of this process are kept beside wall time (the machine is shared).
+A second, identical replay (``replay twin``) is the method's own control: its
+ratio to the replay (an A/A comparison) shows how far two runs of identical work
+read apart here, against which the station's ratio is to be read. The cases run
+in a new random order each round (seeded), so no case always follows the same one.
 
 With ``--baseline REV`` (repeatable) the demo station is also built with the tactile
 sensor and the hand and wrist drivers of ``handle_drake/systems/{tactile,hand_driver}.py``
@@ -38,6 +42,7 @@ import argparse
 import importlib.util
 import inspect
 import os
+import random
 import statistics
 import subprocess
 import sys
@@ -312,6 +317,7 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
     station = {case: _station_case(*case) for case in cases}
     plant = {variant: _plant_case(variant) for variant in variants}
     replay, station_z = _replay_case()
+    twin, _ = _replay_case()  # identical work: the A/A control of the method
     # Where the demo station's time goes: the same station without the tactile
     # logger (its every sample evaluates the plant's contact results), and without
     # any logger (run results then lack the logged signals: diagnosis only); like the
@@ -321,16 +327,17 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
                 "no loggers": _station_case(*STATION_CASES[0], log=())}
     python = _station_case(*STATION_CASES[0], finite_commands=False)  # the Python drivers
     befores = {revision: _baseline_station_case(revision) for revision in baselines or ()}
-    everything = [*station.values(), *plant.values(), replay, python, *ablation.values(),
-                  *befores.values()]
+    everything = [*station.values(), *plant.values(), replay, twin, python,
+                  *ablation.values(), *befores.values()]
     for case in everything:  # one warm-up run each, not counted (first-run allocations)
         case.run_once()
         case.walls.clear(), case.cpus.clear(), case.loads.clear()
+    order = random.Random(0)
     for _ in range(repeats):
-        # the demo case and its floors back to back, then the rest
-        first = [station[STATION_CASES[0]], replay, python, *ablation.values(),
-                 plant["model"]]
-        first[1:1] = befores.values()
+        # the demo case and its floors together in a shuffled order, then the rest
+        first = [station[STATION_CASES[0]], replay, twin, python, *ablation.values(),
+                 plant["model"], *befores.values()]
+        order.shuffle(first)
         rest = [c for c in [*station.values(), *plant.values()] if c not in first]
         for case in [*first, *rest]:
             case.run_once()
@@ -344,6 +351,7 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
     overhead = {"replay": replay.row(variant="replay of the station's frames"),
                 "trajectory": same,
                 "station_over_replay_cpu": _paired(demo, replay, "cpus"),
+                "twin_over_replay_cpu": _paired(twin, replay, "cpus"),
                 "station_over_replay_wall": _paired(demo, replay, "walls"),
                 "station_over_model_cpu": _paired(demo, plant["model"], "cpus"),
                 "ablation_over_replay_cpu": {k: _paired(c, replay, "cpus")
@@ -435,6 +443,8 @@ def main(argv=None) -> int:
           f"station {same['station_final_object_z']!r}: "
           f"{'bit-identical' if same['bit_identical'] else 'DIFFERENT'}")
     _print_ratios(overhead, (("station_over_replay_cpu", "station / replay, CPU"),
+                             ("twin_over_replay_cpu",
+                              "replay twin / replay, CPU (A/A: identical work)"),
                              ("station_over_replay_wall", "station / replay, wall"),
                              ("station_over_model_cpu", "station / model plant, CPU")))
     d = overhead["python_drivers"]
@@ -473,9 +483,16 @@ def main(argv=None) -> int:
                                                          "realtime_factor",
                                                          "object_lift_cm_at_2s")}}
                 for f in [overhead["replay"], *floors]]
+    ratios = [("station / replay", overhead["station_over_replay_cpu"]),
+              ("replay twin / replay (A/A: identical work)", overhead["twin_over_replay_cpu"]),
+              *((f"station, {k} / replay", r)
+                for k, r in overhead["ablation_over_replay_cpu"].items())]
+    notes = ["CPU, paired by round (median, rounds' range): "
+             + "; ".join(f"{label} {r['median']:.3f}x ({r['min']:.3f}-{r['max']:.3f})"
+                         for label, r in ratios) + "."]
     results_run.finish(printed, {"realtime": rows, "plant_only": floors, "reset": reset,
                                  "station_overhead": overhead, "cpu_count": os.cpu_count(),
-                                 "load_average": os.getloadavg()}, args.out)
+                                 "load_average": os.getloadavg()}, args.out, notes=notes)
     print(f"wrote {args.out}")
     return 0
 

@@ -1,4 +1,4 @@
-"""Where the demo station's time over the bare plant goes: three direct measurements.
+"""Where the demo station's time over the bare plant goes: four direct measurements.
 
 1. The tactile sample's contact solve: at 100 sample instants of the demo grasp in contact
    (t = 1.00 ... 1.99 s, end of the step to t_k, as the logger samples), two copies of the
@@ -12,6 +12,12 @@
    sources and 25 Gains, nested one diagram deeper, with 3 VectorLogSinks at 100 Hz.
 3. The station's loggers: the demo station with no logger, each logger alone, the two
    vector loggers, all three (CPU, paired by round against "no logger").
+4. Per step, in the running simulation: thread CPU between two calls of a Simulator
+   monitor (one per 1 ms step; its own Python call costs every case alike) for the replay
+   floor, the station with no logger and the station as users run it. Steps are split into
+   those that end at a logger's sample instant (every 10th: the samples run at their end),
+   the step after (it reuses the sample's contact solve) and the others, so the tactile
+   sample's net cost and the per-step cost of the station's extra systems are read apart.
 
 CPU seconds of this process, every case once per round (the machine is shared; compare
 ratios). Usage: ``python benchmarks/bench_station_parts.py [--rounds N]``
@@ -35,7 +41,7 @@ pin_blas(force=False)
 import numpy as np  # noqa: E402
 from pydrake.multibody.plant import AddMultibodyPlant  # noqa: E402
 from pydrake.systems.analysis import Simulator  # noqa: E402
-from pydrake.systems.framework import DiagramBuilder  # noqa: E402
+from pydrake.systems.framework import DiagramBuilder, EventStatus  # noqa: E402
 from pydrake.systems.primitives import (  # noqa: E402
     ConstantVectorSource,
     Gain,
@@ -154,6 +160,57 @@ def _station(log):
     return run
 
 
+def per_step(rounds: int) -> dict:
+    """Part 4: median thread CPU (ms) of the steps that end at a sample instant, of the
+    step after each, and of the other steps, per case (median over rounds per step, then
+    over the steps of each kind), and the whole run's."""
+    import bench_station
+
+    demo = bench_station.STATION_CASES[0]
+    cases = {"replay": bench_station._replay_case()[0],
+             "station, no logger": bench_station._station_case(*demo, log=()),
+             "station as users run it": bench_station._station_case(*demo)}
+    h = 0.001  # the demo's step
+    every = round(0.01 / h)  # steps per logger sample (harness.LOG_PERIOD)
+
+    def run(case):
+        steps, last = [], [0.0]
+
+        def monitor(context):
+            now = time.thread_time()
+            steps.append((context.get_time(), now - last[0]))
+            last[0] = time.thread_time()
+            return EventStatus.Succeeded()
+
+        case.simulator.set_monitor(monitor)
+        try:
+            case._reset()
+            steps.clear()  # Initialize calls the monitor too
+            last[0] = time.thread_time()
+            case.simulator.AdvanceTo(bench_station.TRIAL_SECONDS)
+        finally:
+            case.simulator.clear_monitor()
+        return np.array(steps)
+
+    for case in cases.values():  # warm-up
+        run(case)
+    runs = {name: [] for name in cases}
+    for _ in range(rounds):
+        for name, case in cases.items():
+            runs[name].append(run(case))
+    out = {}
+    for name, recorded in runs.items():
+        k = np.rint(recorded[0][:, 0] / h).astype(int)
+        ms = 1e3 * np.median(np.array([r[:, 1] for r in recorded]), axis=0)
+        sample = (k % every == 0) & (k > 0)
+        after = (k % every == 1) & (k > 1)
+        out[name] = {"sample_step_ms": float(np.median(ms[sample])),
+                     "step_after_ms": float(np.median(ms[after])),
+                     "other_step_ms": float(np.median(ms[~(sample | after)])),
+                     "run_ms": float(np.median([1e3 * r[:, 1].sum() for r in recorded]))}
+    return out
+
+
 def _rounds(cases: dict, rounds: int, reference: str) -> dict:
     for run in cases.values():  # warm-up
         run()
@@ -179,7 +236,8 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds: must be >= 1")
-    results_run = ResultsRun("Station parts: the tactile sample's solve, leaf systems, loggers",
+    results_run = ResultsRun("Station parts: the tactile sample's solve, leaf systems, loggers, "
+                             "per step",
                              args)
     load = [os.getloadavg()[0]]
     reuse = contact_solve_reuse()
@@ -208,7 +266,14 @@ def main(argv=None) -> int:
                                                                 "hand.tactile",
                                                                 "object.position"))},
                       args.rounds, "no logger")
+    steps = per_step(args.rounds)
     load.append(os.getloadavg()[0])
+    print("4. per step in the running simulation (thread CPU, ms, medians; a sample ends "
+          "every 10th step)")
+    print(f"   {'case':<26}{'sample step':>12}{'step after':>12}{'other step':>12}{'run':>9}")
+    for name, r in steps.items():
+        print(f"   {name:<26}{r['sample_step_ms']:>12.3f}{r['step_after_ms']:>12.3f}"
+              f"{r['other_step_ms']:>12.3f}{r['run_ms']:>9.0f}")
     for title, block in (("2. leaf systems (2 s of the demo script, CPU / bare plant)", structure),
                          ("3. the demo station's loggers (CPU / no logger)", loggers)):
         print(title)
@@ -225,8 +290,13 @@ def main(argv=None) -> int:
              for part, reference, block in (("leaf systems", "bare plant", structure),
                                             ("loggers", "no logger", loggers))
              for name, r in block.items()]
+    rows += [{"measure": f"per step: {name}: {label}", "median": r[key], "unit": "ms"}
+             for name, r in steps.items()
+             for key, label in (("sample_step_ms", "step ending at a sample"),
+                                ("step_after_ms", "step after it"),
+                                ("other_step_ms", "other steps"))]
     results_run.finish(rows, {"contact_solve_reuse_ms": reuse, "leaf_systems": structure,
-                              "loggers": loggers, "load_average": load,
+                              "loggers": loggers, "per_step": steps, "load_average": load,
                               "rounds": args.rounds}, args.out)
     print(f"wrote {args.out}")
     return 0
