@@ -10,7 +10,11 @@ Runs side by side in one process (ratios are what count on a noisy machine):
 - a trial reset (``ScenarioRunner.reset``: default context copied back)
   against a full rebuild (``ScenarioRunner(scenario)``).
 
-Targets (issue 2): >= 4x real time at 1 ms with point contact; reset <= 5 ms.
+Targets: the station within 1.10x of the bare plant's CPU time in the same run (issue
+34; issue 2 had asked >= 4x real time, a fixed speed, when this machine ran the bare
+plant at 3.8x and the station at 3.2x: the plant alone has since read 1.9-3.8x in
+different sessions, so the real-time factor is printed beside the plant's, not judged);
+reset <= 5 ms.
 
 The demo case is also run against the bare plant on the station's own frames
 (``replay``: the drivers' desired states recorded from the station and held
@@ -472,8 +476,13 @@ def main(argv=None) -> int:
     print(f"\nreset {reset['reset_ms_median']:.2f} ms (max {reset['reset_ms_max']:.2f}) vs "
           f"rebuild {reset['rebuild_ms_median']:.0f} ms: "
           f"{reset['rebuild_over_reset']:.0f}x faster")
-    print(f"targets: >= 4x real time at 1 ms point contact: "
-          f"{'met' if point_1ms >= 4 else 'NOT met'} ({point_1ms:.1f}x); reset <= 5 ms: "
+    station_ratio = overhead["station_over_replay_cpu"]["median"]
+    print(f"real time at 1 ms, point contact: station {point_1ms:.1f}x, the bare plant on its "
+          f"frames {overhead['replay']['realtime_factor']:.1f}x in this run (the machine sets "
+          f"both)")
+    print(f"targets: station <= 1.10x the bare plant on its frames (CPU): "
+          f"{'met' if station_ratio <= 1.10 else 'NOT met'} ({station_ratio:.3f}x; read it "
+          f"against the A/A control's spread); reset <= 5 ms: "
           f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
     printed = [{k: r[k] for k in ("contact_model", "approximation", "time_step_ms",
                                   "wall_s_median", "cpu_s_median", "realtime_factor",
