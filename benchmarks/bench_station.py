@@ -23,8 +23,12 @@ that isolates what the station's Python systems and loggers cost; CPU
 seconds of this process are kept beside wall time (the machine is shared).
 A second, identical replay (``replay twin``) is the method's own control: its
 ratio to the replay (an A/A comparison) shows how far two runs of identical work
-read apart here, against which the station's ratio is to be read. The cases run
-in a new random order each round (seeded), so no case always follows the same one.
+read apart here, against which the station's ratio is to be read. Two builds of the
+same diagram in one process also differ (by up to +-2 % here, where they land in
+memory), so the demo station and the replay are each built ``--builds`` times (default
+2) and the headline ratio is the station's CPU summed over its builds over the
+replay's, per round. The cases run in a new random order each round (seeded), so no
+case always follows the same one.
 
 With ``--baseline REV`` (repeatable) the demo station is also built with the tactile
 sensor and the hand and wrist drivers of ``handle_drake/systems/{tactile,hand_driver}.py``
@@ -312,7 +316,16 @@ def _paired(top: _Case, bottom: _Case, what: str) -> dict:
             "rounds": values}
 
 
-def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
+def _paired_builds(tops: list[_Case], bottoms: list[_Case]) -> dict:
+    """Per round: the CPU of ``tops`` summed over the builds over that of ``bottoms``."""
+    top = [sum(r) for r in zip(*(c.cpus for c in tops), strict=True)]
+    bottom = [sum(r) for r in zip(*(c.cpus for c in bottoms), strict=True)]
+    values = [t / b for t, b in zip(top, bottom, strict=True)]
+    return {"median": statistics.median(values), "min": min(values), "max": max(values),
+            "rounds": values}
+
+
+def bench_realtime(repeats: int, demo_only: bool = False, baselines=(), builds: int = 2):
     """Every case once per round, ``repeats`` rounds: the cases see the same
     machine conditions, so their ratios hold even when the machine's speed
     drifts (it does here, by up to 40 % over minutes)."""
@@ -321,7 +334,12 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
     station = {case: _station_case(*case) for case in cases}
     plant = {variant: _plant_case(variant) for variant in variants}
     replay, station_z = _replay_case()
-    twin, _ = _replay_case()  # identical work: the A/A control of the method
+    # identical work: the A/A control of the method, and the builds the headline pools
+    twins = [_replay_case()[0] for _ in range(max(builds, 2) - 1)]
+    twin = twins[0]
+    station_builds = [station[STATION_CASES[0]]] + [_station_case(*STATION_CASES[0])
+                                                    for _ in range(builds - 1)]
+    replay_builds = [replay] + twins[:builds - 1]
     # Where the demo station's time goes: the same station without the tactile
     # logger (its every sample evaluates the plant's contact results), and without
     # any logger (run results then lack the logged signals: diagnosis only); like the
@@ -331,15 +349,15 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
                 "no loggers": _station_case(*STATION_CASES[0], log=())}
     python = _station_case(*STATION_CASES[0], finite_commands=False)  # the Python drivers
     befores = {revision: _baseline_station_case(revision) for revision in baselines or ()}
-    everything = [*station.values(), *plant.values(), replay, twin, python,
-                  *ablation.values(), *befores.values()]
+    everything = [*station.values(), *station_builds[1:], *plant.values(), replay, *twins,
+                  python, *ablation.values(), *befores.values()]
     for case in everything:  # one warm-up run each, not counted (first-run allocations)
         case.run_once()
         case.walls.clear(), case.cpus.clear(), case.loads.clear()
     order = random.Random(0)
     for _ in range(repeats):
         # the demo case and its floors together in a shuffled order, then the rest
-        first = [station[STATION_CASES[0]], replay, twin, python, *ablation.values(),
+        first = [*station_builds, replay, *twins, python, *ablation.values(),
                  plant["model"], *befores.values()]
         order.shuffle(first)
         rest = [c for c in [*station.values(), *plant.values()] if c not in first]
@@ -356,6 +374,15 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=()):
                 "trajectory": same,
                 "station_over_replay_cpu": _paired(demo, replay, "cpus"),
                 "twin_over_replay_cpu": _paired(twin, replay, "cpus"),
+                "builds": builds,
+                "station_over_replay_cpu_builds": _paired_builds(station_builds,
+                                                                 replay_builds),
+                "station_builds_over_first_cpu": [_paired(b, demo, "cpus")
+                                                  for b in station_builds[1:]],
+                "station_builds_same_logs": all(_same_logs(demo, b)
+                                                for b in station_builds[1:]),
+                "replay_builds_same_final_z": all(b.z_final == replay.z_final
+                                                  for b in replay_builds[1:]),
                 "station_over_replay_wall": _paired(demo, replay, "walls"),
                 "station_over_model_cpu": _paired(demo, plant["model"], "cpus"),
                 "ablation_over_replay_cpu": {k: _paired(c, replay, "cpus")
@@ -413,6 +440,9 @@ def main(argv=None) -> int:
     parser.add_argument("--baseline", action="append", default=[],
                         help="git revision of the tactile sensor and drivers for 'before' "
                              "(repeatable)")
+    parser.add_argument("--builds", type=int, default=2,
+                        help="builds of the demo station and of the replay whose CPU the "
+                             "headline ratio sums (default 2)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station.json")
     parser.add_argument("--instructions", action="store_true",
@@ -422,10 +452,12 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.instructions:
         return _instructions_main(args)
+    if not 1 <= args.builds <= 8:
+        parser.error(f"--builds: expected 1 to 8, got {args.builds}")
     results_run = ResultsRun("Station speed: Shadow grasp trial against the bare plant", args)
     repeats = 1 if args.quick else args.repeats
     load_before = os.getloadavg()[0]
-    rows, floors, overhead = bench_realtime(repeats, args.demo, args.baseline)
+    rows, floors, overhead = bench_realtime(repeats, args.demo, args.baseline, args.builds)
     reset = bench_reset(repeats)
     print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats} "
           f"(load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end, "
@@ -446,7 +478,9 @@ def main(argv=None) -> int:
     print(f"replay of the station's frames: final object z {same['replay_final_object_z']!r} vs "
           f"station {same['station_final_object_z']!r}: "
           f"{'bit-identical' if same['bit_identical'] else 'DIFFERENT'}")
-    _print_ratios(overhead, (("station_over_replay_cpu", "station / replay, CPU"),
+    _print_ratios(overhead, (("station_over_replay_cpu_builds",
+                              f"station / replay, CPU, {args.builds} builds each"),
+                             ("station_over_replay_cpu", "station / replay, CPU, first builds"),
                              ("twin_over_replay_cpu",
                               "replay twin / replay, CPU (A/A: identical work)"),
                              ("station_over_replay_wall", "station / replay, wall"),
@@ -476,7 +510,14 @@ def main(argv=None) -> int:
     print(f"\nreset {reset['reset_ms_median']:.2f} ms (max {reset['reset_ms_max']:.2f}) vs "
           f"rebuild {reset['rebuild_ms_median']:.0f} ms: "
           f"{reset['rebuild_over_reset']:.0f}x faster")
-    station_ratio = overhead["station_over_replay_cpu"]["median"]
+    print(f"the {args.builds} station builds' logged signals "
+          f"{'bit-identical' if overhead['station_builds_same_logs'] else 'DIFFERENT'}, "
+          f"the replay builds' final object z "
+          f"{'bit-identical' if overhead['replay_builds_same_final_z'] else 'DIFFERENT'}")
+    for k, r in enumerate(overhead["station_builds_over_first_cpu"], start=2):
+        print(f"station build {k} / build 1, CPU: {r['median']:.3f}x "
+              f"(rounds {r['min']:.3f}-{r['max']:.3f})")
+    station_ratio = overhead["station_over_replay_cpu_builds"]["median"]
     print(f"real time at 1 ms, point contact: station {point_1ms:.1f}x, the bare plant on its "
           f"frames {overhead['replay']['realtime_factor']:.1f}x in this run (the machine sets "
           f"both)")
@@ -492,7 +533,11 @@ def main(argv=None) -> int:
                                                          "realtime_factor",
                                                          "object_lift_cm_at_2s")}}
                 for f in [overhead["replay"], *floors]]
-    ratios = [("station / replay", overhead["station_over_replay_cpu"]),
+    ratios = [(f"station / replay, {args.builds} builds each",
+               overhead["station_over_replay_cpu_builds"]),
+              ("station / replay, first builds", overhead["station_over_replay_cpu"]),
+              *((f"station build {k} / build 1", r) for k, r in
+                enumerate(overhead["station_builds_over_first_cpu"], start=2)),
               ("replay twin / replay (A/A: identical work)", overhead["twin_over_replay_cpu"]),
               *((f"station, {k} / replay", r)
                 for k, r in overhead["ablation_over_replay_cpu"].items())]
