@@ -164,7 +164,11 @@ def _baseline_station_case(revision: str) -> _Case:
         if "measured" not in inspect.signature(hand).parameters:  # built them always
             def hand(*args, measured=True, _old=drivers.HandDriverDiagram, **kwargs):
                 return _old(*args, **kwargs)
-        names.update(HandDriverDiagram=hand, WristDriverDiagram=drivers.WristDriverDiagram)
+        wrist = drivers.WristDriverDiagram
+        if "measured" not in inspect.signature(wrist).parameters:  # built it always
+            def wrist(*args, measured=True, _old=drivers.WristDriverDiagram, **kwargs):
+                return _old(*args, **kwargs)
+        names.update(HandDriverDiagram=hand, WristDriverDiagram=wrist)
     station_source = subprocess.run(["git", "show", f"{revision}:handle_drake/station.py"],
                                     cwd=ROOT, capture_output=True, text=True, check=True).stdout
     if "def _free_body_position" not in station_source:

@@ -91,6 +91,7 @@ from handle_drake.scenario import (
 )
 from handle_drake.scene.plant import AddSceneModels, ExportSceneObjects
 from handle_drake.systems.hand_driver import (
+    MEASURED_OUTPUTS,
     WRIST_JOINTS,
     HandDriverDiagram,
     PdHandDriver,
@@ -148,9 +149,11 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
             default: all). Given, the systems feeding only other outputs are left out:
             the fingertip sensor (``hand.tactile``), the measured-state selectors of a
             :class:`HandDriverDiagram` (``hand.position_measured``,
-            ``hand.velocity_estimated``, ``hand.state_estimated``), the object's pose
-            selector and position split (``object.pose``, ``object.spatial_velocity``,
-            ``object.position``): every system costs the simulator work at every step.
+            ``hand.velocity_estimated``, ``hand.state_estimated``; the first alone: one
+            selector) and of a :class:`WristDriverDiagram` (``wrist.pose_measured``), the
+            object's pose selector and position split (``object.pose``,
+            ``object.spatial_velocity``, ``object.position``): every system costs the
+            simulator work at every step.
             Outputs needing no system of their own (the plant's, the commanded
             position) and the scenario's devices are always there. A name that is no
             station output is refused; one this scenario lacks is absent.
@@ -186,7 +189,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
     if scenario.objects:
         ExportSceneObjects(builder, plant, scenario)
     if isinstance(scenario.hand.mount, FloatingWrist):
-        _add_wrist_driver(builder, plant, scenario, finite_commands)
+        _add_wrist_driver(builder, plant, scenario, finite_commands, wanted)
     if scenario.object is not None:
         _add_object_systems(builder, plant, scenario, wanted)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
@@ -247,7 +250,7 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
     _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
 
     # the Python driver computes its measured outputs itself (no systems to leave out)
-    options = {"measured": wanted(*(f"{HAND}.{s}" for s in _MEASURED))} \
+    options = {"measured": [s for s in MEASURED_OUTPUTS if wanted(f"{HAND}.{s}")]} \
         if finite_commands else {}
     driver = builder.AddNamedSystem(
         "hand_driver",
@@ -275,25 +278,30 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
             builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
 
-# the hand driver's outputs read from the plant's state (its measured-state selectors)
-_MEASURED = ("position_measured", "velocity_estimated", "state_estimated")
 
 
 def _add_wrist_driver(builder, plant, scenario: Scenario,
-                      finite_commands: bool = False) -> None:
-    """The floating wrist's driver; exports ``wrist.pose`` and ``wrist.pose_measured``."""
+                      finite_commands: bool = False, wanted=None) -> None:
+    """The floating wrist's driver; exports ``wrist.pose`` and ``wrist.pose_measured``
+    (that one when ``wanted`` reads it: :class:`_Outputs`)."""
+    wanted = wanted or _Outputs(None)
     wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
+    # the Python driver computes pose_measured itself (no system to leave out)
+    options = {"measured": wanted("wrist.pose_measured")} if finite_commands else {}
     wrist_driver = builder.AddNamedSystem(
         "wrist_driver",
         (WristDriverDiagram if finite_commands else WristDriver)(
             plant, wrist, rpy_pose6(scenario.hand.mount.X_WB.GetDeterministicValue()),
-            control_period=scenario.driver.control_period),
+            control_period=scenario.driver.control_period, **options),
     )
-    builder.Connect(plant.get_state_output_port(), wrist_driver.get_plant_state_input_port())
+    if wrist_driver.HasInputPort("plant_state"):
+        builder.Connect(plant.get_state_output_port(),
+                        wrist_driver.get_plant_state_input_port())
     builder.Connect(wrist_driver.GetOutputPort("desired_state"),
                     plant.get_desired_state_input_port(wrist))
     builder.ExportInput(wrist_driver.get_pose_input_port(), "wrist.pose")
-    builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
+    if wrist_driver.HasOutputPort("pose_measured"):
+        builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
 
 
 def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None:

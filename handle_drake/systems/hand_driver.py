@@ -23,7 +23,7 @@ from pydrake.systems.primitives import (
 )
 
 __all__ = ["PdHandDriver", "WristDriver", "HandDriverDiagram", "WristDriverDiagram",
-           "actuated_order"]
+           "actuated_order", "MEASURED_OUTPUTS"]
 
 
 def actuated_order(plant, model_instance, joint_names) -> np.ndarray:
@@ -194,12 +194,19 @@ def _held_state(builder, initial, period, name, A=None, B=None):
     return hold
 
 
-def _export_measured(builder, size, q_index, v_index) -> None:
+MEASURED_OUTPUTS = ("position_measured", "velocity_estimated", "state_estimated")
+
+
+def _export_measured(builder, size, q_index, v_index, read=MEASURED_OUTPUTS) -> None:
     """Exports a ``plant_state`` input (``size``) and ``state_estimated`` (its entries
     ``q_index`` then ``v_index``: one 0/1 MatrixGain, exact copies of finite values), split
     into ``position_measured`` and ``velocity_estimated`` by a Demultiplexer (copies): two
     systems for the three signals (each system in the diagram costs the simulator some
-    work at every step, read or not)."""
+    work at every step, read or not). When ``read`` is ``position_measured`` alone, one
+    0/1 MatrixGain of the entries ``q_index`` exports it (the same copies)."""
+    if set(read) == {"position_measured"}:
+        _export_selections(builder, size, (("position_measured", q_index),))
+        return
     nq = len(q_index)
     state = builder.AddNamedSystem("state_estimated", MatrixGain(
         _selection(np.r_[q_index, v_index], size)))
@@ -209,6 +216,21 @@ def _export_measured(builder, size, q_index, v_index) -> None:
     builder.ExportOutput(split.get_output_port(0), "position_measured")
     builder.ExportOutput(split.get_output_port(1), "velocity_estimated")
     builder.ExportOutput(state.get_output_port(), "state_estimated")
+
+
+def _measured_read(measured) -> tuple:
+    """:class:`HandDriverDiagram`'s ``measured``: True (all), False (none) or names."""
+    if measured is True:
+        return MEASURED_OUTPUTS
+    if measured is False:
+        return ()
+    if isinstance(measured, str) or not all(isinstance(n, str) for n in measured):
+        raise ValueError(f"measured: expected True, False or names of {MEASURED_OUTPUTS}, "
+                         f"got {measured!r}")
+    unknown = sorted(set(measured) - set(MEASURED_OUTPUTS))
+    if unknown:
+        raise ValueError(f"measured: {unknown[0]!r} is not one of {MEASURED_OUTPUTS}")
+    return tuple(measured)
 
 
 def _export_selections(builder, size, selections) -> None:
@@ -236,12 +258,15 @@ class HandDriverDiagram(Diagram):
     before the run: the station's ``finite_commands``): unlike :class:`PdHandDriver` it
     does not hold on a non-finite command, and its ``position`` input must be connected.
     ``measured=False`` leaves out the measured-state selectors, with their outputs and
-    the ``plant_state`` input (for a caller that reads none of them).
+    the ``plant_state`` input (for a caller that reads none of them); a collection of
+    :data:`MEASURED_OUTPUTS` names builds those read (``position_measured`` alone: one
+    selector, the others absent).
     """
 
     def __init__(self, plant, model_instance, spec, initial_command, lower, upper,
-                 max_joint_velocity=4.0, control_period=0.002, measured: bool = True):
+                 max_joint_velocity=4.0, control_period=0.002, measured=True):
         super().__init__()
+        read = _measured_read(measured)
         nu, initial, lower, upper, step, order, q_index, v_index = _driver_setup(
             plant, model_instance, spec, initial_command, lower, upper, max_joint_velocity,
             control_period)
@@ -266,8 +291,8 @@ class HandDriverDiagram(Diagram):
         builder.ExportInput(target.get_input_port(), "position")
         builder.ExportOutput(desired.get_output_port(), "desired_state")
         builder.ExportOutput(self._hold.get_output_port(), "position_commanded")
-        if measured:
-            _export_measured(builder, nx, q_index, v_index)
+        if read:
+            _export_measured(builder, nx, q_index, v_index, read)
         builder.BuildInto(self)
 
     def get_command_input_port(self):
@@ -358,9 +383,11 @@ class WristDriverDiagram(Diagram):
     """:class:`WristDriver` in Drake primitives: the pose sampled every ``control_period``
     into the desired state (the same permutation, exact copies), ``pose_measured`` from the
     plant state; no Python call per period. For a connected, finite ``pose`` command (see
-    :class:`HandDriverDiagram`): it does not hold on a non-finite one."""
+    :class:`HandDriverDiagram`): it does not hold on a non-finite one. ``measured=False``
+    leaves out ``pose_measured``'s selector and the ``plant_state`` input."""
 
-    def __init__(self, plant, model_instance, initial_pose6, control_period=0.002):
+    def __init__(self, plant, model_instance, initial_pose6, control_period=0.002,
+                 measured: bool = True):
         super().__init__()
         initial = np.asarray(initial_pose6, dtype=float)
         if initial.shape != (6,):
@@ -375,8 +402,9 @@ class WristDriverDiagram(Diagram):
         builder.ExportInput(hold.get_input_port(), "pose")
         builder.ExportOutput(hold.get_output_port(), "desired_state")
         # [x y z roll pitch yaw] from the joints [x y z yaw pitch roll]
-        _export_selections(builder, plant.num_positions() + plant.num_velocities(),
-                           (("pose_measured", q_index[[0, 1, 2, 5, 4, 3]]),))
+        if measured:  # else no pose_measured and no plant_state input (nobody reads them)
+            _export_selections(builder, plant.num_positions() + plant.num_velocities(),
+                               (("pose_measured", q_index[[0, 1, 2, 5, 4, 3]]),))
         builder.BuildInto(self)
 
     def get_pose_input_port(self):

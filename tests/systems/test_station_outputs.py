@@ -47,9 +47,11 @@ def test_no_outputs_leaves_out_the_sensors_and_selectors_and_simulates_the_same_
     lean, lean_context = _run(())
     left_out = set(_leaf_names(full)) - set(_leaf_names(lean))
     assert left_out == {"tactile", "object_pose", "object_position",
-                        "hand_driver/state_estimated", "hand_driver/measured"}
+                        "hand_driver/state_estimated", "hand_driver/measured",
+                        "wrist_driver/pose_measured"}
     assert set(_leaf_names(lean)) < set(_leaf_names(full))
-    for name in ("hand.tactile", "hand.position_measured", "object.pose", "object.position"):
+    for name in ("hand.tactile", "hand.position_measured", "object.pose", "object.position",
+                 "wrist.pose_measured"):
         assert full.HasOutputPort(name) and not lean.HasOutputPort(name)
     # the plant's own ports and the commanded position need no system: always there
     for name in ("plant_state", "contact_results", "hand.position_commanded"):
@@ -71,6 +73,42 @@ def test_the_outputs_read_are_built_and_read_what_the_full_station_reads(finite_
     assert not lean.HasOutputPort("object.pose")
     # object.position of a free object needs no pose selector (a split of the state)
     assert "object_pose" not in _leaf_names(lean)
+
+
+def test_a_measured_position_alone_is_one_selector_and_reads_the_full_stations_bits():
+    # the demo logs hand.position_measured, not the velocity: one 0/1 selection of the
+    # plant state instead of the state selector and its split; the wrist's pose_measured,
+    # read, has its own selector, unread none
+    read = ("hand.position_measured", "wrist.pose_measured")
+    full, full_context = _run(None)
+    lean, lean_context = _run(read)
+    names = _leaf_names(lean)
+    assert "hand_driver/position_measured" in names
+    assert {"hand_driver/state_estimated", "hand_driver/measured"}.isdisjoint(names)
+    assert "wrist_driver/pose_measured" in names
+    assert not lean.HasOutputPort("hand.velocity_estimated")
+    for name in read:
+        value = lean.GetOutputPort(name).Eval(lean_context)
+        expected = full.GetOutputPort(name).Eval(full_context)
+        # bit for bit, sign bits included; and the fingers moved (not a state at rest)
+        assert value.tobytes() == expected.tobytes()
+    assert np.abs(lean.GetOutputPort("hand.position_measured").Eval(lean_context)).max() > 0.1
+    velocity, _ = _run(("hand.position_measured", "hand.velocity_estimated"))
+    assert {"hand_driver/state_estimated", "hand_driver/measured"} <= set(
+        _leaf_names(velocity))
+
+
+@pytest.mark.parametrize("measured, message", [
+    ("position_measured", "measured: expected True, False or names of"),
+    (("position_measurd",), "measured: 'position_measurd' is not one of"),
+])
+def test_a_bad_measured_value_of_the_primitive_driver_is_refused_in_one_line(measured,
+                                                                            message):
+    from handle_drake.systems.hand_driver import _measured_read
+
+    with pytest.raises(ValueError, match=message) as error:
+        _measured_read(measured)
+    assert "\n" not in str(error.value)
 
 
 def test_object_pose_alone_builds_the_selector_without_the_position_split():
