@@ -278,8 +278,6 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
             builder.ExportOutput(source.GetOutputPort(signal), f"{HAND}.{signal}")
 
 
-
-
 def _add_wrist_driver(builder, plant, scenario: Scenario,
                       finite_commands: bool = False, wanted=None) -> None:
     """The floating wrist's driver; exports ``wrist.pose`` and ``wrist.pose_measured``
