@@ -332,16 +332,17 @@ class SimulatedHandFirmware:
     def _loop(self) -> None:
         use_realtime_priority(self.config.realtime_priority)
         if self._on_request:
-            self._loop_on_request(self._period)
+            self._loop_on_request()
         else:
-            self._loop_cycle(self._period)
+            self._loop_cycle()
 
-    def _loop_cycle(self, period: float) -> None:
+    def _loop_cycle(self) -> None:
         """``feedback: cycle``: one wake-up per control cycle, like a firmware that reads
         its CAN receive FIFO at the start of each cycle: sleep to the deadline, take every
         frame that arrived meanwhile, step, publish. (Waking for each frame as well would
         double the context switches per cycle and gain nothing: the acknowledgement goes
         out with this cycle's feedback either way.)"""
+        period = self._period
         last = time.monotonic()
         deadline = last + period
         self._sample(last)
@@ -362,7 +363,7 @@ class SimulatedHandFirmware:
                 deadline = now + period
             self._publish()
 
-    def _loop_on_request(self, period: float) -> None:
+    def _loop_on_request(self) -> None:
         """``feedback: on_request``: the joint model runs on a grid of ``period`` (step k at
         ``t0 + k period``), and the firmware sleeps until a frame comes or a cycle without
         a request ends. Woken by frames, it first brings the model to the last grid time
@@ -372,6 +373,7 @@ class SimulatedHandFirmware:
         at the next wake-up, on the same grid, so the model's trajectory is the one a
         step at every deadline gives (the steps skipped are integrated in one call,
         with the same ``<= 1 ms`` substeps)."""
+        period = self._period
         start = self._grid_start = time.monotonic()
         self._grid_index = 0
         self._sample(start)

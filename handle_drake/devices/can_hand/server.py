@@ -220,7 +220,7 @@ class CanBusServer:
         self._target_seq = 0
         self._setpoint = None
         self._unsent = False
-        self._reached = False  # the setpoint equals the target (both set)
+        self._reached = False  # nothing left to commit: the setpoint is the target
         self._holding = False
         self._clamped = False
         self._last_command_time = 0.0
