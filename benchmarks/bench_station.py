@@ -241,7 +241,7 @@ def _plant_case(variant: str) -> _Case:
                      simulator.get_context())).translation()[2])
 
 
-def _replay_case() -> tuple[_Case, float]:
+def _replay_cases(builds: int = 1) -> tuple[list[_Case], float]:
     """The bare plant on the station's own frames: the desired states the station's
     hand and wrist drivers hand the plant at every 1 ms step of the demo trial
     (recorded from one station run, held in ``TrajectorySource`` zero-order holds),
@@ -250,7 +250,9 @@ def _replay_case() -> tuple[_Case, float]:
     returned by the second value, and the lift of the replay is checked against
     it), so this floor isolates what the station's Python systems, loggers and
     diagram add, with none of the physics differing (the ``model`` floor drives
-    the hand without the drivers' rate limit: another motion, other contacts)."""
+    the hand without the drivers' rate limit: another motion, other contacts).
+    ``builds`` diagrams are built from the one recording (identical work, each a
+    build of its own)."""
     import numpy as np
     from pydrake.multibody.plant import AddMultibodyPlant
     from pydrake.systems.analysis import Simulator
@@ -280,31 +282,43 @@ def _replay_case() -> tuple[_Case, float]:
     body = object_body(source)
     station_lift = body.EvalPoseInWorld(source.GetMyContextFromRoot(root)).translation()[2]
 
-    builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(scenario.plant_config, builder)
-    AddPlantModels(plant, scenario)
-    plant.Finalize()
     # Sample j is read by the plant's step at j h: held on [j h - h/2, (j + 1) h - h/2).
     breaks = np.concatenate([[0.0], (np.arange(1, steps + 1) - 0.5) * h, [TRIAL_SECONDS + h]])
-    for name, instance in (("hand_driver", "hand"), ("wrist_driver", "wrist")):
+    holds = {}
+    for name in drivers:
         values = np.array(samples[name]).T
-        values = np.hstack([values, values[:, -1:]])
-        hold = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(breaks,
-                                                                                    values)))
-        builder.Connect(hold.get_output_port(),
-                        plant.get_desired_state_input_port(plant.GetModelInstanceByName(instance)))
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
-    default = diagram.CreateDefaultContext()
-    plant.SetPositionsAndVelocities(plant.GetMyMutableContextFromRoot(default), x0)
-    body = object_body(plant)
+        holds[name] = PiecewisePolynomial.ZeroOrderHold(breaks,
+                                                        np.hstack([values, values[:, -1:]]))
 
-    def reset():
-        simulator.get_mutable_context().SetTimeStateAndParametersFrom(default)
-        simulator.Initialize()
+    def build() -> _Case:
+        builder = DiagramBuilder()
+        plant, _ = AddMultibodyPlant(scenario.plant_config, builder)
+        AddPlantModels(plant, scenario)
+        plant.Finalize()
+        for name, instance in (("hand_driver", "hand"), ("wrist_driver", "wrist")):
+            hold = builder.AddSystem(TrajectorySource(holds[name]))
+            builder.Connect(hold.get_output_port(), plant.get_desired_state_input_port(
+                plant.GetModelInstanceByName(instance)))
+        diagram = builder.Build()
+        simulator = Simulator(diagram)
+        default = diagram.CreateDefaultContext()
+        plant.SetPositionsAndVelocities(plant.GetMyMutableContextFromRoot(default), x0)
+        body = object_body(plant)
 
-    return _Case(simulator, reset, lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
-        simulator.get_context())).translation()[2]), station_lift
+        def reset():
+            simulator.get_mutable_context().SetTimeStateAndParametersFrom(default)
+            simulator.Initialize()
+
+        return _Case(simulator, reset, lambda: body.EvalPoseInWorld(plant.GetMyContextFromRoot(
+            simulator.get_context())).translation()[2])
+
+    return [build() for _ in range(builds)], station_lift
+
+
+def _replay_case() -> tuple[_Case, float]:
+    """One build of :func:`_replay_cases`, and the station's final object height."""
+    (case,), station_lift = _replay_cases(1)
+    return case, station_lift
 
 
 STATION_CASES = [(c, t, "sap") for c in ("point", "hydroelastic_with_fallback")
@@ -337,9 +351,9 @@ def bench_realtime(repeats: int, demo_only: bool = False, baselines=(), builds: 
     variants = PLANT_VARIANTS[:1] if demo_only else PLANT_VARIANTS
     station = {case: _station_case(*case) for case in cases}
     plant = {variant: _plant_case(variant) for variant in variants}
-    replay, station_z = _replay_case()
-    # identical work: the A/A control of the method, and the builds the headline pools
-    twins = [_replay_case()[0] for _ in range(max(builds, 2) - 1)]
+    # identical work: the A/A control of the method (replay twin), and the builds the
+    # headline pools
+    (replay, *twins), station_z = _replay_cases(max(builds, 2))
     twin = twins[0]
     station_builds = [station[STATION_CASES[0]]] + [_station_case(*STATION_CASES[0])
                                                     for _ in range(builds - 1)]
