@@ -11,9 +11,8 @@ harness is the "simulate" part and owns what all of them share:
 
 - the diagram: the scenario's station (:func:`~handle_drake.station.MakeHandStation`),
   a controller added by the caller's ``add_controller(builder, station)``,
-  one ``VectorLogSink`` of named ports (the station's, then the
-  controller's; :meth:`logs` gives each its :class:`PortLog`) and, on request,
-  :class:`~handle_drake.geometry.quality.ObjectContacts`
+  ``VectorLogSink`` loggers of named ports (the station's, then the
+  controller's) and, on request, :class:`~handle_drake.geometry.quality.ObjectContacts`
   (the hand's contacts on the object, for the grasp metric). It is built once;
   pydrake diagrams do not pickle, so a process pool builds one per worker
   (send parameters, return plain numbers).
@@ -42,7 +41,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus
-from pydrake.systems.primitives import Multiplexer, VectorLogSink
+from pydrake.systems.primitives import VectorLogSink
 
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.base.viewing import frame_hand_and_object
@@ -51,7 +50,7 @@ from handle_drake.scenario import Scenario
 from handle_drake.station import GetPlant, MakeHandStation, object_body
 from handle_drake.systems.hand_driver import WRIST_JOINTS, pose_to_wrist_joints
 
-__all__ = ["TrialHarness", "PortLog", "RunResult", "HoldScore", "LOG_PERIOD", "DEFAULT_LOG",
+__all__ = ["TrialHarness", "RunResult", "HoldScore", "LOG_PERIOD", "DEFAULT_LOG",
            "advance_recording"]
 
 LOG_PERIOD = 0.01  # s, sample period of the harness's loggers
@@ -135,49 +134,6 @@ def advance_recording(simulator, t_final, station, meshcat=None,
     return wall
 
 
-class PortLog:
-    """One recorded port's samples: its rows of the harness's one Drake ``VectorLog``,
-    read with the ``VectorLog`` methods (``sample_times()``: (T,) s; ``data()``:
-    (port size, T), a view of the log's rows; ``num_samples()``)."""
-
-    def __init__(self, log, rows: slice):
-        self._log, self._rows = log, rows
-
-    def sample_times(self) -> np.ndarray:
-        return self._log.sample_times()
-
-    def data(self) -> np.ndarray:
-        return self._log.data()[self._rows]
-
-    def num_samples(self) -> int:
-        return self._log.num_samples()
-
-
-def _add_logger(builder, ports: dict):
-    """One ``VectorLogSink`` sampling every port of ``ports`` (name -> output port) each
-    ``LOG_PERIOD``, through a ``Multiplexer`` when there are several (exact copies, one
-    sample event for all); returns it (None without ports) and name -> its rows.
-
-    One logger rather than one per port: each system in the diagram costs the simulator
-    some work at every step, read or not (``bench_station_parts``), and the demo's
-    three ports cost three loggers where a multiplexer and a logger do."""
-    if not ports:
-        return None, {}
-    sizes = [port.size() for port in ports.values()]
-    ends = np.cumsum(sizes)
-    rows = {name: slice(int(end - size), int(end))
-            for name, size, end in zip(ports, sizes, ends, strict=True)}
-    logger = builder.AddNamedSystem("log", VectorLogSink(int(ends[-1]), LOG_PERIOD))
-    if len(ports) == 1:
-        builder.Connect(next(iter(ports.values())), logger.get_input_port())
-        return logger, rows
-    mux = builder.AddNamedSystem("log_ports", Multiplexer(sizes))
-    for i, port in enumerate(ports.values()):
-        builder.Connect(port, mux.get_input_port(i))
-    builder.Connect(mux.get_output_port(), logger.get_input_port())
-    return logger, rows
-
-
 class TrialHarness:
     """The scenario's station + a controller + loggers (+ object contacts), built once.
 
@@ -220,13 +176,15 @@ class TrialHarness:
                 else tuple(outputs) + tuple(log)))
         self.plant = None if hardware else GetPlant(self.station)
         self.controller = None if add_controller is None else add_controller(builder, self.station)
-        ports = {}
-        for name in dict.fromkeys(log):  # each name once, in order
+        self._loggers = {}
+        for name in log:
             for system in (self.station, self.controller):
                 if system is not None and system.HasOutputPort(name):
-                    ports[name] = system.GetOutputPort(name)
+                    output = system.GetOutputPort(name)
+                    logger = builder.AddSystem(VectorLogSink(output.size(), LOG_PERIOD))
+                    builder.Connect(output, logger.get_input_port())
+                    self._loggers[name] = logger
                     break
-        self._logger, self._log_rows = _add_logger(builder, ports)
         self._object_contacts = None
         if object_contacts:
             hand = self.plant.GetModelInstanceByName("hand")
@@ -254,8 +212,8 @@ class TrialHarness:
         then call :meth:`initialize`.
         """
         self.context.SetTimeStateAndParametersFrom(self._default_context)
-        if self._logger is not None:
-            self._logger.FindMutableLog(self.context).Clear()
+        for logger in self._loggers.values():
+            logger.FindMutableLog(self.context).Clear()
 
     def initialize(self) -> None:
         self.simulator.Initialize()
@@ -324,11 +282,8 @@ class TrialHarness:
         return score_contacts(self.contacts(), params, surface, surface_radius)
 
     def logs(self) -> dict:
-        """Name -> :class:`PortLog` of every recorded port (this run so far)."""
-        if self._logger is None:
-            return {}
-        log = self._logger.FindLog(self.context)
-        return {name: PortLog(log, rows) for name, rows in self._log_rows.items()}
+        """Name -> Drake ``VectorLog`` of every recorded port (this run so far)."""
+        return {name: logger.FindLog(self.context) for name, logger in self._loggers.items()}
 
     def run_result(self, sim_time: float, wall_time: float,
                    score: HoldScore | None = None) -> RunResult:
