@@ -97,6 +97,24 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
     return out
 
 
+def _speed_note(out: dict) -> str:
+    """The trial's ratios to its floors (paired by round: median, the median's 95 %
+    interval, rounds' range) and the target (<= 1.10x the bare plant, own workers)."""
+    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+    from speed import judge
+
+    parts = []
+    for key, label in (("own_worker_trial_over_bare", "trial / bare plant, own workers"),
+                       ("own_worker_trial_over_replay", "trial / replay, own workers"),
+                       ("trial_over_replay", "trial / replay, bench's process")):
+        r = out[key]
+        parts.append(f"{label} {r['median']:.3f}x [95 % {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f}]"
+                     f" ({min(r['rounds']):.3f}-{max(r['rounds']):.3f})")
+    return ("CPU, paired by round, median [its 95 % bootstrap interval] (rounds' range): "
+            + "; ".join(parts) + ". Target: trial <= 1.10x the bare plant (own workers): "
+            + judge(out["own_worker_trial_over_bare"], 1.10) + ".")
+
+
 def instructions(args) -> dict:
     """The trial and its floors' instructions per run (``support/instructions.py``: exact,
     where their times vary by +-5 % between processes), each in a process of its own
@@ -225,12 +243,14 @@ def main(argv=None) -> int:
             result[key] = table(args.tasks, args.optimizers, args.seeds, args.trials,
                                 args.targets, args.db, None, args.particles, executor,
                                 args.evaluation)
-    printed = []
+    printed, notes = [], []
     if args.speed:
         printed += table_rows(result["speed"], "speed")
+        notes.append(_speed_note(result["speed"]))
+        print(notes[-1])
     if args.table:
         printed += table_rows(result[key], "task")
-    run.finish(printed, result, args.out)
+    run.finish(printed, result, args.out, notes=notes)
     print(f"wrote {args.out}")
     return 0
 

@@ -60,12 +60,43 @@ def ratios(times: dict, floor_name: str, sim_time: float) -> dict:
             "ratio_to_floor": ratio, "load_end": load}
 
 
+def median_ci(values, confidence: float = 0.95) -> list[float]:
+    """Percentile-bootstrap confidence interval of the median of ``values`` (a run's
+    per-round ratios), seeded (the same rounds give the same interval): how far the run's
+    median may lie from the ratio it estimates, given its rounds' spread. A run of fewer
+    than 5 rounds gives ``[nan, nan]`` (too few to resolve)."""
+    from scipy.stats import bootstrap
+
+    x = np.asarray(values, dtype=float)
+    if x.size < 5:
+        return [float("nan"), float("nan")]
+    low, high = bootstrap((x,), np.median, confidence_level=confidence, method="percentile",
+                          rng=np.random.default_rng(0)).confidence_interval
+    return [float(low), float(high)]
+
+
+def judge(ratio: dict, target: float) -> str:
+    """A per-round ratio (``median``, ``ci95``) against ``target`` (at most): "met" when
+    the whole interval is at or under it, "met by the median" when the interval straddles
+    it, "NOT met" when the median is over it."""
+    low, high = ratio["ci95"]
+    if ratio["median"] > target:
+        return "NOT met"
+    if np.isnan(high):
+        return "met by the median (too few rounds for an interval)"
+    if high <= target:
+        return "met"
+    return f"met by the median (its 95 % interval {low:.3f}-{high:.3f} reaches over {target:.2f})"
+
+
 def paired(times: dict, a: str, b: str, label: str) -> dict:
-    """``a / b`` round by round: its median and the rounds, printed."""
+    """``a / b`` round by round: its median, the median's 95 % interval and the rounds,
+    printed."""
     r = np.array(times[a]) / np.array(times[b])
-    print(f"{label}, paired by round: median {np.median(r):.3f} "
-          f"({' '.join(f'{v:.2f}' for v in r)})", flush=True)
-    return {"median": float(np.median(r)), "rounds": r.tolist()}
+    ci = median_ci(r)
+    print(f"{label}, paired by round: median {np.median(r):.3f} [95 % {ci[0]:.3f}-{ci[1]:.3f}]"
+          f" ({' '.join(f'{v:.2f}' for v in r)})", flush=True)
+    return {"median": float(np.median(r)), "ci95": ci, "rounds": r.tolist()}
 
 
 def speed_table(cases: dict, workers: dict, n: int, *, trial: str, floor: str,
