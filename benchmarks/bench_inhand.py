@@ -101,14 +101,14 @@ def _speed_note(out: dict) -> str:
     """The trial's ratios to its floors (paired by round: median, the median's 95 %
     interval, rounds' range) and the target (<= 1.10x the bare plant, own workers)."""
     sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
-    from speed import judge
+    from speed import ci_text, judge
 
     parts = []
     for key, label in (("own_worker_trial_over_bare", "trial / bare plant, own workers"),
                        ("own_worker_trial_over_replay", "trial / replay, own workers"),
                        ("trial_over_replay", "trial / replay, bench's process")):
         r = out[key]
-        parts.append(f"{label} {r['median']:.3f}x [95 % {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f}]"
+        parts.append(f"{label} {r['median']:.3f}x {ci_text(r['ci95'])}"
                      f" ({min(r['rounds']):.3f}-{max(r['rounds']):.3f})")
     return ("CPU, paired by round, median [its 95 % bootstrap interval] (rounds' range): "
             + "; ".join(parts) + ". Target: trial <= 1.10x the bare plant (own workers): "

@@ -32,7 +32,8 @@ case always follows the same one. Each ratio's median is printed with its 95 %
 percentile-bootstrap interval (``support/speed.py``); the target reads "met" when the
 whole interval of the headline is at or under 1.10x, "met by the median" when it
 straddles the line (more rounds narrow it: ``--repeats 20 --builds 3`` resolves about
-+-0.5 % here).
++-0.5 % here). The interval resamples rounds of the same builds: the builds' own
+differences (their placement in memory) are averaged by ``--builds``, not held in it.
 
 With ``--baseline REV`` (repeatable) the demo station is also built with the tactile
 sensor and the hand and wrist drivers of ``handle_drake/systems/{tactile,hand_driver}.py``
@@ -69,7 +70,7 @@ from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither
 pin_blas(force=False)
 
 from script_floor import connect_script  # noqa: E402
-from speed import judge, median_ci  # noqa: E402
+from speed import ci_text, judge, median_ci  # noqa: E402
 
 from handle_drake.apps.demo import DEMO_SCENARIO  # noqa: E402
 from handle_drake.base.models import diagrams_dir  # noqa: E402
@@ -452,7 +453,7 @@ def _print_ratios(block: dict, labels) -> None:
     interval and its rounds' range."""
     for key, label in labels:
         r = block[key]
-        print(f"{label}: {r['median']:.3f}x [95 % {r['ci95'][0]:.3f}-{r['ci95'][1]:.3f}] "
+        print(f"{label}: {r['median']:.3f}x {ci_text(r['ci95'])} "
               f"(rounds {r['min']:.3f}-{r['max']:.3f})")
 
 
@@ -547,8 +548,8 @@ def main(argv=None) -> int:
           f"frames {overhead['replay']['realtime_factor']:.1f}x in this run (the machine sets "
           f"both)")
     print(f"targets: station <= 1.10x the bare plant on its frames (CPU): "
-          f"{judge(headline, 1.10)} ({headline['median']:.3f}x, the median's 95 % interval "
-          f"{headline['ci95'][0]:.3f}-{headline['ci95'][1]:.3f}; the A/A control "
+          f"{judge(headline, 1.10)} ({headline['median']:.3f}x {ci_text(headline['ci95'])}; "
+          f"the A/A control "
           f"{overhead['twin_over_replay_cpu']['median']:.3f}x); reset <= 5 ms: "
           f"{'met' if reset['reset_ms_median'] <= 5 else 'NOT met'}")
     printed = [{k: r[k] for k in ("contact_model", "approximation", "time_step_ms",
@@ -568,7 +569,7 @@ def main(argv=None) -> int:
               *((f"station, {k} / replay", r)
                 for k, r in overhead["ablation_over_replay_cpu"].items())]
     notes = ["CPU, paired by round (median [its 95 % bootstrap interval], rounds' range): "
-             + "; ".join(f"{label} {r['median']:.3f}x [{r['ci95'][0]:.3f}-{r['ci95'][1]:.3f}]"
+             + "; ".join(f"{label} {r['median']:.3f}x {ci_text(r['ci95'])}"
                          f" ({r['min']:.3f}-{r['max']:.3f})" for label, r in ratios)
              + f". Target, station <= 1.10x the replay ({args.builds} builds each): "
              + judge(headline, 1.10) + "."]

@@ -63,16 +63,24 @@ def ratios(times: dict, floor_name: str, sim_time: float) -> dict:
 def median_ci(values, confidence: float = 0.95) -> list[float]:
     """Percentile-bootstrap confidence interval of the median of ``values`` (a run's
     per-round ratios), seeded (the same rounds give the same interval): how far the run's
-    median may lie from the ratio it estimates, given its rounds' spread. A run of fewer
-    than 5 rounds gives ``[nan, nan]`` (too few to resolve)."""
+    median may lie from the ratio it estimates, given its rounds' spread (rounds of the same
+    builds: the differences between builds are not in it). A run of fewer than 5 rounds
+    gives ``[None, None]`` (too few to resolve; null in the JSON)."""
     from scipy.stats import bootstrap
 
     x = np.asarray(values, dtype=float)
     if x.size < 5:
-        return [float("nan"), float("nan")]
+        return [None, None]
     low, high = bootstrap((x,), np.median, confidence_level=confidence, method="percentile",
                           rng=np.random.default_rng(0)).confidence_interval
     return [float(low), float(high)]
+
+
+def ci_text(ci) -> str:
+    """``median_ci``'s interval as printed: ``[95 % 1.088-1.095]``."""
+    if ci[0] is None:
+        return "[95 %: too few rounds]"
+    return f"[95 % {ci[0]:.3f}-{ci[1]:.3f}]"
 
 
 def judge(ratio: dict, target: float) -> str:
@@ -82,7 +90,7 @@ def judge(ratio: dict, target: float) -> str:
     low, high = ratio["ci95"]
     if ratio["median"] > target:
         return "NOT met"
-    if np.isnan(high):
+    if high is None:
         return "met by the median (too few rounds for an interval)"
     if high <= target:
         return "met"
@@ -94,7 +102,7 @@ def paired(times: dict, a: str, b: str, label: str) -> dict:
     printed."""
     r = np.array(times[a]) / np.array(times[b])
     ci = median_ci(r)
-    print(f"{label}, paired by round: median {np.median(r):.3f} [95 % {ci[0]:.3f}-{ci[1]:.3f}]"
+    print(f"{label}, paired by round: median {np.median(r):.3f} {ci_text(ci)}"
           f" ({' '.join(f'{v:.2f}' for v in r)})", flush=True)
     return {"median": float(np.median(r)), "ci95": ci, "rounds": r.tolist()}
 
