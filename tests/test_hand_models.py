@@ -8,10 +8,8 @@ the world (the station owns mounts).
 
 from __future__ import annotations
 
-import importlib.util
 import logging
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +38,7 @@ from handle_drake.base.hands import (
     pad_geometry_ids,
 )
 from handle_drake.base.models import models_dir
+from handle_drake.base.testing import load_file_module
 
 PI = math.pi
 HALF_PI = PI / 2
@@ -381,10 +380,7 @@ def test_generated_sdf_is_committed(kind):
     """The committed SDF equals its generator's output (regenerate after editing)."""
     folder = {"shadow": "shadow_hand", "barrett": "barrett_hand"}[kind]
     path = MODELS / folder / "generate.py"
-    module_spec = importlib.util.spec_from_file_location(f"test_generate_{kind}", path)
-    module = importlib.util.module_from_spec(module_spec)
-    sys.modules[module_spec.name] = module
-    module_spec.loader.exec_module(module)
+    module = load_file_module(path, f"test_generate_{kind}")
     committed = (MODELS / get_hand_spec(kind).model_relative_path).read_text()
     assert module.make_sdf() == committed
 

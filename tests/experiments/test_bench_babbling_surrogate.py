@@ -1,6 +1,5 @@
 """bench_babbling.py --surrogate: optimisers run on a grid surrogate as on simulated trials."""
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -8,6 +7,7 @@ import numpy as np
 import pytest
 
 from handle_drake.apps.babbling.babbling import GridSurrogate, trials_to_within
+from handle_drake.base.testing import load_file_module
 from handle_drake.learning.optim.bo import _derived_seed
 
 BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_babbling.py"
@@ -15,10 +15,7 @@ BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_babbling.py"
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_babbling_under_test", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file_module(BENCH, "bench_babbling_under_test")
 
 
 def _bump_grid(n=21, centre=(0.009, -0.006)):

@@ -1,21 +1,19 @@
 """benchmarks/support/speed.py: a speed ratio's median comes with its 95 % interval, and a
 target is judged met only when the whole interval is under it."""
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from handle_drake.base.testing import load_file_module
 
 SPEED = Path(__file__).resolve().parents[2] / "benchmarks" / "support" / "speed.py"
 
 
 @pytest.fixture(scope="module")
 def speed():
-    spec = importlib.util.spec_from_file_location("bench_speed_under_test", SPEED)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_file_module(SPEED, "bench_speed_under_test")
 
 
 def test_the_interval_covers_the_true_median_about_95_percent_of_the_time(speed):
