@@ -483,6 +483,7 @@ def main(argv=None) -> int:
     results_run = ResultsRun("Station speed: Shadow grasp trial against the bare plant", args)
     repeats = 1 if args.quick else args.repeats
     load_before = os.getloadavg()[0]
+    each = f"{args.builds} build{'s' if args.builds > 1 else ''} each"
     rows, floors, overhead = bench_realtime(repeats, args.demo, args.baseline, args.builds)
     reset = bench_reset(repeats)
     print(f"Shadow grasp trial, {TRIAL_SECONDS:.0f} s simulated, median of {repeats} "
@@ -505,7 +506,7 @@ def main(argv=None) -> int:
           f"station {same['station_final_object_z']!r}: "
           f"{'bit-identical' if same['bit_identical'] else 'DIFFERENT'}")
     _print_ratios(overhead, (("station_over_replay_cpu_builds",
-                              f"station / replay, CPU, {args.builds} builds each"),
+                              f"station / replay, CPU, {each}"),
                              ("station_over_replay_cpu", "station / replay, CPU, first builds"),
                              ("twin_over_replay_cpu",
                               "replay twin / replay, CPU (A/A: identical work)"),
@@ -560,7 +561,7 @@ def main(argv=None) -> int:
                                                          "realtime_factor",
                                                          "object_lift_cm_at_2s")}}
                 for f in [overhead["replay"], *floors]]
-    ratios = [(f"station / replay, {args.builds} builds each",
+    ratios = [(f"station / replay, {each}",
                overhead["station_over_replay_cpu_builds"]),
               ("station / replay, first builds", overhead["station_over_replay_cpu"]),
               *((f"station build {k} / build 1", r) for k, r in
@@ -571,7 +572,7 @@ def main(argv=None) -> int:
     notes = ["CPU, paired by round (median [its 95 % bootstrap interval], rounds' range): "
              + "; ".join(f"{label} {r['median']:.3f}x {ci_text(r['ci95'])}"
                          f" ({r['min']:.3f}-{r['max']:.3f})" for label, r in ratios)
-             + f". Target, station <= 1.10x the replay ({args.builds} builds each): "
+             + f". Target, station <= 1.10x the replay ({each}): "
              + judge(headline, 1.10) + "."]
     results_run.finish(printed, {"realtime": rows, "plant_only": floors, "reset": reset,
                                  "station_overhead": overhead, "cpu_count": os.cpu_count(),
