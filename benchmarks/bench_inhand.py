@@ -41,6 +41,8 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
+
 from handle_drake.base.blas import pin_blas  # noqa: E402 - light: loads neither numpy nor Drake
 
 pin_blas(force=False)
@@ -57,7 +59,6 @@ RESULTS = Path(__file__).parent / "results" / "inhand.json"
 
 
 def speed(rounds: int, baseline: str | None = None) -> dict:
-    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from floors import inhand_bare, inhand_replay
     from speed import OWN, paired, speed_table
     from trial_worker import BaselineTrial, outcome_dict, stroke
@@ -100,7 +101,6 @@ def speed(rounds: int, baseline: str | None = None) -> dict:
 def _speed_note(out: dict) -> str:
     """The trial's ratios to its floors (paired by round: median, the median's 95 %
     interval, rounds' range) and the target (<= 1.10x the bare plant, own workers)."""
-    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from speed import ci_text, judge
 
     parts = []
@@ -120,7 +120,6 @@ def instructions(args) -> dict:
     where their times vary by +-5 % between processes), each in a process of its own
     under callgrind; with ``--baseline`` also the trial of that git revision. Written to a
     section and a JSON of their own."""
-    sys.path.insert(0, str(Path(__file__).parent / "support"))  # helpers, not benchmarks
     from instructions import write_section
 
     cases = {"trial (reset, checks)": ("inhand", {}, None),
