@@ -334,16 +334,16 @@ PLANT_VARIANTS = ("model", "no_self_collision", "no_contact")
 
 
 def _paired(top: _Case, bottom: _Case, what: str) -> dict:
-    """Per-round ratios top/bottom (the two ran back to back), median and range."""
-    values = [a / b for a, b in zip(getattr(top, what), getattr(bottom, what), strict=True)]
-    return {"median": statistics.median(values), "ci95": median_ci(values),
-            "min": min(values), "max": max(values), "rounds": values}
+    """Per-round ratios top/bottom (the two ran back to back): :func:`_paired_builds` of
+    one build each, of ``what`` (``"cpus"`` or ``"walls"``)."""
+    return _paired_builds([top], [bottom], what)
 
 
-def _paired_builds(tops: list[_Case], bottoms: list[_Case]) -> dict:
-    """Per round: the CPU of ``tops`` summed over the builds over that of ``bottoms``."""
-    top = [sum(r) for r in zip(*(c.cpus for c in tops), strict=True)]
-    bottom = [sum(r) for r in zip(*(c.cpus for c in bottoms), strict=True)]
+def _paired_builds(tops: list[_Case], bottoms: list[_Case], what: str = "cpus") -> dict:
+    """Per round: ``what`` of ``tops`` summed over the builds over that of ``bottoms``;
+    the ratios' median, its 95 % interval, their range and the rounds."""
+    top = [sum(r) for r in zip(*(getattr(c, what) for c in tops), strict=True)]
+    bottom = [sum(r) for r in zip(*(getattr(c, what) for c in bottoms), strict=True)]
     values = [t / b for t, b in zip(top, bottom, strict=True)]
     return {"median": statistics.median(values), "ci95": median_ci(values),
             "min": min(values), "max": max(values), "rounds": values}
