@@ -202,10 +202,13 @@ def _export_measured(builder, size, q_index, v_index, read=MEASURED_OUTPUTS) -> 
     ``q_index`` then ``v_index``: one 0/1 MatrixGain, exact copies of finite values), split
     into ``position_measured`` and ``velocity_estimated`` by a Demultiplexer (copies): two
     systems for the three signals (each system in the diagram costs the simulator some
-    work at every step, read or not). When ``read`` is ``position_measured`` alone, one
-    0/1 MatrixGain of the entries ``q_index`` exports it (the same copies)."""
-    if set(read) == {"position_measured"}:
-        _export_selections(builder, size, (("position_measured", q_index),))
+    work at every step, read or not). When ``read`` names one signal alone, one 0/1
+    MatrixGain of its entries exports it (the same copies), and nothing else is built."""
+    entries = {"position_measured": q_index, "velocity_estimated": v_index,
+               "state_estimated": np.r_[q_index, v_index]}
+    if len(set(read)) == 1:
+        (name,) = set(read)
+        _export_selections(builder, size, ((name, entries[name]),))
         return
     nq = len(q_index)
     state = builder.AddNamedSystem("state_estimated", MatrixGain(
@@ -259,8 +262,8 @@ class HandDriverDiagram(Diagram):
     does not hold on a non-finite command, and its ``position`` input must be connected.
     ``measured=False`` leaves out the measured-state selectors, with their outputs and
     the ``plant_state`` input (for a caller that reads none of them); a collection of
-    :data:`MEASURED_OUTPUTS` names builds those read (``position_measured`` alone: one
-    selector, the others absent).
+    :data:`MEASURED_OUTPUTS` names builds those read (one name alone: its one selector,
+    the others absent).
     """
 
     def __init__(self, plant, model_instance, spec, initial_command, lower, upper,

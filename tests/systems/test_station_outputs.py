@@ -10,6 +10,7 @@ from handle_drake.apps.demo import DEMO_SCENARIO
 from handle_drake.base.models import diagrams_dir
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import STATION_OUTPUTS, MakeHandStation
+from handle_drake.systems.hand_driver import MEASURED_OUTPUTS
 from handle_drake.trial.harness import TrialHarness
 from handle_drake.trial.simulate import ScenarioRunner
 
@@ -96,6 +97,19 @@ def test_a_measured_position_alone_is_one_selector_and_reads_the_full_stations_b
     velocity, _ = _run(("hand.position_measured", "hand.velocity_estimated"))
     assert {"hand_driver/state_estimated", "hand_driver/measured"} <= set(
         _leaf_names(velocity))
+
+
+@pytest.mark.parametrize("signal", ["velocity_estimated", "state_estimated"])
+def test_any_one_measured_signal_alone_is_one_selector_with_the_full_stations_bits(signal):
+    full, full_context = _run(None)
+    lean, lean_context = _run((f"hand.{signal}",))
+    names = [n for n in _leaf_names(lean) if n.startswith("hand_driver/")]
+    assert f"hand_driver/{signal}" in names and "hand_driver/measured" not in names
+    others = set(MEASURED_OUTPUTS) - {signal}
+    assert not any(lean.HasOutputPort(f"hand.{other}") for other in others)
+    value = lean.GetOutputPort(f"hand.{signal}").Eval(lean_context)
+    assert value.tobytes() == full.GetOutputPort(f"hand.{signal}").Eval(full_context).tobytes()
+    assert np.abs(value).max() > 0.01  # the hand moves at the end of the run (not at rest)
 
 
 @pytest.mark.parametrize("measured, message", [
