@@ -14,7 +14,8 @@ section sits between two markers naming the benchmark,
 
 so the hand-written interpretation above and below is kept, and several
 benchmarks can share one page (one section each). A page without the section
-gets it after its first heading; a missing page is created.
+gets it under its "## Current" heading (else its first heading); a missing page is
+created.
 
 The command-line options (:func:`add_page_arguments`): ``--results-page PATH``
 (default ``docs/results/<page>.md``) and ``--no-page``.
@@ -204,7 +205,11 @@ def update_page(path: Path, source: str, section: str, title: str | None = None)
         text = head + block + tail
     elif text:
         lines = text.splitlines(keepends=True)
-        at = next((i + 1 for i, line in enumerate(lines) if line.startswith("# ")), 0)
+        # a new section goes on top of the page's "## Current" tables, else under its title
+        at = next((i + 1 for i, line in enumerate(lines) if line.strip() == "## Current"),
+                  None)
+        if at is None:
+            at = next((i + 1 for i, line in enumerate(lines) if line.startswith("# ")), 0)
         rest = "".join(lines[at:]).lstrip("\n")
         text = "".join(lines[:at]) + ("\n" if at else "") + block + "\n\n" + rest
     else:
