@@ -291,3 +291,66 @@ def test_a_reduced_run_leaves_the_committed_page_and_json_byte_identical(tmp_pat
     reduced = (tmp_path / "r" / "trial_log.md").read_text()
     assert "--quick --rounds 1" in reduced and "| runner grouped |" in reduced
     assert json.loads((tmp_path / "r" / "trial_log.json").read_text())["run"]["command"]
+
+
+# ------------------------------------------------------------ the pages show the present
+PAGES = sorted((ROOT / "docs" / "results").glob("*.md"))
+MAX_LINES = {"inhand": 320}  # its many targets (and room for a convergence table)
+DEFAULT_MAX_LINES = 160
+MAX_NOTES_LINES = 45
+HISTORY = re.compile(r"\b(pass|passes|run of|runs of|earlier|branch|issue-\d)", re.IGNORECASE)
+COMMAND = re.compile(r"`(python benchmarks/|handle-drake )")
+DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+
+
+def _sections(text: str, level: str) -> list[tuple[str, str]]:
+    """(heading, body) of each heading of ``level`` ("## " or "### ") in ``text``."""
+    parts = re.split(rf"(?m)^({re.escape(level)}.*)$", text)
+    return [(parts[i].strip(), parts[i + 1]) for i in range(1, len(parts) - 1, 2)]
+
+
+def _subsections_outside_markers(current: str) -> list[tuple[str, str]]:
+    """The current section's targets: each ``### `` heading to the next (a benchmark's
+    generated heading sits inside its markers; the verdict written below them belongs to it)."""
+    return _sections(current, "### ")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.stem for p in PAGES])
+def test_a_results_page_shows_the_present(page):
+    """A page is one "## Current" section of tables (one per target, each with its command,
+    date, machine load and verdict) and at most a short "## How measured / notes"; no
+    history of passes and runs (git keeps it)."""
+    text = page.read_text()
+    lines = text.splitlines()
+    bound = MAX_LINES.get(page.stem, DEFAULT_MAX_LINES)
+    assert len(lines) <= bound, f"{page.name}: {len(lines)} lines, at most {bound}"
+    assert lines[0].startswith("# ") and text.count("\n# ") == 0, f"{page.name}: one title"
+    headings = [h for h, _ in _sections(text, "## ")]
+    assert headings in (["## Current"], ["## Current", "## How measured / notes"]), (
+        f"{page.name}: sections {headings}")
+    before_current = text.split("\n## Current", 1)[0].splitlines()[1:]
+    assert all(not line.strip() for line in before_current), f"{page.name}: text above Current"
+    current = text.split("\n## Current", 1)[1].split("\n## How measured / notes", 1)[0]
+    if "\n## How measured / notes" in text:
+        notes = text.split("\n## How measured / notes", 1)[1]
+        assert len(notes.strip().splitlines()) <= MAX_NOTES_LINES, f"{page.name}: long notes"
+    targets = _subsections_outside_markers(current)
+    assert targets, f"{page.name}: no current table"
+    for heading, body in targets:
+        where = f"{page.name} {heading!r}"
+        assert not HISTORY.search(heading), f"{where}: a history heading"
+        assert "|---" in body, f"{where}: no table"
+        assert "**Verdict" in body, f"{where}: no verdict"
+        if body.lstrip().startswith(("Same run", "Same date")):
+            continue  # a further table of the target's run above (its command, date, load)
+        assert COMMAND.search(body), f"{where}: no command"
+        assert DATE.search(body), f"{where}: no date"
+        assert "load" in body, f"{where}: no machine load"
+
+
+def test_the_page_check_refuses_a_lab_notebook(tmp_path):
+    """The check on a page written as passes fails (so the page test cannot pass vacuously)."""
+    notebook = ("# P\n\n## Current\n\n### Run of 2026-11-27, second pass\n\n"
+                "`python benchmarks/bench_x.py`, 2026-11-27, load 1.\n\n| a |\n|---|\n| 1 |\n")
+    (heading, body), = _subsections_outside_markers(notebook.split("## Current", 1)[1])
+    assert HISTORY.search(heading) and "**Verdict" not in body
