@@ -250,3 +250,9 @@ def test_function_lengths_counts_methods_and_nested_functions():
     source = "def f():\n    def g():\n        pass\n    return g\n\n\nclass A:\n" \
              "    def m(self):\n        x = 1\n        return x\n"
     assert function_lengths(source) == {"f": 4, "f.g": 2, "A.m": 3}
+
+
+def test_the_architecture_document_stays_a_design_of_at_most_400_lines():
+    """docs/ARCHITECTURE.md is the design; measurements belong in docs/results/ (issue 48)."""
+    lines = (PACKAGE.parent / "docs" / "ARCHITECTURE.md").read_text().splitlines()
+    assert len(lines) <= 400, f"docs/ARCHITECTURE.md: {len(lines)} lines, at most 400"
