@@ -82,7 +82,7 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results"
                         / "accelerometer_calibration.json")
-    add_page_arguments(parser, "accelerometer_calibration")
+    add_page_arguments(parser, "accelerometer_calibration", published={"seeds": 20})
     args = parser.parse_args()
     run = ResultsRun("Accelerometer at rest: roll/pitch error and flags per device and set-up",
                      args)

@@ -32,7 +32,7 @@ def main(argv=None) -> int:
     parser.add_argument("--places", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default="out/bench")
-    add_page_arguments(parser, "arm_reachability")
+    add_page_arguments(parser, "arm_reachability", published={"places": 2})
     args = parser.parse_args(argv)
     run = ResultsRun("Arm reachability of planned grasps per grasp class", args)
 

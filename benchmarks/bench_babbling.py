@@ -482,6 +482,7 @@ def surrogate_main(args, settings, objects, out: Path) -> int:
            if args.placement_error else "")
         # A subset of the objects does not overwrite the whole table.
         + ("" if tuple(objects) == OBJECT_ORDER else "_" + "+".join(objects)) + ".json")
+    results = args.results_run.output(results)  # out/results/ below the published budget
     results.parent.mkdir(parents=True, exist_ok=True)
     results.write_text(json.dumps(dict(
         surrogate=True, robust=robust, settings=dc.asdict(settings), seeds=seeds,
@@ -526,7 +527,8 @@ def main(argv=None) -> int:
                         help="--surrogate: Sobol points per object simulated to check the "
                              "surrogate, besides both optima (default 2)")
     add_executor_arguments(parser)  # grids and BO/random runs; gp_minimize stays local
-    add_page_arguments(parser, "babbling")
+    add_page_arguments(parser, "babbling", published={"quick": False, "seeds": 10, "trials": 100,
+                                                  "grid": 41, "skopt_seeds": 5, "objects": False})
     args = parser.parse_args(argv)
     run = args.results_run = ResultsRun(
         "Motor babbling: trials to within 5 / 10 / 20 % of the optimum per object", args)
@@ -704,6 +706,7 @@ def main(argv=None) -> int:
     results = (RESULTS.with_name(f"babbling_robust{args.placement_error * 1e3:g}mm"
                                  f"{robust['placement_samples']}.json")
                if args.placement_error else RESULTS)
+    results = run.output(results)  # out/results/ below the published budget
     results.parent.mkdir(parents=True, exist_ok=True)
     results.write_text(json.dumps(dict(robust=robust,
         quick=args.quick, settings=dc.asdict(settings), skopt_seeds=skopt_seeds,

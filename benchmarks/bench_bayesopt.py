@@ -273,7 +273,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer seeds, smaller budgets")
     parser.add_argument("--skip-efficiency", action="store_true")
-    add_page_arguments(parser, "bayesopt")
+    add_page_arguments(parser, "bayesopt", published={"quick": False})
     args = parser.parse_args(argv)
     run = ResultsRun("Bayesian optimisation: per-iteration overhead and trials to target", args)
     try:

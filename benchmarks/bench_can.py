@@ -679,7 +679,7 @@ def rounds(n: int, run: ResultsRun, old_clock: bool = False, hops: bool = False)
                {"rate_hz": RATE, "duration_s": DURATION, "cpu_count": os.cpu_count(),
                 "rounds": n, "load_average_start": load_start, "load_average_end": load_end,
                 "summary": table, "runs": runs}, out / json_name)
-    print(f"wrote {out / json_name}")
+    print(f"wrote {run.output(out / json_name)}")
 
 
 def main() -> None:
@@ -704,7 +704,7 @@ def main() -> None:
     parser.add_argument("--child-echo-udp", nargs=5, help=argparse.SUPPRESS)
     parser.add_argument("--child-tap", nargs=3, help=argparse.SUPPRESS)
     parser.add_argument("--child-echo-tcp", nargs=1, type=int, help=argparse.SUPPRESS)
-    add_page_arguments(parser, "can")
+    add_page_arguments(parser, "can", published={"only": False})
     args = parser.parse_args()
     if args.child:
         print(json.dumps(run_case(*args.child)), flush=True)
@@ -729,7 +729,8 @@ def main() -> None:
                      "its figures do not go on the page)")
     if args.rounds:
         rounds(args.rounds, ResultsRun("CAN hand: interleaved rounds, Barrett against Shadow",
-                                       args), old_clock=args.old_clock, hops=args.hops)
+                                       args, published={"rounds": 4, "only": False}),
+               old_clock=args.old_clock, hops=args.hops)
         return
     run = ResultsRun("CAN hand: full-hand setpoint round trip at 1 kHz", args)
 

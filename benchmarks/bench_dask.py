@@ -362,7 +362,7 @@ def main(argv=None) -> int:
                         default=Path(__file__).parent / "results" / "dask.json")
     parser.add_argument("--summarise", type=Path, default=None, metavar="JSON",
                         help="print the table of a saved run (its samples) and exit")
-    add_page_arguments(parser, "dask")
+    add_page_arguments(parser, "dask", published={"quick": False, "rounds": 3})
     args = parser.parse_args(argv)
     run = ResultsRun("Dask cluster against local workers: trials/s and efficiency", args)
     key = lambda text: (*text.split("|")[:2], int(text.split("|")[2]))  # noqa: E731

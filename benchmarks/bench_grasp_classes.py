@@ -116,7 +116,7 @@ def main(argv=None) -> int:
                         help="override a ReactiveGraspParams field (repeatable), "
                              "e.g. close_shift_speed=0.03")
     add_executor_arguments(parser)
-    add_page_arguments(parser, "grasp_classes")
+    add_page_arguments(parser, "grasp_classes", published={"sizes": 3, "directions": 2})
     args = parser.parse_args(argv)
     run = ResultsRun("Grasp classes: open-loop and reactive grasps held per class and object",
                      args)

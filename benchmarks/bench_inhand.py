@@ -224,7 +224,12 @@ def main(argv=None) -> int:
     add_executor_arguments(p)
     add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
-    run = ResultsRun("In-hand tasks: speed and optimisers' trials to target", args)
+    # the published budget of each kind of run: --speed's rounds, --table's seeds
+    published = {"only_instructions": {}, "speed": {"rounds": 16},
+                 "table": {"seeds": 3}}
+    kinds = [k for k in ("speed", "table") if getattr(args, k)] or ["only_instructions"]
+    run = ResultsRun("In-hand tasks: speed and optimisers' trials to target", args,
+                     published={k: v for kind in kinds for k, v in published[kind].items()})
     result = {"machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                           "cpus": os.cpu_count()}}
     if args.out.exists():
@@ -250,7 +255,7 @@ def main(argv=None) -> int:
     if args.table:
         printed += table_rows(result[key], "task")
     run.finish(printed, result, args.out, notes=notes)
-    print(f"wrote {args.out}")
+    print(f"wrote {run.output(args.out)}")
     return 0
 
 

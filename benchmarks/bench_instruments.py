@@ -129,7 +129,7 @@ def main(argv=None) -> int:
                         help="one cProfile'd trial per case instead: where the time goes")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "instruments.json")
-    add_page_arguments(parser, "instruments")
+    add_page_arguments(parser, "instruments", published={"quick": False, "repeats": 7})
     args = parser.parse_args(argv)
     run = ResultsRun("Instrumented objects: station cost of the device sensors", args)
     if args.profile:

@@ -92,7 +92,7 @@ def main(argv=None) -> int:
                    help="the wheel's net turn to reach (deg, default %(default)s)")
     p.add_argument("--db", type=Path, default=Path("out/inhand/jog_wheel.sqlite"))
     p.add_argument("--out", type=Path, default=RESULTS)
-    add_page_arguments(p, "inhand")
+    add_page_arguments(p, "inhand", published={"seeds": 3, "trials": 30})
     args = p.parse_args(argv)
     try:
         JogWheelTask(target_deg=args.target_deg)

@@ -169,7 +169,7 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="fewer points and trials")
     parser.add_argument("--vhacd", action="store_true", help="also run V-HACD (vhacdx)")
     parser.add_argument("--trials", type=int, default=None)
-    add_page_arguments(parser, "mesh_objects")
+    add_page_arguments(parser, "mesh_objects", published={"quick": False})
     args = parser.parse_args(argv)
     run = ResultsRun("Mesh objects: convex decomposition and trial cost", args)
     n_points = 4000 if args.quick else 20000

@@ -203,7 +203,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=1 if reduced() else 3)
     parser.add_argument("--seconds", type=float, default=1.5 if reduced() else 4.0)
-    add_page_arguments(parser, "midi")
+    add_page_arguments(parser, "midi", published={"rounds": 3, "seconds": 4.0})
     args = parser.parse_args()
     run = ResultsRun("MIDI controller: message latency against a queue floor", args)
     cases = [("midi-in-process-5ms", "midi", 0.005, "in-process"),

@@ -184,7 +184,7 @@ def main(argv=None) -> int:
                         help="another detect.py to time on the same clouds")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "perception.json")
-    add_page_arguments(parser, "perception")
+    add_page_arguments(parser, "perception", published={"rounds": 40, "repeats": 3})
     args = parser.parse_args(argv)
     results_run = ResultsRun("Perception: detection time against the depth render", args)
     if args.rounds < 2 or args.repeats < 1:

@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     add_executor_arguments(parser)
-    add_page_arguments(parser, "perception")
+    add_page_arguments(parser, "perception", published={"poses": 3})
     args = parser.parse_args(argv)
     results_run = ResultsRun("Grasps planned from perception against the true pose", args)
     rng = np.random.default_rng(args.seed)

@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     parser.add_argument("--hand", default="barrett", choices=("barrett", "shadow"))
     parser.add_argument("--objects", nargs="+", default=list(OBJECT_ORDER))
     parser.add_argument("--out", type=Path, default=RESULTS)
-    add_page_arguments(parser, "perception")
+    add_page_arguments(parser, "perception", published={"poses": 5, "objects": len(OBJECT_ORDER)})
     args = parser.parse_args(argv)
     results_run = ResultsRun("Grasp trials on perceived objects, per object", args)
     if args.poses < 1:

@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="0-29", help="e.g. 0-29 or 100-119,7")
     parser.add_argument("--profile", default="kinect_v1", choices=("kinect_v1", "ideal"))
     parser.add_argument("--out", type=Path, default=RESULTS)
-    add_page_arguments(parser, "perception")
+    add_page_arguments(parser, "perception", published={"seeds": 80})
     args = parser.parse_args(argv)
     results_run = ResultsRun("Cluttered tabletop scenes: objects found per kind", args)
     try:

@@ -60,7 +60,7 @@ def main(argv=None) -> int:
                              "(handle-drake pick --no-release-correction)")
     parser.add_argument("--plan-only", action="store_true",
                         help="plan each pick, do not simulate it (planning times only)")
-    add_page_arguments(parser, "pick")
+    add_page_arguments(parser, "pick", published={"seeds": 20, "modes": 2})
     args = parser.parse_args(argv)
     results_run = (ResultsRun("Pick planning time per pick (grasp database, arm IK, paths)",
                               args, section="--plan-only") if args.plan_only else

@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     parser.add_argument("--census", action="store_true",
                         help="count the contact pairs per step (first mode's run)")
     parser.add_argument("--out", default="out/bench")
-    add_page_arguments(parser, "pick")
+    add_page_arguments(parser, "pick", published={"seeds": 20})
     args = parser.parse_args(argv)
     modes = args.modes.split(",")
     if not modes or any(m not in MODES for m in modes):

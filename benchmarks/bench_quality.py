@@ -153,7 +153,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer grasps, smaller budgets")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "quality.json"))
-    add_page_arguments(ap, "quality")
+    add_page_arguments(ap, "quality", published={"quick": False})
     args = ap.parse_args(argv)
     results_run = ResultsRun("Grasp quality: time per grasp against qhull, Drake and facet QP",
                              args)

@@ -101,7 +101,7 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--baseline", default=None, help="git revision of hull.py for 'before'")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "quality_bw_row.json"))
-    add_page_arguments(ap, "quality")
+    add_page_arguments(ap, "quality", published={"rounds": 6})
     args = ap.parse_args(argv)
     results_run = ResultsRun("Grasp quality: one BW table row against qhull", args)
     if args.rounds < 1:

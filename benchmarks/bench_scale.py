@@ -231,7 +231,7 @@ def main(argv=None) -> int:
                         help="trials per Dask task, each case with each (default 1)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "scale.json")
-    add_page_arguments(parser, "scale")
+    add_page_arguments(parser, "scale", published={"quick": False, "rounds": 3, "waves": 16})
     args = parser.parse_args(argv)
     for name in ("workers", "seconds", "saturation", "chunk"):
         if any(not v > 0 for v in getattr(args, name)):

@@ -119,7 +119,7 @@ def main(argv=None) -> int:
     parser.add_argument("--waves", type=int, default=10)
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "scale_loop_profile.json")
-    add_page_arguments(parser, "scale")
+    add_page_arguments(parser, "scale", published={"workers": 128, "waves": 10})
     args = parser.parse_args(argv)
     results_run = ResultsRun("Scale: where the Dask event loop's time goes", args)
     for name in ("workers", "seconds", "waves"):

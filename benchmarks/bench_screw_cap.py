@@ -465,8 +465,12 @@ def main(argv=None) -> int:
     # a section of the page each: the screw cap's runs, the fingertip cylinder's, speed
     section = " ".join(([f"--task {args.task}"] if args.task != "screw_cap" else [])
                        + (["--speed"] if args.speed else [])) or None
+    # the published budget of each section: --speed's rounds; the screw cap's seeds and
+    # trials per run; the fingertip cylinder's trials per run
+    published = ({"speed": 7} if args.speed else {"budget": 450}
+                 if args.task == "fingertip_cylinder" else {"seeds": 3, "budget": 100})
     results_run = ResultsRun(f"In-hand {args.task}: base rate, optimisers and speed", args,
-                             section=section)
+                             section=section, published=published)
     if args.target_deg is None:
         args.target_deg = preset.get("target_deg", 90.0 if args.task == "screw_cap" else 60.0)
     if args.gaits is None:

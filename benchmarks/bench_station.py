@@ -474,7 +474,7 @@ def main(argv=None) -> int:
     parser.add_argument("--instructions", action="store_true",
                         help="only count the instructions of the demo station, its replay "
                              "and model floors (and each --baseline's station; valgrind)")
-    add_page_arguments(parser, "station")
+    add_page_arguments(parser, "station", published={"quick": False, "repeats": 20, "builds": 3})
     args = parser.parse_args(argv)
     if args.instructions:
         return _instructions_main(args)

@@ -232,7 +232,7 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=7)
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "station_parts.json")
-    add_page_arguments(parser, "station")
+    add_page_arguments(parser, "station", published={"rounds": 6})
     args = parser.parse_args(argv)
     if args.rounds < 1:
         parser.error("--rounds: must be >= 1")

@@ -100,7 +100,7 @@ def main(argv=None) -> int:
                         help="where the databases go (default: a temporary folder)")
     parser.add_argument("--out", type=Path,
                         default=Path(__file__).parent / "results" / "trial_log.json")
-    add_page_arguments(parser, "trial_log")
+    add_page_arguments(parser, "trial_log", published={"quick": False, "rounds": 5})
     args = parser.parse_args(argv)
     results_run = ResultsRun("Trial log: logged trials per second, grouped against per write",
                              args)
@@ -156,7 +156,7 @@ def main(argv=None) -> int:
                          "max": t["max"], "per CPU second (median)": t["per_cpu_second"]["median"],
                          "load (median)": t["load"]["median"]} for c, t in table.items()],
                        result, args.out)
-    print(f"\nwritten to {args.out}")
+    print(f"\nwritten to {results_run.output(args.out)}")
     print(f"per-write commit rate (before issue 34), same run: "
           f"{table['runner per write']['median']:.0f} trials/s")
     print(f"logged trials per second: {table['runner grouped']['median']:.0f}")

@@ -27,7 +27,8 @@ def _printed_table(stdout: str) -> dict[str, list[str]]:
 
 
 def _run(tmp_path, *extra):
-    env = {**os.environ, "HANDLE_DRAKE_REDUCED": "1", "OPENBLAS_NUM_THREADS": "1"}
+    env = {**os.environ, "HANDLE_DRAKE_REDUCED": "1", "OPENBLAS_NUM_THREADS": "1",
+           "HANDLE_DRAKE_REDUCED_RESULTS": str(tmp_path / "reduced")}
     result = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "bench_trial_log.py"), "--quick",
          "--rounds", "1", "--folder", str(tmp_path), "--out", str(tmp_path / "trial_log.json"),
@@ -77,6 +78,7 @@ def test_a_reduced_run_leaves_the_measured_pages_alone(tmp_path):
     before = measured.read_text()
     stdout = _run(tmp_path)
     assert measured.read_text() == before and "updated" not in stdout
+    assert (tmp_path / "reduced" / "trial_log.md").exists()  # where its table went
 
 
 def test_update_page_keeps_text_outside_the_markers_and_one_section_per_source(tmp_path):
@@ -152,3 +154,203 @@ def test_table_rows_takes_a_results_own_rows():
     speed = {"sim_time": 1.9, "median_wall": {"trial": 0.6}, "rounds": {"trial": [0.6]},
              "table": rows}
     assert table_rows(speed, "speed") == rows
+
+
+# ------------------------------------------------------------ the published budget guard
+# Every benchmark that writes a page: a run below the budget of its published table, and one
+# at that budget (the page's own command). The reduced run must leave docs/results/ and the
+# committed JSON alone (its table goes to out/results/); the published one writes the page.
+BUDGET_RUNS = {
+    "bench_accelerometer_calibration": (["--seeds", "1"], [], "accelerometer_calibration"),
+    "bench_arm_reachability": (["--places", "1"], [], "arm_reachability"),
+    "bench_babbling": (["--quick"], [], "babbling"),
+    "bench_bayesopt": (["--quick"], [], "bayesopt"),
+    "bench_can": (["--only", "procs-udp"], [], "can"),
+    "bench_dask": (["--rounds", "1"], [], "dask"),
+    "bench_grasp_classes": (["--sizes", "1"], [], "grasp_classes"),
+    "bench_inhand": (["--speed", "--rounds", "2"], ["--speed", "--rounds", "16"], "inhand"),
+    "bench_instruments": (["--quick"], [], "instruments"),
+    "bench_jog_wheel": (["--seeds", "41"], [], "inhand"),
+    "bench_mesh_objects": (["--quick"], [], "mesh_objects"),
+    "bench_midi": (["--rounds", "1"], [], "midi"),
+    "bench_perception": (["--rounds", "2"], ["--repeats", "3"], "perception"),
+    "bench_perception_grasp": (["--poses", "1"], [], "perception"),
+    "bench_perception_objects": (["--objects", "sphere"], [], "perception"),
+    "bench_perception_scenes": (["--seeds", "0-29"], ["--seeds", "100-179"], "perception"),
+    "bench_pick": (["--seeds", "0"], [], "pick"),
+    "bench_pick_sim": (["--seeds", "0-9"], ["--seeds", "0-19"], "pick"),
+    "bench_quality": (["--quick"], [], "quality"),
+    "bench_quality_bw_row": (["--rounds", "1"], [], "quality"),
+    "bench_scale": (["--quick"], ["--rounds", "3", "--waves", "16"], "scale"),
+    "bench_scale_loop_profile": (["--waves", "2"], [], "scale"),
+    "bench_screw_cap": (["--seeds", "0"], ["--seeds", "30", "31", "32", "--budget", "100"],
+                        "inhand"),
+    "bench_station": (["--quick"], ["--repeats", "20", "--builds", "3"], "station"),
+    "bench_station_parts": (["--rounds", "2"], [], "station"),
+    "bench_trial_log": (["--quick"], [], "trial_log"),
+}
+
+
+class _Made(Exception):
+    def __init__(self, run):
+        super().__init__("ResultsRun made")
+        self.run = run
+
+
+def _results_run_of(name: str, argv: list[str], monkeypatch) -> ResultsRun:
+    """The ResultsRun the benchmark ``name`` makes for ``argv`` (stopped right there:
+    nothing is measured nor written)."""
+    import importlib.util
+
+    original = ResultsRun.__init__
+
+    def made(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        raise _Made(self)
+
+    monkeypatch.setattr(ResultsRun, "__init__", made)
+    monkeypatch.setattr(sys, "argv", [str(ROOT / "benchmarks" / f"{name}.py"), *argv])
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))  # as when run as a script
+    spec = importlib.util.spec_from_file_location(f"_budget_{name}",
+                                                  ROOT / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    with pytest.raises(_Made) as made_run:
+        module.main()
+    return made_run.value.run
+
+
+def test_every_benchmark_that_writes_a_page_is_in_the_budget_table():
+    writers = {p.stem for p in BENCHMARKS if "ResultsRun(" in p.read_text()}
+    assert writers - {"hostile_probe"} == set(BUDGET_RUNS)
+
+
+@pytest.mark.parametrize("name", sorted(BUDGET_RUNS))
+def test_a_run_below_the_published_budget_never_writes_the_published_page(name, monkeypatch,
+                                                                          tmp_path):
+    from handle_drake.base import results
+
+    monkeypatch.delenv("HANDLE_DRAKE_REDUCED", raising=False)
+    monkeypatch.setattr(results, "REDUCED_DIR", tmp_path)
+    reduced, published, page = BUDGET_RUNS[name]
+    run = _results_run_of(name, reduced, monkeypatch)
+    assert run.short, f"{name} {reduced}: not seen as below its published budget"
+    assert run.page == tmp_path / f"{page}.md"  # the reduced table's own place
+    committed = results.JSON_DIR / "x.json"
+    assert run.output(committed) == tmp_path / "x.json"
+    assert run.output(tmp_path / "elsewhere.json") == tmp_path / "elsewhere.json"
+    # at the published budget: the page itself, and the JSON where the benchmark puts it
+    run = _results_run_of(name, published, monkeypatch)
+    assert run.short == [] and run.page == results.RESULTS_DIR / f"{page}.md"
+    assert run.output(committed) == committed
+    # the same published run under HANDLE_DRAKE_REDUCED is reduced
+    monkeypatch.setenv("HANDLE_DRAKE_REDUCED", "1")
+    run = _results_run_of(name, published, monkeypatch)
+    assert run.page == tmp_path / f"{page}.md"
+
+
+def test_budget_size_and_below_budget(monkeypatch):
+    import argparse
+
+    monkeypatch.delenv("HANDLE_DRAKE_REDUCED", raising=False)
+    from handle_drake.base.results import below_budget, budget_size
+
+    assert budget_size("0-19") == 20 and budget_size("100-119,7") == 21
+    assert budget_size("perceived,true") == 2 and budget_size([41, 42]) == 2
+    assert budget_size(3) == 3 and budget_size(None) is None
+    args = argparse.Namespace(seeds="0", quick=True, rounds=None)
+    published = {"seeds": 20, "quick": False, "rounds": 3}
+    assert below_budget(args, published) == ["--seeds 1 < 20 published", "--quick given"]
+    args = argparse.Namespace(seeds="0-24", quick=False, rounds=None)
+    assert below_budget(args, published) == []  # None: the benchmark's own default
+    with pytest.raises(ValueError, match=r"published\['seeds'\]"):
+        from handle_drake.base.results import add_page_arguments
+
+        add_page_arguments(argparse.ArgumentParser(), "p", published={"seeds": 0})
+
+
+def test_a_reduced_run_leaves_the_committed_page_and_json_byte_identical(tmp_path):
+    """bench_trial_log --quick with no HANDLE_DRAKE_REDUCED: its default JSON is the committed
+    benchmarks/results/trial_log.json and its default page docs/results/trial_log.md; both
+    stay as they are, and the run says where its table went."""
+    page = ROOT / "docs" / "results" / "trial_log.md"
+    data = ROOT / "benchmarks" / "results" / "trial_log.json"
+    before = page.read_bytes(), data.read_bytes()
+    env = {k: v for k, v in os.environ.items() if k != "HANDLE_DRAKE_REDUCED"}
+    env.update(OPENBLAS_NUM_THREADS="1", HANDLE_DRAKE_REDUCED_RESULTS=str(tmp_path / "r"))
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_trial_log.py"), "--quick",
+         "--rounds", "1", "--folder", str(tmp_path)],
+        capture_output=True, text=True, env=env, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert (page.read_bytes(), data.read_bytes()) == before
+    assert "updated" not in result.stdout
+    assert f"{tmp_path / 'r' / 'trial_log.md'} written, not docs/results/trial_log.md" \
+        in result.stdout
+    assert "--quick given" in result.stdout
+    reduced = (tmp_path / "r" / "trial_log.md").read_text()
+    assert "--quick --rounds 1" in reduced and "| runner grouped |" in reduced
+    assert json.loads((tmp_path / "r" / "trial_log.json").read_text())["run"]["command"]
+
+
+# ------------------------------------------------------------ the pages show the present
+PAGES = sorted((ROOT / "docs" / "results").glob("*.md"))
+MAX_LINES = {"inhand": 320}  # its many targets (and room for a convergence table)
+DEFAULT_MAX_LINES = 160
+MAX_NOTES_LINES = 45
+HISTORY = re.compile(r"\b(pass|passes|run of|runs of|earlier|branch|issue-\d)", re.IGNORECASE)
+COMMAND = re.compile(r"`(python benchmarks/|handle-drake )")
+DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+
+
+def _sections(text: str, level: str) -> list[tuple[str, str]]:
+    """(heading, body) of each heading of ``level`` ("## " or "### ") in ``text``."""
+    parts = re.split(rf"(?m)^({re.escape(level)}.*)$", text)
+    return [(parts[i].strip(), parts[i + 1]) for i in range(1, len(parts) - 1, 2)]
+
+
+def _subsections_outside_markers(current: str) -> list[tuple[str, str]]:
+    """The current section's targets: each ``### `` heading to the next (a benchmark's
+    generated heading sits inside its markers; the verdict written below them belongs to it)."""
+    return _sections(current, "### ")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.stem for p in PAGES])
+def test_a_results_page_shows_the_present(page):
+    """A page is one "## Current" section of tables (one per target, each with its command,
+    date, machine load and verdict) and at most a short "## How measured / notes"; no
+    history of passes and runs (git keeps it)."""
+    text = page.read_text()
+    lines = text.splitlines()
+    bound = MAX_LINES.get(page.stem, DEFAULT_MAX_LINES)
+    assert len(lines) <= bound, f"{page.name}: {len(lines)} lines, at most {bound}"
+    assert lines[0].startswith("# ") and text.count("\n# ") == 0, f"{page.name}: one title"
+    headings = [h for h, _ in _sections(text, "## ")]
+    assert headings in (["## Current"], ["## Current", "## How measured / notes"]), (
+        f"{page.name}: sections {headings}")
+    before_current = text.split("\n## Current", 1)[0].splitlines()[1:]
+    assert all(not line.strip() for line in before_current), f"{page.name}: text above Current"
+    current = text.split("\n## Current", 1)[1].split("\n## How measured / notes", 1)[0]
+    if "\n## How measured / notes" in text:
+        notes = text.split("\n## How measured / notes", 1)[1]
+        assert len(notes.strip().splitlines()) <= MAX_NOTES_LINES, f"{page.name}: long notes"
+    targets = _subsections_outside_markers(current)
+    assert targets, f"{page.name}: no current table"
+    for heading, body in targets:
+        where = f"{page.name} {heading!r}"
+        assert not HISTORY.search(heading), f"{where}: a history heading"
+        assert "|---" in body, f"{where}: no table"
+        assert "**Verdict" in body, f"{where}: no verdict"
+        if body.lstrip().startswith(("Same run", "Same date")):
+            continue  # a further table of the target's run above (its command, date, load)
+        assert COMMAND.search(body), f"{where}: no command"
+        assert DATE.search(body), f"{where}: no date"
+        assert "load" in body, f"{where}: no machine load"
+
+
+def test_the_page_check_refuses_a_lab_notebook(tmp_path):
+    """The check on a page written as passes fails (so the page test cannot pass vacuously)."""
+    notebook = ("# P\n\n## Current\n\n### Run of 2026-11-27, second pass\n\n"
+                "`python benchmarks/bench_x.py`, 2026-11-27, load 1.\n\n| a |\n|---|\n| 1 |\n")
+    (heading, body), = _subsections_outside_markers(notebook.split("## Current", 1)[1])
+    assert HISTORY.search(heading) and "**Verdict" not in body

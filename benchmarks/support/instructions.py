@@ -90,7 +90,7 @@ def write_section(title: str, args, cases: dict, floors: dict, json_path, runs: 
     data written."""
     from handle_drake.base.results import ResultsRun
 
-    run = ResultsRun(title, args, section="instructions")
+    run = ResultsRun(title, args, section="instructions", published={})  # counts: no budget
     rows = ratio_table(count_cases(cases, runs), floors)
     data = {"runs_counted": runs, "table": rows, "load_end": os.getloadavg()[0]}
     run.finish(rows, data, json_path)

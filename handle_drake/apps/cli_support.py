@@ -9,17 +9,24 @@ register sub-commands (``grasp/cli.py``, ``experiments/cli.py``,
 from __future__ import annotations
 
 import argparse
-import math
 import signal
 import sys
 import warnings
 from pathlib import Path
 
+from handle_drake.base.arguments import (
+    int_at_least,
+    non_empty,
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 from handle_drake.base.blas import pin_blas
 
 __all__ = ["check_hardware_server", "run_command", "start_meshcat", "int_at_least", "positive_int",
            "non_negative_int", "positive_float", "non_negative_float", "add_mesh_arguments",
-           "refuse_without_mesh"]
+           "refuse_without_mesh", "non_empty"]
 
 
 def start_meshcat(wanted: bool):
@@ -52,52 +59,6 @@ def check_hardware_server(scenario) -> None:
             f"--hardware: expected a CAN bus server at {driver.host}:{driver.port} (driver.host, "
             f"driver.port), got {error.strerror or error}; start `handle-drake can-server`"
         ) from None
-
-
-def int_at_least(minimum: int, expected: str):
-    """An argparse type: an integer >= ``minimum``, else "expected <expected>, got ..."."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected {expected}, got {value}")
-        return value
-
-    return parse
-
-
-positive_int = int_at_least(1, "a positive integer")
-non_negative_int = int_at_least(0, "an integer >= 0")
-
-
-def non_empty(text: str) -> str:
-    """An argparse type: any text but the empty (or all-blank) one, which would
-    silently mean "the default"."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError(f"expected a non-empty value, got {text!r}")
-    return text
-
-
-def non_negative_float(text: str) -> float:
-    """An argparse type: a finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """An argparse type: a finite number > 0."""
-    value = non_negative_float(text)
-    if value == 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text}")
-    return value
 
 
 def add_mesh_arguments(parser: argparse.ArgumentParser, mesh_help: str, **mesh_options) -> None:

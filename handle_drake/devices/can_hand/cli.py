@@ -22,7 +22,7 @@ import signal
 import sys
 import threading
 
-from handle_drake.apps.cli_support import non_empty
+from handle_drake.base.arguments import non_empty
 from handle_drake.devices.can_hand.config import (
     BUS_INTERFACES,
     DEFAULT_FEEDBACK,
