@@ -1,6 +1,8 @@
 """The Gymnasium environments (handle_drake.envs): the checker, determinism, the reads
 against the plant, the actions' checks and the vectorised trials against the trial objects."""
 
+import os
+import signal
 import subprocess
 import sys
 import warnings
@@ -266,5 +268,11 @@ def test_make_vec_runs_the_trials_in_a_process_pool():
         assert venv._executor is not None  # the pool ran them
         score = trial.evaluate(venv.parameters(actions[0])).score
         assert rewards.tolist() == [score, score]
+        # a worker that dies: the pool replaces itself and the step still gives the trials
+        worker = next(iter(venv._executor._pool._processes.values()))
+        os.kill(worker.pid, signal.SIGKILL)
+        worker.join(timeout=30)
+        _, again, *_ = venv.step(actions)
+        assert again.tolist() == [score, score]
     finally:
         venv.close()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+from concurrent.futures.process import BrokenProcessPool
 
 import gymnasium as gym
 import numpy as np
@@ -204,7 +205,10 @@ class TrialVectorEnv(_Parameters, VectorEnv):
         final = np.zeros((self.num_envs, 3), dtype=np.float32)
         infos: dict = {}
         for i, future in enumerate(futures):
-            outcome = future.result()
+            try:
+                outcome = future.result()
+            except BrokenProcessPool:  # a worker died: the pool replaces itself; once more
+                outcome = self._submit(xs[i], int(self._seeds[i])).result()
             detail = json.loads(outcome["contacts"]) if outcome.get("contacts") else {}
             rewards[i] = outcome["metric"] if outcome["status"] == "done" else 0.0
             final[i] = _summary(self.trial, rewards[i], detail)
