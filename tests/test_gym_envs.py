@@ -276,3 +276,27 @@ def test_make_vec_runs_the_trials_in_a_process_pool():
         assert again.tolist() == [score, score]
     finally:
         venv.close()
+
+
+def test_step_envs_vectorise_in_processes_that_build_their_own_diagram():
+    single = _unwrapped(envs.STEP_IDS["screw_cap"])
+    obs, _ = single.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = np.clip(obs["command"] + 0.3 * rng.standard_normal((3, 2, NU)), -1, 1).astype(
+        np.float32)
+    venv = gymnasium.make_vec(envs.STEP_IDS["screw_cap"], num_envs=2,
+                              vectorization_mode="async", vector_kwargs={"context": "spawn"})
+    try:
+        vobs, _ = venv.reset(seed=0)
+        np.testing.assert_array_equal(vobs["joint_position"][1], obs["joint_position"])
+        for step in actions:
+            vobs, vrewards, *_ = venv.step(step)
+        for i in range(2):
+            single.reset(seed=0)
+            for step in actions:
+                sobs, reward, *_ = single.step(step[i])
+            assert vrewards[i] == reward
+            for key in sobs:
+                np.testing.assert_array_equal(vobs[key][i], sobs[key])
+    finally:
+        venv.close()

@@ -320,13 +320,10 @@ class InHandEnv(gym.Env):
             if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
                 raise ValueError(f"control_period: expected a multiple of the hand driver's "
                                  f"{sim.command_period:g} s, got {self.control_period:g}")
-            sim.lower, sim.upper = actuated_position_limits(self.spec_hand(), sim.coupling)
+            sim.lower, sim.upper = actuated_position_limits(get_hand_spec("shadow"),
+                                                            sim.coupling)
             self._sim = sim
         return self._sim
-
-    @staticmethod
-    def spec_hand():
-        return get_hand_spec("shadow")
 
     def plant_and_context(self):
         """The plant and its context (for reading the simulation from outside)."""
