@@ -300,3 +300,41 @@ def test_step_envs_vectorise_in_processes_that_build_their_own_diagram():
                 np.testing.assert_array_equal(vobs[key][i], sobs[key])
     finally:
         venv.close()
+
+
+def _stroke(trial, j3=1.0, j2=0.9):
+    """The three fingers' flex strokes (J3 j3, J2 j2 rad), thumb still: a hand-written motion
+    that turns the cap and rolls the cylinder (tests/inhand)."""
+    g = trial.gist
+    x = g.initial_parameters()
+    for m, sl in zip(g.motions, g.slices(), strict=True):
+        x[sl][1:] = [j3, j2] if (m.finger != "TH" and m.variation[0] > 0) else 0.0
+    return x
+
+
+@pytest.mark.parametrize("task", ["screw_cap", "cylinder_rotation"])
+def test_the_trials_frames_as_targets_reproduce_the_trials_turn(task):
+    """Same diagram, same physics, same command path: the env holding, per driver period, the
+    frame the trial's motion source plans there ends where the trial ends, to the bit."""
+    env = envs.InHandEnv(task, task_options={"target_deg": 359.0})  # no early termination
+    env.reset(seed=0)
+    sim, trial = env.sim, env.trial
+    x = _stroke(trial)
+    period = sim.command_period
+    source = sim.built["source"] if task == "screw_cap" else sim.built["motion"]
+    n = int(round(trial.config.total_time / period))
+    targets = source.frames_for(x)[source.frame_indices(np.arange(n) * period) - 1]
+    for target in targets:
+        sim.advance(target, period)
+    outcome = trial.evaluate(x, early_stop=False)
+    expected = outcome.turn_deg_truth if task == "screw_cap" else outcome.rotation_deg
+    assert np.degrees(sim.read().angle_truth) == pytest.approx(expected, abs=1e-9)
+    assert expected > 30.0  # a real turn
+    if task == "screw_cap":  # through the normalised actions: 2e-16 rad of rounding in the
+        env = envs.InHandEnv(task, control_period=period,  # targets moves the cap's end
+                             task_options={"target_deg": 359.0})  # by 0.02 deg (the rolling
+        env.reset(seed=0)  # cylinder's by 0.9 deg: its contacts amplify it)
+        for target in targets:
+            action = 2 * (target - sim.lower) / (sim.upper - sim.lower) - 1
+            *_, info = env.step(action)
+        assert info["turn_deg_truth"] == pytest.approx(expected, abs=0.1)

@@ -130,6 +130,13 @@ class _Sim:
         self._q_start = self.joint.get_angle(self.plant_context) if self.joint is not None \
             else 0.0
 
+    def _advance(self, duration):
+        """Simulates ``duration`` (a whole number of command periods) to the next time on the
+        command grid (``ticks * command_period``, not a sum of steps: a sum drifts off the
+        grid by rounding and moves the plant's steps against the commands' breaks)."""
+        self.ticks += int(round(duration / self.command_period))
+        self.simulator.AdvanceTo(self.ticks * self.command_period)
+
     def read(self) -> _Reading:
         plant, pc = self.plant, self.plant_context
         q, v = plant.GetPositions(pc), plant.GetVelocities(pc)
@@ -172,13 +179,14 @@ class _PalmSim(_Sim):
 
     def reset(self):
         self.context.SetTimeStateAndParametersFrom(self.built["settled"])
+        self.ticks = 0
         self.command = self.q0.copy()
         self._hold(self.command)
         self.harness.initialize()
         self._start_reads()
 
     def _hold(self, command):
-        t = self.context.get_time()
+        t = self.ticks * self.command_period
         # from the driver's next sample on (the breaks half a sample before it, as the
         # trial's frames); the source's output cached at t is invalidated by SetTime
         self.built["player"].UpdateTrajectory(PiecewisePolynomial.ZeroOrderHold(
@@ -188,7 +196,7 @@ class _PalmSim(_Sim):
     def advance(self, command, duration):
         self.command = command
         self._hold(command)
-        self.simulator.AdvanceTo(self.context.get_time() + duration)
+        self._advance(duration)
 
     def lost(self, reading: _Reading) -> bool:
         return bool(reading.p[2] < -self.drop or np.linalg.norm(reading.p) >= self.max_travel)
@@ -230,6 +238,7 @@ class _CapSim(_Sim):
 
     def reset(self):
         self.context.SetTimeStateAndParametersFrom(self.settled)
+        self.ticks = 0
         self.command = self.q0.copy()
         self.planned.q0 = self.q0.copy()
         self._hold(np.tile(self.q0, (1, 1)))
@@ -238,7 +247,7 @@ class _CapSim(_Sim):
 
     def _hold(self, targets):
         """Plays the driver's commands for ``targets`` (one per driver period) from now."""
-        t = self.context.get_time()
+        t = self.ticks * self.command_period
         cmd = self.planned.commands(targets)
         trajectory = self.planned.trajectory(cmd)
         trajectory.shiftRight(t)
@@ -250,7 +259,7 @@ class _CapSim(_Sim):
         n = int(round(duration / self.command_period))
         self.command = command
         self._hold(np.tile(command, (n, 1)))
-        self.simulator.AdvanceTo(self.context.get_time() + duration)
+        self._advance(duration)
 
     def lost(self, reading: _Reading) -> bool:
         return bool(self.joint is None and reading.p[2] < -self.drop)
