@@ -14,7 +14,8 @@ id                                     what
 ``handle_drake/FingertipCylinder-v0``
 ``handle_drake/<Task>Gist-v0``         episode level (:class:`~.gist.GistEnv`): the gist's
                                        parameters in, one trial per step; vectorised over
-                                       the trial executor with ``gymnasium.make_vec``
+                                       the trial executor with ``gymnasium.make_vec``; the
+                                       four above and ``JogWheelGist-v0``
 ``handle_drake/Grasp-v0``              episode level: one grasp trial (the babbling
                                        trial's parameters) per step
 =====================================  ===============================================
@@ -32,11 +33,13 @@ __all__ = ["InHandEnv", "GistEnv", "TrialVectorEnv", "ENV_IDS", "STEP_IDS", "GIS
 
 NAMESPACE = "handle_drake"
 _NAMES = {"cylinder_rotation": "CylinderRotation", "star_rotation": "StarRotation",
-          "screw_cap": "ScrewCap", "fingertip_cylinder": "FingertipCylinder"}
+          "screw_cap": "ScrewCap", "fingertip_cylinder": "FingertipCylinder",
+          "jog_wheel": "JogWheel"}
 #: Step-level ids by task.
 STEP_IDS = {task: f"{NAMESPACE}/{_NAMES[task]}-v0" for task in STEP_TASKS}
 #: Episode-level (one trial per step) ids by task.
-GIST_IDS = {**{task: f"{NAMESPACE}/{_NAMES[task]}Gist-v0" for task in STEP_TASKS},
+GIST_IDS = {**{task: f"{NAMESPACE}/{_NAMES[task]}Gist-v0" for task in (*STEP_TASKS,
+                                                                       "jog_wheel")},
             "grasp": f"{NAMESPACE}/Grasp-v0"}
 ENV_IDS = (*STEP_IDS.values(), *GIST_IDS.values())
 

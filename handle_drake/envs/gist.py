@@ -2,6 +2,7 @@
 
 ``GistEnv`` wraps a trial objective (:class:`~handle_drake.apps.inhand.task.InHandTrial`,
 :class:`~handle_drake.apps.inhand.screw_cap.ScrewCapTrial`,
+:class:`~handle_drake.apps.inhand.jog_wheel.JogWheelTrial`,
 :class:`~handle_drake.trial.grasp_trial.GraspTrial`): the action is the trial's parameter
 vector (the action gist's eq. 45 parameters of an in-hand task; a grasp trial's offset,
 standoff or synergy amplitudes), normalised to [-1, 1] over the trial's bounds; the step runs
@@ -31,6 +32,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from handle_drake.apps.inhand.jog_wheel import JogWheelTask, JogWheelTrial
 from handle_drake.envs.inhand import STEP_TASKS, task_trial
 from handle_drake.learning.executors import (
     TrialResult,
@@ -43,8 +45,9 @@ from handle_drake.trial.grasp_trial import GraspTrial, GraspTrialConfig
 
 __all__ = ["GistEnv", "TrialVectorEnv", "GIST_TASKS", "gist_trial"]
 
-#: The episode-level tasks: the in-hand tasks and the grasp trial.
-GIST_TASKS = (*STEP_TASKS, "grasp")
+#: The episode-level tasks: the in-hand tasks (the jog wheel, turned by the floating wrist
+#: and scored from its MIDI ticks, at this level only) and the grasp trial.
+GIST_TASKS = (*STEP_TASKS, "jog_wheel", "grasp")
 # [metric, progress, success], clipped to these bounds (the metrics lie well within)
 _OBS = spaces.Box(np.array([-1e3, -100.0, 0.0], dtype=np.float32),
                   np.array([1e3, 100.0, 1.0], dtype=np.float32), dtype=np.float32)
@@ -54,6 +57,8 @@ def gist_trial(task: str, **options):
     """The trial objective of ``task`` (``options``: its settings' fields)."""
     if task == "grasp":
         return GraspTrial(GraspTrialConfig(**options))
+    if task == "jog_wheel":
+        return JogWheelTrial(JogWheelTask(**options))
     if task not in GIST_TASKS:
         raise ValueError(f"task: expected one of {GIST_TASKS}, got {task!r}")
     return task_trial(task, **options)
