@@ -43,6 +43,8 @@ LAYERS: tuple[tuple[str, float], ...] = (
     # plans on: below the other applications
     ("handle_drake.apps.perception", 6.8),
     ("handle_drake.apps", 7),
+    # gymnasium environments of the applications' tasks (in-hand, grasp): above them
+    ("handle_drake.envs", 7.5),
     ("handle_drake.cli", 8),
 )
 # Layers whose sub-packages are units of their own (one device, one application).
