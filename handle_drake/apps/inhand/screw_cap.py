@@ -76,7 +76,7 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -187,6 +187,39 @@ TWO_STROKES = dict(free=True, stages=2, gait_duration=2.0, n_frames=100, target_
                    benchmark=(0.05, 0.4, 0.5, 1.0), held_turn=True)
 
 
+# The hand's actuator effort limits (N m) in MuJoCo Menagerie's Shadow hand model
+# (google-deepmind/mujoco_menagerie, shadow_hand/right_hand.xml, made with Shadow Robot:
+# the position actuators' forcerange): 1 N m by default (the class "right_hand"), the
+# wrist 10 (WRJ2) and 5 (WRJ1), the thumb base 3 (THJ5) and 2 (THJ4). The fingers' J0
+# tendon (J1 + J2) is one 1 N m actuator there; here the J2 actuator (J1 = J2 by the
+# coupler). The SDF's own limits are sr_description's sheet (2 N m for the finger joints;
+# models/shadow_hand/README.md, "Effort limits").
+MENAGERIE_EFFORT_LIMITS = {"WRJ2": 10.0, "WRJ1": 5.0, "THJ5": 3.0, "THJ4": 2.0}
+MENAGERIE_DEFAULT_EFFORT = 1.0
+EFFORT_LIMITS = ("sheet", "menagerie")
+
+
+def effort_limit(name: str, limits: str) -> float | None:
+    """The effort limit (N m) of actuated joint ``name`` under ``limits`` ("menagerie"), or
+    None ("sheet": the model file's own)."""
+    if limits == "sheet":
+        return None
+    return MENAGERIE_EFFORT_LIMITS.get(name, MENAGERIE_DEFAULT_EFFORT)
+
+
+def _set_effort_limits(plant, hand, limits: str) -> None:
+    if limits not in EFFORT_LIMITS:
+        raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got {limits!r}")
+    # (before Finalize the per-instance query lists nothing: filter all of them)
+    for i in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(i)
+        if actuator.model_instance() != hand:
+            continue
+        value = effort_limit(actuator.joint().name(), limits)
+        if value is not None:
+            actuator.set_effort_limit(value)
+
+
 @dc.dataclass
 class ScrewCapModel:
     """Bottle and cap (m, kg, N m); see the data README for the values' sources."""
@@ -208,6 +241,8 @@ class ScrewCapModel:
     # opposite direction (world -y before the yaw); the bottle stays on the +y side
     axis_reversed: bool = False
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
+    # N/m: the point-contact stiffness of cap, bottle (or free cylinder); 0: Drake's default
+    point_stiffness: float = 0.0
     # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
     # "fingertip cylinder"); its turn is read from its pose
     free: bool = False
@@ -218,6 +253,9 @@ class ScrewCapModel:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"cap.{name}: expected a finite value > 0, got {value!r}")
+        if not (math.isfinite(self.point_stiffness) and self.point_stiffness >= 0):
+            raise ValueError(f"cap.point_stiffness: expected a finite value >= 0, got "
+                             f"{self.point_stiffness!r}")
         if not (math.isfinite(self.viscous) and self.viscous >= 0):
             raise ValueError(f"cap.viscous: expected a finite value >= 0, got {self.viscous!r}")
         if len(self.position) != 3 or not all(math.isfinite(v) for v in self.position):
@@ -241,6 +279,9 @@ class ScrewCapScenario:
     # the settled grasp's command (rad, by actuated joint name; others 0)
     initial_position: dict[str, float] = dc.field(default_factory=dict)
     time_step: float = 0.002
+    # the hand's actuator effort limits: "sheet" (the model file's) or "menagerie"
+    # (MENAGERIE_EFFORT_LIMITS: 1 N m on the finger and distal thumb joints)
+    effort_limits: str = "sheet"
     max_joint_velocity: float = 4.0  # rad/s, the hand driver's rate limit
     settle_time: float = 0.5
     # Algorithm 1: the action gist, its frames and repetitions
@@ -295,9 +336,15 @@ class GaitMotionSource(GistMotionSource):
                         super().frame_indices(t - cycle * self._duration))
 
 
-def _proximity(mu: float) -> ProximityProperties:
+def _proximity(mu: float, stiffness: float = 0.0) -> ProximityProperties:
+    """Friction ``mu``; ``stiffness`` (N/m) > 0: the point contact's stiffness (a compliant
+    cap or cylinder: the pair's stiffness is at most it); 0: Drake's default (rigid)."""
     props = ProximityProperties()
-    AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
+    if stiffness > 0:
+        AddContactMaterial(point_stiffness=stiffness, friction=CoulombFriction(mu, mu),
+                           properties=props)
+    else:
+        AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
     return props
 
 
@@ -327,7 +374,7 @@ def _add_cap(plant, cap: ScrewCapModel):
                        [0.3, 0.6, 0.9, 0.5]))
     for b, shape, rgba in shapes:
         plant.RegisterCollisionGeometry(b, RigidTransform(), shape, f"{b.name()}_collision",
-                                        _proximity(cap.mu))
+                                        _proximity(cap.mu, cap.point_stiffness))
         plant.RegisterVisualGeometry(b, RigidTransform(), shape, f"{b.name()}_visual",
                                      np.array(rgba))
     if not cap.free:
@@ -363,7 +410,8 @@ def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, inst
         builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
 
 
-def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity, driver):
+def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity, driver,
+                      step=0.002):
     """The hand's PD targets: the Python driver (returned first), or its commands planned
     per trial (:class:`PlannedCommands`, returned second) played by a TrajectorySource."""
     if driver:
@@ -375,7 +423,7 @@ def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity
                         plant.get_desired_state_input_port(hand))
         return hand_driver, None
     planned = PlannedCommands(q0, *limits, max_joint_velocity,
-                              actuated_order(plant, hand, _NAMES))
+                              actuated_order(plant, hand, _NAMES), step=step)
     planned.player = builder.AddNamedSystem("planned_commands", TrajectorySource(
         planned.trajectory(np.tile(q0, (2, 1)))))
     builder.Connect(planned.player.get_output_port(), plant.get_desired_state_input_port(hand))
@@ -407,6 +455,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
                      RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
                                     scenario.hand_xyz))
+    _set_effort_limits(plant, hand, scenario.effort_limits)
     instance, body, bottle, joint = _add_cap(plant, cap)
     plant.Finalize()
     if bottle is not None:
@@ -424,7 +473,8 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
         _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance)
         return dict(diagram=builder.Build(), plant=plant)
     hand_driver, planned = _add_hand_command(builder, plant, hand, spec, q0, (lower, upper),
-                                             scenario.max_joint_velocity, driver)
+                                             scenario.max_joint_velocity, driver,
+                                             scenario.time_step)
     if joint is not None:
         zero = builder.AddNamedSystem("cap_friction_reference",
                                       ConstantVectorSource(np.zeros(2)))
@@ -470,11 +520,18 @@ class PlannedCommands:
     plant's PD target on ``[t_k, t_k+1)`` is ``cmd_k`` with ``cmd_0`` = the settled
     command and ``cmd_k+1 = cmd_k + clip(target(t_k) - cmd_k, -s, s)``: computed here in
     the same arithmetic and played by a zero-order-hold ``TrajectorySource`` whose breaks
-    sit half a step before each ``t_k`` (no ambiguity at a step's time)."""
+    sit half a step before each ``t_k`` (no ambiguity at a step's time).
+
+    A plant step ``step`` that divides the period (1 ms, 0.5 ms: the convergence check of
+    :mod:`handle_drake.apps.inhand.convergence`): the Python driver's update at ``t_k`` is
+    read by the plant's next step, at ``t_k + step``, so ``cmd_k+1`` holds from ``t_k +
+    step`` on; the breaks sit at ``t_k + step / 2`` (at ``step = period`` the same breaks
+    as above): the command signal tends to the driver's as the step shrinks."""
 
     period = 0.002  # PdHandDriver's control period
 
-    def __init__(self, q0, lower, upper, max_joint_velocity, order):
+    def __init__(self, q0, lower, upper, max_joint_velocity, order, step: float = 0.002):
+        self.step = float(step)
         self.q0 = np.asarray(q0, dtype=float)
         self._lower, self._upper = np.asarray(lower), np.asarray(upper)
         self._max_step = (max_joint_velocity * self.period if max_joint_velocity > 0
@@ -498,7 +555,7 @@ class PlannedCommands:
         segment per run of equal commands (a held command is one segment, not one per
         step: the same value at every time, a quarter of the segments to build)."""
         desired = np.hstack([cmd[:, self._order], np.zeros((len(cmd), self.q0.size))])
-        breaks = (np.arange(len(cmd)) - 0.5) * self.period
+        breaks = (np.arange(len(cmd)) - 1.0) * self.period + 0.5 * self.step
         end = breaks[-1] + self.period
         keep = np.r_[True, np.any(desired[1:] != desired[:-1], axis=1)]
         breaks, desired = np.append(breaks[keep], end), desired[keep]
@@ -511,6 +568,12 @@ class PlannedCommands:
         frames_ = source.frames_for(parameters)
         targets = frames_[source.frame_indices(np.arange(n) * self.period) - 1]
         self.player.UpdateTrajectory(self.trajectory(self.commands(targets)))
+
+
+def _divides(step: float) -> bool:
+    """Whether the plant's ``step`` divides the driver's period (planned commands apply)."""
+    ratio = PlannedCommands.period / step
+    return step <= PlannedCommands.period and abs(ratio - round(ratio)) < 1e-9
 
 
 def contact_summary(plant, plant_context, built) -> dict:
@@ -565,6 +628,32 @@ def contact_forces(plant, plant_context, built) -> dict:
         n0, t0, q0 = out.get(name, (0.0, 0.0, 0.0))
         out[name] = (n0 + abs(fn), t0 + ft, q0 + torque)
     return out
+
+
+def step_contacts(plant, plant_context, built, st: dict) -> None:
+    """One step's contacts into the trial's record ``st`` (read at EVERY step by a monitor,
+    not at the samples): the palm's force on cap or bottle (``palm``, ``palm_max``), the
+    hand's on any welded body (the bottle: ``welded_max``, N; ``welded_bodies``) and each
+    digit's normal force on the object (``digit_peak``: the sum over the digit's bodies,
+    its peak over the steps, N)."""
+    results = plant.get_contact_results_output_port().Eval(plant_context)
+    obj = int(built["cap"].index())
+    bottle = int(built["bottle"].index()) if built["bottle"] is not None else -1
+    digits = {}
+    for name, mine, force, info in _hand_contacts(results, built["hand_bodies"],
+                                                  (obj, bottle)):
+        magnitude = float(np.linalg.norm(force))
+        if name == "palm":
+            st["palm_max"] = max(st["palm_max"], magnitude)
+            st["palm"] = st["palm"] or magnitude > 0
+        if mine == bottle:
+            st["welded_max"] = max(st["welded_max"], magnitude)
+            st["welded_bodies"].add(name)
+        elif name[:2] in _DIGITS:
+            normal = abs(float(force @ np.asarray(info.point_pair().nhat_BA_W)))
+            digits[name[:2]] = digits.get(name[:2], 0.0) + normal
+    for digit, value in digits.items():
+        st["digit_peak"][digit] = max(st["digit_peak"].get(digit, 0.0), value)
 
 
 def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
@@ -622,6 +711,11 @@ class ScrewCapTask:
     # offsets ((actuated joint name, rad), ...): the hand closing on the object before
     # the motion (FOUR_FINGER_GRIP); () by default.
     grasp_closure: tuple = ()
+    # the hand's actuator effort limits (ScrewCapScenario.effort_limits)
+    effort_limits: str = "sheet"
+    # N: the hand's force on a welded body (the bottle) above which the trial leans on it
+    # (not reached: nothing welded does the work; the cap weighs 0.12 N)
+    lean_force: float = 1.0
     # The fingertip cylinder: the same hand and gist, a free cylinder pinched between thumb
     # and fingers (no bottle, no joint) at ``free_position``; a trial then ends with its
     # weight reversed for ``reverse_time`` (the hand palm down, for it): held only if it
@@ -645,7 +739,7 @@ class ScrewCapTask:
 
     def __post_init__(self):
         for name in ("target_deg", "gait_duration", "sample_period", "time_step",
-                     "settle_time", "contact_window", "coulomb_torque"):
+                     "settle_time", "contact_window", "coulomb_torque", "lean_force"):
             value = getattr(self, name)
             if isinstance(value, bool) or not (isinstance(value, int | float)
                                                and math.isfinite(value) and value > 0):
@@ -667,6 +761,9 @@ class ScrewCapTask:
         if self.benchmark is not None and len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
+        if self.effort_limits not in EFFORT_LIMITS:
+            raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got "
+                             f"{self.effort_limits!r}")
         if not isinstance(self.held_turn, bool):
             raise ValueError(f"held_turn: expected true or false, got {self.held_turn!r}")
         if self.held_turn and not self.free:
@@ -741,7 +838,14 @@ class ScrewCapOutcome:
     max_turn_deg: float
     gripped_at_start: list  # hand bodies touching the cap in the settled grasp
     palm_touched: bool  # the palm touched bottle or cap at some sample
-    palm_force_max: float  # N
+    palm_force_max: float  # N, at any step
+    # the hand's largest force on a body welded to the world (the bottle; N, at any step),
+    # the hand bodies that touched it, and whether it exceeded lean_force (not reached)
+    welded_force_max: float
+    welded_bodies: list
+    leaned_on_welded: bool
+    # per digit (th, ff, mf, rf, lf) its peak normal force on the object (N, any step)
+    digit_peak_normal: dict
     # the palm's upward force on the object / its weight, at the end of the hold
     palm_weight_share: float
     # free cylinder: still held after its weight was reversed (None: not run, or a cap)
@@ -840,7 +944,8 @@ class ScrewCapTrial(GistTrial):
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
                           position=[float(v) for v in c.free_position]),
             initial_position={n: float(v) for n, v in zip(_NAMES, q0, strict=True) if v != 0},
-            time_step=c.time_step, settle_time=c.settle_time, gist_name=self.gist.name,
+            time_step=c.time_step, effort_limits=c.effort_limits,
+            settle_time=c.settle_time, gist_name=self.gist.name,
             gist=ScrewCapScenario.gist_data(self.gist),
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
             hold=c.hold, parameters=[float(v) for v in parameters])
@@ -849,8 +954,7 @@ class ScrewCapTrial(GistTrial):
         """The diagram, settled (kept per process). ``driver``: with the Python hand
         driver (the reference of the default build's planned commands; also used with
         ``meshcat`` and when the time step is not the driver's period)."""
-        driver = driver or meshcat is not None or \
-            self.config.time_step != PlannedCommands.period
+        driver = driver or meshcat is not None or not _divides(self.config.time_step)
         key = "_reference_build" if driver else "_built"
         if meshcat is None and getattr(self, key, None) is not None:
             return getattr(self, key)
@@ -929,7 +1033,8 @@ class ScrewCapTrial(GistTrial):
         module doc), None otherwise (one gait, or the free cylinder)."""
         several = joint is not None and self.config.n_gaits > 1
         return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                    palm_max=0.0, next_check=0, angle=0.0, previous=0.0,
+                    palm_max=0.0, welded_max=0.0, welded_bodies=set(), digit_peak={},
+                    next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if several else None,
                     touch_at_stroke_end=False, digit_touch={})
 
@@ -1024,6 +1129,11 @@ class ScrewCapTrial(GistTrial):
         turns, truths, contacts = [], [], []
         st = self._start_state(x, joint)
 
+        def monitor(root_context):  # every step: palm, welded bodies, the digits' forces
+            step_contacts(plant, plant_context, built, st)
+            return EventStatus.Succeeded()
+
+        simulator.set_monitor(monitor)
         try:
             for i, t in enumerate(samples):
                 simulator.AdvanceTo(float(t))
@@ -1042,6 +1152,7 @@ class ScrewCapTrial(GistTrial):
                         raise _EarlyStop
         except _EarlyStop:
             st["stopped"] = True
+        simulator.clear_monitor()
         # the palm's share of the object's weight at the end (before any reversal)
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
@@ -1054,8 +1165,11 @@ class ScrewCapTrial(GistTrial):
         if c.held_turn and survived is False:  # lost: its turn was never held (held_turn)
             matches[:] = 0.0
             passed = min(passed, c.n_checks - 1)
+        # nothing welded does the work: a trial whose hand leaned on the bottle with more
+        # than lean_force (N) at some step is not turned by the fingers
+        leaned = st["welded_max"] > c.lean_force
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
-                       and not st["palm"] and survived is not False)
+                       and not st["palm"] and not leaned and survived is not False)
         if st["failed"]:
             matches[samples > checks[passed] + step] = 0.0
         score, s_b, s_a = incremental_score(self.dims_per_part, passed,
@@ -1064,6 +1178,9 @@ class ScrewCapTrial(GistTrial):
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
             max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
             palm_touched=st["palm"], palm_force_max=st["palm_max"],
+            welded_force_max=st["welded_max"], welded_bodies=sorted(st["welded_bodies"]),
+            leaned_on_welded=bool(leaned),
+            digit_peak_normal={d: float(v) for d, v in sorted(st["digit_peak"].items())},
             palm_weight_share=float(palm_share), survived_reversal=survived,
             reversal_credits=[float(v) for v in reversal],
             checks_passed=passed,
