@@ -36,7 +36,8 @@ RESULTS = Path(__file__).parent / "results" / "inhand_convergence.json"
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--effort-limits", default="menagerie", choices=("sheet", "menagerie"))
-    p.add_argument("--step", type=float, default=0.002, help="the default step (s)")
+    p.add_argument("--step", type=float, default=None,
+                   help="the default step (s); default: each task's own")
     p.add_argument("--only", default="", help="run the reference motions whose name "
                    "contains this")
     p.add_argument("--out", type=Path, default=RESULTS)
@@ -44,25 +45,27 @@ def main(argv=None) -> int:
                    help="the object's point-contact stiffness (N/m; 0: Drake's default); "
                    "default: the task's")
     args = p.parse_args(argv)
-    if not 1e-4 <= args.step <= 0.01:
+    if args.step is not None and not 1e-4 <= args.step <= 0.01:
         print(f"--step: expected a value in [0.0001, 0.01] s, got {args.step}", file=sys.stderr)
         return 2
     rows = []
     for name, (trial, x) in reference_motions(args.effort_limits).items():
         if args.only and args.only not in name:
             continue
-        scenario = dc.replace(trial.scenario(x), time_step=args.step)
+        step = args.step or trial.config.time_step
+        scenario = dc.replace(trial.scenario(x), time_step=step)
         if args.stiffness is not None:
             scenario = dc.replace(scenario, cap=dc.replace(scenario.cap,
                                                            point_stiffness=args.stiffness))
-        runs = [resimulate(scenario, args.step / f, target_deg=trial.config.target_deg)
+        runs = [resimulate(scenario, step / f, target_deg=trial.config.target_deg)
                 for f in (1, 2, 4)]
         ok = converged(runs)
         rows.append(dict(name=name, target_deg=trial.config.target_deg, converged=ok,
                          runs=[r.as_dict() for r in runs]))
         turns = " | ".join(f"{r.turn_deg:.1f} ({'yes' if r.reached else 'no'})" for r in runs)
         peaks = ", ".join(f"{d} {v:.1f}" for d, v in runs[-1].digit_peak_normal.items() if v)
-        print(f"| {name} | {trial.config.target_deg:g} | {turns} | "
+        print(f"| {name} | {1e3 * step:g} ms, {scenario.effort_limits} | "
+              f"{trial.config.target_deg:g} | {turns} | "
               f"{'yes' if ok else 'NO'} | {runs[-1].welded_peak:.1f} | {peaks} |", flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(dict(effort_limits=args.effort_limits, step=args.step,

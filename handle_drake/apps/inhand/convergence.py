@@ -249,6 +249,7 @@ def reference_motions(effort_limits: str = "menagerie") -> dict:
     """``{name: (ScrewCapTrial, x)}``: every finger task's hand-written reference motion
     (docs/results/inhand.md) under the hand's ``effort_limits``."""
     from handle_drake.apps.inhand.screw_cap import (
+        CLEAR,
         FOUR_FINGER_TURN,
         REGRASP_GAITS,
         TWO_STROKES,
@@ -262,7 +263,9 @@ def reference_motions(effort_limits: str = "menagerie") -> dict:
 
     one, four, regrasp = trial(), trial(**FOUR_FINGER_TURN), trial(**REGRASP_GAITS)
     cyl = trial(**TWO_STROKES)
-    return {"screw cap, one-gait stroke": (one, stroke_motion(one.gist)),
+    clear = ScrewCapTrial(ScrewCapTask(**CLEAR))  # its own limits (Menagerie's) and step
+    return {"screw cap, clear placement, stroke": (clear, stroke_motion(clear.gist)),
+            "screw cap, one-gait stroke": (one, stroke_motion(one.gist)),
             "screw cap, four-finger turn": (four, four_finger_turn_motion(four.gist)),
             "screw cap, 5-gait regrasp": (regrasp, stroke_motion(regrasp.gist,
                                                                   release=[1.6, 0.0])),

@@ -116,7 +116,7 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
+__all__ = ["CLEAR", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
            "TWO_STROKES", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
@@ -173,10 +173,22 @@ def four_finger_turn_motion(gist: ActionGist, motion=None) -> np.ndarray:
 # placement they press it with 50-70 N in the settled grasp and drag it back on every
 # regrasp: the thread's 0.01 N m cannot hold against that).
 REGRASP_GAITS = dict(cap_position=(0.405, -0.02, 0.075), n_gaits=5, target_deg=360.0)
+# Issue 45: a placement in which nothing welded does the work and the turn converges. In
+# the placements above the ring (or little) fingertip lies beyond the cap's end, in the 2 mm
+# slot between the cap and the welded bottle's shoulder: already the settled grasp presses
+# it there with 69 N (1 ms), and the stroke's turn comes from that wedge and changes with
+# the time step (95.5, 26.4, 17.5 deg at 2, 1, 0.5 ms). Here the cap is 100 mm long and
+# 15 mm nearer the little finger, so that the four fingers (about 85 mm across) lie on it and
+# the bottle starts beyond the little finger; the hand has Menagerie's 1 N m finger limits
+# and the step is 1 ms: the hand-written stroke turns it 113.4, 104.7, 109.6 deg at 1, 0.5,
+# 0.25 ms with no contact on the bottle (at 2 ms: 124.0 deg, the little finger brushing the
+# bottle with 3.8 N): docs/results/inhand.md, "Convergence".
+CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, effort_limits="menagerie",
+             time_step=0.001)
 #: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
 #: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
 PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
-              "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS}
+              "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS, "clear": CLEAR}
 # The fingertip cylinder's harder target (issue 35 item 4): 100 deg in two strokes of 1 s,
 # each the demonstration's gist with its own parameters (``stages``: 52), checked while
 # held at each half stroke (turn >= 5, 40, 50, 100 deg less 2 at 0.5, 1.0, 1.5, 2.2 s),
@@ -233,6 +245,14 @@ class ScrewCapModel:
     mu: float = 1.0  # cap and fingertips (knurled plastic on rubber pads)
     bottle_diameter: float = 0.060
     bottle_length: float = 0.080
+    # m: a neck between the cap and the bottle's shoulder (``neck_diameter`` across, less
+    # than the cap's), so that no finger is wedged in a slot between the cap's end and the
+    # shoulder (issue 45: a ring fingertip in the 2 mm slot turned the cap); 0: no neck
+    neck_length: float = 0.0
+    neck_diameter: float = 0.025
+    # True: the bottle on the cap's -y end (the first finger's side, world -y before the
+    # yaw) instead of its +y end (the ring and little fingers' side)
+    bottle_at_index: bool = False
     # the cap's centre in the world (the hand's forearm is at the origin, palm up)
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
     # the axis: world y turned about world z by this angle (deg)
@@ -253,6 +273,12 @@ class ScrewCapModel:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"cap.{name}: expected a finite value > 0, got {value!r}")
+        if not (math.isfinite(self.neck_length) and 0 <= self.neck_length <= 0.1):
+            raise ValueError(f"cap.neck_length: expected a value in [0, 0.1] m, got "
+                             f"{self.neck_length!r}")
+        if not (math.isfinite(self.neck_diameter) and 0 < self.neck_diameter < self.diameter):
+            raise ValueError(f"cap.neck_diameter: expected a value in (0, cap.diameter), got "
+                             f"{self.neck_diameter!r}")
         if not (math.isfinite(self.point_stiffness) and self.point_stiffness >= 0):
             raise ValueError(f"cap.point_stiffness: expected a finite value >= 0, got "
                              f"{self.point_stiffness!r}")
@@ -367,15 +393,22 @@ def _add_cap(plant, cap: ScrewCapModel):
             0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
                                                         cap.bottle_length, [0, 0, 1])))
         # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
+        side = -1.0 if cap.bottle_at_index else 1.0
         X_WB = RigidTransform(R_axis, centre + R_yaw @ np.array(
-            [0, (cap.length + cap.bottle_length) / 2 + 0.002, 0]))
+            [0, side * ((cap.length + cap.bottle_length) / 2 + 0.002 + cap.neck_length), 0]))
         plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
         shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
                        [0.3, 0.6, 0.9, 0.5]))
-    for b, shape, rgba in shapes:
-        plant.RegisterCollisionGeometry(b, RigidTransform(), shape, f"{b.name()}_collision",
+        if cap.neck_length > 0:  # on the bottle's cap side (its body -z: the cap's side)
+            shapes.append((bottle, Cylinder(cap.neck_diameter / 2, cap.neck_length),
+                           [0.3, 0.6, 0.9, 0.5], RigidTransform(
+                               [0, 0, (1 if cap.axis_reversed else -1) * side
+                                * (cap.bottle_length + cap.neck_length) / 2])))
+    for k, (b, shape, rgba, *X) in enumerate(shapes):
+        X_BG = X[0] if X else RigidTransform()
+        plant.RegisterCollisionGeometry(b, X_BG, shape, f"{b.name()}_collision{k or ''}",
                                         _proximity(cap.mu, cap.point_stiffness))
-        plant.RegisterVisualGeometry(b, RigidTransform(), shape, f"{b.name()}_visual",
+        plant.RegisterVisualGeometry(b, X_BG, shape, f"{b.name()}_visual{k or ''}",
                                      np.array(rgba))
     if not cap.free:
         # revolute joint about the cap's own z (= world y): the bottle's axis
