@@ -122,3 +122,60 @@ def test_the_settled_grasps_wedge_or_clear_the_bottle_at_every_step():
         if not wedged:
             assert converged(runs) and all(abs(r.turn_deg) < 1.0 for r in runs)
             assert all(max(r.digit_peak_normal.values()) < 20.0 for r in runs)
+
+
+# ------------------------------------------------------------ held means held (item 6)
+def _record(i, metric, **contacts):
+    from types import SimpleNamespace
+
+    base = dict(turn_deg=50.0, turn_deg_truth=50.0, palm_touched=False, reached_target=False,
+                survived_reversal=None, leaned_on_welded=False, digit_peak_normal={})
+    return SimpleNamespace(index=i, status="done", metric=metric, wall_time=1.0,
+                           contacts={**base, **contacts})
+
+
+def test_the_summary_counts_held_only_what_survived_the_reversal():
+    from handle_drake.apps.inhand.experiment import run_summary
+    from handle_drake.apps.inhand.screw_cap import TWO_STROKES
+
+    free = ScrewCapTrial(ScrewCapTask(**TWO_STROKES))
+    records = [_record(0, 30.0, survived_reversal=False),  # the palm never touched: not held
+               _record(1, 20.0, survived_reversal=True, turn_deg=80.0),
+               _record(2, 10.0, survived_reversal=True, palm_touched=True),
+               _record(3, 5.0, survived_reversal=None)]  # stopped early: not held
+    s = run_summary(records, free, 10)
+    assert s["best_index"] == 0 and s["best_held"] is False
+    assert s["share_held"] == pytest.approx(0.25) and s["best_held_rotation_deg"] == 80.0
+    # the cap cannot fall: held does not apply; a lean on the bottle is counted
+    cap = ScrewCapTrial(ScrewCapTask())
+    s = run_summary([_record(0, 30.0, leaned_on_welded=True, turn_deg=95.0),
+                     _record(1, 20.0, turn_deg=40.0)], cap, 10)
+    assert s["best_held"] is None and s["share_held"] is None
+    assert s["best_leaned"] and s["share_leaned"] == 0.5
+    assert s["best_held_rotation_deg"] == 40.0  # the leaning turn does not count
+
+
+def test_the_reversal_check_fails_when_the_grip_cannot_hold_the_margin():
+    # the free cylinder's reversal: its weight reversed plus reverse_margin (N); the same
+    # hand-written strokes held through 1 N of margin fail a 20 N one (the check can fail)
+    from handle_drake.apps.inhand.convergence import two_strokes_motion
+    from handle_drake.apps.inhand.screw_cap import TWO_STROKES
+
+    held = ScrewCapTrial(ScrewCapTask(**TWO_STROKES))
+    assert held.config.reverse_margin == 1.0
+    x = two_strokes_motion(held.gist)
+    assert held.evaluate(x).survived_reversal is True
+    pulled = ScrewCapTrial(ScrewCapTask(**TWO_STROKES, reverse_margin=20.0))
+    lost = pulled.evaluate(x)
+    assert lost.survived_reversal is False and not lost.reached_target
+    with pytest.raises(ValueError, match="reverse_margin"):
+        ScrewCapTask(reverse_margin=-1.0)
+
+
+def test_the_palm_check_fails_when_the_palm_touches():
+    # a cap pressed into the palm (15 mm lower, nearer the wrist): the palm touches it at
+    # some step (read at every step) and the trial is not reached, whatever the turn
+    trial = ScrewCapTrial(ScrewCapTask(cap_position=(0.36, -0.02, 0.03), lean_force=1e6))
+    outcome = trial.evaluate(stroke_motion(trial.gist), early_stop=False)
+    assert outcome.palm_touched and outcome.palm_force_max > 0.0
+    assert not outcome.reached_target

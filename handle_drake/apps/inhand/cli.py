@@ -174,12 +174,22 @@ def _cmd_inhand(args) -> int:
         return 1
     reached = (f"target reached at trial {s['trials_to_target']}" if s["trials_to_target"]
                else "target not reached")
-    held = ("" if args.task == "jog_wheel" else  # a wheel on its axle: nothing to hold
-            f"{'held' if s['best_held'] else 'not held'} at the end; ")
+    # a wheel on its axle or a cap on its thread: nothing to hold (best_held None); held
+    # means held: the object survived its weight reversed plus the stated margin
+    held = ("" if s.get("best_held") is None else
+            f"{'held' if s['best_held'] else 'not held'} at the end (weight reversed + "
+            f"margin); ")
+    share = ("" if s.get("share_held") is None else
+             f"; {100 * s['share_held']:.0f} % of trials held")
+    leaned = ("" if "share_leaned" not in s else
+              f"; best trial {'LEANED on' if s['best_leaned'] else 'did not lean on'} a welded "
+              f"body, {100 * s['share_leaned']:.0f} % of trials leaned (> lean_force)")
     print(f"best score {s['best_score']:.4g} (target score {s['target_score']:g}), trial "
           f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, {held}{reached}"
-          + ("" if args.task == "jog_wheel" else
-             f"; {100 * s['share_held']:.0f} % of trials held"))
+          + share + leaned)
+    if s.get("best_digit_peak_normal"):
+        print("best trial's peak normal force per digit (N, any step): " + ", ".join(
+            f"{d} {v:.1f}" for d, v in s["best_digit_peak_normal"].items()))
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")

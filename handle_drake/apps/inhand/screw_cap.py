@@ -318,6 +318,8 @@ class ScrewCapScenario:
     n_gaits: int = 1
     hold: float = 0.2  # s after the last gait
     parameters: list[float] = dc.field(default_factory=list)  # eq. 45
+    # N: the free cylinder's reversal pushes its weight reversed plus this much more
+    reverse_margin: float = 0.0
 
     def dump(self) -> str:
         return yaml_dump_typed(self)
@@ -514,7 +516,8 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
         builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
     reverse = None
     if joint is None:  # only the free cylinder has its weight reversed
-        reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(plant, body))
+        reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(
+            plant, body, scenario.reverse_margin))
         builder.Connect(reverse.get_output_port(), plant.get_applied_spatial_force_input_port())
     parameters = scenario.parameters or None
     source = builder.AddNamedSystem("motion", GaitMotionSource(
@@ -758,7 +761,11 @@ class ScrewCapTask:
     free_diameter: float = 0.055
     free_mass: float = 0.03
     reverse_time: float = 0.5
-    reverse_travel: float = 0.01  # m
+    reverse_travel: float = 0.01  # m, at most at any step of the reversal
+    # N: the reversal pushes the weight reversed plus this margin (the grip's tangential
+    # margin: 1 N is 3.4 times the 30 g cylinder's weight, the hand turned palm down while
+    # it accelerates at about 3 g); 0: the weight reversed alone (before issue 45)
+    reverse_margin: float = 1.0
     drop: float = 0.015  # m below the start: dropped (free cylinder)
     # The motion: the demonstration's gist performed ``stages`` times in sequence within
     # the gait (``gist.staged_gist``: each stage its own parameters, its start times bounded
@@ -777,7 +784,7 @@ class ScrewCapTask:
             if isinstance(value, bool) or not (isinstance(value, int | float)
                                                and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
-        for name in ("hold", "tolerance_deg", "viscous"):
+        for name in ("hold", "tolerance_deg", "viscous", "reverse_margin"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name}: expected a finite value >= 0, got {value!r}")
@@ -981,7 +988,8 @@ class ScrewCapTrial(GistTrial):
             settle_time=c.settle_time, gist_name=self.gist.name,
             gist=ScrewCapScenario.gist_data(self.gist),
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
-            hold=c.hold, parameters=[float(v) for v in parameters])
+            hold=c.hold, parameters=[float(v) for v in parameters],
+            reverse_margin=c.reverse_margin if c.free else 0.0)
 
     def _build(self, meshcat=None, driver: bool = False):
         """The diagram, settled (kept per process). ``driver``: with the Python hand
@@ -1103,16 +1111,23 @@ class ScrewCapTrial(GistTrial):
         context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
-        credits, held = [], False
+        credits, held, worst = [], False, [0.0]
+
+        def monitor(root_context):  # the travel at every step, not only at the samples
+            worst[0] = max(worst[0], float(np.linalg.norm(
+                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end)))
+            return EventStatus.Succeeded()
+
+        simulator.set_monitor(monitor)
         for t in c.reversal_sample_times():
             simulator.AdvanceTo(float(t))
-            travel = float(np.linalg.norm(
-                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
+            travel = worst[0]  # the largest so far
             touching = contact_summary(plant, plant_context, built)["touching"]
             touched = any(b != "palm" for b in touching)
             held = touched and travel < c.reverse_travel
             credits.append(1.0 if held else (min(1.0, c.reverse_travel / travel)
                                              if touched and c.partial_credit else 0.0))
+        simulator.clear_monitor()
         return bool(held), np.asarray(credits)
 
     def _reset(self, built: dict, x):
