@@ -63,7 +63,8 @@ def main(argv=None) -> int:
         rows.append(dict(name=name, target_deg=trial.config.target_deg, converged=ok,
                          runs=[r.as_dict() for r in runs]))
         turns = " | ".join(f"{r.turn_deg:.1f} ({'yes' if r.reached else 'no'})" for r in runs)
-        peaks = ", ".join(f"{d} {v:.1f}" for d, v in runs[-1].digit_peak_normal.items() if v)
+        peaks = ", ".join(f"{d} {v:.1f} / {runs[-1].digit_peak_normal_10ms[d]:.1f}"
+                          for d, v in runs[-1].digit_peak_normal.items() if v)
         print(f"| {name} | {1e3 * step:g} ms, {scenario.effort_limits} | "
               f"{trial.config.target_deg:g} | {turns} | "
               f"{'yes' if ok else 'NO'} | {runs[-1].welded_peak:.1f} | {peaks} |", flush=True)

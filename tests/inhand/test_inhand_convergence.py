@@ -83,7 +83,7 @@ def test_the_convergence_judge_can_pass_and_fail():
     from handle_drake.apps.inhand.convergence import Resimulation
 
     def run(h, turn, reached):
-        return Resimulation(h, turn, reached, {}, 0.0, 0.0, [], {}, None, 1)
+        return Resimulation(h, turn, reached, {}, {}, 0.0, 0.0, [], {}, None, 1)
 
     assert converged([run(0.002, 100.0, True), run(0.001, 95.0, True), run(5e-4, 92.0, True)])
     assert not converged([run(0.002, 100.0, True), run(0.001, 80.0, True),

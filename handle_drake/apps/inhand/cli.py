@@ -61,7 +61,10 @@ def register(subparsers) -> None:
                    help="screw_cap: the cap and grasp: one-gait (first and ring finger on the "
                         "cap), four-finger-turn (thumb, first, middle and ring finger on it; "
                         "the fingers turn it), four-finger (FOUR_FINGER_GRIP: four digits, "
-                        "squeezed: they jam), regrasp (5 gaits, 360 deg)")
+                        "squeezed: they jam), regrasp (5 gaits, 360 deg), clear (issue 45: "
+                        "the four fingers on a 100 mm cap, no finger wedged against the "
+                        "welded bottle, Menagerie's 1 N m finger limits, 1 ms: the one whose "
+                        "physics converges)")
     p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
                    help="screw_cap: digits (thumb and fingers) that must each touch the cap "
                         "within the contact window at a check (default 1: any finger)")

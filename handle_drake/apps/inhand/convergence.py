@@ -47,7 +47,10 @@ class Resimulation:
     time_step: float
     turn_deg: float
     reached: bool
-    digit_peak_normal: dict  # digit -> peak normal force on the object (N)
+    digit_peak_normal: dict  # digit -> peak normal force on the object (N), any one step
+    # the same averaged over each 10 ms window first (an impact's one-step peak grows as the
+    # step shrinks: its impulse is what the step resolves; this is what a sensor would show)
+    digit_peak_normal_10ms: dict
     palm_peak: float  # N, the palm on the object or a welded body
     welded_peak: float  # N, the hand on any welded body (the bottle)
     welded_bodies: list  # hand bodies that touched a welded body
@@ -117,6 +120,7 @@ def resimulate(scenario: ScrewCapScenario | str, time_step: float | None = None,
     else:
         angle0 = float(q_all[0])
     rec = dict(angle=0.0, prev=0.0, digits={d: 0.0 for d in DIGITS}, palm=0.0, welded=0.0,
+               series={d: [] for d in DIGITS},
                welded_bodies=set(), sat={d: 0 for d in DIGITS}, steps=0)
 
     def turn_now() -> float:
@@ -149,6 +153,8 @@ def resimulate(scenario: ScrewCapScenario | str, time_step: float | None = None,
                     rec["welded_bodies"].add(hand_bodies[other])
                     if hand_bodies[other] == "palm":
                         rec["palm"] = max(rec["palm"], float(np.linalg.norm(f)))
+        for d in DIGITS:
+            rec["series"][d].append(per_digit.get(d, 0.0))
         for d, v in per_digit.items():
             if d == "palm":
                 rec["palm"] = max(rec["palm"], v)
@@ -189,10 +195,21 @@ def resimulate(scenario: ScrewCapScenario | str, time_step: float | None = None,
     return Resimulation(
         time_step=h, turn_deg=float(turn), reached=reached,
         digit_peak_normal={d: float(v) for d, v in rec["digits"].items()},
+        digit_peak_normal_10ms={d: _window_peak(v, max(1, int(round(0.01 / h))))
+                                for d, v in rec["series"].items()},
         palm_peak=float(rec["palm"]), welded_peak=float(rec["welded"]),
         welded_bodies=sorted(rec["welded_bodies"]),
         saturated={d: rec["sat"][d] / steps for d in DIGITS}, survived_reversal=survived,
         steps=rec["steps"])
+
+
+def _window_peak(values, n: int) -> float:
+    """The largest mean of ``n`` consecutive values (0 when there are fewer)."""
+    v = np.asarray(values, dtype=float)
+    if v.size < n:
+        return float(v.mean()) if v.size else 0.0
+    c = np.cumsum(np.r_[0.0, v])
+    return float(np.max((c[n:] - c[:-n]) / n))
 
 
 def _quat_matrix(q) -> np.ndarray:
