@@ -179,3 +179,25 @@ def test_the_palm_check_fails_when_the_palm_touches():
     outcome = trial.evaluate(stroke_motion(trial.gist), early_stop=False)
     assert outcome.palm_touched and outcome.palm_force_max > 0.0
     assert not outcome.reached_target
+
+
+def test_no_test_or_benchmark_uses_the_evaluation_seeds():
+    # issue 45 item 4: the evaluation seeds live in one place (experiment.EVALUATION_SEEDS)
+    # and nothing is tuned on them: no seed literal in tests/ or benchmarks/ is one of them
+    import re
+    from pathlib import Path
+
+    from handle_drake.apps.inhand.experiment import EVALUATION_SEEDS
+
+    root = Path(__file__).resolve().parents[2]
+    pattern = re.compile(r"(?:seeds?\s*=\s*|default_rng\(|--seeds?\s+)\[?\(?([0-9][0-9 ,]*)")
+    found = []
+    for path in [*(root / "tests").rglob("*.py"), *(root / "benchmarks").rglob("*.py")]:
+        for match in pattern.finditer(path.read_text()):
+            values = {int(v) for v in re.findall(r"[0-9]+", match.group(1))}
+            if values & set(EVALUATION_SEEDS):
+                found.append((path.name, match.group(0)))
+    assert not found, found
+    # the scan finds seeds where they are (it can fail): this very pattern on a literal
+    a, b = EVALUATION_SEEDS[:2]
+    assert pattern.search(f"run(seed={a})") and pattern.search(f"default_rng({b})")

@@ -78,6 +78,12 @@ def _task_config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
             "n_particles": n_particles, "inhand_version": 1}
 
 
+#: The in-hand evaluation seeds (issue 45 item 4): the one place they live. A learning
+#: table that claims "learning matters" is run on these (``bench_screw_cap.py
+#: --evaluation``); no test, benchmark default or tuning uses them
+#: (tests/inhand/test_inhand_convergence.py scans tests/ and benchmarks/ for them).
+EVALUATION_SEEDS = (60, 61, 62, 63, 64)
+
 #: The tasks of :mod:`handle_drake.apps.inhand.screw_cap` (held by the fingers).
 FINGER_TASKS = ("screw_cap", "fingertip_cylinder")
 
