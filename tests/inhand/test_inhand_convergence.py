@@ -201,3 +201,51 @@ def test_no_test_or_benchmark_uses_the_evaluation_seeds():
     # the scan finds seeds where they are (it can fail): this very pattern on a literal
     a, b = EVALUATION_SEEDS[:2]
     assert pattern.search(f"run(seed={a})") and pattern.search(f"default_rng({b})")
+
+
+# ------------------------------------------------------------ domain randomisation (item 3)
+def test_perturbations_are_drawn_within_the_task_ranges_from_the_seed():
+    import numpy as np
+
+    from handle_drake.apps.inhand.screw_cap import CLEAR, draw_perturbations
+
+    c = ScrewCapTask(**CLEAR)
+    draws = draw_perturbations(c, np.random.default_rng(3), 50)
+    assert draws == draw_perturbations(c, np.random.default_rng(3), 50)  # the seed's
+    assert draws != draw_perturbations(c, np.random.default_rng(4), 50)
+    for p in draws:
+        assert p["time_step"] in (0.001, 0.0005)
+        assert 0.7 <= p["mu_scale"] <= 1.3 and 0.8 <= p["mass_scale"] <= 1.2
+        assert 0.5 <= p["effort_scale"] <= 1.0 and 0.01 <= p["coulomb_torque"] <= 0.1
+        assert np.all(np.abs(np.subtract(p["cap_position"], c.cap_position)) <= 0.002)
+    # spread over the ranges, not stuck at one end
+    assert np.ptp([p["mu_scale"] for p in draws]) > 0.4
+    with pytest.raises(ValueError, match="perturb_steps"):
+        ScrewCapTask(perturb_steps=(0.3,))
+    with pytest.raises(ValueError, match="robust_k"):
+        ScrewCapTask(robust_k=-1)
+
+
+def test_the_effort_scale_reaches_the_built_plant():
+    half = ScrewCapTrial(ScrewCapTask(effort_limits="menagerie", effort_scale=0.5))
+    plant = build_screw_cap(half.scenario(), driver=False)["plant"]
+    limits = {plant.get_joint_actuator(i).joint().name(): plant.get_joint_actuator(i)
+              .effort_limit() for i in plant.GetJointActuatorIndices()}
+    assert limits["FFJ3"] == pytest.approx(0.5) and limits["THJ5"] == pytest.approx(1.5)
+    assert limits["cap_thread"] == pytest.approx(0.01)  # the thread's friction: not the hand
+
+
+def test_the_robust_score_is_the_worst_over_the_drawn_physics():
+    import numpy as np
+
+    from handle_drake.apps.inhand.screw_cap import CLEAR, draw_perturbations
+
+    trial = ScrewCapTrial(ScrewCapTask(**CLEAR, robust_k=2, perturb_steps=(1.0,)))
+    x = stroke_motion(trial.gist, 0.5, 0.3)  # a weaker stroke: the draws differ
+    result = trial(x, seed=11)
+    scores = result.contacts["robust_scores"]
+    assert len(scores) == 2 and result.metric == min(scores)
+    # the draws are the seed's, and the worst re-evaluated alone gives its score
+    draws = draw_perturbations(trial.config, np.random.default_rng(11), 2)
+    worst = draws[int(np.argmin(scores))]
+    assert trial.perturbed(worst).evaluate(x).score == pytest.approx(result.metric, abs=1e-9)

@@ -120,7 +120,8 @@ __all__ = ["CLEAR", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRA
            "TWO_STROKES", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
-           "build_screw_cap", "contact_forces", "simulate_scenario",
+           "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
+           "fresh_success",
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
@@ -219,17 +220,21 @@ def effort_limit(name: str, limits: str) -> float | None:
     return MENAGERIE_EFFORT_LIMITS.get(name, MENAGERIE_DEFAULT_EFFORT)
 
 
-def _set_effort_limits(plant, hand, limits: str) -> None:
+def _set_effort_limits(plant, hand, limits: str, scale: float = 1.0) -> None:
     if limits not in EFFORT_LIMITS:
         raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got {limits!r}")
+    if not (math.isfinite(scale) and 0 < scale <= 1):
+        raise ValueError(f"effort_scale: expected a value in (0, 1], got {scale!r}")
     # (before Finalize the per-instance query lists nothing: filter all of them)
     for i in plant.GetJointActuatorIndices():
         actuator = plant.get_joint_actuator(i)
         if actuator.model_instance() != hand:
             continue
         value = effort_limit(actuator.joint().name(), limits)
-        if value is not None:
-            actuator.set_effort_limit(value)
+        if value is None:
+            value = actuator.effort_limit()
+        if value != actuator.effort_limit() or scale != 1.0:
+            actuator.set_effort_limit(value * scale)
 
 
 @dc.dataclass
@@ -308,6 +313,7 @@ class ScrewCapScenario:
     # the hand's actuator effort limits: "sheet" (the model file's) or "menagerie"
     # (MENAGERIE_EFFORT_LIMITS: 1 N m on the finger and distal thumb joints)
     effort_limits: str = "sheet"
+    effort_scale: float = 1.0  # every hand actuator's limit times this (perturbed physics)
     max_joint_velocity: float = 4.0  # rad/s, the hand driver's rate limit
     settle_time: float = 0.5
     # Algorithm 1: the action gist, its frames and repetitions
@@ -490,7 +496,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
                      RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
                                     scenario.hand_xyz))
-    _set_effort_limits(plant, hand, scenario.effort_limits)
+    _set_effort_limits(plant, hand, scenario.effort_limits, scenario.effort_scale)
     instance, body, bottle, joint = _add_cap(plant, cap)
     plant.Finalize()
     if bottle is not None:
@@ -749,6 +755,24 @@ class ScrewCapTask:
     grasp_closure: tuple = ()
     # the hand's actuator effort limits (ScrewCapScenario.effort_limits)
     effort_limits: str = "sheet"
+    # Perturbed physics (issue 45 item 3): the object's friction and mass and the hand's
+    # effort limits scaled by these (1: as modelled)
+    mu_scale: float = 1.0
+    mass_scale: float = 1.0
+    effort_scale: float = 1.0
+    # Domain randomisation: robust_k > 0 scores a trial by the robust_quantile (0: the
+    # worst) of its scores over robust_k perturbed physics drawn per trial from its seed
+    # (:func:`draw_perturbations`): the time step times one of perturb_steps, friction and
+    # mass +- perturb_mu / perturb_mass, the thread's Coulomb torque in perturb_thread (the
+    # cap), effort limits down to (1 - perturb_effort), the object placed +- perturb_place m
+    robust_k: int = 0
+    robust_quantile: float = 0.0
+    perturb_steps: tuple = (1.0, 0.5)
+    perturb_mu: float = 0.3
+    perturb_mass: float = 0.2
+    perturb_thread: tuple = (0.01, 0.1)
+    perturb_effort: float = 0.5
+    perturb_place: float = 0.002
     # N: the hand's force on a welded body (the bottle) above which the trial leans on it
     # (not reached: nothing welded does the work; the cap weighs 0.12 N)
     lean_force: float = 1.0
@@ -801,6 +825,32 @@ class ScrewCapTask:
         if self.benchmark is not None and len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
+        for name in ("mu_scale", "mass_scale"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        if not (isinstance(self.effort_scale, int | float) and 0 < self.effort_scale <= 1):
+            raise ValueError(f"effort_scale: expected a value in (0, 1], got "
+                             f"{self.effort_scale!r}")
+        if isinstance(self.robust_k, bool) or not isinstance(self.robust_k, int) \
+                or self.robust_k < 0:
+            raise ValueError(f"robust_k: expected an integer >= 0, got {self.robust_k!r}")
+        if not 0 <= self.robust_quantile <= 1:
+            raise ValueError(f"robust_quantile: expected a value in [0, 1], got "
+                             f"{self.robust_quantile!r}")
+        for f in self.perturb_steps:
+            if not (0 < f <= 1 and _divides(self.time_step * f)):
+                raise ValueError(f"perturb_steps: expected factors in (0, 1] whose step "
+                                 f"divides 2 ms, got {self.perturb_steps!r}")
+        for name, high in (("perturb_mu", 0.9), ("perturb_mass", 0.9), ("perturb_effort", 0.9),
+                           ("perturb_place", 0.01)):
+            if not 0 <= getattr(self, name) <= high:
+                raise ValueError(f"{name}: expected a value in [0, {high:g}], got "
+                                 f"{getattr(self, name)!r}")
+        if not (len(self.perturb_thread) == 2 and 0 < self.perturb_thread[0]
+                <= self.perturb_thread[1]):
+            raise ValueError(f"perturb_thread: expected (low, high) N m with 0 < low <= high, "
+                             f"got {self.perturb_thread!r}")
         if self.effort_limits not in EFFORT_LIMITS:
             raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got "
                              f"{self.effort_limits!r}")
@@ -911,6 +961,40 @@ class _EarlyStop(Exception):
     pass
 
 
+def draw_perturbations(config: "ScrewCapTask", rng, n: int) -> list[dict]:
+    """``n`` perturbed physics (ScrewCapTask settings) drawn within the task's ranges."""
+    c, out = config, []
+    for _ in range(n):
+        offset = rng.uniform(-c.perturb_place, c.perturb_place, 3)
+        p = dict(time_step=c.time_step * float(rng.choice(c.perturb_steps)),
+                 mu_scale=1.0 + float(rng.uniform(-c.perturb_mu, c.perturb_mu)),
+                 mass_scale=1.0 + float(rng.uniform(-c.perturb_mass, c.perturb_mass)),
+                 effort_scale=1.0 - float(rng.uniform(0.0, c.perturb_effort)))
+        if c.free:
+            p["free_position"] = tuple(float(v) for v in np.asarray(c.free_position) + offset)
+        else:
+            p["cap_position"] = tuple(float(v) for v in np.asarray(c.cap_position) + offset)
+            p["coulomb_torque"] = float(rng.uniform(*c.perturb_thread))
+        out.append(p)
+    return out
+
+
+#: The seed stream of fresh perturbations (never a learning trial's: trial seeds are single
+#: integers, these are drawn from the pair (FRESH, seed))
+FRESH = 45_000_045
+
+
+def fresh_success(config: "ScrewCapTask", x, n: int = 20, seed: int = 0) -> dict:
+    """The share of ``n`` fresh perturbed physics (never used while learning) in which the
+    trial with parameters ``x`` reaches its target, with each draw's turn."""
+    trial = ScrewCapTrial(dc.replace(config, robust_k=0))
+    draws = draw_perturbations(config, np.random.default_rng([FRESH, int(seed)]), n)
+    outcomes = [trial.perturbed(p).evaluate(x) for p in draws]
+    return dict(success=float(np.mean([o.reached_target for o in outcomes])), n=n,
+                turns=[o.turn_deg for o in outcomes],
+                reached=[bool(o.reached_target) for o in outcomes])
+
+
 def _demonstration(name: str = "screw_cap_rotation.json"):
 
     recording = load_glove(DATA_DIR / name)
@@ -980,11 +1064,14 @@ class ScrewCapTrial(GistTrial):
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
                               diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
                               length=c.cap_length, axis_reversed=c.cap_axis_reversed,
-                              position=[float(v) for v in c.cap_position]) if not c.free else
-            ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
+                              position=[float(v) for v in c.cap_position],
+                              mass=ScrewCapModel.mass * c.mass_scale,
+                              mu=ScrewCapModel.mu * c.mu_scale) if not c.free else
+            ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass * c.mass_scale,
+                          mu=ScrewCapModel.mu * c.mu_scale,
                           position=[float(v) for v in c.free_position]),
             initial_position={n: float(v) for n, v in zip(_NAMES, q0, strict=True) if v != 0},
-            time_step=c.time_step, effort_limits=c.effort_limits,
+            time_step=c.time_step, effort_limits=c.effort_limits, effort_scale=c.effort_scale,
             settle_time=c.settle_time, gist_name=self.gist.name,
             gist=ScrewCapScenario.gist_data(self.gist),
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
@@ -1022,12 +1109,37 @@ class ScrewCapTrial(GistTrial):
         return built
 
     def __call__(self, x, seed: int = 0):
-
+        if self.config.robust_k > 0:
+            return self._robust(x, seed)
         outcome = self.evaluate(x)
         detail = outcome.as_dict()
         detail.pop("times")
         return TrialResult(metric=outcome.score, contacts=detail,
                            scenario=self.scenario(x).dump())
+
+    def perturbed(self, perturbation: dict) -> "ScrewCapTrial":
+        """The same task under one perturbation (:func:`draw_perturbations`), not robust."""
+        return ScrewCapTrial(dc.replace(self.config, robust_k=0, **perturbation))
+
+    def _robust(self, x, seed: int) -> TrialResult:
+        """Domain randomisation: the ``robust_quantile`` of the scores over ``robust_k``
+        perturbed physics drawn from the trial's seed; the logged detail is that trial's
+        (its ``reached_target`` then holds for that share of the draws), with every draw's
+        score and reached flag."""
+        c = self.config
+        draws = draw_perturbations(c, np.random.default_rng(int(seed)), c.robust_k)
+        outcomes = [self.perturbed(p).evaluate(x) for p in draws]
+        scores = np.array([o.score for o in outcomes])
+        k = int(np.argsort(scores, kind="stable")[
+            int(math.floor(c.robust_quantile * (len(scores) - 1)))])
+        detail = outcomes[k].as_dict()
+        detail.pop("times")
+        detail.update(robust_scores=scores.tolist(),
+                      robust_reached=[bool(o.reached_target) for o in outcomes],
+                      robust_draws=[{n: (list(v) if isinstance(v, tuple) else v)
+                                     for n, v in p.items()} for p in draws])
+        return TrialResult(metric=float(scores[k]), contacts=detail,
+                           scenario=self.perturbed(draws[k]).scenario(x).dump())
 
     def _gripped(self, st: dict, t, summary: dict, built: dict, plant_context, p0) -> bool:
         """A finger touched the object within ``contact_window``, the palm never did (its
