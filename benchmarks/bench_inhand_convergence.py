@@ -29,6 +29,7 @@ from handle_drake.apps.inhand.convergence import (  # noqa: E402
     reference_motions,
     resimulate,
 )
+from handle_drake.apps.inhand.screw_cap import fresh_success  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "inhand_convergence.json"
 
@@ -41,6 +42,9 @@ def main(argv=None) -> int:
     p.add_argument("--only", default="", help="run the reference motions whose name "
                    "contains this")
     p.add_argument("--out", type=Path, default=RESULTS)
+    p.add_argument("--fresh", type=int, default=0, metavar="N",
+                   help="instead: each reference's success over N fresh perturbed physics "
+                        "(screw_cap.fresh_success, the task's ranges)")
     p.add_argument("--stiffness", type=float, default=None,
                    help="the object's point-contact stiffness (N/m; 0: Drake's default); "
                    "default: the task's")
@@ -51,6 +55,13 @@ def main(argv=None) -> int:
     rows = []
     for name, (trial, x) in reference_motions(args.effort_limits).items():
         if args.only and args.only not in name:
+            continue
+        if args.fresh:
+            fresh = fresh_success(trial.config, x, args.fresh)
+            rows.append(dict(name=name, **fresh))
+            print(f"| {name} | {trial.config.target_deg:g} | {100 * fresh['success']:.0f} % of "
+                  f"{args.fresh} | {min(fresh['turns']):.1f}-{max(fresh['turns']):.1f} |",
+                  flush=True)
             continue
         step = args.step or trial.config.time_step
         scenario = dc.replace(trial.scenario(x), time_step=step)

@@ -74,6 +74,14 @@ def register(subparsers) -> None:
                         "the turn counted only while held; base rate 0.34 %%); 1 = the 60 deg "
                         "pinch in one stroke (base rate 1.5-3.5 %%: random search reaches it "
                         "about as fast as any swarm)")
+    p.add_argument("--robust", type=non_negative_int, default=0, metavar="K",
+                   help="screw_cap / fingertip_cylinder: score each trial by its worst over K "
+                        "perturbed physics drawn per trial (step, friction +-30 %%, mass +-20 "
+                        "%%, thread 0.01-0.1 N m, effort limits down to half, placement +-2 mm; "
+                        "ScrewCapTask.perturb_*); then print the best trial's success over "
+                        "--fresh fresh perturbations. Default 0: the nominal physics only")
+    p.add_argument("--fresh", type=positive_int, default=20, metavar="N",
+                   help="with --robust: fresh perturbations the best trial is tried on (20)")
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
@@ -114,6 +122,9 @@ def _task_options(args) -> dict:
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")
+    if args.robust and args.task not in ("screw_cap", "fingertip_cylinder"):
+        raise ValueError(f"--robust {args.robust}: only with --task screw_cap or "
+                         f"fingertip_cylinder")
     if args.grip_digits is not None and (args.task != "screw_cap" or args.grip_digits > 5):
         raise ValueError(f"--grip-digits {args.grip_digits}: 1..5, only with --task screw_cap")
     if args.task == "jog_wheel":
@@ -135,6 +146,8 @@ def _task_options(args) -> dict:
         options["target_deg"] = default if args.target_deg is None else args.target_deg
         if args.grip_digits is not None:
             options["grip_digits"] = args.grip_digits
+        if args.robust:
+            options["robust_k"] = args.robust
     else:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
@@ -193,6 +206,14 @@ def _cmd_inhand(args) -> int:
     if s.get("best_digit_peak_normal"):
         print("best trial's peak normal force per digit (N, any step): " + ", ".join(
             f"{d} {v:.1f}" for d, v in s["best_digit_peak_normal"].items()))
+    if args.robust:
+        from handle_drake.apps.inhand.screw_cap import fresh_success
+
+        best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
+        fresh = fresh_success(run.trial.config, best.parameters, args.fresh)
+        print(f"best trial over {args.fresh} fresh perturbed physics (never used while "
+              f"learning): reaches its target in {100 * fresh['success']:.0f} %; turns "
+              f"{min(fresh['turns']):.1f}-{max(fresh['turns']):.1f} deg")
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")
