@@ -30,7 +30,17 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import EventStatus
 
-from handle_drake.apps.inhand.screw_cap import ScrewCapScenario, build_screw_cap
+from handle_drake.apps.inhand.screw_cap import (
+    CLEAR,
+    FOUR_FINGER_TURN,
+    REGRASP_GAITS,
+    TWO_STROKES,
+    ScrewCapScenario,
+    ScrewCapTask,
+    ScrewCapTrial,
+    build_screw_cap,
+    four_finger_turn_motion,
+)
 
 __all__ = ["Resimulation", "resimulate", "convergence", "converged", "DIGITS",
            "LEAN_FORCE"]
@@ -80,115 +90,25 @@ def resimulate(scenario: ScrewCapScenario | str, time_step: float | None = None,
         raise ValueError(f"time_step: expected a value in [1e-05, 0.01] s, got {time_step!r}")
     scenario = dc.replace(scenario, time_step=h)
     built = build_screw_cap(scenario, driver=False)
-    plant, planned, source = built["plant"], built["planned"], built["source"]
-    gist = built["gist"]
     simulator = Simulator(built["diagram"])
     context = simulator.get_mutable_context()
-    plant_context = plant.GetMyContextFromRoot(context)
-    # settle with every variation zeroed (the trial's grasp), then restart the clock
-    still = np.asarray(scenario.parameters, dtype=float).copy()
-    for sl in gist.slices():
-        still[sl][1:] = 0.0
-    planned.plan(source, still, scenario.settle_time)
-    simulator.Initialize()
-    simulator.AdvanceTo(scenario.settle_time)
-    context.SetTime(0.0)
     free = built["joint"] is None
     end = scenario.total_time
-    planned.plan(source, np.asarray(scenario.parameters, dtype=float),
-                 end + (reverse_time if free else 0.0))
-
-    body, bottle = built["cap"], built["bottle"]
-    instance = body.model_instance()
-    hand_bodies = built["hand_bodies"]
-    obj = int(body.index())
-    # every body welded to the world that is not the hand's (the bottle)
-    welded = {int(b.index()) for b in plant.GetBodiesWeldedTo(plant.world_body())
-              if int(b.index()) not in hand_bodies and b.index() != plant.world_body().index()}
-    assert bottle is None or int(bottle.index()) in welded
-    # each digit's actuators (with a finite effort limit), by their input index
-    actuators = []
-    for i in plant.GetJointActuatorIndices():
-        a = plant.get_joint_actuator(i)
-        digit = a.joint().name()[:2].lower()
-        if digit in DIGITS and a.effort_limit() < np.inf:
-            actuators.append((digit, int(a.input_start()), float(a.effort_limit())))
-    # the object's rotation about its axis: from the generalized positions directly
-    q_all = plant.GetPositions(plant_context, instance)
-    if free:
-        R0 = _quat_matrix(q_all[:4])
-    else:
-        angle0 = float(q_all[0])
-    rec = dict(angle=0.0, prev=0.0, digits={d: 0.0 for d in DIGITS}, palm=0.0, welded=0.0,
-               series={d: [] for d in DIGITS},
-               welded_bodies=set(), sat={d: 0 for d in DIGITS}, steps=0)
-
-    def turn_now() -> float:
-        q = plant.GetPositions(plant_context, instance)
-        if not free:
-            return math.degrees(float(q[0]) - angle0)
-        R = R0.T @ _quat_matrix(q[:4])
-        raw = -math.atan2(R[1, 0], R[0, 0])  # about the body z, positive as the trial counts
-        rec["angle"] += (raw - rec["prev"] + math.pi) % (2 * math.pi) - math.pi
-        rec["prev"] = raw
-        return math.degrees(rec["angle"])
-
-    def monitor(root_context):
-        results = plant.get_contact_results_output_port().Eval(plant_context)
-        per_digit = {}
-        for k in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(k)
-            a, b = int(info.bodyA_index()), int(info.bodyB_index())
-            f = np.asarray(info.contact_force())
-            fn = abs(float(f @ np.asarray(info.point_pair().nhat_BA_W)))
-            for mine, other in ((a, b), (b, a)):
-                if other not in hand_bodies:
-                    continue
-                if mine == obj:
-                    d = _digit(hand_bodies[other])
-                    if d is not None:
-                        per_digit[d] = per_digit.get(d, 0.0) + fn
-                elif mine in welded:
-                    rec["welded"] = max(rec["welded"], float(np.linalg.norm(f)))
-                    rec["welded_bodies"].add(hand_bodies[other])
-                    if hand_bodies[other] == "palm":
-                        rec["palm"] = max(rec["palm"], float(np.linalg.norm(f)))
-        for d in DIGITS:
-            rec["series"][d].append(per_digit.get(d, 0.0))
-        for d, v in per_digit.items():
-            if d == "palm":
-                rec["palm"] = max(rec["palm"], v)
-            else:
-                rec["digits"][d] = max(rec["digits"][d], v)
-        u = plant.get_net_actuation_output_port().Eval(plant_context)
-        hit = {d for d, i, limit in actuators if abs(u[i]) >= 0.999 * limit}
-        for d in hit:
-            rec["sat"][d] += 1
-        rec["steps"] += 1
-        turn_now()
-        return EventStatus.Succeeded()
-
-    simulator.set_monitor(monitor)
+    _settle(built, simulator, scenario, end + (reverse_time if free else 0.0))
+    reader = _StepReader(built, built["plant"].GetMyContextFromRoot(context))
+    simulator.set_monitor(reader.monitor)
     simulator.Initialize()
     simulator.AdvanceTo(end)
-    turn = turn_now()
+    turn = reader.turn_now()
     survived = None
-    if free:
-        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+    if free:  # the weight reversed (plus the scenario's margin): the travel at every step
+        reader.start_travel()
         reverse = built["reverse"]
         reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         simulator.AdvanceTo(end + reverse_time)
-        moved = float(np.linalg.norm(plant.EvalBodyPoseInWorld(plant_context, body)
-                                     .translation() - p_end))
-        results = plant.get_contact_results_output_port().Eval(plant_context)
-        touched = False
-        for k in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(k)
-            pair = {int(info.bodyA_index()), int(info.bodyB_index())}
-            if obj in pair and any(hand_bodies.get(i, "palm") != "palm" for i in pair - {obj}):
-                touched = True
-        survived = bool(moved < travel and touched)
+        survived = bool(reader.travel < travel and reader.finger_touches())
     simulator.clear_monitor()
+    rec = reader.rec
     steps = max(rec["steps"], 1)
     leaned = rec["welded"] > lean_force or rec["palm"] > lean_force
     reached = bool(turn >= target_deg and not leaned and survived is not False)
@@ -201,6 +121,113 @@ def resimulate(scenario: ScrewCapScenario | str, time_step: float | None = None,
         welded_bodies=sorted(rec["welded_bodies"]),
         saturated={d: rec["sat"][d] / steps for d in DIGITS}, survived_reversal=survived,
         steps=rec["steps"])
+
+
+def _settle(built: dict, simulator, scenario, until: float) -> None:
+    """The trial's grasp settled with every variation zeroed, the clock restarted at 0 and
+    the scenario's own commands planned until ``until`` (s)."""
+    planned, source, gist = built["planned"], built["source"], built["gist"]
+    still = np.asarray(scenario.parameters, dtype=float).copy()
+    for sl in gist.slices():
+        still[sl][1:] = 0.0
+    planned.plan(source, still, scenario.settle_time)
+    simulator.Initialize()
+    simulator.AdvanceTo(scenario.settle_time)
+    simulator.get_mutable_context().SetTime(0.0)
+    planned.plan(source, np.asarray(scenario.parameters, dtype=float), until)
+
+
+class _StepReader:
+    """Reads the plant at every step (a simulator monitor): the turn, the digits' normal
+    forces on the object, the palm's and the hand's on welded bodies, saturation."""
+
+    def __init__(self, built: dict, plant_context):
+        plant, body = built["plant"], built["cap"]
+        self.plant, self.context, self.body = plant, plant_context, body
+        self.hand = built["hand_bodies"]
+        self.obj, self.free = int(body.index()), built["joint"] is None
+        self.instance = body.model_instance()
+        world = plant.world_body().index()
+        # every body welded to the world that is not the hand's (the bottle)
+        self.welded = {int(b.index()) for b in plant.GetBodiesWeldedTo(plant.world_body())
+                       if int(b.index()) not in self.hand and b.index() != world}
+        assert built["bottle"] is None or int(built["bottle"].index()) in self.welded
+        # each digit's actuators (with a finite effort limit), by their input index
+        self.actuators = []
+        for i in plant.GetJointActuatorIndices():
+            a = plant.get_joint_actuator(i)
+            digit = a.joint().name()[:2].lower()
+            if digit in DIGITS and a.effort_limit() < np.inf:
+                self.actuators.append((digit, int(a.input_start()), float(a.effort_limit())))
+        # the object's rotation about its axis: from the generalized positions directly
+        q = plant.GetPositions(plant_context, self.instance)
+        self.R0 = _quat_matrix(q[:4]) if self.free else None
+        self.angle0 = None if self.free else float(q[0])
+        self.p_end, self.travel = None, 0.0
+        self.rec = dict(angle=0.0, prev=0.0, digits={d: 0.0 for d in DIGITS}, palm=0.0,
+                        welded=0.0, series={d: [] for d in DIGITS}, welded_bodies=set(),
+                        sat={d: 0 for d in DIGITS}, steps=0)
+
+    def turn_now(self) -> float:
+        rec, q = self.rec, self.plant.GetPositions(self.context, self.instance)
+        if not self.free:
+            return math.degrees(float(q[0]) - self.angle0)
+        R = self.R0.T @ _quat_matrix(q[:4])
+        raw = -math.atan2(R[1, 0], R[0, 0])  # about the body z, positive as the trial counts
+        rec["angle"] += (raw - rec["prev"] + math.pi) % (2 * math.pi) - math.pi
+        rec["prev"] = raw
+        return math.degrees(rec["angle"])
+
+    def start_travel(self) -> None:
+        self.p_end = self._position()
+
+    def _position(self) -> np.ndarray:
+        return self.plant.EvalBodyPoseInWorld(self.context, self.body).translation().copy()
+
+    def finger_touches(self) -> bool:
+        results = self.plant.get_contact_results_output_port().Eval(self.context)
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            pair = {int(info.bodyA_index()), int(info.bodyB_index())}
+            if self.obj in pair and any(self.hand.get(i, "palm") != "palm"
+                                        for i in pair - {self.obj}):
+                return True
+        return False
+
+    def monitor(self, root_context):
+        rec, hand = self.rec, self.hand
+        results = self.plant.get_contact_results_output_port().Eval(self.context)
+        per_digit = {}
+        for k in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(k)
+            a, b = int(info.bodyA_index()), int(info.bodyB_index())
+            f = np.asarray(info.contact_force())
+            fn = abs(float(f @ np.asarray(info.point_pair().nhat_BA_W)))
+            for mine, other in ((a, b), (b, a)):
+                if other not in hand:
+                    continue
+                if mine == self.obj:
+                    d = _digit(hand[other])
+                    if d is not None:
+                        per_digit[d] = per_digit.get(d, 0.0) + fn
+                elif mine in self.welded:
+                    rec["welded"] = max(rec["welded"], float(np.linalg.norm(f)))
+                    rec["welded_bodies"].add(hand[other])
+                    if hand[other] == "palm":
+                        rec["palm"] = max(rec["palm"], float(np.linalg.norm(f)))
+        for d in DIGITS:
+            rec["series"][d].append(per_digit.get(d, 0.0))
+        rec["palm"] = max(rec["palm"], per_digit.get("palm", 0.0))
+        for d in DIGITS:
+            rec["digits"][d] = max(rec["digits"][d], per_digit.get(d, 0.0))
+        u = self.plant.get_net_actuation_output_port().Eval(self.context)
+        for d in {d for d, i, limit in self.actuators if abs(u[i]) >= 0.999 * limit}:
+            rec["sat"][d] += 1
+        rec["steps"] += 1
+        self.turn_now()
+        if self.p_end is not None:
+            self.travel = max(self.travel, float(np.linalg.norm(self._position() - self.p_end)))
+        return EventStatus.Succeeded()
 
 
 def _window_peak(values, n: int) -> float:
@@ -265,16 +292,6 @@ def two_strokes_motion(gist, first=(0.6, 0.6), second=(0.6, 0.6)) -> np.ndarray:
 def reference_motions(effort_limits: str = "menagerie") -> dict:
     """``{name: (ScrewCapTrial, x)}``: every finger task's hand-written reference motion
     (docs/results/inhand.md) under the hand's ``effort_limits``."""
-    from handle_drake.apps.inhand.screw_cap import (
-        CLEAR,
-        FOUR_FINGER_TURN,
-        REGRASP_GAITS,
-        TWO_STROKES,
-        ScrewCapTask,
-        ScrewCapTrial,
-        four_finger_turn_motion,
-    )
-
     def trial(**kw):
         return ScrewCapTrial(ScrewCapTask(effort_limits=effort_limits, **kw))
 

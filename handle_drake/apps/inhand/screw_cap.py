@@ -1257,37 +1257,24 @@ class ScrewCapTrial(GistTrial):
             reverse.set_reversed(reverse.GetMyContextFromRoot(context), False)
         return built["plant"].GetMyContextFromRoot(context)
 
-    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
-                 contact_results: bool = False, driver: bool = False) -> ScrewCapOutcome:
-        """Runs one trial from the settled grasp (deterministic).
-
-        Each sample reads the touching bodies from the geometry query
-        (:func:`touching_geometry`) and the contact results (forces) only when the palm
-        touches; ``contact_results``: read the contact results at every sample instead
-        (the reference the cheaper read is tested against); ``driver``: run the Python
-        hand driver per step instead of its planned commands (likewise)."""
-        x = self._check(x)
-        c = self.config
-        built = self._build(meshcat, driver)
-        simulator, plant, joint = built["simulator"], built["plant"], built["joint"]
-        body = built["cap"]
-        start_wall = time.perf_counter()
-        plant_context = self._reset(built, x)
+    def _run_samples(self, built: dict, plant_context, st: dict, early_stop: bool,
+                     contact_results: bool):
+        """The trial's samples and checks (contacts read at every step by a monitor into
+        ``st``); returns eq. 48's credits, the turns (encoder, truth) and contacts per
+        sample taken (fewer when a check stopped it: ``st["stopped"]``)."""
+        c, simulator, plant = self.config, built["simulator"], built["plant"]
+        joint, body = built["joint"], built["cap"]
         counts = ScrewCapModel().encoder_counts
         X0 = plant.EvalBodyPoseInWorld(plant_context, body)
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
         q_start = joint.get_angle(plant_context) if joint is not None else 0.0
         simulator.Initialize()
-        if html is not None:
-            early_stop = False
-            meshcat.StartRecording()
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
         benchmark = c.benchmark_at(samples)  # per sample (np.interp's values, computed once)
         step = 1e-3 * c.time_step
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
-        st = self._start_state(x, joint)
 
         def monitor(root_context):  # every step: palm, welded bodies, the digits' forces
             step_contacts(plant, plant_context, built, st)
@@ -1313,6 +1300,31 @@ class ScrewCapTrial(GistTrial):
         except _EarlyStop:
             st["stopped"] = True
         simulator.clear_monitor()
+        return matches, turns, truths, contacts
+
+    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
+                 contact_results: bool = False, driver: bool = False) -> ScrewCapOutcome:
+        """Runs one trial from the settled grasp (deterministic).
+
+        Each sample reads the touching bodies from the geometry query
+        (:func:`touching_geometry`) and the contact results (forces) only when the palm
+        touches; ``contact_results``: read the contact results at every sample instead
+        (the reference the cheaper read is tested against); ``driver``: run the Python
+        hand driver per step instead of its planned commands (likewise)."""
+        x = self._check(x)
+        c = self.config
+        built = self._build(meshcat, driver)
+        plant, joint = built["plant"], built["joint"]
+        start_wall = time.perf_counter()
+        plant_context = self._reset(built, x)
+        if html is not None:
+            early_stop = False
+            meshcat.StartRecording()
+        samples, checks = c.sample_times(), c.check_times()
+        step = 1e-3 * c.time_step
+        st = self._start_state(x, joint)
+        matches, turns, truths, contacts = self._run_samples(
+            built, plant_context, st, early_stop, contact_results)
         # the palm's share of the object's weight at the end (before any reversal)
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
