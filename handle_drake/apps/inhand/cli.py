@@ -57,14 +57,15 @@ def register(subparsers) -> None:
     p.add_argument("--gaits", type=positive_int, default=None,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp); "
                         "default 1 (the placement's)")
-    p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
-                   help="screw_cap: the cap and grasp: one-gait (first and ring finger on the "
-                        "cap), four-finger-turn (thumb, first, middle and ring finger on it; "
-                        "the fingers turn it), four-finger (FOUR_FINGER_GRIP: four digits, "
-                        "squeezed: they jam), regrasp (5 gaits, 360 deg), clear (issue 45: "
-                        "the four fingers on a 100 mm cap, no finger wedged against the "
-                        "welded bottle, Menagerie's 1 N m finger limits, 1 ms: the one whose "
-                        "physics converges)")
+    p.add_argument("--placement", choices=sorted(PLACEMENTS), default=None,
+                   help="screw_cap: the cap and grasp. Default clear (issue 45: the four "
+                        "fingers on a 100 mm cap, no finger wedged against the welded bottle, "
+                        "Menagerie's 1 N m finger limits, 1 ms: the one whose physics "
+                        "converges). The earlier ones, whose turns come from a finger wedged "
+                        "against the bottle: one-gait (first and ring finger on the cap), "
+                        "four-finger-turn (thumb, first, middle and ring finger; the fingers "
+                        "turn it), four-finger (FOUR_FINGER_GRIP: four digits, squeezed: they "
+                        "jam), regrasp (5 gaits, 360 deg)")
     p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
                    help="screw_cap: digits (thumb and fingers) that must each touch the cap "
                         "within the contact window at a check (default 1: any finger)")
@@ -119,6 +120,8 @@ def register(subparsers) -> None:
 
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
+    if args.placement is None:  # the screw cap's default: the one whose physics converges
+        args.placement = "clear" if args.task == "screw_cap" else "one-gait"
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")

@@ -747,6 +747,8 @@ class ScrewCapTask:
     cap_diameter: float = 0.035
     cap_axis_yaw_deg: float = 0.0
     cap_length: float = 0.060  # along the axis
+    # m: a neck (25 mm across) between the cap and the bottle's shoulder (ScrewCapModel)
+    bottle_neck: float = 0.0
     # True: the turn counts positive the other way round (ScrewCapModel.axis_reversed)
     cap_axis_reversed: bool = False
     # The grasp: the demonstration's first frame mapped by the four rules, plus these
@@ -1065,6 +1067,7 @@ class ScrewCapTrial(GistTrial):
                               diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
                               length=c.cap_length, axis_reversed=c.cap_axis_reversed,
                               position=[float(v) for v in c.cap_position],
+                              neck_length=c.bottle_neck,
                               mass=ScrewCapModel.mass * c.mass_scale,
                               mu=ScrewCapModel.mu * c.mu_scale) if not c.free else
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass * c.mass_scale,
