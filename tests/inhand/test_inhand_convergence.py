@@ -95,7 +95,7 @@ def test_the_convergence_judge_can_pass_and_fail():
 def test_the_clear_placement_stroke_converges_at_1_ms_and_leans_on_nothing():
     # the screw cap's converged case (issue 45, item 1): the hand-written stroke in the
     # CLEAR placement (Menagerie's limits, 1 ms) re-simulated at 1, 0.5 and 0.25 ms by the
-    # check's own code: the same turn within 10 % (measured 113.4, 104.7, 109.6 deg), reached
+    # check's own code: the same turn within 10 % (measured 113.6, 104.7, 109.7 deg), reached
     # at each, nothing welded touched
     trial, x = reference_motions()["screw cap, clear placement, stroke"]
     assert trial.config.time_step == 0.001 and trial.config.effort_limits == "menagerie"
