@@ -35,6 +35,18 @@ from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
 __all__ = ["register", "main"]
 
 
+def _add_robust_arguments(p) -> None:
+    """Domain randomisation of the finger tasks (issue 45 item 3)."""
+    p.add_argument("--robust", type=non_negative_int, default=0, metavar="K",
+                   help="screw_cap / fingertip_cylinder: score each trial by its worst over K "
+                        "perturbed physics drawn per trial (step, friction +-30 %%, mass +-20 "
+                        "%%, thread 0.01-0.1 N m, effort limits down to half, placement +-2 mm; "
+                        "ScrewCapTask.perturb_*); then print the best trial's success over "
+                        "--fresh fresh perturbations. Default 0: the nominal physics only")
+    p.add_argument("--fresh", type=positive_int, default=20, metavar="N",
+                   help="with --robust: fresh perturbations the best trial is tried on (20)")
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "inhand", help="learn an in-hand rotation by action-gist guided babbling (PSO & co.)",
@@ -75,14 +87,7 @@ def register(subparsers) -> None:
                         "the turn counted only while held; base rate 0.34 %%); 1 = the 60 deg "
                         "pinch in one stroke (base rate 1.5-3.5 %%: random search reaches it "
                         "about as fast as any swarm)")
-    p.add_argument("--robust", type=non_negative_int, default=0, metavar="K",
-                   help="screw_cap / fingertip_cylinder: score each trial by its worst over K "
-                        "perturbed physics drawn per trial (step, friction +-30 %%, mass +-20 "
-                        "%%, thread 0.01-0.1 N m, effort limits down to half, placement +-2 mm; "
-                        "ScrewCapTask.perturb_*); then print the best trial's success over "
-                        "--fresh fresh perturbations. Default 0: the nominal physics only")
-    p.add_argument("--fresh", type=positive_int, default=20, metavar="N",
-                   help="with --robust: fresh perturbations the best trial is tried on (20)")
+    _add_robust_arguments(p)
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
