@@ -36,7 +36,7 @@ pin_blas(force=False)
 
 import numpy as np  # noqa: E402
 
-from handle_drake.apps.inhand.experiment import run_inhand  # noqa: E402
+from handle_drake.apps.inhand.experiment import EVALUATION_SEEDS, run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     FOUR_FINGER_GRIP,
     FOUR_FINGER_TURN,
@@ -427,6 +427,9 @@ def main(argv=None) -> int:
                    help="the table from the trial log as it is (with --resimulate: re-simulate "
                         "each run's best trial from its logged scenario)")
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
+    p.add_argument("--evaluation", action="store_true",
+                   help="run on the evaluation seeds (experiment.EVALUATION_SEEDS) instead of "
+                        "--seeds: never used for tuning")
     p.add_argument("--optimizers", nargs="+", choices=OPTIMIZERS, default=list(OPTIMIZERS))
     p.add_argument("--budget", type=int, default=60)
     p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
@@ -453,6 +456,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=RESULTS)
     add_page_arguments(p, "inhand")
     args = p.parse_args(argv)
+    if args.evaluation:
+        args.seeds = list(EVALUATION_SEEDS)
     preset = PLACEMENTS[args.placement]
     if preset and args.task != "screw_cap":
         p.error("--placement: only with --task screw_cap")

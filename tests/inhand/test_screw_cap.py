@@ -70,9 +70,12 @@ def test_a_known_stroke_turns_the_cap_90_deg_read_from_the_joint(trial):
     outcome = trial.evaluate(_stroke(trial))
     # settled grasp: the fingers (not the palm) touch the cap; the cap is on its joint
     assert len([b for b in outcome.gripped_at_start if b.endswith("distal")]) >= 2
-    assert outcome.completed and outcome.reached_target
-    assert outcome.turn_deg >= 90.0 and not outcome.palm_touched
-    assert outcome.score >= trial.target_score
+    assert outcome.completed and outcome.turn_deg >= 90.0 and not outcome.palm_touched
+    # issue 45: the turn is the ring finger's, wedged between the cap and the welded bottle
+    # (> 100 N on the bottle at some step): not turned by the fingers, not reached
+    assert outcome.leaned_on_welded and "rfdistal" in outcome.welded_bodies
+    assert not outcome.reached_target
+    assert outcome.score < trial.target_score
     # the encoder reads the joint within one count, at every sample
     assert abs(outcome.turn_deg - outcome.turn_deg_truth) <= ONE_COUNT_DEG / 2 + 1e-9
     # the logged scenario is whole: re-simulated alone (own build, reads the plant)
@@ -163,7 +166,9 @@ def test_the_hand_written_regrasp_motion_reaches_its_target_score():
     # the cap sits on its thread joint (it cannot fall): over several gaits the final check
     # asks for a finger on the cap at the end of the last turn stroke, not after the last
     # release (which leaves the cap by design). Before: 3 of 4 checks, score below target.
-    trial = ScrewCapTrial(ScrewCapTask(**REGRASP_GAITS))
+    # (the welded bottle's rule switched off: this placement's fingers lean on it, issue 45,
+    # tests/inhand/test_inhand_convergence.py; here the multi-gait touch rule alone)
+    trial = ScrewCapTrial(ScrewCapTask(**REGRASP_GAITS, lean_force=1e6))
     x = _gait(trial, [1.6, 0.0])
     # the last gait's stroke ends where its last flexing finger (RF) starts its release
     rf_release = [m.start for m in trial.gist.motions if m.finger == "RF"][-1]
@@ -193,7 +198,8 @@ _ONE_GAIT_SCORES = [28.99836993492961, 13.412228467987806, 26.551990386655937,
                     26.533315075516022]
 
 
-def test_one_gait_scoring_is_unchanged_by_the_multi_gait_touch_rule(trial):
+def test_one_gait_scoring_is_unchanged_by_the_multi_gait_touch_rule():
+    trial = ScrewCapTrial(ScrewCapTask(lean_force=1e6))  # the welded bottle's rule off
     b = trial.bounds
     rng = np.random.default_rng(12)
     xs = [_stroke(trial), trial.gist.initial_parameters()] + [
@@ -378,7 +384,9 @@ def test_the_hand_written_motion_turns_the_cap_90_deg_with_four_digits_on_it(fou
     b = four_finger.bounds
     assert np.all((x >= b[:, 0]) & (x <= b[:, 1]))  # inside the gist's box
     outcome = four_finger.evaluate(x)
-    assert outcome.completed and outcome.reached_target and outcome.score >= 28
+    # issue 45: this placement's fingers lean on the welded bottle (> 1 N): not reached
+    assert outcome.leaned_on_welded and not outcome.reached_target
+    assert outcome.completed and outcome.checks_passed == 4
     assert outcome.turn_deg >= 90.0 and not outcome.palm_touched
     assert abs(outcome.turn_deg - outcome.turn_deg_truth) <= ONE_COUNT_DEG / 2 + 1e-9
     # the part of the turn made while all four digits touched the cap (25 ms samples)
@@ -467,10 +475,12 @@ _DRAW_43 = [0.6498555341862423, 0.35181051050634626, 0.3685449687555527, 0.16518
             0.9168033987160289, 0.35974235056626386]
 
 
-def test_grip_digits_refuses_a_turn_made_after_the_grip_was_given_up(four_finger):
+def test_grip_digits_refuses_a_turn_made_after_the_grip_was_given_up():
+    # the welded bottle's rule off (this placement leans on it, issue 45): grip_digits alone
+    four_finger = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN, lean_force=1e6))
     loose = four_finger.evaluate(_DRAW_43)  # grip_digits 1: any finger within 0.3 s
     assert loose.reached_target and loose.turn_deg >= 90.0
-    strict = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN, grip_digits=4))
+    strict = ScrewCapTrial(ScrewCapTask(**FOUR_FINGER_TURN, grip_digits=4, lean_force=1e6))
     refused = strict.evaluate(_DRAW_43)
     assert not refused.reached_target and refused.score < strict.target_score
     # the hand-written motion keeps all four digits on the cap at every check

@@ -35,6 +35,18 @@ from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
 __all__ = ["register", "main"]
 
 
+def _add_robust_arguments(p) -> None:
+    """Domain randomisation of the finger tasks (issue 45 item 3)."""
+    p.add_argument("--robust", type=non_negative_int, default=0, metavar="K",
+                   help="screw_cap / fingertip_cylinder: score each trial by its worst over K "
+                        "perturbed physics drawn per trial (step, friction +-30 %%, mass +-20 "
+                        "%%, thread 0.01-0.1 N m, effort limits down to half, placement +-2 mm; "
+                        "ScrewCapTask.perturb_*); then print the best trial's success over "
+                        "--fresh fresh perturbations. Default 0: the nominal physics only")
+    p.add_argument("--fresh", type=positive_int, default=20, metavar="N",
+                   help="with --robust: fresh perturbations the best trial is tried on (20)")
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "inhand", help="learn an in-hand rotation by action-gist guided babbling (PSO & co.)",
@@ -57,11 +69,15 @@ def register(subparsers) -> None:
     p.add_argument("--gaits", type=positive_int, default=None,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp); "
                         "default 1 (the placement's)")
-    p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
-                   help="screw_cap: the cap and grasp: one-gait (first and ring finger on the "
-                        "cap), four-finger-turn (thumb, first, middle and ring finger on it; "
-                        "the fingers turn it), four-finger (FOUR_FINGER_GRIP: four digits, "
-                        "squeezed: they jam), regrasp (5 gaits, 360 deg)")
+    p.add_argument("--placement", choices=sorted(PLACEMENTS), default=None,
+                   help="screw_cap: the cap and grasp. Default clear (issue 45: the four "
+                        "fingers on a 100 mm cap, no finger wedged against the welded bottle, "
+                        "Menagerie's 1 N m finger limits, 1 ms: the one whose physics "
+                        "converges). The earlier ones, whose turns come from a finger wedged "
+                        "against the bottle: one-gait (first and ring finger on the cap), "
+                        "four-finger-turn (thumb, first, middle and ring finger; the fingers "
+                        "turn it), four-finger (FOUR_FINGER_GRIP: four digits, squeezed: they "
+                        "jam), regrasp (5 gaits, 360 deg)")
     p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
                    help="screw_cap: digits (thumb and fingers) that must each touch the cap "
                         "within the contact window at a check (default 1: any finger)")
@@ -71,6 +87,7 @@ def register(subparsers) -> None:
                         "the turn counted only while held; base rate 0.34 %%); 1 = the 60 deg "
                         "pinch in one stroke (base rate 1.5-3.5 %%: random search reaches it "
                         "about as fast as any swarm)")
+    _add_robust_arguments(p)
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
@@ -108,9 +125,14 @@ def register(subparsers) -> None:
 
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
+    if args.placement is None:  # the screw cap's default: the one whose physics converges
+        args.placement = "clear" if args.task == "screw_cap" else "one-gait"
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")
+    if args.robust and args.task not in ("screw_cap", "fingertip_cylinder"):
+        raise ValueError(f"--robust {args.robust}: only with --task screw_cap or "
+                         f"fingertip_cylinder")
     if args.grip_digits is not None and (args.task != "screw_cap" or args.grip_digits > 5):
         raise ValueError(f"--grip-digits {args.grip_digits}: 1..5, only with --task screw_cap")
     if args.task == "jog_wheel":
@@ -132,6 +154,8 @@ def _task_options(args) -> dict:
         options["target_deg"] = default if args.target_deg is None else args.target_deg
         if args.grip_digits is not None:
             options["grip_digits"] = args.grip_digits
+        if args.robust:
+            options["robust_k"] = args.robust
     else:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
@@ -174,12 +198,30 @@ def _cmd_inhand(args) -> int:
         return 1
     reached = (f"target reached at trial {s['trials_to_target']}" if s["trials_to_target"]
                else "target not reached")
-    held = ("" if args.task == "jog_wheel" else  # a wheel on its axle: nothing to hold
-            f"{'held' if s['best_held'] else 'not held'} at the end; ")
+    # a wheel on its axle or a cap on its thread: nothing to hold (best_held None); held
+    # means held: the object survived its weight reversed plus the stated margin
+    held = ("" if s.get("best_held") is None else
+            f"{'held' if s['best_held'] else 'not held'} at the end (weight reversed + "
+            f"margin); ")
+    share = ("" if s.get("share_held") is None else
+             f"; {100 * s['share_held']:.0f} % of trials held")
+    leaned = ("" if "share_leaned" not in s else
+              f"; best trial {'LEANED on' if s['best_leaned'] else 'did not lean on'} a welded "
+              f"body, {100 * s['share_leaned']:.0f} % of trials leaned (> lean_force)")
     print(f"best score {s['best_score']:.4g} (target score {s['target_score']:g}), trial "
           f"{s['best_index']}: rotation {s['best_rotation_deg']:.1f} deg, {held}{reached}"
-          + ("" if args.task == "jog_wheel" else
-             f"; {100 * s['share_held']:.0f} % of trials held"))
+          + share + leaned)
+    if s.get("best_digit_peak_normal"):
+        print("best trial's peak normal force per digit (N, any step): " + ", ".join(
+            f"{d} {v:.1f}" for d, v in s["best_digit_peak_normal"].items()))
+    if args.robust:
+        from handle_drake.apps.inhand.screw_cap import fresh_success
+
+        best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
+        fresh = fresh_success(run.trial.config, best.parameters, args.fresh)
+        print(f"best trial over {args.fresh} fresh perturbed physics (never used while "
+              f"learning): reaches its target in {100 * fresh['success']:.0f} %; turns "
+              f"{min(fresh['turns']):.1f}-{max(fresh['turns']):.1f} deg")
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")

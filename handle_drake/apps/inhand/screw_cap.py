@@ -76,7 +76,7 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -116,11 +116,12 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
+__all__ = ["CLEAR", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
            "TWO_STROKES", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
-           "build_screw_cap", "contact_forces", "simulate_scenario",
+           "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
+           "fresh_success",
            "scenario_fingerprint"]
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
@@ -173,10 +174,24 @@ def four_finger_turn_motion(gist: ActionGist, motion=None) -> np.ndarray:
 # placement they press it with 50-70 N in the settled grasp and drag it back on every
 # regrasp: the thread's 0.01 N m cannot hold against that).
 REGRASP_GAITS = dict(cap_position=(0.405, -0.02, 0.075), n_gaits=5, target_deg=360.0)
+# Issue 45: a placement in which nothing welded does the work and the turn converges. In
+# the placements above the ring (or little) fingertip lies beyond the cap's end, in the 2 mm
+# slot between the cap and the welded bottle's shoulder: already the settled grasp presses
+# it there with 69 N (1 ms), and the stroke's turn comes from that wedge and changes with
+# the time step (95.5, 26.4, 17.5 deg at 2, 1, 0.5 ms). Here the cap is 100 mm long and
+# 15 mm nearer the little finger, so that the four fingers (about 85 mm across) lie on it,
+# and a 10 mm neck keeps the bottle's shoulder clear of the little finger (without it 2 mm
+# of the +-2 mm placement perturbation brings the little finger onto the bottle: 3 of 4
+# fresh perturbations leaned on it); the hand has Menagerie's 1 N m finger limits and the
+# step is 1 ms: the hand-written stroke turns it 113.6, 104.7, 109.7 deg at 1, 0.5, 0.25 ms
+# with no contact on the bottle (at 2 ms, without the neck: 124.0 deg, the little finger
+# brushing the bottle with 3.8 N): docs/results/inhand.md, "Convergence".
+CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, bottle_neck=0.01,
+             effort_limits="menagerie", time_step=0.001)
 #: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
 #: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
 PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
-              "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS}
+              "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS, "clear": CLEAR}
 # The fingertip cylinder's harder target (issue 35 item 4): 100 deg in two strokes of 1 s,
 # each the demonstration's gist with its own parameters (``stages``: 52), checked while
 # held at each half stroke (turn >= 5, 40, 50, 100 deg less 2 at 0.5, 1.0, 1.5, 2.2 s),
@@ -185,6 +200,43 @@ PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
 # through the reversed weight, palm 0 N (tests/inhand/test_screw_cap.py).
 TWO_STROKES = dict(free=True, stages=2, gait_duration=2.0, n_frames=100, target_deg=100.0,
                    benchmark=(0.05, 0.4, 0.5, 1.0), held_turn=True)
+
+
+# The hand's actuator effort limits (N m) in MuJoCo Menagerie's Shadow hand model
+# (google-deepmind/mujoco_menagerie, shadow_hand/right_hand.xml, made with Shadow Robot:
+# the position actuators' forcerange): 1 N m by default (the class "right_hand"), the
+# wrist 10 (WRJ2) and 5 (WRJ1), the thumb base 3 (THJ5) and 2 (THJ4). The fingers' J0
+# tendon (J1 + J2) is one 1 N m actuator there; here the J2 actuator (J1 = J2 by the
+# coupler). The SDF's own limits are sr_description's sheet (2 N m for the finger joints;
+# models/shadow_hand/README.md, "Effort limits").
+MENAGERIE_EFFORT_LIMITS = {"WRJ2": 10.0, "WRJ1": 5.0, "THJ5": 3.0, "THJ4": 2.0}
+MENAGERIE_DEFAULT_EFFORT = 1.0
+EFFORT_LIMITS = ("sheet", "menagerie")
+
+
+def effort_limit(name: str, limits: str) -> float | None:
+    """The effort limit (N m) of actuated joint ``name`` under ``limits`` ("menagerie"), or
+    None ("sheet": the model file's own)."""
+    if limits == "sheet":
+        return None
+    return MENAGERIE_EFFORT_LIMITS.get(name, MENAGERIE_DEFAULT_EFFORT)
+
+
+def _set_effort_limits(plant, hand, limits: str, scale: float = 1.0) -> None:
+    if limits not in EFFORT_LIMITS:
+        raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got {limits!r}")
+    if not (math.isfinite(scale) and 0 < scale <= 1):
+        raise ValueError(f"effort_scale: expected a value in (0, 1], got {scale!r}")
+    # (before Finalize the per-instance query lists nothing: filter all of them)
+    for i in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(i)
+        if actuator.model_instance() != hand:
+            continue
+        value = effort_limit(actuator.joint().name(), limits)
+        if value is None:
+            value = actuator.effort_limit()
+        if value != actuator.effort_limit() or scale != 1.0:
+            actuator.set_effort_limit(value * scale)
 
 
 @dc.dataclass
@@ -200,6 +252,14 @@ class ScrewCapModel:
     mu: float = 1.0  # cap and fingertips (knurled plastic on rubber pads)
     bottle_diameter: float = 0.060
     bottle_length: float = 0.080
+    # m: a neck between the cap and the bottle's shoulder (``neck_diameter`` across, less
+    # than the cap's), so that no finger is wedged in a slot between the cap's end and the
+    # shoulder (issue 45: a ring fingertip in the 2 mm slot turned the cap); 0: no neck
+    neck_length: float = 0.0
+    neck_diameter: float = 0.025
+    # True: the bottle on the cap's -y end (the first finger's side, world -y before the
+    # yaw) instead of its +y end (the ring and little fingers' side)
+    bottle_at_index: bool = False
     # the cap's centre in the world (the hand's forearm is at the origin, palm up)
     position: list[float] = dc.field(default_factory=lambda: [0.405, -0.02, 0.07])
     # the axis: world y turned about world z by this angle (deg)
@@ -208,6 +268,8 @@ class ScrewCapModel:
     # opposite direction (world -y before the yaw); the bottle stays on the +y side
     axis_reversed: bool = False
     encoder_counts: int = 4096  # per turn, as a 12-bit magnetic encoder
+    # N/m: the point-contact stiffness of cap, bottle (or free cylinder); 0: Drake's default
+    point_stiffness: float = 0.0
     # True: no bottle, no joint: the cylinder is free, held by the fingers alone (the
     # "fingertip cylinder"); its turn is read from its pose
     free: bool = False
@@ -218,6 +280,15 @@ class ScrewCapModel:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
                 raise ValueError(f"cap.{name}: expected a finite value > 0, got {value!r}")
+        if not (math.isfinite(self.neck_length) and 0 <= self.neck_length <= 0.1):
+            raise ValueError(f"cap.neck_length: expected a value in [0, 0.1] m, got "
+                             f"{self.neck_length!r}")
+        if not (math.isfinite(self.neck_diameter) and 0 < self.neck_diameter < self.diameter):
+            raise ValueError(f"cap.neck_diameter: expected a value in (0, cap.diameter), got "
+                             f"{self.neck_diameter!r}")
+        if not (math.isfinite(self.point_stiffness) and self.point_stiffness >= 0):
+            raise ValueError(f"cap.point_stiffness: expected a finite value >= 0, got "
+                             f"{self.point_stiffness!r}")
         if not (math.isfinite(self.viscous) and self.viscous >= 0):
             raise ValueError(f"cap.viscous: expected a finite value >= 0, got {self.viscous!r}")
         if len(self.position) != 3 or not all(math.isfinite(v) for v in self.position):
@@ -241,6 +312,10 @@ class ScrewCapScenario:
     # the settled grasp's command (rad, by actuated joint name; others 0)
     initial_position: dict[str, float] = dc.field(default_factory=dict)
     time_step: float = 0.002
+    # the hand's actuator effort limits: "sheet" (the model file's) or "menagerie"
+    # (MENAGERIE_EFFORT_LIMITS: 1 N m on the finger and distal thumb joints)
+    effort_limits: str = "sheet"
+    effort_scale: float = 1.0  # every hand actuator's limit times this (perturbed physics)
     max_joint_velocity: float = 4.0  # rad/s, the hand driver's rate limit
     settle_time: float = 0.5
     # Algorithm 1: the action gist, its frames and repetitions
@@ -251,6 +326,8 @@ class ScrewCapScenario:
     n_gaits: int = 1
     hold: float = 0.2  # s after the last gait
     parameters: list[float] = dc.field(default_factory=list)  # eq. 45
+    # N: the free cylinder's reversal pushes its weight reversed plus this much more
+    reverse_margin: float = 0.0
 
     def dump(self) -> str:
         return yaml_dump_typed(self)
@@ -295,9 +372,15 @@ class GaitMotionSource(GistMotionSource):
                         super().frame_indices(t - cycle * self._duration))
 
 
-def _proximity(mu: float) -> ProximityProperties:
+def _proximity(mu: float, stiffness: float = 0.0) -> ProximityProperties:
+    """Friction ``mu``; ``stiffness`` (N/m) > 0: the point contact's stiffness (a compliant
+    cap or cylinder: the pair's stiffness is at most it); 0: Drake's default (rigid)."""
     props = ProximityProperties()
-    AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
+    if stiffness > 0:
+        AddContactMaterial(point_stiffness=stiffness, friction=CoulombFriction(mu, mu),
+                           properties=props)
+    else:
+        AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
     return props
 
 
@@ -320,15 +403,22 @@ def _add_cap(plant, cap: ScrewCapModel):
             0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
                                                         cap.bottle_length, [0, 0, 1])))
         # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
+        side = -1.0 if cap.bottle_at_index else 1.0
         X_WB = RigidTransform(R_axis, centre + R_yaw @ np.array(
-            [0, (cap.length + cap.bottle_length) / 2 + 0.002, 0]))
+            [0, side * ((cap.length + cap.bottle_length) / 2 + 0.002 + cap.neck_length), 0]))
         plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
         shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
                        [0.3, 0.6, 0.9, 0.5]))
-    for b, shape, rgba in shapes:
-        plant.RegisterCollisionGeometry(b, RigidTransform(), shape, f"{b.name()}_collision",
-                                        _proximity(cap.mu))
-        plant.RegisterVisualGeometry(b, RigidTransform(), shape, f"{b.name()}_visual",
+        if cap.neck_length > 0:  # on the bottle's cap side (its body -z: the cap's side)
+            shapes.append((bottle, Cylinder(cap.neck_diameter / 2, cap.neck_length),
+                           [0.3, 0.6, 0.9, 0.5], RigidTransform(
+                               [0, 0, (1 if cap.axis_reversed else -1) * side
+                                * (cap.bottle_length + cap.neck_length) / 2])))
+    for k, (b, shape, rgba, *X) in enumerate(shapes):
+        X_BG = X[0] if X else RigidTransform()
+        plant.RegisterCollisionGeometry(b, X_BG, shape, f"{b.name()}_collision{k or ''}",
+                                        _proximity(cap.mu, cap.point_stiffness))
+        plant.RegisterVisualGeometry(b, X_BG, shape, f"{b.name()}_visual{k or ''}",
                                      np.array(rgba))
     if not cap.free:
         # revolute joint about the cap's own z (= world y): the bottle's axis
@@ -363,7 +453,8 @@ def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, inst
         builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
 
 
-def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity, driver):
+def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity, driver,
+                      step=0.002):
     """The hand's PD targets: the Python driver (returned first), or its commands planned
     per trial (:class:`PlannedCommands`, returned second) played by a TrajectorySource."""
     if driver:
@@ -375,7 +466,7 @@ def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity
                         plant.get_desired_state_input_port(hand))
         return hand_driver, None
     planned = PlannedCommands(q0, *limits, max_joint_velocity,
-                              actuated_order(plant, hand, _NAMES))
+                              actuated_order(plant, hand, _NAMES), step=step)
     planned.player = builder.AddNamedSystem("planned_commands", TrajectorySource(
         planned.trajectory(np.tile(q0, (2, 1)))))
     builder.Connect(planned.player.get_output_port(), plant.get_desired_state_input_port(hand))
@@ -407,6 +498,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
                      RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
                                     scenario.hand_xyz))
+    _set_effort_limits(plant, hand, scenario.effort_limits, scenario.effort_scale)
     instance, body, bottle, joint = _add_cap(plant, cap)
     plant.Finalize()
     if bottle is not None:
@@ -424,14 +516,16 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
         _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance)
         return dict(diagram=builder.Build(), plant=plant)
     hand_driver, planned = _add_hand_command(builder, plant, hand, spec, q0, (lower, upper),
-                                             scenario.max_joint_velocity, driver)
+                                             scenario.max_joint_velocity, driver,
+                                             scenario.time_step)
     if joint is not None:
         zero = builder.AddNamedSystem("cap_friction_reference",
                                       ConstantVectorSource(np.zeros(2)))
         builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
     reverse = None
     if joint is None:  # only the free cylinder has its weight reversed
-        reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(plant, body))
+        reverse = builder.AddNamedSystem("reversed_gravity", ReversedGravity(
+            plant, body, scenario.reverse_margin))
         builder.Connect(reverse.get_output_port(), plant.get_applied_spatial_force_input_port())
     parameters = scenario.parameters or None
     source = builder.AddNamedSystem("motion", GaitMotionSource(
@@ -470,11 +564,18 @@ class PlannedCommands:
     plant's PD target on ``[t_k, t_k+1)`` is ``cmd_k`` with ``cmd_0`` = the settled
     command and ``cmd_k+1 = cmd_k + clip(target(t_k) - cmd_k, -s, s)``: computed here in
     the same arithmetic and played by a zero-order-hold ``TrajectorySource`` whose breaks
-    sit half a step before each ``t_k`` (no ambiguity at a step's time)."""
+    sit half a step before each ``t_k`` (no ambiguity at a step's time).
+
+    A plant step ``step`` that divides the period (1 ms, 0.5 ms: the convergence check of
+    :mod:`handle_drake.apps.inhand.convergence`): the Python driver's update at ``t_k`` is
+    read by the plant's next step, at ``t_k + step``, so ``cmd_k+1`` holds from ``t_k +
+    step`` on; the breaks sit at ``t_k + step / 2`` (at ``step = period`` the same breaks
+    as above): the command signal tends to the driver's as the step shrinks."""
 
     period = 0.002  # PdHandDriver's control period
 
-    def __init__(self, q0, lower, upper, max_joint_velocity, order):
+    def __init__(self, q0, lower, upper, max_joint_velocity, order, step: float = 0.002):
+        self.step = float(step)
         self.q0 = np.asarray(q0, dtype=float)
         self._lower, self._upper = np.asarray(lower), np.asarray(upper)
         self._max_step = (max_joint_velocity * self.period if max_joint_velocity > 0
@@ -498,7 +599,7 @@ class PlannedCommands:
         segment per run of equal commands (a held command is one segment, not one per
         step: the same value at every time, a quarter of the segments to build)."""
         desired = np.hstack([cmd[:, self._order], np.zeros((len(cmd), self.q0.size))])
-        breaks = (np.arange(len(cmd)) - 0.5) * self.period
+        breaks = (np.arange(len(cmd)) - 1.0) * self.period + 0.5 * self.step
         end = breaks[-1] + self.period
         keep = np.r_[True, np.any(desired[1:] != desired[:-1], axis=1)]
         breaks, desired = np.append(breaks[keep], end), desired[keep]
@@ -511,6 +612,12 @@ class PlannedCommands:
         frames_ = source.frames_for(parameters)
         targets = frames_[source.frame_indices(np.arange(n) * self.period) - 1]
         self.player.UpdateTrajectory(self.trajectory(self.commands(targets)))
+
+
+def _divides(step: float) -> bool:
+    """Whether the plant's ``step`` divides the driver's period (planned commands apply)."""
+    ratio = PlannedCommands.period / step
+    return step <= PlannedCommands.period and abs(ratio - round(ratio)) < 1e-9
 
 
 def contact_summary(plant, plant_context, built) -> dict:
@@ -567,6 +674,32 @@ def contact_forces(plant, plant_context, built) -> dict:
     return out
 
 
+def step_contacts(plant, plant_context, built, st: dict) -> None:
+    """One step's contacts into the trial's record ``st`` (read at EVERY step by a monitor,
+    not at the samples): the palm's force on cap or bottle (``palm``, ``palm_max``), the
+    hand's on any welded body (the bottle: ``welded_max``, N; ``welded_bodies``) and each
+    digit's normal force on the object (``digit_peak``: the sum over the digit's bodies,
+    its peak over the steps, N)."""
+    results = plant.get_contact_results_output_port().Eval(plant_context)
+    obj = int(built["cap"].index())
+    bottle = int(built["bottle"].index()) if built["bottle"] is not None else -1
+    digits = {}
+    for name, mine, force, info in _hand_contacts(results, built["hand_bodies"],
+                                                  (obj, bottle)):
+        magnitude = float(np.linalg.norm(force))
+        if name == "palm":
+            st["palm_max"] = max(st["palm_max"], magnitude)
+            st["palm"] = st["palm"] or magnitude > 0
+        if mine == bottle:
+            st["welded_max"] = max(st["welded_max"], magnitude)
+            st["welded_bodies"].add(name)
+        elif name[:2] in _DIGITS:
+            normal = abs(float(force @ np.asarray(info.point_pair().nhat_BA_W)))
+            digits[name[:2]] = digits.get(name[:2], 0.0) + normal
+    for digit, value in digits.items():
+        st["digit_peak"][digit] = max(st["digit_peak"].get(digit, 0.0), value)
+
+
 def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
     """The per-sample read without the contact solver: (hand bodies whose collision
     geometry penetrates the cap, whether the palm's penetrates the cap or bottle), from
@@ -616,12 +749,37 @@ class ScrewCapTask:
     cap_diameter: float = 0.035
     cap_axis_yaw_deg: float = 0.0
     cap_length: float = 0.060  # along the axis
+    # m: a neck (25 mm across) between the cap and the bottle's shoulder (ScrewCapModel)
+    bottle_neck: float = 0.0
     # True: the turn counts positive the other way round (ScrewCapModel.axis_reversed)
     cap_axis_reversed: bool = False
     # The grasp: the demonstration's first frame mapped by the four rules, plus these
     # offsets ((actuated joint name, rad), ...): the hand closing on the object before
     # the motion (FOUR_FINGER_GRIP); () by default.
     grasp_closure: tuple = ()
+    # the hand's actuator effort limits (ScrewCapScenario.effort_limits)
+    effort_limits: str = "sheet"
+    # Perturbed physics (issue 45 item 3): the object's friction and mass and the hand's
+    # effort limits scaled by these (1: as modelled)
+    mu_scale: float = 1.0
+    mass_scale: float = 1.0
+    effort_scale: float = 1.0
+    # Domain randomisation: robust_k > 0 scores a trial by the robust_quantile (0: the
+    # worst) of its scores over robust_k perturbed physics drawn per trial from its seed
+    # (:func:`draw_perturbations`): the time step times one of perturb_steps, friction and
+    # mass +- perturb_mu / perturb_mass, the thread's Coulomb torque in perturb_thread (the
+    # cap), effort limits down to (1 - perturb_effort), the object placed +- perturb_place m
+    robust_k: int = 0
+    robust_quantile: float = 0.0
+    perturb_steps: tuple = (1.0, 0.5)
+    perturb_mu: float = 0.3
+    perturb_mass: float = 0.2
+    perturb_thread: tuple = (0.01, 0.1)
+    perturb_effort: float = 0.5
+    perturb_place: float = 0.002
+    # N: the hand's force on a welded body (the bottle) above which the trial leans on it
+    # (not reached: nothing welded does the work; the cap weighs 0.12 N)
+    lean_force: float = 1.0
     # The fingertip cylinder: the same hand and gist, a free cylinder pinched between thumb
     # and fingers (no bottle, no joint) at ``free_position``; a trial then ends with its
     # weight reversed for ``reverse_time`` (the hand palm down, for it): held only if it
@@ -631,7 +789,11 @@ class ScrewCapTask:
     free_diameter: float = 0.055
     free_mass: float = 0.03
     reverse_time: float = 0.5
-    reverse_travel: float = 0.01  # m
+    reverse_travel: float = 0.01  # m, at most at any step of the reversal
+    # N: the reversal pushes the weight reversed plus this margin (the grip's tangential
+    # margin: 1 N is 3.4 times the 30 g cylinder's weight, the hand turned palm down while
+    # it accelerates at about 3 g); 0: the weight reversed alone (before issue 45)
+    reverse_margin: float = 1.0
     drop: float = 0.015  # m below the start: dropped (free cylinder)
     # The motion: the demonstration's gist performed ``stages`` times in sequence within
     # the gait (``gist.staged_gist``: each stage its own parameters, its start times bounded
@@ -645,12 +807,12 @@ class ScrewCapTask:
 
     def __post_init__(self):
         for name in ("target_deg", "gait_duration", "sample_period", "time_step",
-                     "settle_time", "contact_window", "coulomb_torque"):
+                     "settle_time", "contact_window", "coulomb_torque", "lean_force"):
             value = getattr(self, name)
             if isinstance(value, bool) or not (isinstance(value, int | float)
                                                and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
-        for name in ("hold", "tolerance_deg", "viscous"):
+        for name in ("hold", "tolerance_deg", "viscous", "reverse_margin"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name}: expected a finite value >= 0, got {value!r}")
@@ -667,6 +829,35 @@ class ScrewCapTask:
         if self.benchmark is not None and len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
+        for name in ("mu_scale", "mass_scale"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        if not (isinstance(self.effort_scale, int | float) and 0 < self.effort_scale <= 1):
+            raise ValueError(f"effort_scale: expected a value in (0, 1], got "
+                             f"{self.effort_scale!r}")
+        if isinstance(self.robust_k, bool) or not isinstance(self.robust_k, int) \
+                or self.robust_k < 0:
+            raise ValueError(f"robust_k: expected an integer >= 0, got {self.robust_k!r}")
+        if not 0 <= self.robust_quantile <= 1:
+            raise ValueError(f"robust_quantile: expected a value in [0, 1], got "
+                             f"{self.robust_quantile!r}")
+        for f in self.perturb_steps:
+            if not (0 < f <= 1 and _divides(self.time_step * f)):
+                raise ValueError(f"perturb_steps: expected factors in (0, 1] whose step "
+                                 f"divides 2 ms, got {self.perturb_steps!r}")
+        for name, high in (("perturb_mu", 0.9), ("perturb_mass", 0.9), ("perturb_effort", 0.9),
+                           ("perturb_place", 0.01)):
+            if not 0 <= getattr(self, name) <= high:
+                raise ValueError(f"{name}: expected a value in [0, {high:g}], got "
+                                 f"{getattr(self, name)!r}")
+        if not (len(self.perturb_thread) == 2 and 0 < self.perturb_thread[0]
+                <= self.perturb_thread[1]):
+            raise ValueError(f"perturb_thread: expected (low, high) N m with 0 < low <= high, "
+                             f"got {self.perturb_thread!r}")
+        if self.effort_limits not in EFFORT_LIMITS:
+            raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got "
+                             f"{self.effort_limits!r}")
         if not isinstance(self.held_turn, bool):
             raise ValueError(f"held_turn: expected true or false, got {self.held_turn!r}")
         if self.held_turn and not self.free:
@@ -741,7 +932,14 @@ class ScrewCapOutcome:
     max_turn_deg: float
     gripped_at_start: list  # hand bodies touching the cap in the settled grasp
     palm_touched: bool  # the palm touched bottle or cap at some sample
-    palm_force_max: float  # N
+    palm_force_max: float  # N, at any step
+    # the hand's largest force on a body welded to the world (the bottle; N, at any step),
+    # the hand bodies that touched it, and whether it exceeded lean_force (not reached)
+    welded_force_max: float
+    welded_bodies: list
+    leaned_on_welded: bool
+    # per digit (th, ff, mf, rf, lf) its peak normal force on the object (N, any step)
+    digit_peak_normal: dict
     # the palm's upward force on the object / its weight, at the end of the hold
     palm_weight_share: float
     # free cylinder: still held after its weight was reversed (None: not run, or a cap)
@@ -765,6 +963,40 @@ class ScrewCapOutcome:
 
 class _EarlyStop(Exception):
     pass
+
+
+def draw_perturbations(config: "ScrewCapTask", rng, n: int) -> list[dict]:
+    """``n`` perturbed physics (ScrewCapTask settings) drawn within the task's ranges."""
+    c, out = config, []
+    for _ in range(n):
+        offset = rng.uniform(-c.perturb_place, c.perturb_place, 3)
+        p = dict(time_step=c.time_step * float(rng.choice(c.perturb_steps)),
+                 mu_scale=1.0 + float(rng.uniform(-c.perturb_mu, c.perturb_mu)),
+                 mass_scale=1.0 + float(rng.uniform(-c.perturb_mass, c.perturb_mass)),
+                 effort_scale=1.0 - float(rng.uniform(0.0, c.perturb_effort)))
+        if c.free:
+            p["free_position"] = tuple(float(v) for v in np.asarray(c.free_position) + offset)
+        else:
+            p["cap_position"] = tuple(float(v) for v in np.asarray(c.cap_position) + offset)
+            p["coulomb_torque"] = float(rng.uniform(*c.perturb_thread))
+        out.append(p)
+    return out
+
+
+#: The seed stream of fresh perturbations (never a learning trial's: trial seeds are single
+#: integers, these are drawn from the pair (FRESH, seed))
+FRESH = 45_000_045
+
+
+def fresh_success(config: "ScrewCapTask", x, n: int = 20, seed: int = 0) -> dict:
+    """The share of ``n`` fresh perturbed physics (never used while learning) in which the
+    trial with parameters ``x`` reaches its target, with each draw's turn."""
+    trial = ScrewCapTrial(dc.replace(config, robust_k=0))
+    draws = draw_perturbations(config, np.random.default_rng([FRESH, int(seed)]), n)
+    outcomes = [trial.perturbed(p).evaluate(x) for p in draws]
+    return dict(success=float(np.mean([o.reached_target for o in outcomes])), n=n,
+                turns=[o.turn_deg for o in outcomes],
+                reached=[bool(o.reached_target) for o in outcomes])
 
 
 def _demonstration(name: str = "screw_cap_rotation.json"):
@@ -836,21 +1068,26 @@ class ScrewCapTrial(GistTrial):
             cap=ScrewCapModel(coulomb_torque=c.coulomb_torque, viscous=c.viscous,
                               diameter=c.cap_diameter, axis_yaw_deg=c.cap_axis_yaw_deg,
                               length=c.cap_length, axis_reversed=c.cap_axis_reversed,
-                              position=[float(v) for v in c.cap_position]) if not c.free else
-            ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass,
+                              position=[float(v) for v in c.cap_position],
+                              neck_length=c.bottle_neck,
+                              mass=ScrewCapModel.mass * c.mass_scale,
+                              mu=ScrewCapModel.mu * c.mu_scale) if not c.free else
+            ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass * c.mass_scale,
+                          mu=ScrewCapModel.mu * c.mu_scale,
                           position=[float(v) for v in c.free_position]),
             initial_position={n: float(v) for n, v in zip(_NAMES, q0, strict=True) if v != 0},
-            time_step=c.time_step, settle_time=c.settle_time, gist_name=self.gist.name,
+            time_step=c.time_step, effort_limits=c.effort_limits, effort_scale=c.effort_scale,
+            settle_time=c.settle_time, gist_name=self.gist.name,
             gist=ScrewCapScenario.gist_data(self.gist),
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
-            hold=c.hold, parameters=[float(v) for v in parameters])
+            hold=c.hold, parameters=[float(v) for v in parameters],
+            reverse_margin=c.reverse_margin if c.free else 0.0)
 
     def _build(self, meshcat=None, driver: bool = False):
         """The diagram, settled (kept per process). ``driver``: with the Python hand
         driver (the reference of the default build's planned commands; also used with
         ``meshcat`` and when the time step is not the driver's period)."""
-        driver = driver or meshcat is not None or \
-            self.config.time_step != PlannedCommands.period
+        driver = driver or meshcat is not None or not _divides(self.config.time_step)
         key = "_reference_build" if driver else "_built"
         if meshcat is None and getattr(self, key, None) is not None:
             return getattr(self, key)
@@ -877,12 +1114,37 @@ class ScrewCapTrial(GistTrial):
         return built
 
     def __call__(self, x, seed: int = 0):
-
+        if self.config.robust_k > 0:
+            return self._robust(x, seed)
         outcome = self.evaluate(x)
         detail = outcome.as_dict()
         detail.pop("times")
         return TrialResult(metric=outcome.score, contacts=detail,
                            scenario=self.scenario(x).dump())
+
+    def perturbed(self, perturbation: dict) -> "ScrewCapTrial":
+        """The same task under one perturbation (:func:`draw_perturbations`), not robust."""
+        return ScrewCapTrial(dc.replace(self.config, robust_k=0, **perturbation))
+
+    def _robust(self, x, seed: int) -> TrialResult:
+        """Domain randomisation: the ``robust_quantile`` of the scores over ``robust_k``
+        perturbed physics drawn from the trial's seed; the logged detail is that trial's
+        (its ``reached_target`` then holds for that share of the draws), with every draw's
+        score and reached flag."""
+        c = self.config
+        draws = draw_perturbations(c, np.random.default_rng(int(seed)), c.robust_k)
+        outcomes = [self.perturbed(p).evaluate(x) for p in draws]
+        scores = np.array([o.score for o in outcomes])
+        k = int(np.argsort(scores, kind="stable")[
+            int(math.floor(c.robust_quantile * (len(scores) - 1)))])
+        detail = outcomes[k].as_dict()
+        detail.pop("times")
+        detail.update(robust_scores=scores.tolist(),
+                      robust_reached=[bool(o.reached_target) for o in outcomes],
+                      robust_draws=[{n: (list(v) if isinstance(v, tuple) else v)
+                                     for n, v in p.items()} for p in draws])
+        return TrialResult(metric=float(scores[k]), contacts=detail,
+                           scenario=self.perturbed(draws[k]).scenario(x).dump())
 
     def _gripped(self, st: dict, t, summary: dict, built: dict, plant_context, p0) -> bool:
         """A finger touched the object within ``contact_window``, the palm never did (its
@@ -929,7 +1191,8 @@ class ScrewCapTrial(GistTrial):
         module doc), None otherwise (one gait, or the free cylinder)."""
         several = joint is not None and self.config.n_gaits > 1
         return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                    palm_max=0.0, next_check=0, angle=0.0, previous=0.0,
+                    palm_max=0.0, welded_max=0.0, welded_bodies=set(), digit_peak={},
+                    next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if several else None,
                     touch_at_stroke_end=False, digit_touch={})
 
@@ -965,16 +1228,23 @@ class ScrewCapTrial(GistTrial):
         context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
-        credits, held = [], False
+        credits, held, worst = [], False, [0.0]
+
+        def monitor(root_context):  # the travel at every step, not only at the samples
+            worst[0] = max(worst[0], float(np.linalg.norm(
+                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end)))
+            return EventStatus.Succeeded()
+
+        simulator.set_monitor(monitor)
         for t in c.reversal_sample_times():
             simulator.AdvanceTo(float(t))
-            travel = float(np.linalg.norm(
-                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
+            travel = worst[0]  # the largest so far
             touching = contact_summary(plant, plant_context, built)["touching"]
             touched = any(b != "palm" for b in touching)
             held = touched and travel < c.reverse_travel
             credits.append(1.0 if held else (min(1.0, c.reverse_travel / travel)
                                              if touched and c.partial_credit else 0.0))
+        simulator.clear_monitor()
         return bool(held), np.asarray(credits)
 
     def _reset(self, built: dict, x):
@@ -992,38 +1262,30 @@ class ScrewCapTrial(GistTrial):
             reverse.set_reversed(reverse.GetMyContextFromRoot(context), False)
         return built["plant"].GetMyContextFromRoot(context)
 
-    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
-                 contact_results: bool = False, driver: bool = False) -> ScrewCapOutcome:
-        """Runs one trial from the settled grasp (deterministic).
-
-        Each sample reads the touching bodies from the geometry query
-        (:func:`touching_geometry`) and the contact results (forces) only when the palm
-        touches; ``contact_results``: read the contact results at every sample instead
-        (the reference the cheaper read is tested against); ``driver``: run the Python
-        hand driver per step instead of its planned commands (likewise)."""
-        x = self._check(x)
-        c = self.config
-        built = self._build(meshcat, driver)
-        simulator, plant, joint = built["simulator"], built["plant"], built["joint"]
-        body = built["cap"]
-        start_wall = time.perf_counter()
-        plant_context = self._reset(built, x)
+    def _run_samples(self, built: dict, plant_context, st: dict, early_stop: bool,
+                     contact_results: bool):
+        """The trial's samples and checks (contacts read at every step by a monitor into
+        ``st``); returns eq. 48's credits, the turns (encoder, truth) and contacts per
+        sample taken (fewer when a check stopped it: ``st["stopped"]``)."""
+        c, simulator, plant = self.config, built["simulator"], built["plant"]
+        joint, body = built["joint"], built["cap"]
         counts = ScrewCapModel().encoder_counts
         X0 = plant.EvalBodyPoseInWorld(plant_context, body)
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
         q_start = joint.get_angle(plant_context) if joint is not None else 0.0
         simulator.Initialize()
-        if html is not None:
-            early_stop = False
-            meshcat.StartRecording()
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
         benchmark = c.benchmark_at(samples)  # per sample (np.interp's values, computed once)
         step = 1e-3 * c.time_step
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
-        st = self._start_state(x, joint)
 
+        def monitor(root_context):  # every step: palm, welded bodies, the digits' forces
+            step_contacts(plant, plant_context, built, st)
+            return EventStatus.Succeeded()
+
+        simulator.set_monitor(monitor)
         try:
             for i, t in enumerate(samples):
                 simulator.AdvanceTo(float(t))
@@ -1042,6 +1304,32 @@ class ScrewCapTrial(GistTrial):
                         raise _EarlyStop
         except _EarlyStop:
             st["stopped"] = True
+        simulator.clear_monitor()
+        return matches, turns, truths, contacts
+
+    def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
+                 contact_results: bool = False, driver: bool = False) -> ScrewCapOutcome:
+        """Runs one trial from the settled grasp (deterministic).
+
+        Each sample reads the touching bodies from the geometry query
+        (:func:`touching_geometry`) and the contact results (forces) only when the palm
+        touches; ``contact_results``: read the contact results at every sample instead
+        (the reference the cheaper read is tested against); ``driver``: run the Python
+        hand driver per step instead of its planned commands (likewise)."""
+        x = self._check(x)
+        c = self.config
+        built = self._build(meshcat, driver)
+        plant, joint = built["plant"], built["joint"]
+        start_wall = time.perf_counter()
+        plant_context = self._reset(built, x)
+        if html is not None:
+            early_stop = False
+            meshcat.StartRecording()
+        samples, checks = c.sample_times(), c.check_times()
+        step = 1e-3 * c.time_step
+        st = self._start_state(x, joint)
+        matches, turns, truths, contacts = self._run_samples(
+            built, plant_context, st, early_stop, contact_results)
         # the palm's share of the object's weight at the end (before any reversal)
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
@@ -1054,8 +1342,11 @@ class ScrewCapTrial(GistTrial):
         if c.held_turn and survived is False:  # lost: its turn was never held (held_turn)
             matches[:] = 0.0
             passed = min(passed, c.n_checks - 1)
+        # nothing welded does the work: a trial whose hand leaned on the bottle with more
+        # than lean_force (N) at some step is not turned by the fingers
+        leaned = st["welded_max"] > c.lean_force
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
-                       and not st["palm"] and survived is not False)
+                       and not st["palm"] and not leaned and survived is not False)
         if st["failed"]:
             matches[samples > checks[passed] + step] = 0.0
         score, s_b, s_a = incremental_score(self.dims_per_part, passed,
@@ -1064,6 +1355,9 @@ class ScrewCapTrial(GistTrial):
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
             max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
             palm_touched=st["palm"], palm_force_max=st["palm_max"],
+            welded_force_max=st["welded_max"], welded_bodies=sorted(st["welded_bodies"]),
+            leaned_on_welded=bool(leaned),
+            digit_peak_normal={d: float(v) for d, v in sorted(st["digit_peak"].items())},
             palm_weight_share=float(palm_share), survived_reversal=survived,
             reversal_credits=[float(v) for v in reversal],
             checks_passed=passed,

@@ -126,17 +126,23 @@ TASKS: dict[str, TaskSpec] = {
 
 class ReversedGravity(LeafSystem):
     """While switched on (a numeric parameter; default off), a force ``-2 m g`` on the body
-    at its centre of mass: its weight reversed (the hand turned palm down, for it).
+    at its centre of mass: its weight reversed (the hand turned palm down, for it), plus
+    ``margin`` N more upwards (the grip's tangential margin beyond the weight).
 
     The output depends on that parameter alone (its only prerequisite), so Drake computes
     it once per switch and the plant's every step reads the cached forces: no Python call
     per step. Switch it on at the time the reversal starts (the trials do so at the end of
     the hold: the steps from then on feel it)."""
 
-    def __init__(self, plant, body):
+    def __init__(self, plant, body, margin: float = 0.0):
         super().__init__()
+        if not (np.isfinite(margin) and margin >= 0):
+            raise ValueError(f"reverse_margin: expected a finite value >= 0 N, got {margin!r}")
         self._index = body.index()
-        self._force = -2.0 * body.default_mass() * plant.gravity_field().gravity_vector()
+        g = plant.gravity_field().gravity_vector()
+        # the weight reversed plus ``margin`` (N) more along the same (upward) direction: the
+        # grip must hold the object's weight and a tangential margin beyond it (issue 45)
+        self._force = -2.0 * body.default_mass() * g - margin * g / np.linalg.norm(g)
         self._on = self.DeclareNumericParameter(BasicVector([0.0]))
         self.DeclareAbstractOutputPort(
             "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
