@@ -478,8 +478,97 @@ def _split_touching(cluster: np.ndarray, plane: TablePlane, cell: float) -> list
     return [cluster]
 
 
+#: Two clusters whose footprint hulls overlap by at least this share of the
+#: smaller one's area are one object (upright objects on a table do not
+#: overlap in footprint: a wine glass's bowl seen as its near wall and the
+#: inside of its far wall, apart from its foot).
+HULL_OVERLAP = 0.2
+#: A fragment (a few points, or a thin strip: a box's face seen edge-on)
+#: whose footprint lies within this distance (m) of a larger cluster's hull
+#: is part of it.
+FRAGMENT_REACH = 0.004
+
+
+def _hull_equations(xy: np.ndarray):
+    try:
+        return ConvexHull(xy).equations
+    except (QhullError, ValueError):
+        return None
+
+
+def _hull_overlap(a: np.ndarray, b: np.ndarray, cell: float = 0.0015) -> float:
+    """Area shared by the convex hulls of the 2-D point sets ``a`` and ``b``
+    over the smaller hull's area, counted on a grid of ``cell`` (m) over the
+    hulls' common bounding box (0 if they do not meet or one is degenerate).
+    (scipy has no polygon intersection and shapely is no dependency: a grid
+    of a few hundred cells is exact enough for a share.)"""
+    lo = np.maximum(a.min(axis=0), b.min(axis=0))
+    hi = np.minimum(a.max(axis=0), b.max(axis=0))
+    if np.any(hi <= lo):
+        return 0.0
+    ea, eb = _hull_equations(a), _hull_equations(b)
+    if ea is None or eb is None:
+        return 0.0
+
+    def area(eq, low, high):  # grid cells inside the hull within [low, high]
+        xs = np.arange(low[0], high[0] + cell, cell)
+        ys = np.arange(low[1], high[1] + cell, cell)
+        grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+        return grid, (grid @ eq[:, :2].T + eq[:, 2]).max(axis=1) <= 0
+
+    grid, in_a = area(ea, lo, hi)
+    both = np.count_nonzero(in_a & ((grid @ eb[:, :2].T + eb[:, 2]).max(axis=1) <= 0))
+    if both == 0:
+        return 0.0
+    smaller = min(np.count_nonzero(area(e, p.min(axis=0), p.max(axis=0))[1])
+                  for e, p in ((ea, a), (eb, b)))
+    return both / max(smaller, 1)
+
+
+def _join_across(flats: list[np.ndarray], components: list[int]) -> list[int]:
+    """Owner (union-find parent) of each cluster after joining the parts of
+    one object that the camera sees apart (different connected components):
+    footprint hulls that overlap (:data:`HULL_OVERLAP`), or a fragment
+    (fewer than a quarter of the other's points, and fewer than 30 or a strip
+    under 6 mm wide) within :data:`FRAGMENT_REACH` of the other's hull. Parts
+    of one component (split at a waist by :func:`_split_touching`) are never
+    joined here. Objects 15-20 mm apart stay apart: their hulls neither
+    overlap nor come within 4 mm."""
+    owner = list(range(len(flats)))
+
+    def find(a):
+        while owner[a] != a:
+            a = owner[a]
+        return a
+
+    xy = [f[:, :2] for f in flats]
+    boxes = np.array([[*p.min(axis=0), *p.max(axis=0)] for p in xy])
+    order = np.argsort([-len(f) for f in flats], kind="stable")  # larger first
+    for a, i in enumerate(order):
+        for j in order[a + 1:]:
+            if components[i] == components[j] or find(i) == find(j):
+                continue
+            lo, hi = boxes[i], boxes[j]
+            reach = FRAGMENT_REACH
+            if (lo[0] > hi[2] + reach or hi[0] > lo[2] + reach
+                    or lo[1] > hi[3] + reach or hi[1] > lo[3] + reach):
+                continue
+            # j is the smaller (order: larger first).
+            joined = _hull_overlap(xy[i], xy[j]) >= HULL_OVERLAP
+            if not joined and 4 * len(xy[j]) <= len(xy[i]) and (
+                    len(xy[j]) < 30 or min_area_rectangle(xy[j])[1][1] < 0.006):
+                eq = _hull_equations(xy[i])
+                if eq is not None:
+                    outside = (xy[j] @ eq[:, :2].T + eq[:, 2]).max(axis=1)
+                    joined = float(np.percentile(outside, 90)) <= reach
+            if joined:
+                owner[find(j)] = find(i)
+    return [find(i) for i in range(len(flats))]
+
+
 def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
-                 params: DetectorParams) -> list[np.ndarray]:
+                 params: DetectorParams, components: list[int] | None = None
+                 ) -> list[np.ndarray]:
     """Clusters that are parts of one object become one cluster:
 
     - a part standing within another's footprint (a wine glass's stem seen
@@ -501,6 +590,15 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
         return clusters
     origin, R_WT = _table_frame(plane)
     flats = [(np.asarray(c, dtype=float) - origin) @ R_WT for c in clusters]
+    if components is not None:
+        groups = {}
+        for i, root in enumerate(_join_across(flats, components)):
+            groups.setdefault(root, []).append(i)
+        if len(groups) < len(clusters):
+            clusters = [np.vstack([clusters[i] for i in m]) for m in groups.values()]
+            flats = [np.vstack([flats[i] for i in m]) for m in groups.values()]
+        if len(clusters) < 2:
+            return clusters
     owner = list(range(len(clusters)))
 
     def find(a):
@@ -581,12 +679,14 @@ def detect_objects(points, params: DetectorParams | None = None,
     labels = _grid_clusters(above, params.cluster_eps / 2)
     order = np.argsort(labels, kind="stable")
     bounds = np.flatnonzero(np.diff(labels[order])) + 1
-    clusters = []
-    for members in np.split(order, bounds):
+    clusters, components = [], []  # each part's connected component
+    for component, members in enumerate(np.split(order, bounds)):
         if len(members) >= 5:  # fewer: noise (DBSCAN's min_samples)
-            clusters.extend(_split_touching(above[members], plane, params.voxel))
+            parts = _split_touching(above[members], plane, params.voxel)
+            components.extend([component] * len(parts))
+            clusters.extend(parts)
     detections = []
-    for cluster in _merge_parts(clusters, plane, params):
+    for cluster in _merge_parts(clusters, plane, params, components):
         if len(cluster) >= params.min_points:
             detections.append(_describe(cluster, plane))
     detections.sort(key=lambda d: float(np.linalg.norm(d.position[:2])))
