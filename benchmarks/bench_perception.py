@@ -92,12 +92,15 @@ def _ports(args):
         diagram = TabletopScene(objects, seed=args.scene_seed).diagram
         expected = len(objects)
     context = diagram.CreateDefaultContext()
+    # The camera's position: the detector joins pieces of one object seen
+    # apart around a nearer one (what detect(frame) does with a frame's X_WC).
+    camera = np.asarray(diagram.GetOutputPort("kinect.pose").Eval(context).translation())
     return (context, diagram.GetOutputPort("kinect.rgb"),
-            diagram.GetOutputPort("kinect.point_cloud"), expected)
+            diagram.GetOutputPort("kinect.point_cloud"), expected, camera)
 
 
 def measure(args, baseline) -> dict:
-    context, rgb_port, cloud_port, expected = _ports(args)
+    context, rgb_port, cloud_port, expected, camera = _ports(args)
     rgb_port.Eval(context)  # the renderer's first frame builds its pipeline
     steps = ["render rgb", "render depth + cloud", "detect (plane per frame)",
              "detect (plane per scene)"] + (["baseline detect"] if baseline else [])
@@ -110,7 +113,7 @@ def measure(args, baseline) -> dict:
     # One warm-up frame for every detector (imports, first-call caches).
     context.SetTime(0.001)
     cloud = cloud_port.Eval(context).xyzs().T
-    detect_objects(cloud)
+    detect_objects(cloud, camera=camera)
     if baseline:
         baseline(cloud)
     # What a full collection costs here (every object of Drake's diagrams and
@@ -139,9 +142,9 @@ def measure(args, baseline) -> dict:
             elif step == "render depth + cloud":
                 cloud = cloud_port.Eval(context).xyzs().T
             elif step == "detect (plane per frame)":
-                results[step] = detect_objects(cloud)[1]
+                results[step] = detect_objects(cloud, camera=camera)[1]
             elif step == "detect (plane per scene)":
-                results[step] = detector.detect(cloud)
+                results[step] = detector.detect(cloud, camera=camera)
             else:
                 results[step] = baseline(cloud)[1]
             times[step].append(time.perf_counter() - start)

@@ -498,6 +498,36 @@ HULL_OVERLAP = 0.2
 FRAGMENT_REACH = 0.004
 
 
+#: Pieces of one object seen apart around a nearer object (a box behind a
+#: wine glass, seen beside its stem and under its bowl) join when each has
+#: fewer points than this (thinned), what lies between them is hidden from
+#: the camera by a nearer surface, and together they are no longer than
+#: :data:`PIECES_LENGTH` (m; the catalogue's largest footprint, a 90 mm mug
+#: with its handle, is 117 mm).
+PIECE_POINTS = 100
+PIECES_LENGTH = 0.12
+
+
+def _hidden_between(a: np.ndarray, b: np.ndarray, camera: np.ndarray,
+                    rays: tuple) -> bool:
+    """Whether the camera (at ``camera``, world) cannot see the space between
+    the 3-D point sets ``a`` and ``b``: on the segment between their nearest
+    points, each of 5 samples has a point of the cloud (``rays``: the unit
+    directions' ``cKDTree`` and the ranges of the points above the table)
+    within 4 mm of its line of sight and at least 1 cm nearer."""
+    distance, nearest = cKDTree(b).query(a)
+    k = int(np.argmin(distance))
+    p, q = a[k], b[nearest[k]]
+    tree, ranges = rays
+    for t in (0.1, 0.3, 0.5, 0.7, 0.9):
+        sample = p + t * (q - p) - camera
+        length = float(np.linalg.norm(sample))
+        near = tree.query_ball_point(sample / length, 0.004 / length)
+        if not near or not np.any(ranges[near] < length - 0.01):
+            return False
+    return True
+
+
 def _hull_equations(xy: np.ndarray):
     try:
         return ConvexHull(xy).equations
@@ -534,7 +564,8 @@ def _hull_overlap(a: np.ndarray, b: np.ndarray, cell: float = 0.0015) -> float:
     return both / max(smaller, 1)
 
 
-def _join_across(flats: list[np.ndarray], components: list[int]) -> list[int]:
+def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
+                 camera=None) -> list[int]:
     """Owner (union-find parent) of each cluster after joining the parts of
     one object that the camera sees apart (different connected components):
     footprint hulls that overlap (:data:`HULL_OVERLAP`), or a fragment
@@ -542,8 +573,15 @@ def _join_across(flats: list[np.ndarray], components: list[int]) -> list[int]:
     under 6 mm wide) within :data:`FRAGMENT_REACH` of the other's hull. Parts
     of one component (split at a waist by :func:`_split_touching`) are never
     joined here. Objects 15-20 mm apart stay apart: their hulls neither
-    overlap nor come within 4 mm."""
+    overlap nor come within 4 mm. With the ``camera``'s position (world) and
+    the ``clusters`` (world points), also small pieces of one object seen
+    apart around a nearer one (:data:`PIECE_POINTS`, :func:`_hidden_between`)."""
     owner = list(range(len(flats)))
+    rays = None
+    if camera is not None and clusters is not None:
+        cloud = np.vstack(clusters) - camera
+        ranges = np.linalg.norm(cloud, axis=1)
+        rays = (cKDTree(cloud / ranges[:, None]), ranges)
 
     def find(a):
         while owner[a] != a:
@@ -559,12 +597,11 @@ def _join_across(flats: list[np.ndarray], components: list[int]) -> list[int]:
                 continue
             lo, hi = boxes[i], boxes[j]
             reach = FRAGMENT_REACH
-            if (lo[0] > hi[2] + reach or hi[0] > lo[2] + reach
-                    or lo[1] > hi[3] + reach or hi[1] > lo[3] + reach):
-                continue
+            near = not (lo[0] > hi[2] + reach or hi[0] > lo[2] + reach
+                        or lo[1] > hi[3] + reach or hi[1] > lo[3] + reach)
             # j is the smaller (order: larger first).
-            joined = _hull_overlap(xy[i], xy[j]) >= HULL_OVERLAP
-            if not joined and 4 * len(xy[j]) <= len(xy[i]) and (
+            joined = near and _hull_overlap(xy[i], xy[j]) >= HULL_OVERLAP
+            if not joined and near and 4 * len(xy[j]) <= len(xy[i]) and (
                     len(xy[j]) < 30 or min_area_rectangle(xy[j])[1][1] < 0.006):
                 eq = _hull_equations(xy[i])
                 if eq is not None:
@@ -572,12 +609,30 @@ def _join_across(flats: list[np.ndarray], components: list[int]) -> list[int]:
                     joined = float(np.percentile(outside, 90)) <= reach
             if joined:
                 owner[find(j)] = find(i)
+    if rays is None:
+        return [find(i) for i in range(len(flats))]
+    # Then the small pieces still alone, pairwise (a group's points together).
+    groups: dict[int, list[int]] = {}
+    for i in range(len(flats)):
+        groups.setdefault(find(i), []).append(i)
+    pieces = [m for m in groups.values() if sum(len(xy[i]) for i in m) < PIECE_POINTS]
+    for a, ma in enumerate(pieces):
+        for mb in pieces[a + 1:]:
+            if find(ma[0]) == find(mb[0]):
+                continue
+            union = np.vstack([xy[i] for i in ma + mb])
+            if (np.ptp(union, axis=0).max() > math.sqrt(2) * PIECES_LENGTH
+                    or min_area_rectangle(union)[1][0] > PIECES_LENGTH):
+                continue
+            if _hidden_between(np.vstack([clusters[i] for i in ma]),
+                               np.vstack([clusters[i] for i in mb]), camera, rays):
+                owner[find(mb[0])] = find(ma[0])
     return [find(i) for i in range(len(flats))]
 
 
 def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
-                 params: DetectorParams, components: list[int] | None = None
-                 ) -> list[np.ndarray]:
+                 params: DetectorParams, components: list[int] | None = None,
+                 camera: np.ndarray | None = None) -> list[np.ndarray]:
     """Clusters that are parts of one object become one cluster:
 
     - a part standing within another's footprint (a wine glass's stem seen
@@ -601,7 +656,7 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
     flats = [(np.asarray(c, dtype=float) - origin) @ R_WT for c in clusters]
     if components is not None:
         groups = {}
-        for i, root in enumerate(_join_across(flats, components)):
+        for i, root in enumerate(_join_across(flats, components, clusters, camera)):
             groups.setdefault(root, []).append(i)
         if len(groups) < len(clusters):
             clusters = [np.vstack([clusters[i] for i in m]) for m in groups.values()]
@@ -667,16 +722,22 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
 
 
 def detect_objects(points, params: DetectorParams | None = None,
-                   plane: TablePlane | None = None
+                   plane: TablePlane | None = None, camera=None
                    ) -> tuple[TablePlane | None, list[Detection]]:
     """Table plane and object detections from world-frame points (N x 3, m;
     non-finite rows, i.e. invalid pixels, are dropped). An empty or object-free
     view gives an empty list, not an error. Detections are sorted by their
     distance from the world origin. ``plane``: the table plane already known
     (a fixed camera's earlier frame, see :class:`TabletopDetector`); without
-    it the plane is fitted to ``points``."""
+    it the plane is fitted to ``points``. ``camera``: the camera's position
+    (world, m; a frame's ``X_WC`` translation): with it, pieces of one object
+    seen apart around a nearer object are joined (:func:`_join_across`)."""
     params = DetectorParams() if params is None else params
     points = _check_rows(points)
+    if camera is not None:
+        camera = np.asarray(camera, dtype=float)
+        if camera.shape != (3,) or not np.all(np.isfinite(camera)):
+            raise ValueError(f"camera must be a finite position (3,) in m, got {camera!r}")
     if plane is None:
         plane = _fit_plane(_sample_finite(points, params), params)
     if plane is None or len(points) == 0:
@@ -695,7 +756,7 @@ def detect_objects(points, params: DetectorParams | None = None,
             components.extend([component] * len(parts))
             clusters.extend(parts)
     detections = []
-    for cluster in _merge_parts(clusters, plane, params, components):
+    for cluster in _merge_parts(clusters, plane, params, components, camera):
         if len(cluster) >= params.min_points:
             detections.append(_describe(cluster, plane))
     detections.sort(key=lambda d: float(np.linalg.norm(d.position[:2])))
@@ -721,8 +782,12 @@ class TabletopDetector:
             return 0.0
         return float(np.mean(np.abs(self.plane.height(sample)) <= self.params.plane_tolerance))
 
-    def detect(self, frame) -> list[Detection]:
+    def detect(self, frame, camera=None) -> list[Detection]:
+        """``frame``: a depth frame or world points (N x 3); ``camera``: the
+        camera's position (world, m) when ``frame`` is points (a frame's own
+        ``X_WC`` otherwise), see :func:`detect_objects`."""
         points = _check_rows(frame.points() if hasattr(frame, "points") else frame)
+        camera = _camera_position(frame) if camera is None else camera
         sample = _sample_finite(points, self.params, 2000)
         if self.plane is not None and self._on_plane(sample) < 0.5 * self._share:
             self.plane = None
@@ -732,7 +797,7 @@ class TabletopDetector:
                 return []
             self._share = self._on_plane(sample)
             self.refits += 1
-        return detect_objects(points, self.params, plane=self.plane)[1]
+        return detect_objects(points, self.params, plane=self.plane, camera=camera)[1]
 
 
 def detect(frame, params: DetectorParams | None = None) -> list[Detection]:
@@ -742,4 +807,10 @@ def detect(frame, params: DetectorParams | None = None) -> list[Detection]:
     ``extent``. For a stream from a fixed camera use
     :class:`TabletopDetector` (the table plane is fitted once)."""
     points = frame.points() if hasattr(frame, "points") else frame
-    return detect_objects(points, params)[1]
+    return detect_objects(points, params, camera=_camera_position(frame))[1]
+
+
+def _camera_position(frame):
+    """A depth frame's camera position (world, m); None for bare points."""
+    X_WC = getattr(frame, "X_WC", None)
+    return None if X_WC is None else np.asarray(X_WC, dtype=float)[:3, 3]
