@@ -528,6 +528,34 @@ def _hidden_between(a: np.ndarray, b: np.ndarray, camera: np.ndarray,
     return True
 
 
+def _unseen_between(a: np.ndarray, b: np.ndarray, view) -> bool:
+    """Whether the camera got no return at all between the 3-D point sets
+    ``a`` and ``b``: on the middle of the segment between their nearest
+    points, each of 3 samples (at 0.3, 0.5, 0.7) projects (``view``: a depth
+    frame's ``depth``, ``K``, ``X_WC``) to a 3 x 3 patch of mostly (>= 5)
+    invalid pixels (the segment's ends lie on the cut's edge, where the
+    table behind shows). That is a surface nearer than the
+    sensor's range (a tall object near the camera: its near top is cut off
+    and the rest is seen as its far top and its side, apart), never empty
+    space between two objects (the table behind it is in range)."""
+    distance, nearest = cKDTree(b).query(a)
+    k = int(np.argmin(distance))
+    p, q = a[k], b[nearest[k]]
+    depth, K, X_WC = view.depth, np.asarray(view.K, dtype=float), np.asarray(view.X_WC, float)
+    rows, cols = depth.shape
+    for t in (0.3, 0.5, 0.7):
+        p_C = X_WC[:3, :3].T @ (p + t * (q - p) - X_WC[:3, 3])
+        if p_C[2] <= 0:
+            return False
+        u, v = (K[:2, :2] @ (p_C[:2] / p_C[2]) + K[:2, 2]).round().astype(int)
+        if not (1 <= u < cols - 1 and 1 <= v < rows - 1):
+            return False
+        patch = depth[v - 1:v + 2, u - 1:u + 2]
+        if np.count_nonzero(np.isfinite(patch) & (patch > 0)) > 4:
+            return False
+    return True
+
+
 def _hull_equations(xy: np.ndarray):
     try:
         return ConvexHull(xy).equations
@@ -565,7 +593,7 @@ def _hull_overlap(a: np.ndarray, b: np.ndarray, cell: float = 0.0015) -> float:
 
 
 def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
-                 camera=None) -> list[int]:
+                 camera=None, view=None) -> list[int]:
     """Owner (union-find parent) of each cluster after joining the parts of
     one object that the camera sees apart (different connected components):
     footprint hulls that overlap (:data:`HULL_OVERLAP`), or a fragment
@@ -575,7 +603,10 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
     joined here. Objects 15-20 mm apart stay apart: their hulls neither
     overlap nor come within 4 mm. With the ``camera``'s position (world) and
     the ``clusters`` (world points), also small pieces of one object seen
-    apart around a nearer one (:data:`PIECE_POINTS`, :func:`_hidden_between`)."""
+    apart around a nearer one (:data:`PIECE_POINTS`, :func:`_hidden_between`);
+    with the depth ``view`` too, parts of any size with no return between
+    them (:func:`_unseen_between`: a near top out of the sensor's range),
+    together at most :data:`PIECES_LENGTH` long."""
     owner = list(range(len(flats)))
     rays = None
     if camera is not None and clusters is not None:
@@ -607,6 +638,11 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
                 if eq is not None:
                     outside = (xy[j] @ eq[:, :2].T + eq[:, 2]).max(axis=1)
                     joined = float(np.percentile(outside, 90)) <= reach
+            if (not joined and view is not None and clusters is not None
+                    and np.max(np.maximum(hi[2:], lo[2:]) - np.minimum(hi[:2], lo[:2]))
+                    <= math.sqrt(2) * PIECES_LENGTH
+                    and min_area_rectangle(np.vstack([xy[i], xy[j]]))[1][0] <= PIECES_LENGTH):
+                joined = _unseen_between(clusters[i], clusters[j], view)
             if joined:
                 owner[find(j)] = find(i)
     if rays is None:
@@ -632,7 +668,7 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
 
 def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
                  params: DetectorParams, components: list[int] | None = None,
-                 camera: np.ndarray | None = None) -> list[np.ndarray]:
+                 camera: np.ndarray | None = None, view=None) -> list[np.ndarray]:
     """Clusters that are parts of one object become one cluster:
 
     - a part standing within another's footprint (a wine glass's stem seen
@@ -656,7 +692,7 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
     flats = [(np.asarray(c, dtype=float) - origin) @ R_WT for c in clusters]
     if components is not None:
         groups = {}
-        for i, root in enumerate(_join_across(flats, components, clusters, camera)):
+        for i, root in enumerate(_join_across(flats, components, clusters, camera, view)):
             groups.setdefault(root, []).append(i)
         if len(groups) < len(clusters):
             clusters = [np.vstack([clusters[i] for i in m]) for m in groups.values()]
@@ -722,7 +758,7 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
 
 
 def detect_objects(points, params: DetectorParams | None = None,
-                   plane: TablePlane | None = None, camera=None
+                   plane: TablePlane | None = None, camera=None, view=None
                    ) -> tuple[TablePlane | None, list[Detection]]:
     """Table plane and object detections from world-frame points (N x 3, m;
     non-finite rows, i.e. invalid pixels, are dropped). An empty or object-free
@@ -731,9 +767,18 @@ def detect_objects(points, params: DetectorParams | None = None,
     (a fixed camera's earlier frame, see :class:`TabletopDetector`); without
     it the plane is fitted to ``points``. ``camera``: the camera's position
     (world, m; a frame's ``X_WC`` translation): with it, pieces of one object
-    seen apart around a nearer object are joined (:func:`_join_across`)."""
+    seen apart around a nearer object are joined (:func:`_join_across`).
+    ``view``: the depth frame the points come from (``depth``, ``K``,
+    ``X_WC``; its camera is ``camera``): with it, also the parts of an object
+    seen apart around its surface nearer than the sensor's range."""
     params = DetectorParams() if params is None else params
     points = _check_rows(points)
+    if view is not None:
+        if not all(hasattr(view, k) for k in ("depth", "K", "X_WC")):
+            raise TypeError(f"view must be a depth frame (depth, K, X_WC), "
+                            f"got {type(view).__name__}")
+        if camera is None:
+            camera = np.asarray(view.X_WC, dtype=float)[:3, 3]
     if camera is not None:
         camera = np.asarray(camera, dtype=float)
         if camera.shape != (3,) or not np.all(np.isfinite(camera)):
@@ -756,7 +801,7 @@ def detect_objects(points, params: DetectorParams | None = None,
             components.extend([component] * len(parts))
             clusters.extend(parts)
     detections = []
-    for cluster in _merge_parts(clusters, plane, params, components, camera):
+    for cluster in _merge_parts(clusters, plane, params, components, camera, view):
         if len(cluster) >= params.min_points:
             detections.append(_describe(cluster, plane))
     detections.sort(key=lambda d: float(np.linalg.norm(d.position[:2])))
@@ -782,12 +827,13 @@ class TabletopDetector:
             return 0.0
         return float(np.mean(np.abs(self.plane.height(sample)) <= self.params.plane_tolerance))
 
-    def detect(self, frame, camera=None) -> list[Detection]:
-        """``frame``: a depth frame or world points (N x 3); ``camera``: the
-        camera's position (world, m) when ``frame`` is points (a frame's own
-        ``X_WC`` otherwise), see :func:`detect_objects`."""
+    def detect(self, frame, camera=None, view=None) -> list[Detection]:
+        """``frame``: a depth frame or world points (N x 3); ``camera``,
+        ``view``: the camera's position (world, m) and depth frame when
+        ``frame`` is points (a frame is its own view), see
+        :func:`detect_objects`."""
         points = _check_rows(frame.points() if hasattr(frame, "points") else frame)
-        camera = _camera_position(frame) if camera is None else camera
+        view = _view(frame) if view is None else view
         sample = _sample_finite(points, self.params, 2000)
         if self.plane is not None and self._on_plane(sample) < 0.5 * self._share:
             self.plane = None
@@ -797,7 +843,8 @@ class TabletopDetector:
                 return []
             self._share = self._on_plane(sample)
             self.refits += 1
-        return detect_objects(points, self.params, plane=self.plane, camera=camera)[1]
+        return detect_objects(points, self.params, plane=self.plane, camera=camera,
+                              view=view)[1]
 
 
 def detect(frame, params: DetectorParams | None = None) -> list[Detection]:
@@ -807,10 +854,9 @@ def detect(frame, params: DetectorParams | None = None) -> list[Detection]:
     ``extent``. For a stream from a fixed camera use
     :class:`TabletopDetector` (the table plane is fitted once)."""
     points = frame.points() if hasattr(frame, "points") else frame
-    return detect_objects(points, params, camera=_camera_position(frame))[1]
+    return detect_objects(points, params, view=_view(frame))[1]
 
 
-def _camera_position(frame):
-    """A depth frame's camera position (world, m); None for bare points."""
-    X_WC = getattr(frame, "X_WC", None)
-    return None if X_WC is None else np.asarray(X_WC, dtype=float)[:3, 3]
+def _view(frame):
+    """``frame`` if it is a depth frame (``depth``, ``K``, ``X_WC``), else None."""
+    return frame if all(hasattr(frame, k) for k in ("depth", "K", "X_WC")) else None

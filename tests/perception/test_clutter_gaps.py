@@ -134,3 +134,25 @@ def test_a_box_seen_in_pieces_behind_a_wine_glass_is_one_object():
     assert len(detect_objects(frame.points())[1]) > 2  # without the camera: pieces
     with pytest.raises(ValueError, match="camera"):
         detect_objects(frame.points(), camera=[0.0, 1.0])
+
+
+@pytest.mark.parametrize("size", [0.05, 0.06])
+def test_a_tall_cylinder_whose_near_top_is_out_of_range_is_one_object(size):
+    """Was 2 detections: the top's near edge is nearer to the camera than the
+    Kinect's 0.8 m minimum range, so the camera sees the far part of the top
+    and the side below the cut apart, with no return between them."""
+    from handle_drake.devices.camera.profiles import get_profile
+
+    cylinder = SceneObject("cylinder", size, (-0.19, -0.09), 2.4)
+    scene = TabletopScene([cylinder])
+    frame = scene.frame(0.0)
+    # The scene is what the test says: the top's nearest point out of range.
+    camera = frame.X_WC[:3, 3]
+    near_top = np.array([-0.19 - size / 2 * 0.9, -0.09, 2 * size])
+    axis = frame.X_WC[:3, 2]
+    assert (near_top - camera) @ axis < get_profile("kinect_v1").min_depth
+    detections = detect(frame)
+    score = match_detections(detections, [cylinder])
+    assert len(detections) == 1, _described(detections)
+    (found,) = score["objects"]
+    assert found["kind_ok"] and found["xy_mm"] < 5, found
