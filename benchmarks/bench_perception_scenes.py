@@ -17,9 +17,9 @@ Targets (issue 33): every object found within 1 cm, kinds right >= 95 %.
 
 ``--scenes clutter`` draws :func:`~handle_drake.apps.perception.scenes.clutter_scene`
 instead (issue 49 item 6): 2-5 objects, each 15-20 mm (footprint outline to
-outline) from a neighbour, the rotated cuboid among the kinds; ``--seeds dev``
-and ``--seeds held-out`` name its seed blocks (``CLUTTER_DEV_SEEDS``,
-``CLUTTER_HELD_OUT_SEEDS`` in ``scenes.py``). Target there: kinds >= 95 %.
+outline) from a neighbour, the rotated cuboid among the kinds; ``--seeds dev``,
+``held-out`` and ``fresh`` name its seed blocks (``CLUTTER_*_SEEDS`` in
+``scenes.py``). Target there: kinds >= 95 %.
 
 Run: ``python benchmarks/bench_perception_scenes.py [--seeds 0-29]``; prints the
 table (per kind) and writes ``benchmarks/results/perception_scenes.json``.
@@ -70,13 +70,15 @@ def main(argv=None) -> int:
     add_page_arguments(parser, "perception")
     args = parser.parse_args(argv)
     results_run = ResultsRun("Cluttered tabletop scenes: objects found per kind", args)
-    named = {"dev": scene_module.CLUTTER_DEV_SEEDS, "held-out": scene_module.CLUTTER_HELD_OUT_SEEDS}
+    named = {"dev": scene_module.CLUTTER_DEV_SEEDS, "held-out": scene_module.CLUTTER_HELD_OUT_SEEDS,
+             "fresh": scene_module.CLUTTER_FRESH_SEEDS}
     if args.seeds in named and args.scenes != "clutter":
         parser.error(f"--seeds {args.seeds}: a named block of --scenes clutter")
     try:
         seeds = list(named[args.seeds]) if args.seeds in named else _seeds(args.seeds)
     except ValueError:
-        parser.error(f"--seeds: expected e.g. 0-29, 3,5,8, dev or held-out, got {args.seeds!r}")
+        parser.error(f"--seeds: expected e.g. 0-29, 3,5,8, dev, held-out or fresh, "
+                     f"got {args.seeds!r}")
     draw = scene_module.clutter_scene if args.scenes == "clutter" else scene_module.random_scene
     scenes, start = [], time.perf_counter()
     for seed in seeds:

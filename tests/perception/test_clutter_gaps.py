@@ -12,6 +12,7 @@ import pytest
 
 from handle_drake.apps.perception.scenes import (
     CLUTTER_DEV_SEEDS,
+    CLUTTER_FRESH_SEEDS,
     CLUTTER_HELD_OUT_SEEDS,
     SceneObject,
     TabletopScene,
@@ -81,7 +82,8 @@ def test_clutter_scenes_stand_15_to_20_mm_apart():
     """Every object of a clutter scene is 15-20 mm (outline to outline) from
     its nearest neighbour and at least 15 mm from every other; seeded."""
     assert clutter_scene(3) == clutter_scene(3) and clutter_scene(3) != clutter_scene(4)
-    assert not set(CLUTTER_DEV_SEEDS) & set(CLUTTER_HELD_OUT_SEEDS)
+    blocks = [set(CLUTTER_DEV_SEEDS), set(CLUTTER_HELD_OUT_SEEDS), set(CLUTTER_FRESH_SEEDS)]
+    assert all(not a & b for a, b in itertools.combinations(blocks, 2))
     for seed in CLUTTER_DEV_SEEDS[:10]:
         objects = clutter_scene(seed)
         assert 2 <= len(objects) <= 5
