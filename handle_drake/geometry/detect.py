@@ -608,11 +608,14 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
     them (:func:`_unseen_between`: a near top out of the sensor's range),
     together at most :data:`PIECES_LENGTH` long."""
     owner = list(range(len(flats)))
-    rays = None
-    if camera is not None and clusters is not None:
-        cloud = np.vstack(clusters) - camera
-        ranges = np.linalg.norm(cloud, axis=1)
-        rays = (cKDTree(cloud / ranges[:, None]), ranges)
+    rays = []  # the lines of sight's tree, built when a pair of pieces needs it
+
+    def lines_of_sight():
+        if not rays:
+            cloud = np.vstack(clusters) - camera
+            ranges = np.linalg.norm(cloud, axis=1)
+            rays.extend([cKDTree(cloud / ranges[:, None]), ranges])
+        return tuple(rays)
 
     def find(a):
         while owner[a] != a:
@@ -645,7 +648,7 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
                 joined = _unseen_between(clusters[i], clusters[j], view)
             if joined:
                 owner[find(j)] = find(i)
-    if rays is None:
+    if camera is None or clusters is None:
         return [find(i) for i in range(len(flats))]
     # Then the small pieces still alone, pairwise (a group's points together).
     groups: dict[int, list[int]] = {}
@@ -661,7 +664,8 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
                     or min_area_rectangle(union)[1][0] > PIECES_LENGTH):
                 continue
             if _hidden_between(np.vstack([clusters[i] for i in ma]),
-                               np.vstack([clusters[i] for i in mb]), camera, rays):
+                               np.vstack([clusters[i] for i in mb]), camera,
+                               lines_of_sight()):
                 owner[find(mb[0])] = find(ma[0])
     return [find(i) for i in range(len(flats))]
 
