@@ -670,9 +670,22 @@ def _join_across(flats: list[np.ndarray], components: list[int], clusters=None,
     return [find(i) for i in range(len(flats))]
 
 
+def _join_seen_apart(clusters: list[np.ndarray], components: list[int], plane: TablePlane,
+                     camera=None, view=None) -> list[np.ndarray]:
+    """``clusters`` with the parts of one object that the camera sees apart
+    stacked into one (:func:`_join_across`)."""
+    if len(clusters) < 2:
+        return clusters
+    origin, R_WT = _table_frame(plane)
+    flats = [(np.asarray(c, dtype=float) - origin) @ R_WT for c in clusters]
+    groups: dict[int, list[int]] = {}
+    for i, root in enumerate(_join_across(flats, components, clusters, camera, view)):
+        groups.setdefault(root, []).append(i)
+    return [np.vstack([clusters[i] for i in m]) for m in groups.values()]
+
+
 def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
-                 params: DetectorParams, components: list[int] | None = None,
-                 camera: np.ndarray | None = None, view=None) -> list[np.ndarray]:
+                 params: DetectorParams) -> list[np.ndarray]:
     """Clusters that are parts of one object become one cluster:
 
     - a part standing within another's footprint (a wine glass's stem seen
@@ -694,15 +707,6 @@ def _merge_parts(clusters: list[np.ndarray], plane: TablePlane,
         return clusters
     origin, R_WT = _table_frame(plane)
     flats = [(np.asarray(c, dtype=float) - origin) @ R_WT for c in clusters]
-    if components is not None:
-        groups = {}
-        for i, root in enumerate(_join_across(flats, components, clusters, camera, view)):
-            groups.setdefault(root, []).append(i)
-        if len(groups) < len(clusters):
-            clusters = [np.vstack([clusters[i] for i in m]) for m in groups.values()]
-            flats = [np.vstack([flats[i] for i in m]) for m in groups.values()]
-        if len(clusters) < 2:
-            return clusters
     owner = list(range(len(clusters)))
 
     def find(a):
@@ -805,7 +809,8 @@ def detect_objects(points, params: DetectorParams | None = None,
             components.extend([component] * len(parts))
             clusters.extend(parts)
     detections = []
-    for cluster in _merge_parts(clusters, plane, params, components, camera, view):
+    clusters = _join_seen_apart(clusters, components, plane, camera, view)
+    for cluster in _merge_parts(clusters, plane, params):
         if len(cluster) >= params.min_points:
             detections.append(_describe(cluster, plane))
     detections.sort(key=lambda d: float(np.linalg.norm(d.position[:2])))

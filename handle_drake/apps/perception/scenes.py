@@ -36,6 +36,7 @@ from handle_drake.devices.camera.frames import DepthFrame
 from handle_drake.devices.camera.profiles import get_profile
 from handle_drake.devices.camera.sensors import AddCameras, camera_info
 from handle_drake.geometry.objects import (
+    ROTATED_CUBOID_YAW,
     AddObject,
     AddTable,
     ObjectSpec,
@@ -160,8 +161,6 @@ def _footprint_outline(obj: SceneObject, step: float = 0.001) -> np.ndarray:
     """Points (N x 2, m, world) on the outline of the object's footprint,
     about ``step`` apart: a box's rectangle, a star's polygon, a mug's cup
     circle and handle rectangle, the widest circle of a round object."""
-    from handle_drake.geometry.objects.catalogue import ROTATED_CUBOID_YAW
-
     d = dimensions(obj.spec())
 
     def polygon(corners):
