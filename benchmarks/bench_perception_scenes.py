@@ -18,7 +18,7 @@ Targets (issue 33): every object found within 1 cm, kinds right >= 95 %.
 ``--scenes clutter`` draws :func:`~handle_drake.apps.perception.scenes.clutter_scene`
 instead (issue 49 item 6): 2-5 objects, each 15-20 mm (footprint outline to
 outline) from a neighbour, the rotated cuboid among the kinds; ``--seeds dev``,
-``held-out`` and ``fresh`` name its seed blocks (``CLUTTER_*_SEEDS`` in
+``held-out``, ``fresh`` and ``final`` name its seed blocks (``CLUTTER_*_SEEDS`` in
 ``scenes.py``). Target there: kinds >= 95 %.
 
 Run: ``python benchmarks/bench_perception_scenes.py [--seeds 0-29]``; prints the
@@ -71,13 +71,13 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     results_run = ResultsRun("Cluttered tabletop scenes: objects found per kind", args)
     named = {"dev": scene_module.CLUTTER_DEV_SEEDS, "held-out": scene_module.CLUTTER_HELD_OUT_SEEDS,
-             "fresh": scene_module.CLUTTER_FRESH_SEEDS}
+             "fresh": scene_module.CLUTTER_FRESH_SEEDS, "final": scene_module.CLUTTER_FINAL_SEEDS}
     if args.seeds in named and args.scenes != "clutter":
         parser.error(f"--seeds {args.seeds}: a named block of --scenes clutter")
     try:
         seeds = list(named[args.seeds]) if args.seeds in named else _seeds(args.seeds)
     except ValueError:
-        parser.error(f"--seeds: expected e.g. 0-29, 3,5,8, dev, held-out or fresh, "
+        parser.error(f"--seeds: expected e.g. 0-29, 3,5,8, dev, held-out, fresh or final, "
                      f"got {args.seeds!r}")
     draw = scene_module.clutter_scene if args.scenes == "clutter" else scene_module.random_scene
     scenes, start = [], time.perf_counter()

@@ -315,6 +315,11 @@ BOX_FILL = 0.85
 #: (box over cylinder residual, development seeds: upright cuboids 0.12-1.13,
 #: round objects 0.44-4.75, median 1.41).
 BOX_RESIDUAL_RATIO = 1.3
+#: A box fitting better than this times the cylinder's residual is a box
+#: whatever its top's outline (round objects on the development seeds: at
+#: least 0.44, star prisms; two whole cuboids near the camera with their
+#: tops cut by the sensor's range, from the fresh block: 0.25).
+BOX_CLEAR_RATIO = 0.3
 
 
 def _table_frame(plane: TablePlane):
@@ -387,7 +392,10 @@ def _describe(cluster: np.ndarray, plane: TablePlane) -> Detection:
         fill = _hull_fill(top)
         if math.isfinite(fill):
             box_like = fill > BOX_FILL and b_res <= BOX_RESIDUAL_RATIO * c_res
-            kind = "box" if box_like else "cylinder"
+            # ... or the box fits far better, whatever the top's outline (a box
+            # near the camera, its top's near part beyond the sensor's range:
+            # the outline is cut and fills less).
+            kind = "box" if box_like or b_res < BOX_CLEAR_RATIO * c_res else "cylinder"
     if kind == "sphere":
         centre_local = s_centre
         extent = np.array([2 * s_radius, 2 * s_radius, height])
