@@ -92,12 +92,28 @@ def _ports(args):
         diagram = TabletopScene(objects, seed=args.scene_seed).diagram
         expected = len(objects)
     context = diagram.CreateDefaultContext()
+    # The depth frame beside the cloud (what detect(frame) is given): the
+    # detector joins the parts of one object seen apart around a nearer one
+    # or around its surface nearer than the sensor's range.
+    from types import SimpleNamespace
+
+    from handle_drake.devices.camera.profiles import get_profile
+    from handle_drake.devices.camera.sensors import camera_info
+
+    depth_port = diagram.GetOutputPort("kinect.depth")
+    X_WC = diagram.GetOutputPort("kinect.pose").Eval(context).GetAsMatrix4()
+    K = camera_info(get_profile("kinect_v1")).intrinsic_matrix()
+
+    def view():  # the depth image's array (no copy), K and X_WC
+        return SimpleNamespace(depth=np.asarray(depth_port.Eval(context).data)[:, :, 0],
+                               K=K, X_WC=X_WC)
+
     return (context, diagram.GetOutputPort("kinect.rgb"),
-            diagram.GetOutputPort("kinect.point_cloud"), expected)
+            diagram.GetOutputPort("kinect.point_cloud"), expected, view)
 
 
 def measure(args, baseline) -> dict:
-    context, rgb_port, cloud_port, expected = _ports(args)
+    context, rgb_port, cloud_port, expected, view_of = _ports(args)
     rgb_port.Eval(context)  # the renderer's first frame builds its pipeline
     steps = ["render rgb", "render depth + cloud", "detect (plane per frame)",
              "detect (plane per scene)"] + (["baseline detect"] if baseline else [])
@@ -110,7 +126,7 @@ def measure(args, baseline) -> dict:
     # One warm-up frame for every detector (imports, first-call caches).
     context.SetTime(0.001)
     cloud = cloud_port.Eval(context).xyzs().T
-    detect_objects(cloud)
+    detect_objects(cloud, view=view_of())
     if baseline:
         baseline(cloud)
     # What a full collection costs here (every object of Drake's diagrams and
@@ -138,10 +154,11 @@ def measure(args, baseline) -> dict:
                 rgb_port.Eval(context)
             elif step == "render depth + cloud":
                 cloud = cloud_port.Eval(context).xyzs().T
+                view = view_of()
             elif step == "detect (plane per frame)":
-                results[step] = detect_objects(cloud)[1]
+                results[step] = detect_objects(cloud, view=view)[1]
             elif step == "detect (plane per scene)":
-                results[step] = detector.detect(cloud)
+                results[step] = detector.detect(cloud, view=view)
             else:
                 results[step] = baseline(cloud)[1]
             times[step].append(time.perf_counter() - start)

@@ -59,7 +59,7 @@ def perceive_frame(camera: str, frame: DepthFrame,
         return CameraView(camera, frame, None, [],
                           f"camera {camera}: nothing in view (no valid depth pixel: everything "
                           f"is out of the sensor's range)")
-    plane, detections = detect_objects(frame.points(), params)
+    plane, detections = detect_objects(frame.points(), params, view=frame)
     message = ""
     if plane is None:
         message = f"camera {camera}: nothing in view (no table plane among the points)"
