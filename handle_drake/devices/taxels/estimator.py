@@ -1,0 +1,297 @@
+"""The object's pose in the hand, estimated from what the hand senses (never the plant's
+state): the hand's joint positions, its taxels, optionally a camera's detection and the
+object's accelerometer (gravity direction).
+
+:class:`InHandPoseEstimator` ports:
+
+- input ``hand_positions`` (nq, rad, ``HandSpec.joint_names`` order: the station's
+  ``hand.position_measured``).
+- input ``taxels`` (cells, Pa: the station's ``hand.taxels``).
+- input ``hand_pose`` (6, ``[x y z roll pitch yaw]`` of the hand base in world: the
+  floating wrist's ``wrist.pose_measured``); unconnected, the fixed ``X_WB`` given.
+- input ``camera_pose`` (abstract ``RigidTransform``, ``X_WO`` detected), optional.
+- input ``roll_pitch`` (2, rad: the object's accelerometer's ``object.roll_pitch``),
+  optional; needs ``X_OS``.
+- output ``pose`` (abstract ``RigidTransform``): ``X_WO`` estimated.
+- output ``covariance`` (36): the 6 x 6 covariance of ``[rotation vector, position]``
+  (rad, m) in the hand base frame, row-major.
+- output ``quality`` (2): the number of pads in contact and the RMS distance (m) of
+  their centres of pressure to the fitted surface.
+
+The method (at ``rate_hz``, state in the context): each pad whose cells sum to more than
+``contact_threshold`` N gives a contact: its centre of pressure on the pad face and the
+pad's outward normal, placed in the hand base frame B by the forward kinematics of a
+plant of the hand alone. The object's pose ``X_BO`` is the least-squares fit
+(``scipy.optimize.least_squares``) of its primitive's signed distance (sphere, cylinder,
+cuboid) to the contacts (``sigma_distance``) and of its outward normal to the pads'
+inward normals (``sigma_normal``), with the previous estimate as a prior widened by
+``process_position_std`` / ``process_angle_std`` per update (a filter with a random-walk
+model), the camera's detection (``camera_position_std``, ``camera_angle_std``) and the
+gravity direction. Before the first contact the estimate is the ``X_WO_prior`` (held in
+world: the object rests where it was seen); from the first contact it is held in the hand.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
+from pydrake.systems.framework import EventStatus, LeafSystem
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
+from handle_drake.base.hands import AddHand, get_hand_spec
+from handle_drake.devices.taxels.pads import Pad
+from handle_drake.geometry.objects.pieces import pieces
+
+__all__ = ["InHandPoseEstimator", "PrimitiveShape", "pad_contacts"]
+
+
+class PrimitiveShape:
+    """The signed distance (m) and outward normal of a sphere, cylinder (axis z) or box,
+    in the object frame O."""
+
+    def __init__(self, spec):
+        parts = pieces(spec)
+        if len(parts) != 1 or parts[0].shape not in ("sphere", "cylinder", "box"):
+            raise ValueError(f"estimator: object kind {spec.kind!r} is not a single primitive; "
+                             "expected sphere, cylinder or cuboid")
+        piece = parts[0]
+        self.shape = piece.shape
+        self.params = np.array(piece.params, float)
+        self._R_PO = piece.X_OP.rotation().inverse().matrix()
+        self._p_OP = piece.X_OP.translation()
+
+    def distance(self, p_O: np.ndarray) -> np.ndarray:
+        """Signed distance of each row of ``p_O`` (n, 3)."""
+        p = (p_O - self._p_OP) @ self._R_PO.T
+        if self.shape == "sphere":
+            return np.linalg.norm(p, axis=1) - self.params[0]
+        if self.shape == "cylinder":
+            r, length = self.params
+            q = np.column_stack([np.hypot(p[:, 0], p[:, 1]) - r, np.abs(p[:, 2]) - length / 2])
+        else:
+            q = np.abs(p) - self.params / 2
+        outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
+        return outside + np.minimum(q.max(axis=1), 0.0)
+
+    def normal(self, p_O: np.ndarray, h: float = 1e-5) -> np.ndarray:
+        """Unit outward normal (the distance's gradient, central differences) at each row."""
+        g = np.column_stack([self.distance(p_O + h * e) - self.distance(p_O - h * e)
+                             for e in np.eye(3)]) / (2 * h)
+        return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+
+
+def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransform],
+                 threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per pad in contact: the centre of pressure ``c_B``, the pad's outward normal ``n_B``
+    and its force (N) from ``taxels`` (Pa). Arrays (k, 3), (k, 3), (k,)."""
+    points, normals, forces = [], [], []
+    start = 0
+    for pad, X_BP in zip(pads, X_BPads, strict=True):
+        profile = pad.profile
+        f = np.asarray(taxels[start:start + pad.cells], float) * profile.cell_area
+        start += pad.cells
+        # cells under three noise deviations are taken as empty
+        f = np.where(f > 3.0 * profile.noise_std_pa * profile.cell_area, f, 0.0)
+        total = f.sum()
+        if total <= threshold:
+            continue
+        uv = f @ profile.cell_centres() / total
+        points.append(X_BP.multiply([uv[0], uv[1], 0.0]))
+        normals.append(X_BP.rotation().col(2))
+        forces.append(total)
+    if not points:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    return np.array(points), np.array(normals), np.array(forces)
+
+
+class InHandPoseEstimator(LeafSystem):
+    """See the module doc.
+
+    Args:
+        hand_kind, coupling_ratio: the hand (a plant of it alone gives the pads' poses).
+        pads: the taxel pads (:func:`~.pads.shadow_pads`), their ``body_name`` and ``X_BP``.
+        spec: the object's ``ObjectSpec`` (a sphere, cylinder or cuboid).
+        X_WO_prior: the object's pose believed before the grasp (a detection, a plan).
+        X_WB: the hand base's pose for a fixed mount (used when ``hand_pose`` is unconnected).
+        X_OS: the accelerometer's frame on the object (for ``roll_pitch``).
+    """
+
+    def __init__(self, hand_kind: str, coupling_ratio, pads: list[Pad], spec,
+                 X_WO_prior: RigidTransform, X_WB: RigidTransform | None = None,
+                 X_OS: RigidTransform | None = None, rate_hz: float = 50.0,
+                 prior_position_std: float = 0.01, prior_angle_std: float = 0.2,
+                 contact_threshold: float = 0.2, sigma_distance: float = 0.001,
+                 sigma_normal: float = 0.3, process_position_std: float = 0.002,
+                 process_angle_std: float = 0.05, camera_position_std: float = 0.005,
+                 camera_angle_std: float = 0.1, gravity_std: float = 0.05):
+        super().__init__()
+        self._shape = PrimitiveShape(spec)
+        self._pads = list(pads)
+        spec_h = get_hand_spec(hand_kind)
+        # kinematics only (never stepped); AddHand asks for a SAP plant (its couplers)
+        self._plant = MultibodyPlant(0.001)
+        self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
+        hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
+        self._plant.WeldFrames(self._plant.world_frame(),
+                               self._plant.GetBodyByName(spec_h.base_body, hand).body_frame())
+        self._plant.Finalize()
+        self._plant_context = self._plant.CreateDefaultContext()
+        self._q_index = np.array([self._plant.GetJointByName(n, hand).position_start()
+                                  for n in spec_h.joint_names], dtype=int)
+        self._q0 = self._plant.GetPositions(self._plant_context)
+        self._bodies = [self._plant.GetBodyByName(p.body_name, hand) for p in self._pads]
+        self._X_WO_prior = RigidTransform(X_WO_prior)
+        self._X_WB = None if X_WB is None else RigidTransform(X_WB)
+        self._X_OS = None if X_OS is None else RigidTransform(X_OS)
+        self._period = 1.0 / rate_hz
+        self._sig = dict(prior_p=prior_position_std, prior_a=prior_angle_std,
+                         d=sigma_distance, n=sigma_normal, proc_p=process_position_std,
+                         proc_a=process_angle_std, cam_p=camera_position_std,
+                         cam_a=camera_angle_std, g=gravity_std)
+        self._threshold = contact_threshold
+        nq, cells = len(spec_h.joint_names), sum(p.cells for p in self._pads)
+        self._q_port = self.DeclareVectorInputPort("hand_positions", nq)
+        self._taxel_port = self.DeclareVectorInputPort("taxels", cells)
+        self._hand_pose = self.DeclareVectorInputPort("hand_pose", 6)
+        self._camera = self.DeclareAbstractInputPort("camera_pose",
+                                                     AbstractValue.Make(RigidTransform()))
+        self._roll_pitch = self.DeclareVectorInputPort("roll_pitch", 2)
+        # state: quaternion wxyz and p of X_BO (or X_WO before contact), 36 covariance,
+        # contacts, rms, in_hand
+        self._state = self.DeclareDiscreteState(self._initial_state())
+        self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
+        self.DeclareAbstractOutputPort("pose", lambda: AbstractValue.Make(RigidTransform()),
+                                       self._calc_pose, {self.all_input_ports_ticket(),
+                                                         self.xd_ticket()})
+        self.DeclareVectorOutputPort("covariance", 36, lambda c, o: o.SetFromVector(
+            c.get_discrete_state(self._state).value()[7:43]), {self.xd_ticket()})
+        self.DeclareVectorOutputPort("quality", 2, lambda c, o: o.SetFromVector(
+            c.get_discrete_state(self._state).value()[43:45]), {self.xd_ticket()})
+
+    def _initial_state(self) -> np.ndarray:
+        x = np.zeros(46)
+        x[:4] = self._X_WO_prior.rotation().ToQuaternion().wxyz()
+        x[4:7] = self._X_WO_prior.translation()
+        s = self._sig
+        x[7:43] = np.diag([s["prior_a"] ** 2] * 3 + [s["prior_p"] ** 2] * 3).ravel()
+        return x
+
+    # -- helpers -------------------------------------------------------------------------
+    def _X_WB_of(self, context) -> RigidTransform:
+        if self._hand_pose.HasValue(context):
+            x = self._hand_pose.Eval(context)
+            return RigidTransform(RollPitchYaw(x[3:6]), x[:3])
+        if self._X_WB is None:
+            raise RuntimeError("estimator: hand_pose is unconnected and no fixed X_WB was given")
+        return self._X_WB
+
+    def pad_poses(self, q: np.ndarray) -> list[RigidTransform]:
+        """``X_BP`` of each pad for hand joint positions ``q`` (forward kinematics).
+        Uses the estimator's own plant context: call from one thread."""
+        full = self._q0.copy()
+        full[self._q_index] = q
+        self._plant.SetPositions(self._plant_context, full)
+        return [self._plant.EvalBodyPoseInWorld(self._plant_context, b) @ p.X_BP
+                for b, p in zip(self._bodies, self._pads, strict=True)]
+
+    @staticmethod
+    def _unpack(x) -> RigidTransform:
+        q = np.asarray(x[:4], float)
+        return RigidTransform(Quaternion(q / np.linalg.norm(q)), np.asarray(x[4:7], float))
+
+    def _calc_pose(self, context, out):
+        x = context.get_discrete_state(self._state).value()
+        X = self._unpack(x)
+        if x[45] > 0.5:
+            X = self._X_WB_of(context) @ X
+        out.set_value(X)
+
+    # -- the update ------------------------------------------------------------------------
+    def _update(self, context, state):
+        x = context.get_discrete_state(self._state).value().copy()
+        X_WB = self._X_WB_of(context)
+        X_BW = X_WB.inverse()
+        points, normals, _ = pad_contacts(self._pads, self._taxel_port.Eval(context),
+                                          self.pad_poses(self._q_port.Eval(context)),
+                                          self._threshold)
+        in_hand = x[45] > 0.5
+        X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
+        cov_prev = x[7:43].reshape(6, 6)
+        if not in_hand and len(points) == 0:
+            return EventStatus.DidNothing()
+        s = self._sig
+        # the prior: the last estimate, widened by the process noise
+        prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0)
+                            + np.array([s["proc_a"] ** 2] * 3 + [s["proc_p"] ** 2] * 3))
+        priors = [(X_BO_prev, prior_std)]
+        if self._camera.HasValue(context):
+            priors.append((X_BW @ self._camera.Eval(context),
+                           np.array([s["cam_a"]] * 3 + [s["cam_p"]] * 3)))
+        gravity = None
+        if self._roll_pitch.HasValue(context) and self._X_OS is not None:
+            r, p = self._roll_pitch.Eval(context)
+            down_S = RollPitchYaw(r, p, 0.0).ToRotationMatrix().inverse().multiply([0, 0, -1.0])
+            gravity = (X_BW.rotation().multiply([0, 0, -1.0]), down_S)
+        X_BO, cov, rms = self.fit(points, normals, priors, gravity)
+        x[:4] = X_BO.rotation().ToQuaternion().wxyz()
+        x[4:7] = X_BO.translation()
+        x[7:43] = cov.ravel()
+        x[43:45] = (len(points), rms)
+        x[45] = 1.0
+        state.get_mutable_vector(self._state).SetFromVector(x)
+        return EventStatus.Succeeded()
+
+    def fit(self, points, normals, priors, gravity=None):
+        """``(X_BO, covariance, rms)``: the least-squares pose (see the module doc).
+
+        ``points``, ``normals``: (k, 3) contacts and the pads' outward normals in B;
+        ``priors``: ``[(X_BO, std6)]`` with ``std6`` of ``[rotation vector, position]``;
+        ``gravity``: ``(down_B, down_S)`` or None.
+        """
+        points = np.asarray(points, float).reshape(-1, 3)
+        normals = np.asarray(normals, float).reshape(-1, 3)
+        X0 = priors[0][0]
+        R0 = X0.rotation().matrix()
+        p0 = X0.translation()
+        s = self._sig
+        prior_terms = [(Rotation.from_matrix(X.rotation().matrix()), X.translation(),
+                        np.asarray(std, float)) for X, std in priors]
+        R_OS = None if self._X_OS is None else self._X_OS.rotation().matrix()
+
+        def pose(v):
+            R = Rotation.from_rotvec(v[:3]).as_matrix() @ R0
+            return R, p0 + v[3:]
+
+        def residuals(v):
+            R, p = pose(v)
+            res = []
+            if len(points):
+                p_O = (points - p) @ R  # R^T (c - p) per row
+                res.append(self._shape.distance(p_O) / s["d"])
+                n_B = self._shape.normal(p_O) @ R.T
+                res.append(((n_B + normals) / s["n"]).ravel())
+            rot = Rotation.from_matrix(R)
+            for R_prior, p_prior, std in prior_terms:
+                res.append((rot * R_prior.inv()).as_rotvec() / std[:3])
+                res.append((p - p_prior) / std[3:])
+            if gravity is not None and R_OS is not None:
+                down_B, down_S = gravity
+                res.append(((R @ R_OS).T @ down_B - down_S) / s["g"])
+            return np.concatenate(res)
+
+        result = least_squares(residuals, np.zeros(6), method="lm" if len(
+            residuals(np.zeros(6))) >= 6 else "trf", x_scale=[0.1] * 3 + [0.01] * 3)
+        R, p = pose(result.x)
+        J = result.jac
+        cov = np.linalg.pinv(J.T @ J)
+        # the covariance of the rotation about R0 is that of the rotation vector of R R0^T
+        if len(points):
+            rms = float(np.sqrt(np.mean(self._shape.distance((points - p) @ R) ** 2)))
+        else:
+            rms = 0.0
+        return RigidTransform(RotationMatrix(R), p), cov, rms
+
