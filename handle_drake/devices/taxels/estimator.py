@@ -36,9 +36,10 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue
+from pydrake.geometry import Role
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
-from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
-from pydrake.systems.framework import EventStatus, LeafSystem
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContactApproximation
+from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
@@ -47,6 +48,11 @@ from handle_drake.devices.taxels.pads import Pad
 from handle_drake.geometry.objects.pieces import pieces
 
 __all__ = ["InHandPoseEstimator", "PrimitiveShape", "pad_contacts"]
+
+#: m: a point this far behind a contact, inside the finger, must be outside the object
+#: (at least 0.8 of it): the fit's guard against the mirror solution (the object on the
+#: far side of the contacts, through the fingers).
+INNER_DEPTH = 0.006
 
 
 class PrimitiveShape:
@@ -125,21 +131,38 @@ class InHandPoseEstimator(LeafSystem):
                  X_OS: RigidTransform | None = None, rate_hz: float = 50.0,
                  prior_position_std: float = 0.01, prior_angle_std: float = 0.2,
                  contact_threshold: float = 0.2, sigma_distance: float = 0.001,
-                 sigma_normal: float = 0.3, process_position_std: float = 0.002,
+                 sigma_normal: float = 1.0, process_position_std: float = 0.002,
                  process_angle_std: float = 0.05, camera_position_std: float = 0.005,
-                 camera_angle_std: float = 0.1, gravity_std: float = 0.05):
+                 camera_angle_std: float = 0.1, gravity_std: float = 0.05,
+                 self_contact_distance: float = 0.002):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._pads = list(pads)
         spec_h = get_hand_spec(hand_kind)
-        # kinematics only (never stepped); AddHand asks for a SAP plant (its couplers)
-        self._plant = MultibodyPlant(0.001)
+        # kinematics and the hand's own geometry only (never stepped); AddHand asks for a
+        # SAP plant (its couplers)
+        builder = DiagramBuilder()
+        self._plant, self._scene_graph = AddMultibodyPlantSceneGraph(builder, 0.001)
         self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
         hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
         self._plant.WeldFrames(self._plant.world_frame(),
                                self._plant.GetBodyByName(spec_h.base_body, hand).body_frame())
         self._plant.Finalize()
-        self._plant_context = self._plant.CreateDefaultContext()
+        self._kinematics = builder.Build()
+        # a scratch context, overwritten whole at each use (no result depends on its past)
+        self._kin_context = self._kinematics.CreateDefaultContext()
+        self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
+        self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
+        self._self_contact_distance = self_contact_distance
+        inspector = self._scene_graph.model_inspector()
+        # per pad: the hand geometries that can touch it (not on its body, not filtered)
+        self._others = []
+        for pad in pads:
+            body = self._plant.GetBodyByName(pad.body_name, hand)
+            own = self._plant.GetCollisionGeometriesForBody(body)
+            self._others.append({
+                g for g in inspector.GetAllGeometryIds(Role.kProximity)
+                if g not in own and not any(inspector.CollisionFiltered(g, o) for o in own)})
         self._q_index = np.array([self._plant.GetJointByName(n, hand).position_start()
                                   for n in spec_h.joint_names], dtype=int)
         self._q0 = self._plant.GetPositions(self._plant_context)
@@ -153,6 +176,7 @@ class InHandPoseEstimator(LeafSystem):
                          proc_a=process_angle_std, cam_p=camera_position_std,
                          cam_a=camera_angle_std, g=gravity_std)
         self._threshold = contact_threshold
+        self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
         nq, cells = len(spec_h.joint_names), sum(p.cells for p in self._pads)
         self._q_port = self.DeclareVectorInputPort("hand_positions", nq)
         self._taxel_port = self.DeclareVectorInputPort("taxels", cells)
@@ -198,6 +222,30 @@ class InHandPoseEstimator(LeafSystem):
         return [self._plant.EvalBodyPoseInWorld(self._plant_context, b) @ p.X_BP
                 for b, p in zip(self._bodies, self._pads, strict=True)]
 
+    def contacts(self, q: np.ndarray, taxels: np.ndarray):
+        """The pads' contacts with the object (centres of pressure and outward normals in B)
+        and the face centres of the pads that feel nothing (``(points, normals, free)``):
+        a pad whose centre of pressure lies within ``self_contact_distance`` of another
+        link of the hand (one it can collide with) is pressed by the hand, not the object,
+        and is left out."""
+        X_BPads = self.pad_poses(q)
+        query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
+        keep, free = [], []
+        for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
+            points, normals, _ = pad_contacts([pad], taxels[self._offsets[i]:self._offsets[i + 1]],
+                                              [X_BP], self._threshold)
+            if not len(points):
+                free.append(X_BP.translation())
+                continue
+            near = query.ComputeSignedDistanceToPoint(points[0], self._self_contact_distance)
+            if any(d.id_G in self._others[i] for d in near):
+                continue
+            keep.append((points[0], normals[0]))
+        free = np.array(free).reshape(-1, 3)
+        if not keep:
+            return np.zeros((0, 3)), np.zeros((0, 3)), free
+        return np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free
+
     @staticmethod
     def _unpack(x) -> RigidTransform:
         q = np.asarray(x[:4], float)
@@ -215,9 +263,8 @@ class InHandPoseEstimator(LeafSystem):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
-        points, normals, _ = pad_contacts(self._pads, self._taxel_port.Eval(context),
-                                          self.pad_poses(self._q_port.Eval(context)),
-                                          self._threshold)
+        points, normals, free = self.contacts(self._q_port.Eval(context),
+                                              self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
@@ -236,7 +283,7 @@ class InHandPoseEstimator(LeafSystem):
             r, p = self._roll_pitch.Eval(context)
             down_S = RollPitchYaw(r, p, 0.0).ToRotationMatrix().inverse().multiply([0, 0, -1.0])
             gravity = (X_BW.rotation().multiply([0, 0, -1.0]), down_S)
-        X_BO, cov, rms = self.fit(points, normals, priors, gravity)
+        X_BO, cov, rms = self.fit(points, normals, priors, gravity, free)
         x[:4] = X_BO.rotation().ToQuaternion().wxyz()
         x[4:7] = X_BO.translation()
         x[7:43] = cov.ravel()
@@ -245,13 +292,15 @@ class InHandPoseEstimator(LeafSystem):
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
 
-    def fit(self, points, normals, priors, gravity=None):
+    def fit(self, points, normals, priors, gravity=None, free=()):
         """``(X_BO, covariance, rms)``: the least-squares pose (see the module doc).
 
         ``points``, ``normals``: (k, 3) contacts and the pads' outward normals in B;
         ``priors``: ``[(X_BO, std6)]`` with ``std6`` of ``[rotation vector, position]``;
-        ``gravity``: ``(down_B, down_S)`` or None.
+        ``gravity``: ``(down_B, down_S)`` or None; ``free``: (m, 3) centres of the pads
+        that feel nothing (not inside the object).
         """
+        free = np.asarray(free, float).reshape(-1, 3)
         points = np.asarray(points, float).reshape(-1, 3)
         normals = np.asarray(normals, float).reshape(-1, 3)
         X0 = priors[0][0]
@@ -274,6 +323,13 @@ class InHandPoseEstimator(LeafSystem):
                 res.append(self._shape.distance(p_O) / s["d"])
                 n_B = self._shape.normal(p_O) @ R.T
                 res.append(((n_B + normals) / s["n"]).ravel())
+                # the finger behind each contact is outside the object
+                inner = (points - INNER_DEPTH * normals - p) @ R
+                res.append(np.minimum(self._shape.distance(inner) - 0.8 * INNER_DEPTH, 0.0)
+                           / s["d"])
+            if len(free):
+                # pads that feel nothing are not inside the object
+                res.append(np.minimum(self._shape.distance((free - p) @ R), 0.0) / s["d"])
             rot = Rotation.from_matrix(R)
             for R_prior, p_prior, std in prior_terms:
                 res.append((rot * R_prior.inv()).as_rotvec() / std[:3])
