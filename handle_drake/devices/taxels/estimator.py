@@ -107,7 +107,7 @@ def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransfo
             continue
         uv = f @ profile.cell_centres() / total
         points.append(X_BP.multiply([uv[0], uv[1], 0.0]))
-        normals.append(X_BP.rotation().col(2))
+        normals.append(X_BP.rotation().matrix()[:, 2].copy())
         forces.append(total)
     if not points:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)

@@ -190,7 +190,7 @@ class PadForces:
                 for i in self._by_body.get(body, ()) if body is not None else ():
                     X = pose(i)
                     p = centroids @ X.rotation().matrix().T + X.translation()
-                    z_P = X.rotation().inverse().col(2)  # pad normal in world
+                    z_P = X.rotation().matrix()[2].copy()  # pad normal in world (row 2 of R_PW)
                     profile = self.pads[i].profile
                     cell = _cell_of(profile, p[:, 0], p[:, 1])
                     keep = (cell >= 0) & (np.abs(p[:, 2]) <= DEPTH_TOLERANCE)

@@ -67,6 +67,8 @@ class TaxelArray(LeafSystem):
             "body_poses", AbstractValue.Make([RigidTransform()]))
         self._state = self.DeclareDiscreteState(n)
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._sample)
+        # a caller may also take a sample now (CalcForcedDiscreteVariableUpdate)
+        self.DeclareForcedDiscreteUpdateEvent(self._sample)
         self.DeclareVectorOutputPort(
             "taxels", n, lambda c, o: o.SetFromVector(
                 c.get_discrete_state(self._state).value() * self._lsb),
