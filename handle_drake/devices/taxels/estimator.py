@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue
-from pydrake.geometry import Role
+from pydrake.geometry import Box, Capsule, Cylinder, Role, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContactApproximation
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
@@ -54,6 +54,32 @@ __all__ = ["InHandPoseEstimator", "PrimitiveShape", "pad_contacts"]
 #: far side of the contacts, through the fingers).
 INNER_DEPTH = 0.006
 
+#: m: how far a link of the hand may reach into the fitted object (the simulated contact's
+#: penetration under grasp forces is up to ~1.5 mm).
+HAND_TOLERANCE = 0.002
+
+
+def _shape_points(shape) -> tuple[np.ndarray, np.ndarray]:
+    """Points inside a collision shape (its frame) and the clearance each needs from the
+    object (a ball of that radius around each point lies inside the shape)."""
+    if isinstance(shape, Sphere):
+        return np.zeros((1, 3)), np.array([shape.radius()])
+    if isinstance(shape, Capsule | Cylinder):
+        z = np.linspace(-shape.length() / 2, shape.length() / 2, 4)
+        return np.column_stack([0 * z, 0 * z, z]), np.full(4, shape.radius())
+    if isinstance(shape, Box):
+        size = np.array([shape.width(), shape.depth(), shape.height()])
+        thin = int(np.argmin(size))
+        r = size[thin] / 2
+        axes = [a for a in range(3) if a != thin]
+        grid = [np.linspace(-size[a] / 2 + r, size[a] / 2 - r, 3) if size[a] > 2 * r
+                else np.zeros(1) for a in axes]
+        g0, g1 = np.meshgrid(*grid, indexing="ij")
+        points = np.zeros((g0.size, 3))
+        points[:, axes[0]], points[:, axes[1]] = g0.ravel(), g1.ravel()
+        return points, np.full(len(points), r)
+    return np.zeros((0, 3)), np.zeros(0)
+
 
 class PrimitiveShape:
     """The signed distance (m) and outward normal of a sphere, cylinder (axis z) or box,
@@ -69,6 +95,12 @@ class PrimitiveShape:
         self.params = np.array(piece.params, float)
         self._R_PO = piece.X_OP.rotation().inverse().matrix()
         self._p_OP = piece.X_OP.translation()
+
+    def half_size(self) -> float:
+        """The smallest distance from the centre to the surface (m)."""
+        if self.shape == "box":
+            return float(self.params.min() / 2)
+        return float(self.params[0])
 
     def distance(self, p_O: np.ndarray) -> np.ndarray:
         """Signed distance of each row of ``p_O`` (n, 3)."""
@@ -137,6 +169,7 @@ class InHandPoseEstimator(LeafSystem):
                  self_contact_distance: float = 0.002):
         super().__init__()
         self._shape = PrimitiveShape(spec)
+        self._half_size = self._shape.half_size()
         self._pads = list(pads)
         spec_h = get_hand_spec(hand_kind)
         # kinematics and the hand's own geometry only (never stepped); AddHand asks for a
@@ -155,6 +188,17 @@ class InHandPoseEstimator(LeafSystem):
         self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
         self._self_contact_distance = self_contact_distance
         inspector = self._scene_graph.model_inspector()
+        # points inside every link of the hand, with their clearance (the object is not
+        # inside the hand)
+        self._links = []
+        for g in inspector.GetAllGeometryIds(Role.kProximity):
+            points, clearance = _shape_points(inspector.GetShape(g))
+            if len(points):
+                X_LG = inspector.GetPoseInFrame(g)
+                body = self._plant.GetBodyFromFrameId(inspector.GetFrameId(g))
+                self._links.append((body, points @ X_LG.rotation().matrix().T
+                                    + X_LG.translation(), clearance))
+        self._clearance = np.concatenate([c for _, _, c in self._links])
         # per pad: the hand geometries that can touch it (not on its body, not filtered)
         self._others = []
         for pad in pads:
@@ -222,6 +266,13 @@ class InHandPoseEstimator(LeafSystem):
         return [self._plant.EvalBodyPoseInWorld(self._plant_context, b) @ p.X_BP
                 for b, p in zip(self._bodies, self._pads, strict=True)]
 
+    def hand_points(self) -> np.ndarray:
+        """The link points of the hand in B at the joints last set (:meth:`pad_poses`)."""
+        return np.concatenate([
+            points @ X.rotation().matrix().T + X.translation()
+            for X, points in ((self._plant.EvalBodyPoseInWorld(self._plant_context, body), p)
+                              for body, p, _ in self._links)])
+
     def contacts(self, q: np.ndarray, taxels: np.ndarray):
         """The pads' contacts with the object (centres of pressure and outward normals in B)
         and the face centres of the pads that feel nothing (``(points, normals, free)``):
@@ -283,7 +334,19 @@ class InHandPoseEstimator(LeafSystem):
             r, p = self._roll_pitch.Eval(context)
             down_S = RollPitchYaw(r, p, 0.0).ToRotationMatrix().inverse().multiply([0, 0, -1.0])
             gravity = (X_BW.rotation().multiply([0, 0, -1.0]), down_S)
-        X_BO, cov, rms = self.fit(points, normals, priors, gravity, free)
+        hand = (self.hand_points(), self._clearance)
+        starts = [X_BO_prev]
+        if len(points):
+            # a start from the touch alone: the object's centre a half-size beyond the
+            # contacts, along the pads' normals
+            guess = np.mean(points + self._half_size * normals, axis=0)
+            starts.append(RigidTransform(X_BO_prev.rotation(), guess))
+        best = None
+        for start in starts:
+            result = self.fit(points, normals, priors, gravity, free, hand, start=start)
+            if best is None or result[3] < best[3]:
+                best = result
+        X_BO, cov, rms, _ = best
         x[:4] = X_BO.rotation().ToQuaternion().wxyz()
         x[4:7] = X_BO.translation()
         x[7:43] = cov.ravel()
@@ -292,18 +355,20 @@ class InHandPoseEstimator(LeafSystem):
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
 
-    def fit(self, points, normals, priors, gravity=None, free=()):
+    def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None):
         """``(X_BO, covariance, rms)``: the least-squares pose (see the module doc).
 
         ``points``, ``normals``: (k, 3) contacts and the pads' outward normals in B;
         ``priors``: ``[(X_BO, std6)]`` with ``std6`` of ``[rotation vector, position]``;
         ``gravity``: ``(down_B, down_S)`` or None; ``free``: (m, 3) centres of the pads
-        that feel nothing (not inside the object).
+        that feel nothing (not inside the object); ``hand``: ``(points, clearance)`` inside
+        the hand's links (not inside the object); ``start``: where the search starts (default:
+        the first prior). Returns ``(X_BO, covariance, rms, cost)``.
         """
         free = np.asarray(free, float).reshape(-1, 3)
         points = np.asarray(points, float).reshape(-1, 3)
         normals = np.asarray(normals, float).reshape(-1, 3)
-        X0 = priors[0][0]
+        X0 = priors[0][0] if start is None else start
         R0 = X0.rotation().matrix()
         p0 = X0.translation()
         s = self._sig
@@ -327,6 +392,9 @@ class InHandPoseEstimator(LeafSystem):
                 inner = (points - INNER_DEPTH * normals - p) @ R
                 res.append(np.minimum(self._shape.distance(inner) - 0.8 * INNER_DEPTH, 0.0)
                            / s["d"])
+            if hand is not None:
+                inside = self._shape.distance((hand[0] - p) @ R) - hand[1] + HAND_TOLERANCE
+                res.append(np.minimum(inside, 0.0) / s["d"])
             if len(free):
                 # pads that feel nothing are not inside the object
                 res.append(np.minimum(self._shape.distance((free - p) @ R), 0.0) / s["d"])
@@ -349,5 +417,5 @@ class InHandPoseEstimator(LeafSystem):
             rms = float(np.sqrt(np.mean(self._shape.distance((points - p) @ R) ** 2)))
         else:
             rms = 0.0
-        return RigidTransform(RotationMatrix(R), p), cov, rms
+        return RigidTransform(RotationMatrix(R), p), cov, rms, float(result.cost)
 
