@@ -279,8 +279,27 @@ def test_hardware_station_plays_the_recording_on_hand_taxels(tmp_path):
     ("hand: {taxels: {profile: nope}}", "hand.taxels.profile"),
     ("hand: {taxels: {palm: nope}}", "hand.taxels.palm"),
     ("hand: {taxels: {estimator_rate_hz: 0}}", "hand.taxels.estimator_rate_hz"),
+    ("hand: {taxels: {rate_hz: 0}}", "hand.taxels.rate_hz"),
     ("hand: {taxels: {estimator: true}}\nobject: {kind: mug}", "hand.taxels.estimator"),
 ])
 def test_bad_taxel_fields_are_refused_by_name(override, field):
     with pytest.raises(ScenarioError, match=field.replace(".", r"\.")):
         LoadScenario(filename=diagrams_dir() / "shadow_sphere_grasp.yaml", data=override)
+
+
+def test_meshcat_shows_the_taxel_images():
+    from pydrake.geometry import Meshcat
+    meshcat = Meshcat()
+    scenario = LoadScenario(filename=diagrams_dir() / "shadow_sphere_grasp.yaml",
+                            data="hand: {taxels: {}}")
+    station = MakeHandStation(scenario, meshcat=meshcat, finite_commands=True)
+    builder = DiagramBuilder()
+    builder.AddSystem(station)
+    builder.Connect(builder.AddSystem(ConstantVectorSource(hand_initial_command(scenario)))
+                    .get_output_port(), station.GetInputPort("hand.position"))
+    hand, wrist = script_trajectories(scenario, hand_initial_command(scenario))
+    builder.Connect(builder.AddSystem(TrajectorySource(wrist)).get_output_port(),
+                    station.GetInputPort("wrist.pose"))
+    Simulator(builder.Build()).AdvanceTo(0.05)
+    for pad in ("fftip_pad", "thtip_pad", "palm_pad"):
+        assert meshcat.HasPath(f"taxels/{pad}/0")

@@ -10,6 +10,7 @@ No ``from __future__ import annotations`` here: Drake's YAML reader needs real t
         profile: pad4x4      # a profile of handle_drake.devices.taxels.PROFILES (distal pads)
         palm: palm6x6        # the palm's profile; "" = no palm pad
         # noise: false       (still sampled, saturated and quantised)
+        # rate_hz: 50        (the sample rate instead of the profile's)
         # seed: 3            (default: the scenario's random_seed)
         # estimator: true    (the station also exports object.pose_estimated)
         # recording: run.npz (hardware=True: hand.taxels plays this recorded stream)
@@ -27,6 +28,9 @@ class TaxelConfig:
     profile: str = "pad4x4"
     palm: str = "palm6x6"
     noise: bool = True
+    # the sample rate (Hz) instead of the profile's (pads and palm); None keeps it. Each
+    # sample evaluates the plant's contact results: the station's main cost of taxels.
+    rate_hz: float | None = None
     seed: int | None = None
     estimator: bool = False
     # the estimator's update rate (Hz) and prior (the object's pose before the grasp,
@@ -50,6 +54,11 @@ class TaxelConfig:
                 get_profile(self.palm)
             except ValueError as error:
                 raise ValueError(f"palm: {error}") from None
+        if self.rate_hz is not None:
+            try:
+                get_profile(self.profile).replace(rate_hz=self.rate_hz)
+            except ValueError as error:
+                raise ValueError(str(error)) from None
         for field, (low, high) in (("estimator_rate_hz", (1.0, 1000.0)),
                                    ("prior_position_std", (1e-4, 1.0)),
                                    ("prior_angle_std", (1e-3, 3.15))):

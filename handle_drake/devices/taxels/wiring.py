@@ -27,7 +27,12 @@ CAMERA_INPUT = "object.pose_detected"
 
 
 def _profiles(config: TaxelConfig):
-    return get_profile(config.profile), (get_profile(config.palm) if config.palm else None)
+    pad = get_profile(config.profile)
+    palm = get_profile(config.palm) if config.palm else None
+    if config.rate_hz is not None:
+        pad = pad.replace(rate_hz=config.rate_hz)
+        palm = palm.replace(rate_hz=config.rate_hz) if palm is not None else None
+    return pad, palm
 
 
 def taxel_cells(config: TaxelConfig) -> int:
