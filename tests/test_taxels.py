@@ -234,8 +234,6 @@ def test_the_estimator_built_from_ports_alone_finds_the_held_sphere():
     for name, value in (("hand_positions", q), ("taxels", 0 * taxels), ("hand_pose", wrist)):
         builder.Connect(builder.AddSystem(ConstantVectorSource(value)).get_output_port(),
                         alone.GetInputPort(name))
-    builder.Connect(builder.AddSystem(ConstantValueSource(AbstractValue.Make(prior)))
-                    .get_output_port(), alone.GetInputPort("camera_pose"))
     simulator = Simulator(builder.Build())
     simulator.AdvanceTo(0.1)
     kept = alone.GetOutputPort("pose").Eval(alone.GetMyContextFromRoot(simulator.get_context()))
@@ -303,3 +301,46 @@ def test_meshcat_shows_the_taxel_images():
     Simulator(builder.Build()).AdvanceTo(0.05)
     for pad in ("fftip_pad", "thtip_pad", "palm_pad"):
         assert meshcat.HasPath(f"taxels/{pad}/0")
+
+
+def _alone(prior, camera=None, roll_pitch=None, X_OS=None):
+    """The estimator with no touch (zero taxels, open hand, fixed base) and optional
+    camera and accelerometer inputs, run 1 s; returns its estimate."""
+    from handle_drake.geometry.objects import ObjectSpec
+    scenario = LoadScenario(data="hand: {taxels: {}}")
+    probe = MakeHandStation(scenario, outputs=("hand.taxels",))
+    pads = probe.GetSubsystemByName("taxels").pads
+    builder = DiagramBuilder()
+    estimator = builder.AddSystem(InHandPoseEstimator(
+        "shadow", None, pads, ObjectSpec("cuboid", 0.06), prior, X_WB=RigidTransform(),
+        X_OS=X_OS))
+    cells = sum(p.cells for p in pads)
+    for name, value in (("hand_positions", np.zeros(24)), ("taxels", np.zeros(cells))):
+        builder.Connect(builder.AddSystem(ConstantVectorSource(value)).get_output_port(),
+                        estimator.GetInputPort(name))
+    if camera is not None:
+        builder.Connect(builder.AddSystem(ConstantValueSource(AbstractValue.Make(camera)))
+                        .get_output_port(), estimator.GetInputPort("camera_pose"))
+    if roll_pitch is not None:
+        builder.Connect(builder.AddSystem(ConstantVectorSource(roll_pitch)).get_output_port(),
+                        estimator.GetInputPort("roll_pitch"))
+    simulator = Simulator(builder.Build())
+    simulator.AdvanceTo(1.0)
+    return estimator.GetOutputPort("pose").Eval(
+        estimator.GetMyContextFromRoot(simulator.get_context()))
+
+
+def test_before_touch_the_camera_and_gravity_refine_the_prior():
+    from pydrake.math import RollPitchYaw
+    prior = RigidTransform(RollPitchYaw(0.15, -0.1, 0.3), [0.3, 0.0, 0.05])
+    camera = RigidTransform(RollPitchYaw(0.0, 0.0, 0.25), [0.31, 0.006, 0.05])
+    # the camera (5 mm, 0.1 rad) outweighs the prior once the prior's spread has grown
+    estimate = _alone(prior, camera=camera)
+    assert np.linalg.norm(estimate.translation() - camera.translation()) < 0.001
+    # gravity alone: the accelerometer (S = O) reads the object level, roll and pitch
+    # of the estimate go to 0, its yaw (unobservable by gravity) stays the prior's
+    level = _alone(prior, roll_pitch=np.zeros(2), X_OS=RigidTransform())
+    rpy = RollPitchYaw(level.rotation()).vector()
+    assert abs(rpy[0]) < 0.02 and abs(rpy[1]) < 0.02
+    assert abs(rpy[2] - 0.3) < 0.05
+    assert np.allclose(level.translation(), prior.translation(), atol=1e-3)

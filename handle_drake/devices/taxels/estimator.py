@@ -21,14 +21,19 @@ object's accelerometer (gravity direction).
 The method (at ``rate_hz``, state in the context): each pad whose cells sum to more than
 ``contact_threshold`` N gives a contact: its centre of pressure on the pad face and the
 pad's outward normal, placed in the hand base frame B by the forward kinematics of a
-plant of the hand alone. The object's pose ``X_BO`` is the least-squares fit
-(``scipy.optimize.least_squares``) of its primitive's signed distance (sphere, cylinder,
-cuboid) to the contacts (``sigma_distance``) and of its outward normal to the pads'
-inward normals (``sigma_normal``), with the previous estimate as a prior widened by
-``process_position_std`` / ``process_angle_std`` per update (a filter with a random-walk
-model), the camera's detection (``camera_position_std``, ``camera_angle_std``) and the
-gravity direction. Before the first contact the estimate is the ``X_WO_prior`` (held in
-world: the object rests where it was seen); from the first contact it is held in the hand.
+plant of the hand alone; a pad whose centre of pressure is within
+``self_contact_distance`` of another link of the hand is pressed by the hand and left
+out. The object's pose ``X_BO`` is the least-squares fit (``scipy.optimize.least_squares``)
+of its primitive's signed distance (sphere, cylinder, cuboid) to the contacts
+(``sigma_distance``) and of its outward normal to the pads' inward normals
+(``sigma_normal``), the object kept out of every link of the hand and off the pads that
+feel nothing, with the previous estimate as a prior widened by ``process_position_std`` /
+``process_angle_std`` per update (a filter with a random-walk model), the camera's
+detection (``camera_position_std``, ``camera_angle_std``) and the gravity direction; the
+better of two starts (the last estimate, and a half-size beyond the contacts along their
+normals) is kept. Before the first contact the estimate is held in world (the
+``X_WO_prior``, refined by the camera and gravity when they are connected: the object
+rests where it was seen); from the first contact it is held in the hand.
 """
 
 from __future__ import annotations
@@ -188,25 +193,8 @@ class InHandPoseEstimator(LeafSystem):
         self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
         self._self_contact_distance = self_contact_distance
         inspector = self._scene_graph.model_inspector()
-        # points inside every link of the hand, with their clearance (the object is not
-        # inside the hand)
-        self._links = []
-        for g in inspector.GetAllGeometryIds(Role.kProximity):
-            points, clearance = _shape_points(inspector.GetShape(g))
-            if len(points):
-                X_LG = inspector.GetPoseInFrame(g)
-                body = self._plant.GetBodyFromFrameId(inspector.GetFrameId(g))
-                self._links.append((body, points @ X_LG.rotation().matrix().T
-                                    + X_LG.translation(), clearance))
+        self._links, self._others = self._hand_geometry(inspector, hand)
         self._clearance = np.concatenate([c for _, _, c in self._links])
-        # per pad: the hand geometries that can touch it (not on its body, not filtered)
-        self._others = []
-        for pad in pads:
-            body = self._plant.GetBodyByName(pad.body_name, hand)
-            own = self._plant.GetCollisionGeometriesForBody(body)
-            self._others.append({
-                g for g in inspector.GetAllGeometryIds(Role.kProximity)
-                if g not in own and not any(inspector.CollisionFiltered(g, o) for o in own)})
         self._q_index = np.array([self._plant.GetJointByName(n, hand).position_start()
                                   for n in spec_h.joint_names], dtype=int)
         self._q0 = self._plant.GetPositions(self._plant_context)
@@ -239,6 +227,27 @@ class InHandPoseEstimator(LeafSystem):
             c.get_discrete_state(self._state).value()[7:43]), {self.xd_ticket()})
         self.DeclareVectorOutputPort("quality", 2, lambda c, o: o.SetFromVector(
             c.get_discrete_state(self._state).value()[43:45]), {self.xd_ticket()})
+
+    def _hand_geometry(self, inspector, hand):
+        """Points inside every link of the hand with their clearance (the object is not
+        inside the hand), and per pad the hand geometries that can touch it (not on its
+        body, not filtered against it)."""
+        links = []
+        for g in inspector.GetAllGeometryIds(Role.kProximity):
+            points, clearance = _shape_points(inspector.GetShape(g))
+            if len(points):
+                X_LG = inspector.GetPoseInFrame(g)
+                body = self._plant.GetBodyFromFrameId(inspector.GetFrameId(g))
+                links.append((body, points @ X_LG.rotation().matrix().T
+                              + X_LG.translation(), clearance))
+        others = []
+        for pad in self._pads:
+            own = self._plant.GetCollisionGeometriesForBody(
+                self._plant.GetBodyByName(pad.body_name, hand))
+            others.append({
+                g for g in inspector.GetAllGeometryIds(Role.kProximity)
+                if g not in own and not any(inspector.CollisionFiltered(g, o) for o in own)})
+        return links, others
 
     def _initial_state(self) -> np.ndarray:
         x = np.zeros(46)
@@ -319,18 +328,20 @@ class InHandPoseEstimator(LeafSystem):
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
-        if not in_hand and len(points) == 0:
+        camera = self._camera.HasValue(context)
+        gravity_in = self._roll_pitch.HasValue(context) and self._X_OS is not None
+        if not in_hand and len(points) == 0 and not camera and not gravity_in:
             return EventStatus.DidNothing()
         s = self._sig
         # the prior: the last estimate, widened by the process noise
         prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0)
                             + np.array([s["proc_a"] ** 2] * 3 + [s["proc_p"] ** 2] * 3))
         priors = [(X_BO_prev, prior_std)]
-        if self._camera.HasValue(context):
+        if camera:
             priors.append((X_BW @ self._camera.Eval(context),
                            np.array([s["cam_a"]] * 3 + [s["cam_p"]] * 3)))
         gravity = None
-        if self._roll_pitch.HasValue(context) and self._X_OS is not None:
+        if gravity_in:
             r, p = self._roll_pitch.Eval(context)
             down_S = RollPitchYaw(r, p, 0.0).ToRotationMatrix().inverse().multiply([0, 0, -1.0])
             gravity = (X_BW.rotation().multiply([0, 0, -1.0]), down_S)
@@ -347,11 +358,15 @@ class InHandPoseEstimator(LeafSystem):
             if best is None or result[3] < best[3]:
                 best = result
         X_BO, cov, rms, _ = best
-        x[:4] = X_BO.rotation().ToQuaternion().wxyz()
-        x[4:7] = X_BO.translation()
+        # held in the hand from the first touch; before it, in world (a camera or the
+        # accelerometer alone refine where the object rests)
+        in_hand = in_hand or len(points) > 0
+        X = X_BO if in_hand else X_WB @ X_BO
+        x[:4] = X.rotation().ToQuaternion().wxyz()
+        x[4:7] = X.translation()
         x[7:43] = cov.ravel()
         x[43:45] = (len(points), rms)
-        x[45] = 1.0
+        x[45] = float(in_hand)
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
 
