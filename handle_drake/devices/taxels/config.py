@@ -35,7 +35,7 @@ class TaxelConfig:
     estimator: bool = False
     # the estimator's update rate (Hz) and prior (the object's pose before the grasp,
     # the scenario's X_WO, believed within these standard deviations)
-    estimator_rate_hz: float = 50.0
+    estimator_rate_hz: float = 20.0
     prior_position_std: float = 0.01
     prior_angle_std: float = 0.2
     recording: str = ""

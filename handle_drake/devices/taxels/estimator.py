@@ -165,7 +165,7 @@ class InHandPoseEstimator(LeafSystem):
 
     def __init__(self, hand_kind: str, coupling_ratio, pads: list[Pad], spec,
                  X_WO_prior: RigidTransform, X_WB: RigidTransform | None = None,
-                 X_OS: RigidTransform | None = None, rate_hz: float = 50.0,
+                 X_OS: RigidTransform | None = None, rate_hz: float = 20.0,
                  prior_position_std: float = 0.01, prior_angle_std: float = 0.2,
                  contact_threshold: float = 0.2, sigma_distance: float = 0.001,
                  sigma_normal: float = 1.0, process_position_std: float = 0.002,
@@ -423,7 +423,8 @@ class InHandPoseEstimator(LeafSystem):
             return np.concatenate(res)
 
         result = least_squares(residuals, np.zeros(6), method="lm" if len(
-            residuals(np.zeros(6))) >= 6 else "trf", x_scale=[0.1] * 3 + [0.01] * 3)
+            residuals(np.zeros(6))) >= 6 else "trf", x_scale=[0.1] * 3 + [0.01] * 3,
+            ftol=1e-6, xtol=1e-6)
         R, p = pose(result.x)
         J = result.jac
         cov = np.linalg.pinv(J.T @ J)
