@@ -30,6 +30,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 
 from handle_drake.base.models import diagrams_dir
+from handle_drake.base.results import ResultsRun, add_page_arguments
 from handle_drake.scenario import LoadScenario
 from handle_drake.station import MakeHandStation, hand_initial_command
 from handle_drake.trial.simulate import script_trajectories
@@ -132,7 +133,11 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--quick", action="store_true")
+    add_page_arguments(parser, "sensing")
     args = parser.parse_args(argv)
+    run = ResultsRun("The sensing hand: the pose estimate per grasp and the station's cost",
+                     args, section="quick" if args.quick else None)
+    table = []
     grasps = GRASPS[:2] if args.quick else GRASPS
     lines = ["| scenario | kind | pads in contact (median) | position RMS (mm) | "
              "angle RMS (deg) | held (object z rose > 5 cm) | verdict (5 mm, 5 deg) |",
@@ -143,6 +148,12 @@ def main(argv=None):
         ang = float(np.degrees(np.sqrt(np.mean(rows[:, 2] ** 2)))) if kind != "sphere" else None
         held = rows[-1, 4] - rows[0, 4] > 0.05
         ok = pos <= 5 and (ang is None or ang <= 5)
+        table.append({"scenario": name, "kind": kind,
+                      "pads in contact (median)": int(np.median(rows[:, 3])),
+                      "position RMS (mm)": round(pos, 1),
+                      "angle RMS (deg)": "n/a" if ang is None else round(ang, 1),
+                      "held (z rose > 5 cm)": bool(held),
+                      "verdict (5 mm, 5 deg)": "met" if ok else "not met"})
         lines.append(f"| {name} | {kind} | {np.median(rows[:, 3]):.0f} | {pos:.1f} | "
                      f"{'n/a' if ang is None else f'{ang:.1f}'} | {'yes' if held else 'no'} | "
                      f"{'met' if ok else 'not met'} |")
@@ -156,6 +167,13 @@ def main(argv=None):
         ratio = "1" if case == "without" else f"{ratios[case]:.3f}"
         lines.append(f"| {case} | {statistics.median(t):.2f} | {ratio} |")
     print("\n".join(lines[-6:]))
+    cost_lines = [line for line in lines if line.startswith("| ") and (
+        "station" in line or "without" in line or "taxels" in line)]
+    run.finish(table, {"accuracy": table, "cost_s": times, "cost_ratio": ratios},
+               json_path=ROOT / "benchmarks" / "results" / "sensing.json",
+               notes=["Station cost, same run (CPU s of this process per 2 s demo grasp; "
+                      f"{args.rounds} rounds, alternating order):", "",
+                      cost_lines[0], "|---|---|---|", *cost_lines[1:]])
     return lines
 
 
