@@ -84,6 +84,7 @@ from handle_drake.devices.camera.config import (
 from handle_drake.devices.camera.profiles import get_profile
 from handle_drake.devices.can_hand.config import CanHandDriverConfig
 from handle_drake.devices.midi.wiring import validate_midi_controller
+from handle_drake.devices.taxels.config import TaxelConfig
 from handle_drake.geometry.objects import KINDS, ObjectSpec
 from handle_drake.geometry.objects.mesh import MeshObjectSpec, MeshObjectWarning
 from handle_drake.scene.config import Hole, SortingBoxConfig, validate_scene
@@ -167,6 +168,9 @@ class HandConfig:
     mount: FixedMount | FloatingWrist | Arm = dc.field(default_factory=FixedMount)
     # Initial joint positions (rad) by actuated joint name; others start at 0.
     initial_position: dict[str, float] = dc.field(default_factory=dict)
+    # Taxel arrays on the distal pads and the palm (handle_drake.devices.taxels): the
+    # station then exports hand.taxels (and, with estimator: true, object.pose_estimated).
+    taxels: TaxelConfig | None = None
 
 
 @dc.dataclass
@@ -519,6 +523,8 @@ def validate_scenario(scenario: Scenario) -> None:
             )
         if not math.isfinite(value):
             raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
+    if scenario.hand.taxels is not None:
+        _validate_taxels(scenario)
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
     elif scenario.object is not None:
@@ -554,6 +560,25 @@ def validate_scenario(scenario: Scenario) -> None:
     check_ranges(scenario)
     if scenario.objects or scenario.sorting_box is not None:
         validate_scene(scenario, validate_scenario, ScenarioError)
+
+
+def _validate_taxels(scenario: Scenario) -> None:
+    config = scenario.hand.taxels
+    try:
+        config.validate()
+    except ValueError as error:
+        raise ScenarioError(f"hand.taxels.{error}") from None
+    if scenario.hand.kind != "shadow":
+        raise ScenarioError(f"hand.taxels: only the Shadow hand carries tactile pads, got "
+                            f"hand.kind {short(scenario.hand.kind)}")
+    if config.estimator:
+        if scenario.object is None or scenario.object.kind not in (
+                "sphere", "cylinder", "cuboid", "rotated_cuboid"):
+            raise ScenarioError("hand.taxels.estimator: expected an object of kind sphere, "
+                                "cylinder or cuboid")
+        if isinstance(scenario.hand.mount, Arm):
+            raise ScenarioError("hand.taxels.estimator: expected a !FixedMount or "
+                                "!FloatingWrist (the arm's forward kinematics is not wired)")
 
 
 def _validate_plant_config(config) -> None:

@@ -33,10 +33,18 @@ port                              dir    size                      units / frame
 ``plant_state``                   out    plant nq + nv
 ``midi_controller.control_positions``  out  controls                m / rad (with a MIDI controller)
 ``midi_controller.midi``          out    ``MidiBatch``             MIDI the controller sent
+``hand.taxels``                   out    pads x cells              Pa, taxel pressures (**)
+``object.pose_estimated``         out    ``RigidTransform``        ``X_WO`` from touch (**)
+``object.pose_covariance``        out    36                        6 x 6, [rotvec, p] (**)
+``object.pose_quality``           out    2                         pads in contact, RMS m (**)
+``object.pose_detected``          in     ``RigidTransform``        a camera's ``X_WO`` (**)
 ================================  =====  ========================  ==========================
 
 (*) only with an ``object.accelerometer`` in the scenario (also on hardware,
 read through evdev); see ``handle_drake.devices.accelerometer``.
+(**) only with ``hand.taxels`` in the scenario (the estimator's with ``estimator: true``;
+on hardware ``hand.taxels`` plays ``hand.taxels.recording``); see
+``handle_drake.devices.taxels``.
 
 The diagram's subsystems are named ``plant``, ``scene_graph``, ``hand_driver``,
 ``wrist_driver``, ``tactile``, ``object_pose`` and (a free object) ``object_position``;
@@ -78,6 +86,12 @@ from handle_drake.devices.can_hand.config import driver_config
 from handle_drake.devices.can_hand.driver import AddCanHandDriver
 from handle_drake.devices.can_hand.layout import hand_layout
 from handle_drake.devices.midi.wiring import AddMidiControllerModel, AddMidiControllerSystems
+from handle_drake.devices.taxels.wiring import (
+    AddPoseEstimator,
+    AddTaxelMeshcat,
+    AddTaxelPlayback,
+    AddTaxels,
+)
 from handle_drake.geometry.objects import AddObject, AddTable, resting_height
 from handle_drake.scenario import (
     Arm,
@@ -202,8 +216,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
         AddCameras(builder, plant, scene_graph, scenario, hand)
     if scenario.midi_controller is not None:
         AddMidiControllerSystems(builder, plant, scenario)
-    if meshcat is not None:
-        _add_visualization(builder, plant, scene_graph, meshcat, scenario)
+    _add_visualization(builder, plant, scene_graph, meshcat, scenario)  # with a meshcat
+    _add_taxel_systems(builder, plant, scene_graph, hand, scenario, meshcat)
     diagram = builder.Build()
     diagram.set_name("hand_station")
     wanted.check(diagram)
@@ -250,8 +264,8 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
     _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
 
     # the Python driver computes its measured outputs itself (no systems to leave out)
-    options = {"measured": [s for s in MEASURED_OUTPUTS if wanted(f"{HAND}.{s}")]} \
-        if finite_commands else {}
+    options = {"measured": [s for s in MEASURED_OUTPUTS if wanted(f"{HAND}.{s}") or (
+        s == "position_measured" and _estimating(scenario))]} if finite_commands else {}
     driver = builder.AddNamedSystem(
         "hand_driver",
         (HandDriverDiagram if finite_commands else PdHandDriver)(
@@ -285,7 +299,8 @@ def _add_wrist_driver(builder, plant, scenario: Scenario,
     wanted = wanted or _Outputs(None)
     wrist = plant.GetModelInstanceByName(WRIST_INSTANCE)
     # the Python driver computes pose_measured itself (no system to leave out)
-    options = {"measured": wanted("wrist.pose_measured")} if finite_commands else {}
+    options = {"measured": wanted("wrist.pose_measured") or _estimating(scenario)} \
+        if finite_commands else {}
     wrist_driver = builder.AddNamedSystem(
         "wrist_driver",
         (WristDriverDiagram if finite_commands else WristDriver)(
@@ -323,6 +338,34 @@ def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None
     if scenario.object.accelerometer is not None:
         AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
                                 object_spec(scenario))
+
+
+def _estimating(scenario: Scenario) -> bool:
+    """Whether the scenario asks for the object's pose estimated from touch (it reads the
+    measured hand joints and wrist pose)."""
+    return scenario.hand.taxels is not None and scenario.hand.taxels.estimator
+
+
+def _add_taxel_systems(builder, plant, scene_graph, hand, scenario: Scenario, meshcat) -> None:
+    """The taxel arrays (``hand.taxels``), their Meshcat drawing and, when the scenario
+    asks, the object's pose estimator fed by the station's measured ports only."""
+    config = scenario.hand.taxels
+    if config is None:
+        return
+    seed = config.seed if config.seed is not None else scenario.random_seed
+    sensor = AddTaxels(builder, plant, scene_graph, hand, config, seed)
+    if meshcat is not None:
+        AddTaxelMeshcat(builder, plant, sensor, meshcat, scenario.visualization.publish_period)
+    if config.estimator:
+        mount = scenario.hand.mount
+        wrist = builder.GetSubsystemByName("wrist_driver") \
+            if isinstance(mount, FloatingWrist) else None
+        AddPoseEstimator(
+            builder, sensor, config, scenario.hand.kind, scenario.hand.coupling_ratio,
+            object_spec(scenario), object_initial_pose(scenario),
+            builder.GetSubsystemByName("hand_driver").GetOutputPort("position_measured"),
+            hand_pose=None if wrist is None else wrist.GetOutputPort("pose_measured"),
+            X_WB=None if wrist is not None else mount.X_WB.GetDeterministicValue())
 
 
 def _free_body_position(builder, plant, body):
@@ -451,6 +494,9 @@ def _set_default_hand_positions(plant, hand, spec, command, coupling_ratio) -> N
 def _add_visualization(builder, plant, scene_graph, meshcat, scenario) -> None:
     # Drake's ApplyVisualizationConfig adds the Meshcat (and contact) visualisers the
     # scenario's VisualizationConfig asks for; its LCM messages go to a null bus.
+    # Nothing without a Meshcat.
+    if meshcat is None:
+        return
     meshcat.Delete()
     ApplyVisualizationConfig(scenario.visualization, builder, plant=plant,
                              scene_graph=scene_graph, meshcat=meshcat,
@@ -490,6 +536,11 @@ def MakeHardwareStation(scenario: Scenario, meshcat=None):
 
     builder = DiagramBuilder()
     driver = AddCanHandDriver(builder, config, layout, initial_position=initial)
+    if scenario.hand.taxels is not None:
+        if not scenario.hand.taxels.recording:
+            raise ValueError("hardware station: hand.taxels needs a recording (the taxel "
+                             "stream to play back) until a real taxel driver exists")
+        AddTaxelPlayback(builder, scenario.hand.taxels)
     if meshcat is not None:
         _add_hardware_visualization(builder, driver, scenario, spec, meshcat)
     diagram = builder.Build()
