@@ -133,7 +133,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--quick", action="store_true")
-    add_page_arguments(parser, "sensing")
+    add_page_arguments(parser, "sensing", published={"rounds": 5, "quick": False})
     args = parser.parse_args(argv)
     run = ResultsRun("The sensing hand: the pose estimate per grasp and the station's cost",
                      args, section="quick" if args.quick else None)

@@ -183,6 +183,7 @@ BUDGET_RUNS = {
     "bench_quality_bw_row": (["--rounds", "1"], [], "quality"),
     "bench_scale": (["--quick"], ["--rounds", "3", "--waves", "16"], "scale"),
     "bench_scale_loop_profile": (["--waves", "2"], [], "scale"),
+    "bench_sensing": (["--rounds", "1"], ["--rounds", "5"], "sensing"),
     "bench_screw_cap": (["--seeds", "0"], ["--seeds", "30", "31", "32", "--budget", "100"],
                         "inhand"),
     "bench_station": (["--quick"], ["--repeats", "20", "--builds", "3"], "station"),
