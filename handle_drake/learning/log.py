@@ -28,6 +28,7 @@ import functools
 import hashlib
 import json
 import math
+import numbers
 import os
 import sqlite3
 import time
@@ -434,6 +435,10 @@ class TrialLog:
         if not isinstance(run_id, str) or not run_id:
             raise ValueError(f"run_id must be a non-empty string, got {run_id!r}")
         bounds = check_bounds(bounds)
+        if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) \
+                or not -(2**63) <= int(seed) < 2**63:
+            raise ValueError(f"seed: expected an integer in -2**63..2**63-1 (SQLite's "
+                             f"INTEGER), got {str(seed)[:40]}")
         info = RunInfo(
             run_id, strategy, bounds, int(seed), str(objective), dict(config or {}), time.time()
         )
