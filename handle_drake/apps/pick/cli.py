@@ -208,6 +208,9 @@ def _cmd_pick(args) -> int:
     if not args.true_poses and not scenario.cameras:
         raise ValueError("pick: the scenario has no camera to perceive with; add one or "
                          "give --true-poses")
+    from handle_drake.apps.pick.checks import check_pick_arguments
+
+    check_pick_arguments(args, scenario)  # every refusal before any work
     from handle_drake.apps.pick.plan import GRASP_DB, build_grasp_database
     from handle_drake.grasp.database import GraspDatabase
 

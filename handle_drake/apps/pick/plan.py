@@ -268,6 +268,9 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     if kind not in CLASS_ORDER:
         raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
                                 f"{sorted(CLASS_ORDER)})")
+    if kind not in hole_centres(scenario):
+        raise PickPlanningError(f"{target}: the sorting box has no hole for a {kind} "
+                                f"(sorting_box.holes)")
     ratio = scenario.hand.coupling_ratio or 1.0
     hand = get_hand_spec(scenario.hand.kind)
     base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()
