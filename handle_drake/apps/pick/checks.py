@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["check_pick_arguments", "check_pick_scene", "PICK_HANDS"]
+__all__ = ["check_pick_arguments", "check_pick_scene", "named_as_truth", "PICK_HANDS"]
 
 #: The hands the pick planner has grasps for (its grasp database and postures are the
 #: Shadow hand's 24 joints).
@@ -86,3 +86,15 @@ def check_pick_scene(scenario) -> None:
         if abs(q[2] - top) > BOX_ON_TOP:
             raise ValueError(f"sorting_box.X_WB: the box's bottom at z = {q[2]:g} m is not on "
                              f"the table top ({top:g} m); give on_table: true")
+
+
+def named_as_truth(error, seen_name: str, true_name: str) -> str:
+    """A planner's reason (it begins with the planning world's name of the target,
+    ``seen_name``: the perceived objects' order) under the name the result reports,
+    ``true_name`` (the true object the detection stands for), so that the target and the
+    reason name the same object."""
+    text = str(error)
+    if seen_name != true_name and text.startswith(seen_name) \
+            and text[len(seen_name):len(seen_name) + 1] in (":", " "):
+        return f"{true_name} (perceived as {seen_name}){text[len(seen_name):]}"
+    return text

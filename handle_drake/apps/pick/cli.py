@@ -167,7 +167,9 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
                          np.asarray(scenario.hand.mount.initial_position or np.zeros(6)),
                          grasp_db=grasp_db)
     except PickPlanningError as error:
-        result["outcome"] = f"not in the box: {error}"
+        from handle_drake.apps.pick.checks import named_as_truth
+
+        result["outcome"] = f"not in the box: {named_as_truth(error, seen_name, true_name)}"
         return result
     result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
                   planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored)
