@@ -222,7 +222,7 @@ def _results_run_of(name: str, argv: list[str], monkeypatch) -> ResultsRun:
 
 def test_every_benchmark_that_writes_a_page_is_in_the_budget_table():
     writers = {p.stem for p in BENCHMARKS if "ResultsRun(" in p.read_text()}
-    assert writers - {"hostile_probe"} == set(BUDGET_RUNS)
+    assert writers == set(BUDGET_RUNS)  # the hostile probe is a test tool: tools/
 
 
 @pytest.mark.parametrize("name", sorted(BUDGET_RUNS))
