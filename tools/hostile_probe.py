@@ -1022,7 +1022,7 @@ def probe_fourth_wave(tmp, only=None):
              ["contact_error"])):
         cases.append(("grasp database", f"--grasp-db {name}", 60, _memory_capped(_cmd(
             ["pick", H, "--true-poses", "--grasp-db", str(path)], words, cwd=tmp, quick=20)),
-            True))
+            name not in ("FIFO", "/dev/zero")))  # no answer from reading those: a hang
     cases.append(("grasp database", "--build-grasp-db to /proc", 90, _cmd(
         ["pick", H, "--true-poses", "--build-grasp-db", "--grasp-db", "/proc/x.json"],
         ["--grasp-db"], cwd=tmp, quick=20), True))
@@ -1043,7 +1043,7 @@ def probe_fourth_wave(tmp, only=None):
         db = tmp / f"inhand_{len(cases)}.sqlite"
         cases.append(("inhand options", name, 60, _cmd(
             ["inhand", "--trials", "1", "--no-progress", "--db", str(db), *argv], words,
-            quick=20, absent=[db]), True))
+            quick=20, absent=[db]), "--gaits 1" not in name))  # 1e6 gaits: a hang
     db = tmp / "babble_seed.sqlite"
     cases.append(("inhand options", "babble --seed 2**70", 60, _cmd(
         ["babble", "--trials", "1", "--no-progress", "--no-plot", "--seed", str(2**70),
