@@ -958,7 +958,7 @@ def probe_fourth_wave(tmp, only=None):
     def pick(name, override, words, part="pick scenes", extra=(), limit=60):
         argv = ["pick", H, "--true-poses", *extra] + (["--override", override] if override
                                                         else [])
-        cases.append((part, name, limit, _cmd(argv, words, cwd=tmp, quick=20,
+        cases.append((part, name, limit, _cmd(argv, words, cwd=tmp, quick=10,
                                                absent=[tmp / "out.png"]), True))
 
     # pick: targets and hands
@@ -1021,11 +1021,11 @@ def probe_fourth_wave(tmp, only=None):
             ("NaN contact_error", database("nanerr", entry("contact_error", float("nan"))),
              ["contact_error"])):
         cases.append(("grasp database", f"--grasp-db {name}", 60, _memory_capped(_cmd(
-            ["pick", H, "--true-poses", "--grasp-db", str(path)], words, cwd=tmp, quick=20)),
+            ["pick", H, "--true-poses", "--grasp-db", str(path)], words, cwd=tmp, quick=10)),
             name not in ("FIFO", "/dev/zero")))  # no answer from reading those: a hang
     cases.append(("grasp database", "--build-grasp-db to /proc", 90, _cmd(
         ["pick", H, "--true-poses", "--build-grasp-db", "--grasp-db", "/proc/x.json"],
-        ["--grasp-db"], cwd=tmp, quick=20), True))
+        ["--grasp-db"], cwd=tmp, quick=10), True))
 
     # inhand: every refusal before the trial log exists, every option bounded
     for name, argv, words in (
@@ -1043,23 +1043,29 @@ def probe_fourth_wave(tmp, only=None):
         db = tmp / f"inhand_{len(cases)}.sqlite"
         cases.append(("inhand options", name, 60, _cmd(
             ["inhand", "--trials", "1", "--no-progress", "--db", str(db), *argv], words,
-            quick=20, absent=[db]), "--gaits 1" not in name))  # 1e6 gaits: a hang
+            quick=10, absent=[db]), "--gaits 1" not in name))  # 1e6 gaits: a hang
     db = tmp / "babble_seed.sqlite"
     cases.append(("inhand options", "babble --seed 2**70", 60, _cmd(
         ["babble", "--trials", "1", "--no-progress", "--no-plot", "--seed", str(2**70),
-         "--db", str(db)], ["--seed"], quick=20, absent=[db]), True))
+         "--db", str(db)], ["--seed"], quick=10, absent=[db]), True))
 
     # messages
     cases.append(("messages", "--chunk ²", 30, _cmd(
         ["babble", "--chunk", "²", "--trials", "1", "--db", str(tmp / "c.sqlite")],
-        ["--chunk", "'²'", "integer"], quick=20), True))
+        ["--chunk", "'²'", "integer"], quick=10), True))
     bad_log = _log_with_bad_scenario(tmp) if not only or "messages" in only else None
     cases.append(("messages", "trial log: scenario not UTF-8", 60, _cmd(
         ["babble", "--strategy", "random", "--trials", "2", "--no-plot", "--no-progress",
-         "--db", str(bad_log)], ["scenario", "UTF-8"], quick=20), False))
+         "--db", str(bad_log)], ["scenario", "UTF-8"], quick=10), False))
     cases.append(("messages", "numba: no cache locator", 120, _no_cache_locator, False))
 
-    BASELINE["s"] = 0.0
+    def baseline():  # refused by the output check, before any work, on every version
+        start = time.monotonic()
+        _cmd(["pick", H, "--true-poses", "--html", str(tmp / "dir")], [])()
+        return "clean", f"{time.monotonic() - start:.2f}"
+
+    BASELINE["s"] = max(float(_forked(120, baseline)[1]) for _ in range(2))
+    print(f"baseline (a command refused before work): {BASELINE['s']:.1f} s", file=sys.stderr)
     for part, name, limit, body, accepted_if_slow in cases:
         if only and only not in part:
             continue
