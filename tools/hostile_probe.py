@@ -608,10 +608,11 @@ def _api(words, call):
 BASELINE = {"s": 0.0}  # s: a command refused before any work, on this machine now
 
 
-def _cmd(argv, words, cwd=None, quick=None, absent=()):
+def _cmd(argv, words, cwd=None, quick=None, absent=(), one_line=False):
     """A probe body: ``handle-drake argv`` must exit 2 with one line naming ``words``,
     within ``quick`` s (plus the run's :data:`BASELINE`: the machine is shared and its
-    speed changes) if given, leaving the ``absent`` paths unwritten."""
+    speed changes) if given, leaving the ``absent`` paths unwritten. ``one_line``: the
+    message after "error:" holds no line break (argparse's usage lines come before it)."""
     def body():
         from handle_drake.cli import main
 
@@ -628,7 +629,9 @@ def _cmd(argv, words, cwd=None, quick=None, absent=()):
         if "Traceback" in text:
             return "traceback", text[-300:]
         written = [str(p) for p in absent if Path(p).exists()]
+        message = text.split("error:", 1)[-1].strip()
         ok = (code == 2 and all(w in text for w in words) and len(text) < 2000
+              and not (one_line and "\n" in message)
               and (quick is None or took < quick + BASELINE["s"]) and not written)
         return ("clean" if ok else "wrong",
                 f"exit {code} in {took:.1f} s, wrote {written}: {text.strip()[-200:]}")
@@ -958,7 +961,7 @@ def probe_fourth_wave(tmp, only=None):
     def pick(name, override, words, part="pick scenes", extra=(), limit=60):
         argv = ["pick", H, "--true-poses", *extra] + (["--override", override] if override
                                                         else [])
-        cases.append((part, name, limit, _cmd(argv, words, cwd=tmp, quick=10,
+        cases.append((part, name, limit, _cmd(argv, words, cwd=tmp, quick=10, one_line=True,
                                                absent=[tmp / "out.png"]), True))
 
     # pick: targets and hands
@@ -1021,11 +1024,12 @@ def probe_fourth_wave(tmp, only=None):
             ("NaN contact_error", database("nanerr", entry("contact_error", float("nan"))),
              ["contact_error"])):
         cases.append(("grasp database", f"--grasp-db {name}", 60, _memory_capped(_cmd(
-            ["pick", H, "--true-poses", "--grasp-db", str(path)], words, cwd=tmp, quick=10)),
+            ["pick", H, "--true-poses", "--grasp-db", str(path)], words, cwd=tmp, quick=10,
+            one_line=True)),
             name not in ("FIFO", "/dev/zero")))  # no answer from reading those: a hang
     cases.append(("grasp database", "--build-grasp-db to /proc", 90, _cmd(
         ["pick", H, "--true-poses", "--build-grasp-db", "--grasp-db", "/proc/x.json"],
-        ["--grasp-db"], cwd=tmp, quick=10), True))
+        ["--grasp-db"], cwd=tmp, quick=10, one_line=True), True))
 
     # inhand: every refusal before the trial log exists, every option bounded
     for name, argv, words in (
@@ -1043,20 +1047,20 @@ def probe_fourth_wave(tmp, only=None):
         db = tmp / f"inhand_{len(cases)}.sqlite"
         cases.append(("inhand options", name, 60, _cmd(
             ["inhand", "--trials", "1", "--no-progress", "--db", str(db), *argv], words,
-            quick=10, absent=[db]), "--gaits 1" not in name))  # 1e6 gaits: a hang
+            quick=10, one_line=True, absent=[db]), "--gaits 1" not in name))  # 1e6 gaits: a hang
     db = tmp / "babble_seed.sqlite"
     cases.append(("inhand options", "babble --seed 2**70", 60, _cmd(
         ["babble", "--trials", "1", "--no-progress", "--no-plot", "--seed", str(2**70),
-         "--db", str(db)], ["--seed"], quick=10, absent=[db]), True))
+         "--db", str(db)], ["--seed"], quick=10, one_line=True, absent=[db]), True))
 
     # messages
     cases.append(("messages", "--chunk ²", 30, _cmd(
         ["babble", "--chunk", "²", "--trials", "1", "--db", str(tmp / "c.sqlite")],
-        ["--chunk", "'²'", "integer"], quick=10), True))
+        ["--chunk", "'²'", "integer"], quick=10, one_line=True), True))
     bad_log = _log_with_bad_scenario(tmp) if not only or "messages" in only else None
     cases.append(("messages", "trial log: scenario not UTF-8", 60, _cmd(
         ["babble", "--strategy", "random", "--trials", "2", "--no-plot", "--no-progress",
-         "--db", str(bad_log)], ["scenario", "UTF-8"], quick=10), False))
+         "--db", str(bad_log)], ["scenario", "UTF-8"], quick=10, one_line=True), False))
     cases.append(("messages", "numba: no cache locator", 120, _no_cache_locator, False))
 
     def baseline():  # refused by the output check, before any work, on every version
