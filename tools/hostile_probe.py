@@ -1147,16 +1147,21 @@ def _log_rows(db):
 
 
 def _probe_two_runs(tmp):
-    """The same babble command twice at once on one log: the second must be refused
-    naming the other process, the first end with every trial done once."""
+    """The same babble command twice at once on one log (the first stopped with SIGSTOP
+    after its first trial while the second runs): the second must be refused naming the
+    other process, the first then end with every trial done once."""
     db = tmp / "two.sqlite"
     first = _babble(db, 12)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not (db.exists() and _rows_or_none(db)):
         time.sleep(0.2)
-    second = _babble(db, 12)
-    _, err2 = second.communicate(timeout=300)
+    first.send_signal(signal.SIGSTOP)  # held mid-run (a loaded machine cannot race it)
     first_running = first.poll() is None
+    second = _babble(db, 12)
+    try:
+        _, err2 = second.communicate(timeout=600)
+    finally:
+        first.send_signal(signal.SIGCONT)
     first.communicate(timeout=900)
     rows = _log_rows(db)
     ok = (second.returncode == 2 and "another process" in err2 and first.returncode == 0
