@@ -299,7 +299,7 @@ MAX_LINES = {"inhand": 320}  # its many targets (and room for a convergence tabl
 DEFAULT_MAX_LINES = 160
 MAX_NOTES_LINES = 45
 HISTORY = re.compile(r"\b(pass|passes|run of|runs of|earlier|branch|issue-\d)", re.IGNORECASE)
-COMMAND = re.compile(r"`(python benchmarks/|handle-drake )")
+COMMAND = re.compile(r"`(python benchmarks/|python tools/|handle-drake )")  # tools/: test tools
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
 
 

@@ -16,6 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.apps.pick.plan import GRASP_DB
+from handle_drake.base.paths import check_output
+from handle_drake.devices.arm.model import ARM_SPECS
+from handle_drake.scene.config import box_pose, scene_objects
+
 __all__ = ["check_pick_arguments", "check_pick_scene", "named_as_truth", "PICK_HANDS"]
 
 #: The hands the pick planner has grasps for (its grasp database and postures are the
@@ -27,8 +32,6 @@ BOX_ON_TOP = 0.005
 
 def check_pick_arguments(args, scenario) -> None:
     """Refuses what ``pick`` cannot do with ``args`` on ``scenario`` (module doc)."""
-    from handle_drake.base.paths import check_output
-
     if args.html is not None and Path(args.html).suffix.lower() != ".html":
         raise ValueError(f"--html: expected a .html file name, got {str(args.html)!r}")
     kind = scenario.hand.kind
@@ -42,8 +45,6 @@ def check_pick_arguments(args, scenario) -> None:
             raise ValueError(f"--kind {args.kind}: the sorting box has no hole for a "
                              f"{args.kind} (sorting_box.holes: {holes})")
     if args.build_grasp_db:
-        from handle_drake.apps.pick.plan import GRASP_DB
-
         check_output("--grasp-db" if args.grasp_db else "--build-grasp-db (the shipped "
                      "grasp database)", args.grasp_db or GRASP_DB)
     check_pick_scene(scenario)
@@ -52,9 +53,6 @@ def check_pick_arguments(args, scenario) -> None:
 def check_pick_scene(scenario) -> None:
     """The arm can reach the table from outside it, every object stands on the table,
     and the sorting box stands on it."""
-    from handle_drake.devices.arm.model import ARM_SPECS
-    from handle_drake.scene.config import box_pose, scene_objects
-
     table = scenario.table
     if table is None:
         raise ValueError("table: pick needs the table the objects stand on")
