@@ -24,7 +24,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from handle_drake.apps.cli_support import float_in, int_in, run_command, seed_int
+from handle_drake.apps.cli_support import float_in, int_in, positive_int, run_command, seed_int
 from handle_drake.apps.inhand.experiment import MAX_PARTICLES
 from handle_drake.apps.inhand.screw_cap import PLACEMENTS, TWO_STROKES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
@@ -67,7 +67,7 @@ def register(subparsers) -> None:
                         "cap), four-finger-turn (thumb, first, middle and ring finger on it; "
                         "the fingers turn it), four-finger (FOUR_FINGER_GRIP: four digits, "
                         "squeezed: they jam), regrasp (5 gaits, 360 deg)")
-    p.add_argument("--grip-digits", type=int_in(1, 5), default=None, metavar="N",
+    p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
                    help="screw_cap: digits (thumb and fingers) that must each touch the cap "
                         "within the contact window at a check (default 1: any finger)")
     p.add_argument("--strokes", type=int, choices=(1, 2), default=None,
