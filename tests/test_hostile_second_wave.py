@@ -2,7 +2,7 @@
 mesh objects and --executor refuse bad input before any work, with one line
 naming the option or field (exit 2, no traceback).
 
-Each case was run by ``benchmarks/hostile_probe.py second``; the ones here are
+Each case was run by ``tools/hostile_probe.py second``; the ones here are
 those refused without simulating (milliseconds each). ``{tmp}`` is the test's
 folder, holding ``ok.yaml`` (a valid scenario), ``dir/``, ``fifo`` and the
 meshes written by :func:`_files`.
@@ -22,8 +22,8 @@ from handle_drake.scenario import LoadScenario, ScenarioError
 CASES = [
     # (argv, words the one-line message must hold)
     ("inhand --workers 100000", ["workers", "100000"]),
-    ("inhand --particles 1000000", ["n_particles", "[1, 1000]"]),
-    ("inhand --target-deg 1000", ["target_deg", "360"]),
+    ("inhand --particles 1000000", ["--particles", "1..1000"]),  # the flag, since issue 46
+    ("inhand --target-deg 1000", ["--target-deg", "360"]),
     ("inhand --db {tmp}/dir", ["--db", "directory"]),
     ("inhand --db {tmp}/ok.yaml", ["--db", "not an SQLite database"]),
     ("inhand --db {tmp}/ok.yaml/x.sqlite", ["--db", "is a file"]),

@@ -3,7 +3,7 @@ glove recordings, depth frames, accelerometer configs and recordings, meshes,
 MIDI mappings, output paths checked first, pool workers that die with their
 parent, and the messages of a few refusals.
 
-Every case was found by ``benchmarks/hostile_probe.py third`` on the code before
+Every case was found by ``tools/hostile_probe.py third`` on the code before
 these checks: a hang, a traceback, or a silent accept. Each test here fails on
 that code (hangs are bounded by the test itself: a thread joined with a guard).
 """

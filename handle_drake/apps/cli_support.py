@@ -15,18 +15,22 @@ import warnings
 from pathlib import Path
 
 from handle_drake.base.arguments import (
+    SEED_MAX,
+    float_in,
     int_at_least,
+    int_in,
     non_empty,
     non_negative_float,
     non_negative_int,
     positive_float,
     positive_int,
+    seed_int,
 )
 from handle_drake.base.blas import pin_blas
 
 __all__ = ["check_hardware_server", "run_command", "start_meshcat", "int_at_least", "positive_int",
            "non_negative_int", "positive_float", "non_negative_float", "add_mesh_arguments",
-           "refuse_without_mesh", "non_empty"]
+           "refuse_without_mesh", "non_empty", "SEED_MAX", "seed_int", "int_in", "float_in"]
 
 
 def start_meshcat(wanted: bool):

@@ -62,6 +62,7 @@ LIMITS = {
     "wrist_angle": (-2 * math.pi, 2 * math.pi),  # rad: every orientation, no wind-up
     "wrist_speed": (0.0, 10.0),  # m/s between two keyframes of the wrist script
     "wrist_rate": (0.0, 100.0),  # rad/s likewise (1e4 rad in 0.2 s makes SAP diverge)
+    "coupling_ratio": (0.5, 2.0),  # xFJ1 / xFJ2 (the C6 hand 1.0, the C5 1.1)
 }
 _MAX_NODES = 100_000  # alias chains ("billion laughs") expand to more than this
 _SCALAR_TAGS = {"tag:yaml.org,2002:int", "tag:yaml.org,2002:float", "tag:yaml.org,2002:str",
@@ -451,6 +452,14 @@ def check_ranges(scenario) -> None:
     """Bounds every physical quantity of ``scenario`` (see :data:`LIMITS`)."""
     hand = scenario.hand
     _check_pose("hand.mount.X_WB", hand.mount.X_WB)
+    if hasattr(hand.mount, "X_FH"):  # an arm: the hand on its flange
+        _check_pose("hand.mount.X_FH", hand.mount.X_FH)
+    if hand.coupling_ratio is not None and isinstance(hand.coupling_ratio, int | float) \
+            and not isinstance(hand.coupling_ratio, bool):
+        _in("hand.coupling_ratio", hand.coupling_ratio, "coupling_ratio")
+    box = getattr(scenario, "sorting_box", None)
+    if box is not None:
+        _check_pose("sorting_box.X_WB", box.X_WB)
     if hasattr(hand.mount, "translation_kp"):  # a floating wrist: its PD gains
         for name in ("translation_kp", "translation_kd", "rotation_kp", "rotation_kd"):
             _in(f"hand.mount.{name}", getattr(hand.mount, name), "gain")

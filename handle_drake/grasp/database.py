@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.math import RigidTransform
 
+from handle_drake.base.checks import read_text_file, short, short_path
 from handle_drake.grasp.planning import (
     PLANNER_VERSION,
     GraspPlanningTimeout,
@@ -40,10 +41,37 @@ from handle_drake.grasp.planning import (
 )
 from handle_drake.grasp.taxonomy import grasp_info
 
-__all__ = ["GraspDatabase", "GraspDatabaseError", "build_database", "FORMAT"]
+__all__ = ["GraspDatabase", "GraspDatabaseError", "build_database", "check_pose_matrix",
+           "FORMAT", "MAX_BYTES"]
 
 FORMAT = "handle_drake.grasp_database/1"
 _MISSING = object()
+
+
+#: The largest grasp database file read (the shipped one is ~100 kB).
+MAX_BYTES = 64 << 20
+
+
+def check_pose_matrix(name: str, value) -> np.ndarray:
+    """``value`` as a 4x4 homogeneous transform: finite, last row [0 0 0 1], a proper
+    rotation (orthonormal to 1e-6, determinant +1); ValueError naming ``name``."""
+    m = np.asarray(value, dtype=float)
+    if m.shape != (4, 4):
+        raise ValueError(f"{name}: expected a 4x4 matrix, got shape {m.shape}")
+    if not np.isfinite(m).all():
+        raise ValueError(f"{name}: expected finite numbers, got NaN or infinity")
+    if not np.array_equal(m[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{name}: expected the last row [0, 0, 0, 1], got {m[3].tolist()}")
+    R = m[:3, :3]
+    error = float(np.abs(R.T @ R - np.eye(3)).max())
+    if error > 1e-6 or np.linalg.det(R) < 0:
+        raise ValueError(f"{name}: expected a rotation (orthonormal, determinant +1) in the "
+                         f"first 3 columns, got one off by {error:.3g} (determinant "
+                         f"{np.linalg.det(R):.3g})")
+    if np.abs(m[:3, 3]).max() > 10.0:
+        raise ValueError(f"{name}: expected a translation within 10 m, got "
+                         f"{m[:3, 3].tolist()}")
+    return m
 
 
 class GraspDatabaseError(ValueError):
@@ -75,10 +103,7 @@ def _grasp_to_json(g: ObjectFrameGrasp) -> dict:
 
 def _grasp_from_json(key: tuple, d: dict) -> ObjectFrameGrasp:
     def pose(name):
-        m = np.asarray(d[name], dtype=float)
-        if m.shape != (4, 4):
-            raise ValueError(f"{name}: expected a 4x4 matrix, got shape {m.shape}")
-        return RigidTransform(m)
+        return RigidTransform(check_pose_matrix(name, d[name]))
 
     def vector(name, n=None):
         v = np.asarray(d[name], dtype=float)
@@ -90,9 +115,17 @@ def _grasp_from_json(key: tuple, d: dict) -> ObjectFrameGrasp:
         key=key, X_PG=pose("X_PG"), up_G=vector("up_G", 3),
         centre_source=str(d["centre_source"]), X_BP=pose("X_BP"),
         q_grasp=vector("q_grasp", 24), q_pre=vector("q_pre", 24),
-        q_close=vector("q_close", 24), contact_error=float(d["contact_error"]),
+        q_close=vector("q_close", 24), contact_error=_finite("contact_error", d),
         amplitudes=None if d["amplitudes"] is None else vector("amplitudes"),
         grasp_amplitudes=vector("grasp_amplitudes"))
+
+
+def _finite(name: str, d: dict) -> float:
+    value = d[name]
+    if isinstance(value, bool) or not isinstance(value, int | float) \
+            or not np.isfinite(value):
+        raise ValueError(f"{name}: expected a finite number, got {short(value)}")
+    return float(value)
 
 
 class GraspDatabase:
@@ -133,28 +166,43 @@ class GraspDatabase:
         """Reads ``path``; entries of another planner version are kept only in
         :attr:`stale`. Raises :class:`GraspDatabaseError` naming the bad field."""
         path = Path(path)
-        try:
-            data = json.loads(path.read_text())
+        try:  # a regular UTF-8 file of at most MAX_BYTES (a FIFO blocks, /dev/zero fills memory)
+            text = read_text_file(path, "grasp database", MAX_BYTES)
         except FileNotFoundError:
-            raise GraspDatabaseError(f"grasp database {path}: no such file") from None
-        except (OSError, json.JSONDecodeError) as error:
-            raise GraspDatabaseError(f"grasp database {path}: not readable JSON "
-                                     f"({error})") from None
+            raise GraspDatabaseError(f"grasp database {short_path(path)}: no such file") \
+                from None
+        except (TypeError, ValueError) as error:
+            raise GraspDatabaseError(str(error)) from None
+        try:
+            data = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as error:
+            raise GraspDatabaseError(f"grasp database {short_path(path)}: not readable JSON "
+                                     f"({str(error)[:200]})") from None
         if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise GraspDatabaseError(f"grasp database {path}: format: expected {FORMAT!r}")
+            raise GraspDatabaseError(f"grasp database {short_path(path)}: format: expected "
+                                     f"{FORMAT!r}")
         version = data.get("planner_version")
         if not isinstance(version, int):
-            raise GraspDatabaseError(f"grasp database {path}: planner_version: expected an "
-                                     f"integer, got {version!r}")
+            raise GraspDatabaseError(f"grasp database {short_path(path)}: planner_version: "
+                                     f"expected an integer, got {short(version)}")
+        items = data.get("entries", [])
+        if not isinstance(items, list):
+            raise GraspDatabaseError(f"grasp database {short_path(path)}: entries: expected a "
+                                     f"list, got {short(items)}")
         entries, stale = {}, []
-        for i, item in enumerate(data.get("entries", [])):
+        for i, item in enumerate(items):
             try:
+                if not isinstance(item, dict):
+                    raise TypeError(f"expected a mapping with key and grasp, got {short(item)}")
                 key = _key_from_json(item["key"])
                 grasp = None if item["grasp"] is None else _grasp_from_json(key,
                                                                             item["grasp"])
-            except (KeyError, TypeError, ValueError) as error:
-                raise GraspDatabaseError(f"grasp database {path}: entries[{i}]: "
-                                         f"{error}") from None
+            except KeyError as error:
+                raise GraspDatabaseError(f"grasp database {short_path(path)}: entries[{i}]: "
+                                         f"missing {error}") from None
+            except (TypeError, ValueError, OverflowError) as error:
+                raise GraspDatabaseError(f"grasp database {short_path(path)}: entries[{i}]: "
+                                         f"{str(error)[:200]}") from None
             if version == PLANNER_VERSION:
                 entries[key] = grasp
             else:

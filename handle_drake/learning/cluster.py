@@ -182,9 +182,9 @@ def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _chunk_type(text: str) -> int:
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1 (trials per Dask task), "
-                                         f"got {text!r}")
+    if not (text.isascii() and text.isdigit()) or not 1 <= int(text) <= 10_000:
+        raise argparse.ArgumentTypeError(f"expected an integer in 1..10000 (trials per Dask "
+                                         f"task), got {text!r}")
     return int(text)
 
 

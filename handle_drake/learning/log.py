@@ -24,12 +24,16 @@ resume, and none is repeated or lost.
 from __future__ import annotations
 
 import ast
+import errno
 import functools
 import hashlib
 import json
 import math
+import numbers
 import os
+import socket
 import sqlite3
+import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -170,6 +174,54 @@ def _parameters_json(x) -> str:
     return json.dumps([float(v) for v in np.asarray(x, dtype=float).reshape(-1)])
 
 
+#: Runs this process holds (:meth:`TrialLog.open_run`): claim name -> [socket, count].
+_CLAIMS: dict[str, list] = {}
+
+
+def _claim_name(path, run_id) -> str | None:
+    """The Linux abstract socket name standing for (this log, run id): bound by the one
+    process running it, and unbound by the kernel when that process ends however it
+    ends (kill -9 too); nothing is written to disk. None off Linux."""
+    if not sys.platform.startswith("linux"):
+        return None
+    digest = hashlib.sha256(f"{os.path.realpath(path)}\0{run_id}".encode()).hexdigest()
+    return f"\0handle_drake.trial_log.{digest[:40]}"
+
+
+def _take_claim(name: str) -> bool:
+    entry = _CLAIMS.get(name)
+    if entry is None:
+        claim = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            claim.bind(name)
+        except OSError as error:
+            claim.close()
+            if error.errno == errno.EADDRINUSE:
+                return False
+            return True  # no abstract sockets here: run unguarded, as before
+        entry = _CLAIMS[name] = [claim, 0]
+    entry[1] += 1
+    return True
+
+
+def _release_claim(name: str) -> None:
+    entry = _CLAIMS.get(name)
+    if entry is not None:
+        entry[1] -= 1
+        if entry[1] <= 0:
+            entry[0].close()
+            del _CLAIMS[name]
+
+
+def _one_line(error) -> str:
+    """SQLite's message without the raw column it may quote ("Could not decode to UTF-8
+    column 'scenario' with text '...'": kilobytes over many lines)."""
+    text = str(error)
+    if text.startswith("Could not decode to UTF-8 column"):
+        return text.split(" with text ", 1)[0] + " (not UTF-8 text)"
+    return _short(text.replace("\n", " "), 200)
+
+
 def _guarded(method):
     """SQLite failures inside a method become TrialLogError with the real reason:
     a write to a read-only log says so, a record damaged after opening says that."""
@@ -184,9 +236,10 @@ def _guarded(method):
             if self.read_only or "readonly" in str(error):
                 raise TrialLogError(f"{self.path} is read-only: cannot record trials in it "
                                     f"({error}); copy it somewhere writable to resume") from None
-            raise TrialLogError(f"{self.path}: {error}") from None
+            raise TrialLogError(f"{self.path}: {_one_line(error)}") from None
         except sqlite3.DatabaseError as error:
-            raise TrialLogError(f"{self.path} is damaged: {error}; it was not modified") from None
+            raise TrialLogError(f"{self.path} is damaged: {_one_line(error)}; it was not "
+                                f"modified") from None
         except (json.JSONDecodeError, UnicodeDecodeError) as error:
             raise TrialLogError(f"{self.path} is damaged: a field does not decode "
                                 f"({str(error)[:200]})") from None
@@ -213,6 +266,7 @@ class TrialLog:
 
     def __init__(self, path):
         self.path = Path(path)
+        self._claims: set[str] = set()  # runs this log opened for writing (open_run)
         #: Trial writes not yet committed, in order: (sql, args, message if not one row).
         self._buffer: list[tuple[str, tuple, str | None]] = []
         self._group: tuple[int, float] | None = None  # (count, seconds) inside grouped()
@@ -297,7 +351,8 @@ class TrialLog:
                 conn.close()
         except sqlite3.DatabaseError as error:
             raise TrialLogError(
-                f"{self.path} is damaged: SQLite cannot read it ({error}); it was not modified"
+                f"{self.path} is damaged: SQLite cannot read it ({_one_line(error)}); it was not "
+                f"modified"
             ) from error
 
     def _read_only_uri(self) -> str:
@@ -322,9 +377,16 @@ class TrialLog:
                 if not isinstance(json.loads(row[5]), dict):
                     raise ValueError("config is not a JSON object")
             for n, row in enumerate(conn.execute(
-                    "SELECT run_id, trial_index, parameters, status, seed, contacts "
-                    "FROM trials")):
+                    "SELECT run_id, trial_index, parameters, status, seed, contacts, "
+                    "CAST(scenario AS BLOB) FROM trials")):
                 where = f"trials row {n + 1}"
+                if row[6] is not None:
+                    try:
+                        row[6].decode("utf-8")
+                    except UnicodeDecodeError as error:
+                        raise ValueError(f"scenario: not UTF-8 text (byte "
+                                         f"0x{error.object[error.start]:02x} at offset "
+                                         f"{error.start})") from None
                 np.array(json.loads(row[2]), dtype=float)
                 if row[3] not in STATUSES:
                     raise ValueError(f"status {row[3]!r}")
@@ -333,7 +395,7 @@ class TrialLog:
                     json.loads(row[5])
         except sqlite3.DatabaseError as error:
             raise TrialLogError(f"{self.path} is damaged at {where}: SQLite cannot read it "
-                                f"({error}); it was not modified") from None
+                                f"({_one_line(error)}); it was not modified") from None
         except (ValueError, TypeError, UnicodeDecodeError) as error:
             raise TrialLogError(f"{self.path} is damaged at {where}: a field does not decode "
                                 f"({str(error)[:200]}); it was not modified") from None
@@ -343,6 +405,9 @@ class TrialLog:
             self.commit()
         finally:
             self._conn.close()
+            for name in self._claims:
+                _release_claim(name)
+            self._claims.clear()
 
     # --------------------------------------------------------- group commits
     @contextmanager
@@ -434,6 +499,10 @@ class TrialLog:
         if not isinstance(run_id, str) or not run_id:
             raise ValueError(f"run_id must be a non-empty string, got {run_id!r}")
         bounds = check_bounds(bounds)
+        if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) \
+                or not -(2**63) <= int(seed) < 2**63:
+            raise ValueError(f"seed: expected an integer in -2**63..2**63-1 (SQLite's "
+                             f"INTEGER), got {str(seed)[:40]}")
         info = RunInfo(
             run_id, strategy, bounds, int(seed), str(objective), dict(config or {}), time.time()
         )
@@ -455,6 +524,18 @@ class TrialLog:
             raise ValueError(f"run {run_id!r} already exists in {self.path}") from None
         return info
 
+    def _claim(self, run_id) -> None:
+        """Refuses a run another process is running on this log right now (its trials
+        would be taken twice); see :func:`_claim_name`."""
+        name = _claim_name(self.path, run_id)
+        if name is None or name in self._claims:
+            return
+        if not _take_claim(name):
+            raise TrialLogError(f"{self.path}: run {run_id!r} is being run by another process "
+                                f"right now (its trials are in this log); wait for it to "
+                                f"end, or give another log")
+        self._claims.add(name)
+
     def open_run(self, run_id, strategy, bounds, seed, objective, config=None) -> RunInfo:
         """Creates the run, or checks that the logged run of that id has these settings.
 
@@ -465,6 +546,7 @@ class TrialLog:
         value.
         """
         bounds = check_bounds(bounds)
+        self._claim(run_id)
         info = self.get_run(run_id)
         if info is None:
             return self.create_run(run_id, strategy, bounds, seed, objective, config)

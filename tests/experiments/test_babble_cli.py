@@ -102,7 +102,7 @@ def test_babble_resumes_an_interrupted_run_without_repeating_trials(
 @pytest.mark.parametrize("bad, message", [
     (["--trials", "0"], "positive integer"),
     (["--trials", "ten"], "positive integer"),
-    (["--seed", "-1"], "integer >= 0"),
+    (["--seed", "-1"], "integer in 0..2**63-1"),
     (["--noise", "nan"], "finite number"),
     (["--ei-stop", "-1"], "finite number"),
     (["--object", "teapot"], "invalid choice"),
@@ -283,7 +283,8 @@ def test_babble_bo_on_two_workers_runs_batches_as_a_run_of_its_own(reference_run
     ("non_negative_float", "nan", None, "finite number >= 0, got nan"),
     ("non_negative_float", "inf", None, "finite number >= 0, got inf"),
     ("positive_float", "1e-3", 1e-3, None), ("positive_float", "0", None, "number > 0, got 0"),
-    ("positive_float", "x", None, "number >= 0, got 'x'"),
+    ("positive_float", "x", None, "number > 0, got 'x'"),  # not ">= 0": 0 is refused
+    ("positive_float", "-90", None, "finite number > 0, got -90"),
 ])
 def test_the_shared_argument_types(parse, text, value, error):
     """One set of argparse types for every sub-command (babble, report, inhand)."""

@@ -30,10 +30,10 @@ from handle_drake.apps.cli_support import (
     add_mesh_arguments,
     non_empty,
     non_negative_float,
-    non_negative_int,
     positive_float,
     positive_int,
     refuse_without_mesh,
+    seed_int,
 )
 from handle_drake.geometry.objects import KINDS
 from handle_drake.learning.cluster import add_chunk_argument, add_executor_arguments
@@ -63,7 +63,7 @@ def register(subparsers) -> None:
     p.add_argument("--strategy", choices=("bo", "random"), default="bo")
     p.add_argument("--trials", type=positive_int, default=50,
                    help="trials in the run (BO may stop earlier on its EI rule)")
-    p.add_argument("--seed", type=non_negative_int, default=0)
+    p.add_argument("--seed", type=seed_int, default=0)
     p.add_argument("--ei-stop", type=non_negative_float, default=0.0, metavar="THRESHOLD",
                    help="BO only: stop when the best expected improvement falls below "
                         "THRESHOLD x the RMS of the metric (the report's stop rule, e.g. 1e-6; "

@@ -24,15 +24,20 @@ import argparse
 import sys
 from pathlib import Path
 
-from handle_drake.apps.cli_support import non_negative_int, positive_int, run_command
-from handle_drake.apps.cli_support import positive_float as _positive_float
+from handle_drake.apps.cli_support import float_in, int_in, positive_int, run_command, seed_int
+from handle_drake.apps.inhand.experiment import MAX_PARTICLES
 from handle_drake.apps.inhand.screw_cap import PLACEMENTS, TWO_STROKES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
 from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
 
-__all__ = ["register", "main"]
+__all__ = ["register", "main", "MAX_GAITS", "MAX_TRIALS"]
+
+#: --gaits: the regrasp placement turns 360 deg in 5 gaits; 12 is past two turns.
+MAX_GAITS = 12
+#: --trials: the report's longest runs are 1000 trials.
+MAX_TRIALS = 100_000
 
 
 def _add_robust_arguments(p) -> None:
@@ -66,7 +71,7 @@ def register(subparsers) -> None:
                         "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored "
                         "from its MIDI ticks alone, the true wheel angle logged beside "
                         "(default 60)")
-    p.add_argument("--gaits", type=positive_int, default=None,
+    p.add_argument("--gaits", type=int_in(1, MAX_GAITS), default=None,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp); "
                         "default 1 (the placement's)")
     p.add_argument("--placement", choices=sorted(PLACEMENTS), default=None,
@@ -93,17 +98,17 @@ def register(subparsers) -> None:
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
                         "with the restarts of 5.5.4; pso: standard PSO; cmaes: CMA-ES; "
                         "random: random search")
-    p.add_argument("--trials", type=positive_int, default=200,
+    p.add_argument("--trials", type=int_in(1, MAX_TRIALS), default=200,
                    help="budget of trials (the run stops earlier at the target)")
-    p.add_argument("--workers", type=positive_int, default=1,
+    p.add_argument("--workers", type=int_in(1, 1024), default=1,
                    help="worker processes of 'local' and 'dask' (default 1: trials run in this "
                         "process); the particles of one iteration run in parallel. With "
                         "dask://, the cluster's workers")
     add_executor_arguments(p)
-    p.add_argument("--seed", type=non_negative_int, default=0)
-    p.add_argument("--particles", type=positive_int, default=10,
+    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--particles", type=int_in(1, MAX_PARTICLES), default=10,
                    help="particles per iteration (CMA-ES: population)")
-    p.add_argument("--target-deg", type=_positive_float, default=None,
+    p.add_argument("--target-deg", type=float_in(0, 360), default=None,
                    help="rotation the object must reach, held, at the end (deg; default 30, "
                         "the screw cap 90)")
     p.add_argument("--evaluation", choices=EVALUATIONS, default="incremental",
@@ -157,6 +162,9 @@ def _task_options(args) -> dict:
         if args.robust:
             options["robust_k"] = args.robust
     else:
+        if args.gaits is not None:
+            raise ValueError(f"--gaits {args.gaits}: only with --task screw_cap or "
+                             f"fingertip_cylinder")
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
     return options
@@ -173,12 +181,13 @@ def _cmd_inhand(args) -> int:
     if args.strokes is not None and args.task != "fingertip_cylinder":
         raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
                          f"{args.task}")
+    options = _task_options(args)  # every refusal before the log is created
+    if args.db.exists():
+        try:
+            TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
+        except TrialLogError as error:
+            raise ValueError(f"--db: {error}") from None
     args.db.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
-    except TrialLogError as error:
-        raise ValueError(f"--db: {error}") from None
-    options = _task_options(args)
     print(f"inhand: {args.task}, {args.optimizer}, seed {args.seed}, up to {args.trials} trials "
           f"in {args.db} ({args.executor} executor)", flush=True)
     if args.accelerometer:

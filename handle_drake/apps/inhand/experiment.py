@@ -113,7 +113,7 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
                                    ("workers", workers, 1,
                                     max_local_workers() if executor is None else None),
                                    ("n_particles", n_particles, 1, MAX_PARTICLES),
-                                   ("seed", seed, 0, None)):
+                                   ("seed", seed, 0, 2**63 - 1)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
         if high is not None and value > high:

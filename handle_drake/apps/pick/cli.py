@@ -167,7 +167,9 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
                          np.asarray(scenario.hand.mount.initial_position or np.zeros(6)),
                          grasp_db=grasp_db)
     except PickPlanningError as error:
-        result["outcome"] = f"not in the box: {error}"
+        from handle_drake.apps.pick.checks import named_as_truth
+
+        result["outcome"] = f"not in the box: {named_as_truth(error, seen_name, true_name)}"
         return result
     result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
                   planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored)
@@ -208,6 +210,9 @@ def _cmd_pick(args) -> int:
     if not args.true_poses and not scenario.cameras:
         raise ValueError("pick: the scenario has no camera to perceive with; add one or "
                          "give --true-poses")
+    from handle_drake.apps.pick.checks import check_pick_arguments
+
+    check_pick_arguments(args, scenario)  # every refusal before any work
     from handle_drake.apps.pick.plan import GRASP_DB, build_grasp_database
     from handle_drake.grasp.database import GraspDatabase
 

@@ -248,6 +248,16 @@ def _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearanc
     return path
 
 
+def _check_target(scenario, target: str, kind: str) -> None:
+    """A PickPlanningError unless pick grasps a ``kind`` and the box has its hole."""
+    if kind not in CLASS_ORDER:
+        raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
+                                f"{sorted(CLASS_ORDER)})")
+    if kind not in hole_centres(scenario):
+        raise PickPlanningError(f"{target}: the sorting box has no hole for a {kind} "
+                                f"(sorting_box.holes)")
+
+
 def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidTransform,
               q_start, classes=None, grasp_budget: float | None = GRASP_BUDGET,
               total_budget: float | None = GRASP_TOTAL_BUDGET,
@@ -265,9 +275,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     computed. A kind or size the database lacks is searched (within the budgets) and
     the answer reused for the rest of the process (``plan_grasp``'s ``cache``)."""
 
-    if kind not in CLASS_ORDER:
-        raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
-                                f"{sorted(CLASS_ORDER)})")
+    _check_target(scenario, target, kind)
     ratio = scenario.hand.coupling_ratio or 1.0
     hand = get_hand_spec(scenario.hand.kind)
     base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()

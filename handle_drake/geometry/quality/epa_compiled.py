@@ -35,10 +35,34 @@ _KIND = ord("d")
 
 __all__ = ["epa_loop"]
 
+
+def _njit(function):
+    """``numba.njit(cache=True)``, or without the disk cache (with a warning) when numba
+    finds no place to write one: a user who can write neither the package's
+    ``__pycache__`` nor a home cache gets numba's ``RuntimeError: cannot cache function
+    ...: no locator available`` at import otherwise (set ``NUMBA_CACHE_DIR`` to keep it)."""
+    try:
+        return numba.njit(cache=True)(function)
+    except RuntimeError as error:
+        if "cannot cache" not in str(error):
+            raise
+        global _WARNED
+        if not _WARNED:
+            import warnings
+
+            warnings.warn(f"numba cannot cache the compiled EPA ({error}); compiling it in "
+                          f"each process (set NUMBA_CACHE_DIR to a writable folder)",
+                          RuntimeWarning, stacklevel=2)
+            _WARNED = True
+        return numba.njit(function)
+
+
+_WARNED = False
+
 DIM = 6
 
 
-@numba.njit(cache=True)
+@_njit
 def _oriented(V, center, ridge, vi, n_out, A, x, ipiv):
     """Unit outward normal and offset of the facet ``ridge + [vi]`` (as hull._Epa._oriented);
     NaN when the facet is degenerate (numpy's LinAlgError). ``A`` (6, 6), ``x`` (6,) and
@@ -76,7 +100,7 @@ _SIMPLEX_FACETS = np.array([[c for c in range(DIM + 1) if c != j] for j in range
                            dtype=np.int64)
 
 
-@numba.njit(cache=True)
+@_njit
 def init_simplex(pts, tol, vertex_hash):
     """``hull._Epa.init_simplex`` while the given points suffice: 7 affinely independent
     points of ``pts`` chosen greedily (farthest from the flat of those chosen), and the 7
@@ -131,7 +155,7 @@ def init_simplex(pts, tol, vertex_hash):
     return True, V0, F0, N0, b0, H0, center
 
 
-@numba.njit(cache=True)
+@_njit
 def epa_loop(W, V0, F0, N0, b0, H0, center, vertex_hash, eps, gap_tol, max_iterations):
     """Runs the EPA from the initial simplex (``V0`` 7 vertices, facets ``F0/N0/b0/H0``).
 
@@ -214,7 +238,7 @@ def epa_loop(W, V0, F0, N0, b0, H0, center, vertex_hash, eps, gap_tol, max_itera
     return 1, 0.0, u
 
 
-@numba.njit(cache=True)
+@_njit
 def _horizon(F, H, vis, nvis, vertex_hash):
     """Ridges of exactly one visible facet, as ``facet slot * 6 + opposite vertex``, in the
     order of their keys (as numpy's argsort of the keys, then the keys seen once)."""
@@ -238,7 +262,7 @@ def _horizon(F, H, vis, nvis, vertex_hash):
     return new, nnew
 
 
-@numba.njit(cache=True)
+@_njit
 def _grown(F, N, b, H, nf, cap):
     F2 = np.zeros((cap, DIM), dtype=np.int64)
     N2 = np.zeros((cap, DIM))
@@ -248,7 +272,7 @@ def _grown(F, N, b, H, nf, cap):
     return F2, N2, b2, H2
 
 
-@numba.njit(cache=True)
+@_njit
 def _consistent(V, nv, F, N, b, nf):
     """Every ridge in exactly two live facets (exact keys), every vertex inside every facet."""
     live = np.empty(nf, dtype=np.int64)

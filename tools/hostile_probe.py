@@ -1,6 +1,8 @@
-"""Hostile-input probe set (issue 15): tries bad inputs on each part and tabulates outcomes.
+"""Hostile-input probe set (issues 15, 31, 46): tries bad inputs on each part and tabulates
+outcomes. A test tool, not a benchmark (it measures no speed): ``tests/test_hostile_probe.py``
+runs its fourth wave's quick surfaces.
 
-Run: ``PYTHONPATH=. python benchmarks/hostile_probe.py`` (about 2 minutes; it starts
+Run: ``PYTHONPATH=. python tools/hostile_probe.py`` (about 2 minutes; it starts
 a CAN server and simulated hand as subprocesses on a random loopback multicast
 group). Outcomes per probe:
 
@@ -11,9 +13,11 @@ group). Outcomes per probe:
 - hang: no answer within the probe's time limit;
 - wrong: accepted although it is nonsense, or a message without the field.
 
-Writes ``benchmarks/results/hostile_probe.json``. ``hostile_probe.py third before``
+Writes ``out/hostile_probe/hostile_probe.json``. ``hostile_probe.py third before``
 (or ``after``) runs issue 31's surfaces only (each case in a forked child, killed
-at its time limit) and writes ``hostile_probe_third_<label>.json``;
+at its time limit) and writes ``hostile_probe_third_<label>.json``; ``fourth``
+likewise issue 46's (pick and its grasp database and scenes, in-hand options, seeds,
+numba's cache, trial logs, messages) into ``hostile_probe_fourth_<label>.json``.
 ``PROBE_ONLY=<part>`` limits it to one surface, ``PROBE_VERBOSE=1`` prints each case.
 """
 
@@ -30,6 +34,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +42,7 @@ import numpy as np
 from handle_drake.base.results import ResultsRun, add_page_arguments
 
 ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "out" / "hostile_probe"
 RESULTS = {}
 
 
@@ -61,7 +67,7 @@ def time_limit(seconds):
 def record(part, outcome, probe):
     RESULTS.setdefault(part, {"tried": 0, "clean": 0, "traceback": 0, "hang": 0, "wrong": 0,
                               "failures": []})
-    if part in ("kill -9",) or probe.startswith("Ctrl-C"):  # measured: keep the figures
+    if part in ("kill -9", "process checks") or probe.startswith("Ctrl-C"):  # keep the figures
         RESULTS[part].setdefault("measured", []).append(f"{outcome}: {probe}")
     RESULTS[part]["tried"] += 1
     RESULTS[part][outcome] += 1
@@ -602,10 +608,11 @@ def _api(words, call):
 BASELINE = {"s": 0.0}  # s: a command refused before any work, on this machine now
 
 
-def _cmd(argv, words, cwd=None, quick=None, absent=()):
+def _cmd(argv, words, cwd=None, quick=None, absent=(), one_line=False):
     """A probe body: ``handle-drake argv`` must exit 2 with one line naming ``words``,
     within ``quick`` s (plus the run's :data:`BASELINE`: the machine is shared and its
-    speed changes) if given, leaving the ``absent`` paths unwritten."""
+    speed changes) if given, leaving the ``absent`` paths unwritten. ``one_line``: the
+    message after "error:" holds no line break (argparse's usage lines come before it)."""
     def body():
         from handle_drake.cli import main
 
@@ -622,7 +629,9 @@ def _cmd(argv, words, cwd=None, quick=None, absent=()):
         if "Traceback" in text:
             return "traceback", text[-300:]
         written = [str(p) for p in absent if Path(p).exists()]
+        message = text.split("error:", 1)[-1].strip()
         ok = (code == 2 and all(w in text for w in words) and len(text) < 2000
+              and not (one_line and "\n" in message)
               and (quick is None or took < quick + BASELINE["s"]) and not written)
         return ("clean" if ok else "wrong",
                 f"exit {code} in {took:.1f} s, wrote {written}: {text.strip()[-200:]}")
@@ -935,6 +944,277 @@ def probe_third_wave(tmp):
         _probe_ctrl_c(tmp)
 
 
+def probe_fourth_wave(tmp, only=None):
+    """Issue 46's surfaces: pick's targets, hands, scenes and grasp database, the in-hand
+    options, seeds, numba's cache, trial logs; then three process checks (two runs on one
+    log, kill -9 and resume, SIGINT and resume). ``only``: a surface name's part."""
+    import handle_drake.cli  # noqa: F401 - loaded once, before the forks
+
+    tmp = Path(tmp)
+    only = only or os.environ.get("PROBE_ONLY")
+    (tmp / "dir").mkdir(exist_ok=True)
+    if not (tmp / "fifo").exists():
+        os.mkfifo(tmp / "fifo")
+    H = str(ROOT / "diagrams" / "hamburg_setup.yaml")
+    cases = []  # (part, name, limit, body, accepted_if_slow)
+
+    def pick(name, override, words, part="pick scenes", extra=(), limit=60):
+        argv = ["pick", H, "--true-poses", *extra] + (["--override", override] if override
+                                                        else [])
+        cases.append((part, name, limit, _cmd(argv, words, cwd=tmp, quick=10, one_line=True,
+                                               absent=[tmp / "out.png"]), True))
+
+    # pick: targets and hands
+    pick("--kind without a hole", "sorting_box: {holes: [{kind: cylinder, size: 0.05}]}",
+         ["--kind"], "pick targets", ["--kind", "sphere"])
+    pick("--html out.png", None, ["--html"], "pick targets", ["--html", str(tmp / "out.png")])
+    pick("Barrett hand on the arm", "hand: {kind: barrett, coupling_ratio: null}",
+         ["hand.kind"], "pick targets")
+    # pick: scenes
+    arm = "hand: {mount: !Arm {kind: pa10, X_WB: {translation: %s}%s}}"
+    pick("X_FH NaN rotation", arm % ("[-1.0, 0, 0]", ", X_FH: {rotation: !Rpy {deg: [.nan, 0, "
+                                                      "0]}}"), ["X_FH"])
+    pick("sorting box at NaN", "sorting_box: {X_WB: {translation: [.nan, 0.3, 0]}}",
+         ["sorting_box.X_WB"])
+    pick("arm base inside the table", arm % ("[0, 0, -0.2]", ""), ["hand.mount.X_WB"])
+    pick("arm base 5 m below", arm % ("[-1.0, 0, -5]", ""), ["hand.mount.X_WB"])
+    pick("object at [3, 3, 0]", "object: {kind: sphere, size: 0.06, X_WO: {translation: "
+                                "[3, 3, 0]}}", ["object.X_WO"])
+    pick("sorting box floating", "sorting_box: {on_table: false, X_WB: {translation: "
+                                 "[0.0, 0.3, 0.5]}}", ["sorting_box"])
+    pick("sorting box beside the table", "sorting_box: {X_WB: {translation: [0.0, 1.5, 0]}}",
+         ["sorting_box"])
+    pick("coupling ratio 100", "hand: {coupling_ratio: 100}", ["coupling_ratio"])
+
+    # pick: the grasp database
+    shipped = json.loads((ROOT / "handle_drake" / "apps" / "pick" / "data" /
+                          "grasp_database.json").read_text())
+    grasped = next(i for i, e in enumerate(shipped["entries"]) if e["grasp"] is not None)
+
+    def database(name, change=None, raw=None):
+        path = tmp / f"db_{name}.json"
+        if raw is not None:
+            path.write_bytes(raw)
+        else:
+            data = json.loads(json.dumps(shipped))
+            change(data)
+            path.write_text(json.dumps(data))
+        return path
+
+    def entry(field, value):
+        def change(data):
+            data["entries"][grasped]["grasp"][field] = value
+        return change
+
+    zero = [[0.0] * 4 for _ in range(4)]
+    nan = np.eye(4).tolist()
+    nan[0][3] = float("nan")  # json writes NaN, which Python reads back
+    mirrored = np.diag([1.0, 1.0, -1.0, 1.0]).tolist()
+    for name, path, words in (
+            ("FIFO", tmp / "fifo", ["fifo"]), ("/dev/zero", Path("/dev/zero"), ["/dev/zero"]),
+            ("directory", tmp / "dir", ["dir"]),
+            ("binary", database("binary", raw=zlib.compress(json.dumps(shipped).encode())),
+             ["db_binary.json"]),
+            ("entries: 5", database("entries5", lambda d: d.update(entries=5)), ["entries"]),
+            ("entry a number", database("entry5", lambda d: d.update(entries=[5])),
+             ["entries[0]"]),
+            ("NaN X_PG", database("nan", entry("X_PG", nan)), ["X_PG"]),
+            ("all-zero X_BP", database("zero", entry("X_BP", zero)), ["X_BP"]),
+            ("mirrored X_PG", database("mirror", entry("X_PG", mirrored)), ["X_PG"]),
+            ("NaN contact_error", database("nanerr", entry("contact_error", float("nan"))),
+             ["contact_error"])):
+        cases.append(("grasp database", f"--grasp-db {name}", 60, _memory_capped(_cmd(
+            ["pick", H, "--true-poses", "--grasp-db", str(path)], words, cwd=tmp, quick=10,
+            one_line=True)),
+            name not in ("FIFO", "/dev/zero")))  # no answer from reading those: a hang
+    cases.append(("grasp database", "--build-grasp-db to /proc", 90, _cmd(
+        ["pick", H, "--true-poses", "--build-grasp-db", "--grasp-db", "/proc/x.json"],
+        ["--grasp-db"], cwd=tmp, quick=10, one_line=True), True))
+
+    # inhand: every refusal before the trial log exists, every option bounded
+    for name, argv, words in (
+            ("--placement regrasp", ["--placement", "regrasp"], ["--placement"]),
+            ("--grip-digits 6", ["--task", "screw_cap", "--grip-digits", "6"],
+             ["--grip-digits"]),
+            ("jog_wheel --gaits 2", ["--task", "jog_wheel", "--gaits", "2"], ["--gaits"]),
+            ("--target-deg 1e308", ["--target-deg", "1e308"], ["--target-deg"]),
+            ("--target-deg -90", ["--target-deg", "-90"], ["--target-deg", "(0, 360]"]),
+            ("--particles 1e9", ["--particles", "1000000000"], ["--particles"]),
+            ("--gaits 1000000", ["--task", "screw_cap", "--gaits", "1000000"], ["--gaits"]),
+            ("--trials 1e12", ["--trials", "1000000000000"], ["--trials"]),
+            ("--workers 1e6", ["--workers", "1000000"], ["--workers"]),
+            ("--seed 2**70", ["--seed", str(2**70)], ["--seed"])):
+        db = tmp / f"inhand_{len(cases)}.sqlite"
+        cases.append(("inhand options", name, 60, _cmd(
+            ["inhand", "--trials", "1", "--no-progress", "--db", str(db), *argv], words,
+            quick=10, one_line=True, absent=[db]), "--gaits 1" not in name))  # 1e6 gaits: a hang
+    db = tmp / "babble_seed.sqlite"
+    cases.append(("inhand options", "babble --seed 2**70", 60, _cmd(
+        ["babble", "--trials", "1", "--no-progress", "--no-plot", "--seed", str(2**70),
+         "--db", str(db)], ["--seed"], quick=10, one_line=True, absent=[db]), True))
+
+    # messages
+    cases.append(("messages", "--chunk ²", 30, _cmd(
+        ["babble", "--chunk", "²", "--trials", "1", "--db", str(tmp / "c.sqlite")],
+        ["--chunk", "'²'", "integer"], quick=10, one_line=True), True))
+    bad_log = _log_with_bad_scenario(tmp) if not only or "messages" in only else None
+    cases.append(("messages", "trial log: scenario not UTF-8", 60, _cmd(
+        ["babble", "--strategy", "random", "--trials", "2", "--no-plot", "--no-progress",
+         "--db", str(bad_log)], ["scenario", "UTF-8"], quick=10, one_line=True), False))
+    cases.append(("messages", "numba: no cache locator", 120, _no_cache_locator, False))
+
+    def baseline():  # refused by the output check, before any work, on every version
+        start = time.monotonic()
+        _cmd(["pick", H, "--true-poses", "--html", str(tmp / "dir")], [])()
+        return "clean", f"{time.monotonic() - start:.2f}"
+
+    BASELINE["s"] = max(float(_forked(120, baseline)[1]) for _ in range(2))
+    print(f"baseline (a command refused before work): {BASELINE['s']:.1f} s", file=sys.stderr)
+    for part, name, limit, body, accepted_if_slow in cases:
+        if only and only not in part:
+            continue
+        outcome, text = _forked(limit, body)
+        if outcome == "hang" and accepted_if_slow:  # accepted: still working at the limit
+            outcome, text = "wrong", f"accepted: still working after {limit} s"
+        record(part, outcome, f"{name}: {text}")
+        if os.environ.get("PROBE_VERBOSE"):
+            print(f"  {outcome:9} {part}: {name}: {text[:150]}", file=sys.stderr)
+    if not only or "process" in only:
+        _probe_two_runs(tmp)
+        _probe_kill_and_resume(tmp, "kill -9")
+        _probe_kill_and_resume(tmp, "SIGINT")
+
+
+def _memory_capped(body, gib=6):
+    """``body`` with its address space capped (a /dev/zero read grows until MemoryError:
+    on a shared machine, not with the whole of its memory)."""
+    def capped():
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_AS, (gib << 30, gib << 30))
+        return body()
+    return capped
+
+
+def _babble(db, trials, **popen):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p),
+               OPENBLAS_NUM_THREADS="1")
+    return subprocess.Popen(
+        [sys.executable, "-m", "handle_drake.cli", "babble", "--strategy", "random",
+         "--trials", str(trials), "--db", str(db), "--no-plot", "--no-progress"],
+        env=env, text=True, **{"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, **popen})
+
+
+def _log_with_bad_scenario(tmp) -> Path:
+    """A trial log of one babble trial whose scenario column is then not UTF-8."""
+    db = tmp / "bad_scenario.sqlite"
+    if not db.exists():
+        _babble(db, 1).communicate(timeout=300)
+        conn = sqlite3.connect(db)
+        conn.execute("UPDATE trials SET scenario = CAST(? AS TEXT)",
+                     (b"\xff\xfe hand:\n  kind: barrett\n" * 20,))
+        conn.commit()
+        conn.close()
+    return db
+
+
+def _no_cache_locator():
+    """numba finds no writable cache place (as a user who can write neither the
+    package's __pycache__ nor a home cache): the import must still work."""
+    code = ("import numba.core.caching as c\n"
+            "c.CacheImpl._locator_classes = []\n"
+            "import numpy as np\n"
+            "from handle_drake.geometry.quality import grasp_quality, ContactParams\n"
+            "P = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) / 3**0.5 * 0.05\n"
+            "print(grasp_quality(P, -P / 0.05, ContactParams(characteristic_length=0.05))"
+            ".force_closure)\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    done = subprocess.run([sys.executable, "-W", "always", "-c", code], capture_output=True,
+                          text=True, env=env, timeout=110)
+    if "Traceback" in done.stderr:
+        return "traceback", done.stderr.strip().splitlines()[-1][:200]
+    ok = done.returncode == 0 and done.stdout.strip() == "True" and "cannot cache" in done.stderr
+    return ("clean" if ok else "wrong",
+            f"exit {done.returncode}, {done.stdout.strip()}, {done.stderr.strip()[:150]}")
+
+
+def _log_rows(db):
+    conn = sqlite3.connect(db)
+    try:
+        return conn.execute("SELECT trial_index, status FROM trials").fetchall()
+    finally:
+        conn.close()
+
+
+def _probe_two_runs(tmp):
+    """The same babble command twice at once on one log (the first stopped with SIGSTOP
+    after its first trial while the second runs): the second must be refused naming the
+    other process, the first then end with every trial done once."""
+    db = tmp / "two.sqlite"
+    first = _babble(db, 12)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not (db.exists() and _rows_or_none(db)):
+        time.sleep(0.2)
+    first.send_signal(signal.SIGSTOP)  # held mid-run (a loaded machine cannot race it)
+    first_running = first.poll() is None
+    second = _babble(db, 12)
+    try:
+        _, err2 = second.communicate(timeout=600)
+    finally:
+        first.send_signal(signal.SIGCONT)
+    first.communicate(timeout=900)
+    rows = _log_rows(db)
+    ok = (second.returncode == 2 and "another process" in err2 and first.returncode == 0
+          and first_running and sorted(i for i, s in rows if s == "done") == list(range(12)))
+    record("process checks", "clean" if ok else "wrong",
+           f"two runs on one log: second exit {second.returncode} "
+           f"({err2.strip().splitlines()[-1][:120] if err2.strip() else ''}) while the first "
+           f"ran: {first_running}; first exit "
+           f"{first.returncode}, trials done {sorted(i for i, s in rows if s == 'done')}")
+
+
+def _rows_or_none(db):
+    try:
+        return _log_rows(db)
+    except sqlite3.Error:
+        return None
+
+
+def _probe_kill_and_resume(tmp, how):
+    """babble killed (``kill -9``, or SIGINT) after its second trial, then run again: every
+    trial done exactly once, none lost, and (SIGINT) exit 130 within 10 s."""
+    db = tmp / f"resume_{how.replace(' ', '').replace('-', '')}.sqlite"
+    run = _babble(db, 6)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        rows = _rows_or_none(db) or []
+        if sum(s == "done" for _, s in rows) >= 2:
+            break
+        time.sleep(0.1)
+    start = time.monotonic()
+    run.send_signal(signal.SIGKILL if how == "kill -9" else signal.SIGINT)
+    try:
+        run.communicate(timeout=30)
+        took = time.monotonic() - start
+    except subprocess.TimeoutExpired:
+        run.kill()
+        run.communicate()
+        took = None
+    before = sorted(i for i, s in _log_rows(db) if s == "done")
+    again = _babble(db, 6)
+    again.communicate(timeout=600)
+    rows = _log_rows(db)
+    indices = [i for i, _ in rows]
+    ok = (again.returncode == 0 and sorted(indices) == list(range(6))
+          and all(s == "done" for _, s in rows)
+          and (how == "kill -9" or (run.returncode == 130 and took is not None and took < 10)))
+    record("process checks", "clean" if ok else "wrong",
+           f"{how} after {len(before)} trials done (exit {run.returncode}"
+           f"{'' if took is None else f' in {took:.1f} s'}), resumed: exit {again.returncode}, "
+           f"trials {sorted(indices)} ({len(indices) - len(set(indices))} duplicated, "
+           f"{sum(s != 'done' for _, s in rows)} not done)")
+
+
 def _children(pid):
     out = []
     for entry in os.listdir("/proc"):
@@ -1025,17 +1305,18 @@ def main():
     page_args, sys.argv[1:] = page.parse_known_args(sys.argv[1:])
     results_run = ResultsRun("Hostile input probe: inputs tried, refused cleanly, failures",
                              page_args)
-    only = {"can": probe_can, "second": probe_second_wave, "third": probe_third_wave}
+    only = {"can": probe_can, "second": probe_second_wave, "third": probe_third_wave,
+            "fourth": probe_fourth_wave}
     if sys.argv[1:2] and sys.argv[1] in only:  # one part only ('can' needs the least time)
         with tempfile.TemporaryDirectory() as tmp:
             only[sys.argv[1]](Path(tmp))
         print(json.dumps({k: {n: v for n, v in r.items() if n != "failures"} | {
             "failures": r["failures"]} for k, r in RESULTS.items()}, indent=1))
-        if sys.argv[1] == "third":  # `third before|after`: the table of issue 31's note
+        if sys.argv[1] in ("third", "fourth"):  # `third|fourth before|after`: an issue's table
             label = sys.argv[2] if len(sys.argv) > 2 else "run"
-            out = ROOT / "benchmarks" / "results"
-            out.mkdir(parents=True, exist_ok=True)
-            results_run.finish(_table(), RESULTS, out / f"hostile_probe_third_{label}.json")
+            OUT.mkdir(parents=True, exist_ok=True)
+            results_run.finish(_table(), RESULTS,
+                               OUT / f"hostile_probe_{sys.argv[1]}_{label}.json")
             print("| surface | tried | clean | traceback | hang | wrong (silent accept) |\n"
                   "|---|---|---|---|---|---|")
             for part, r in RESULTS.items():
@@ -1059,7 +1340,8 @@ def main():
     for part, r in RESULTS.items():
         for failure in r["failures"][:20]:
             print(f"  {part}: {failure}")
-    results_run.finish(_table(), RESULTS, ROOT / "benchmarks" / "results" / "hostile_probe.json")
+    OUT.mkdir(parents=True, exist_ok=True)
+    results_run.finish(_table(), RESULTS, OUT / "hostile_probe.json")
 
 
 def _table() -> list[dict]:
