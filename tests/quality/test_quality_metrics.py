@@ -287,7 +287,9 @@ def test_epa_equals_the_compacting_reference_and_qhull_on_random_4x8_grasps():
             continue
         r, _ = largest_ball_radius(W)
         assert r > 0
-        assert r == _epa_compacting_reference(W)  # bit-identical to the first EPA
+        # the same EPA to the last few ulps (numpy's own matmul kernels may sum in another
+        # order from one numpy release to the next: 2.4 moved results by 1 ulp)
+        assert r == pytest.approx(_epa_compacting_reference(W), rel=1e-14, abs=0)
         assert r == pytest.approx(qhull_ball_radius(W), rel=1e-12)
         checked += 1
     assert checked >= 10
@@ -469,9 +471,9 @@ def test_moving_the_reference_point_can_reorder_grasps():
     assert len(grasps) >= 6 and swapped.any()
 
 
-def test_the_compiled_epa_equals_the_numpy_epa_bit_for_bit(monkeypatch):
+def test_the_compiled_epa_equals_the_numpy_epa_to_a_few_ulps(monkeypatch):
     """epa_compiled.epa_loop (numba) against hull._Epa's numpy loop: the same radius and
-    normal, bit for bit, on random 3-5 contact grasps with 4 and 8 friction-cone edges."""
+    normal, to a few ulps, on random 3-5 contact grasps with 4 and 8 friction-cone edges."""
     rng = np.random.default_rng(3434)
     stats0 = dict(EPA_STATS)
     checked = 0
@@ -486,8 +488,9 @@ def test_the_compiled_epa_equals_the_numpy_epa_bit_for_bit(monkeypatch):
             monkeypatch.setitem(hull_module.COMPILED_EPA, "enabled", False)
             r_numpy, u_numpy = largest_ball_radius(W)
             assert r > 0
-            assert r == r_numpy
-            np.testing.assert_array_equal(u, u_numpy)
+            # to a few ulps: numba's loop and numpy's kernels may sum in another order
+            assert r == pytest.approx(r_numpy, rel=1e-14, abs=0)
+            np.testing.assert_allclose(u, u_numpy, rtol=0, atol=1e-13)
             checked += 1
     assert checked >= 10
     assert EPA_STATS["fallbacks"] == stats0["fallbacks"]
