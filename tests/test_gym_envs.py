@@ -103,6 +103,32 @@ def test_cap_angle_is_the_encoder_of_the_plants_joint():
     assert moved > np.radians(5)  # the random targets turned it: the test saw a turn
 
 
+def test_screw_cap_env_has_the_default_tasks_physics():
+    """The ScrewCap env is the command line's default screw cap (the clear placement, issue
+    45): read from its built plant, a 1 ms step, Menagerie's 1 N m on the finger joints (the
+    wrist 10 / 5), and nothing of the hand on the welded bottle in the settled grasp."""
+    env = _unwrapped(envs.STEP_IDS["screw_cap"])
+    env.reset(seed=0)
+    plant, context = env.plant_and_context()
+    assert plant.time_step() == pytest.approx(0.001)
+    limits = {plant.get_joint_actuator(i).joint().name(): plant.get_joint_actuator(i)
+              .effort_limit() for i in plant.GetJointActuatorIndices()}
+    assert {n: limits[n] for n in ("FFJ3", "MFJ2", "RFJ3", "LFJ3", "WRJ2", "WRJ1")} == \
+        pytest.approx({"FFJ3": 1, "MFJ2": 1, "RFJ3": 1, "LFJ3": 1, "WRJ2": 10, "WRJ1": 5})
+    hand = plant.GetModelInstanceByName("hand")
+    welded = {b.index() for b in plant.GetBodiesWeldedTo(plant.world_body())
+              if b.model_instance() != hand}
+    assert welded  # the bottle (and the world)
+    on_welded = []
+    results = plant.get_contact_results_output_port().Eval(context)
+    for c in map(results.point_pair_contact_info, range(results.num_point_pair_contacts())):
+        a, b = plant.get_body(c.bodyA_index()), plant.get_body(c.bodyB_index())
+        if {a.model_instance() == hand, b.model_instance() == hand} == {True, False} and (
+                a.index() in welded or b.index() in welded):
+            on_welded.append((a.name(), b.name(), np.linalg.norm(c.contact_force())))
+    assert not on_welded, f"the hand on a welded body in the settled grasp: {on_welded}"
+
+
 @pytest.mark.parametrize("task", ["cylinder_rotation", "fingertip_cylinder"])
 def test_free_object_angle_is_its_turn_about_its_own_axis(task):
     env = _unwrapped(envs.STEP_IDS[task])

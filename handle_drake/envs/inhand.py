@@ -57,6 +57,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.apps.inhand.screw_cap import (
+    DEFAULT_PLACEMENT,
+    PLACEMENTS,
     TWO_STROKES,
     ScrewCapTask,
     ScrewCapTrial,
@@ -86,8 +88,8 @@ def task_trial(task: str, **options):
     overriding them (fields of :class:`InHandTask` or :class:`ScrewCapTask`)."""
     if task in ("cylinder_rotation", "star_rotation"):
         return InHandTrial(InHandTask(task=task, **options))
-    if task == "screw_cap":
-        return ScrewCapTrial(ScrewCapTask(**options))
+    if task == "screw_cap":  # the command line's default placement (its step and limits)
+        return ScrewCapTrial(ScrewCapTask(**(PLACEMENTS[DEFAULT_PLACEMENT] | options)))
     if task == "fingertip_cylinder":  # the learning task: two strokes, 100 deg
         settings = {k: v for k, v in TWO_STROKES.items() if k != "free"} | options
         return ScrewCapTrial(ScrewCapTask(free=True, **settings))

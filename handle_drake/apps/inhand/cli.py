@@ -26,7 +26,7 @@ from pathlib import Path
 
 from handle_drake.apps.cli_support import non_negative_int, positive_int, run_command
 from handle_drake.apps.cli_support import positive_float as _positive_float
-from handle_drake.apps.inhand.screw_cap import PLACEMENTS, TWO_STROKES
+from handle_drake.apps.inhand.screw_cap import DEFAULT_PLACEMENT, PLACEMENTS, TWO_STROKES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
@@ -126,7 +126,7 @@ def register(subparsers) -> None:
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
     if args.placement is None:  # the screw cap's default: the one whose physics converges
-        args.placement = "clear" if args.task == "screw_cap" else "one-gait"
+        args.placement = DEFAULT_PLACEMENT if args.task == "screw_cap" else "one-gait"
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")

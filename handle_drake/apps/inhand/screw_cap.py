@@ -116,8 +116,8 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["CLEAR", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
-           "TWO_STROKES", "ScrewCapModel",
+__all__ = ["CLEAR", "DEFAULT_PLACEMENT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS",
+           "REGRASP_GAITS", "TWO_STROKES", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
@@ -192,6 +192,9 @@ CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, bottle_neck=0.0
 #: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
 PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
               "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS, "clear": CLEAR}
+#: The screw cap's default placement (``handle-drake inhand --task screw_cap`` and the
+#: ``ScrewCap`` environments): the one whose physics converges.
+DEFAULT_PLACEMENT = "clear"
 # The fingertip cylinder's harder target (issue 35 item 4): 100 deg in two strokes of 1 s,
 # each the demonstration's gist with its own parameters (``stages``: 52), checked while
 # held at each half stroke (turn >= 5, 40, 50, 100 deg less 2 at 0.5, 1.0, 1.5, 2.2 s),
