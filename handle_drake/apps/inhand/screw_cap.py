@@ -121,6 +121,7 @@ __all__ = ["CLEAR", "DEFAULT_PLACEMENT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
+           "step_contacts", "new_contact_record",
            "fresh_success",
            "scenario_fingerprint"]
 
@@ -677,6 +678,11 @@ def contact_forces(plant, plant_context, built) -> dict:
     return out
 
 
+def new_contact_record() -> dict:
+    """An empty record for :func:`step_contacts`."""
+    return dict(palm=False, palm_max=0.0, welded_max=0.0, welded_bodies=set(), digit_peak={})
+
+
 def step_contacts(plant, plant_context, built, st: dict) -> None:
     """One step's contacts into the trial's record ``st`` (read at EVERY step by a monitor,
     not at the samples): the palm's force on cap or bottle (``palm``, ``palm_max``), the
@@ -1193,9 +1199,8 @@ class ScrewCapTrial(GistTrial):
         """A trial's running record; ``stroke_end``: a cap over several gaits (see the
         module doc), None otherwise (one gait, or the free cylinder)."""
         several = joint is not None and self.config.n_gaits > 1
-        return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                    palm_max=0.0, welded_max=0.0, welded_bodies=set(), digit_peak={},
-                    next_check=0, angle=0.0, previous=0.0,
+        return dict(new_contact_record(), passed=0, failed=False, stopped=False,
+                    last_touch=0.0, next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if several else None,
                     touch_at_stroke_end=False, digit_touch={})
 
