@@ -67,6 +67,11 @@ def main(argv=None) -> int:
     if args.stiffness is not None and not args.stiffness >= 0:
         print(f"--stiffness: expected a value >= 0 N/m, got {args.stiffness}", file=sys.stderr)
         return 2
+    motions = reference_motions(args.effort_limits)
+    if args.only is not None and not any(args.only in name for name in motions):
+        print(f"--only: no reference motion's name contains {args.only!r} (names: "
+              f"{'; '.join(motions)})", file=sys.stderr)
+        return 2
     # --fresh: its own kind of run, its own section (published from 20 draws; --only picks
     # the references worth it: those that converge)
     fresh_budget = {"fresh": 20, "step": False, "stiffness": False,
@@ -75,7 +80,7 @@ def main(argv=None) -> int:
                       section="--fresh", published=fresh_budget) if args.fresh else
            ResultsRun("In-hand references: convergence in the time step", args))
     rows, shown = [], []
-    for name, (trial, x) in reference_motions(args.effort_limits).items():
+    for name, (trial, x) in motions.items():
         if args.only and args.only not in name:
             continue
         if args.fresh:
