@@ -1,6 +1,7 @@
 """The Gymnasium environments (handle_drake.envs): the checker, determinism, the reads
 against the plant, the actions' checks and the vectorised trials against the trial objects."""
 
+import dataclasses as dc
 import os
 import signal
 import subprocess
@@ -14,6 +15,7 @@ from gymnasium.utils.env_checker import check_env
 from pydrake.math import RollPitchYaw
 
 import handle_drake.envs as envs
+from handle_drake.apps.inhand.screw_cap import ScrewCapTask
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 from handle_drake.envs.gist import GistEnv, TrialVectorEnv, gist_trial
 from handle_drake.learning.executors import InlineExecutor
@@ -101,6 +103,79 @@ def test_cap_angle_is_the_encoder_of_the_plants_joint():
         if terminated or truncated:
             break
     assert moved > np.radians(5)  # the random targets turned it: the test saw a turn
+
+
+def test_screw_cap_env_has_the_default_tasks_physics():
+    """The ScrewCap env is the command line's default screw cap (the clear placement, issue
+    45): read from its built plant, a 1 ms step, Menagerie's 1 N m on the finger joints (the
+    wrist 10 / 5), and nothing of the hand on the welded bottle in the settled grasp."""
+    env = _unwrapped(envs.STEP_IDS["screw_cap"])
+    env.reset(seed=0)
+    plant, context = env.plant_and_context()
+    assert plant.time_step() == pytest.approx(0.001)
+    limits = {plant.get_joint_actuator(i).joint().name(): plant.get_joint_actuator(i)
+              .effort_limit() for i in plant.GetJointActuatorIndices()}
+    assert {n: limits[n] for n in ("FFJ3", "MFJ2", "RFJ3", "LFJ3", "WRJ2", "WRJ1")} == \
+        pytest.approx({"FFJ3": 1, "MFJ2": 1, "RFJ3": 1, "LFJ3": 1, "WRJ2": 10, "WRJ1": 5})
+    hand = plant.GetModelInstanceByName("hand")
+    welded = {b.index() for b in plant.GetBodiesWeldedTo(plant.world_body())
+              if b.model_instance() != hand}
+    assert welded  # the bottle (and the world)
+    on_welded = []
+    results = plant.get_contact_results_output_port().Eval(context)
+    for c in map(results.point_pair_contact_info, range(results.num_point_pair_contacts())):
+        a, b = plant.get_body(c.bodyA_index()), plant.get_body(c.bodyB_index())
+        if {a.model_instance() == hand, b.model_instance() == hand} == {True, False} and (
+                a.index() in welded or b.index() in welded):
+            on_welded.append((a.name(), b.name(), np.linalg.norm(c.contact_force())))
+    assert not on_welded, f"the hand on a welded body in the settled grasp: {on_welded}"
+
+
+def _hand_on_bottle(plant, context) -> float:
+    """The hand's largest contact force on the welded bottle now, read from the plant."""
+    hand, bottle = plant.GetModelInstanceByName("hand"), plant.GetBodyByName("bottle")
+    results = plant.get_contact_results_output_port().Eval(context)
+    forces = [0.0]
+    for c in map(results.point_pair_contact_info, range(results.num_point_pair_contacts())):
+        a, b = plant.get_body(c.bodyA_index()), plant.get_body(c.bodyB_index())
+        if {a.index(), b.index()} & {bottle.index()} and hand in (a.model_instance(),
+                                                                    b.model_instance()):
+            forces.append(float(np.linalg.norm(c.contact_force())))
+    return max(forces)
+
+
+def test_a_turn_made_leaning_on_the_bottle_is_not_reached():
+    """The old wedged placement (2 ms, the sheet's limits: a ring finger pressed against the
+    welded bottle) with a 20 deg target: the hand-written stroke turns the cap past it, but
+    the env, as the trial, does not count it (the bottle's force read from the plant); on the
+    default placement holding the grasp leans on nothing."""
+    wedged = {f.name: f.default for f in dc.fields(ScrewCapTask)
+              if f.name in ("cap_position", "cap_length", "bottle_neck", "effort_limits",
+                            "time_step")}
+    assert wedged["time_step"] == 0.002 and wedged["effort_limits"] == "sheet"
+    env = envs.InHandEnv("screw_cap", task_options=dict(wedged, target_deg=20.0))
+    obs, _ = env.reset(seed=0)
+    sim, trial = env.sim, env.trial
+    plant, context = env.plant_and_context()
+    x = _stroke(trial)
+    source = sim.built["source"]
+    n = int(round(trial.config.total_time / env.control_period))
+    ticks = np.arange(n) * env.control_period
+    targets = source.frames_for(x)[source.frame_indices(ticks) - 1]
+    seen = 0.0
+    for target in targets:
+        _, _, terminated, _, info = env.step(2 * (target - sim.lower) / (sim.upper - sim.lower)
+                                             - 1)
+        seen = max(seen, _hand_on_bottle(plant, context))
+        if info["turn_deg"] >= 20.0:
+            break
+    assert info["turn_deg"] >= 20.0  # the wedge turned it past the target
+    assert seen > 1.0 and info["welded_force_max"] >= seen - 1e-9  # read at every step
+    assert info["leaned_on_welded"] and not info["reached_target"] and not terminated
+    env = _unwrapped(envs.STEP_IDS["screw_cap"])
+    obs, _ = env.reset(seed=0)
+    *_, info = env.step(obs["command"])
+    assert info["welded_force_max"] == 0.0 and not info["leaned_on_welded"]
 
 
 @pytest.mark.parametrize("task", ["cylinder_rotation", "fingertip_cylinder"])

@@ -169,6 +169,7 @@ BUDGET_RUNS = {
     "bench_dask": (["--rounds", "1"], [], "dask"),
     "bench_grasp_classes": (["--sizes", "1"], [], "grasp_classes"),
     "bench_inhand": (["--speed", "--rounds", "2"], ["--speed", "--rounds", "16"], "inhand"),
+    "bench_inhand_convergence": (["--only", "clear"], [], "inhand"),
     "bench_instruments": (["--quick"], [], "instruments"),
     "bench_jog_wheel": (["--seeds", "41"], [], "inhand"),
     "bench_mesh_objects": (["--quick"], [], "mesh_objects"),
@@ -250,6 +251,26 @@ def test_a_run_below_the_published_budget_never_writes_the_published_page(name, 
     assert run.page == tmp_path / f"{page}.md"
 
 
+def test_the_convergence_benchmarks_two_kinds_of_run_and_their_budgets(monkeypatch, tmp_path):
+    """bench_inhand_convergence: the published table is every reference at its task's own
+    step, limits and stiffness; --fresh N is its own kind (section "--fresh", from 20
+    draws). A finer --step, another limit or stiffness (even 0) is a reduced run."""
+    from handle_drake.base import results
+
+    monkeypatch.delenv("HANDLE_DRAKE_REDUCED", raising=False)
+    monkeypatch.setattr(results, "REDUCED_DIR", tmp_path)
+    name, page = "bench_inhand_convergence", results.RESULTS_DIR / "inhand.md"
+    for argv in (["--step", "0.001"], ["--effort-limits", "sheet"], ["--stiffness", "0"],
+                 ["--fresh", "5", "--only", "clear"], ["--fresh", "20", "--step", "0.001"]):
+        run = _results_run_of(name, argv, monkeypatch)
+        assert run.short and run.page == tmp_path / "inhand.md", argv
+    run = _results_run_of(name, ["--fresh", "20", "--only", "clear"], monkeypatch)
+    assert run.short == [] and run.page == page
+    assert run.marker == "benchmarks/bench_inhand_convergence.py --fresh"
+    run = _results_run_of(name, [], monkeypatch)
+    assert run.marker == "benchmarks/bench_inhand_convergence.py"
+
+
 def test_budget_size_and_below_budget(monkeypatch):
     import argparse
 
@@ -264,6 +285,13 @@ def test_budget_size_and_below_budget(monkeypatch):
     assert below_budget(args, published) == ["--seeds 1 < 20 published", "--quick given"]
     args = argparse.Namespace(seeds="0-24", quick=False, rounds=None)
     assert below_budget(args, published) == []  # None: the benchmark's own default
+    # a flag given as a value False-like (--stiffness 0) is given; a choice must match
+    published = {"stiffness": False, "only": False, "limits": "menagerie"}
+    args = argparse.Namespace(stiffness=0.0, only=None, limits="sheet")
+    assert below_budget(args, published) == ["--stiffness given",
+                                             "--limits sheet (published: menagerie)"]
+    args = argparse.Namespace(stiffness=None, only=None, limits="menagerie")
+    assert below_budget(args, published) == []
     with pytest.raises(ValueError, match=r"published\['seeds'\]"):
         from handle_drake.base.results import add_page_arguments
 

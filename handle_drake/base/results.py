@@ -65,13 +65,16 @@ def add_page_arguments(parser, page: str, published: dict | None = None) -> None
     """``--results-page`` (default ``docs/results/<page>.md``) and ``--no-page``;
     ``published``: the budget of the page's published table, option (its ``dest``) ->
     the least size a run must have to replace it (see :func:`budget_size`), or, for a
-    flag, the value it must have (``{"quick": False}``)."""
+    flag, the value it must have (``{"quick": False}``: given means set to anything but
+    None or False), or, for a choice, the text it must have (``{"limits": "menagerie"}``;
+    None, the benchmark's own default, passes)."""
     published = dict(published or {})
     for dest, value in published.items():
-        if not isinstance(value, (bool, int, float)) or (
-                not isinstance(value, bool) and value <= 0):
-            raise ValueError(f"published[{dest!r}]: expected a flag's value or a size > 0, "
-                             f"got {value!r}")
+        if not isinstance(value, (bool, int, float, str)) or (
+                isinstance(value, (int, float)) and not isinstance(value, bool)
+                and value <= 0):
+            raise ValueError(f"published[{dest!r}]: expected a flag's value, a choice or a "
+                             f"size > 0, got {value!r}")
     shown = ", ".join(f"--{d.replace('_', '-')} {v}" for d, v in published.items())
     parser.add_argument("--results-page", type=Path, default=None, metavar="PATH",
                         help=f"measurement page to update (default docs/results/{page}.md; a "
@@ -118,8 +121,13 @@ def below_budget(args, published: dict | None = None) -> list[str]:
         flag = "--" + dest.replace("_", "-")
         value = getattr(args, dest, None)
         if isinstance(wanted, bool):
-            if bool(value) != wanted:
-                short.append(f"{flag} {'given' if value else 'not given'}")
+            given = value is not None and value is not False  # --stiffness 0 is given
+            if given != wanted:
+                short.append(f"{flag} {'given' if given else 'not given'}")
+            continue
+        if isinstance(wanted, str):
+            if value is not None and value != wanted:
+                short.append(f"{flag} {value} (published: {wanted})")
             continue
         size = budget_size(value)
         if size is not None and size < wanted:

@@ -36,8 +36,12 @@ Each is clipped to finite bounds (100 rad/s, 1000 N, ten turns, 1 m) that the ta
 motions do not reach, so that every observation lies in the space.
 
 Reward: the turn gained in the step over the task's target (a whole target's turn sums to
-1), +1 when the target is reached, -1 when the object is lost. Terminated when the turn
-reaches the target or the object is lost (dropped more than the task's ``drop`` below its
+1), +1 when the target is reached, -1 when the object is lost. Reached as the trial counts
+it: the screw cap and the fingertip cylinder read the palm and the welded bottle at every
+plant step (``screw_cap.step_contacts``): a turn made with the palm on the object or the
+hand pushing the bottle with more than the task's ``lean_force`` (1 N) is not reached
+(``info``: ``palm_touched``, ``welded_force_max``, ``leaned_on_welded``). Terminated when
+the turn reaches the target or the object is lost (dropped more than the task's ``drop`` below its
 start, or moved more than its ``max_travel``: the palm tasks; the fingertip cylinder:
 ``drop``; the cap sits on its thread and is never lost); truncated after ``max_steps``.
 The simulation has no noise: ``reset`` restores the settled grasp exactly, so a seed only
@@ -54,13 +58,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import EventStatus
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.apps.inhand.screw_cap import (
+    DEFAULT_PLACEMENT,
+    PLACEMENTS,
     TWO_STROKES,
     ScrewCapTask,
     ScrewCapTrial,
     build_screw_cap,
+    new_contact_record,
+    step_contacts,
 )
 from handle_drake.apps.inhand.task import InHandTask, InHandTrial, build_inhand
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
@@ -86,8 +95,8 @@ def task_trial(task: str, **options):
     overriding them (fields of :class:`InHandTask` or :class:`ScrewCapTask`)."""
     if task in ("cylinder_rotation", "star_rotation"):
         return InHandTrial(InHandTask(task=task, **options))
-    if task == "screw_cap":
-        return ScrewCapTrial(ScrewCapTask(**options))
+    if task == "screw_cap":  # the command line's default placement (its step and limits)
+        return ScrewCapTrial(ScrewCapTask(**(PLACEMENTS[DEFAULT_PLACEMENT] | options)))
     if task == "fingertip_cylinder":  # the learning task: two strokes, 100 deg
         settings = {k: v for k, v in TWO_STROKES.items() if k != "free"} | options
         return ScrewCapTrial(ScrewCapTask(free=True, **settings))
@@ -201,6 +210,10 @@ class _PalmSim(_Sim):
     def lost(self, reading: _Reading) -> bool:
         return bool(reading.p[2] < -self.drop or np.linalg.norm(reading.p) >= self.max_travel)
 
+    def contacts(self) -> dict:
+        """The episode's contacts that void a turn (the palm-up tasks: none)."""
+        return {}
+
 
 class _CapSim(_Sim):
     """The screw cap or the fingertip cylinder (:func:`build_screw_cap`)."""
@@ -235,10 +248,20 @@ class _CapSim(_Sim):
         self.simulator.AdvanceTo(c.settle_time)
         self.settled = self.context.Clone()
         self.settled.SetTime(0.0)
+        # the trial's reads at EVERY step: the palm and the hand on the welded bottle
+        self.lean_force = c.lean_force
+        self.record = new_contact_record()
+
+        def monitor(root_context):
+            step_contacts(plant, self.plant_context, built, self.record)
+            return EventStatus.Succeeded()
+
+        self.simulator.set_monitor(monitor)
 
     def reset(self):
         self.context.SetTimeStateAndParametersFrom(self.settled)
         self.ticks = 0
+        self.record = new_contact_record()
         self.command = self.q0.copy()
         self.planned.q0 = self.q0.copy()
         self._hold(np.tile(self.q0, (1, 1)))
@@ -263,6 +286,13 @@ class _CapSim(_Sim):
 
     def lost(self, reading: _Reading) -> bool:
         return bool(self.joint is None and reading.p[2] < -self.drop)
+
+    def contacts(self) -> dict:
+        """As the trial counts them (``ScrewCapTask.lean_force``): the palm touched the
+        object or the bottle; the hand pushed the welded bottle with more than lean_force."""
+        r = self.record
+        return {"palm_touched": bool(r["palm"]), "welded_force_max": float(r["welded_max"]),
+                "leaned_on_welded": bool(r["welded_max"] > self.lean_force)}
 
 
 class InHandEnv(gym.Env):
@@ -398,12 +428,16 @@ class InHandEnv(gym.Env):
         self._steps += 1
         r = self._last = sim.read()
         reward = (r.angle - before) / sim.target
-        lost, reached = sim.lost(r), r.angle >= sim.target
+        # reached as the trial counts it: not with the palm, nor leaning on a welded body
+        voided = sim.contacts()
+        lost = sim.lost(r)
+        reached = r.angle >= sim.target and not (voided.get("palm_touched")
+                                                 or voided.get("leaned_on_welded"))
         if lost:
             reward -= 1.0
         elif reached:
             reward += 1.0
         terminated = bool(lost or reached)
         truncated = bool(not terminated and self._steps >= self.max_steps)
-        info = self._info(r) | {"lost": lost, "reached_target": bool(reached)}
+        info = self._info(r) | {"lost": lost, "reached_target": bool(reached)} | voided
         return self._observation(r), float(reward), terminated, truncated, info

@@ -24,9 +24,15 @@ import argparse
 import sys
 from pathlib import Path
 
-from handle_drake.apps.cli_support import float_in, int_in, positive_int, run_command, seed_int
+from handle_drake.apps.cli_support import (
+    float_in,
+    int_in,
+    positive_int,
+    run_command,
+    seed_int,
+)
 from handle_drake.apps.inhand.experiment import MAX_PARTICLES
-from handle_drake.apps.inhand.screw_cap import PLACEMENTS, TWO_STROKES
+from handle_drake.apps.inhand.screw_cap import DEFAULT_PLACEMENT, PLACEMENTS, TWO_STROKES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
@@ -42,13 +48,13 @@ MAX_TRIALS = 100_000
 
 def _add_robust_arguments(p) -> None:
     """Domain randomisation of the finger tasks (issue 45 item 3)."""
-    p.add_argument("--robust", type=non_negative_int, default=0, metavar="K",
+    p.add_argument("--robust", type=int_in(0, 64), default=0, metavar="K",
                    help="screw_cap / fingertip_cylinder: score each trial by its worst over K "
                         "perturbed physics drawn per trial (step, friction +-30 %%, mass +-20 "
                         "%%, thread 0.01-0.1 N m, effort limits down to half, placement +-2 mm; "
                         "ScrewCapTask.perturb_*); then print the best trial's success over "
                         "--fresh fresh perturbations. Default 0: the nominal physics only")
-    p.add_argument("--fresh", type=positive_int, default=20, metavar="N",
+    p.add_argument("--fresh", type=int_in(1, 1000), default=20, metavar="N",
                    help="with --robust: fresh perturbations the best trial is tried on (20)")
 
 
@@ -131,7 +137,7 @@ def register(subparsers) -> None:
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
     if args.placement is None:  # the screw cap's default: the one whose physics converges
-        args.placement = "clear" if args.task == "screw_cap" else "one-gait"
+        args.placement = DEFAULT_PLACEMENT if args.task == "screw_cap" else "one-gait"
     preset = PLACEMENTS[args.placement]
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")

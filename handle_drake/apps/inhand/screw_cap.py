@@ -116,11 +116,12 @@ from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
-__all__ = ["CLEAR", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS",
-           "TWO_STROKES", "ScrewCapModel",
+__all__ = ["CLEAR", "DEFAULT_PLACEMENT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS",
+           "REGRASP_GAITS", "TWO_STROKES", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
+           "step_contacts", "new_contact_record",
            "fresh_success",
            "scenario_fingerprint"]
 
@@ -192,6 +193,9 @@ CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, bottle_neck=0.0
 #: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
 PLACEMENTS = {"one-gait": {}, "four-finger": FOUR_FINGER_GRIP,
               "four-finger-turn": FOUR_FINGER_TURN, "regrasp": REGRASP_GAITS, "clear": CLEAR}
+#: The screw cap's default placement (``handle-drake inhand --task screw_cap`` and the
+#: ``ScrewCap`` environments): the one whose physics converges.
+DEFAULT_PLACEMENT = "clear"
 # The fingertip cylinder's harder target (issue 35 item 4): 100 deg in two strokes of 1 s,
 # each the demonstration's gist with its own parameters (``stages``: 52), checked while
 # held at each half stroke (turn >= 5, 40, 50, 100 deg less 2 at 0.5, 1.0, 1.5, 2.2 s),
@@ -672,6 +676,11 @@ def contact_forces(plant, plant_context, built) -> dict:
         n0, t0, q0 = out.get(name, (0.0, 0.0, 0.0))
         out[name] = (n0 + abs(fn), t0 + ft, q0 + torque)
     return out
+
+
+def new_contact_record() -> dict:
+    """An empty record for :func:`step_contacts`."""
+    return dict(palm=False, palm_max=0.0, welded_max=0.0, welded_bodies=set(), digit_peak={})
 
 
 def step_contacts(plant, plant_context, built, st: dict) -> None:
@@ -1190,9 +1199,8 @@ class ScrewCapTrial(GistTrial):
         """A trial's running record; ``stroke_end``: a cap over several gaits (see the
         module doc), None otherwise (one gait, or the free cylinder)."""
         several = joint is not None and self.config.n_gaits > 1
-        return dict(passed=0, failed=False, stopped=False, last_touch=0.0, palm=False,
-                    palm_max=0.0, welded_max=0.0, welded_bodies=set(), digit_peak={},
-                    next_check=0, angle=0.0, previous=0.0,
+        return dict(new_contact_record(), passed=0, failed=False, stopped=False,
+                    last_touch=0.0, next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if several else None,
                     touch_at_stroke_end=False, digit_touch={})
 
