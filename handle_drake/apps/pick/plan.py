@@ -39,7 +39,7 @@ from handle_drake.scene.config import box_pose, hole_centres
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
            "default_grasp_database", "grasp_db_requests", "build_grasp_database",
-           "free_path", "replan_release"]
+           "free_path", "replan_release", "GRASP_SOURCES"]
 
 #: The pick application's grasp database (``handle-drake pick SCENARIO
 #: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
@@ -47,7 +47,10 @@ __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_B
 GRASP_DB = Path(__file__).resolve().parent / "data" / "grasp_database.json"
 #: A perceived object whose size is this close to a catalogue object's of its kind (the
 #: sorting box's holes name the catalogue) is that object: it is planned with the
-#: catalogue size, resting on the table, so the stored grasps apply.
+#: catalogue size, resting on the table, so the stored grasps apply as they are. Any
+#: other size is planned as seen, with the nearest stored grasp of each class adapted
+#: to it (:func:`handle_drake.grasp.planning.adapt_grasp`: one seeded IK solve and the
+#: planner's acceptance test, 0.1-0.8 s), not searched: no step in planning time here.
 SIZE_TOLERANCE = 0.005  # m
 
 #: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
@@ -58,15 +61,19 @@ CLASS_ORDER = {
     "cuboid": ("parallel_extension", "tripod", "palmar_pinch", "lateral_tripod",
                "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
 }
-#: Seconds the grasp planner's hand-IK search may take per class (``plan_grasp``'s
-#: ``time_budget``): a class that has not found a grasp by then is reported as timed out
-#: and the next is tried. The classes taken in bench_pick (tripod on a sphere, parallel
-#: extension on a cuboid) took 0.9-7 s cold at load 9 on 2 cores; the failing ones up to
-#: 45 s each (docs/results/pick.md).
-GRASP_BUDGET = 10.0  # s
-#: Seconds all classes' grasp searches together may take (each gets the least of
+#: Seconds each class's grasp may take (``plan_grasp``'s ``time_budget``): a stored grasp
+#: takes none, one adapted to another size 0.1-0.8 s (its solves capped at
+#: ``ADAPT_ITERATIONS``); a class whose kind the database lacks is searched within what is
+#: left (the search checks the deadline before each IK solve, and each solve's SNOPT time
+#: limit is what is left). A class that has no grasp by then is reported as timed out and
+#: the next is tried. (Cold searches of the 6 cm objects took 0.3-45 s: they belong in
+#: ``--build-grasp-db``, not in a pick.)
+GRASP_BUDGET = 2.0  # s
+#: Seconds all classes' grasps together may take (each gets the least of
 #: ``GRASP_BUDGET`` and what is left); the classes after it are reported as not tried.
-GRASP_TOTAL_BUDGET = 30.0  # s
+GRASP_TOTAL_BUDGET = 2.0  # s
+#: Where a plan's grasp came from (``PickPlan.grasp_source``).
+GRASP_SOURCES = ("stored", "adapted", "searched")
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 CARRY_HEIGHT = 0.12  # m, above the release pose
 
@@ -151,7 +158,14 @@ class PickPlan:
     X_WO_release: RigidTransform
     seconds: dict  # grasp planning, IK and path times (s)
     attempts: dict  # class -> reason it was not taken
-    grasp_stored: bool = False  # the grasp came from the grasp database
+    grasp_source: str = "searched"  # one of GRASP_SOURCES
+    # Per class tried, in order: (class, where its grasp came from or "failed", seconds).
+    grasp_log: list = dc.field(default_factory=list)
+
+    @property
+    def grasp_stored(self) -> bool:
+        """The grasp came from the grasp database as stored."""
+        return self.grasp_source == "stored"
 
     def summary(self) -> str:
         t = self.seconds
@@ -262,8 +276,10 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     empty ``GraspDatabase()`` for none): an object within ``SIZE_TOLERANCE`` of a
     catalogue size is planned as that catalogue object resting on the table, so
     every class's grasp is a stored one and only the arm's IK and paths are
-    computed. A kind or size the database lacks is searched (within the budgets) and
-    the answer reused for the rest of the process (``plan_grasp``'s ``cache``)."""
+    computed. Another size of a stored class and kind gets the nearest stored grasp
+    adapted to it (``adapt_grasp``); a class and kind the database lacks is searched
+    (within the budgets) and the answer reused for the rest of the process
+    (``plan_grasp``'s ``cache``)."""
 
     if kind not in CLASS_ORDER:
         raise PickPlanningError(f"{target}: no grasp for a {kind} (pick takes "
@@ -275,7 +291,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     size, X_WO = _as_catalogue(scenario, kind, size, X_WO)
     spec = ObjectSpec(kind=kind, size=size)
     q_start = np.asarray(q_start, dtype=float)
-    attempts, seconds = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}
+    attempts, seconds, log = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}, []
     for cls in classes or CLASS_ORDER[kind]:
         budget = grasp_budget
         if total_budget is not None:
@@ -293,10 +309,15 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                                coupling_ratio=ratio, time_budget=budget,
                                database=grasp_db)
         except ValueError as error:
-            attempts[cls] = f"no grasp plan: {str(error)[:100]}"
-            seconds["grasp"] += time.perf_counter() - start
+            attempts[cls] = f"no grasp plan: {error}"
+            spent = time.perf_counter() - start
+            seconds["grasp"] += spent
+            log.append((cls, "failed", spent))
             continue
-        seconds["grasp"] += time.perf_counter() - start
+        spent = time.perf_counter() - start
+        seconds["grasp"] += spent
+        source = "stored" if stored else "adapted" if grasp.adapted_from else "searched"
+        log.append((cls, source, spent))
         q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
         q_closed = actuated_to_joint_positions(hand, grasp.close_command, ratio)
         X_OB = X_WO.inverse() @ grasp.X_WB
@@ -323,7 +344,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
             attempts[cls] = reason
             continue
         return PickPlan(target, kind, cls, grasp, waypoints, X_WO, X_release, seconds, attempts,
-                        stored)
+                        source, log)
     raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
         f"{c}: {r}" for c, r in attempts.items()))
 
