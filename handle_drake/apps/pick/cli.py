@@ -210,7 +210,8 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
                   planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored,
                   grasp_source=plan.grasp_source,
-                  grasp_log=[[c, src, round(t, 4)] for c, src, t in plan.grasp_log])
+                  grasp_log=[[c, src, round(t, 4)] for c, src, t in plan.grasp_log],
+                  attempts=dict(plan.attempts))
     report("plan", planning, f"{target.kind} {100 * plan.grasp.object_spec.size:.1f} cm: "
            f"{plan.grasp_class} ({plan.grasp_source} grasp; grasp {plan.seconds['grasp']:.2f}"
            f" s, arm IK {plan.seconds['ik']:.2f} s, paths {plan.seconds['path']:.2f} s)")
