@@ -532,6 +532,7 @@ def plan_grasp(
     time_budget: float | None = None,
     cache: bool = True,
     database=None,
+    search: bool = True,
 ) -> GraspPlan:
     """Plan a grasp of class ``grasp_class`` on ``obj`` at ``X_WO`` (see module doc).
 
@@ -548,7 +549,12 @@ def plan_grasp(
     database: a :class:`~handle_drake.grasp.database.GraspDatabase` (or any mapping
       with ``get(key, default)`` of :func:`grasp_key` to :class:`ObjectFrameGrasp`
       or None) consulted before searching (default synergies only); its stored
-      grasp is the one a fresh search gives.
+      grasp is the one a fresh search gives. With ``nearest(key)`` (a
+      GraspDatabase), a key it lacks gets the nearest stored grasp of the class and
+      kind adapted (:func:`adapt_grasp`; bounded by its iterations, not by
+      ``time_budget``) before any search.
+    search: False: only a cached, stored or adapted grasp; GraspPlanningError
+      instead of a search.
 
     Raises:
         ValueError: unknown class, object kind or size outside the class's
@@ -584,16 +590,16 @@ def plan_grasp(
         # one by one seeded IK solve and checked (adapt_grasp), not searched.
         near = database.nearest(key)
         if near is not None:
-            adapted = adapt_grasp(near, info.grasp_class, spec, height, coupling_ratio,
-                                  deadline=deadline)
+            # Bounded by its solves' iterations (ADAPT_ITERATIONS), not by the clock:
+            # the grasp a pick takes does not depend on the machine's load.
+            adapted = adapt_grasp(near, info.grasp_class, spec, height, coupling_ratio)
             if adapted is not None:
                 return place_grasp(adapted, info.grasp_class, spec, size, X_WO, table_height,
                                    reach, standoff, lift_height, vertical_standoff,
                                    coupling_ratio, row_O)
-            if _out_of_time(deadline):
-                raise GraspPlanningTimeout(
-                    f"time budget: adapting the stored {info.name} grasp took over "
-                    f"{time_budget:.1f} s")
+    if found is _MISSING and not search:
+        raise GraspPlanningError(
+            f"no stored {info.name} grasp of a {spec.kind} to use or adapt (not searched)")
     if found is _MISSING:
         found = _object_frame_grasp(key, info, spec, shape, dims, size, height, synergies,
                                     coupling_ratio, deadline, time_budget)
