@@ -1,8 +1,12 @@
 """Plan a pick and place: the grasp planner's hand poses, arm configurations that
 reach them, collision-checked joint paths, and the release over the object's hole.
 
-:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn. For
-each, the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`,
+:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn, first
+each from the grasp database (:data:`GRASP_DB`: the stored grasp, or the nearest
+stored one adapted to the perceived size by one seeded IK solve and the planner's
+acceptance test, :func:`handle_drake.grasp.planning.adapt_grasp`), then, for the
+classes the database cannot serve, by a search within ``GRASP_BUDGET`` /
+``GRASP_TOTAL_BUDGET``. For each, the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`,
 reaching from the arm's base towards the object) gives the pre-grasp, grasp and
 lift poses of the hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm
 joints for each (limits, 3 mm clearance; each IK seeded by the previous
