@@ -28,7 +28,6 @@ geometry: capsule radius 8.5 mm, pad boxes 9 mm / 10.5 mm below the axis):
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -432,7 +431,6 @@ class GraspKinematics:
         X_PO_guess: RigidTransform | None = None,
         row_fingers: int | None = None,
         max_pad_tilt: float | None = None,
-        time_limit: float | None = None,
         max_iterations: int = 400,
     ) -> GraspSolution:
         """Postures of class ``name`` holding a (shape, dims) object (see module doc).
@@ -468,9 +466,6 @@ class GraspKinematics:
           the layout's direction was bounded (``max_pad_angle``), and a pad
           touching a small ball away from that direction met it with its edge
           (a 25 mm ball: a pad 6 mm in it and no collision-free IK). None: off.
-        time_limit: seconds SNOPT may take over both stages together (its ``Time
-          limit`` option, where the SNOPT build honours it; a stage stopped by it is
-          not a success). None: no limit.
         max_iterations: SNOPT's major iterations limit of each stage (a seeded
           solve near its answer needs a few dozen).
         """
@@ -479,11 +474,9 @@ class GraspKinematics:
             p_PO_guess, fix_p_PO, centre_prior_weight, min_distance, approach_P,
             max_approach_angle, table_clearance, hand_clearance, contact_height, row_fingers,
             max_pad_tilt)
-        if time_limit is not None and not (np.isfinite(time_limit) and time_limit > 0):
-            raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
-        return self._solve(name, g, X_PO_guess, time_limit, int(max_iterations))
+        return self._solve(name, g, X_PO_guess, int(max_iterations))
 
-    def _solve(self, name, g: _GraspProblem, X_PO_guess, time_limit=None,
+    def _solve(self, name, g: _GraspProblem, X_PO_guess,
                max_iterations: int = 400) -> GraspSolution:
         """Two-stage IK of a checked grasp problem from the prior posture."""
         plant = self.plant
@@ -504,17 +497,11 @@ class GraspKinematics:
         options = SolverOptions()
         # Fail fast: a grasp that needs more iterations is almost always infeasible.
         options.SetOption(SnoptSolver.id(), "Major iterations limit", max_iterations)
-        end = None if time_limit is None else time.perf_counter() + float(time_limit)
-        if end is not None:
-            options.SetOption(SnoptSolver.id(), "Time limit", float(time_limit))
         prog, qv = self._build_ik(g, False)
         result = Solve(prog, q0, options)
         if g.check_collisions and result.is_success():
             q1 = result.GetSolution(qv)
             prog, qv = self._build_ik(g, True)
-            if end is not None:
-                options.SetOption(SnoptSolver.id(), "Time limit",
-                                  max(end - time.perf_counter(), 1e-3))
             result = Solve(prog, q1, options)
         q_sol = result.GetSolution(qv)
         plant.SetPositions(self.context, q_sol)

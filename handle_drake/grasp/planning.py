@@ -697,7 +697,9 @@ def adapt_grasp(stored: ObjectFrameGrasp, grasp_class, obj, height: float,
     centre within ``ADAPT_MAX_CENTRE_SHIFT`` of the stored grasp (the same grasp,
     not another one the solver wandered to). Returns the adapted grasp (its
     ``adapted_from`` the stored key) or None. ``deadline``: ``time.perf_counter()``
-    the solves stop by (SNOPT's time limit)."""
+    after which no further solve starts (a solve itself is bounded by
+    ``ADAPT_ITERATIONS``; Drake's SNOPT did not honour its ``Time limit`` option: a
+    0.3 s limit let a solve run 10 s)."""
     info = grasp_info(grasp_class)
     spec = _object_spec(obj)
     shape, dims = grasp_dims(spec)
@@ -719,7 +721,7 @@ def adapt_grasp(stored: ObjectFrameGrasp, grasp_class, obj, height: float,
             X_PO_guess=stored.X_PG, min_distance=-MAX_PENETRATION,
             max_approach_angle=MAX_APPROACH_ANGLE, centre_prior_weight=100.0,
             p_PO_guess=centre, row_fingers=row_fingers, max_pad_tilt=pad_tilt,
-            time_limit=_remaining(deadline), max_iterations=ADAPT_ITERATIONS)
+            max_iterations=ADAPT_ITERATIONS)
         if not _acceptable(kin, sol):
             continue
         if np.max(np.abs(sol.q - stored.q_grasp)) > ADAPT_MAX_JOINT_CHANGE or \
@@ -838,12 +840,6 @@ def _out_of_time(deadline) -> bool:
     return deadline is not None and time.perf_counter() > deadline
 
 
-def _remaining(deadline) -> float | None:
-    """Seconds left before ``deadline`` (at least 1 ms; None: no deadline): each IK solve's
-    SNOPT time limit, so that one solve does not run past the search's budget."""
-    return None if deadline is None else max(deadline - time.perf_counter(), 1e-3)
-
-
 def _solve_contacts(info, kind, shape, dims, height, priors, priors_refine, c_table1, a_P,
                     coupling_ratio, deadline=None):
     """``(solution, up_G, centre source, kinematics)`` of the first acceptable IK, None,
@@ -901,7 +897,7 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
             info.grasp_class, shape, dims, prior, approach_P=a_P, X_PO_guess=X_PG_guess,
             min_distance=-MAX_PENETRATION, max_approach_angle=CANONICAL_APPROACH_ANGLE,
             centre_prior_weight=100.0, p_PO_guess=c_table1, row_fingers=row_fingers,
-            max_pad_tilt=pad_tilt, time_limit=_remaining(deadline))
+            max_pad_tilt=pad_tilt)
         if _acceptable(kin_canonical, sol):
             source = "table1" if np.linalg.norm(sol.X_PO.translation() - c_table1) < 1e-3 \
                 else "refined"
@@ -914,8 +910,7 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
         kw = dict(fix_p_PO=c_table1) if source == "table1" else dict(
             centre_prior_weight=100.0, p_PO_guess=c_table1)
         free = free_kin.solve_grasp(info.grasp_class, shape, dims, prior, min_distance=None,
-                                    row_fingers=row_fingers, max_pad_tilt=pad_tilt,
-                                    time_limit=_remaining(deadline), **kw)
+                                    row_fingers=row_fingers, max_pad_tilt=pad_tilt, **kw)
         if not (free.success and free.contact_error < 1.5e-3):
             continue
         if _out_of_time(deadline):
@@ -926,7 +921,7 @@ def _solve_layout(info, kind, shape, dims, height, priors, priors_refine, c_tabl
         sol = kin.solve_grasp(info.grasp_class, shape, dims, free.q, approach_P=a_P,
                               X_PO_guess=free.X_PO, min_distance=-MAX_PENETRATION,
                               max_approach_angle=MAX_APPROACH_ANGLE, row_fingers=row_fingers,
-                              max_pad_tilt=pad_tilt, time_limit=_remaining(deadline),
+                              max_pad_tilt=pad_tilt,
                               **kw)
         if _acceptable(kin, sol):
             return sol, up, source, kin

@@ -1,26 +1,24 @@
 """Plan a pick and place: the grasp planner's hand poses, arm configurations that
 reach them, collision-checked joint paths, and the release over the object's hole.
 
-:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn, first
-each from the grasp database (:data:`GRASP_DB`: the stored grasp, or the nearest
-stored one adapted to the perceived size by one seeded IK solve and the planner's
-acceptance test, :func:`handle_drake.grasp.planning.adapt_grasp`), then, for the
-classes the database cannot serve, by a search within ``GRASP_BUDGET`` /
-``GRASP_TOTAL_BUDGET``. For each, the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`,
-reaching from the arm's base towards the object) gives the pre-grasp, grasp and
-lift poses of the hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm
-joints for each (limits, 3 mm clearance; each IK seeded by the previous
-configuration). The release pose keeps the grasp (``X_OB``, object to hand
-base, as planned) and puts the object ``DROP_HEIGHT`` above its hole, turned to
-the hole's orientation (a cuboid's width along the box's x, either way round;
-a sphere at its own yaw or a quarter or half turn from it, whichever the arm
-reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it. Between
-consecutive configurations the straight joint-space segment must be collision
-free (checked every 0.02 rad with the hand's posture of that phase); if one is
-not, Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free
-path between the two (:func:`free_path`). The first class whose whole chain
-exists is the plan; otherwise :class:`PickPlanningError` lists each class's
-reason.
+:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn, first each
+from the grasp database (:data:`GRASP_DB`: the stored grasp, or the nearest stored one
+adapted to the perceived size by one seeded IK solve and the planner's acceptance test,
+:func:`handle_drake.grasp.planning.adapt_grasp`), then, for the classes the database
+cannot serve, by a search within ``GRASP_BUDGET`` / ``GRASP_TOTAL_BUDGET``. For each,
+the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`, reaching
+from the arm's base towards the object) gives the pre-grasp, grasp and lift poses of the
+hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm joints for each
+(limits, 3 mm clearance; each IK seeded by the previous configuration). The release pose
+keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object
+``DROP_HEIGHT`` above its hole, turned to the hole's orientation (a cuboid's width along
+the box's x, either way round; a sphere at its own yaw or a quarter or half turn from
+it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
+Between consecutive configurations the straight joint-space segment must be collision
+free (checked every 0.02 rad with the hand's posture of that phase); if one is not,
+Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free path between the
+two (:func:`free_path`). The first class whose whole chain exists is the plan; otherwise
+:class:`PickPlanningError` lists each class's reason.
 """
 
 from __future__ import annotations
