@@ -597,6 +597,11 @@ def plan_grasp(
                 return place_grasp(adapted, info.grasp_class, spec, size, X_WO, table_height,
                                    reach, standoff, lift_height, vertical_standoff,
                                    coupling_ratio, row_O)
+            if not search:
+                raise GraspPlanningError(
+                    f"the stored {info.name} grasp of a {spec.kind} (grasp width "
+                    f"{near.key[4][0] * 100:.1f} cm) does not adapt to a grasp width of "
+                    f"{size * 100:.1f} cm (not searched)")
     if found is _MISSING and not search:
         raise GraspPlanningError(
             f"no stored {info.name} grasp of a {spec.kind} to use or adapt (not searched)")
