@@ -233,4 +233,4 @@ def test_a_pick_of_a_perceived_size_past_the_tolerance_adapts_every_class_it_tri
     assert searches == []
     assert plan.grasp_source == "adapted"
     assert plan.grasp.object_spec.size == pytest.approx(size)
-    assert all(source in ("adapted", "failed") for _, source, _ in plan.grasp_log)
+    assert all(source in ("adapted", "unreachable") for _, source, _ in plan.grasp_log)
