@@ -354,3 +354,31 @@ def test_the_idle_contact_filter_leaves_a_pick_unchanged(hamburg):
     filtered = execute_pick(scene, plan, filter_contacts=True)
     assert every.in_box and filtered.in_box
     np.testing.assert_allclose(filtered.p_WO_final, every.p_WO_final, atol=1e-6)
+
+
+def test_a_cuboid_the_arm_cannot_reach_at_its_yaw_is_grasped_turned(hamburg):
+    """Development seed 6: the arm reaches no grasp of the nearest cuboid at the
+    cuboid's own yaw (IK of the pre-grasp fails from 21 seeds), but the parallel
+    extension turned a few degrees about the vertical (GRASP_TURNS): planned with it,
+    the arm's joints put the hand where that grasp wants it."""
+    import dataclasses as dc
+
+    from handle_drake.apps.pick.plan import GRASP_TURNS
+
+    scene = dc.replace(random_scene(hamburg, 6), cameras=[])
+    base = np.array([-1.0, 0.0])
+    name, cuboid = min(((n, o) for n, o in scene_objects(scene) if o.kind == "cuboid"),
+                       key=lambda t: math.dist(np.asarray(t[1].X_WO.translation[:2],
+                                                          dtype=float), base))
+    reach = ArmReach(scene, ignore=(name,))
+    X_WO = initial_pose(cuboid, scene.table)
+    plan = plan_pick(scene, reach, name, "cuboid", cuboid.size, X_WO,
+                     scene.hand.mount.initial_position)
+    assert plan.grasp_class == "parallel_extension"
+    turn = (X_WO.rotation().inverse() @ plan.grasp.X_WO.rotation()).ToAngleAxis()
+    angle = turn.angle() * np.sign(turn.axis()[2])
+    assert 0.0 < abs(angle) <= max(np.abs(GRASP_TURNS["cuboid"])) + 1e-9
+    assert min(abs(angle - t) for t in GRASP_TURNS["cuboid"]) < 1e-9
+    by_label = {w.label: w for w in plan.waypoints}
+    X_reached = reach.hand_pose(by_label["grasp"].q)
+    assert np.linalg.norm(X_reached.translation() - plan.grasp.X_WB.translation()) < 0.004
