@@ -170,11 +170,16 @@ PLANNER_HAND = "shadow"
 # second pick of the same kind and size reuses it (a failed search too). Bounded.
 _SOLUTION_CACHE: dict = {}
 _SOLUTION_CACHE_SIZE = 256
+# adapt_grasp's answers (it is deterministic) per (key, stored key, database): the same
+# object planned again (another turn, another pick) is not adapted again.
+_ADAPTED_CACHE: dict = {}
 
 
 def clear_solution_cache() -> None:
-    """Forgets the cached hand-IK answers (see ``plan_grasp``'s ``cache``)."""
+    """Forgets the cached hand-IK answers (see ``plan_grasp``'s ``cache``) and
+    adaptations."""
     _SOLUTION_CACHE.clear()
+    _ADAPTED_CACHE.clear()
 
 
 # ---------------------------------------------------------------- objects
@@ -592,7 +597,13 @@ def plan_grasp(
         if near is not None:
             # Bounded by its solves' iterations (ADAPT_ITERATIONS), not by the clock:
             # the grasp a pick takes does not depend on the machine's load.
-            adapted = adapt_grasp(near, info.grasp_class, spec, height, coupling_ratio)
+            memo = (key, near.key, id(database))
+            if not cache or memo not in _ADAPTED_CACHE:
+                if len(_ADAPTED_CACHE) >= _SOLUTION_CACHE_SIZE:
+                    _ADAPTED_CACHE.pop(next(iter(_ADAPTED_CACHE)))
+                _ADAPTED_CACHE[memo] = adapt_grasp(near, info.grasp_class, spec, height,
+                                                   coupling_ratio)
+            adapted = _ADAPTED_CACHE[memo]
             if adapted is not None:
                 return place_grasp(adapted, info.grasp_class, spec, size, X_WO, table_height,
                                    reach, standoff, lift_height, vertical_standoff,
