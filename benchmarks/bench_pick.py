@@ -9,7 +9,13 @@ paths), the simulation's real-time rate next to a floor measured in the same
 run (the bare station, arm and hand only, no objects or box), and the load;
 writes JSON.
 
-Run: python benchmarks/bench_pick.py [--seeds 0-19] [--modes perceived,true] [--out out/bench]
+``--seeds eval`` is the held-out block (``scenes.EVALUATION_SEEDS``, nothing tuned on
+it); ``--time-steps 0.001,0.0005`` simulates each pick at each plant step and prints
+whether the verdicts agree (the physics converged); the grasp of each pick is counted by
+where it came from (stored, adapted to the perceived size, searched).
+
+Run: python benchmarks/bench_pick.py [--seeds 0-19|eval] [--modes perceived,true]
+     [--time-steps 0.001] [--out out/bench]
 """
 
 from __future__ import annotations
@@ -26,6 +32,10 @@ from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows
 
 
 def _seeds(text: str) -> list[int]:
+    if text == "eval":
+        from handle_drake.apps.pick.scenes import EVALUATION_SEEDS
+
+        return list(EVALUATION_SEEDS)
     if "-" in text:
         a, b = text.split("-")
         return list(range(int(a), int(b) + 1))
@@ -47,6 +57,16 @@ def _floor_rate(scenario) -> float:
     return 1.0 / (time.perf_counter() - start)
 
 
+def _with_time_step(scenario, step: float):
+    """``scenario`` with its plant's time step ``step`` (s)."""
+    import copy
+    import dataclasses as dc
+
+    config = copy.deepcopy(scenario.plant_config)
+    config.time_step = float(step)
+    return dc.replace(scenario, plant_config=config)
+
+
 def main(argv=None) -> int:
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -58,6 +78,9 @@ def main(argv=None) -> int:
     parser.add_argument("--no-correction", action="store_true",
                         help="release without measuring the object in the hand "
                              "(handle-drake pick --no-release-correction)")
+    parser.add_argument("--time-steps", default=None, metavar="DT[,DT...]",
+                        help="plant time steps (s) to simulate each pick at (default: the "
+                             "scenario's); with two or more, the verdicts are compared")
     parser.add_argument("--plan-only", action="store_true",
                         help="plan each pick, do not simulate it (planning times only)")
     add_page_arguments(parser, "pick", published={"seeds": 20, "modes": 2})
@@ -78,25 +101,36 @@ def main(argv=None) -> int:
     print(f"grasp database: {len(database)} entries, loaded in {db_load:.3f} s")
     base = LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml")
     floor = float("nan") if args.plan_only else _floor_rate(base)
+    steps = [None] if args.time_steps is None else [float(v) for v in
+                                                     args.time_steps.split(",")]
     rows = []
     for seed in _seeds(args.seeds):
-        scenario = random_scene(base, seed)
-        for mode in args.modes.split(","):
-            start = time.perf_counter()
-            result = pick(scenario, true_poses=(mode == "true"), execute=not args.plan_only,
-                          close=args.close, correct_release=not args.no_correction)
-            result.update(seed=seed, mode=mode, total_s=time.perf_counter() - start,
-                          load=os.getloadavg()[0])
-            rows.append(result)
-            print(f"seed {seed:2d} {mode:9s} {result.get('true_kind', '-'):7s} "
-                  f"{result.get('grasp_class', '-'):18s} {result['outcome']}", flush=True)
+        for step in steps:
+            scenario = base if step is None else _with_time_step(base, step)
+            scenario = random_scene(scenario, seed)
+            for mode in args.modes.split(","):
+                start = time.perf_counter()
+                result = pick(scenario, true_poses=(mode == "true"),
+                              execute=not args.plan_only, close=args.close,
+                              correct_release=not args.no_correction)
+                result.update(seed=seed, mode=mode, total_s=time.perf_counter() - start,
+                              load=os.getloadavg()[0],
+                              time_step=scenario.plant_config.time_step)
+                rows.append(result)
+                print(f"seed {seed:2d} {mode:9s} dt {result['time_step']:.4g} "
+                      f"{result.get('true_kind', '-'):7s} "
+                      f"{result.get('grasp_class', '-'):18s} "
+                      f"{result.get('grasp_source', '-'):8s} {result['outcome']}", flush=True)
             partial = Path(args.out) / "pick_partial.json"
             partial.parent.mkdir(parents=True, exist_ok=True)
             partial.write_text(json.dumps(rows, indent=1, default=str))  # survives a stop
     print("\nmode       in the box   sphere   cuboid")
     summary = {}
-    for mode in args.modes.split(","):
-        mine = [r for r in rows if r["mode"] == mode]
+    for mode, step in [(m, t) for m in args.modes.split(",") for t in steps]:
+        mine = [r for r in rows if r["mode"] == mode and (
+            step is None or r["time_step"] == step)]
+        if step is not None and len(steps) > 1:
+            mode = f"{mode} dt {step:g}"
         ok = [r for r in mine if r.get("in_box")]
         per_kind = {k: (sum(1 for r in ok if r.get("true_kind") == k),
                         sum(1 for r in mine if r.get("true_kind") == k))
@@ -104,7 +138,23 @@ def main(argv=None) -> int:
         summary[mode] = {"in_box": len(ok), "runs": len(mine), "per_kind": per_kind}
         print(f"{mode:10s} {len(ok):3d}/{len(mine):<3d}      "
               + "   ".join(f"{a}/{b}" for a, b in per_kind.values()))
+    if len(steps) > 1:
+        verdicts = {}
+        for r in rows:
+            verdicts.setdefault((r["seed"], r["mode"]), {})[r["time_step"]] = bool(
+                r.get("in_box"))
+        same = sum(len(set(v.values())) == 1 for v in verdicts.values())
+        flips = [k for k, v in verdicts.items() if len(set(v.values())) > 1]
+        summary["time_steps"] = {"same_verdict": same, "picks": len(verdicts),
+                                 "flipped": flips}
+        print(f"time steps {steps}: the same verdict in {same}/{len(verdicts)} picks; "
+              f"flipped: {flips}")
     planned = [r for r in rows if "planning_s" in r]
+    sources = {}
+    for r in planned:
+        sources[r.get("grasp_source")] = sources.get(r.get("grasp_source"), 0) + 1
+    if planned:
+        print(f"grasp sources: {sources}")
     timing = []
     if planned:
         for key in ("grasp", "ik", "path"):

@@ -153,6 +153,25 @@ class GraspDatabase:
             return default
         return self.entries.get(key, default)
 
+    def nearest(self, key) -> ObjectFrameGrasp | None:
+        """The stored grasp (not a "no grasp" entry) of the same hand, class, object kind
+        and shape and coupling ratio as ``key`` whose dimensions and height above the
+        table are nearest to ``key``'s (the largest difference of any of them, m), or
+        None. What :func:`~handle_drake.grasp.planning.plan_grasp` adapts to a size or
+        height the database does not hold (:func:`~handle_drake.grasp.planning.adapt_grasp`)."""
+        if self.version != PLANNER_VERSION:
+            return None
+        hand, cls, kind, shape, dims, height, ratio = key
+        best, gap = None, np.inf
+        for (h2, c2, k2, s2, d2, z2, r2), grasp in self.entries.items():
+            if grasp is None or (h2, c2, k2, s2, r2) != (hand, cls, kind, shape, ratio) or \
+                    len(d2) != len(dims):
+                continue
+            g = max(np.max(np.abs(np.subtract(d2, dims))), abs(z2 - height))
+            if g < gap:
+                best, gap = grasp, g
+        return best
+
     def put(self, key, grasp: ObjectFrameGrasp | None) -> None:
         if self.version != PLANNER_VERSION:
             raise ValueError(f"cannot add to a database of planner version {self.version} "

@@ -431,6 +431,7 @@ class GraspKinematics:
         X_PO_guess: RigidTransform | None = None,
         row_fingers: int | None = None,
         max_pad_tilt: float | None = None,
+        max_iterations: int = 400,
     ) -> GraspSolution:
         """Postures of class ``name`` holding a (shape, dims) object (see module doc).
 
@@ -465,15 +466,18 @@ class GraspKinematics:
           the layout's direction was bounded (``max_pad_angle``), and a pad
           touching a small ball away from that direction met it with its edge
           (a 25 mm ball: a pad 6 mm in it and no collision-free IK). None: off.
+        max_iterations: SNOPT's major iterations limit of each stage (a seeded
+          solve near its answer needs a few dozen).
         """
         g = self._grasp_problem(
             name, shape, dims, q_prior, rng, target_jitter, tolerance, max_pad_angle,
             p_PO_guess, fix_p_PO, centre_prior_weight, min_distance, approach_P,
             max_approach_angle, table_clearance, hand_clearance, contact_height, row_fingers,
             max_pad_tilt)
-        return self._solve(name, g, X_PO_guess)
+        return self._solve(name, g, X_PO_guess, int(max_iterations))
 
-    def _solve(self, name, g: _GraspProblem, X_PO_guess) -> GraspSolution:
+    def _solve(self, name, g: _GraspProblem, X_PO_guess,
+               max_iterations: int = 400) -> GraspSolution:
         """Two-stage IK of a checked grasp problem from the prior posture."""
         plant = self.plant
         # Initial guess: the prior posture, the object at its expected centre.
@@ -492,7 +496,7 @@ class GraspKinematics:
         # satisfy from a guess where the object overlaps the hand).
         options = SolverOptions()
         # Fail fast: a grasp that needs more iterations is almost always infeasible.
-        options.SetOption(SnoptSolver.id(), "Major iterations limit", 400)
+        options.SetOption(SnoptSolver.id(), "Major iterations limit", max_iterations)
         prog, qv = self._build_ik(g, False)
         result = Solve(prog, q0, options)
         if g.check_collisions and result.is_success():

@@ -113,11 +113,13 @@ def test_a_stale_entry_is_searched_again_never_used(tmp_path, searches):
     assert len(stale) == 0 and len(stale.stale) == 1
     plan_grasp("tripod", obj, X_WO, cache=False, database=stale)
     assert searches == ["tripod"]
-    # Another size is another key: not answered by the 6 cm ball's entry.
+    # Another size is another key: not answered by the 6 cm ball's entry as it is, but
+    # adapted from it (no search); a database of another version adapts nothing.
     searches.clear()
-    plan_grasp("tripod", ("sphere", 0.055), resting_pose("sphere", 0.055), cache=False,
-               database=database)
-    assert searches == ["tripod"]
+    other = plan_grasp("tripod", ("sphere", 0.055), resting_pose("sphere", 0.055),
+                       cache=False, database=database)
+    assert searches == [] and other.adapted_from == next(iter(database.entries))
+    assert stale.nearest(grasp_key("tripod", ("sphere", 0.055), 0.0275)) is None
 
 
 @pytest.mark.parametrize("text, field", [
@@ -156,3 +158,79 @@ def test_a_pick_plans_with_stored_grasps_only_even_on_a_perceived_size(hamburg, 
     assert searches == []
     assert plan.grasp_stored and plan.grasp.object_spec.size == pytest.approx(0.06)
     assert plan.X_WO.translation()[2] == pytest.approx(X_true.translation()[2], abs=1e-9)
+
+
+@pytest.fixture
+def ik_solves(monkeypatch):
+    """The hand-IK solves run (``GraspKinematics.solve_grasp`` calls)."""
+    from handle_drake.grasp.kinematics import GraspKinematics
+
+    calls = []
+    solve = GraspKinematics.solve_grasp
+
+    def counting(self, *args, **kwargs):
+        calls.append(args[0])
+        return solve(self, *args, **kwargs)
+
+    monkeypatch.setattr(GraspKinematics, "solve_grasp", counting)
+    return calls
+
+
+@pytest.mark.parametrize("kind, grasp_class, sizes", [
+    # Across the old cliff at 6.5 cm (SIZE_TOLERANCE around the 6 cm catalogue cuboid).
+    ("cuboid", "parallel_extension", (0.0640, 0.0649, 0.0651, 0.0657, 0.0680)),
+    ("sphere", "tripod", (0.0520, 0.0549, 0.0551, 0.0651, 0.0700)),
+])
+def test_every_size_gets_a_stored_grasp_adapted_without_a_search(hamburg, searches, ik_solves,
+                                                                 kind, grasp_class, sizes):
+    """Sizes the database does not hold get its nearest grasp adapted (one seeded IK
+    solve), never a hand-IK search; the adapted contacts lie on the new object's
+    surface (checked by forward kinematics of the returned posture, not by the
+    adaptation's own test) and the posture is the stored grasp's, moved a little."""
+    from handle_drake.geometry.objects import ObjectSpec
+    from handle_drake.grasp.kinematics import GraspKinematics
+    from handle_drake.grasp.taxonomy import grasp_info
+
+    database = default_grasp_database()
+    ratio = hamburg.hand.coupling_ratio
+    stored = database.get(grasp_key(grasp_class, (kind, 0.06), resting_pose(kind, 0.06)
+                                    .translation()[2], ratio))
+    kin = GraspKinematics(ratio)
+    for size in sizes:
+        ik_solves.clear()
+        X_WO = resting_pose(kind, size, xy=(0.1, -0.2), yaw=0.7,
+                            table_height=hamburg.table.top_height)
+        plan = plan_grasp(grasp_class, (kind, size), X_WO,
+                          table_height=hamburg.table.top_height, reach_direction=(1.0, -0.2),
+                          coupling_ratio=ratio, cache=False, database=database,
+                          time_budget=60.0)
+        assert searches == [], size
+        assert len(ik_solves) == 1, size  # the stored grasp's layout, solved once
+        assert plan.adapted_from == stored.key
+        shape, dims = planning.grasp_dims(ObjectSpec(kind, size))
+        X_PO = plan.X_WP.inverse() @ plan.X_WG
+        # Surface error of the class's contacts on the new object (the layout the
+        # adaptation solved is the stored grasp's: a row of fingers may be left out).
+        error = kin.surface_error(plan.q_grasp, grasp_info(grasp_class).grasp_class, shape,
+                                  dims, X_PO)
+        assert error <= planning.MAX_CONTACT_ERROR + 1e-4, (size, error)
+        assert np.max(np.abs(plan.q_grasp - stored.q_grasp)) < 0.5
+
+
+def test_a_pick_of_a_perceived_size_past_the_tolerance_adapts_every_class_it_tries(
+        hamburg, searches):
+    """The held-out cuboids read 6.51-6.57 cm: past SIZE_TOLERANCE they were searched
+    (3-32 s); now the stored grasp is adapted and nothing is searched."""
+    name, cuboid = next((n, o) for n, o in scene_objects(hamburg) if o.kind == "cuboid")
+    reach = ArmReach(hamburg, ignore=(name,))
+    X_true = initial_pose(cuboid, hamburg.table)
+    size = 0.0655
+    assert catalogue_size(hamburg, "cuboid", size) == size
+    X_seen = RigidTransform(X_true.rotation(), [*X_true.translation()[:2],
+                                                resting_pose("cuboid", size).translation()[2]])
+    plan = plan_pick(hamburg, reach, name, "cuboid", size, X_seen,
+                     hamburg.hand.mount.initial_position)
+    assert searches == []
+    assert plan.grasp_source == "adapted"
+    assert plan.grasp.object_spec.size == pytest.approx(size)
+    assert all(source in ("adapted", "unreachable") for _, source, _ in plan.grasp_log)

@@ -11,8 +11,13 @@ scenario's own poses) and listed nearest to the arm's base first; ``--object
 N`` picks the N-th, ``--kind K`` the first of kind K, else the first the
 planner grasps (spheres and upright cuboids). The plan (:func:`plan_pick`) is
 made on what was perceived: the objects as detected are the obstacles of the
-arm's IK. The run is simulated; the last line says "in the box" or why not
-(exit status 0 or 1).
+arm's IK. The run is simulated. A line is printed as each phase ends
+(perceive, plan, approach, close, lift, carry, release) with its time (the
+simulated phases: simulated and wall-clock seconds); the last line says "in the
+box" or why not, whole. Exit status: 0 in the box; 1 an attempt that failed (the
+object was grasped at and not put in); 2 bad input (one line on stderr); 3
+nothing to attempt: no object seen, none of a pickable kind, or no grasp class
+with a reachable, collision-free pick.
 """
 
 from __future__ import annotations
@@ -20,16 +25,20 @@ from __future__ import annotations
 import dataclasses as dc
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["register", "perceived_objects", "choose_target"]
+__all__ = ["register", "perceived_objects", "choose_target", "EXIT_CODES", "exit_code"]
 
 #: The catalogue kind the planner is given for each detected primitive.
 DETECTED_KIND = {"sphere": "sphere", "box": "cuboid", "cylinder": "cylinder"}
 PICKABLE = ("sphere", "cuboid")
+#: ``pick``'s result ``status`` -> the command's exit status (2 is bad input, raised
+#: before any work as a ValueError).
+EXIT_CODES = {"in_box": 0, "failed": 1, "nothing_to_pick": 3}
 
 
 def register(subparsers) -> None:
@@ -116,14 +125,36 @@ def choose_target(objects, base_xy, index=None, kind=None) -> int:
                       f"{[objects[i].kind for i in order]})")
 
 
+def exit_code(result: dict) -> int:
+    """The command's exit status for a :func:`pick` result (:data:`EXIT_CODES`)."""
+    return EXIT_CODES[result["status"]]
+
+
 def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
          grasp_db=None, execute: bool = True, close: str = "reactive",
-         correct_release: bool = True) -> dict:
+         correct_release: bool = True, progress=None, monitor=None) -> dict:
     """Perceive (or read the truth), plan and execute one pick; returns the result.
     ``grasp_db``: a GraspDatabase (default: the shipped one); ``execute=False``
     stops after planning; ``close``: "reactive" or "scripted", ``correct_release``:
     measure the object in the hand after the lift and release it where it is
-    (``execute_pick``)."""
+    (``execute_pick``); ``progress(line)``, if given, is called with a line as each
+    phase ends; ``monitor``: ``execute_pick``'s. The result's ``status`` is one of
+    :data:`EXIT_CODES` ("in_box", "failed": attempted and not in the box,
+    "nothing_to_pick": nothing seen, nothing pickable, no reachable pick; a plan
+    made with ``execute=False`` counts as "failed"), ``phases`` the list of
+    ``{phase, wall_s[, sim_s], note}``."""
+    phases = []
+
+    def report(phase, wall, note, sim=None):
+        entry = {"phase": phase, "wall_s": round(float(wall), 3), "note": note}
+        timing = f"{wall:6.2f} s"
+        if sim is not None:
+            entry["sim_s"] = round(float(sim), 3)
+            timing = f"{sim:5.2f} s simulated in {wall:6.2f} s"
+        phases.append(entry)
+        if progress is not None:
+            progress(f"{phase:9s} {timing}  {note}")
+
     from handle_drake.apps.pick.execute import execute_pick
     from handle_drake.apps.pick.plan import PickPlanningError, plan_pick
     from handle_drake.apps.pick.reach import ArmReach
@@ -131,6 +162,7 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
 
     base_xy = scenario.hand.mount.X_WB.GetDeterministicValue().translation()[:2]
     truth = scene_objects(scenario)
+    start = time.perf_counter()
     if true_poses:
         from handle_drake.scene.config import initial_pose
 
@@ -139,15 +171,19 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
         message = ""
     else:
         seen, message = perceived_objects(scenario)
+    report("perceive", time.perf_counter() - start,
+           ("true poses: " if true_poses else "seen: ") + (", ".join(
+               f"{o.kind} {100 * o.size:.1f} cm" for o in seen) or "nothing"))
     result = {"perceived": not true_poses, "objects_seen": len(seen),
-              "objects_true": len(truth), "message": message}
+              "objects_true": len(truth), "message": message, "phases": phases}
     if not seen:
-        result["outcome"] = f"not in the box: nothing to pick ({message})"
+        result.update(status="nothing_to_pick",
+                      outcome=f"not in the box: nothing to pick ({message})")
         return result
     try:
         i = choose_target(seen, base_xy, index, kind)
     except LookupError as error:
-        result["outcome"] = f"not in the box: {error}"
+        result.update(status="nothing_to_pick", outcome=f"not in the box: {error}")
         return result
     target = seen[i]
     p_seen = np.asarray(target.X_WO.translation, dtype=float)
@@ -169,15 +205,27 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     except PickPlanningError as error:
         from handle_drake.apps.pick.checks import named_as_truth
 
-        result["outcome"] = f"not in the box: {named_as_truth(error, seen_name, true_name)}"
+        report("plan", time.perf_counter() - start, "no reachable pick")
+        result.update(status="nothing_to_pick",
+                      outcome=f"not in the box: {named_as_truth(error, seen_name, true_name)}")
         return result
+    planning = time.perf_counter() - start
     result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
-                  planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored)
+                  planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored,
+                  grasp_source=plan.grasp_source,
+                  grasp_log=[[c, src, round(t, 4)] for c, src, t in plan.grasp_log],
+                  attempts=dict(plan.attempts))
+    report("plan", planning, f"{target.kind} {100 * plan.grasp.object_spec.size:.1f} cm: "
+           f"{plan.grasp_class} ({plan.grasp_source} grasp; grasp {plan.seconds['grasp']:.2f}"
+           f" s, arm IK {plan.seconds['ik']:.2f} s, paths {plan.seconds['path']:.2f} s)")
     if not execute:
-        result["outcome"] = "planned (not executed)"
+        result.update(status="failed", outcome="planned (not executed)")
         return result
     outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html,
-                           close=close, reach=reach if correct_release else None)
+                           close=close, reach=reach if correct_release else None,
+                           monitor=monitor,
+                           progress=lambda phase, sim, wall, note: report(phase, wall, note,
+                                                                          sim))
     result.update(close=close, release_corrected=outcome.release_corrected,
                   in_hand_offset_mm=outcome.in_hand_offset_mm,
                   in_hand_turn_deg=outcome.in_hand_turn_deg,
@@ -185,7 +233,8 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     if outcome.close_mode is not None:
         result.update(close_mode=outcome.close_mode, fingers_touched=outcome.fingers_touched,
                       closing_at_squeeze=outcome.closing_at_squeeze)
-    result.update(outcome=outcome.reason, in_box=outcome.in_box,
+    result.update(status="in_box" if outcome.in_box else "failed",
+                  outcome=outcome.reason, in_box=outcome.in_box,
                   final_position=outcome.p_WO_final.round(4).tolist(),
                   sim_s=outcome.sim_seconds, wall_s=outcome.wall_seconds)
     return result
@@ -235,13 +284,17 @@ def _cmd_pick(args) -> int:
         from handle_drake.apps.pick.scenes import random_scene
 
         scenario = random_scene(scenario, args.scene_seed)
+    # One line per phase as it ends: on stdout, or on stderr under --json (whose stdout
+    # is the JSON and the verdict).
+    stream = sys.stderr if args.json else sys.stdout
     result = pick(scenario, args.true_poses, args.object, args.kind, args.html,
                   grasp_db=grasp_db, close="scripted" if args.scripted_close else "reactive",
-                  correct_release=not args.no_release_correction)
+                  correct_release=not args.no_release_correction,
+                  progress=lambda line: print(line, file=stream, flush=True))
     if args.json:
         print(json.dumps(result, indent=1))
     else:
-        for key in ("objects_seen", "target", "kind", "grasp_class", "planning_s"):
+        for key in ("objects_seen", "target", "kind", "grasp_class"):
             if key in result:
                 print(f"{key}: {result[key]}")
         if "sim_s" in result:
@@ -250,4 +303,4 @@ def _cmd_pick(args) -> int:
         if args.html:
             print(f"replay written to {args.html}")
     print(result["outcome"])
-    return 0 if result.get("in_box") else 1
+    return exit_code(result)

@@ -5,7 +5,7 @@ The arm follows the plan's waypoints (and the paths between them) through
 its speed limit (at least ``MIN_SEGMENT`` s), linear in joint space, and the
 driver's own rate limit applies on top. The hand holds each waypoint's command
 through ``hand.position``; the release opens to the pre-shape and waits
-``SETTLE_TIME`` s for the object to fall.
+``SETTLE_TIME`` s for the object to fall (longer while it still moves: ``MAX_SETTLE``).
 
 The close (``close="reactive"``, the default) is the project's reactive tactile
 grasp (:class:`~handle_drake.systems.reactive_grasp.ReactiveGrasp`, report section
@@ -75,12 +75,18 @@ from handle_drake.systems.reactive_grasp import (
 
 __all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "filter_idle_contacts",
            "MIN_SEGMENT", "CLOSES",
-           "REACTIVE_CLOSE_TIME", "measure_in_hand", "locate_object"]
+           "REACTIVE_CLOSE_TIME", "measure_in_hand", "locate_object", "PHASES"]
 
 MIN_SEGMENT = 0.4  # s
 CLOSE_TIME = 0.6  # s, the scripted close's ramp
 HOLD_TIME = 0.3  # s, and its hold before the lift
 SETTLE_TIME = 1.2  # s
+#: After ``SETTLE_TIME``, the run goes on in 0.1 s steps, up to ``MAX_SETTLE`` s more,
+#: while the object moves faster than ``SETTLED_SPEED`` (m/s, its centre): the verdict is
+#: on the object at rest, not bouncing (a ball let go over its hole was still bouncing
+#: at 6 cm/s after 1.2 s).
+MAX_SETTLE = 2.0  # s
+SETTLED_SPEED = 0.05  # m/s (a ball may roll on the floor at 2 cm/s for long)
 CLOSES = ("reactive", "scripted")
 #: The reactive close's parameters: the controller's defaults (the lift is the arm's).
 REACTIVE_PARAMS = ReactiveGraspParams()
@@ -378,16 +384,25 @@ def filter_idle_contacts(station, root_context, target: str) -> list[tuple[str, 
     return pairs
 
 
+#: The phases of an executed pick, in order, and the timeline mark each ends at (the
+#: release ends after the settle).
+PHASES = (("approach", "grasp"), ("close", "close"), ("lift", "lift"), ("carry", "release"),
+          ("release", None))
+
+
 def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
                  close: str = "reactive", reach=None,
-                 filter_contacts: bool = False, monitor=None) -> PickOutcome:
+                 filter_contacts: bool = False, monitor=None, progress=None) -> PickOutcome:
     """Simulates ``plan`` on ``scenario``'s station (cameras left out; the other
     objects welded with ``still_bystanders``; ``close``: one of ``CLOSES``; with
     ``reach``, the ArmReach the plan was made with, the release is corrected by the
     object measured in the hand: see the module doc; ``filter_contacts``: the pairs
     of :func:`filter_idle_contacts` excluded (default: every pair simulated);
     ``monitor(station, station_context)``, if given, is called after every step);
-    writes an HTML replay to ``html`` when given."""
+    writes an HTML replay to ``html`` when given. ``progress(phase, sim_seconds,
+    wall_seconds, note)``, if given, is called as each of :data:`PHASES` ends (the
+    simulated and wall-clock seconds it took; ``note``: the object's height gained,
+    or where it ended)."""
     if close not in CLOSES:
         raise ValueError(f"close: expected one of {CLOSES}, got {close!r}")
     from pydrake.systems.framework import DiagramBuilder
@@ -428,7 +443,22 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     if meshcat is not None:
         meshcat.StartRecording()
     start = time.perf_counter()
-    simulator.AdvanceTo(marks["lift"])
+    clock = [0.0, start]  # the last phase's end: simulated, wall
+
+    def advance(phase, t):
+        simulator.AdvanceTo(t)
+        if progress is not None:
+            now = time.perf_counter()
+            p_now = position.Eval(station_context)
+            note = (f"object {100 * (p_now[2] - p0[2]):+.1f} cm from where it stood"
+                    if phase != "release" else
+                    f"object at {np.round(p_now, 3).tolist()}")
+            progress(phase, t - clock[0], now - clock[1], note)
+            clock[:] = [t, now]
+
+    advance("approach", marks["grasp"])
+    advance("close", marks["close"])
+    advance("lift", marks["lift"])
     p_lift = position.Eval(station_context).copy()
     close_report = _close_report(diagram, context) if close == "reactive" else {}
     if reach is not None:
@@ -438,10 +468,19 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
         close_report.update(measured)
         if new_times is not None:
             times, marks = new_times, new_marks
-    simulator.AdvanceTo(marks["release"])
+    advance("carry", marks["release"])
     p_release = position.Eval(station_context).copy()
     end = times[-1] + SETTLE_TIME
+    plant = GetPlant(station)
+    plant_context = station.GetSubsystemContext(plant, station_context)
+    body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(plan.target))[0])
     simulator.AdvanceTo(end)
+    while (np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(plant_context, body)
+                          .translational()) > SETTLED_SPEED
+           and end < times[-1] + SETTLE_TIME + MAX_SETTLE - 1e-9):
+        end += 0.1
+        simulator.AdvanceTo(end)
+    advance("release", end)
     wall = time.perf_counter() - start
     p = position.Eval(station_context).copy()
     if meshcat is not None:

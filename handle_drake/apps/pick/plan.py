@@ -1,22 +1,24 @@
 """Plan a pick and place: the grasp planner's hand poses, arm configurations that
 reach them, collision-checked joint paths, and the release over the object's hole.
 
-:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn. For
-each, the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`,
-reaching from the arm's base towards the object) gives the pre-grasp, grasp and
-lift poses of the hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm
-joints for each (limits, 3 mm clearance; each IK seeded by the previous
-configuration). The release pose keeps the grasp (``X_OB``, object to hand
-base, as planned) and puts the object ``DROP_HEIGHT`` above its hole, turned to
-the hole's orientation (a cuboid's width along the box's x, either way round;
-a sphere at its own yaw or a quarter or half turn from it, whichever the arm
-reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it. Between
-consecutive configurations the straight joint-space segment must be collision
-free (checked every 0.02 rad with the hand's posture of that phase); if one is
-not, Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free
-path between the two (:func:`free_path`). The first class whose whole chain
-exists is the plan; otherwise :class:`PickPlanningError` lists each class's
-reason.
+:func:`plan_pick` tries the grasp classes of ``CLASS_ORDER[kind]`` in turn, first each
+from the grasp database (:data:`GRASP_DB`: the stored grasp, or the nearest stored one
+adapted to the perceived size by one seeded IK solve and the planner's acceptance test,
+:func:`handle_drake.grasp.planning.adapt_grasp`), then, for the classes the database
+cannot serve, by a search within ``GRASP_BUDGET`` / ``GRASP_TOTAL_BUDGET``. For each,
+the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`, reaching
+from the arm's base towards the object) gives the pre-grasp, grasp and lift poses of the
+hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm joints for each
+(limits, 3 mm clearance; each IK seeded by the previous configuration). The release pose
+keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object
+``DROP_HEIGHT`` above its hole, turned to the hole's orientation (a cuboid's width along
+the box's x, either way round; a sphere at its own yaw or a quarter or half turn from
+it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
+Between consecutive configurations the straight joint-space segment must be collision
+free (checked every 0.02 rad with the hand's posture of that phase); if one is not,
+Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free path between the
+two (:func:`free_path`). The first class whose whole chain exists is the plan; otherwise
+:class:`PickPlanningError` lists each class's reason.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.geometry.objects import ObjectSpec, resting_height
@@ -39,7 +41,7 @@ from handle_drake.scene.config import box_pose, hole_centres
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
            "default_grasp_database", "grasp_db_requests", "build_grasp_database",
-           "free_path", "replan_release"]
+           "free_path", "replan_release", "GRASP_SOURCES"]
 
 #: The pick application's grasp database (``handle-drake pick SCENARIO
 #: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
@@ -47,7 +49,10 @@ __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_B
 GRASP_DB = Path(__file__).resolve().parent / "data" / "grasp_database.json"
 #: A perceived object whose size is this close to a catalogue object's of its kind (the
 #: sorting box's holes name the catalogue) is that object: it is planned with the
-#: catalogue size, resting on the table, so the stored grasps apply.
+#: catalogue size, resting on the table, so the stored grasps apply as they are. Any
+#: other size is planned as seen, with the nearest stored grasp of each class adapted
+#: to it (:func:`handle_drake.grasp.planning.adapt_grasp`: one seeded IK solve and the
+#: planner's acceptance test, 0.1-0.8 s), not searched: no step in planning time here.
 SIZE_TOLERANCE = 0.005  # m
 
 #: Grasp classes tried for each kind, in order: the power-ish grasps that held the object
@@ -58,17 +63,36 @@ CLASS_ORDER = {
     "cuboid": ("parallel_extension", "tripod", "palmar_pinch", "lateral_tripod",
                "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
 }
-#: Seconds the grasp planner's hand-IK search may take per class (``plan_grasp``'s
-#: ``time_budget``): a class that has not found a grasp by then is reported as timed out
-#: and the next is tried. The classes taken in bench_pick (tripod on a sphere, parallel
-#: extension on a cuboid) took 0.9-7 s cold at load 9 on 2 cores; the failing ones up to
-#: 45 s each (docs/results/pick.md).
-GRASP_BUDGET = 10.0  # s
-#: Seconds all classes' grasp searches together may take (each gets the least of
+#: Seconds each class's grasp search may take (``plan_grasp``'s ``time_budget``). Every
+#: class is first served from the database (stored, or adapted to the size: 0.1-0.8 s on
+#: a quiet machine, bounded by its solves' iterations, ``ADAPT_ITERATIONS``, not by the
+#: clock, so the grasp taken does not depend on the load); only the classes it cannot
+#: serve (a kind it lacks) are then searched, within these budgets (the search checks
+#: the deadline before each IK solve: one solve can overrun it). A class with no grasp
+#: by then is reported as timed out and the next is tried. (Cold searches of the 6 cm
+#: objects took 0.3-45 s: they belong in ``--build-grasp-db``, not in a pick.)
+GRASP_BUDGET = 2.0  # s
+#: Seconds all classes' grasps together may take (each gets the least of
 #: ``GRASP_BUDGET`` and what is left); the classes after it are reported as not tried.
-GRASP_TOTAL_BUDGET = 30.0  # s
+GRASP_TOTAL_BUDGET = 2.0  # s
+#: Where a plan's grasp came from (``PickPlan.grasp_source``).
+GRASP_SOURCES = ("stored", "adapted", "searched")
+#: Turns (rad) about the vertical of a cuboid's grasp tried in turn when the arm reaches
+#: none at the object's own yaw: the squeeze turns the cuboid to the fingers. (On seeds 6
+#: and 8 of 0-19 the arm reached the parallel extension's pre-grasp within 0.1 rad but
+#: not 0.02; turned -5 deg it reaches it. Development seeds 20-59, the 18 scenes whose
+#: nearest object is a cuboid, parallel extension's pre-grasp and grasp reached: 15 at
+#: 0 deg, 16 with +-5, 17 with +-10, 18 with +-20.)
+GRASP_TURNS = {"cuboid": tuple(np.radians([0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 20.0]))}
+#: The classes whose grasp is turned (``GRASP_TURNS``): the ones that lift a cuboid; each
+#: turn costs the arm's IK of its poses (a held-out cuboid trying every turn of all eight
+#: classes planned for 77 s at load 14).
+TURNED_CLASSES = ("parallel_extension", "tripod")
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 CARRY_HEIGHT = 0.12  # m, above the release pose
+
+
+_NOT_STORED = "no grasp plan: no stored"  # a class the database could not serve
 
 
 class PickPlanningError(ValueError):
@@ -151,7 +175,14 @@ class PickPlan:
     X_WO_release: RigidTransform
     seconds: dict  # grasp planning, IK and path times (s)
     attempts: dict  # class -> reason it was not taken
-    grasp_stored: bool = False  # the grasp came from the grasp database
+    grasp_source: str = "searched"  # one of GRASP_SOURCES
+    # Per class tried, in order: (class, where its grasp came from or "failed", seconds).
+    grasp_log: list = dc.field(default_factory=list)
+
+    @property
+    def grasp_stored(self) -> bool:
+        """The grasp came from the grasp database as stored."""
+        return self.grasp_source == "stored"
 
     def summary(self) -> str:
         t = self.seconds
@@ -272,8 +303,10 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     empty ``GraspDatabase()`` for none): an object within ``SIZE_TOLERANCE`` of a
     catalogue size is planned as that catalogue object resting on the table, so
     every class's grasp is a stored one and only the arm's IK and paths are
-    computed. A kind or size the database lacks is searched (within the budgets) and
-    the answer reused for the rest of the process (``plan_grasp``'s ``cache``)."""
+    computed. Another size of a stored class and kind gets the nearest stored grasp
+    adapted to it (``adapt_grasp``); a class and kind the database lacks is searched
+    (within the budgets) and the answer reused for the rest of the process
+    (``plan_grasp``'s ``cache``)."""
 
     _check_target(scenario, target, kind)
     ratio = scenario.hand.coupling_ratio or 1.0
@@ -283,11 +316,18 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     size, X_WO = _as_catalogue(scenario, kind, size, X_WO)
     spec = ObjectSpec(kind=kind, size=size)
     q_start = np.asarray(q_start, dtype=float)
-    attempts, seconds = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}
-    for cls in classes or CLASS_ORDER[kind]:
+    attempts, seconds, log = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}, []
+    searched = 0.0  # s of grasp searches (what total_budget bounds)
+    # First every class from the database (stored or adapted: no search, no clock), then
+    # the searches within the budgets, for the classes the database could not serve.
+    order = list(classes or CLASS_ORDER[kind])
+    passes = [(cls, False) for cls in order] + [(cls, True) for cls in order]
+    for cls, search in passes:
+        if search and not attempts.get(cls, "").startswith(_NOT_STORED):
+            continue  # the database served it (the arm did not reach it), or no size fits
         budget = grasp_budget
-        if total_budget is not None:
-            left = total_budget - seconds["grasp"]
+        if search and total_budget is not None:
+            left = total_budget - searched
             if left <= 0:
                 attempts[cls] = f"not tried: the grasp planning budget ({total_budget} s) is spent"
                 continue
@@ -295,45 +335,138 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
         start = time.perf_counter()
         stored = grasp_key(cls, spec, X_WO.translation()[2] - scenario.table.top_height,
                            ratio) in grasp_db
+        if not stored and not search:
+            # Adapting takes 0.1-0.8 s a class: first whether the arm reaches the stored
+            # grasp it would start from (its hand poses are within mm of the adapted one's).
+            reason = _stored_grasp_unreachable(scenario, reach, cls, kind, spec, X_WO,
+                                               base, ratio, hand, grasp_db, q_start, seconds)
+            if reason:
+                attempts[cls] = reason
+                log.append((cls, "unreachable", time.perf_counter() - start))
+                seconds["grasp"] += time.perf_counter() - start
+                continue
         try:
             grasp = plan_grasp(cls, spec, X_WO, table_height=scenario.table.top_height,
                                reach_direction=X_WO.translation()[:2] - base[:2],
-                               coupling_ratio=ratio, time_budget=budget,
-                               database=grasp_db)
+                               coupling_ratio=ratio, time_budget=budget if search else None,
+                               database=grasp_db, search=search)
         except ValueError as error:
-            attempts[cls] = f"no grasp plan: {str(error)[:100]}"
-            seconds["grasp"] += time.perf_counter() - start
+            attempts[cls] = f"no grasp plan: {error}"
+            spent = time.perf_counter() - start
+            seconds["grasp"] += spent
+            searched += spent if search else 0.0
+            log.append((cls, "failed", spent))
             continue
-        seconds["grasp"] += time.perf_counter() - start
-        q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
-        q_closed = actuated_to_joint_positions(hand, grasp.close_command, ratio)
-        X_OB = X_WO.inverse() @ grasp.X_WB
-        chain = [("pregrasp", grasp.X_WB_pregrasp, q_open, grasp.preshape_command),
-                 ("grasp", grasp.X_WB, q_open, grasp.preshape_command),
-                 ("close", None, q_closed, grasp.close_command),
-                 ("lift", grasp.lifted(), q_closed, grasp.close_command)]
-        waypoints = [Waypoint("start", q_start, grasp.preshape_command)]
-        reason = _solve_chain(reach, chain, waypoints, seconds)
-        X_release = None
-        if not reason:
-            reason = "no IK for the carry and release poses at any turn over the hole"
-            for X_WO_rel, X_WB_rel in _release_poses(scenario, kind, spec, X_WO, X_OB):
-                tail = [("carry", _raised(X_WB_rel, CARRY_HEIGHT), q_closed, grasp.close_command),
-                        ("release", X_WB_rel, q_closed, grasp.close_command),
-                        ("open", None, q_open, grasp.preshape_command)]
-                trial = list(waypoints)
-                if not _solve_chain(reach, tail, trial, seconds):
-                    waypoints, X_release, reason = trial, X_WO_rel, ""
-                    break
-        if not reason:
-            reason = _connect(reach, waypoints, seconds)
-        if reason:
-            attempts[cls] = reason
-            continue
-        return PickPlan(target, kind, cls, grasp, waypoints, X_WO, X_release, seconds, attempts,
-                        stored)
+        spent = time.perf_counter() - start
+        seconds["grasp"] += spent
+        searched += spent if search else 0.0
+        source = "stored" if stored else "adapted" if grasp.adapted_from else "searched"
+        log.append((cls, source, spent))
+        reasons, needs_search = [], []
+        # Every turn with straight joint paths first, then the turns that only lacked one
+        # with the path search (KinematicTrajectoryOptimization: a failing one took
+        # 11-134 s on held-out seed 505, whose grasp turned 20 deg needs no search).
+        for search_paths in (False, True):
+            for turn in (_turns(kind, cls) if not search_paths else needs_search):
+                turned = grasp
+                if turn:
+                    try:
+                        turned = plan_grasp(cls, spec, _turned(X_WO, turn),
+                                            table_height=scenario.table.top_height,
+                                            reach_direction=X_WO.translation()[:2] - base[:2],
+                                            coupling_ratio=ratio, database=grasp_db,
+                                            search=False)
+                    except ValueError:
+                        continue
+                waypoints, X_release, reason = _pick_chain(
+                    scenario, reach, kind, spec, X_WO, turned, q_start, ratio, hand, seconds,
+                    search_paths)
+                if not reason:
+                    return PickPlan(target, kind, cls, turned, waypoints, X_WO, X_release,
+                                    seconds, attempts, source, log)
+                if reason.startswith(_NO_STRAIGHT):
+                    needs_search.append(turn)
+                else:
+                    reasons.append(reason)
+        reasons = reasons or ["no grasp at any turn"]
+        attempts[cls] = reasons[0] if len(set(reasons)) == 1 else "; ".join(
+            dict.fromkeys(reasons))
     raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
         f"{c}: {r}" for c, r in attempts.items()))
+
+
+def _stored_grasp_unreachable(scenario, reach, cls, kind, spec, X_WO, base, ratio, hand,
+                              grasp_db, q_start, seconds) -> str:
+    """Why the arm reaches the pre-grasp and grasp poses of no turn (``GRASP_TURNS``) of
+    the class's stored grasp on the catalogue object of this kind nearest in size
+    (resting where ``X_WO`` stands), or "" (it reaches one, or there is no such stored
+    grasp to judge by)."""
+    box = scenario.sorting_box
+    sizes = [h.size for h in (box.holes if box is not None else []) if h.kind == kind
+             and h.size]
+    if not sizes:
+        return ""
+    known = ObjectSpec(kind=kind, size=float(min(sizes, key=lambda v: abs(v - spec.size))))
+    z = scenario.table.top_height + resting_height(known)
+    X_known = RigidTransform(X_WO.rotation(), [*X_WO.translation()[:2], z])
+    reason = ""
+    for turn in _turns(kind, cls):
+        try:
+            grasp = plan_grasp(cls, known, _turned(X_known, turn),
+                               table_height=scenario.table.top_height,
+                               reach_direction=X_WO.translation()[:2] - base[:2],
+                               coupling_ratio=ratio, database=grasp_db, search=False)
+        except ValueError:
+            return ""
+        q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
+        chain = [("pregrasp", grasp.X_WB_pregrasp, q_open, grasp.preshape_command),
+                 ("grasp", grasp.X_WB, q_open, grasp.preshape_command)]
+        reason = _solve_chain(reach, chain, [Waypoint("start", q_start,
+                                                      grasp.preshape_command)], seconds)
+        if not reason:
+            return ""
+    return f"{reason} (of the stored {known.size * 100:.1f} cm grasp, before adapting it)"
+
+
+def _turns(kind: str, cls: str) -> tuple:
+    """The turns (rad) of ``cls``'s grasp on a ``kind`` tried in turn."""
+    return GRASP_TURNS.get(kind, (0.0,)) if cls in TURNED_CLASSES else (0.0,)
+
+
+def _turned(X: RigidTransform, yaw: float) -> RigidTransform:
+    """``X`` turned by ``yaw`` about its own vertical axis."""
+    return RigidTransform(X.rotation() @ RotationMatrix.MakeZRotation(yaw), X.translation())
+
+
+def _pick_chain(scenario, reach, kind, spec, X_WO, grasp, q_start, ratio, hand, seconds,
+                search_paths: bool = True):
+    """``(waypoints, X_WO_release, reason)`` of one grasp: the arm's IK of the pre-grasp,
+    grasp, lift, carry and release (each turn over the hole in turn) and the paths
+    between them (``search_paths`` False: straight joint segments only); ``reason``
+    empty when the whole chain exists."""
+    q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
+    q_closed = actuated_to_joint_positions(hand, grasp.close_command, ratio)
+    X_OB = X_WO.inverse() @ grasp.X_WB
+    chain = [("pregrasp", grasp.X_WB_pregrasp, q_open, grasp.preshape_command),
+             ("grasp", grasp.X_WB, q_open, grasp.preshape_command),
+             ("close", None, q_closed, grasp.close_command),
+             ("lift", grasp.lifted(), q_closed, grasp.close_command)]
+    waypoints = [Waypoint("start", q_start, grasp.preshape_command)]
+    reason = _solve_chain(reach, chain, waypoints, seconds)
+    X_release = None
+    if not reason:
+        reason = "no IK for the carry and release poses at any turn over the hole"
+        for X_WO_rel, X_WB_rel in _release_poses(scenario, kind, spec, X_WO, X_OB):
+            tail = [("carry", _raised(X_WB_rel, CARRY_HEIGHT), q_closed, grasp.close_command),
+                    ("release", X_WB_rel, q_closed, grasp.close_command),
+                    ("open", None, q_open, grasp.preshape_command)]
+            trial = list(waypoints)
+            if not _solve_chain(reach, tail, trial, seconds):
+                waypoints, X_release, reason = trial, X_WO_rel, ""
+                break
+    if not reason:
+        reason = _connect(reach, waypoints, seconds, search_paths)
+    return waypoints, X_release, reason
 
 
 def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransform):
@@ -380,7 +513,10 @@ def _solve_chain(reach, chain, waypoints, seconds) -> str:
     return ""
 
 
-def _connect(reach, waypoints, seconds) -> str:
+_NO_STRAIGHT = "no straight collision-free path"
+
+
+def _connect(reach, waypoints, seconds, search_paths: bool = True) -> str:
 
     start = time.perf_counter()
     hand = get_hand_spec(reach.hand_spec.name)
@@ -392,6 +528,8 @@ def _connect(reach, waypoints, seconds) -> str:
             q_hand = actuated_to_joint_positions(hand, a.hand, reach.coupling_ratio)
             if reach.path_is_free(a.q, b.q, q_hand):
                 continue
+            if not search_paths:
+                return f"{_NO_STRAIGHT} from {a.label} to {b.label}"
             path = free_path(reach, a.q, b.q, q_hand)
             if path is None:
                 return f"no collision-free path from {a.label} to {b.label}"
