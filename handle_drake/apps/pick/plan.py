@@ -152,6 +152,9 @@ class PickPlan:
     seconds: dict  # grasp planning, IK and path times (s)
     attempts: dict  # class -> reason it was not taken
     grasp_stored: bool = False  # the grasp came from the grasp database
+    # Hand joints the arm's IK set per waypoint (an arm with fewer than six joints:
+    # the wrist, reach.ArmReach); the hand's commands carry them.
+    wrist_from_ik: tuple[str, ...] = ()
 
     def summary(self) -> str:
         t = self.seconds
@@ -305,7 +308,8 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                  ("close", None, q_closed, grasp.close_command),
                  ("lift", grasp.lifted(), q_closed, grasp.close_command)]
         waypoints = [Waypoint("start", q_start, grasp.preshape_command)]
-        reason = _solve_chain(reach, chain, waypoints, seconds)
+        symmetry = (kind, X_OB.inverse().translation())  # used by arms with < 6 joints
+        reason = _solve_chain(reach, chain, waypoints, seconds, symmetry)
         X_release = None
         if not reason:
             reason = "no IK for the carry and release poses at any turn over the hole"
@@ -314,7 +318,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                         ("release", X_WB_rel, q_closed, grasp.close_command),
                         ("open", None, q_open, grasp.preshape_command)]
                 trial = list(waypoints)
-                if not _solve_chain(reach, tail, trial, seconds):
+                if not _solve_chain(reach, tail, trial, seconds, symmetry):
                     waypoints, X_release, reason = trial, X_WO_rel, ""
                     break
         if not reason:
@@ -323,7 +327,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
             attempts[cls] = reason
             continue
         return PickPlan(target, kind, cls, grasp, waypoints, X_WO, X_release, seconds, attempts,
-                        stored)
+                        stored, tuple(getattr(reach, "free_hand_joints", ())))
     raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
         f"{c}: {r}" for c, r in attempts.items()))
 
@@ -350,7 +354,8 @@ def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransfor
                 ("release", X_WB_rel, q_closed, grasp.close_command),
                 ("open", None, q_open, grasp.preshape_command)]
         trial = list(head)
-        if _solve_chain(reach, tail, trial, seconds):
+        if _solve_chain(reach, tail, trial, seconds,
+                        (plan.kind, X_OB_measured.inverse().translation())):
             continue
         moved = trial[len(head) - 1:]
         if not _connect(reach, moved, seconds):
@@ -358,18 +363,41 @@ def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransfor
     return None
 
 
-def _solve_chain(reach, chain, waypoints, seconds) -> str:
+def _solve_chain(reach, chain, waypoints, seconds, symmetry=None) -> str:
+    """IK for each ``(label, X_WB, q_hand, command)`` of ``chain``, appended to
+    ``waypoints``; ``symmetry``: the grasped object's (:meth:`ArmReach.solve`)."""
+    options = {} if symmetry is None else {"symmetry": symmetry}
     for label, X, q_hand, command in chain:
         previous = waypoints[-1]
         if X is None:  # the hand changes posture where the arm stands
-            waypoints.append(Waypoint(label, previous.q, command))
+            waypoints.append(Waypoint(label, previous.q,
+                                      _with_wrist(reach, command, previous.hand)))
             continue
-        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=2)
+        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=2,
+                                        **options)
         seconds["ik"] += result.seconds
         if not result.ok:
             return f"no IK for the {label} pose"
+        if result.q_hand is not None:  # an arm with < 6 joints moved the hand's wrist
+            hand_names = reach.hand_spec.joint_names
+            command = _with_wrist(reach, command, None, {
+                n: result.q_hand[hand_names.index(n)] for n in reach.free_hand_joints})
         waypoints.append(Waypoint(label, result.q, command))
     return ""
+
+
+def _with_wrist(reach, command, source=None, values=None):
+    """``command`` with the IK's wrist joints (``reach.free_hand_joints``, arms with
+    fewer than six joints) from ``values`` (name -> rad) or the command ``source``."""
+    free = getattr(reach, "free_hand_joints", ())
+    if not free or (source is None and values is None):
+        return command
+    names = list(reach.hand_spec.actuated_joint_names)
+    out = np.array(command, dtype=float)
+    for name in free:
+        i = names.index(name)
+        out[i] = values[name] if values is not None else source[i]
+    return out
 
 
 def _connect(reach, waypoints, seconds) -> str:
