@@ -83,7 +83,7 @@ def _inertia(mass, shape):
 
 
 def _fmt(values) -> str:
-    return " ".join(f"{v:.6g}" for v in values)
+    return " ".join(f"{v:.12g}" for v in values)
 
 
 def _link(name: str, pose: str) -> str:
