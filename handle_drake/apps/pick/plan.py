@@ -31,6 +31,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
+from handle_drake.devices.arm.config import Arm
 from handle_drake.geometry.objects import ObjectSpec, resting_height
 from handle_drake.grasp.database import GraspDatabase, build_database
 from handle_drake.grasp.planning import grasp_key, plan_grasp
@@ -179,6 +180,13 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
     else:
         yaws = [yaw0 + k * math.pi / 2 for k in (0, 1, -1, 2)]
     yaws.sort(key=lambda y: abs((y - yaw0 + math.pi) % (2 * math.pi) - math.pi))
+    if kind == "sphere" and isinstance(scenario.hand.mount, Arm):
+        # Last: the turn that keeps the hand on the same side of the sphere as seen from
+        # the arm's base, which an arm with fewer than six joints may need.
+        base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()
+        p_WO = X_WO.translation()
+        yaws.append(yaw0 + math.atan2(centre[1] - base[1], centre[0] - base[0])
+                    - math.atan2(p_WO[1] - base[1], p_WO[0] - base[0]))
     out = []
     for yaw in yaws:
         X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
