@@ -101,6 +101,11 @@ def test_kinematics_match_the_readme():
     assert rotate[2] == pytest.approx(_number(_row("elbow to the hand support")[1]), abs=1e-9)
     # The shoulder's height above the base plate, as the README sums it.
     assert joint_origin("ShoulderJSwing").translation()[2] == pytest.approx(0.5405, abs=1e-9)
+    # The spec's closed-form lengths: base to shoulder, upper arm, elbow to flange.
+    flange = plant.GetFrameByName("flange", arm).CalcPoseInWorld(context).translation()
+    assert np.linalg.norm(flange - joint_origin("ElbowJSwing").translation()) == pytest.approx(
+        SPEC.lengths[2], abs=1e-9)
+    assert SPEC.lengths[:2] == pytest.approx((0.5405, 0.369), abs=1e-12)
     # At q = 0 the arm hangs straight down: the elbow below the shoulder.
     np.testing.assert_allclose(joint_origin("ElbowJSwing").translation(),
                                [0, -0.134, 0.5405 - 0.369], atol=1e-9)

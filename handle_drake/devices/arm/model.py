@@ -83,7 +83,9 @@ ARM_SPECS = {
         velocity=(1.0, 1.0, 1.0, 1.0),
         kp=(1200.0, 1600.0, 800.0, 400.0),
         kd=(120.0, 120.0, 50.0, 20.0),
-        lengths=(0.5405, 0.369, 0.131, 0.080),
+        # Base to shoulder, upper arm, elbow to flange (hypot of 0.131 and 0.080), no
+        # wrist: the same closed-form meaning as the PA10's.
+        lengths=(0.5405, 0.369, math.hypot(0.131, 0.080), 0.0),
         links=("base", "trunk", "upperarm", "lowerarm", "handsupport"),
     ),
 }
