@@ -355,6 +355,12 @@ def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransfor
     head = [dc.replace(w) for w in plan.waypoints[:labels.index("lift") + 1]]
     spec = grasp.object_spec
     X_WO_lift = reach.hand_pose(head[-1].q) @ X_OB_measured.inverse()
+    if getattr(reach, "free_hand_joints", ()):
+        # The IK moved the wrist at the lift: the object as held in the palm there, given
+        # to the release's IK with the plan's wrist (which it turns into a palm pose).
+        q_lift = actuated_to_joint_positions(hand, head[-1].hand, ratio)
+        X_PO = reach.palm_in_base(q_lift).inverse() @ X_OB_measured.inverse()
+        X_OB_measured = (reach.palm_in_base(q_closed) @ X_PO).inverse()
     seconds = {"ik": 0.0, "path": 0.0}
     for X_WO_rel, X_WB_rel in _release_poses(scenario, plan.kind, spec, X_WO_lift,
                                               X_OB_measured):

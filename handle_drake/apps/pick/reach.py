@@ -20,7 +20,8 @@ body after them) where the plan's posture would put it: the hand's base may
 then move, the palm and fingers are where the grasp wants them.
 :attr:`IkResult.q_hand` holds the hand's joints with the wrist so solved. Six
 joints (four and the wrist's two) reach few of the grasp planner's poses exactly
-(measured on diagrams/paris_setup.yaml: 5 of 24 pre-grasp and grasp poses), so
+(8 of 24 pre-grasp and grasp poses of three classes on a sphere in a Paris
+layout; 17 of 24 with the symmetry below: docs/results/paris.md), so
 such an arm may also use the grasped object's symmetry (``symmetry=(kind,
 p_BO)``, the object's centre in the hand base frame): a sphere's grasp is the
 same turned about its centre (up to :data:`SPHERE_TURN` rad from the plan), an
@@ -147,6 +148,13 @@ class ArmReach:
         query = self.query_port.Eval(self.plant_context)
         pairs = query.ComputeSignedDistancePairwiseClosestPoints(max_distance)
         return min((p.distance for p in pairs), default=max_distance)
+
+    def palm_in_base(self, q_hand) -> RigidTransform:
+        """The IK's target frame (the palm for an arm with fewer than six joints, else
+        the hand's base) in the hand's base frame at the hand joints ``q_hand``."""
+        self.plant.SetPositions(self.plant_context,
+                                self.positions(np.zeros(len(self._arm_q)), q_hand))
+        return self.target_frame.CalcPose(self.plant_context, self.base_frame)
 
     def hand_pose(self, q_arm, q_hand=None) -> RigidTransform:
         q_hand = np.zeros(len(self._hand_q)) if q_hand is None else q_hand
