@@ -288,3 +288,47 @@ def test_ik_reaches_the_pregrasp_of_a_reachable_sphere(reach):
     fixed = [i for i, n in enumerate(names) if n not in ("WRJ2", "WRJ1")]
     np.testing.assert_allclose(result.q_hand[fixed], q_open[fixed])
     assert ik.min_distance(result.q, result.q_hand) >= 0.003 - 1e-4
+
+
+def test_the_pick_plan_carries_the_wrist_the_ik_chose_in_the_hand_commands():
+    """plan_pick on the Paris scene's sphere (true pose): every waypoint's hand command
+    holds the wrist its IK chose (the close and the open keep the one before), and by
+    forward kinematics with those commands the sphere's centre sits in the palm where
+    the planned grasp has it, at the grasp and the lift."""
+    from handle_drake.apps.pick.plan import plan_pick
+    from handle_drake.base.hands import actuated_to_joint_positions
+    from handle_drake.scene.config import initial_pose, scene_objects
+
+    scenario = LoadScenario(filename=PARIS)
+    scenario.cameras = []
+    (name, target), *_ = scene_objects(scenario)
+    X_WO = initial_pose(target, scenario.table)
+    ik = ArmReach(scenario, ignore=(name,))
+    plan = plan_pick(scenario, ik, name, target.kind, target.size, X_WO,
+                     scenario.hand.mount.initial_position)
+    assert plan.wrist_from_ik == ("WRJ2", "WRJ1")
+    actuated = list(ik.hand_spec.actuated_joint_names)
+    wrist = [actuated.index("WRJ2"), actuated.index("WRJ1")]
+    by_label = {w.label: w for w in plan.waypoints}
+    np.testing.assert_array_equal(by_label["close"].hand[wrist], by_label["grasp"].hand[wrist])
+    np.testing.assert_array_equal(by_label["open"].hand[wrist], by_label["release"].hand[wrist])
+    # The planned grasp's sphere centre in the palm (the plan's own wrist).
+    ratio = scenario.hand.coupling_ratio
+    q_planned = actuated_to_joint_positions(ik.hand_spec, plan.grasp.preshape_command, ratio)
+    X_BP = _palm_of_base_at(ik, q_planned)
+    p_PO = X_BP.inverse() @ (plan.grasp.X_WB.inverse() @ X_WO.translation())
+    for label, lifted in (("grasp", 0.0), ("lift", None)):
+        w = by_label[label]
+        q_hand = actuated_to_joint_positions(ik.hand_spec, w.hand, ratio)
+        X_palm = _fk_palm(ik, w.q, q_hand)
+        want = X_WO.translation() if lifted is not None else (
+            plan.grasp.lifted() @ plan.grasp.X_WB.inverse() @ X_WO.translation())
+        np.testing.assert_allclose(X_palm @ p_PO, want, atol=0.0036)
+
+
+def _palm_of_base_at(ik, q_hand):
+    plant = ik.plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, ik.positions(np.zeros(4), q_hand))
+    forearm = plant.GetBodyByName(ik.hand_spec.base_body, ik.hand).body_frame()
+    return plant.GetBodyByName("palm", ik.hand).body_frame().CalcPose(context, forearm)
