@@ -75,7 +75,9 @@ from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.sensor import check_sensor_pose
 from handle_drake.devices.accelerometer.wiring import instrument_X_OS
 from handle_drake.devices.arm.config import Arm, validate_arm
+from handle_drake.devices.arm.model import ARM_SPECS
 from handle_drake.devices.camera.config import (
+    ARM_PARENT_PREFIX,
     CAMERA_PARENTS,
     CameraConfig,
     DepthCamera,
@@ -713,9 +715,12 @@ def _validate_cameras(scenario: Scenario) -> None:
             get_profile(camera.profile)
         except ValueError as error:
             raise ScenarioError(f"{where}.profile: {error}") from None
-        if camera.parent not in CAMERA_PARENTS:
+        if camera.parent.startswith(ARM_PARENT_PREFIX):
+            _check_arm_camera_parent(scenario, camera.parent, where)
+        elif camera.parent not in CAMERA_PARENTS:
             raise ScenarioError(f"{where}.config.X_PB.base_frame: expected one of "
-                                f"{list(CAMERA_PARENTS)}, got {short(camera.parent)}")
+                                f"{list(CAMERA_PARENTS)} or arm::<link>, got "
+                                f"{short(camera.parent)}")
         resolve_camera_config(camera, where, ScenarioError)
         _check_transform(f"{where}.config.X_PB", camera.config.X_PB)
         if camera.parent == "world" and scenario.table is not None:
@@ -739,6 +744,20 @@ def _validate_cameras(scenario: Scenario) -> None:
             if np.linalg.norm(np.asarray(camera.target) - eye) < 1e-6:
                 raise ScenarioError(f"{where}.target: the camera cannot look at its own "
                                     f"position {eye.tolist()}")
+
+
+def _check_arm_camera_parent(scenario: Scenario, parent: str, where: str) -> None:
+    """``arm::<link>``: the hand is on an ``!Arm`` that has that link."""
+    mount = scenario.hand.mount
+    if not isinstance(mount, Arm):
+        raise ScenarioError(f"{where}.config.X_PB.base_frame: {short(parent)} needs the hand on "
+                            f"an !Arm mount (hand.mount)")
+    links = ARM_SPECS[mount.kind].links
+    link = parent[len(ARM_PARENT_PREFIX):]
+    if link not in links:
+        raise ScenarioError(f"{where}.config.X_PB.base_frame: the {mount.kind} arm has no link "
+                            f"{short(link)}; expected one of "
+                            f"{[ARM_PARENT_PREFIX + n for n in links]}")
 
 
 def _finite_vector(name: str, values, size: int) -> None:

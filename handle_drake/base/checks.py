@@ -263,6 +263,11 @@ class _Walker:
             name = self._key(key, path, seen)
             where = f"{path}.{name}"
             if name == "base_frame":
+                # A camera names its parent frame (world, wrist or arm::<link>; the
+                # scenario's camera check names the allowed ones).
+                camera = path.startswith("cameras[") and path.endswith("].config.X_PB")
+                if camera and isinstance(value, yaml.ScalarNode) and value.tag == _STR:
+                    continue
                 if not (_is_null(value) or (isinstance(value, yaml.ScalarNode)
                                             and value.value == "world")):
                     raise _error(where, "'world' (poses are in the world frame)",

@@ -128,9 +128,11 @@ class _HandSwitch(LeafSystem):
     """``hand.position``: the scripted command, but the reactive controller's between
     ``t_from`` and ``t_to`` (the close, the lift and the carry)."""
 
-    def __init__(self, nu: int, t_from: float, t_to: float):
+    def __init__(self, nu: int, t_from: float, t_to: float, scripted_only=()):
         super().__init__()
         self._window = (float(t_from), float(t_to))
+        # Command entries always from the script (the wrist an arm's IK moves).
+        self._scripted_only = np.asarray(scripted_only, dtype=int)
         self._scripted = self.DeclareVectorInputPort("scripted", nu)
         self._reactive = self.DeclareVectorInputPort("reactive", nu)
         self.DeclareVectorOutputPort("hand_position", nu, self._output)
@@ -142,7 +144,12 @@ class _HandSwitch(LeafSystem):
     def _output(self, context, output: BasicVector):
         t = context.get_time()
         inside = self._window[0] <= t < self._window[1]
-        output.SetFromVector((self._reactive if inside else self._scripted).Eval(context))
+        if not inside:
+            output.SetFromVector(self._scripted.Eval(context))
+            return
+        value = np.array(self._reactive.Eval(context))
+        value[self._scripted_only] = self._scripted.Eval(context)[self._scripted_only]
+        output.SetFromVector(value)
 
 
 @dc.dataclass
@@ -188,7 +195,9 @@ def _timeline(plan, velocity, close_time=CLOSE_TIME, hold_time=HOLD_TIME):
             t += dt
             times.append(t)
             arm.append(q)
-            hand.append(b.hand if b.label in ("close", "open") else a.hand)
+            # b's command: a's but at the close and the open, and for an arm with fewer
+            # than six joints the wrist joints the IK set for b (plan.wrist_from_ik).
+            hand.append(b.hand)
             previous = q
         if b.label == "close" and hold_time > 0:
             t += hold_time
@@ -210,8 +219,10 @@ def _connect_reactive_close(builder, station, scenario, plan, marks, scripted_po
         params=dc.replace(REACTIVE_PARAMS, arrival_timeout=1e3)))
     trigger = builder.AddNamedSystem("close_trigger", _CloseTrigger(
         len(groups), goal, marks["grasp"]))
+    names = get_hand_spec(kind).actuated_joint_names
     switch = builder.AddNamedSystem("hand_switch", _HandSwitch(
-        get_hand_spec(kind).num_actuated, marks["grasp"], marks["release"]))
+        len(names), marks["grasp"], marks["release"],
+        [names.index(n) for n in getattr(plan, "wrist_from_ik", ())]))
     builder.Connect(station.GetOutputPort("hand.tactile"), trigger.get_input_port())
     builder.Connect(trigger.GetOutputPort("tactile"), controller.get_tactile_input_port())
     builder.Connect(trigger.GetOutputPort("wrist_pose_measured"),

@@ -33,6 +33,8 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
+from handle_drake.devices.arm.config import Arm
+from handle_drake.devices.arm.model import get_arm_spec
 from handle_drake.geometry.objects import ObjectSpec, resting_height
 from handle_drake.grasp.database import GraspDatabase, build_database
 from handle_drake.grasp.planning import grasp_key, plan_grasp
@@ -178,6 +180,9 @@ class PickPlan:
     grasp_source: str = "searched"  # one of GRASP_SOURCES
     # Per class tried, in order: (class, where its grasp came from or "failed", seconds).
     grasp_log: list = dc.field(default_factory=list)
+    # Hand joints the arm's IK set per waypoint (an arm with fewer than six joints:
+    # the wrist, reach.ArmReach); the hand's commands carry them.
+    wrist_from_ik: tuple[str, ...] = ()
 
     @property
     def grasp_stored(self) -> bool:
@@ -207,6 +212,15 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
     else:
         yaws = [yaw0 + k * math.pi / 2 for k in (0, 1, -1, 2)]
     yaws.sort(key=lambda y: abs((y - yaw0 + math.pi) % (2 * math.pi) - math.pi))
+    mount = scenario.hand.mount
+    if kind == "sphere" and isinstance(mount, Arm) and len(
+            get_arm_spec(mount.kind).joint_names) < 6:
+        # Last: the turn that keeps the hand on the same side of the sphere as seen from
+        # the arm's base, which an arm with fewer than six joints may need.
+        base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()
+        p_WO = X_WO.translation()
+        yaws.append(yaw0 + math.atan2(centre[1] - base[1], centre[0] - base[0])
+                    - math.atan2(p_WO[1] - base[1], p_WO[0] - base[0]))
     out = []
     for yaw in yaws:
         X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
@@ -383,7 +397,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                     search_paths)
                 if not reason:
                     return PickPlan(target, kind, cls, turned, waypoints, X_WO, X_release,
-                                    seconds, attempts, source, log)
+                                    seconds, attempts, source, log, _free_joints(reach))
                 if reason.startswith(_NO_STRAIGHT):
                     needs_search.append(turn)
                 else:
@@ -421,8 +435,10 @@ def _stored_grasp_unreachable(scenario, reach, cls, kind, spec, X_WO, base, rati
         q_open = actuated_to_joint_positions(hand, grasp.preshape_command, ratio)
         chain = [("pregrasp", grasp.X_WB_pregrasp, q_open, grasp.preshape_command),
                  ("grasp", grasp.X_WB, q_open, grasp.preshape_command)]
+        symmetry = (kind, (grasp.X_WB.inverse() @ X_known).translation())  # as _pick_chain
         reason = _solve_chain(reach, chain, [Waypoint("start", q_start,
-                                                      grasp.preshape_command)], seconds)
+                                                      grasp.preshape_command)], seconds,
+                              symmetry)
         if not reason:
             return ""
     return f"{reason} (of the stored {known.size * 100:.1f} cm grasp, before adapting it)"
@@ -452,7 +468,8 @@ def _pick_chain(scenario, reach, kind, spec, X_WO, grasp, q_start, ratio, hand, 
              ("close", None, q_closed, grasp.close_command),
              ("lift", grasp.lifted(), q_closed, grasp.close_command)]
     waypoints = [Waypoint("start", q_start, grasp.preshape_command)]
-    reason = _solve_chain(reach, chain, waypoints, seconds)
+    symmetry = (kind, X_OB.inverse().translation())  # used by arms with < 6 joints
+    reason = _solve_chain(reach, chain, waypoints, seconds, symmetry)
     X_release = None
     if not reason:
         reason = "no IK for the carry and release poses at any turn over the hole"
@@ -461,7 +478,7 @@ def _pick_chain(scenario, reach, kind, spec, X_WO, grasp, q_start, ratio, hand, 
                     ("release", X_WB_rel, q_closed, grasp.close_command),
                     ("open", None, q_open, grasp.preshape_command)]
             trial = list(waypoints)
-            if not _solve_chain(reach, tail, trial, seconds):
+            if not _solve_chain(reach, tail, trial, seconds, symmetry):
                 waypoints, X_release, reason = trial, X_WO_rel, ""
                 break
     if not reason:
@@ -484,6 +501,12 @@ def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransfor
     head = [dc.replace(w) for w in plan.waypoints[:labels.index("lift") + 1]]
     spec = grasp.object_spec
     X_WO_lift = reach.hand_pose(head[-1].q) @ X_OB_measured.inverse()
+    if _free_joints(reach):
+        # The IK moved the wrist at the lift: the object as held in the palm there, given
+        # to the release's IK with the plan's wrist (which it turns into a palm pose).
+        q_lift = actuated_to_joint_positions(hand, head[-1].hand, ratio)
+        X_PO = reach.palm_in_base(q_lift).inverse() @ X_OB_measured.inverse()
+        X_OB_measured = (reach.palm_in_base(q_closed) @ X_PO).inverse()
     seconds = {"ik": 0.0, "path": 0.0}
     for X_WO_rel, X_WB_rel in _release_poses(scenario, plan.kind, spec, X_WO_lift,
                                               X_OB_measured):
@@ -491,7 +514,8 @@ def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransfor
                 ("release", X_WB_rel, q_closed, grasp.close_command),
                 ("open", None, q_open, grasp.preshape_command)]
         trial = list(head)
-        if _solve_chain(reach, tail, trial, seconds):
+        if _solve_chain(reach, tail, trial, seconds,
+                        (plan.kind, X_OB_measured.inverse().translation())):
             continue
         moved = trial[len(head) - 1:]
         if not _connect(reach, moved, seconds):
@@ -499,18 +523,47 @@ def replan_release(scenario, reach, plan: PickPlan, X_OB_measured: RigidTransfor
     return None
 
 
-def _solve_chain(reach, chain, waypoints, seconds) -> str:
+def _solve_chain(reach, chain, waypoints, seconds, symmetry=None) -> str:
+    """IK for each ``(label, X_WB, q_hand, command)`` of ``chain``, appended to
+    ``waypoints``; ``symmetry``: the grasped object's (:meth:`ArmReach.solve`)."""
+    options = {} if symmetry is None else {"symmetry": symmetry}
     for label, X, q_hand, command in chain:
         previous = waypoints[-1]
         if X is None:  # the hand changes posture where the arm stands
-            waypoints.append(Waypoint(label, previous.q, command))
+            waypoints.append(Waypoint(label, previous.q,
+                                      _with_wrist(reach, command, previous.hand)))
             continue
-        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=2)
+        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=2,
+                                        **options)
         seconds["ik"] += result.seconds
         if not result.ok:
             return f"no IK for the {label} pose"
+        if result.q_hand is not None:  # an arm with < 6 joints moved the hand's wrist
+            hand_names = reach.hand_spec.joint_names
+            command = _with_wrist(reach, command, None, {
+                n: result.q_hand[hand_names.index(n)] for n in reach.free_hand_joints})
         waypoints.append(Waypoint(label, result.q, command))
     return ""
+
+
+def _free_joints(reach) -> tuple[str, ...]:
+    """The hand joints ``reach``'s IK moves (its wrist: an arm with fewer than six
+    joints, :class:`handle_drake.apps.pick.reach.ArmReach`), else ()."""
+    return tuple(getattr(reach, "free_hand_joints", ()))
+
+
+def _with_wrist(reach, command, source=None, values=None):
+    """``command`` with the IK's wrist joints (``reach.free_hand_joints``, arms with
+    fewer than six joints) from ``values`` (name -> rad) or the command ``source``."""
+    free = _free_joints(reach)
+    if not free or (source is None and values is None):
+        return command
+    names = list(reach.hand_spec.actuated_joint_names)
+    out = np.array(command, dtype=float)
+    for name in free:
+        i = names.index(name)
+        out[i] = values[name] if values is not None else source[i]
+    return out
 
 
 _NO_STRAIGHT = "no straight collision-free path"

@@ -11,11 +11,28 @@ fingers at a given posture, every collision pair of the robot at least
 ``clearance`` apart (objects named in ``ignore`` excepted: the object being
 grasped is touched on purpose), starting from a seed (the previous
 configuration, so consecutive waypoints stay on one IK branch).
+
+An arm with fewer than six joints (Shadow's 4-DOF arm of the Paris platform)
+cannot put the hand's base at an arbitrary pose. Its IK frees the hand's wrist
+joints (:func:`wrist_joints`: the hand joints every finger hangs from; the
+Shadow hand's WRJ2 and WRJ1) within their limits and asks for the palm (the
+body after them) where the plan's posture would put it: the hand's base may
+then move, the palm and fingers are where the grasp wants them.
+:attr:`IkResult.q_hand` holds the hand's joints with the wrist so solved. Six
+joints (four and the wrist's two) reach few of the grasp planner's poses exactly
+(8 of 24 pre-grasp and grasp poses of three classes on a sphere in a Paris
+layout; 17 of 24 with the symmetry below: docs/results/paris.md), so
+such an arm may also use the grasped object's symmetry (``symmetry=(kind,
+p_BO)``, the object's centre in the hand base frame): a sphere's grasp is the
+same turned about its centre (up to :data:`SPHERE_TURN` rad from the plan), an
+upright cuboid's turned about the vertical through its centre (up to
+:data:`CUBOID_TURN` rad); the centre keeps its place in the hand.
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
+import itertools
 import time
 
 import numpy as np
@@ -31,7 +48,15 @@ from handle_drake.geometry.objects import AddObject, AddTable
 from handle_drake.scene.config import initial_pose, scene_objects, spec_of
 from handle_drake.scene.plant import AddSortingBox
 
-__all__ = ["ArmReach", "IkResult"]
+__all__ = ["ArmReach", "IkResult", "SPHERE_TURN", "CUBOID_TURN", "wrist_joints"]
+
+#: Largest turn (rad) of a sphere's grasp about its centre an arm with fewer than six
+#: joints may take instead of the planned one (ours: the fingers' approach stays
+#: within 30 deg of the planner's, whose table clearance the IK checks again).
+SPHERE_TURN = 0.5
+#: The same for an upright cuboid, about the vertical through its centre (ours:
+#: the fingers stay on the faces the grasp planned within 10 deg).
+CUBOID_TURN = 0.17
 
 
 @dc.dataclass
@@ -41,6 +66,8 @@ class IkResult:
     position_error: float = float("nan")  # m
     angle_error: float = float("nan")  # rad
     message: str = ""
+    # The hand's joints with the wrist joints solved (arms with fewer than six joints).
+    q_hand: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -98,6 +125,15 @@ class ArmReach:
         self._hand_q = np.array([plant.GetJointByName(n, self.hand).position_start()
                                  for n in self.hand_spec.joint_names])
         self.query_port = plant.get_geometry_query_input_port()
+        # Fewer than six arm joints: the hand's wrist joints join the IK (module doc).
+        self.free_hand_joints = () if len(self.spec.joint_names) >= 6 else wrist_joints(
+            plant, self.hand, self.hand_spec)
+        self._free_in_hand = np.array([self.hand_spec.joint_names.index(n)
+                                       for n in self.free_hand_joints], dtype=int)
+        self.target_frame = self.base_frame
+        if self.free_hand_joints:
+            last = plant.GetJointByName(self.free_hand_joints[-1], self.hand)
+            self.target_frame = last.child_body().body_frame()
 
     def positions(self, q_arm, q_hand) -> np.ndarray:
         q = np.zeros(self.plant.num_positions())
@@ -113,6 +149,13 @@ class ArmReach:
         pairs = query.ComputeSignedDistancePairwiseClosestPoints(max_distance)
         return min((p.distance for p in pairs), default=max_distance)
 
+    def palm_in_base(self, q_hand) -> RigidTransform:
+        """The IK's target frame (the palm for an arm with fewer than six joints, else
+        the hand's base) in the hand's base frame at the hand joints ``q_hand``."""
+        self.plant.SetPositions(self.plant_context,
+                                self.positions(np.zeros(len(self._arm_q)), q_hand))
+        return self.target_frame.CalcPose(self.plant_context, self.base_frame)
+
     def hand_pose(self, q_arm, q_hand=None) -> RigidTransform:
         q_hand = np.zeros(len(self._hand_q)) if q_hand is None else q_hand
         self.plant.SetPositions(self.plant_context, self.positions(q_arm, q_hand))
@@ -120,7 +163,7 @@ class ArmReach:
 
     def solve(self, X_WB: RigidTransform, q_seed, q_hand, clearance: float = 0.003,
               position_tolerance: float = 0.002, angle_tolerance: float = 0.02,
-              collision: bool = True) -> IkResult:
+              collision: bool = True, symmetry=None) -> IkResult:
         """Arm joints putting the hand base at ``X_WB`` (see the module doc).
 
         Two stages: the kinematic problem alone (fast; when it has no solution
@@ -129,22 +172,41 @@ class ArmReach:
         start = time.perf_counter()
         q_hand = np.asarray(q_hand, dtype=float)
         seed = self.positions(q_seed, q_hand)
-        result, q = self._solve(X_WB, seed, q_hand, None, position_tolerance, angle_tolerance)
+        X_target = X_WB
+        if self.free_hand_joints:  # the palm where the posture puts it (module doc)
+            self.plant.SetPositions(self.plant_context, seed)
+            X_target = X_WB @ self.target_frame.CalcPose(self.plant_context, self.base_frame)
+        pivot = None
+        if self.free_hand_joints and symmetry is not None and symmetry[0] in (
+                "sphere", "cuboid"):
+            # The object's centre in the palm frame, and where it is in world.
+            kind, p_BO = symmetry
+            X_BP = X_WB.inverse() @ X_target
+            pivot = (kind, X_BP.inverse() @ np.asarray(p_BO, dtype=float),
+                     X_WB @ np.asarray(p_BO, dtype=float))
+        result, q = self._solve(X_target, seed, q_hand, None, position_tolerance,
+                                angle_tolerance, pivot)
         if result.is_success() and collision:
             seed = result.GetSolution(q)
-            if self.min_distance(seed[self._arm_q], q_hand, 0.03) < clearance:
-                result, q = self._solve(X_WB, seed, q_hand, clearance, position_tolerance,
-                                        angle_tolerance)
+            if self.min_distance(seed[self._arm_q], seed[self._hand_q], 0.03) < clearance:
+                result, q = self._solve(X_target, seed, q_hand, clearance, position_tolerance,
+                                        angle_tolerance, pivot)
         seconds = time.perf_counter() - start
         if not result.is_success():
             return IkResult(None, seconds, message=f"IK failed ({result.get_solver_id().name()})")
-        q_arm = result.GetSolution(q)[self._arm_q]
-        X = self.hand_pose(q_arm, q_hand)
-        return IkResult(q_arm, seconds, float(np.linalg.norm(X.translation() - X_WB.translation())),
-                        float(X.rotation().InvertAndCompose(X_WB.rotation()).ToAngleAxis()
-                              .angle()))
+        solution = result.GetSolution(q)
+        q_arm = solution[self._arm_q]
+        solved_hand = solution[self._hand_q] if self.free_hand_joints else None
+        self.plant.SetPositions(self.plant_context, self.positions(
+            q_arm, q_hand if solved_hand is None else solved_hand))
+        X = self.target_frame.CalcPoseInWorld(self.plant_context)
+        return IkResult(q_arm, seconds,
+                        float(np.linalg.norm(X.translation() - X_target.translation())),
+                        float(X.rotation().InvertAndCompose(X_target.rotation()).ToAngleAxis()
+                              .angle()), q_hand=solved_hand)
 
-    def _solve(self, X_WB, seed, q_hand, clearance, position_tolerance, angle_tolerance):
+    def _solve(self, X_WB, seed, q_hand, clearance, position_tolerance, angle_tolerance,
+               pivot=None):
         from pydrake.solvers import SnoptSolver
 
         plant = self.plant
@@ -152,12 +214,27 @@ class ArmReach:
         q = ik.q()
         prog = ik.get_mutable_prog()
         p = X_WB.translation()
-        ik.AddPositionConstraint(self.base_frame, np.zeros(3), plant.world_frame(),
-                                 p - position_tolerance, p + position_tolerance)
-        ik.AddOrientationConstraint(plant.world_frame(), X_WB.rotation(), self.base_frame,
-                                    _identity(), angle_tolerance)
-        prog.AddBoundingBoxConstraint(q_hand, q_hand, q[self._hand_q])
-        prog.AddQuadraticErrorCost(np.eye(len(self._arm_q)), seed[self._arm_q], q[self._arm_q])
+        frame = self.target_frame
+        if pivot is None:
+            ik.AddPositionConstraint(frame, np.zeros(3), plant.world_frame(),
+                                     p - position_tolerance, p + position_tolerance)
+            ik.AddOrientationConstraint(plant.world_frame(), X_WB.rotation(), frame,
+                                        _identity(), angle_tolerance)
+        else:  # the object's symmetry (module doc)
+            kind, p_PO, p_WO = pivot
+            ik.AddPositionConstraint(frame, p_PO, plant.world_frame(),
+                                     p_WO - position_tolerance, p_WO + position_tolerance)
+            turn = SPHERE_TURN if kind == "sphere" else CUBOID_TURN
+            ik.AddOrientationConstraint(plant.world_frame(), X_WB.rotation(), frame,
+                                        _identity(), turn)
+            if kind == "cuboid":  # about the vertical only
+                up_P = X_WB.rotation().inverse() @ np.array([0.0, 0.0, 1.0])
+                ik.AddAngleBetweenVectorsConstraint(plant.world_frame(), [0.0, 0.0, 1.0],
+                                                    frame, up_P, 0.0, angle_tolerance)
+        fixed = np.setdiff1d(np.arange(len(self._hand_q)), self._free_in_hand)
+        prog.AddBoundingBoxConstraint(q_hand[fixed], q_hand[fixed], q[self._hand_q[fixed]])
+        moved = np.concatenate([self._arm_q, self._hand_q[self._free_in_hand]])
+        prog.AddQuadraticErrorCost(np.eye(len(moved)), seed[moved], q[moved])
         if clearance is not None:
             ik.AddMinimumDistanceLowerBoundConstraint(clearance, 0.03)
         # Bounded effort: a pose out of reach fails in a fraction of a second.
@@ -191,6 +268,29 @@ class ArmReach:
                                  q_hand, 0.02) < clearance:
                 return False
         return True
+
+
+def wrist_joints(plant, hand, hand_spec) -> tuple[str, ...]:
+    """The hand's joints that every fingertip hangs from (base to palm order): the
+    Shadow hand's WRJ2, WRJ1; none for the Barrett hand."""
+    by_child = {}
+    for index in plant.GetJointIndices(hand):
+        joint = plant.get_joint(index)
+        by_child[joint.child_body().index()] = joint
+    common = None
+    for tip in hand_spec.fingertip_frames:
+        body = plant.GetFrameByName(tip, hand).body()
+        path = []
+        while body.index() in by_child:
+            joint = by_child[body.index()]
+            if joint.num_positions() > 0:
+                path.append(joint.name())
+            body = joint.parent_body()
+        path.reverse()
+        common = path if common is None else list(
+            a for a, _ in itertools.takewhile(lambda ab: ab[0] == ab[1],
+                                              zip(common, path, strict=False)))
+    return tuple(common or ())
 
 
 def _identity():

@@ -45,6 +45,8 @@ class ArmSpec:
     # Link lengths (m) for closed-form checks: base to shoulder, upper arm,
     # forearm, wrist to flange (models/pa10/README.md).
     lengths: tuple[float, ...] = ()
+    # The arm's links (bodies) a camera may be fixed to (``X_PB.base_frame: arm::<link>``).
+    links: tuple[str, ...] = ()
 
 
 def _deg(*values):
@@ -65,6 +67,26 @@ ARM_SPECS = {
         kp=(4000.0, 4000.0, 2000.0, 400.0, 400.0, 200.0),
         kd=(300.0, 300.0, 120.0, 20.0, 20.0, 8.0),
         lengths=(0.317, 0.450, 0.480, 0.070),
+        links=("base", "link1", "link2", "link3", "link4", "link5", "link6"),
+    ),
+    # Shadow's 4-DOF air-muscle arm (the Paris platform; models/shadow_arm/README.md):
+    # limits and speeds [SR]; the gains are ours (within [SR]'s effort limits, 70, 100,
+    # 50 and 30 N m, for a 0.05 rad error).
+    "shadow_arm": ArmSpec(
+        name="shadow_arm",
+        model_relative_path="shadow_arm/shadow_arm.sdf",
+        base_body="base",
+        flange_frame="flange",
+        joint_names=("ShoulderJRotate", "ShoulderJSwing", "ElbowJSwing", "ElbowJRotate"),
+        lower=(-math.pi / 4, 0.0, 0.52, -math.pi / 2),
+        upper=(math.pi / 2, math.pi / 2, 2.09439510239, math.pi / 2),
+        velocity=(1.0, 1.0, 1.0, 1.0),
+        kp=(1200.0, 1600.0, 800.0, 400.0),
+        kd=(120.0, 120.0, 50.0, 20.0),
+        # Base to shoulder, upper arm, elbow to flange (hypot of 0.131 and 0.080), no
+        # wrist: the same closed-form meaning as the PA10's.
+        lengths=(0.5405, 0.369, math.hypot(0.131, 0.080), 0.0),
+        links=("base", "trunk", "upperarm", "lowerarm", "handsupport"),
     ),
 }
 

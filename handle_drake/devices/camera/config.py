@@ -16,7 +16,9 @@ types (see ``handle_drake.scenario``).
 ``config`` is Drake's own ``CameraConfig`` (as in RussTedrake/manipulation's
 scenarios): ``name`` names the station's ``<name>.*`` ports, ``X_PB`` is the
 camera's pose in its parent frame ``X_PB.base_frame``: ``world`` (the default,
-a fixed camera) or ``wrist`` (the hand's base body, moving with it). The
+a fixed camera), ``wrist`` (the hand's base body, moving with it) or, with the
+hand on an ``!Arm``, ``arm::<link>`` (a link of the arm: the Paris platform's
+Kinect on the arm's trunk, ``arm::trunk``). The
 camera frame follows Drake's convention: +z along the optical axis, +x to the
 right of the image, +y down. With ``target`` (world-fixed cameras only), only
 ``X_PB``'s translation is used and the camera looks at ``target`` with the
@@ -43,13 +45,15 @@ from pydrake.systems.sensors import CameraConfig
 
 from handle_drake.devices.camera.profiles import CameraProfile, get_profile
 
-__all__ = ["CAMERA_PARENTS", "CameraConfig", "DepthCamera", "RENDERER", "drake_camera_config",
-           "resolve_camera_config"]
+__all__ = ["ARM_PARENT_PREFIX", "CAMERA_PARENTS", "CameraConfig", "DepthCamera", "RENDERER",
+           "drake_camera_config", "resolve_camera_config"]
 
 #: The render engine the station adds for its cameras (RenderEngineVtk).
 RENDERER = "handle_drake_vtk"
 #: Parent frames a camera's ``X_PB.base_frame`` may name (None means world).
 CAMERA_PARENTS = ("world", "wrist")
+#: Prefix of a camera parent that is a link of the scenario's arm (``arm::trunk``).
+ARM_PARENT_PREFIX = "arm::"
 # The renderer's ranges are wider than any profile's valid depth range: the
 # profile's depth model marks what lies outside it.
 _CLIPPING = (0.01, 20.0)  # m
@@ -93,7 +97,8 @@ class DepthCamera:
 
     @property
     def parent(self) -> str:
-        """``world`` or ``wrist``: ``config.X_PB.base_frame`` (None is world)."""
+        """``world``, ``wrist`` or ``arm::<link>``: ``config.X_PB.base_frame`` (None is
+        world)."""
         return self.config.X_PB.base_frame or "world"
 
 

@@ -26,7 +26,7 @@ from pydrake.systems.framework import LeafSystem
 from pydrake.systems.sensors import CameraInfo, ImageDepth32F, PixelType, RgbdSensor
 
 from handle_drake.base.hands import get_hand_spec
-from handle_drake.devices.camera.config import RENDERER, resolve_camera_config
+from handle_drake.devices.camera.config import ARM_PARENT_PREFIX, RENDERER, resolve_camera_config
 from handle_drake.devices.camera.profiles import CameraProfile, apply_depth_model, get_profile
 
 __all__ = ["AddCameras", "camera_info", "look_at", "DepthModel", "RENDERER"]
@@ -97,6 +97,10 @@ def AddCameras(builder, plant, scene_graph, scenario, hand_instance=None) -> Non
             parent_id = plant.GetBodyFrameIdOrThrow(plant.world_body().index())
             if camera.target:
                 X_PC = look_at(X_PC.translation(), camera.target)
+        elif camera.parent.startswith(ARM_PARENT_PREFIX):  # a link of the arm
+            instance, _, link = camera.parent.rpartition("::")
+            body = plant.GetBodyByName(link, plant.GetModelInstanceByName(instance))
+            parent_id = plant.GetBodyFrameIdOrThrow(body.index())
         else:
             spec = get_hand_spec(scenario.hand.kind)
             base = plant.GetBodyByName(spec.base_body, hand_instance)
