@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from handle_drake.base.arguments import seed_int
+
 __all__ = ["register", "perceived_objects", "choose_target", "EXIT_CODES", "exit_code"]
 
 #: The catalogue kind the planner is given for each detected primitive.
@@ -47,7 +49,7 @@ def register(subparsers) -> None:
     p.add_argument("scenario", type=Path, help="scenario YAML with an !Arm mount and a "
                                                "sorting_box (diagrams/hamburg_setup.yaml)")
     p.add_argument("--override", default=None, help="YAML text applied on top of the file")
-    p.add_argument("--scene-seed", type=int, default=None, metavar="N",
+    p.add_argument("--scene-seed", type=seed_int, default=None, metavar="N",
                    help="replace the objects with a seeded random scene of 2-5")
     which = p.add_mutually_exclusive_group()
     which.add_argument("--object", type=int, default=None, metavar="N",
