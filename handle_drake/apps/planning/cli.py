@@ -86,8 +86,10 @@ def register(subparsers) -> None:
     s = subparsers.add_parser("synergies", help="fit synergies to recorded grasps, error vs k")
     s.add_argument("file", nargs="?", default=None,
                    help="handle_drake-grasps CSV (default: the shipped synthetic data)")
-    s.add_argument("--k-max", type=int, default=8)
-    s.add_argument("--plot", type=Path, default=Path("out/synergies_error_vs_k.png"))
+    s.add_argument("--k-max", type=int, default=8,
+                   help="largest number of synergies fitted (default 8)")
+    s.add_argument("--plot", type=Path, default=Path("out/synergies_error_vs_k.png"),
+                   help="figure of the error vs k (default out/synergies_error_vs_k.png)")
     s.set_defaults(func=_cmd_synergies)
 
 
