@@ -281,6 +281,7 @@ def write_class_scenarios(directory: Path) -> list[Path]:
     """Plan each class on its ``CLASS_OBJECTS`` object; write ``grasp_<class>.yaml``."""
     from handle_drake.grasp.planning import plan_grasp, resting_pose
 
+    Path(directory).mkdir(parents=True, exist_ok=True)
     out = []
     for name, (kind, size) in CLASS_OBJECTS.items():
         plan = plan_grasp(name, (kind, size), resting_pose(kind, size))
