@@ -201,7 +201,7 @@ def test_without_commands_the_hand_still_streams_and_does_not_spin(hosts):
     and sleeps between them. Counted against the firmware's own loop (its published cycles
     and wake-ups) and the cycle times it stamps, not the wall clock: a loaded machine runs
     fewer cycles in 0.5 s, never more than one feedback per cycle or a spinning loop.
-    (The 100 Hz rate in real time is measured by benchmarks/bench_can.py.)"""
+    (Whether it keeps 100 Hz in real time depends on the machine's load: not asserted here.)"""
     period = 0.01
     host = hosts("barrett", "fd", rate=1 / period)
     host.next_feedback()
