@@ -242,7 +242,8 @@ def walk(folder: Path, steps=WALK, echo=None) -> list[tuple[Step, int | None, fl
             else:
                 done = subprocess.run(_argv(line), cwd=folder, env=ENV, text=True,
                                       capture_output=True, timeout=900)
-                output = (done.stdout + done.stderr).strip().splitlines()
+                output = ((done.stderr if done.returncode else done.stdout).strip()
+                          or (done.stdout + done.stderr).strip()).splitlines()
                 results.append((step, done.returncode, time.monotonic() - start,
                                 output[-1] if output else ""))
             if echo:
