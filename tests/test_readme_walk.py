@@ -135,7 +135,8 @@ WALK: tuple[Step, ...] = (
          "python benchmarks/bench_arm_reachability.py --places 1 --out out/bench_arm --no-page",
          why="1 place; no page"),
     Step("handle-drake grasp --class tip_pinch --object sphere --size 0.0225 --pose-error 0.007 "
-         "0.008 --open-loop"),
+         "0.008 --open-loop", code=1,
+         why="the README's point: open loop drops the ball (DROPPED, exit 1)"),
     Step("handle-drake grasp --class tip_pinch --object sphere --size 0.0225 --pose-error 0.007 "
          "0.008 --recentre"),
     Step("python benchmarks/bench_grasp_classes.py --sizes 3 --offset 10",
