@@ -95,6 +95,7 @@ from handle_drake.apps.babbling.report import (  # noqa: E402
     _random_spec,
     _table3_spec,
 )
+from handle_drake.apps.cli_support import positive_int  # noqa: E402
 from handle_drake.base.results import ResultsRun, add_page_arguments  # noqa: E402
 from handle_drake.learning.cluster import add_executor_arguments, trial_executor  # noqa: E402
 from handle_drake.learning.optim.bo import (  # noqa: E402
@@ -186,6 +187,8 @@ def _print_table(header, rows) -> None:
 
 # ------------------------------------------------------------------ surrogate
 SURROGATE_METHODS = ("bo", "random", "gp_minimize")
+#: gp_minimize's default n_initial_points: it refuses fewer calls.
+SKOPT_MIN_CALLS = 10
 
 
 def surrogate_run(surrogate: GridSurrogate, method: str, seed: int, n_trials: int,
@@ -501,10 +504,11 @@ def main(argv=None) -> int:
                         help="3 objects, 2 seeds, 15 trials, 9x9 grid (own folder)")
     parser.add_argument("--out", type=Path, default=None,
                         help="trial log and grid cache folder (default out/report)")
-    parser.add_argument("--seeds", type=int, default=None, help="seeds for BO and random (10)")
-    parser.add_argument("--skopt-seeds", type=int, default=None,
+    parser.add_argument("--seeds", type=positive_int, default=None,
+                        help="seeds for BO and random (10)")
+    parser.add_argument("--skopt-seeds", type=positive_int, default=None,
                         help="seeds for gp_minimize (default 5: ~0.3 s overhead per iteration)")
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=positive_int, default=2)
     parser.add_argument("--no-v1", action="store_true",
                         help="leave out the BO runs with the first defaults (bo_v1)")
     parser.add_argument("--seed-offset", type=int, default=0,
@@ -516,8 +520,9 @@ def main(argv=None) -> int:
                         help="robust objective: mean metric over placements within M metres")
     parser.add_argument("--placement-samples", type=int, default=5, metavar="K",
                         help="placements per trial of the robust objective (default 5)")
-    parser.add_argument("--trials", type=int, default=None, help="trials per run (100)")
-    parser.add_argument("--grid", type=int, default=None, help="grid points per dimension (41)")
+    parser.add_argument("--trials", type=positive_int, default=None, help="trials per run (100)")
+    parser.add_argument("--grid", type=positive_int, default=None,
+                        help="grid points per dimension (41)")
     parser.add_argument("--surrogate", action="store_true",
                         help="run the optimisers on the simulated grid's surrogate (nominal and, "
                              "with --placement-error, robust tables side by side)")
@@ -554,6 +559,10 @@ def main(argv=None) -> int:
         settings = dc.replace(settings, trials=args.trials)
     if args.grid:
         settings = dc.replace(settings, grid=args.grid)
+    if not args.no_skopt and settings.trials < SKOPT_MIN_CALLS:  # before any grid is computed
+        parser.error(f"--trials {settings.trials}: gp_minimize needs at least "
+                     f"{SKOPT_MIN_CALLS} (its initial random points); give --trials >= "
+                     f"{SKOPT_MIN_CALLS} or --no-skopt")
     if args.validate_points < 0:
         parser.error(f"--validate-points: expected an integer >= 0, got {args.validate_points}")
     if args.robust_only and not (args.surrogate and args.placement_error):

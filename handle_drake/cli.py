@@ -34,7 +34,9 @@ AREA_COMMANDS: tuple[str, ...] = (
 
 def _add_simulate(subparsers) -> None:
     p = subparsers.add_parser("simulate", help="run a scenario file (see diagrams/)")
-    p.add_argument("scenario", type=Path, help="scenario YAML file")
+    p.add_argument("scenario", type=Path,
+                   help="scenario YAML file, or a shipped scenario's name (handle-drake "
+                        "diagrams list)")
     p.add_argument("--override", default=None, help="YAML text applied on top of the file")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: scenario's)")
     p.add_argument("--meshcat", action="store_true", help="show it live in Meshcat")
@@ -53,6 +55,58 @@ def _add_demo(subparsers) -> None:
     p.add_argument("--meshcat", action="store_true", help="also show it live in Meshcat")
     p.add_argument("--no-html", action="store_true", help="do not write the HTML replay")
     p.set_defaults(func=_cmd_demo)
+
+
+def _add_diagrams(subparsers) -> None:
+    p = subparsers.add_parser(
+        "diagrams", help="the shipped scenario files: list them, or copy them to edit",
+        description="The scenarios of diagrams/ ship with the package (handle_drake/_diagrams "
+                    "outside a checkout). Commands that take a scenario file also take a "
+                    "shipped one by name: handle-drake simulate shadow_sphere_grasp.")
+    sub = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    q = sub.add_parser("list", help="name each shipped scenario and its first comment line")
+    q.add_argument("--paths", action="store_true", help="print the installed files' paths")
+    q.set_defaults(func=_cmd_diagrams_list)
+    q = sub.add_parser("copy", help="copy the shipped scenarios (and their meshes) to a folder")
+    q.add_argument("dest", type=Path, help="folder to copy into (created; existing files are "
+                                           "refused, not overwritten)")
+    q.set_defaults(func=_cmd_diagrams_copy)
+
+
+def _cmd_diagrams_list(args) -> int:
+    from handle_drake.base.models import shipped_scenarios
+
+    for path in shipped_scenarios():
+        if args.paths:
+            print(path)
+            continue
+        comments = [text for line in path.read_text().splitlines()
+                    if line.startswith("#") and (text := line.lstrip("# ").strip())
+                    and not text.startswith(("Planned by", "Written by"))]
+        first = comments[0] if comments else ""
+        print(f"{path.stem:44s} {first[:90]}")
+    return 0
+
+
+def _cmd_diagrams_copy(args) -> int:
+    import shutil
+
+    from handle_drake.base.models import diagrams_dir
+
+    source = diagrams_dir()
+    files = [p for p in sorted(source.rglob("*"))
+             if p.is_file() and "__pycache__" not in p.parts and p.name != "__init__.py"]
+    clashes = [str(args.dest / p.relative_to(source)) for p in files
+               if (args.dest / p.relative_to(source)).exists()]
+    if clashes:
+        raise ValueError(f"DEST: {len(clashes)} file(s) already there, e.g. {clashes[0]}; "
+                         "copy into a new folder")
+    for path in files:
+        target = args.dest / path.relative_to(source)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(path, target)
+    print(f"copied {len(files)} files from {source} to {args.dest}")
+    return 0
 
 
 def _cmd_simulate(args) -> int:
@@ -164,6 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_demo(subparsers)
     _add_simulate(subparsers)
+    _add_diagrams(subparsers)
     for module_name in AREA_COMMANDS:
         importlib.import_module(module_name).register(subparsers)
     return parser

@@ -71,6 +71,7 @@ from handle_drake.base.checks import (
     translate_deprecated_keys,
 )
 from handle_drake.base.hands import HAND_SPECS
+from handle_drake.base.models import SHIPPED_HINT, shipped_path
 from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.sensor import check_sensor_pose
 from handle_drake.devices.accelerometer.wiring import instrument_X_OS
@@ -374,6 +375,10 @@ class Scenario:
 def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
     """Loads a scenario from a YAML file, then applies an optional override string.
 
+    A ``filename`` that names no file but a shipped scenario (``diagrams/NAME.yaml``
+    outside a checkout, or ``NAME``) loads the installed one
+    (:func:`~handle_drake.base.models.shipped_path`).
+
     Raises:
         FileNotFoundError: the file does not exist.
         ScenarioError: malformed YAML, an unknown field or tag, or an invalid
@@ -381,8 +386,13 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
     """
     scenario = Scenario()
     if filename is not None:
-        scenario = _load(read_text_file(filename, "scenario"), scenario, source=str(filename))
-        _resolve_mesh_file(scenario, Path(filename).parent)
+        path = shipped_path(filename) if isinstance(filename, (str, Path)) else filename
+        try:
+            text = read_text_file(path, "scenario")
+        except FileNotFoundError as error:
+            raise FileNotFoundError(f"{error}; {SHIPPED_HINT}") from None
+        scenario = _load(text, scenario, source=str(filename))
+        _resolve_mesh_file(scenario, Path(path).parent)
     if data is not None:
         scenario = _load(data, scenario, source="override")
     validate_scenario(scenario)

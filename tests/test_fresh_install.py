@@ -9,6 +9,7 @@ by hand would pass here, which is why CI makes a new venv every run.
 from __future__ import annotations
 
 import ast
+import importlib.metadata
 import importlib.util
 import json
 import os
@@ -18,6 +19,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -77,6 +79,72 @@ def test_every_third_party_import_is_installed():
     missing = {top: where[:3] for top, where in imports.items()
                if importlib.util.find_spec(top) is None}
     assert not missing, f"imported but not installed (declare in pyproject.toml): {missing}"
+
+
+def _normalized(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def _requirement(text: str) -> tuple[str, list[str]]:
+    """(distribution, [extras]) of a requirement string such as 'dask[distributed]>=2024'."""
+    match = re.match(r"\s*([A-Za-z0-9_.\-]+)\s*(?:\[([^\]]*)\])?", text)
+    extras = [e.strip() for e in (match.group(2) or "").split(",") if e.strip()]
+    return _normalized(match.group(1)), extras
+
+
+def declared_distributions(pyproject: dict) -> set[str]:
+    """Distributions pyproject.toml names itself: dependencies, every extra, and what a named
+    extra of a dependency adds (``dask[distributed]`` declares ``distributed``)."""
+    project = pyproject["project"]
+    requirements = list(project.get("dependencies", []))
+    for extra in project.get("optional-dependencies", {}).values():
+        requirements += extra
+    declared = set()
+    for requirement in requirements:
+        name, extras = _requirement(requirement)
+        declared.add(name)
+        try:
+            for sub in importlib.metadata.requires(name) or []:
+                body, _, marker = sub.partition(";")
+                named = re.search(r"extra\s*==\s*['\"]([^'\"]+)['\"]", marker)
+                if named and named.group(1) in extras:
+                    declared.add(_requirement(body)[0])
+        except importlib.metadata.PackageNotFoundError:
+            pass
+    return declared
+
+
+def undeclared_imports(imports: dict[str, list[str]], declared: set[str],
+                       distributions: dict[str, list[str]]) -> dict[str, str]:
+    """Top-level module -> why it is not declared: no installed distribution provides it, or
+    the ones that do are not named in pyproject.toml (a package that only arrives as a
+    dependency's dependency is not declared: it can go away with that dependency)."""
+    missing = {}
+    for top, where in sorted(imports.items()):
+        candidates = {_normalized(d) for d in distributions.get(top, [])}
+        if not candidates:
+            missing[top] = f"no installed distribution provides it ({', '.join(where[:3])})"
+        elif not candidates & declared:
+            missing[top] = (f"from {', '.join(sorted(candidates))}, not in pyproject.toml "
+                            f"({', '.join(where[:3])})")
+    return missing
+
+
+def test_every_third_party_import_is_declared_in_pyproject():
+    """Each third-party module imported by the package, its tests, benchmarks and notebooks'
+    code cells comes from a distribution that pyproject.toml names (dependencies or an
+    extra), mapped by importlib.metadata.packages_distributions(): true on any machine, not
+    only in a new virtual environment."""
+    declared = declared_distributions(tomllib.loads((ROOT / "pyproject.toml").read_text()))
+    distributions = importlib.metadata.packages_distributions()
+    imports = _top_level_imports()
+    assert {"PIL", "pydrake", "sklearn", "can", "yaml"} <= imports.keys()  # the scan sees them
+    assert not undeclared_imports(imports, declared, distributions)
+    # the check itself: without pillow declared, PIL (which matplotlib brings) is reported
+    missing = undeclared_imports(imports, declared - {"pillow"}, distributions)
+    assert list(missing) == ["PIL"] and "pillow, not in pyproject.toml" in missing["PIL"]
+    assert "nowhere_module" in undeclared_imports({"nowhere_module": ["x.py:1"]}, declared,
+                                                  distributions)
 
 
 def test_every_module_of_the_package_imports_in_a_fresh_interpreter():

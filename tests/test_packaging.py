@@ -52,5 +52,7 @@ def test_wheel_contains_models_scenarios_and_data(tmp_path):
                      "handle_drake/devices/can_hand/hand.dbc",
                      "handle_drake/devices/midi/icontrols_pro.yaml",
                      "handle_drake/_diagrams/midi_jog_pinch.yaml",
+                     "handle_drake/_diagrams/meshes/part.stl",  # the README's mesh examples
+                     "handle_drake/_diagrams/meshes/l_bracket.obj",
                      "handle_drake/grasp/data/synthetic_grasps.csv"):
         assert required in names, required

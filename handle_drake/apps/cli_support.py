@@ -12,7 +12,6 @@ import argparse
 import signal
 import sys
 import warnings
-from pathlib import Path
 
 from handle_drake.base.arguments import (
     SEED_MAX,
@@ -68,7 +67,9 @@ def check_hardware_server(scenario) -> None:
 def add_mesh_arguments(parser: argparse.ArgumentParser, mesh_help: str, **mesh_options) -> None:
     """``--mesh FILE`` (your own object) and ``--mesh-scale S`` (default None: 1, and
     :func:`refuse_without_mesh` can tell it was given)."""
-    parser.add_argument("--mesh", type=Path, metavar="FILE", help=mesh_help,
+    from handle_drake.base.models import shipped_path
+
+    parser.add_argument("--mesh", type=shipped_path, metavar="FILE", help=mesh_help,
                         **{"default": None, **mesh_options})
     parser.add_argument("--mesh-scale", type=positive_float, default=None, metavar="S",
                         help="mesh file units to metres (0.001 for millimetres; default 1)")

@@ -40,6 +40,42 @@ def diagrams_dir() -> Path:
     raise FileNotFoundError(f"no diagrams/ directory next to {here}")
 
 
+#: What a scenario argument that names no file is told (the CLI's one-line error).
+SHIPPED_HINT = ("the shipped scenarios are installed with the package: `handle-drake diagrams "
+                "list` names them, `handle-drake simulate NAME` runs one by name, `handle-drake "
+                "diagrams copy DEST` copies them to edit")
+
+
+def shipped_path(path) -> Path:
+    """``path`` if something is there; else the installed copy of a shipped file it names.
+
+    The README's ``diagrams/NAME.yaml`` (and ``diagrams/meshes/...``) works outside a
+    checkout (a wheel: ``handle_drake/_diagrams``), and a bare ``NAME`` or ``NAME.yaml``
+    names a shipped scenario from any folder. A file in the working directory always wins.
+    Anything else comes back unchanged (its reader says it is not found).
+    """
+    given = Path(path)
+    if str(path) == "" or given.exists() or given.is_absolute():
+        return given
+    parts = given.parts
+    if len(parts) > 1 and parts[0] == "diagrams":
+        relative = Path(*parts[1:])
+    elif len(parts) == 1:
+        relative = given if given.suffix else given.with_name(f"{given.name}.yaml")
+    else:
+        return given
+    try:
+        candidate = diagrams_dir() / relative
+    except FileNotFoundError:
+        return given
+    return candidate if candidate.is_file() else given
+
+
+def shipped_scenarios() -> list[Path]:
+    """The shipped scenario files, by name."""
+    return sorted(diagrams_dir().glob("*.yaml"))
+
+
 def model_path(relative: str) -> Path:
     """Absolute path of a file inside ``models/``; raises if it does not exist."""
     path = models_dir() / relative

@@ -113,3 +113,21 @@ def test_validation_compares_simulated_trials_with_the_surrogate_and_caches_them
     again = bench.validate_surrogate(configs, grids, points, placement_error=0.002,
                                      placement_samples=5, cache_dir=tmp_path)["sphere"]
     assert calls == [] and again == result
+
+
+@pytest.mark.parametrize("argv", [["--surrogate", "--trials", "5"], ["--trials", "9"]])
+def test_a_budget_below_gp_minimizes_initial_points_is_refused_before_any_grid(
+        bench, argv, tmp_path, capsys):
+    """`--surrogate --trials 5` was a scikit-optimize traceback after the grids were computed:
+    now one line and exit 2, and no grid was started (nothing written in --out)."""
+    with pytest.raises(SystemExit) as exit_:
+        bench.main([*argv, "--out", str(tmp_path / "out"), "--no-page"])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "gp_minimize needs at least 10" in err and "--no-skopt" in err
+    assert not (tmp_path / "out").exists()
+    from skopt import gp_minimize  # the limit is scikit-optimize's own
+
+    with pytest.raises(ValueError, match="Expected `n_calls` >= 10"):
+        gp_minimize(lambda x: x[0] ** 2, [(-1.0, 1.0)], n_calls=bench.SKOPT_MIN_CALLS - 1,
+                    random_state=0)

@@ -13,6 +13,7 @@ from handle_drake.apps.inhand.task import (
     inhand_fingerprint,
 )
 from handle_drake.cli import main as cli_main
+from handle_drake.learning.log import TrialLog
 from handle_drake.scenario import DumpScenario
 
 
@@ -135,13 +136,15 @@ def test_a_replayed_best_trial_reproduces_its_score(tmp_path):
         assert DumpScenario(logged.station) == DumpScenario(run.trial.scenario().station)
         assert logged.station.table is None and logged.station.object.kind == "cylinder"
         assert logged.action_gist() == run.trial.gist
-    # the same settings resume the run; other settings under its id are refused
+    # the same settings resume the run; other settings are another run, and refused
+    # under this run's id when it is given
     again = run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
                        db=tmp_path / "r.sqlite", progress=False)
     assert [r.metric for r in again.records] == [r.metric for r in run.records]
+    assert again.run_id == run.run_id
     with pytest.raises(ValueError, match=r"exists in .* with config.task.mu=0.8, got 0.9"):
         run_inhand("cylinder_rotation", "random", trials=2, workers=1, seed=4,
-                   db=tmp_path / "r.sqlite", progress=False, mu=0.9)
+                   db=tmp_path / "r.sqlite", progress=False, mu=0.9, run_id=run.run_id)
 
 
 def test_each_trial_object_builds_its_own_diagram_and_pickles_without_it():
@@ -218,3 +221,25 @@ def test_cli_run_in_parallel_equals_the_sequential_run(tmp_path, capsys):
     sequential = _rows(tmp_path / "seq.sqlite")
     assert [r[0] for r in sequential] == [0, 1, 2, 3]
     assert _rows(tmp_path / "pool.sqlite") == sequential
+
+
+def test_cli_runs_that_differ_in_any_trial_setting_are_two_runs_of_one_log(tmp_path, capsys):
+    """The README's sequence: a plain run, then the instrumented object, in one log; a given
+    --run-id resumes that run and refuses other settings under it, naming the field."""
+    db = tmp_path / "inhand.sqlite"
+    common = ["inhand", "--trials", "1", "--seed", "0", "--db", str(db), "--no-plot",
+              "--no-html", "--no-progress", "--optimizer", "random"]
+    assert cli_main(common) == 0
+    assert cli_main([*common, "--accelerometer", "joywarrior24f14"]) == 0
+    with TrialLog(db) as log:
+        runs = log.runs()
+    assert len(runs) == 2 and runs[0].run_id != runs[1].run_id
+    assert [bool(r.config["task"].get("accelerometer")) for r in runs] == [False, True]
+    capsys.readouterr()
+    assert cli_main([*common, "--accelerometer", "joywarrior24f14",
+                     "--run-id", runs[0].run_id]) == 2
+    err = capsys.readouterr().err
+    assert "config.task.accelerometer=(missing), got 'joywarrior24f14'" in err
+    assert cli_main([*common, "--run-id", "mine"]) == 0
+    with TrialLog(db) as log:
+        assert [r.run_id for r in log.runs()][-1] == "mine"

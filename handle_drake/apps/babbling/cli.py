@@ -54,16 +54,20 @@ def register(subparsers) -> None:
         "babble", help="learn a grasp by trial: BO or random search over grasp parameters",
         description="Runs (or resumes) grasp trials chosen by Bayesian optimisation or random "
                     "search and logs each one to an SQLite file.")
-    p.add_argument("--hand", choices=("barrett", "shadow"), default="barrett")
+    p.add_argument("--hand", choices=("barrett", "shadow"), default="barrett",
+                   help="the hand that grasps (default barrett)")
     p.add_argument("--object", choices=KINDS, default=None, help="the object (default sphere)")
     p.add_argument("--dims", type=int, choices=(1, 2), default=None,
                    help="1: standoff along the approach axis; 2: (x, y) offset (default 2)")
     p.add_argument("--space", choices=("standoff", "offset", "synergy"), default=None,
                    help="parameter space (synergy: Shadow anatomical synergies, 2-D)")
-    p.add_argument("--strategy", choices=("bo", "random"), default="bo")
+    p.add_argument("--strategy", choices=("bo", "random"), default="bo",
+                   help="bo: Bayesian optimisation (GP + expected improvement); random: "
+                        "random search (default bo)")
     p.add_argument("--trials", type=positive_int, default=50,
                    help="trials in the run (BO may stop earlier on its EI rule)")
-    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--seed", type=seed_int, default=0,
+                   help="the run's seed (first trials and trial noise; default 0)")
     p.add_argument("--ei-stop", type=non_negative_float, default=0.0, metavar="THRESHOLD",
                    help="BO only: stop when the best expected improvement falls below "
                         "THRESHOLD x the RMS of the metric (the report's stop rule, e.g. 1e-6; "

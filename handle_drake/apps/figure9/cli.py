@@ -63,7 +63,8 @@ def register(subparsers) -> None:
     q.set_defaults(func=_cmd_ports)
 
     q = sub.add_parser("write-scenarios", help="plan the experiments and write their YAML")
-    q.add_argument("directory", type=Path)
+    q.add_argument("directory", type=Path,
+                   help="folder to write midi_jog_pinch.yaml and midi_fader_push.yaml to")
     q.set_defaults(func=_cmd_write)
 
 

@@ -27,6 +27,7 @@ from pathlib import Path
 from handle_drake.apps.cli_support import (
     float_in,
     int_in,
+    non_empty,
     positive_int,
     run_command,
     seed_int,
@@ -111,7 +112,8 @@ def register(subparsers) -> None:
                         "process); the particles of one iteration run in parallel. With "
                         "dask://, the cluster's workers")
     add_executor_arguments(p)
-    p.add_argument("--seed", type=seed_int, default=0)
+    p.add_argument("--seed", type=seed_int, default=0,
+                   help="the run's seed (optimizer and trial noise; default 0)")
     p.add_argument("--particles", type=int_in(1, MAX_PARTICLES), default=10,
                    help="particles per iteration (CMA-ES: population)")
     p.add_argument("--target-deg", type=float_in(0, 360), default=None,
@@ -123,14 +125,19 @@ def register(subparsers) -> None:
                    help="make the object the report's instrumented object: this accelerometer "
                         f"({', '.join(sorted(PROFILES))}) at its origin also measures the "
                         "rotation (logged per trial; valid at rest)")
-    p.add_argument("--db", type=Path, default=Path("out/inhand/inhand.sqlite"))
+    p.add_argument("--db", type=Path, default=Path("out/inhand/inhand.sqlite"),
+                   help="SQLite trial log (default out/inhand/inhand.sqlite); the same "
+                        "command again resumes its run")
+    p.add_argument("--run-id", type=non_empty, default=None,
+                   help="name of the run in the log (default: task, optimizer, particles, "
+                        "seed and a fingerprint of every other setting)")
     p.add_argument("--plot", type=Path, default=None, metavar="PNG",
                    help="learning curve (default <db folder>/<run id>.png)")
     p.add_argument("--html", type=Path, default=None,
                    help="HTML replay of the best trial (default <db folder>/<run id>.html)")
-    p.add_argument("--no-plot", action="store_true")
-    p.add_argument("--no-html", action="store_true")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-plot", action="store_true", help="write no learning curve")
+    p.add_argument("--no-html", action="store_true", help="write no replay of the best trial")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_inhand)
 
 
@@ -200,12 +207,13 @@ def _cmd_inhand(args) -> int:
         options["accelerometer"] = args.accelerometer
     if args.executor.kind == "local":  # run_inhand's own pool: workers build the trial first
         run = run_inhand(args.task, args.optimizer, args.trials, args.workers, args.seed,
-                         args.db, args.particles, **options)
+                         args.db, args.particles, run_id=args.run_id, **options)
     else:  # dask: as many trials at once as the cluster has workers
         with trial_executor(args.executor, args.workers,
                             connect_timeout=args.connect_timeout) as executor:
             run = run_inhand(args.task, args.optimizer, args.trials, None, args.seed,
-                             args.db, args.particles, executor=executor, **options)
+                             args.db, args.particles, executor=executor, run_id=args.run_id,
+                             **options)
     s = run.summary()
     print(f"trials: {s['done']} done, {s['failed']} failed")
     if "best_score" not in s:

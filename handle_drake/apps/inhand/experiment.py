@@ -95,7 +95,7 @@ MAX_PARTICLES = 1000
 def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials: int = 200,
                workers: int | None = None, seed: int = 0, db="out/inhand.sqlite",
                n_particles: int = 10, progress: bool = True, executor=None,
-               **task_options) -> InHandRun:
+               run_id: str | None = None, **task_options) -> InHandRun:
     """Optimises the in-hand task (module doc); ``task_options`` go to :class:`InHandTask`.
 
     ``executor``: any ``concurrent.futures.Executor``, a ``distributed.Client``
@@ -104,6 +104,12 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
     process pool of ``workers``. The swarms evaluate one iteration's particles
     at once; random search runs ``workers`` trials at once (default: as many
     as the executor has workers).
+
+    ``run_id``: the run's name in the log; by default the task, optimizer,
+    particles and seed, then a fingerprint of every other setting that changes
+    a trial (so that other settings start another run), and for the palm tasks
+    the code's fingerprint. A given ``run_id`` resumes that run, and other
+    settings under it are refused.
     """
     if optimizer not in INHAND_OPTIMIZERS:
         raise ValueError(f"optimizer: expected one of {INHAND_OPTIMIZERS}, got {optimizer!r}")
@@ -129,11 +135,13 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
                          stop_score=trial.target_score,
                          min_active=int(trial.dims_per_part[0]))
     config = _config(trial, optimizer, n_particles)
-    run_id = f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}"
-    if task in FINGER_TASKS:  # the settings' fingerprint: other settings, another run
-        run_id += "-" + scenario_fingerprint(json.dumps(config, sort_keys=True))
-    else:  # the code's fingerprint (as babbling's): other settings under this id are refused
-        run_id += "-" + inhand_fingerprint()
+    if run_id is None:  # the settings' fingerprint: other settings, another run
+        run_id = (f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}-"
+                  + scenario_fingerprint(json.dumps(config, sort_keys=True)))
+        if task not in FINGER_TASKS:  # and the code's fingerprint (as babbling's)
+            run_id += "-" + inhand_fingerprint()
+    elif not isinstance(run_id, str) or not run_id.strip():
+        raise ValueError(f"run_id: expected a non-empty string, got {run_id!r}")
     db = Path(db)
     db.parent.mkdir(parents=True, exist_ok=True)
     with TrialLog(db) as log:

@@ -86,8 +86,10 @@ def register(subparsers) -> None:
     s = subparsers.add_parser("synergies", help="fit synergies to recorded grasps, error vs k")
     s.add_argument("file", nargs="?", default=None,
                    help="handle_drake-grasps CSV (default: the shipped synthetic data)")
-    s.add_argument("--k-max", type=int, default=8)
-    s.add_argument("--plot", type=Path, default=Path("out/synergies_error_vs_k.png"))
+    s.add_argument("--k-max", type=int, default=8,
+                   help="largest number of synergies fitted (default 8)")
+    s.add_argument("--plot", type=Path, default=Path("out/synergies_error_vs_k.png"),
+                   help="figure of the error vs k (default out/synergies_error_vs_k.png)")
     s.set_defaults(func=_cmd_synergies)
 
 
@@ -279,6 +281,7 @@ def write_class_scenarios(directory: Path) -> list[Path]:
     """Plan each class on its ``CLASS_OBJECTS`` object; write ``grasp_<class>.yaml``."""
     from handle_drake.grasp.planning import plan_grasp, resting_pose
 
+    Path(directory).mkdir(parents=True, exist_ok=True)
     out = []
     for name, (kind, size) in CLASS_OBJECTS.items():
         plan = plan_grasp(name, (kind, size), resting_pose(kind, size))

@@ -57,7 +57,8 @@ def parse_listen(text: str) -> tuple[str, int]:
 
 
 def _add_bus_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--hand", choices=("shadow", "barrett"), default="shadow")
+    p.add_argument("--hand", choices=("shadow", "barrett"), default="shadow",
+                   help="the hand on the bus (its joints and CAN messages; default shadow)")
     p.add_argument("--coupling-ratio", type=float, default=None,
                    help="Shadow xFJ1 = ratio * xFJ2 (1.0 C6 hand, 1.1 C5 hand)")
     p.add_argument("--bus", choices=BUS_INTERFACES, default="udp_multicast",
@@ -76,7 +77,8 @@ def _add_bus_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-priority", type=int, default=0,
                    help="1..99: run the bus threads under SCHED_FIFO at this priority "
                         "(needs CAP_SYS_NICE or an rtprio limit); 0: normal scheduling")
-    p.add_argument("--log-level", default="WARNING")
+    p.add_argument("--log-level", default="WARNING",
+                   help="Python logging level (DEBUG, INFO, WARNING, ERROR; default WARNING)")
 
 
 def register(subparsers) -> None:
@@ -116,7 +118,7 @@ def _add_firmware_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise", type=float, default=0.0005, help="rad, position noise (std)")
     p.add_argument("--object-closure", type=float, default=None,
                    help="fraction of the closing range where a virtual object stops the fingers")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the position noise")
     p.add_argument("--feedback", choices=FEEDBACK_MODES, default=None,
                    help="when the hand acknowledges a setpoint: once per control cycle (cycle) "
                         "or at once with the last step's state (on_request); default: the "
