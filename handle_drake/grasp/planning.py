@@ -584,45 +584,16 @@ def plan_grasp(
     _world_grasp_frame(spec.kind, X_WO, row_O=row_O)  # validates the resting orientation early
 
     key = grasp_key(info.grasp_class, spec, height, coupling_ratio)
-    found = _MISSING
-    if synergies is None:
-        if cache and key in _SOLUTION_CACHE:
-            found = _SOLUTION_CACHE[key]
-        elif database is not None:
-            found = database.get(key, _MISSING)
+    found = _known_grasp(key, synergies, cache, database)
     if found is _MISSING and synergies is None and hasattr(database, "nearest"):
-        # Another size or height of the same class and kind is stored: adapted to this
-        # one by one seeded IK solve and checked (adapt_grasp), not searched.
-        near = database.nearest(key)
-        if near is not None:
-            # Bounded by its solves' iterations (ADAPT_ITERATIONS), not by the clock:
-            # the grasp a pick takes does not depend on the machine's load.
-            memo = (key, near.key, id(database))
-            if not cache or memo not in _ADAPTED_CACHE:
-                if len(_ADAPTED_CACHE) >= _SOLUTION_CACHE_SIZE:
-                    _ADAPTED_CACHE.pop(next(iter(_ADAPTED_CACHE)))
-                _ADAPTED_CACHE[memo] = adapt_grasp(near, info.grasp_class, spec, height,
-                                                   coupling_ratio)
-            adapted = _ADAPTED_CACHE[memo]
-            if adapted is not None:
-                return place_grasp(adapted, info.grasp_class, spec, size, X_WO, table_height,
-                                   reach, standoff, lift_height, vertical_standoff,
-                                   coupling_ratio, row_O)
-            if not search:
-                raise GraspPlanningError(
-                    f"the stored {info.name} grasp of a {spec.kind} (grasp width "
-                    f"{near.key[4][0] * 100:.1f} cm) does not adapt to a grasp width of "
-                    f"{size * 100:.1f} cm (not searched)")
+        found = _adapted_grasp(database, key, info, spec, size, height, coupling_ratio,
+                               cache, search)
     if found is _MISSING and not search:
         raise GraspPlanningError(
             f"no stored {info.name} grasp of a {spec.kind} to use or adapt (not searched)")
     if found is _MISSING:
-        found = _object_frame_grasp(key, info, spec, shape, dims, size, height, synergies,
-                                    coupling_ratio, deadline, time_budget)
-        if cache and synergies is None:
-            if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
-                _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
-            _SOLUTION_CACHE[key] = found
+        found = _searched_grasp(key, info, spec, shape, dims, size, height, synergies,
+                                coupling_ratio, deadline, time_budget, cache)
     if found is None:
         raise GraspPlanningError(
             f"unreachable: no collision-free {info.name} grasp puts the "
@@ -634,6 +605,59 @@ def plan_grasp(
 
 
 _MISSING = object()  # no stored answer for a key
+
+
+def _known_grasp(key, synergies, cache, database):
+    """The answer for ``key`` already at hand (default synergies only): this process's
+    cache first (with ``cache``), else ``database``'s entry; ``_MISSING`` if neither
+    has it (an entry may be None: no grasp of the class exists)."""
+    if synergies is not None:
+        return _MISSING
+    if cache and key in _SOLUTION_CACHE:
+        return _SOLUTION_CACHE[key]
+    if database is not None:
+        return database.get(key, _MISSING)
+    return _MISSING
+
+
+def _adapted_grasp(database, key, info, spec, size, height, coupling_ratio, cache, search):
+    """The nearest stored grasp of ``key``'s class and kind (``database.nearest``)
+    adapted to this object (:func:`adapt_grasp`, memoised with ``cache``), or
+    ``_MISSING`` (nothing stored near, or it did not adapt and ``search`` may search
+    instead); a GraspPlanningError when it did not adapt and ``search`` is False."""
+    # Another size or height of the same class and kind is stored: adapted to this
+    # one by one seeded IK solve and checked (adapt_grasp), not searched.
+    near = database.nearest(key)
+    if near is None:
+        return _MISSING
+    # Bounded by its solves' iterations (ADAPT_ITERATIONS), not by the clock:
+    # the grasp a pick takes does not depend on the machine's load.
+    memo = (key, near.key, id(database))
+    if not cache or memo not in _ADAPTED_CACHE:
+        if len(_ADAPTED_CACHE) >= _SOLUTION_CACHE_SIZE:
+            _ADAPTED_CACHE.pop(next(iter(_ADAPTED_CACHE)))
+        _ADAPTED_CACHE[memo] = adapt_grasp(near, info.grasp_class, spec, height,
+                                           coupling_ratio)
+    adapted = _ADAPTED_CACHE[memo]
+    if adapted is None and not search:
+        raise GraspPlanningError(
+            f"the stored {info.name} grasp of a {spec.kind} (grasp width "
+            f"{near.key[4][0] * 100:.1f} cm) does not adapt to a grasp width of "
+            f"{size * 100:.1f} cm (not searched)")
+    return _MISSING if adapted is None else adapted
+
+
+def _searched_grasp(key, info, spec, shape, dims, size, height, synergies, coupling_ratio,
+                    deadline, time_budget, cache):
+    """A fresh search's answer (:func:`_object_frame_grasp`), kept in this process's
+    cache with ``cache`` and the default synergies."""
+    found = _object_frame_grasp(key, info, spec, shape, dims, size, height, synergies,
+                                coupling_ratio, deadline, time_budget)
+    if cache and synergies is None:
+        if len(_SOLUTION_CACHE) >= _SOLUTION_CACHE_SIZE:
+            _SOLUTION_CACHE.pop(next(iter(_SOLUTION_CACHE)))
+        _SOLUTION_CACHE[key] = found
+    return found
 
 
 def object_frame_grasp(grasp_class, obj, height: float, coupling_ratio: float = 1.0,

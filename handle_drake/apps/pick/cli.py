@@ -146,36 +146,16 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     made with ``execute=False`` counts as "failed"), ``phases`` the list of
     ``{phase, wall_s[, sim_s], note}``."""
     phases = []
-
-    def report(phase, wall, note, sim=None):
-        entry = {"phase": phase, "wall_s": round(float(wall), 3), "note": note}
-        timing = f"{wall:6.2f} s"
-        if sim is not None:
-            entry["sim_s"] = round(float(sim), 3)
-            timing = f"{sim:5.2f} s simulated in {wall:6.2f} s"
-        phases.append(entry)
-        if progress is not None:
-            progress(f"{phase:9s} {timing}  {note}")
-
-    from handle_drake.apps.pick.execute import execute_pick
-    from handle_drake.apps.pick.plan import PickPlanningError, plan_pick
+    report = _phase_reporter(phases, progress)
+    # Loaded here, before any phase is timed (the plan and execute steps use them).
+    import handle_drake.apps.pick.execute  # noqa: F401
+    import handle_drake.apps.pick.plan  # noqa: F401
     from handle_drake.apps.pick.reach import ArmReach
     from handle_drake.scene.config import scene_objects
 
     base_xy = scenario.hand.mount.X_WB.GetDeterministicValue().translation()[:2]
     truth = scene_objects(scenario)
-    start = time.perf_counter()
-    if true_poses:
-        from handle_drake.scene.config import initial_pose
-
-        seen = [dc.replace(o, X_WO=_transform(initial_pose(o, scenario.table)), on_table=False,
-                           fixed=True) for _, o in truth]
-        message = ""
-    else:
-        seen, message = perceived_objects(scenario)
-    report("perceive", time.perf_counter() - start,
-           ("true poses: " if true_poses else "seen: ") + (", ".join(
-               f"{o.kind} {100 * o.size:.1f} cm" for o in seen) or "nothing"))
+    seen, message = _perceive(scenario, true_poses, truth, report)
     result = {"perceived": not true_poses, "objects_seen": len(seen),
               "objects_true": len(truth), "message": message, "phases": phases}
     if not seen:
@@ -199,6 +179,61 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     result["reach_model_s"] = time.perf_counter() - start
     result.update(target=true_name, kind=target.kind, true_kind=true_object.kind,
                   planned_xy=p_seen[:2].round(4).tolist())
+    plan = _plan(scenario, world, reach, target, seen_name, true_name, grasp_db, start,
+                 report, result)
+    if plan is None:
+        return result
+    if not execute:
+        result.update(status="failed", outcome="planned (not executed)")
+        return result
+    _execute(scenario, dc.replace(plan, target=true_name), reach, html, close,
+             correct_release, monitor, report, result)
+    return result
+
+
+def _phase_reporter(phases: list, progress):
+    """``report(phase, wall, note, sim=None)``: appends the phase's entry to ``phases``
+    and, if ``progress`` is given, calls it with the phase's line (:func:`pick`)."""
+
+    def report(phase, wall, note, sim=None):
+        entry = {"phase": phase, "wall_s": round(float(wall), 3), "note": note}
+        timing = f"{wall:6.2f} s"
+        if sim is not None:
+            entry["sim_s"] = round(float(sim), 3)
+            timing = f"{sim:5.2f} s simulated in {wall:6.2f} s"
+        phases.append(entry)
+        if progress is not None:
+            progress(f"{phase:9s} {timing}  {note}")
+
+    return report
+
+
+def _perceive(scenario, true_poses: bool, truth, report):
+    """The perceive phase: ``(seen, message)``, the objects as perceived (with
+    ``true_poses``: the scenario's own ``truth``, fixed where they rest)."""
+    start = time.perf_counter()
+    if true_poses:
+        from handle_drake.scene.config import initial_pose
+
+        seen = [dc.replace(o, X_WO=_transform(initial_pose(o, scenario.table)), on_table=False,
+                           fixed=True) for _, o in truth]
+        message = ""
+    else:
+        seen, message = perceived_objects(scenario)
+    report("perceive", time.perf_counter() - start,
+           ("true poses: " if true_poses else "seen: ") + (", ".join(
+               f"{o.kind} {100 * o.size:.1f} cm" for o in seen) or "nothing"))
+    return seen, message
+
+
+def _plan(scenario, world, reach, target, seen_name, true_name, grasp_db, start, report,
+          result):
+    """The plan phase (timed from ``start``, before the arm's reach model was built):
+    :func:`plan_pick` of ``target`` (``seen_name`` in ``world``, the scene as
+    perceived), its figures put in ``result``; None when no pick is reachable
+    (``result`` then says why)."""
+    from handle_drake.apps.pick.plan import PickPlanningError, plan_pick
+
     try:
         plan = plan_pick(world, reach, seen_name, target.kind, target.size,
                          target.X_WO.GetDeterministicValue(),
@@ -210,7 +245,7 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
         report("plan", time.perf_counter() - start, "no reachable pick")
         result.update(status="nothing_to_pick",
                       outcome=f"not in the box: {named_as_truth(error, seen_name, true_name)}")
-        return result
+        return None
     planning = time.perf_counter() - start
     result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
                   planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored,
@@ -220,10 +255,15 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
     report("plan", planning, f"{target.kind} {100 * plan.grasp.object_spec.size:.1f} cm: "
            f"{plan.grasp_class} ({plan.grasp_source} grasp; grasp {plan.seconds['grasp']:.2f}"
            f" s, arm IK {plan.seconds['ik']:.2f} s, paths {plan.seconds['path']:.2f} s)")
-    if not execute:
-        result.update(status="failed", outcome="planned (not executed)")
-        return result
-    outcome = execute_pick(scenario, dc.replace(plan, target=true_name), html=html,
+    return plan
+
+
+def _execute(scenario, plan, reach, html, close, correct_release, monitor, report, result):
+    """The simulated phases (:func:`execute_pick` of ``plan``, named as the truth), their
+    outcome put in ``result``."""
+    from handle_drake.apps.pick.execute import execute_pick
+
+    outcome = execute_pick(scenario, plan, html=html,
                            close=close, reach=reach if correct_release else None,
                            monitor=monitor,
                            progress=lambda phase, sim, wall, note: report(phase, wall, note,
@@ -239,7 +279,6 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
                   outcome=outcome.reason, in_box=outcome.in_box,
                   final_position=outcome.p_WO_final.round(4).tolist(),
                   sim_s=outcome.sim_seconds, wall_s=outcome.wall_seconds)
-    return result
 
 
 def _transform(X):

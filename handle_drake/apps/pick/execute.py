@@ -416,11 +416,6 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     or where it ended)."""
     if close not in CLOSES:
         raise ValueError(f"close: expected one of {CLOSES}, got {close!r}")
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import TrajectorySource
-    from pydrake.trajectories import PiecewisePolynomial
-
-
     scenario = dc.replace(scenario, cameras=[])
     if still_bystanders:
         scenario = weld_bystanders(scenario, plan.target)
@@ -430,22 +425,7 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
 
         meshcat = StartMeshcat()
     station = MakeHandStation(scenario, meshcat=meshcat)
-    times, arm, hand, marks = _plan_timeline(plan, scenario, close)
-    builder = DiagramBuilder()
-    builder.AddSystem(station)
-    arm_source = builder.AddSystem(TrajectorySource(
-        PiecewisePolynomial.FirstOrderHold(times, arm.T)))
-    # The hand's command steps at each knot into a ramp to the next.
-    hand_source = builder.AddSystem(TrajectorySource(
-        PiecewisePolynomial.FirstOrderHold(times, hand.T)))
-    builder.Connect(arm_source.get_output_port(), station.GetInputPort("arm.position"))
-    switch = None
-    if close == "reactive":
-        switch = _connect_reactive_close(builder, station, scenario, plan, marks,
-                                         hand_source.get_output_port())
-    else:
-        builder.Connect(hand_source.get_output_port(), station.GetInputPort("hand.position"))
-    diagram = builder.Build()
+    times, marks, diagram, sources = _build_diagram(station, scenario, plan, close)
     simulator = _simulator(diagram, station, plan.target, filter_contacts, monitor)
     context = simulator.get_mutable_context()
     station_context = station.GetMyContextFromRoot(context)
@@ -474,36 +454,75 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     close_report = _close_report(diagram, context) if close == "reactive" else {}
     if reach is not None:
         plan, new_times, new_marks, measured = _correct_release(
-            simulator, diagram, station, scenario, plan, reach, close,
-            (arm_source, hand_source, switch))
+            simulator, diagram, station, scenario, plan, reach, close, sources)
         close_report.update(measured)
         if new_times is not None:
             times, marks = new_times, new_marks
     advance("carry", marks["release"])
     p_release = position.Eval(station_context).copy()
-    end = times[-1] + SETTLE_TIME
-    plant = GetPlant(station)
-    plant_context = station.GetSubsystemContext(plant, station_context)
-    body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(plan.target))[0])
-    simulator.AdvanceTo(end)
-    while (np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(plant_context, body)
-                          .translational()) > SETTLED_SPEED
-           and end < times[-1] + SETTLE_TIME + MAX_SETTLE - 1e-9):
-        end += 0.1
-        simulator.AdvanceTo(end)
+    end = _settle(simulator, station, station_context, plan.target, times[-1])
     advance("release", end)
     wall = time.perf_counter() - start
     p = position.Eval(station_context).copy()
     if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        from pathlib import Path
-
-        Path(html).parent.mkdir(parents=True, exist_ok=True)
-        Path(html).write_text(meshcat.StaticHtml())
+        _write_replay(meshcat, html)
     inside = in_box(scenario, p)
     reason = _judge(plan, inside, p0, p_lift, p_release, p)
     return PickOutcome(inside, reason, p, end, wall, **close_report)
+
+
+def _build_diagram(station, scenario, plan, close):
+    """``(times, marks, diagram, sources)``: the plan's timeline and the diagram that
+    plays it to ``station`` (the arm's and the hand's trajectory sources, the hand's
+    through the reactive close with ``close`` "reactive"); ``sources``: ``(arm_source,
+    hand_source, switch)`` as ``_correct_release`` takes them (switch None: scripted)."""
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    times, arm, hand, marks = _plan_timeline(plan, scenario, close)
+    builder = DiagramBuilder()
+    builder.AddSystem(station)
+    arm_source = builder.AddSystem(TrajectorySource(
+        PiecewisePolynomial.FirstOrderHold(times, arm.T)))
+    # The hand's command steps at each knot into a ramp to the next.
+    hand_source = builder.AddSystem(TrajectorySource(
+        PiecewisePolynomial.FirstOrderHold(times, hand.T)))
+    builder.Connect(arm_source.get_output_port(), station.GetInputPort("arm.position"))
+    switch = None
+    if close == "reactive":
+        switch = _connect_reactive_close(builder, station, scenario, plan, marks,
+                                         hand_source.get_output_port())
+    else:
+        builder.Connect(hand_source.get_output_port(), station.GetInputPort("hand.position"))
+    return times, marks, builder.Build(), (arm_source, hand_source, switch)
+
+
+def _settle(simulator, station, station_context, target: str, t_last: float) -> float:
+    """Advances ``SETTLE_TIME`` past the timeline's last knot ``t_last``, then in 0.1 s
+    steps while ``target`` moves faster than ``SETTLED_SPEED`` (at most ``MAX_SETTLE``
+    more); returns the time it stopped at."""
+    end = t_last + SETTLE_TIME
+    plant = GetPlant(station)
+    plant_context = station.GetSubsystemContext(plant, station_context)
+    body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(target))[0])
+    simulator.AdvanceTo(end)
+    while (np.linalg.norm(plant.EvalBodySpatialVelocityInWorld(plant_context, body)
+                          .translational()) > SETTLED_SPEED
+           and end < t_last + SETTLE_TIME + MAX_SETTLE - 1e-9):
+        end += 0.1
+        simulator.AdvanceTo(end)
+    return end
+
+
+def _write_replay(meshcat, html) -> None:
+    """Ends ``meshcat``'s recording and writes it to ``html`` as a static page."""
+    from pathlib import Path
+
+    meshcat.StopRecording()
+    meshcat.PublishRecording()
+    Path(html).parent.mkdir(parents=True, exist_ok=True)
+    Path(html).write_text(meshcat.StaticHtml())
 
 
 def _simulator(diagram, station, target, filter_contacts, monitor):

@@ -330,83 +330,126 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     size, X_WO = _as_catalogue(scenario, kind, size, X_WO)
     spec = ObjectSpec(kind=kind, size=size)
     q_start = np.asarray(q_start, dtype=float)
-    attempts, seconds, log = {}, {"grasp": 0.0, "ik": 0.0, "path": 0.0}, []
-    searched = 0.0  # s of grasp searches (what total_budget bounds)
+    r = _PickRequest(scenario, reach, target, kind, spec, X_WO, q_start, ratio, hand, base,
+                     grasp_db)
     # First every class from the database (stored or adapted: no search, no clock), then
     # the searches within the budgets, for the classes the database could not serve.
     order = list(classes or CLASS_ORDER[kind])
     passes = [(cls, False) for cls in order] + [(cls, True) for cls in order]
     for cls, search in passes:
-        if search and not attempts.get(cls, "").startswith(_NOT_STORED):
+        if search and not r.attempts.get(cls, "").startswith(_NOT_STORED):
             continue  # the database served it (the arm did not reach it), or no size fits
         budget = grasp_budget
         if search and total_budget is not None:
-            left = total_budget - searched
+            left = total_budget - r.searched
             if left <= 0:
-                attempts[cls] = f"not tried: the grasp planning budget ({total_budget} s) is spent"
+                r.attempts[cls] = ("not tried: the grasp planning budget "
+                                   f"({total_budget} s) is spent")
                 continue
             budget = left if budget is None else min(budget, left)
-        start = time.perf_counter()
-        stored = grasp_key(cls, spec, X_WO.translation()[2] - scenario.table.top_height,
-                           ratio) in grasp_db
-        if not stored and not search:
-            # Adapting takes 0.1-0.8 s a class: first whether the arm reaches the stored
-            # grasp it would start from (its hand poses are within mm of the adapted one's).
-            reason = _stored_grasp_unreachable(scenario, reach, cls, kind, spec, X_WO,
-                                               base, ratio, hand, grasp_db, q_start, seconds)
-            if reason:
-                attempts[cls] = reason
-                log.append((cls, "unreachable", time.perf_counter() - start))
-                seconds["grasp"] += time.perf_counter() - start
-                continue
-        try:
-            grasp = plan_grasp(cls, spec, X_WO, table_height=scenario.table.top_height,
-                               reach_direction=X_WO.translation()[:2] - base[:2],
-                               coupling_ratio=ratio, time_budget=budget if search else None,
-                               database=grasp_db, search=search)
-        except ValueError as error:
-            attempts[cls] = f"no grasp plan: {error}"
-            spent = time.perf_counter() - start
-            seconds["grasp"] += spent
-            searched += spent if search else 0.0
-            log.append((cls, "failed", spent))
-            continue
-        spent = time.perf_counter() - start
-        seconds["grasp"] += spent
-        searched += spent if search else 0.0
-        source = "stored" if stored else "adapted" if grasp.adapted_from else "searched"
-        log.append((cls, source, spent))
-        reasons, needs_search = [], []
-        # Every turn with straight joint paths first, then the turns that only lacked one
-        # with the path search (KinematicTrajectoryOptimization: a failing one took
-        # 11-134 s on held-out seed 505, whose grasp turned 20 deg needs no search).
-        for search_paths in (False, True):
-            for turn in (_turns(kind, cls) if not search_paths else needs_search):
-                turned = grasp
-                if turn:
-                    try:
-                        turned = plan_grasp(cls, spec, _turned(X_WO, turn),
-                                            table_height=scenario.table.top_height,
-                                            reach_direction=X_WO.translation()[:2] - base[:2],
-                                            coupling_ratio=ratio, database=grasp_db,
-                                            search=False)
-                    except ValueError:
-                        continue
-                waypoints, X_release, reason = _pick_chain(
-                    scenario, reach, kind, spec, X_WO, turned, q_start, ratio, hand, seconds,
-                    search_paths)
-                if not reason:
-                    return PickPlan(target, kind, cls, turned, waypoints, X_WO, X_release,
-                                    seconds, attempts, source, log, _free_joints(reach))
-                if reason.startswith(_NO_STRAIGHT):
-                    needs_search.append(turn)
-                else:
-                    reasons.append(reason)
-        reasons = reasons or ["no grasp at any turn"]
-        attempts[cls] = reasons[0] if len(set(reasons)) == 1 else "; ".join(
-            dict.fromkeys(reasons))
+        found = _class_grasp(r, cls, search, budget)
+        if found is not None:
+            plan = _plan_with_grasp(r, cls, *found)
+            if plan is not None:
+                return plan
     raise PickPlanningError(f"{target} ({kind}): no reachable pick; " + "; ".join(
-        f"{c}: {r}" for c, r in attempts.items()))
+        f"{c}: {why}" for c, why in r.attempts.items()))
+
+
+@dc.dataclass
+class _PickRequest:
+    """One :func:`plan_pick` call: the object, arm and hand it plans for, and its
+    tallies so far (the reasons per class, the seconds, the grasp log and the
+    seconds of grasp searches, which ``total_budget`` bounds)."""
+
+    scenario: object
+    reach: object
+    target: str
+    kind: str
+    spec: ObjectSpec
+    X_WO: RigidTransform
+    q_start: np.ndarray
+    ratio: float
+    hand: object
+    base: np.ndarray
+    grasp_db: GraspDatabase
+    attempts: dict = dc.field(default_factory=dict)
+    seconds: dict = dc.field(default_factory=lambda: {"grasp": 0.0, "ik": 0.0, "path": 0.0})
+    log: list = dc.field(default_factory=list)
+    searched: float = 0.0
+
+
+def _class_grasp(r: _PickRequest, cls, search: bool, budget):
+    """``(grasp, source)`` of class ``cls`` on the object: from the database (stored or
+    adapted) or, with ``search``, searched within ``budget`` s; source one of
+    ``GRASP_SOURCES``. None when there is none (the reason in ``r.attempts``)."""
+    start = time.perf_counter()
+    stored = grasp_key(cls, r.spec, r.X_WO.translation()[2] - r.scenario.table.top_height,
+                       r.ratio) in r.grasp_db
+    if not stored and not search:
+        # Adapting takes 0.1-0.8 s a class: first whether the arm reaches the stored
+        # grasp it would start from (its hand poses are within mm of the adapted one's).
+        reason = _stored_grasp_unreachable(r.scenario, r.reach, cls, r.kind, r.spec, r.X_WO,
+                                           r.base, r.ratio, r.hand, r.grasp_db, r.q_start,
+                                           r.seconds)
+        if reason:
+            r.attempts[cls] = reason
+            r.log.append((cls, "unreachable", time.perf_counter() - start))
+            r.seconds["grasp"] += time.perf_counter() - start
+            return None
+    try:
+        grasp = plan_grasp(cls, r.spec, r.X_WO, table_height=r.scenario.table.top_height,
+                           reach_direction=r.X_WO.translation()[:2] - r.base[:2],
+                           coupling_ratio=r.ratio, time_budget=budget if search else None,
+                           database=r.grasp_db, search=search)
+    except ValueError as error:
+        r.attempts[cls] = f"no grasp plan: {error}"
+        spent = time.perf_counter() - start
+        r.seconds["grasp"] += spent
+        r.searched += spent if search else 0.0
+        r.log.append((cls, "failed", spent))
+        return None
+    spent = time.perf_counter() - start
+    r.seconds["grasp"] += spent
+    r.searched += spent if search else 0.0
+    source = "stored" if stored else "adapted" if grasp.adapted_from else "searched"
+    r.log.append((cls, source, spent))
+    return grasp, source
+
+
+def _plan_with_grasp(r: _PickRequest, cls, grasp, source) -> PickPlan | None:
+    """The PickPlan of ``cls``'s ``grasp`` at the first turn (``_turns``) whose whole
+    chain the arm reaches, or None (the reasons in ``r.attempts``)."""
+    reasons, needs_search = [], []
+    # Every turn with straight joint paths first, then the turns that only lacked one
+    # with the path search (KinematicTrajectoryOptimization: a failing one took
+    # 11-134 s on held-out seed 505, whose grasp turned 20 deg needs no search).
+    for search_paths in (False, True):
+        for turn in (_turns(r.kind, cls) if not search_paths else needs_search):
+            turned = grasp
+            if turn:
+                try:
+                    turned = plan_grasp(cls, r.spec, _turned(r.X_WO, turn),
+                                        table_height=r.scenario.table.top_height,
+                                        reach_direction=r.X_WO.translation()[:2] - r.base[:2],
+                                        coupling_ratio=r.ratio, database=r.grasp_db,
+                                        search=False)
+                except ValueError:
+                    continue
+            waypoints, X_release, reason = _pick_chain(
+                r.scenario, r.reach, r.kind, r.spec, r.X_WO, turned, r.q_start, r.ratio,
+                r.hand, r.seconds, search_paths)
+            if not reason:
+                return PickPlan(r.target, r.kind, cls, turned, waypoints, r.X_WO, X_release,
+                                r.seconds, r.attempts, source, r.log, _free_joints(r.reach))
+            if reason.startswith(_NO_STRAIGHT):
+                needs_search.append(turn)
+            else:
+                reasons.append(reason)
+    reasons = reasons or ["no grasp at any turn"]
+    r.attempts[cls] = reasons[0] if len(set(reasons)) == 1 else "; ".join(
+        dict.fromkeys(reasons))
+    return None
 
 
 def _stored_grasp_unreachable(scenario, reach, cls, kind, spec, X_WO, base, ratio, hand,
