@@ -43,12 +43,14 @@ def test_joywarrior_tripod_rotation_is_measured_by_the_object_itself(tmp_path):
 
 def test_committed_experiment_diagrams_are_current(tmp_path):
     assert main(["instruments", "--write-scenarios", str(tmp_path)]) == 0
-    for path in sorted(tmp_path.glob("instrumented_*.yaml")):
-        committed = diagrams_dir() / path.name
-        assert committed.read_text() == path.read_text(), (
-            f"diagrams/{path.name} is stale: run handle-drake instruments --write-scenarios "
-            "diagrams")
-        scenario = LoadScenario(filename=committed)
+    # the written files equal the committed ones (text, and numbers to 1e-4: the IK's last
+    # digits move with numpy's version) in tests/test_written_scenarios.py; here each loads
+    written = sorted(tmp_path.glob("instrumented_*.yaml"))
+    assert [p.name for p in written] == ["instrumented_joywarrior_tripod.yaml",
+                                         "instrumented_wiimote_parallel_extension.yaml"]
+    for path in written:
+        assert (diagrams_dir() / path.name).is_file(), path.name
+        scenario = LoadScenario(filename=path)
         assert scenario.object.accelerometer is not None
 
 

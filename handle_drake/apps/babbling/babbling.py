@@ -136,8 +136,8 @@ def _grid_chunk(config: GraspTrialConfig, points: np.ndarray) -> np.ndarray:
 def simulation_sources() -> list[Path]:
     """The source files a grasp trial's metric depends on: the trial, harness, scenario
     runner, station, scenario, hands, objects (the instrumented devices' geometry
-    included), the scene's further objects and the arm, drivers, controllers and grasp
-    quality. What else a trial loads
+    included), the scene's further objects and the arm, the taxels (the station wires them
+    when a scenario asks), drivers, controllers and grasp quality. What else a trial loads
     cannot change its metric: the learning engine, validation, port names, other
     drivers' settings (``tests/experiments/test_babbling.py`` keeps this true)."""
     root = PACKAGE_DIR
@@ -148,6 +148,7 @@ def simulation_sources() -> list[Path]:
         *(root / "geometry" / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
         *(root / "geometry" / "quality").glob("*.py"),
         *(root / "scene").glob("*.py"), *(root / "devices" / "arm").glob("*.py"),
+        *(root / "devices" / "taxels").glob("*.py"),
     ])
 
 
