@@ -245,12 +245,19 @@ def test_pick_with_nothing_to_attempt_exits_3_with_the_whole_reason(override, me
     (["--override", "cameras: []"], "no camera to perceive with"),
     (["--true-poses", "--object", "9"], "--object: 9 is not one of the 4 objects"),
     (["--true-poses", "--object", "-1"], "--object: -1 is not one of the 4 objects"),
-    (["--scene-seed", "-3"], "--scene-seed: expected an integer >= 0"),
 ])
 def test_pick_refuses_bad_input_with_exit_2(args, message, capsys):
     code = main(["pick", str(PATH), *args])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seed", ["-3", str(2**63), "1.5"])
+def test_pick_scene_seed_out_of_range_is_refused_by_the_parser(seed, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["pick", str(PATH), "--scene-seed", seed])
+    assert stop.value.code == 2
+    assert "--scene-seed: expected an integer in 0..2**63-1" in capsys.readouterr().err
 
 
 def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
