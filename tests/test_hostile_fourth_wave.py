@@ -19,27 +19,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import cli_exit
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-from handle_drake.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 HAMBURG = str(ROOT / "diagrams" / "hamburg_setup.yaml")
 SHIPPED_DB = ROOT / "handle_drake" / "apps" / "pick" / "data" / "grasp_database.json"
 ENV = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p),
            OPENBLAS_NUM_THREADS="1")
-
-
-def _cli(argv, capsys):
-    """``handle-drake argv`` in-process: (exit code, stderr); never a traceback."""
-    try:
-        code = main(argv)
-    except SystemExit as exit_:  # argparse's own refusals
-        code = exit_.code
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and len(err) < 2000, err
-    return code, err
 
 
 def _last_line(err: str) -> str:
@@ -290,7 +278,7 @@ def test_pick_refuses_a_scene_it_cannot_work_in_before_any_work(override, words,
 
     monkeypatch.setattr(pick_cli, "pick", no_work)
     monkeypatch.chdir(tmp_path)
-    code, err = _cli(["pick", HAMBURG, "--true-poses", "--override", override], capsys)
+    code, err = cli_exit(["pick", HAMBURG, "--true-poses", "--override", override], capsys)
     assert code == 2 and all(w in err for w in words), err
     assert len(err.strip().splitlines()) == 1 and list(tmp_path.iterdir()) == []
 
@@ -310,8 +298,8 @@ def test_pick_html_png_is_refused_before_any_work(capsys, monkeypatch, tmp_path)
 
     monkeypatch.setattr(pick_cli, "pick", lambda *a, **k: (_ for _ in ()).throw(
         AssertionError("pick started")))
-    code, err = _cli(["pick", HAMBURG, "--true-poses", "--html", str(tmp_path / "out.png")],
-                     capsys)
+    code, err = cli_exit(["pick", HAMBURG, "--true-poses", "--html", str(tmp_path / "out.png")],
+                         capsys)
     assert code == 2 and "--html" in err and ".html" in err and not (tmp_path / "out.png")\
         .exists()
 
@@ -322,7 +310,7 @@ def test_build_grasp_db_to_an_unwritable_place_is_refused_before_any_search(caps
 
     monkeypatch.setattr(plan, "build_grasp_database", lambda *a, **k: (_ for _ in ()).throw(
         AssertionError("searched")))
-    code, err = _cli(["pick", HAMBURG, "--true-poses", "--build-grasp-db", "--grasp-db",
+    code, err = cli_exit(["pick", HAMBURG, "--true-poses", "--build-grasp-db", "--grasp-db",
                       "/proc/grasps.json"], capsys)
     assert code == 2 and "--grasp-db" in err, err  # was refused after 45 s of searches
 
@@ -351,20 +339,20 @@ def test_a_planning_reason_names_the_target_the_result_names():
 ])
 def test_inhand_refusals_leave_no_trial_log_behind(argv, word, capsys, tmp_path):
     db = tmp_path / "sub" / "x.sqlite"
-    code, err = _cli(["inhand", "--trials", "1", "--no-progress", "--db", str(db), *argv],
-                     capsys)
+    code, err = cli_exit(["inhand", "--trials", "1", "--no-progress", "--db", str(db), *argv],
+                         capsys)
     assert code == 2 and word in _last_line(err), err
     assert not db.exists() and not db.parent.exists()  # was: a new sqlite file
 
 
 def test_target_deg_minus_90_names_the_accepted_range(capsys, tmp_path):
-    code, err = _cli(["inhand", "--target-deg", "-90", "--db", str(tmp_path / "x.sqlite")],
-                     capsys)
+    code, err = cli_exit(["inhand", "--target-deg", "-90", "--db", str(tmp_path / "x.sqlite")],
+                         capsys)
     assert code == 2 and "(0, 360]" in err and ">= 0" not in err, err
 
 
 def test_chunk_superscript_two_is_named(capsys):
-    code, err = _cli(["babble", "--chunk", "²", "--trials", "1"], capsys)
+    code, err = cli_exit(["babble", "--chunk", "²", "--trials", "1"], capsys)
     assert code == 2 and "--chunk" in err and "'²'" in err and "_chunk_type" not in err, err
 
 

@@ -22,20 +22,10 @@ import zlib
 import numpy as np
 import pytest
 import trimesh
+from conftest import cli_exit
 from PIL import Image
 
-from handle_drake.cli import main
 from handle_drake.scenario import LoadScenario, ScenarioError
-
-
-def _cli(argv, capsys):
-    try:
-        code = main(argv)
-    except SystemExit as exit_:  # argparse's own refusals
-        code = exit_.code
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and len(err) < 2000, err
-    return code, err
 
 
 # --------------------------------------------------------------- dask:// addresses
@@ -100,8 +90,8 @@ def test_the_command_refuses_a_hostile_dask_address_before_writing_anything(tmp_
     server, held = _listener("http")
     db = tmp_path / "never.sqlite"
     try:
-        code, err = _cli(["babble", "--executor", f"dask://127.0.0.1:{server.getsockname()[1]}",
-                          "--connect-timeout", "1", "--db", str(db), "--no-plot"], capsys)
+        code, err = cli_exit(["babble", "--executor", f"dask://127.0.0.1:{server.getsockname()[1]}",
+                              "--connect-timeout", "1", "--db", str(db), "--no-plot"], capsys)
     finally:
         server.close()
         for conn in held:
@@ -112,7 +102,7 @@ def test_the_command_refuses_a_hostile_dask_address_before_writing_anything(tmp_
 
 @pytest.mark.parametrize("command", [["babble"], ["inhand"], ["report", "--reduced"]])
 def test_connect_timeout_without_a_dask_address_is_refused(command, tmp_path, capsys):
-    code, err = _cli([*command, "--connect-timeout", "3", "--executor", "local"], capsys)
+    code, err = cli_exit([*command, "--connect-timeout", "3", "--executor", "local"], capsys)
     assert code == 2 and "--connect-timeout" in err and "dask://" in err
 
 
@@ -232,7 +222,7 @@ def test_a_depth_image_above_the_pixel_cap_is_refused_before_decoding(tmp_path):
 
 def test_the_perceive_command_refuses_a_bad_frame_with_exit_2(tmp_path, capsys):
     path = _frame(tmp_path, depth_scale=True)
-    code, err = _cli(["perceive", "--frame", str(path)], capsys)
+    code, err = cli_exit(["perceive", "--frame", str(path)], capsys)
     assert code == 2 and "depth_scale" in err
 
 
@@ -350,7 +340,7 @@ def test_a_mapping_naming_controls_the_device_lacks_is_refused(tmp_path):
 def test_an_output_the_system_refuses_is_named_before_any_work(argv, tmp_path, capsys):
     _frame(tmp_path)
     start = time.monotonic()
-    code, err = _cli(argv.format(tmp=tmp_path).split(), capsys)
+    code, err = cli_exit(argv.format(tmp=tmp_path).split(), capsys)
     option = next(a for a in argv.split() if a.startswith("--") and "/proc" in
                   argv.split()[argv.split().index(a) + 1])
     assert code == 2 and f"{option}: cannot create" in err, err
@@ -423,7 +413,7 @@ def test_refusals_say_why(argv, words, tmp_path, capsys):
     args = argv.split(" ")
     if args[0] == "babble":  # bounded on code that would run it
         args += ["--trials", "1", "--no-plot", "--no-progress", "--db", str(tmp_path / "x.sqlite")]
-    code, err = _cli(args, capsys)
+    code, err = cli_exit(args, capsys)
     assert code == 2, err
     for word in words:
         assert word in err, (word, err)

@@ -33,7 +33,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from handle_drake.apps.inhand.jog_wheel import JogWheelTask, JogWheelTrial
-from handle_drake.envs.inhand import STEP_TASKS, task_trial
+from handle_drake.envs.inhand import STEP_TASKS, checked_action, task_trial
 from handle_drake.learning.executors import (
     TrialResult,
     _check_local_workers,
@@ -88,19 +88,8 @@ class _Parameters:
         self.names = f"{len(self.bounds)} trial parameters"
 
     def check_action(self, action) -> np.ndarray:
-        n = len(self.bounds)
-        a = np.asarray(action, dtype=float)
-        if a.shape != (n,):
-            raise ValueError(f"action: expected {n} values (the {self.names}, normalised), "
-                             f"got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("action: expected finite values")
-        bad = np.flatnonzero(np.abs(a) > 1.0 + 1e-6)
-        if bad.size:
-            i = int(bad[0])
-            raise ValueError(f"action: expected values in [-1, 1] (parameters normalised over "
-                             f"their bounds), got {a[i]:g} at index {i}")
-        return np.clip(a, -1.0, 1.0)
+        return checked_action(action, len(self.bounds), f"the {self.names}, normalised",
+                              "parameters normalised over their bounds")
 
     def parameters(self, action) -> np.ndarray:
         """The trial's parameter vector of a normalised action."""

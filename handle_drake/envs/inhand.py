@@ -103,6 +103,23 @@ def task_trial(task: str, **options):
     raise ValueError(f"task: expected one of {STEP_TASKS}, got {task!r}")
 
 
+def checked_action(action, n: int, values: str, meaning: str, name=lambda i: "") -> np.ndarray:
+    """``action`` as ``n`` finite floats in [-1, 1] (clipped to it within 1e-6); otherwise a
+    one-line ValueError: the shape expected (``values``: what they are), or the first value
+    out of range (``meaning``; ``name(i)``: what index ``i`` is)."""
+    a = np.asarray(action, dtype=float)
+    if a.shape != (n,):
+        raise ValueError(f"action: expected {n} values ({values}), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError("action: expected finite values")
+    bad = np.flatnonzero(np.abs(a) > 1.0 + 1e-6)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"action: expected values in [-1, 1] ({meaning}), got {a[i]:g} at "
+                         f"index {i}{name(i)}")
+    return np.clip(a, -1.0, 1.0)
+
+
 @dc.dataclass(eq=False)
 class _Reading:
     """One read of the simulation (plain numbers)."""
@@ -371,20 +388,10 @@ class InHandEnv(gym.Env):
     # -------------------------------------------------------------- actions
     def check_action(self, action) -> np.ndarray:
         """``action`` as nu floats in [-1, 1]; a ValueError naming what is wrong otherwise."""
-        nu = len(self.actuated_names)
-        a = np.asarray(action, dtype=float)
-        if a.shape != (nu,):
-            raise ValueError(f"action: expected {nu} values (one per actuated joint, "
-                             f"{self.actuated_names[0]}..{self.actuated_names[-1]}), got shape "
-                             f"{a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError("action: expected finite values")
-        bad = np.flatnonzero(np.abs(a) > 1.0 + 1e-6)
-        if bad.size:
-            i = int(bad[0])
-            raise ValueError(f"action: expected values in [-1, 1] (normalised joint targets), "
-                             f"got {a[i]:g} at index {i} ({self.actuated_names[i]})")
-        return np.clip(a, -1.0, 1.0)
+        names = self.actuated_names
+        return checked_action(action, len(names),
+                              f"one per actuated joint, {names[0]}..{names[-1]}",
+                              "normalised joint targets", lambda i: f" ({names[i]})")
 
     def target(self, action) -> np.ndarray:
         """The joint command (rad) of a checked action."""
