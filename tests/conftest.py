@@ -12,16 +12,3 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("HANDLE_DRAKE_CACHE_DIR",
                       os.path.join(tempfile.gettempdir(), "handle_drake_test_cache"))
 
-
-def cli_exit(argv, capsys):
-    """``handle-drake argv`` in-process: (exit code, stderr), argparse's own refusals
-    included; never a traceback and never a screenful (the hostile-input tests)."""
-    from handle_drake.cli import main
-
-    try:
-        code = main(argv)
-    except SystemExit as exit_:  # argparse's own refusals
-        code = exit_.code
-    err = capsys.readouterr().err
-    assert "Traceback" not in err and len(err) < 2000, err
-    return code, err

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import cli_exit
+from cli_runner import cli_exit
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -22,7 +22,7 @@ import zlib
 import numpy as np
 import pytest
 import trimesh
-from conftest import cli_exit
+from cli_runner import cli_exit
 from PIL import Image
 
 from handle_drake.scenario import LoadScenario, ScenarioError
