@@ -324,7 +324,7 @@ def test_a_reduced_run_leaves_the_committed_page_and_json_byte_identical(tmp_pat
 
 # ------------------------------------------------------------ the pages show the present
 PAGES = sorted((ROOT / "docs" / "results").glob("*.md"))
-MAX_LINES = {"inhand": 320}  # its many targets (and room for a convergence table)
+MAX_LINES = {"inhand": 300}  # its many targets (the convergence tables among them)
 DEFAULT_MAX_LINES = 160
 MAX_NOTES_LINES = 45
 HISTORY = re.compile(r"\b(pass|passes|run of|runs of|earlier|branch|issue-\d)", re.IGNORECASE)
