@@ -23,7 +23,7 @@ from handle_drake.station import (
     object_body,
     object_spec,
 )
-from handle_drake.trial.simulate import script_trajectories
+from handle_drake.trial.simulate import ScenarioRunner, script_trajectories
 
 RADIUS = 0.015  # m, the sphere pressed on the pad
 DEPTH = 0.0004  # m, how far its surface starts inside the pad face
@@ -188,16 +188,9 @@ def _hold(scenario_file: str, until: float):
     """The scenario with taxels and the estimator, simulated to ``until``."""
     scenario = LoadScenario(filename=diagrams_dir() / scenario_file,
                             data="hand: {taxels: {estimator: true}}")
-    builder = DiagramBuilder()
-    station = builder.AddSystem(MakeHandStation(scenario, finite_commands=True))
-    hand, wrist = script_trajectories(scenario, hand_initial_command(scenario))
-    builder.Connect(builder.AddSystem(TrajectorySource(hand)).get_output_port(),
-                    station.GetInputPort("hand.position"))
-    builder.Connect(builder.AddSystem(TrajectorySource(wrist)).get_output_port(),
-                    station.GetInputPort("wrist.pose"))
-    simulator = Simulator(builder.Build())
-    simulator.AdvanceTo(until)
-    return scenario, station, station.GetMyContextFromRoot(simulator.get_context())
+    runner = ScenarioRunner(scenario)  # the station driven by the scenario's script
+    runner.simulator.AdvanceTo(until)
+    return scenario, runner.station, runner.station.GetMyContextFromRoot(runner.context)
 
 
 def test_the_estimator_built_from_ports_alone_finds_the_held_sphere():
