@@ -75,3 +75,28 @@ def test_instruments_write_scenarios_reproduces_the_committed_files(tmp_path, mo
     assert cli_main(["instruments", "--write-scenarios", "diagrams"]) == 0
     _check(tmp_path / "diagrams", ["instrumented_joywarrior_tripod.yaml",
                                    "instrumented_wiimote_parallel_extension.yaml"])
+
+
+GRASP_SCENARIOS = sorted(p.name for p in (ROOT / "diagrams").glob("grasp_*.yaml"))
+
+
+@pytest.mark.slow
+def test_grasp_write_scenarios_reproduces_the_committed_files(tmp_path, monkeypatch):
+    from handle_drake.apps.planning.cli import CLASS_OBJECTS
+    from handle_drake.apps.planning.cli import main as planning_main
+
+    monkeypatch.chdir(tmp_path)
+    assert planning_main(["--write-scenarios", "diagrams"]) == 0
+    assert GRASP_SCENARIOS == sorted(f"grasp_{name}.yaml" for name in CLASS_OBJECTS)
+    _check(tmp_path / "diagrams", GRASP_SCENARIOS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", GRASP_SCENARIOS)
+def test_every_shipped_grasp_scenario_lifts_its_object(name):
+    """Read from the plant: the object ends >= 10 cm above where it started, and steady."""
+    from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.simulate import ScenarioRunner, held_through_lift
+
+    result = ScenarioRunner(LoadScenario(filename=str(ROOT / "diagrams" / name))).run()
+    assert held_through_lift(result), result.object_position[::25, 2]

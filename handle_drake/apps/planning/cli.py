@@ -36,10 +36,10 @@ CLASS_OBJECTS = {
     "palmar_pinch": ("cuboid", 0.0667),  # grasp width (cuboid depth) 40 mm
     "tip_pinch": ("cuboid", 0.0367),  # 22 mm
     "tripod": ("cuboid", 0.075),  # 45 mm
-    "writing_tripod": ("sphere", 0.024),  # plans, but no writing-tripod plan held yet
+    "writing_tripod": ("sphere", 0.024),
     "lateral": ("cuboid", 0.028),  # 16.8 mm, a thin box
     "lateral_tripod": ("cuboid", 0.0417),  # 25 mm
-    "adduction_grip": ("sphere", 0.010),
+    "adduction_grip": ("cuboid", 0.025),  # 15 mm (a 10 mm sphere's plan does not lift)
     "parallel_extension": ("cuboid", 0.075),  # 45 mm
 }
 
