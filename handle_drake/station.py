@@ -66,7 +66,7 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer
 from pydrake.visualization import ApplyVisualizationConfig
 
 from handle_drake.base.hands import (
@@ -74,6 +74,7 @@ from handle_drake.base.hands import (
     actuated_position_limits,
     actuated_to_joint_positions,
     get_hand_spec,
+    set_effort_limits,
 )
 from handle_drake.base.port_names import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
 from handle_drake.devices.accelerometer.wiring import (
@@ -92,7 +93,7 @@ from handle_drake.devices.taxels.wiring import (
     AddTaxelPlayback,
     AddTaxels,
 )
-from handle_drake.geometry.objects import AddObject, AddTable, resting_height
+from handle_drake.geometry.objects import AddObject, AddTable, dimensions, resting_height
 from handle_drake.scenario import (
     Arm,
     CanHandDriver,
@@ -100,9 +101,11 @@ from handle_drake.scenario import (
     FloatingWrist,
     Scenario,
     SimHandDriver,
+    is_bare,
     object_spec,
     validate_scenario,
 )
+from handle_drake.scene.jointed import AddBareObject, BareObject, FilterObjectBase
 from handle_drake.scene.plant import AddSceneModels, ExportSceneObjects
 from handle_drake.systems.hand_driver import (
     MEASURED_OUTPUTS,
@@ -134,7 +137,7 @@ STATION_OUTPUTS = (
     *(f"{HAND}.{s}" for s in HAND_SIGNALS), "wrist.pose_measured",
     *(f"object.{s}" for s in ("pose", "spatial_velocity", "position", "acceleration",
                               "acceleration_counts", "roll_pitch", "at_rest", "free_fall",
-                              "slip")),
+                              "slip", "joint_position")),
     "contact_results", "query_object", "body_poses", "plant_state")
 
 HAND_INSTANCE = HAND
@@ -206,6 +209,8 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
         _add_wrist_driver(builder, plant, scenario, finite_commands, wanted)
     if scenario.object is not None:
         _add_object_systems(builder, plant, scenario, wanted)
+        if scenario.object.joint is not None:
+            _add_object_joint(builder, plant, scene_graph, wanted)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     # external forces on bodies (e.g. an object's weight reversed: the in-hand held test)
     builder.ExportInput(plant.get_applied_spatial_force_input_port(), "applied_spatial_force")
@@ -340,6 +345,23 @@ def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None
                                 object_spec(scenario))
 
 
+def _add_object_joint(builder, plant, scene_graph, wanted) -> None:
+    """An object on a joint (``object.joint``): its friction actuator's reference (0), the
+    object and its base kept from colliding, and ``object.joint_position`` (rad) when
+    ``wanted``."""
+    body = object_body(plant)
+    instance = body.model_instance()
+    bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
+    if len(bodies) > 1:  # the welded base (the bottle): the thread is the joint
+        FilterObjectBase(plant, scene_graph, body, bodies[1])
+    zero = builder.AddNamedSystem("object_joint_reference", ConstantVectorSource(np.zeros(2)))
+    builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+    if wanted("object.joint_position"):
+        split = builder.AddNamedSystem("object_joint_state", Demultiplexer([1, 1]))
+        builder.Connect(plant.get_state_output_port(instance), split.get_input_port())
+        builder.ExportOutput(split.get_output_port(0), "object.joint_position")
+
+
 def _estimating(scenario: Scenario) -> bool:
     """Whether the scenario asks for the object's pose estimated from touch (it reads the
     measured hand joints and wrist pose)."""
@@ -408,10 +430,17 @@ def AddPlantModels(plant, scenario: Scenario):
         _add_floating_wrist(plant, base_frame, mount)
         plant.set_gravity_enabled(hand, False)
 
+    set_effort_limits(plant, hand, scenario.hand.effort_limits, scenario.hand.effort_scale)
     if scenario.table is not None:
         AddTable(plant, top_height=scenario.table.top_height,
                  size=(scenario.table.size_x, scenario.table.size_y))
-    if scenario.object is not None:
+    if scenario.object is not None and is_bare(scenario.object):
+        o = scenario.object
+        AddBareObject(plant, BareObject(
+            diameter=o.size, length=dimensions(object_spec(scenario))["height"], mass=o.mass,
+            mu=o.mu, X_WO=object_initial_pose(scenario), point_stiffness=o.point_stiffness,
+            joint=o.joint))
+    elif scenario.object is not None:
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.plant_config.contact_model != "point")
         if scenario.object.fixed:
