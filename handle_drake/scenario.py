@@ -391,8 +391,10 @@ class Scenario:
     midi_controller: MidiControllerConfig | None = None
 
 
-def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
-    """Loads a scenario from a YAML file, then applies an optional override string.
+def LoadScenario(*, filename: str | Path | None = None, data: str | None = None,
+                 text: str | None = None, source: str = "text") -> Scenario:
+    """Loads a scenario from a YAML file (or its ``text``, named ``source`` in errors:
+    e.g. a trial log's record), then applies an optional override string.
 
     A ``filename`` that names no file but a shipped scenario (``diagrams/NAME.yaml``
     outside a checkout, or ``NAME``) loads the installed one
@@ -404,6 +406,10 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
             value; the message names the file and the problem.
     """
     scenario = Scenario()
+    if filename is not None and text is not None:
+        raise ValueError("LoadScenario: give filename or text, not both")
+    if text is not None:
+        scenario = _load(text, scenario, source=source)
     if filename is not None:
         path = shipped_path(filename) if isinstance(filename, (str, Path)) else filename
         try:

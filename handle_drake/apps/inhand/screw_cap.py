@@ -95,7 +95,10 @@ from handle_drake.apps.inhand.task import (
     ReversedGravity,
     gist_data,
     gist_from_data,
+    logged_scenario,
+    motion_script,
     penetrating_hand_bodies,
+    trial_text,
 )
 from handle_drake.base.hands import (
     EFFORT_LIMITS,
@@ -311,7 +314,15 @@ class ScrewCapScenario:
 
     @staticmethod
     def load(text: str) -> "ScrewCapScenario":
-        return yaml_load_typed(schema=ScrewCapScenario, data=text)
+        """From its own YAML, or from a trial log's text (:func:`~handle_drake.apps.inhand.
+        task.logged_scenario`: the station's scenario, then this one as comments)."""
+        return yaml_load_typed(schema=ScrewCapScenario, data=trial_text(text))
+
+    def logged(self) -> str:
+        """The text a trial log stores: the station's scenario with the motion as its
+        script (``handle-drake simulate`` replays it), then this scenario."""
+        what = "fingertip cylinder" if self.cap.free else "screw cap"
+        return logged_scenario(self.station(motion=True), self.dump(), what)
 
     @property
     def total_time(self) -> float:
@@ -420,10 +431,10 @@ def station_scenario(scenario: ScrewCapScenario, motion: bool = False) -> Scenar
     X_WB.set_rotation_rpy_deg([float(v) for v in scenario.hand_rpy_deg])
     script, duration = [], scenario.settle_time + scenario.total_time
     if motion:
-        source = _motion_source(scenario)
-        script = source.held_keyframes(scenario.parameters or scenario.action_gist()
-                                       .initial_parameters(), PlannedCommands.period,
-                                       scenario.total_time, scenario.settle_time)
+        script = motion_script(_motion_source(scenario), scenario.parameters
+                               or scenario.action_gist().initial_parameters(),
+                               PlannedCommands.period, scenario.total_time,
+                               scenario.settle_time)
     return Scenario(
         hand=HandConfig(kind="shadow", coupling_ratio=1.0, mount=FixedMount(X_WB=X_WB),
                         initial_position={n: float(v) for n, v in
@@ -1189,7 +1200,7 @@ class ScrewCapTrial(GistObjective):
         detail = outcome.as_dict()
         detail.pop("times")
         return TrialResult(metric=outcome.score, contacts=detail,
-                           scenario=self.scenario(x).dump())
+                           scenario=self.scenario(x).logged())
 
     def perturbed(self, perturbation: dict) -> "ScrewCapTrial":
         """The same task under one perturbation (:func:`draw_perturbations`), not robust."""
@@ -1213,7 +1224,7 @@ class ScrewCapTrial(GistObjective):
                       robust_draws=[{n: (list(v) if isinstance(v, tuple) else v)
                                      for n, v in p.items()} for p in draws])
         return TrialResult(metric=float(scores[k]), contacts=detail,
-                           scenario=self.perturbed(draws[k]).scenario(x).dump())
+                           scenario=self.perturbed(draws[k]).scenario(x).logged())
 
     def _gripped(self, st: dict, t, summary: dict, built: dict, plant_context, p0) -> bool:
         """A finger touched the object within ``contact_window``, the palm never did (its

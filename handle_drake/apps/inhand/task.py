@@ -80,8 +80,10 @@ from handle_drake.learning.executors import TrialResult
 from handle_drake.learning.log import code_fingerprint
 from handle_drake.scenario import (
     AccelerometerConfig,
+    DumpScenario,
     FixedMount,
     HandConfig,
+    Keyframe,
     ObjectConfig,
     Scenario,
     SimHandDriver,
@@ -92,7 +94,8 @@ from handle_drake.trial.gist_trial import ReversedGravity
 
 __all__ = ["TASKS", "InHandTask", "InHandTrial", "InHandScenario", "TrialOutcome", "EVALUATIONS",
            "task_gist", "build_inhand", "ReversedGravity", "inhand_fingerprint", "GistMotionData",
-           "gist_data", "gist_from_data", "penetrating_hand_bodies"]
+           "gist_data", "gist_from_data", "penetrating_hand_bodies",
+           "logged_scenario", "trial_text", "motion_script", "TRIAL_MARKER"]
 
 DATA_DIR = Path(__file__).parent / "data"
 EVALUATIONS = ("incremental", "old")
@@ -276,6 +279,37 @@ def gist_from_data(name: str, motions: list[GistMotionData]) -> ActionGist:
     return ActionGist.from_dict({"name": name, "motions": [dc.asdict(m) for m in motions]})
 
 
+#: The line that starts an in-hand trial's own scenario inside its logged text
+TRIAL_MARKER = "# in-hand trial"
+
+
+def logged_scenario(station: Scenario, trial_text: str, note: str = "") -> str:
+    """What an in-hand trial's log record stores: the station's scenario with the trial's
+    motion as its keyframe script (the YAML :func:`~handle_drake.scenario.LoadScenario`
+    reads: ``handle-drake simulate`` replays it, from a log too), then the trial's own
+    scenario (settings, gist, parameters) as ``#| `` comment lines (:func:`trial_text`)."""
+    lines = "".join(f"#| {line}\n" for line in trial_text.splitlines())
+    return DumpScenario(station) + f"{TRIAL_MARKER}{': ' + note if note else ''}\n" + lines
+
+
+def trial_text(text: str) -> str:
+    """The trial's own scenario in a logged text (:func:`logged_scenario`); a text without
+    it (logged before, or written by hand) is returned as it is."""
+    if f"\n{TRIAL_MARKER}" not in text:
+        return text
+    return "".join(line[3:] + "\n" for line in text.splitlines() if line.startswith("#|"))
+
+
+def motion_script(source: GistMotionSource, parameters, period: float, duration: float,
+                  settle_time: float) -> list:
+    """A trial's motion as a scenario's keyframe script: a keyframe with no command one
+    driver period before the settle ends (where the motion starts: ``handle-drake
+    simulate`` counts the object's turn from there), then the frames' keyframes
+    (:meth:`GistMotionSource.held_keyframes`) from ``settle_time`` on for ``duration``."""
+    return [Keyframe(time=float(settle_time - period)), *source.held_keyframes(
+        parameters, period, duration, settle_time)]
+
+
 @dc.dataclass
 class InHandScenario:
     """One palm-up in-hand trial, whole: the station's scenario (hand, object, plant,
@@ -300,7 +334,24 @@ class InHandScenario:
         # yaml_dump_typed leaves out None fields: the table (and any other optional part
         # of the station) absent from the text is absent from the scenario
         defaults = InHandScenario(station=Scenario(object=None, table=None))
-        return yaml_load_typed(schema=InHandScenario, data=text, defaults=defaults)
+        return yaml_load_typed(schema=InHandScenario, data=trial_text(text),
+                               defaults=defaults)
+
+    def replay_scenario(self) -> Scenario:
+        """The station's scenario with this trial's motion as its script (the grasp holds
+        the initial command for ``settle_time``; the reversed weight is the trial's own
+        check, not replayed)."""
+        source = GistMotionSource(self.action_gist(), self.initial_command(),
+                                  self.motion_duration, self.n_frames)
+        duration = self.station.simulation_duration - self.settle_time
+        return dc.replace(self.station, script=motion_script(
+            source, self.parameters, self.station.driver.control_period, duration,
+            self.settle_time))
+
+    def logged(self) -> str:
+        """The text a trial log stores (:func:`logged_scenario`)."""
+        return logged_scenario(self.replay_scenario(), self.dump(),
+                               f"{self.gist_name}, palm up")
 
     def action_gist(self) -> ActionGist:
         return gist_from_data(self.gist_name, self.gist)
@@ -499,7 +550,8 @@ class InHandTrial(GistObjective):
         detail = outcome.as_dict()
         for key in ("times",):
             detail.pop(key)
-        return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario(x).dump())
+        return TrialResult(metric=outcome.score, contacts=detail,
+                           scenario=self.scenario(x).logged())
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> TrialOutcome:
         """Runs one trial (deterministic: the simulation has no noise; ``seed`` is unused).
