@@ -208,9 +208,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
     if isinstance(scenario.hand.mount, FloatingWrist):
         _add_wrist_driver(builder, plant, scenario, finite_commands, wanted)
     if scenario.object is not None:
-        _add_object_systems(builder, plant, scenario, wanted)
-        if scenario.object.joint is not None:
-            _add_object_joint(builder, plant, scene_graph, wanted)
+        _add_object_systems(builder, plant, scenario, wanted, scene_graph)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     # external forces on bodies (e.g. an object's weight reversed: the in-hand held test)
     builder.ExportInput(plant.get_applied_spatial_force_input_port(), "applied_spatial_force")
@@ -322,9 +320,10 @@ def _add_wrist_driver(builder, plant, scenario: Scenario,
         builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
 
 
-def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None:
+def _add_object_systems(builder, plant, scenario: Scenario, wanted=None,
+                        scene_graph=None) -> None:
     """The object's pose selector (``object.*`` ports; those ``wanted`` reads:
-    :class:`_Outputs`) and its accelerometer, if any."""
+    :class:`_Outputs`), its accelerometer and its joint's systems, if any."""
     wanted = wanted or _Outputs(None)
     position = None
     if wanted("object.position"):
@@ -343,6 +342,8 @@ def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None
     if scenario.object.accelerometer is not None:
         AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
                                 object_spec(scenario))
+    if scenario.object.joint is not None:
+        _add_object_joint(builder, plant, scene_graph, wanted)
 
 
 def _add_object_joint(builder, plant, scene_graph, wanted) -> None:
