@@ -51,6 +51,12 @@ def test_the_logged_learned_motion_runs_on_the_can_hand(processes, tmp_path, cap
     # the command line does the same (one scenario file, the driver swapped)
     assert cli_main(["simulate", str(path), "--hardware", "--override", override]) == 0
     assert "simulated" in capsys.readouterr().out
+    # and the learning command replays its best trial there (--hardware HOST:PORT)
+    db = tmp_path / "run.sqlite"
+    assert cli_main(["inhand", "--task", "screw_cap", "--optimizer", "random", "--trials", "1",
+                     "--db", str(db), "--no-plot", "--no-html", "--no-progress",
+                     "--hardware", f"127.0.0.1:{port}"]) == 0
+    assert "replayed trial 0 on the CAN hand" in capsys.readouterr().out
 
 
 def _frames(trial, x):

@@ -160,3 +160,15 @@ def test_the_shipped_in_hand_scenario_replays_the_hand_written_stroke(clear, cap
     assert turn == pytest.approx(outcome.turn_deg_truth, abs=1e-6)
     assert math.isfinite(turn) and dc.is_dataclass(clear.scenario())
     assert np.isfinite(outcome.score)
+
+
+def test_inhand_hardware_is_checked_before_any_trial(tmp_path, capsys):
+    db = tmp_path / "never.sqlite"
+    for value, words in (("nohost", "HOST:PORT"), ("127.0.0.1:1", "CAN bus server")):
+        code, err = cli_exit(["inhand", "--task", "screw_cap", "--trials", "1", "--db", str(db),
+                              "--hardware", value], capsys)
+        assert code == 2 and words in err.strip().splitlines()[-1], err
+    code, err = cli_exit(["inhand", "--task", "jog_wheel", "--db", str(db), "--hardware",
+                          "127.0.0.1:1"], capsys)
+    assert code == 2 and "floating wrist" in err
+    assert not db.exists()
