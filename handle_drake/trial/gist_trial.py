@@ -153,6 +153,11 @@ class GistTrial:
 
     # ------------------------------------------------------------------ runs
     @property
+    def player(self):
+        """The ``TrajectorySource`` playing the frames into ``hand.position``."""
+        return self._player
+
+    @property
     def context(self):
         return self.harness.context
 
@@ -176,12 +181,13 @@ class GistTrial:
         self.settled = self.harness.context.Clone()
         self.settled.SetTime(0.0)
 
-    def start(self, frames) -> None:
-        """The settled state (time 0) with the trial's ``frames``; the weight not reversed.
-        Call :meth:`initialize` before advancing."""
-        if self.settled is None:
+    def start(self, frames, settled=None) -> None:
+        """The settled state (time 0; or the context ``settled``) with the trial's
+        ``frames``; the weight not reversed. Call :meth:`initialize` before advancing."""
+        settled = self.settled if settled is None else settled
+        if settled is None:
             raise ValueError("GistTrial.start: settle the grasp first (settle)")
-        self.harness.context.SetTimeStateAndParametersFrom(self.settled)
+        self.harness.context.SetTimeStateAndParametersFrom(settled)
         self._player.UpdateTrajectory(frames)
         self.reverse(False)
 

@@ -52,7 +52,7 @@ def test_the_station_built_cap_trial_equals_the_modules_own_diagram(clear):
     x = stroke_motion(clear.gist)
     station = clear.evaluate(x, early_stop=False)
     own = clear.evaluate(x, early_stop=False, build="planned")
-    assert "trial" in clear._station_build and "trial" not in clear._planned_build
+    assert "trial" in clear._built and "trial" not in clear._planned_build
     assert station.turn_deg_truth > 90.0  # the hand-written stroke does turn it
     assert station.turn_deg_truth == pytest.approx(own.turn_deg_truth, abs=1e-6)
     assert station.score == own.score and station.checks_passed == own.checks_passed

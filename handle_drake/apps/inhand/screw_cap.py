@@ -1176,7 +1176,7 @@ class ScrewCapTrial(GistObjective):
             raise ValueError(f"build: expected one of {BUILDS}, got {build!r}")
         if build == "planned" and not _divides(self.config.time_step):
             build = "driver"
-        key = f"_{build}_build"
+        key = {"station": "_built", "driver": "_reference_build"}.get(build, "_planned_build")
         if meshcat is None and getattr(self, key, None) is not None:
             return getattr(self, key)
         still = self.gist.initial_parameters().copy()
@@ -1332,7 +1332,8 @@ class ScrewCapTrial(GistObjective):
         c, context = self.config, built["simulator"].get_mutable_context()
         end = c.total_time + (c.reverse_time if built["joint"] is None else 0)
         if "trial" in built:  # the station: the frames' zero-order hold at the driver's samples
-            built["trial"].start(built["source"].held_frames(x, PlannedCommands.period, end))
+            built["trial"].start(built["source"].held_frames(x, PlannedCommands.period, end),
+                                 built["settled"])
             return built["plant"].GetMyContextFromRoot(context)
         context.SetTimeStateAndParametersFrom(built["settled"])
         source = built["source"]

@@ -420,6 +420,7 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     harness, body, hand_bodies = trial.harness, trial.body, trial.hand_bodies
     return dict(trial=trial, harness=harness, settled=trial.settled, body=body,
                 reverse=trial.reverse_system, weight=trial.weight, motion=source,
+                player=trial.player,
                 period=period, hand_bodies=hand_bodies,
                 touching_query=_touching_query(trial.plant, body, hand_bodies),
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
@@ -567,7 +568,7 @@ class InHandTrial(GistObjective):
         start_wall = time.perf_counter()
         context, plant = harness.context, harness.plant
         built["trial"].start(built["motion"].held_frames(
-            x, built["period"], c.total_time + c.reverse_time))
+            x, built["period"], c.total_time + c.reverse_time), built["settled"])
         plant_context = harness.plant_context()
         X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
         samples = c.sample_times()
