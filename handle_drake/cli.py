@@ -200,7 +200,10 @@ def _logged_trial(args):
     its best finished trial (or ``--trial``) of ``--run-id`` (or its only run); None for a
     scenario file. ``--run-id`` and ``--trial`` are refused without a log."""
     path = args.scenario
-    is_log = path.is_file() and path.open("rb").read(16) == SQLITE_HEADER
+    is_log = False
+    if path.is_file():
+        with path.open("rb") as file:
+            is_log = file.read(16) == SQLITE_HEADER
     if not is_log:
         for flag, value in (("--run-id", args.run_id), ("--trial", args.trial)):
             if value is not None:

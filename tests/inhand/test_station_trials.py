@@ -149,6 +149,10 @@ def test_bad_jointed_objects_and_log_flags_are_one_line_errors(tmp_path, capsys)
     assert code == 2 and "--run-id" in err and len(err.strip().splitlines()) == 1
     code, err = cli_exit(["simulate", str(tmp_path / "a.sqlite"), "--trial", "7"], capsys)
     assert code == 2 and "--trial" in err
+    scribbled = tmp_path / "scribbled.sqlite"
+    scribbled.write_bytes(b"SQLite format 3\x00" + bytes(range(256)) * 8)
+    code, err = cli_exit(["simulate", str(scribbled)], capsys)
+    assert code == 2 and "SCENARIO" in err and len(err.strip().splitlines()) == 1, err
 
 
 def test_the_shipped_in_hand_scenario_replays_the_hand_written_stroke(clear, capsys):
