@@ -135,6 +135,12 @@ def register(subparsers) -> None:
                    help="learning curve (default <db folder>/<run id>.png)")
     p.add_argument("--html", type=Path, default=None,
                    help="HTML replay of the best trial (default <db folder>/<run id>.html)")
+    _add_after_run_arguments(p)
+    p.set_defaults(func=_cmd_inhand)
+
+
+def _add_after_run_arguments(p) -> None:
+    """What the command writes and does once the run is over."""
     p.add_argument("--no-plot", action="store_true", help="write no learning curve")
     p.add_argument("--no-html", action="store_true", help="write no replay of the best trial")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -144,7 +150,6 @@ def register(subparsers) -> None:
                         "with the driver !CanHandDriver; checked before any trial runs). The "
                         "same as: handle-drake simulate DB --hardware --override 'driver: "
                         "!CanHandDriver {host: HOST, port: PORT}'")
-    p.set_defaults(func=_cmd_inhand)
 
 
 def _host_port(text: str) -> tuple[str, int]:
@@ -173,7 +178,10 @@ def _check_hardware(args) -> None:
 
 
 def _replay_on_hardware(args, run) -> None:
-    """The run's best trial, from its logged scenario, on the CAN hand in real time."""
+    """The run's best trial, from its logged scenario, on the CAN hand in real time (with
+    ``--hardware``)."""
+    if args.hardware is None:
+        return
     from handle_drake.scenario import LoadScenario
     from handle_drake.trial.simulate import ScenarioRunner
 
@@ -290,8 +298,7 @@ def _cmd_inhand(args) -> int:
         print(f"best trial over {args.fresh} fresh perturbed physics (never used while "
               f"learning): reaches its target in {100 * fresh['success']:.0f} %; turns "
               f"{min(fresh['turns']):.1f}-{max(fresh['turns']):.1f} deg")
-    if args.hardware is not None:
-        _replay_on_hardware(args, run)
+    _replay_on_hardware(args, run)
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")
