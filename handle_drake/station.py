@@ -93,7 +93,13 @@ from handle_drake.devices.taxels.wiring import (
     AddTaxelPlayback,
     AddTaxels,
 )
-from handle_drake.geometry.objects import AddObject, AddTable, dimensions, resting_height
+from handle_drake.geometry.objects import (
+    BODY_NAME,
+    AddObject,
+    AddTable,
+    dimensions,
+    resting_height,
+)
 from handle_drake.scenario import (
     Arm,
     CanHandDriver,
@@ -105,7 +111,7 @@ from handle_drake.scenario import (
     object_spec,
     validate_scenario,
 )
-from handle_drake.scene.jointed import AddBareObject, BareObject, FilterObjectBase
+from handle_drake.scene.jointed import AddBareObject, BareObject, FilterObjectBase, ThreadJoint
 from handle_drake.scene.plant import AddSceneModels, ExportSceneObjects
 from handle_drake.systems.hand_driver import (
     MEASURED_OUTPUTS,
@@ -440,7 +446,7 @@ def AddPlantModels(plant, scenario: Scenario):
         AddBareObject(plant, BareObject(
             diameter=o.size, length=dimensions(object_spec(scenario))["height"], mass=o.mass,
             mu=o.mu, X_WO=object_initial_pose(scenario), point_stiffness=o.point_stiffness,
-            joint=o.joint))
+            joint=o.joint, names=_bare_names(o)))
     elif scenario.object is not None:
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.plant_config.contact_model != "point")
@@ -456,6 +462,13 @@ def AddPlantModels(plant, scenario: Scenario):
     if scenario.midi_controller is not None:
         AddMidiControllerModel(plant, scenario)
     return hand
+
+
+def _bare_names(o) -> tuple:
+    """The plant's names of a bare object: instance, body, base, joint, joint frame."""
+    joint = o.joint if o.joint is not None else ThreadJoint()
+    base = joint.base.name if joint.base is not None else "base"
+    return (OBJECT_INSTANCE, BODY_NAME, base, joint.name, f"{OBJECT_INSTANCE}_mouth")
 
 
 def object_initial_pose(scenario: Scenario) -> RigidTransform:

@@ -61,6 +61,7 @@ class ObjectBase:
     ``neck_offset`` along its z."""
 
     X_WB: Transform = dc.field(default_factory=Transform)
+    name: str = BASE_NAME  # the body's name in the plant
     diameter: float = 0.06
     length: float = 0.08
     mass: float = 0.3
@@ -80,6 +81,7 @@ class ThreadJoint:
     viscous: float = 1.0e-3
     stiction_speed: float = 0.01
     base: ObjectBase | None = None
+    name: str = JOINT_NAME  # the joint's name in the plant (its actuator: <name>_friction)
 
 
 @dc.dataclass(frozen=True)
@@ -109,6 +111,11 @@ def validate_thread_joint(joint: ThreadJoint, error=ValueError, where: str = "ob
                                                and math.isfinite(joint.viscous)
                                                and 0 <= joint.viscous <= 1e3):
         raise error(f"{where}.viscous: expected a value in [0, 1000], got {joint.viscous!r}")
+    names = [("name", joint.name)] + ([("base.name", joint.base.name)] if joint.base else [])
+    for field, name in names:
+        if not isinstance(name, str) or not name or any(c in name for c in " /:\t\n"):
+            raise error(f"{where}.{field}: expected a name without spaces, '/' or ':', got "
+                        f"{name!r}")
     base = joint.base
     if base is None:
         return

@@ -139,7 +139,8 @@ class GistTrial:
         others = [plant.get_body(i) for i in plant.GetBodyIndices(self.body.model_instance())]
         self.base = others[1] if len(others) > 1 else None
         if self.scenario.object.joint is not None:
-            self.joint = plant.GetJointByName("object_joint", self.body.model_instance())
+            self.joint = plant.GetJointByName(self.scenario.object.joint.name,
+                                              self.body.model_instance())
         self.geometry = {g: name for i, name in self.hand_bodies.items()
                          for g in plant.GetCollisionGeometriesForBody(plant.get_body(
                              BodyIndex(i)))}

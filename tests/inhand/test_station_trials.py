@@ -80,9 +80,9 @@ def test_the_station_scenario_has_the_cap_on_its_thread_joint(clear):
     # the same bodies, masses and joint friction in both plants
     assert mine.num_bodies() == plant.num_bodies()
     assert mine.num_positions() == plant.num_positions()
-    cap = mine.GetJointByName("object_joint")
+    cap = mine.GetJointByName("cap_thread")  # the screw cap's names
     assert cap.default_damping() == plant.GetJointByName("cap_thread").default_damping()
-    assert mine.GetJointActuatorByName("object_joint_friction").effort_limit() == \
+    assert mine.GetJointActuatorByName("cap_thread_friction").effort_limit() == \
         pytest.approx(ScrewCapTask().coulomb_torque)
 
 
@@ -97,7 +97,7 @@ def test_a_cap_spun_on_its_thread_slows_at_the_coulomb_deceleration():
     simulator = Simulator(station)
     context = simulator.get_mutable_context()
     plant = GetPlant(station)
-    joint = plant.GetJointByName("object_joint")
+    joint = plant.GetJointByName("cap_thread")
     joint.set_angular_rate(plant.GetMyMutableContextFromRoot(context), 2.0)
     simulator.AdvanceTo(0.02)
     rate = joint.get_angular_rate(plant.GetMyContextFromRoot(context))
@@ -138,7 +138,8 @@ def test_bad_jointed_objects_and_log_flags_are_one_line_errors(tmp_path, capsys)
                             ("object: {mass: null}", "object.mass"),
                             ("object: {on_table: true}", "on_table"),
                             ("hand: {effort_limits: soft}", "hand.effort_limits"),
-                            ("object: {joint: {base: {neck_length: 5}}}", "neck_length")):
+                            ("object: {joint: {base: {neck_length: 5}}}", "neck_length"),
+                            ("object: {joint: {name: 'a b'}}", "object.joint.name")):
         with pytest.raises(ScenarioError, match=re.escape(field)):
             LoadScenario(filename=diagrams_dir() / "screw_cap_station.yaml", data=override)
     code, err = cli_exit(["simulate", "screw_cap_station", "--trial", "3"], capsys)

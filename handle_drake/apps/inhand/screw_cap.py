@@ -132,7 +132,7 @@ __all__ = ["CLEAR", "DEFAULT_PLACEMENT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
            "step_contacts", "new_contact_record",
-           "fresh_success", "bare_object",
+           "fresh_success", "bare_object", "station_build", "station_scenario",
            "scenario_fingerprint",
            # the hands' effort limits live in handle_drake.base.hands (the station sets them)
            "EFFORT_LIMITS", "MENAGERIE_DEFAULT_EFFORT", "MENAGERIE_EFFORT_LIMITS", "effort_limit"]
@@ -400,14 +400,15 @@ def bare_object(cap: ScrewCapModel, names=("screw_cap", "cap", "bottle", "cap_th
     if not cap.free:
         side = -1.0 if cap.bottle_at_index else 1.0
         # the neck on the bottle's cap side (its body -z: the cap's side)
-        base = ObjectBase(diameter=cap.bottle_diameter, length=cap.bottle_length, mass=0.3,
+        base = ObjectBase(name=names[2], diameter=cap.bottle_diameter,
+                          length=cap.bottle_length, mass=0.3,
                           neck_length=cap.neck_length, neck_diameter=cap.neck_diameter,
                           neck_offset=(1 if cap.axis_reversed else -1) * side
                           * (cap.bottle_length + cap.neck_length) / 2)
         X_WB = _base_pose(cap)
         base.X_WB = _schema_pose(cap, X_WB.translation())
         joint = ThreadJoint(coulomb_torque=cap.coulomb_torque, viscous=cap.viscous,
-                            stiction_speed=cap.stiction_speed, base=base)
+                            stiction_speed=cap.stiction_speed, base=base, name=names[3])
     return BareObject(diameter=cap.diameter, length=cap.length, mass=cap.mass, mu=cap.mu,
                       X_WO=RigidTransform(_axis_rotation(cap),
                                           np.asarray(cap.position, dtype=float)),
@@ -1049,7 +1050,7 @@ def _demonstration(name: str = "screw_cap_rotation.json"):
 BUILDS = ("station", "planned", "driver")
 
 
-def _station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
+def station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
     """The trial on the station (:class:`~handle_drake.trial.gist_trial.GistTrial`), the grasp
     settled with the ``still`` parameters; the handles the trial reads, under the names of
     :func:`build_screw_cap`'s."""
@@ -1183,7 +1184,7 @@ class ScrewCapTrial(GistObjective):
         for sl in self.gist.slices():
             still[sl][1:] = 0.0
         if build == "station":
-            built = _station_build(self.scenario(), still, meshcat)
+            built = station_build(self.scenario(), still, meshcat)
         else:
             built = _reference_build(self.scenario(), still, meshcat, build == "driver")
         plant = built["plant"]
