@@ -33,10 +33,16 @@ AREA_COMMANDS: tuple[str, ...] = (
 
 
 def _add_simulate(subparsers) -> None:
-    p = subparsers.add_parser("simulate", help="run a scenario file (see diagrams/)")
+    p = subparsers.add_parser("simulate", help="run a scenario file (see diagrams/) or a "
+                                               "logged trial")
     p.add_argument("scenario", type=Path,
-                   help="scenario YAML file, or a shipped scenario's name (handle-drake "
-                        "diagrams list)")
+                   help="scenario YAML file, a shipped scenario's name (handle-drake "
+                        "diagrams list), or a trial log (SQLite, of handle-drake babble or "
+                        "inhand): its best trial's scenario (--run-id, --trial)")
+    p.add_argument("--run-id", default=None,
+                   help="with a trial log: the run (default: the log's only run)")
+    p.add_argument("--trial", type=int, default=None, metavar="INDEX",
+                   help="with a trial log: the trial's index (default: the best finished one)")
     p.add_argument("--override", default=None, help="YAML text applied on top of the file")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: scenario's)")
     p.add_argument("--meshcat", action="store_true", help="show it live in Meshcat")
@@ -114,7 +120,14 @@ def _cmd_simulate(args) -> int:
     from handle_drake.trial.harness import DEFAULT_LOG
     from handle_drake.trial.simulate import ScenarioRunner
 
-    scenario = LoadScenario(filename=args.scenario, data=args.override)
+    logged = _logged_trial(args)
+    if logged is not None:
+        print(f"trial {logged[1]} of run {logged[2]!r} in {args.scenario} (score "
+              f"{logged[3]:.6g})")
+        scenario = LoadScenario(text=logged[0], data=args.override,
+                                source=f"{args.scenario}, trial {logged[1]}")
+    else:
+        scenario = LoadScenario(filename=args.scenario, data=args.override)
     if args.duration is not None:
         _check_duration(args.duration, scenario)
     if args.hardware:
@@ -122,6 +135,9 @@ def _cmd_simulate(args) -> int:
     meshcat = start_meshcat(args.meshcat or args.html is not None)
     instrumented = scenario.object is not None and scenario.object.accelerometer is not None
     log = DEFAULT_LOG
+    jointed = scenario.object is not None and scenario.object.joint is not None
+    if jointed:
+        log = log + ("object.joint_position",)
     if instrumented:
         from handle_drake.devices.accelerometer.wiring import INSTRUMENT_LOG
 
@@ -143,6 +159,8 @@ def _cmd_simulate(args) -> int:
         print(f"object height: start {result.object_position[0, 2]:.3f} m, "
               f"end {result.object_position[-1, 2]:.3f} m")
         _warn_below_table(scenario, result.object_position[:, 2])
+    if jointed and not args.hardware:
+        print(_joint_turn(scenario, runner.harness.logs()["object.joint_position"]))
     if result.score is not None:
         m, score = scenario.metric, result.score
         over = (f"; the mean over {len(m.placements)} start placements (metric.placements), "
@@ -172,6 +190,68 @@ def _cmd_simulate(args) -> int:
     if args.html:
         print(f"replay written to {args.html}")
     return 0
+
+
+SQLITE_HEADER = b"SQLite format 3\x00"
+
+
+def _logged_trial(args):
+    """With a trial log as SCENARIO: ``(scenario text, trial index, run id, score)`` of
+    its best finished trial (or ``--trial``) of ``--run-id`` (or its only run); None for a
+    scenario file. ``--run-id`` and ``--trial`` are refused without a log."""
+    path = args.scenario
+    is_log = False
+    if path.is_file():
+        with path.open("rb") as file:
+            is_log = file.read(16) == SQLITE_HEADER
+    if not is_log:
+        for flag, value in (("--run-id", args.run_id), ("--trial", args.trial)):
+            if value is not None:
+                raise ValueError(f"{flag}: only with a trial log (SQLite) as SCENARIO, got "
+                                 f"{str(path)!r}")
+        return None
+    from handle_drake.learning.log import TrialLog, TrialLogError
+
+    try:
+        with TrialLog(path) as log:
+            runs = [r.run_id for r in log.runs()]
+            run_id = args.run_id if args.run_id is not None else (runs[0] if len(runs) == 1
+                                                                   else None)
+            if run_id not in runs:
+                raise ValueError(f"--run-id: expected one of the log's {len(runs)} runs "
+                                 f"{runs[:4]}{' ...' if len(runs) > 4 else ''}, got "
+                                 f"{args.run_id!r}")
+            done = [r for r in log.trials(run_id) if r.status == "done" and r.scenario]
+    except TrialLogError as error:
+        raise ValueError(f"SCENARIO: {error}") from None
+    if args.trial is not None:
+        done = [r for r in done if r.index == args.trial]
+        if not done:
+            raise ValueError(f"--trial: run {run_id!r} has no finished trial {args.trial} "
+                             f"with a scenario")
+    if not done:
+        raise ValueError(f"SCENARIO: run {run_id!r} in {path} has no finished trial with a "
+                         f"scenario")
+    best = max(done, key=lambda r: r.metric)
+    return best.scenario, best.index, run_id, best.metric
+
+
+def _joint_turn(scenario, log) -> str:
+    """The object's turn on its joint (``object.joint_position``) over the run, counted from
+    the script's first keyframe (the first sample at or after it; an in-hand trial's
+    motion starts there, after the settle) or from the start."""
+    import math
+
+    import numpy as np
+
+    times, q = log.sample_times(), log.data()[0]
+    start = scenario.script[0].time if scenario.script else 0.0
+    i = int(np.searchsorted(times, start - 1e-9))
+    if i >= times.size:
+        return "object joint: no sample after the script's first keyframe"
+    turn = math.degrees(q[-1] - q[i])
+    return (f"object joint (object.joint_position): turned {turn!r} deg from t = "
+            f"{times[i]:g} s to {times[-1]:g} s")
 
 
 def _warn_below_table(scenario, z) -> None:

@@ -70,7 +70,7 @@ from handle_drake.base.checks import (
     short,
     translate_deprecated_keys,
 )
-from handle_drake.base.hands import HAND_SPECS
+from handle_drake.base.hands import EFFORT_LIMITS, HAND_SPECS
 from handle_drake.base.models import SHIPPED_HINT, shipped_path
 from handle_drake.devices.accelerometer.config import AccelerometerConfig
 from handle_drake.devices.accelerometer.sensor import check_sensor_pose
@@ -91,6 +91,7 @@ from handle_drake.devices.taxels.config import TaxelConfig
 from handle_drake.geometry.objects import KINDS, ObjectSpec
 from handle_drake.geometry.objects.mesh import MeshObjectSpec, MeshObjectWarning
 from handle_drake.scene.config import Hole, SortingBoxConfig, validate_scene
+from handle_drake.scene.jointed import ObjectBase, ThreadJoint, validate_thread_joint
 
 __all__ = [
     "AccelerometerConfig",
@@ -111,6 +112,9 @@ __all__ = [
     "MidiControllerConfig",
     "MultibodyPlantConfig",
     "ObjectConfig",
+    "ObjectBase",
+    "ThreadJoint",
+    "is_bare",
     "Scenario",
     "ScenarioError",
     "SimHandDriver",
@@ -174,6 +178,11 @@ class HandConfig:
     # Taxel arrays on the distal pads and the palm (handle_drake.devices.taxels): the
     # station then exports hand.taxels (and, with estimator: true, object.pose_estimated).
     taxels: TaxelConfig | None = None
+    # The actuators' effort limits: "sheet" (the model file's) or "menagerie" (MuJoCo
+    # Menagerie's Shadow hand: 1 N m on the finger joints; base.hands.effort_limit), each
+    # times effort_scale in (0, 1] (perturbed physics).
+    effort_limits: str = "sheet"
+    effort_scale: float = 1.0
 
 
 @dc.dataclass
@@ -204,6 +213,16 @@ class ObjectConfig:
     # An accelerometer on the object (see handle_drake.devices.accelerometer.config): the
     # station then exports object.acceleration, .roll_pitch, .free_fall, .slip, ...
     accelerometer: AccelerometerConfig | None = None
+    # An object on a joint (handle_drake.scene.jointed): a revolute joint about the object's
+    # own z axis at X_WO with thread friction, on an optional welded base (a cap on its
+    # bottle); the station then exports object.joint_position. None: a free (or fixed) body.
+    joint: ThreadJoint | None = None
+    # false: the bare shape (a cylinder: one Drake Cylinder, the analytic solid-cylinder
+    # inertia of ``mass``), without the rest-on-table contact feet; an object on a joint is
+    # always bare. The in-hand tasks' objects.
+    contact_feet: bool = True
+    # N/m: the bare object's (and its base's) point-contact stiffness; 0: Drake's default
+    point_stiffness: float = 0.0
 
 
 @dc.dataclass
@@ -372,8 +391,10 @@ class Scenario:
     midi_controller: MidiControllerConfig | None = None
 
 
-def LoadScenario(*, filename: str | Path | None = None, data: str | None = None) -> Scenario:
-    """Loads a scenario from a YAML file, then applies an optional override string.
+def LoadScenario(*, filename: str | Path | None = None, data: str | None = None,
+                 text: str | None = None, source: str = "text") -> Scenario:
+    """Loads a scenario from a YAML file (or its ``text``, named ``source`` in errors:
+    e.g. a trial log's record), then applies an optional override string.
 
     A ``filename`` that names no file but a shipped scenario (``diagrams/NAME.yaml``
     outside a checkout, or ``NAME``) loads the installed one
@@ -385,6 +406,10 @@ def LoadScenario(*, filename: str | Path | None = None, data: str | None = None)
             value; the message names the file and the problem.
     """
     scenario = Scenario()
+    if filename is not None and text is not None:
+        raise ValueError("LoadScenario: give filename or text, not both")
+    if text is not None:
+        scenario = _load(text, scenario, source=source)
     if filename is not None:
         path = shipped_path(filename) if isinstance(filename, (str, Path)) else filename
         try:
@@ -537,12 +562,19 @@ def validate_scenario(scenario: Scenario) -> None:
             raise ScenarioError(f"hand.initial_position[{name}] must be finite, got {value}")
     if scenario.hand.taxels is not None:
         _validate_taxels(scenario)
+    if scenario.hand.effort_limits not in EFFORT_LIMITS:
+        raise ScenarioError(f"hand.effort_limits: expected one of {list(EFFORT_LIMITS)}, got "
+                            f"{short(scenario.hand.effort_limits)}")
+    scale = scenario.hand.effort_scale
+    if isinstance(scale, bool) or not (isinstance(scale, int | float) and 0 < scale <= 1):
+        raise ScenarioError(f"hand.effort_scale: expected a value in (0, 1], got {short(scale)}")
     if scenario.object is not None and scenario.object.kind == "mesh":
         _validate_mesh_object(scenario.object)
     elif scenario.object is not None:
         _validate_catalogue_object(scenario.object)
     if scenario.object is not None and scenario.object.accelerometer is not None:
         _validate_accelerometer(scenario)  # mesh or catalogue object alike
+    _validate_bare_objects(scenario)
     if scenario.table is not None:
         if not math.isfinite(scenario.table.top_height):
             raise ScenarioError("table.top_height must be finite")
@@ -591,6 +623,49 @@ def _validate_taxels(scenario: Scenario) -> None:
         if isinstance(scenario.hand.mount, Arm):
             raise ScenarioError("hand.taxels.estimator: expected a !FixedMount or "
                                 "!FloatingWrist (the arm's forward kinematics is not wired)")
+
+
+def is_bare(o: ObjectConfig) -> bool:
+    """Whether the station builds ``o`` as a bare shape (``handle_drake.scene.jointed``)."""
+    return o.joint is not None or not o.contact_feet
+
+
+def _validate_bare_objects(scenario: Scenario) -> None:
+    """An object on a joint or without contact feet: a cylinder of given mass, point contact
+    (its only model), the main object only."""
+    for i, o in enumerate(scenario.objects):
+        if is_bare(o):
+            raise ScenarioError(f"objects[{i}]: a joint or contact_feet: false is for the "
+                                f"main object only")
+    o = scenario.object
+    if o is None:
+        return
+    if not (isinstance(o.point_stiffness, int | float) and math.isfinite(o.point_stiffness)
+            and 0 <= o.point_stiffness <= 1e9):
+        raise ScenarioError(f"object.point_stiffness: expected a value in [0, 1e9] N/m, got "
+                            f"{short(o.point_stiffness)}")
+    if not is_bare(o):
+        if o.point_stiffness:
+            raise ScenarioError("object.point_stiffness: only for a bare object (a joint or "
+                                "contact_feet: false)")
+        return
+    what = "object.joint" if o.joint is not None else "object.contact_feet: false"
+    if o.kind != "cylinder" or set(o.dimensions) - {"height"}:
+        raise ScenarioError(f"{what}: expected kind cylinder (size: diameter, dimensions: "
+                            f"{{height}}), got kind {short(o.kind)}")
+    if o.mass is None:
+        raise ScenarioError(f"{what}: needs object.mass (kg)")
+    if scenario.plant_config.contact_model != "point":
+        raise ScenarioError(f"{what}: point contact only (plant_config.contact_model: point), "
+                            f"got {short(scenario.plant_config.contact_model)}")
+    if o.accelerometer is not None or o.fixed:
+        raise ScenarioError(f"{what}: no accelerometer and not fixed")
+    if o.joint is not None:
+        if o.on_table:
+            raise ScenarioError("object.joint: the joint is at X_WO: expected on_table: false")
+        validate_thread_joint(o.joint, ScenarioError)
+        if o.joint.base is not None:
+            _check_transform("object.joint.base.X_WB", o.joint.base.X_WB)
 
 
 def _validate_plant_config(config) -> None:

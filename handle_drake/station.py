@@ -66,7 +66,7 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer
 from pydrake.visualization import ApplyVisualizationConfig
 
 from handle_drake.base.hands import (
@@ -74,6 +74,7 @@ from handle_drake.base.hands import (
     actuated_position_limits,
     actuated_to_joint_positions,
     get_hand_spec,
+    set_effort_limits,
 )
 from handle_drake.base.port_names import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
 from handle_drake.devices.accelerometer.wiring import (
@@ -92,7 +93,13 @@ from handle_drake.devices.taxels.wiring import (
     AddTaxelPlayback,
     AddTaxels,
 )
-from handle_drake.geometry.objects import AddObject, AddTable, resting_height
+from handle_drake.geometry.objects import (
+    BODY_NAME,
+    AddObject,
+    AddTable,
+    dimensions,
+    resting_height,
+)
 from handle_drake.scenario import (
     Arm,
     CanHandDriver,
@@ -100,9 +107,11 @@ from handle_drake.scenario import (
     FloatingWrist,
     Scenario,
     SimHandDriver,
+    is_bare,
     object_spec,
     validate_scenario,
 )
+from handle_drake.scene.jointed import AddBareObject, BareObject, FilterObjectBase, ThreadJoint
 from handle_drake.scene.plant import AddSceneModels, ExportSceneObjects
 from handle_drake.systems.hand_driver import (
     MEASURED_OUTPUTS,
@@ -134,7 +143,7 @@ STATION_OUTPUTS = (
     *(f"{HAND}.{s}" for s in HAND_SIGNALS), "wrist.pose_measured",
     *(f"object.{s}" for s in ("pose", "spatial_velocity", "position", "acceleration",
                               "acceleration_counts", "roll_pitch", "at_rest", "free_fall",
-                              "slip")),
+                              "slip", "joint_position")),
     "contact_results", "query_object", "body_poses", "plant_state")
 
 HAND_INSTANCE = HAND
@@ -205,7 +214,7 @@ def MakeHandStation(scenario: Scenario, meshcat=None, hardware: bool = False,
     if isinstance(scenario.hand.mount, FloatingWrist):
         _add_wrist_driver(builder, plant, scenario, finite_commands, wanted)
     if scenario.object is not None:
-        _add_object_systems(builder, plant, scenario, wanted)
+        _add_object_systems(builder, plant, scenario, wanted, scene_graph)
     builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
     # external forces on bodies (e.g. an object's weight reversed: the in-hand held test)
     builder.ExportInput(plant.get_applied_spatial_force_input_port(), "applied_spatial_force")
@@ -317,9 +326,10 @@ def _add_wrist_driver(builder, plant, scenario: Scenario,
         builder.ExportOutput(wrist_driver.GetOutputPort("pose_measured"), "wrist.pose_measured")
 
 
-def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None:
+def _add_object_systems(builder, plant, scenario: Scenario, wanted=None,
+                        scene_graph=None) -> None:
     """The object's pose selector (``object.*`` ports; those ``wanted`` reads:
-    :class:`_Outputs`) and its accelerometer, if any."""
+    :class:`_Outputs`), its accelerometer and its joint's systems, if any."""
     wanted = wanted or _Outputs(None)
     position = None
     if wanted("object.position"):
@@ -338,6 +348,25 @@ def _add_object_systems(builder, plant, scenario: Scenario, wanted=None) -> None
     if scenario.object.accelerometer is not None:
         AddSimulatedInstruments(builder, plant, scenario, object_body(plant),
                                 object_spec(scenario))
+    if scenario.object.joint is not None:
+        _add_object_joint(builder, plant, scene_graph, wanted)
+
+
+def _add_object_joint(builder, plant, scene_graph, wanted) -> None:
+    """An object on a joint (``object.joint``): its friction actuator's reference (0), the
+    object and its base kept from colliding, and ``object.joint_position`` (rad) when
+    ``wanted``."""
+    body = object_body(plant)
+    instance = body.model_instance()
+    bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
+    if len(bodies) > 1:  # the welded base (the bottle): the thread is the joint
+        FilterObjectBase(plant, scene_graph, body, bodies[1])
+    zero = builder.AddNamedSystem("object_joint_reference", ConstantVectorSource(np.zeros(2)))
+    builder.Connect(zero.get_output_port(), plant.get_desired_state_input_port(instance))
+    if wanted("object.joint_position"):
+        split = builder.AddNamedSystem("object_joint_state", Demultiplexer([1, 1]))
+        builder.Connect(plant.get_state_output_port(instance), split.get_input_port())
+        builder.ExportOutput(split.get_output_port(0), "object.joint_position")
 
 
 def _estimating(scenario: Scenario) -> bool:
@@ -408,10 +437,17 @@ def AddPlantModels(plant, scenario: Scenario):
         _add_floating_wrist(plant, base_frame, mount)
         plant.set_gravity_enabled(hand, False)
 
+    set_effort_limits(plant, hand, scenario.hand.effort_limits, scenario.hand.effort_scale)
     if scenario.table is not None:
         AddTable(plant, top_height=scenario.table.top_height,
                  size=(scenario.table.size_x, scenario.table.size_y))
-    if scenario.object is not None:
+    if scenario.object is not None and is_bare(scenario.object):
+        o = scenario.object
+        AddBareObject(plant, BareObject(
+            diameter=o.size, length=dimensions(object_spec(scenario))["height"], mass=o.mass,
+            mu=o.mu, X_WO=object_initial_pose(scenario), point_stiffness=o.point_stiffness,
+            joint=o.joint, names=_bare_names(o)))
+    elif scenario.object is not None:
         AddObject(plant, object_spec(scenario), name=OBJECT_INSTANCE,
                   hydroelastic=scenario.plant_config.contact_model != "point")
         if scenario.object.fixed:
@@ -426,6 +462,13 @@ def AddPlantModels(plant, scenario: Scenario):
     if scenario.midi_controller is not None:
         AddMidiControllerModel(plant, scenario)
     return hand
+
+
+def _bare_names(o) -> tuple:
+    """The plant's names of a bare object: instance, body, base, joint, joint frame."""
+    joint = o.joint if o.joint is not None else ThreadJoint()
+    base = joint.base.name if joint.base is not None else "base"
+    return (OBJECT_INSTANCE, BODY_NAME, base, joint.name, f"{OBJECT_INSTANCE}_mouth")
 
 
 def object_initial_pose(scenario: Scenario) -> RigidTransform:

@@ -96,6 +96,7 @@ WALK: tuple[Step, ...] = (
          "handle-drake inhand --task jog_wheel --optimizer ipso --trials 2 --no-progress",
          why="2 trials"),
     Step("handle-drake simulate diagrams/inhand_jog_wheel.yaml"),
+    Step("handle-drake simulate diagrams/screw_cap_station.yaml"),
     Step("handle-drake simulate diagrams/barrett_mesh_bracket_grasp.yaml --html out/bracket.html"),
     Step("handle-drake grasp --class lateral --mesh diagrams/meshes/part.stl --mesh-scale 0.001"),
     Step("handle-drake babble --mesh diagrams/meshes/part.stl --mesh-scale 0.001 --trials 40",

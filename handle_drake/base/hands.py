@@ -40,6 +40,11 @@ __all__ = [
     "actuated_position_limits",
     "joint_position_indices",
     "pad_geometry_ids",
+    "EFFORT_LIMITS",
+    "MENAGERIE_DEFAULT_EFFORT",
+    "MENAGERIE_EFFORT_LIMITS",
+    "effort_limit",
+    "set_effort_limits",
 ]
 
 SHADOW_COUPLING_RATIO_C6 = 1.0
@@ -408,6 +413,47 @@ def pad_geometry_ids(plant, model_instance, spec: HandSpec, inspector) -> list:
             )
         ids.append(found[0])
     return ids
+
+
+# The hand's actuator effort limits (N m) in MuJoCo Menagerie's Shadow hand model
+# (google-deepmind/mujoco_menagerie, shadow_hand/right_hand.xml, made with Shadow Robot:
+# the position actuators' forcerange): 1 N m by default (the class "right_hand"), the
+# wrist 10 (WRJ2) and 5 (WRJ1), the thumb base 3 (THJ5) and 2 (THJ4). The fingers' J0
+# tendon (J1 + J2) is one 1 N m actuator there; here the J2 actuator (J1 = J2 by the
+# coupler). The SDF's own limits are sr_description's sheet (2 N m for the finger joints;
+# models/shadow_hand/README.md, "Effort limits").
+MENAGERIE_EFFORT_LIMITS = {"WRJ2": 10.0, "WRJ1": 5.0, "THJ5": 3.0, "THJ4": 2.0}
+MENAGERIE_DEFAULT_EFFORT = 1.0
+EFFORT_LIMITS = ("sheet", "menagerie")
+
+
+def effort_limit(name: str, limits: str) -> float | None:
+    """The effort limit (N m) of actuated joint ``name`` under ``limits`` ("menagerie"), or
+    None ("sheet": the model file's own)."""
+    if limits == "sheet":
+        return None
+    return MENAGERIE_EFFORT_LIMITS.get(name, MENAGERIE_DEFAULT_EFFORT)
+
+
+def set_effort_limits(plant, hand, limits: str, scale: float = 1.0) -> None:
+    """Sets the effort limit of every actuator of model instance ``hand`` of an unfinalized
+    plant: :func:`effort_limit` under ``limits`` (the model file's own for "sheet") times
+    ``scale`` in (0, 1] (perturbed physics)."""
+    if limits not in EFFORT_LIMITS:
+        raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got {limits!r}")
+    if not (math.isfinite(scale) and 0 < scale <= 1):
+        raise ValueError(f"effort_scale: expected a value in (0, 1], got {scale!r}")
+    # (before Finalize the per-instance query lists nothing: filter all of them)
+    for i in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(i)
+        if actuator.model_instance() != hand:
+            continue
+        value = effort_limit(actuator.joint().name(), limits)
+        if value is None:
+            value = actuator.effort_limit()
+        if value != actuator.effort_limit() or scale != 1.0:
+            actuator.set_effort_limit(value * scale)
+
 
 
 @cache

@@ -10,11 +10,11 @@ task's public builder from the task's settings (nothing here sets a physics cons
   limit, PD gains) and the settled grasp; the env's command replaces the trial's frames on
   the station's ``hand.position`` input;
 - the screw cap and the fingertip cylinder (``screw_cap``, ``fingertip_cylinder``):
-  :func:`~handle_drake.apps.inhand.screw_cap.build_screw_cap` of
-  :meth:`ScrewCapTrial.scenario() <handle_drake.apps.inhand.screw_cap.ScrewCapTrial.scenario>`,
-  settled as the trial settles it; the env's command goes through the trial's
-  :class:`~handle_drake.apps.inhand.screw_cap.PlannedCommands` (the hand driver's rate limit
-  and clipping, computed per control period).
+  :func:`~handle_drake.apps.inhand.screw_cap.station_build` of
+  :meth:`ScrewCapTrial.scenario() <handle_drake.apps.inhand.screw_cap.ScrewCapTrial.scenario>`:
+  the trial's station (the cap on its thread joint, or the free cylinder), settled as the
+  trial settles it; the env's targets replace the trial's frames on ``hand.position`` (the
+  station's driver rate-limits and clips them).
 
 A step holds one command (``action_mode="absolute"``: the action in [-1, 1] scaled onto the
 actuated joints' limits; ``"delta"``: the action times ``max_delta`` rad added to the command
@@ -57,7 +57,6 @@ import math
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import EventStatus
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -67,8 +66,8 @@ from handle_drake.apps.inhand.screw_cap import (
     TWO_STROKES,
     ScrewCapTask,
     ScrewCapTrial,
-    build_screw_cap,
     new_contact_record,
+    station_build,
     step_contacts,
 )
 from handle_drake.apps.inhand.task import InHandTask, InHandTrial, build_inhand
@@ -233,19 +232,23 @@ class _PalmSim(_Sim):
 
 
 class _CapSim(_Sim):
-    """The screw cap or the fingertip cylinder (:func:`build_screw_cap`)."""
+    """The screw cap or the fingertip cylinder on the station (the trial's
+    :func:`~handle_drake.apps.inhand.screw_cap.station_build`: a diagram of its own)."""
 
     def __init__(self, trial: ScrewCapTrial):
         c = trial.config
         scenario = trial.scenario()
-        # the trial's fast path: the driver's commands computed per control period
-        self.built = built = build_screw_cap(scenario, driver=False)
-        self.planned = built["planned"]
-        self.simulator = Simulator(built["diagram"])
+        # the grasp settled as the trial settles it: the gist's frames with every variation 0
+        gist = trial.gist
+        still = gist.initial_parameters().copy()
+        for sl in gist.slices():
+            still[sl][1:] = 0.0
+        self.built = built = station_build(scenario, still)
+        self.simulator = built["simulator"]
         self.context = self.simulator.get_mutable_context()
-        self.coupling = 1.0  # build_screw_cap's hand
+        self.coupling = 1.0  # the trial's hand
         self.q0 = np.asarray(built["q0"], dtype=float).copy()
-        self.command_period = self.planned.period
+        self.command_period = built["trial"].scenario.driver.control_period
         self.time_step = scenario.time_step
         self.target = math.radians(c.target_deg)
         self.drop = c.drop
@@ -253,18 +256,7 @@ class _CapSim(_Sim):
         self._setup_reads(plant, plant.GetModelInstanceByName("hand"), built["cap"],
                           built["joint"], scenario.cap.encoder_counts)
         self.plant_context = plant.GetMyMutableContextFromRoot(self.context)
-        # the grasp settled as the trial settles it: the gist's frames with every variation 0
-        source, gist = built["source"], trial.gist
-        still = gist.initial_parameters().copy()
-        for sl in gist.slices():
-            still[sl][1:] = 0.0
-        source.set_parameters(source.GetMyContextFromRoot(self.context), still)
-        self.planned.q0 = self.q0.copy()
-        self.planned.plan(source, still, c.settle_time)
-        self.simulator.Initialize()
-        self.simulator.AdvanceTo(c.settle_time)
-        self.settled = self.context.Clone()
-        self.settled.SetTime(0.0)
+        self.settled = built["settled"]
         # the trial's reads at EVERY step: the palm and the hand on the welded bottle
         self.lean_force = c.lean_force
         self.record = new_contact_record()
@@ -280,19 +272,18 @@ class _CapSim(_Sim):
         self.ticks = 0
         self.record = new_contact_record()
         self.command = self.q0.copy()
-        self.planned.q0 = self.q0.copy()
         self._hold(np.tile(self.q0, (1, 1)))
         self.simulator.Initialize()
         self._start_reads()
 
     def _hold(self, targets):
-        """Plays the driver's commands for ``targets`` (one per driver period) from now."""
+        """Plays ``targets`` (one per driver period) from now to the station's driver (which
+        rate-limits them itself), the last one held; breaks half a period before each of the
+        driver's samples, as the trial's frames."""
         t = self.ticks * self.command_period
-        cmd = self.planned.commands(targets)
-        trajectory = self.planned.trajectory(cmd)
-        trajectory.shiftRight(t)
-        self.planned.player.UpdateTrajectory(trajectory)
-        self.planned.q0 = cmd[-1].copy()  # what the plant reads from the end on
+        breaks = t + (np.arange(len(targets)) - 0.5) * self.command_period
+        self.built["trial"].player.UpdateTrajectory(PiecewisePolynomial.ZeroOrderHold(
+            np.append(breaks, breaks[-1] + _FAR), np.vstack([targets, targets[-1]]).T))
         self.context.SetTime(t)
 
     def advance(self, command, duration):

@@ -130,9 +130,9 @@ def test_the_trial_pickles_as_a_gist_trial_config_only(trial):
     import pickle
 
     from handle_drake.apps.inhand import jog_wheel
-    from handle_drake.apps.inhand.task import GistTrial
+    from handle_drake.apps.inhand.task import GistObjective
 
-    assert isinstance(trial, GistTrial) and not hasattr(jog_wheel, "_BUILD_CACHE")
+    assert isinstance(trial, GistObjective) and not hasattr(jog_wheel, "_BUILD_CACHE")
     trial._build()  # a diagram on this object, never pickled
     copy = pickle.loads(pickle.dumps(trial))
     assert copy.config == trial.config and copy._built is None

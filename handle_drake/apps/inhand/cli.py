@@ -135,10 +135,62 @@ def register(subparsers) -> None:
                    help="learning curve (default <db folder>/<run id>.png)")
     p.add_argument("--html", type=Path, default=None,
                    help="HTML replay of the best trial (default <db folder>/<run id>.html)")
+    _add_after_run_arguments(p)
+    p.set_defaults(func=_cmd_inhand)
+
+
+def _add_after_run_arguments(p) -> None:
+    """What the command writes and does once the run is over."""
     p.add_argument("--no-plot", action="store_true", help="write no learning curve")
     p.add_argument("--no-html", action="store_true", help="write no replay of the best trial")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_inhand)
+    p.add_argument("--hardware", type=_host_port, default=None, metavar="HOST:PORT",
+                   help="after learning, replay the best trial's motion on the CAN hand behind "
+                        "the CAN bus server at HOST:PORT, in real time (its logged scenario "
+                        "with the driver !CanHandDriver; checked before any trial runs). The "
+                        "same as: handle-drake simulate DB --hardware --override 'driver: "
+                        "!CanHandDriver {host: HOST, port: PORT}'")
+
+
+def _host_port(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` of ``--hardware``."""
+    host, _, port = str(text).rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT (port 1-65535), got {text!r}")
+    return host, int(port)
+
+
+def _can_override(address) -> str:
+    return f"driver: !CanHandDriver {{host: '{address[0]}', port: {address[1]}}}"
+
+
+def _check_hardware(args) -> None:
+    """``--hardware``: a task whose hand is on a fixed mount, and the server answering."""
+    if args.hardware is None:
+        return
+    if args.task == "jog_wheel":
+        raise ValueError("--hardware: the jog wheel's hand is on a floating wrist; the CAN hand "
+                         "has none (only the fixed-mount tasks)")
+    from handle_drake.apps.cli_support import check_hardware_server
+    from handle_drake.scenario import LoadScenario
+
+    check_hardware_server(LoadScenario(data=_can_override(args.hardware)))
+
+
+def _replay_on_hardware(args, run) -> None:
+    """The run's best trial, from its logged scenario, on the CAN hand in real time (with
+    ``--hardware``)."""
+    if args.hardware is None:
+        return
+    from handle_drake.scenario import LoadScenario
+    from handle_drake.trial.simulate import ScenarioRunner
+
+    best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
+    scenario = LoadScenario(text=best.scenario, data=_can_override(args.hardware),
+                            source=f"{args.db}, trial {best.index}")
+    result = ScenarioRunner(scenario, hardware=True).run()
+    print(f"replayed trial {best.index} on the CAN hand at {args.hardware[0]}:"
+          f"{args.hardware[1]}: {result.sim_time:.2f} s in {result.wall_time:.2f} s")
 
 
 def _task_options(args) -> dict:
@@ -195,6 +247,7 @@ def _cmd_inhand(args) -> int:
         raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
                          f"{args.task}")
     options = _task_options(args)  # every refusal before the log is created
+    _check_hardware(args)
     if args.db.exists():
         try:
             TrialLog(args.db).close()  # refuses a corrupt or foreign file before any work
@@ -245,6 +298,7 @@ def _cmd_inhand(args) -> int:
         print(f"best trial over {args.fresh} fresh perturbed physics (never used while "
               f"learning): reaches its target in {100 * fresh['success']:.0f} %; turns "
               f"{min(fresh['turns']):.1f}-{max(fresh['turns']):.1f} deg")
+    _replay_on_hardware(args, run)
     if not args.no_plot:
         path = args.plot or args.db.parent / f"{run.run_id}.png"
         print(f"learning curve: {plot_learning_curve([run], path)}")

@@ -42,6 +42,7 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
+from handle_drake.scenario import Keyframe
 
 __all__ = [
     "check_parameter_vector",
@@ -380,6 +381,29 @@ class GistMotionSource(LeafSystem):
         keep = np.r_[True, np.any(values[1:] != values[:-1], axis=1)]
         breaks, values = np.append(breaks[keep], breaks[-1] + period), values[keep]
         return PiecewisePolynomial.ZeroOrderHold(breaks, np.vstack([values, values[-1]]).T)
+
+    def held_keyframes(self, parameters, period: float, end_time: float, offset: float,
+                       q0=None) -> list:
+        """:meth:`held_frames` as a scenario's keyframe ``script`` starting at ``offset`` s
+        (after the settle): the script interpolates linearly, so each change of frame is
+        two keyframes a quarter period either side of its break (the first naming only
+        the joints that change), and between them the command is constant: at every
+        sample ``offset + k period`` the station's driver reads the same command as from
+        :meth:`held_frames` (exactly: a linear segment between equal values is that
+        value). ``q0``: the command before (default the source's)."""
+        n = int(np.ceil(end_time / period - 1e-9)) + 1
+        values = self.frames_for(parameters)[self.frame_indices(np.arange(n) * period) - 1]
+        previous = self._q0 if q0 is None else np.asarray(q0, dtype=float)
+        script = []
+        for k in range(n):
+            changed = np.flatnonzero(values[k] != previous)
+            if changed.size:
+                t = offset + (k - 0.5) * period
+                script.append(Keyframe(time=float(t - period / 4)))
+                script.append(Keyframe(time=float(t + period / 4), hand={
+                    _NAMES[j]: float(values[k][j]) for j in changed}))
+                previous = values[k]
+        return script
 
     def _frames(self, c) -> np.ndarray:
         # A cache of a pure function: all N frames of the parameter vector ``c`` read from

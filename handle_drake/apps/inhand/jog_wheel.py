@@ -39,7 +39,7 @@ from pydrake.systems.framework import LeafSystem
 from pydrake.systems.primitives import TrajectorySource
 
 from handle_drake.apps.inhand.evaluation import incremental_score, part_dimensions
-from handle_drake.apps.inhand.task import GistTrial
+from handle_drake.apps.inhand.task import GistObjective
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.midi.codec import ControlCounts, MidiDecoder
 from handle_drake.devices.midi.mapping import LoadMidiMapping, MidiMapping
@@ -299,9 +299,9 @@ class JogOutcome:
         return dc.asdict(self)
 
 
-class JogWheelTrial(GistTrial):
+class JogWheelTrial(GistObjective):
     """A picklable objective ``trial(x, seed) -> TrialResult`` (score maximised): the
-    in-hand trials' :class:`~handle_drake.apps.inhand.task.GistTrial` (only ``config``
+    in-hand trials' :class:`~handle_drake.apps.inhand.task.GistObjective` (only ``config``
     pickled, the diagram built once per process on this object); its parameters are
     the jog's own ``[grip, turn_1 .. turn_K]``."""
 

@@ -53,27 +53,19 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.geometry import (
-    AddContactMaterial,
     CollisionFilterDeclaration,
-    Cylinder,
     GeometrySet,
-    ProximityProperties,
 )
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import (
     AddMultibodyPlant,
-    CoulombFriction,
     MultibodyPlantConfig,
 )
 from pydrake.multibody.tree import (
     BodyIndex,
-    FixedOffsetFrame,
-    PdControllerGains,
-    RevoluteJoint,
-    SpatialInertia,
-    UnitInertia,
 )
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus
@@ -99,22 +91,40 @@ from handle_drake.apps.inhand.mapping import glove_to_shadow
 from handle_drake.apps.inhand.task import (
     DATA_DIR,
     GistMotionData,
-    GistTrial,
+    GistObjective,
     ReversedGravity,
     gist_data,
     gist_from_data,
+    logged_scenario,
+    motion_script,
     penetrating_hand_bodies,
+    trial_text,
 )
 from handle_drake.base.hands import (
+    EFFORT_LIMITS,
+    MENAGERIE_DEFAULT_EFFORT,
+    MENAGERIE_EFFORT_LIMITS,
     AddHand,
     actuated_position_limits,
     actuated_to_joint_positions,
+    effort_limit,
     get_hand_spec,
+    set_effort_limits,
 )
 from handle_drake.learning.executors import TrialResult
 from handle_drake.learning.log import scenario_fingerprint
-from handle_drake.station import _set_default_hand_positions
+from handle_drake.scenario import (
+    FixedMount,
+    HandConfig,
+    ObjectConfig,
+    Scenario,
+    SimHandDriver,
+    default_plant_config,
+)
+from handle_drake.scene.jointed import AddBareObject, BareObject, ObjectBase, ThreadJoint
+from handle_drake.station import _set_default_hand_positions, hand_initial_command
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
+from handle_drake.trial.gist_trial import GistTrial as StationGistTrial
 
 __all__ = ["CLEAR", "DEFAULT_PLACEMENT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN", "PLACEMENTS",
            "REGRASP_GAITS", "TWO_STROKES", "ScrewCapModel",
@@ -122,8 +132,11 @@ __all__ = ["CLEAR", "DEFAULT_PLACEMENT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
            "step_contacts", "new_contact_record",
-           "fresh_success",
-           "scenario_fingerprint"]
+           "fresh_success", "bare_object", "station_build", "station_scenario",
+           "scenario_fingerprint",
+           # the hands' effort limits live in handle_drake.base.hands (the station sets them)
+           "EFFORT_LIMITS", "MENAGERIE_DEFAULT_EFFORT", "MENAGERIE_EFFORT_LIMITS", "effort_limit"]
+_set_effort_limits = set_effort_limits
 
 _NAMES = get_hand_spec("shadow").actuated_joint_names
 _DIGITS = {"th", "ff", "mf", "rf", "lf"}  # the hand's bodies of a digit start so
@@ -204,43 +217,6 @@ DEFAULT_PLACEMENT = "clear"
 # through the reversed weight, palm 0 N (tests/inhand/test_screw_cap.py).
 TWO_STROKES = dict(free=True, stages=2, gait_duration=2.0, n_frames=100, target_deg=100.0,
                    benchmark=(0.05, 0.4, 0.5, 1.0), held_turn=True)
-
-
-# The hand's actuator effort limits (N m) in MuJoCo Menagerie's Shadow hand model
-# (google-deepmind/mujoco_menagerie, shadow_hand/right_hand.xml, made with Shadow Robot:
-# the position actuators' forcerange): 1 N m by default (the class "right_hand"), the
-# wrist 10 (WRJ2) and 5 (WRJ1), the thumb base 3 (THJ5) and 2 (THJ4). The fingers' J0
-# tendon (J1 + J2) is one 1 N m actuator there; here the J2 actuator (J1 = J2 by the
-# coupler). The SDF's own limits are sr_description's sheet (2 N m for the finger joints;
-# models/shadow_hand/README.md, "Effort limits").
-MENAGERIE_EFFORT_LIMITS = {"WRJ2": 10.0, "WRJ1": 5.0, "THJ5": 3.0, "THJ4": 2.0}
-MENAGERIE_DEFAULT_EFFORT = 1.0
-EFFORT_LIMITS = ("sheet", "menagerie")
-
-
-def effort_limit(name: str, limits: str) -> float | None:
-    """The effort limit (N m) of actuated joint ``name`` under ``limits`` ("menagerie"), or
-    None ("sheet": the model file's own)."""
-    if limits == "sheet":
-        return None
-    return MENAGERIE_EFFORT_LIMITS.get(name, MENAGERIE_DEFAULT_EFFORT)
-
-
-def _set_effort_limits(plant, hand, limits: str, scale: float = 1.0) -> None:
-    if limits not in EFFORT_LIMITS:
-        raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got {limits!r}")
-    if not (math.isfinite(scale) and 0 < scale <= 1):
-        raise ValueError(f"effort_scale: expected a value in (0, 1], got {scale!r}")
-    # (before Finalize the per-instance query lists nothing: filter all of them)
-    for i in plant.GetJointActuatorIndices():
-        actuator = plant.get_joint_actuator(i)
-        if actuator.model_instance() != hand:
-            continue
-        value = effort_limit(actuator.joint().name(), limits)
-        if value is None:
-            value = actuator.effort_limit()
-        if value != actuator.effort_limit() or scale != 1.0:
-            actuator.set_effort_limit(value * scale)
 
 
 @dc.dataclass
@@ -338,7 +314,15 @@ class ScrewCapScenario:
 
     @staticmethod
     def load(text: str) -> "ScrewCapScenario":
-        return yaml_load_typed(schema=ScrewCapScenario, data=text)
+        """From its own YAML, or from a trial log's text (:func:`~handle_drake.apps.inhand.
+        task.logged_scenario`: the station's scenario, then this one as comments)."""
+        return yaml_load_typed(schema=ScrewCapScenario, data=trial_text(text))
+
+    def logged(self) -> str:
+        """The text a trial log stores: the station's scenario with the motion as its
+        script (``handle-drake simulate`` replays it), then this scenario."""
+        what = "fingertip cylinder" if self.cap.free else "screw cap"
+        return logged_scenario(self.station(motion=True), self.dump(), what)
 
     @property
     def total_time(self) -> float:
@@ -350,6 +334,10 @@ class ScrewCapScenario:
     @staticmethod
     def gist_data(gist: ActionGist) -> list[GistMotionData]:
         return gist_data(gist)
+
+    def station(self, motion: bool = False) -> Scenario:
+        """The station's scenario of this trial (:func:`station_scenario`)."""
+        return station_scenario(self, motion)
 
 
 class GaitMotionSource(GistMotionSource):
@@ -376,67 +364,110 @@ class GaitMotionSource(GistMotionSource):
                         super().frame_indices(t - cycle * self._duration))
 
 
-def _proximity(mu: float, stiffness: float = 0.0) -> ProximityProperties:
-    """Friction ``mu``; ``stiffness`` (N/m) > 0: the point contact's stiffness (a compliant
-    cap or cylinder: the pair's stiffness is at most it); 0: Drake's default (rigid)."""
-    props = ProximityProperties()
-    if stiffness > 0:
-        AddContactMaterial(point_stiffness=stiffness, friction=CoulombFriction(mu, mu),
-                           properties=props)
-    else:
-        AddContactMaterial(friction=CoulombFriction(mu, mu), properties=props)
-    return props
+def _axis_rotation(cap: ScrewCapModel) -> RotationMatrix:
+    """The cap's orientation: its z (the axis) along world y (``axis_reversed``: -y),
+    turned about world z by ``axis_yaw_deg``."""
+    R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
+    return R_yaw @ RotationMatrix(RollPitchYaw(np.pi / 2 if cap.axis_reversed else
+                                               -np.pi / 2, 0, 0))
+
+
+def _base_pose(cap: ScrewCapModel) -> RigidTransform:
+    """The bottle's pose: it continues the cap's axis towards +y (``bottle_at_index``: -y),
+    beyond a 2 mm gap and the neck."""
+    R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
+    side = -1.0 if cap.bottle_at_index else 1.0
+    return RigidTransform(_axis_rotation(cap), np.asarray(cap.position, dtype=float) + R_yaw @ (
+        np.array([0, side * ((cap.length + cap.bottle_length) / 2 + 0.002 + cap.neck_length),
+                  0])))
+
+
+def _schema_pose(cap: ScrewCapModel, p) -> Transform:
+    """A pose of the cap's orientation at ``p`` as a scenario ``Transform``: rpy
+    ``[-+90, 0, axis_yaw_deg]`` deg, :func:`_axis_rotation`'s matrix (the station-built
+    trial's turn equals the module's own at yaw 0, tested, and at 10 deg, measured)."""
+    X = Transform(translation=[float(v) for v in p])
+    X.set_rotation_rpy_deg([90.0 if cap.axis_reversed else -90.0, 0.0,
+                            float(cap.axis_yaw_deg)])
+    return X
+
+
+def bare_object(cap: ScrewCapModel, names=("screw_cap", "cap", "bottle", "cap_thread",
+                                           "bottle_mouth")) -> BareObject:
+    """The cap (on its thread, with the bottle) or the free cylinder as the one in-hand object
+    model of :mod:`handle_drake.scene.jointed` (the station's and this module's builder)."""
+    joint = X_WB = None
+    if not cap.free:
+        side = -1.0 if cap.bottle_at_index else 1.0
+        # the neck on the bottle's cap side (its body -z: the cap's side)
+        base = ObjectBase(name=names[2], diameter=cap.bottle_diameter,
+                          length=cap.bottle_length, mass=0.3,
+                          neck_length=cap.neck_length, neck_diameter=cap.neck_diameter,
+                          neck_offset=(1 if cap.axis_reversed else -1) * side
+                          * (cap.bottle_length + cap.neck_length) / 2)
+        X_WB = _base_pose(cap)
+        base.X_WB = _schema_pose(cap, X_WB.translation())
+        joint = ThreadJoint(coulomb_torque=cap.coulomb_torque, viscous=cap.viscous,
+                            stiction_speed=cap.stiction_speed, base=base, name=names[3])
+    return BareObject(diameter=cap.diameter, length=cap.length, mass=cap.mass, mu=cap.mu,
+                      X_WO=RigidTransform(_axis_rotation(cap),
+                                          np.asarray(cap.position, dtype=float)),
+                      point_stiffness=cap.point_stiffness, joint=joint, X_WB=X_WB,
+                      names=tuple(names))
+
+
+def station_scenario(scenario: ScrewCapScenario, motion: bool = False) -> Scenario:
+    """The trial's station (:func:`~handle_drake.station.MakeHandStation`): the Shadow hand
+    fixed palm up with the scenario's effort limits, the cap on its thread joint on the
+    welded bottle (``object.joint``) or the free cylinder (``contact_feet: false``), no
+    table, point contact at the scenario's step, the hand driver sampling every 2 ms. The
+    same plant, bit for bit, as :func:`build_screw_cap`'s (tested). ``motion``: with the
+    trial's frames as the keyframe ``script`` after the settle (the grasp holds the
+    initial command until ``settle_time``), so that ``handle-drake simulate`` replays the
+    trial from this scenario alone."""
+    cap = scenario.cap
+    cap.validate()
+    bare = bare_object(cap)
+    X_WB = Transform(translation=[float(v) for v in scenario.hand_xyz])
+    X_WB.set_rotation_rpy_deg([float(v) for v in scenario.hand_rpy_deg])
+    script, duration = [], scenario.settle_time + scenario.total_time
+    if motion:
+        script = motion_script(_motion_source(scenario), scenario.parameters
+                               or scenario.action_gist().initial_parameters(),
+                               PlannedCommands.period, scenario.total_time,
+                               scenario.settle_time)
+    return Scenario(
+        hand=HandConfig(kind="shadow", coupling_ratio=1.0, mount=FixedMount(X_WB=X_WB),
+                        initial_position={n: float(v) for n, v in
+                                          scenario.initial_position.items()},
+                        effort_limits=scenario.effort_limits,
+                        effort_scale=float(scenario.effort_scale)),
+        object=ObjectConfig(kind="cylinder", size=cap.diameter,
+                            dimensions={"height": cap.length}, mass=cap.mass, mu=cap.mu,
+                            X_WO=_schema_pose(cap, cap.position), on_table=False,
+                            contact_feet=False, point_stiffness=cap.point_stiffness,
+                            joint=bare.joint),
+        table=None,
+        plant_config=default_plant_config(time_step=scenario.time_step),
+        driver=SimHandDriver(max_joint_velocity=scenario.max_joint_velocity,
+                             control_period=PlannedCommands.period),
+        simulation_duration=duration, script=script)
+
+
+def _motion_source(scenario: ScrewCapScenario) -> "GaitMotionSource":
+    """The scenario's motion source (its frames; not a system of any diagram)."""
+    spec = get_hand_spec("shadow")
+    lower, upper = actuated_position_limits(spec, 1.0)
+    q0 = np.clip([float(scenario.initial_position.get(n, 0.0)) for n in _NAMES], lower, upper)
+    return GaitMotionSource(scenario.action_gist(), q0, scenario.gait_duration,
+                            scenario.n_frames, scenario.n_gaits,
+                            parameters=scenario.parameters or None)
 
 
 def _add_cap(plant, cap: ScrewCapModel):
     """The cap (and, unless free, the bottle welded to the world and the thread joint with
     its Coulomb friction actuator); returns (instance, cap body, bottle, joint)."""
-    # The axis along world y (a cylinder's z axis turned onto y), then yawed about world z.
-    R_yaw = RotationMatrix.MakeZRotation(np.radians(cap.axis_yaw_deg))
-    R_axis = R_yaw @ RotationMatrix(RollPitchYaw(np.pi / 2 if cap.axis_reversed else
-                                                 -np.pi / 2, 0, 0))
-    centre = np.asarray(cap.position, dtype=float)
-    instance = plant.AddModelInstance("screw_cap")
-    body = plant.AddRigidBody("cap", instance, SpatialInertia(
-        cap.mass, np.zeros(3), UnitInertia.SolidCylinder(cap.diameter / 2, cap.length,
-                                                         [0, 0, 1])))
-    shapes = [(body, Cylinder(cap.diameter / 2, cap.length), [0.9, 0.2, 0.2, 1])]
-    bottle = joint = None
-    if not cap.free:
-        bottle = plant.AddRigidBody("bottle", instance, SpatialInertia(
-            0.3, np.zeros(3), UnitInertia.SolidCylinder(cap.bottle_diameter / 2,
-                                                        cap.bottle_length, [0, 0, 1])))
-        # the bottle continues the cap's axis towards +y (the cap is its mouth's end, at -y)
-        side = -1.0 if cap.bottle_at_index else 1.0
-        X_WB = RigidTransform(R_axis, centre + R_yaw @ np.array(
-            [0, side * ((cap.length + cap.bottle_length) / 2 + 0.002 + cap.neck_length), 0]))
-        plant.WeldFrames(plant.world_frame(), bottle.body_frame(), X_WB)
-        shapes.append((bottle, Cylinder(cap.bottle_diameter / 2, cap.bottle_length),
-                       [0.3, 0.6, 0.9, 0.5]))
-        if cap.neck_length > 0:  # on the bottle's cap side (its body -z: the cap's side)
-            shapes.append((bottle, Cylinder(cap.neck_diameter / 2, cap.neck_length),
-                           [0.3, 0.6, 0.9, 0.5], RigidTransform(
-                               [0, 0, (1 if cap.axis_reversed else -1) * side
-                                * (cap.bottle_length + cap.neck_length) / 2])))
-    for k, (b, shape, rgba, *X) in enumerate(shapes):
-        X_BG = X[0] if X else RigidTransform()
-        plant.RegisterCollisionGeometry(b, X_BG, shape, f"{b.name()}_collision{k or ''}",
-                                        _proximity(cap.mu, cap.point_stiffness))
-        plant.RegisterVisualGeometry(b, X_BG, shape, f"{b.name()}_visual{k or ''}",
-                                     np.array(rgba))
-    if not cap.free:
-        # revolute joint about the cap's own z (= world y): the bottle's axis
-        mouth = plant.AddFrame(FixedOffsetFrame("bottle_mouth", plant.world_frame(),
-                                                RigidTransform(R_axis, centre), instance))
-        joint = plant.AddJoint(RevoluteJoint("cap_thread", mouth, body.body_frame(), [0, 0, 1],
-                                             damping=cap.viscous))
-        actuator = plant.AddJointActuator("cap_thread_friction", joint,
-                                          effort_limit=cap.coulomb_torque)
-        actuator.set_controller_gains(PdControllerGains(
-            p=0.0, d=cap.coulomb_torque / cap.stiction_speed))
-    else:
-        plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(R_axis, centre))
-    return instance, body, bottle, joint
+    return AddBareObject(plant, bare_object(cap))
 
 
 def _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance):
@@ -502,7 +533,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
                      RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
                                     scenario.hand_xyz))
-    _set_effort_limits(plant, hand, scenario.effort_limits, scenario.effort_scale)
+    set_effort_limits(plant, hand, scenario.effort_limits, scenario.effort_scale)
     instance, body, bottle, joint = _add_cap(plant, cap)
     plant.Finalize()
     if bottle is not None:
@@ -1014,7 +1045,50 @@ def _demonstration(name: str = "screw_cap_rotation.json"):
     return recording, glove_to_shadow(recording)
 
 
-class ScrewCapTrial(GistTrial):
+#: How a ScrewCapTrial is built: on the station (the default), or the module's own diagram
+#: with planned commands or the Python hand driver (the references)
+BUILDS = ("station", "planned", "driver")
+
+
+def station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
+    """The trial on the station (:class:`~handle_drake.trial.gist_trial.GistTrial`), the grasp
+    settled with the ``still`` parameters; the handles the trial reads, under the names of
+    :func:`build_screw_cap`'s."""
+    trial = StationGistTrial(scenario.station(), meshcat=meshcat,
+                             reverse_margin=scenario.reverse_margin)
+    source = _motion_source(scenario)
+    trial.settle(source.held_frames(still, PlannedCommands.period, scenario.settle_time),
+                 scenario.settle_time)
+    names = {"object": "cap", "base": "bottle"}
+    return dict(trial=trial, diagram=trial.harness.diagram, plant=trial.plant, source=source,
+                joint=trial.joint, cap=trial.body, bottle=trial.base,
+                hand_bodies=trial.hand_bodies,
+                geometry={g: names.get(n, n) for g, n in trial.geometry.items()},
+                q0=hand_initial_command(trial.scenario), gist=scenario.action_gist(),
+                reverse=trial.reverse_system, planned=None, weight=trial.weight,
+                simulator=trial.simulator, settled=trial.settled)
+
+
+def _reference_build(scenario: ScrewCapScenario, still, meshcat=None,
+                     driver: bool = False) -> dict:
+    """:func:`build_screw_cap`'s diagram (planned commands, or the Python ``driver``), the
+    grasp settled with the ``still`` parameters."""
+    built = build_screw_cap(scenario, meshcat=meshcat, driver=driver)
+    simulator = Simulator(built["diagram"])
+    context = simulator.get_mutable_context()
+    source = built["source"]
+    source.set_parameters(source.GetMyContextFromRoot(context), still)
+    if built["planned"] is not None:
+        built["planned"].plan(source, still, scenario.settle_time)
+    simulator.Initialize()
+    simulator.AdvanceTo(scenario.settle_time)
+    settled = context.Clone()
+    settled.SetTime(0.0)
+    built.update(simulator=simulator, settled=settled)
+    return built
+
+
+class ScrewCapTrial(GistObjective):
     """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
 
     The diagram is built on the first call in each process and kept on this
@@ -1092,32 +1166,30 @@ class ScrewCapTrial(GistTrial):
             hold=c.hold, parameters=[float(v) for v in parameters],
             reverse_margin=c.reverse_margin if c.free else 0.0)
 
-    def _build(self, meshcat=None, driver: bool = False):
-        """The diagram, settled (kept per process). ``driver``: with the Python hand
-        driver (the reference of the default build's planned commands; also used with
-        ``meshcat`` and when the time step is not the driver's period)."""
-        driver = driver or meshcat is not None or not _divides(self.config.time_step)
-        key = "_reference_build" if driver else "_built"
+    def _build(self, meshcat=None, driver: bool = False, build: str | None = None):
+        """The trial, settled (kept per process): on the station (``build`` "station", the
+        default: :class:`~handle_drake.trial.gist_trial.GistTrial` on
+        :meth:`ScrewCapScenario.station`), or the module's own diagram
+        (:func:`build_screw_cap`, the reference the station is tested against): "planned"
+        (its planned commands) or "driver" (its Python hand driver; also ``driver``)."""
+        build = "driver" if driver else (build or "station")
+        if build not in BUILDS:
+            raise ValueError(f"build: expected one of {BUILDS}, got {build!r}")
+        if build == "planned" and not _divides(self.config.time_step):
+            build = "driver"
+        key = {"station": "_built", "driver": "_reference_build"}.get(build, "_planned_build")
         if meshcat is None and getattr(self, key, None) is not None:
             return getattr(self, key)
-        built = build_screw_cap(self.scenario(), meshcat=meshcat, driver=driver)
-        simulator = Simulator(built["diagram"])
-        context = simulator.get_mutable_context()
-        source = built["source"]
         still = self.gist.initial_parameters().copy()
         for sl in self.gist.slices():
             still[sl][1:] = 0.0
-        source.set_parameters(source.GetMyContextFromRoot(context), still)
-        if built["planned"] is not None:
-            built["planned"].plan(source, still, self.config.settle_time)
-        simulator.Initialize()
-        simulator.AdvanceTo(self.config.settle_time)
-        settled = context.Clone()
-        settled.SetTime(0.0)
+        if build == "station":
+            built = station_build(self.scenario(), still, meshcat)
+        else:
+            built = _reference_build(self.scenario(), still, meshcat, build == "driver")
         plant = built["plant"]
-        built.update(simulator=simulator, settled=settled,
-                     gripped=contact_summary(plant, plant.GetMyContextFromRoot(context),
-                                             built)["touching"])
+        built["gripped"] = contact_summary(plant, plant.GetMyContextFromRoot(
+            built["simulator"].get_context()), built)["touching"]
         if meshcat is None:
             setattr(self, key, built)
         return built
@@ -1129,7 +1201,7 @@ class ScrewCapTrial(GistTrial):
         detail = outcome.as_dict()
         detail.pop("times")
         return TrialResult(metric=outcome.score, contacts=detail,
-                           scenario=self.scenario(x).dump())
+                           scenario=self.scenario(x).logged())
 
     def perturbed(self, perturbation: dict) -> "ScrewCapTrial":
         """The same task under one perturbation (:func:`draw_perturbations`), not robust."""
@@ -1153,7 +1225,7 @@ class ScrewCapTrial(GistTrial):
                       robust_draws=[{n: (list(v) if isinstance(v, tuple) else v)
                                      for n, v in p.items()} for p in draws])
         return TrialResult(metric=float(scores[k]), contacts=detail,
-                           scenario=self.perturbed(draws[k]).scenario(x).dump())
+                           scenario=self.perturbed(draws[k]).scenario(x).logged())
 
     def _gripped(self, st: dict, t, summary: dict, built: dict, plant_context, p0) -> bool:
         """A finger touched the object within ``contact_window``, the palm never did (its
@@ -1259,12 +1331,16 @@ class ScrewCapTrial(GistTrial):
         """The simulator at the settled grasp, time 0, with the parameters ``x`` (and their
         planned commands); returns the plant's context."""
         c, context = self.config, built["simulator"].get_mutable_context()
+        end = c.total_time + (c.reverse_time if built["joint"] is None else 0)
+        if "trial" in built:  # the station: the frames' zero-order hold at the driver's samples
+            built["trial"].start(built["source"].held_frames(x, PlannedCommands.period, end),
+                                 built["settled"])
+            return built["plant"].GetMyContextFromRoot(context)
         context.SetTimeStateAndParametersFrom(built["settled"])
         source = built["source"]
         source.set_parameters(source.GetMyContextFromRoot(context), x)
         if built["planned"] is not None:
-            built["planned"].plan(source, x, c.total_time + (c.reverse_time
-                                                             if built["joint"] is None else 0))
+            built["planned"].plan(source, x, end)
         reverse = built["reverse"]
         if reverse is not None:
             reverse.set_reversed(reverse.GetMyContextFromRoot(context), False)
@@ -1316,17 +1392,19 @@ class ScrewCapTrial(GistTrial):
         return matches, turns, truths, contacts
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
-                 contact_results: bool = False, driver: bool = False) -> ScrewCapOutcome:
+                 contact_results: bool = False, driver: bool = False,
+                 build: str | None = None) -> ScrewCapOutcome:
         """Runs one trial from the settled grasp (deterministic).
 
         Each sample reads the touching bodies from the geometry query
         (:func:`touching_geometry`) and the contact results (forces) only when the palm
         touches; ``contact_results``: read the contact results at every sample instead
-        (the reference the cheaper read is tested against); ``driver``: run the Python
-        hand driver per step instead of its planned commands (likewise)."""
+        (the reference the cheaper read is tested against). The trial runs on the station
+        unless ``build`` names a reference (:data:`BUILDS`; ``driver``: "driver", the
+        module's own diagram with the Python hand driver)."""
         x = self._check(x)
         c = self.config
-        built = self._build(meshcat, driver)
+        built = self._build(meshcat, driver, build)
         plant, joint = built["plant"], built["joint"]
         start_wall = time.perf_counter()
         plant_context = self._reset(built, x)

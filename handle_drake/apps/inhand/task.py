@@ -54,13 +54,9 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
-from pydrake.common.value import AbstractValue
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
-from pydrake.multibody.math import SpatialForce
-from pydrake.multibody.plant import ContactModel, ExternallyAppliedSpatialForce
+from pydrake.multibody.plant import ContactModel
 from pydrake.multibody.tree import BodyIndex
-from pydrake.systems.framework import BasicVector, LeafSystem, NumericParameterIndex
-from pydrake.systems.primitives import TrajectorySource
 
 from handle_drake.apps.inhand.evaluation import (
     incremental_score,
@@ -84,19 +80,22 @@ from handle_drake.learning.executors import TrialResult
 from handle_drake.learning.log import code_fingerprint
 from handle_drake.scenario import (
     AccelerometerConfig,
+    DumpScenario,
     FixedMount,
     HandConfig,
+    Keyframe,
     ObjectConfig,
     Scenario,
     SimHandDriver,
     default_plant_config,
 )
-from handle_drake.station import GetPlant, object_body
-from handle_drake.trial.harness import TrialHarness
+from handle_drake.trial.gist_trial import GistTrial as StationGistTrial
+from handle_drake.trial.gist_trial import ReversedGravity
 
 __all__ = ["TASKS", "InHandTask", "InHandTrial", "InHandScenario", "TrialOutcome", "EVALUATIONS",
            "task_gist", "build_inhand", "ReversedGravity", "inhand_fingerprint", "GistMotionData",
-           "gist_data", "gist_from_data", "penetrating_hand_bodies"]
+           "gist_data", "gist_from_data", "penetrating_hand_bodies",
+           "logged_scenario", "trial_text", "motion_script", "TRIAL_MARKER"]
 
 DATA_DIR = Path(__file__).parent / "data"
 EVALUATIONS = ("incremental", "old")
@@ -122,45 +121,6 @@ TASKS: dict[str, TaskSpec] = {
     "star_rotation": TaskSpec("star_rotation.json", "star_prism", 0.05,
                               (("height", 0.06),), (0.322, 0.0, 0.048)),
 }
-
-
-class ReversedGravity(LeafSystem):
-    """While switched on (a numeric parameter; default off), a force ``-2 m g`` on the body
-    at its centre of mass: its weight reversed (the hand turned palm down, for it), plus
-    ``margin`` N more upwards (the grip's tangential margin beyond the weight).
-
-    The output depends on that parameter alone (its only prerequisite), so Drake computes
-    it once per switch and the plant's every step reads the cached forces: no Python call
-    per step. Switch it on at the time the reversal starts (the trials do so at the end of
-    the hold: the steps from then on feel it)."""
-
-    def __init__(self, plant, body, margin: float = 0.0):
-        super().__init__()
-        if not (np.isfinite(margin) and margin >= 0):
-            raise ValueError(f"reverse_margin: expected a finite value >= 0 N, got {margin!r}")
-        self._index = body.index()
-        g = plant.gravity_field().gravity_vector()
-        # the weight reversed plus ``margin`` (N) more along the same (upward) direction: the
-        # grip must hold the object's weight and a tangential margin beyond it (issue 45)
-        self._force = -2.0 * body.default_mass() * g - margin * g / np.linalg.norm(g)
-        self._on = self.DeclareNumericParameter(BasicVector([0.0]))
-        self.DeclareAbstractOutputPort(
-            "spatial_forces", lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()]),
-            self._calc, prerequisites_of_calc={
-                self.numeric_parameter_ticket(NumericParameterIndex(self._on))})
-
-    def set_reversed(self, context, on: bool) -> None:
-        context.get_mutable_numeric_parameter(self._on).SetAtIndex(0, 1.0 if on else 0.0)
-
-    def _calc(self, context, output):
-        forces = []
-        if context.get_numeric_parameter(self._on).GetAtIndex(0) > 0.5:
-            f = ExternallyAppliedSpatialForce()
-            f.body_index = self._index
-            f.p_BoBq_B = np.zeros(3)
-            f.F_Bq_W = SpatialForce(np.zeros(3), self._force)
-            forces.append(f)
-        output.set_value(forces)
 
 
 def task_gist(task: str) -> ActionGist:
@@ -319,6 +279,37 @@ def gist_from_data(name: str, motions: list[GistMotionData]) -> ActionGist:
     return ActionGist.from_dict({"name": name, "motions": [dc.asdict(m) for m in motions]})
 
 
+#: The line that starts an in-hand trial's own scenario inside its logged text
+TRIAL_MARKER = "# in-hand trial"
+
+
+def logged_scenario(station: Scenario, trial_text: str, note: str = "") -> str:
+    """What an in-hand trial's log record stores: the station's scenario with the trial's
+    motion as its keyframe script (the YAML :func:`~handle_drake.scenario.LoadScenario`
+    reads: ``handle-drake simulate`` replays it, from a log too), then the trial's own
+    scenario (settings, gist, parameters) as ``#| `` comment lines (:func:`trial_text`)."""
+    lines = "".join(f"#| {line}\n" for line in trial_text.splitlines())
+    return DumpScenario(station) + f"{TRIAL_MARKER}{': ' + note if note else ''}\n" + lines
+
+
+def trial_text(text: str) -> str:
+    """The trial's own scenario in a logged text (:func:`logged_scenario`); a text without
+    it (logged before, or written by hand) is returned as it is."""
+    if f"\n{TRIAL_MARKER}" not in text:
+        return text
+    return "".join(line[3:] + "\n" for line in text.splitlines() if line.startswith("#|"))
+
+
+def motion_script(source: GistMotionSource, parameters, period: float, duration: float,
+                  settle_time: float) -> list:
+    """A trial's motion as a scenario's keyframe script: a keyframe with no command one
+    driver period before the settle ends (where the motion starts: ``handle-drake
+    simulate`` counts the object's turn from there), then the frames' keyframes
+    (:meth:`GistMotionSource.held_keyframes`) from ``settle_time`` on for ``duration``."""
+    return [Keyframe(time=float(settle_time - period)), *source.held_keyframes(
+        parameters, period, duration, settle_time)]
+
+
 @dc.dataclass
 class InHandScenario:
     """One palm-up in-hand trial, whole: the station's scenario (hand, object, plant,
@@ -343,7 +334,24 @@ class InHandScenario:
         # yaml_dump_typed leaves out None fields: the table (and any other optional part
         # of the station) absent from the text is absent from the scenario
         defaults = InHandScenario(station=Scenario(object=None, table=None))
-        return yaml_load_typed(schema=InHandScenario, data=text, defaults=defaults)
+        return yaml_load_typed(schema=InHandScenario, data=trial_text(text),
+                               defaults=defaults)
+
+    def replay_scenario(self) -> Scenario:
+        """The station's scenario with this trial's motion as its script (the grasp holds
+        the initial command for ``settle_time``; the reversed weight is the trial's own
+        check, not replayed)."""
+        source = GistMotionSource(self.action_gist(), self.initial_command(),
+                                  self.motion_duration, self.n_frames)
+        duration = self.station.simulation_duration - self.settle_time
+        return dc.replace(self.station, script=motion_script(
+            source, self.parameters, self.station.driver.control_period, duration,
+            self.settle_time))
+
+    def logged(self) -> str:
+        """The text a trial log stores (:func:`logged_scenario`)."""
+        return logged_scenario(self.replay_scenario(), self.dump(),
+                               f"{self.gist_name}, palm up")
 
     def action_gist(self) -> ActionGist:
         return gist_from_data(self.gist_name, self.gist)
@@ -361,7 +369,8 @@ def inhand_sources() -> list[Path]:
     here = Path(__file__).parent
     return sorted([
         here / "task.py", here / "gist.py", here / "evaluation.py", here / "mapping.py",
-        here / "glove.py", root / "trial" / "harness.py", root / "station.py",
+        here / "glove.py", root / "trial" / "harness.py", root / "trial" / "gist_trial.py",
+        root / "scene" / "jointed.py", root / "station.py",
         root / "scenario.py", root / "base" / "hands.py",
         *(root / "geometry" / "objects").glob("*.py"), *(root / "systems").glob("*.py"),
         *(root / "devices" / "accelerometer").glob("*.py"),
@@ -389,61 +398,38 @@ def build_inhand(scenario: InHandScenario, meshcat=None) -> dict:
     gist = scenario.action_gist()
     q0 = scenario.initial_command()
 
-    reverse, player = [], []
     period = scenario.station.driver.control_period
-
     # The source plans the trial's frames; what reaches the hand driver is their
     # zero-order hold at the driver's sample times (GistMotionSource.held_frames,
-    # re-planned per trial): the same commands, no Python call per sample. The source
-    # itself is not in the diagram (it would be an idle system there: every system costs
-    # the simulator work at every step).
+    # re-planned per trial), played on the station by the one gist trial
+    # (handle_drake.trial.gist_trial.GistTrial): the same commands, no Python call per
+    # sample. The source itself is not in the diagram (an idle system there would cost the
+    # simulator work at every step).
     source = GistMotionSource(gist, q0, scenario.motion_duration, scenario.n_frames)
-
-    def add_motion(builder, station):
-        player.append(builder.AddNamedSystem("motion_frames", TrajectorySource(
-            source.held_frames(gist.initial_parameters(), period, period))))
-        builder.Connect(player[0].get_output_port(), station.GetInputPort("hand.position"))
-        plant = GetPlant(station)
-        reverse.append(builder.AddNamedSystem("reversed_gravity",
-                                              ReversedGravity(plant, object_body(plant))))
-        builder.Connect(reverse[0].get_output_port(),
-                        station.GetInputPort("applied_spatial_force"))
-        return player[0]
-
     accelerometer = scenario.station.object.accelerometer is not None
-    # the frames are finite (validated parameters): the station's driver in Drake
-    # primitives; the station's systems are those of the outputs the samples read
-    harness = TrialHarness(scenario.station, add_motion, log=(), meshcat=meshcat,
-                           finite_commands=True,
-                           outputs=("object.acceleration", "object.free_fall")
-                           if accelerometer else ())
-    plant = harness.plant
-    hand = plant.GetModelInstanceByName("hand")
-    hand_bodies = {int(plant.get_body(i).index()): plant.get_body(i).name()
-                   for i in plant.GetBodyIndices(hand)}
-    # Settle the grasp once: hold the initial command (all variations zero).
+    # the station's systems are those of the outputs the samples read
+    trial = StationGistTrial(scenario.station, meshcat=meshcat,
+                             outputs=("object.acceleration", "object.free_fall")
+                             if accelerometer else ())
+    # Settle the grasp once: hold the initial command (all variations zero); trials start
+    # from that context (time 0), not from the scenario's default one.
     still = gist.initial_parameters().copy()
     for sl in gist.slices():
         still[sl][1:] = 0.0
-    harness.reset()
-    player[0].UpdateTrajectory(source.held_frames(still, period, scenario.settle_time))
-    harness.initialize()
-    harness.advance(scenario.settle_time)
-    # Trials start from this context, not from the scenario's default one.
-    settled = harness.context.Clone()
-    settled.SetTime(0.0)
-    body = object_body(plant)
-    weight = body.default_mass() * float(np.linalg.norm(plant.gravity_field().gravity_vector()))
-    return dict(harness=harness, settled=settled, body=body, reverse=reverse[0], weight=weight,
-                motion=source, player=player[0], period=period,
-                hand_bodies=hand_bodies, touching_query=_touching_query(plant, body, hand_bodies),
+    trial.settle(source.held_frames(still, period, scenario.settle_time), scenario.settle_time)
+    harness, body, hand_bodies = trial.harness, trial.body, trial.hand_bodies
+    return dict(trial=trial, harness=harness, settled=trial.settled, body=body,
+                reverse=trial.reverse_system, weight=trial.weight, motion=source,
+                player=trial.player,
+                period=period, hand_bodies=hand_bodies,
+                touching_query=_touching_query(trial.plant, body, hand_bodies),
                 accelerometer=harness.station.GetOutputPort("object.acceleration")
                 if accelerometer else None,
                 free_fall=harness.station.GetOutputPort("object.free_fall")
                 if accelerometer else None)
 
 
-class GistTrial:
+class GistObjective:
     """What every gist-driven in-hand trial shares: its settings ``config`` (of
     ``config_type``; the only thing pickled: a diagram does not pickle, so each process
     builds its own on its first call, into ``_built``) and the parameter space of its
@@ -478,7 +464,7 @@ class GistTrial:
         return check_parameter_vector(x, self.dimension, self._parameters_text())
 
 
-class InHandTrial(GistTrial):
+class InHandTrial(GistObjective):
     """A picklable objective ``trial(c, seed) -> TrialResult`` (score maximised).
 
     Every trial is an :class:`InHandScenario` (logged whole). The diagram
@@ -565,7 +551,8 @@ class InHandTrial(GistTrial):
         detail = outcome.as_dict()
         for key in ("times",):
             detail.pop(key)
-        return TrialResult(metric=outcome.score, contacts=detail, scenario=self.scenario(x).dump())
+        return TrialResult(metric=outcome.score, contacts=detail,
+                           scenario=self.scenario(x).logged())
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True) -> TrialOutcome:
         """Runs one trial (deterministic: the simulation has no noise; ``seed`` is unused).
@@ -580,9 +567,8 @@ class InHandTrial(GistTrial):
         harness = built["harness"]
         start_wall = time.perf_counter()
         context, plant = harness.context, harness.plant
-        context.SetTimeStateAndParametersFrom(built["settled"])
-        built["player"].UpdateTrajectory(built["motion"].held_frames(
-            x, built["period"], c.total_time + c.reverse_time))
+        built["trial"].start(built["motion"].held_frames(
+            x, built["period"], c.total_time + c.reverse_time), built["settled"])
         plant_context = harness.plant_context()
         X0 = plant.EvalBodyPoseInWorld(plant_context, built["body"])
         samples = c.sample_times()
