@@ -258,12 +258,23 @@ def test_playback_holds_the_recorded_frames_and_refuses_bad_files(tmp_path):
 
 
 def test_hardware_station_plays_the_recording_on_hand_taxels(tmp_path):
-    path = save_recording(tmp_path / "run.npz", [0.0, 0.5], np.ones((2, 116)))
+    from handle_drake.devices.taxels.wiring import taxel_cells
+    # five 4 x 4 pads, the 6 x 6 palm and the skins: 8 and 5 rows of 6 on each finger's
+    # proximal and middle phalanx, 3 and 3 rows on the thumb's
+    cells = 5 * 16 + 36 + 4 * (8 + 5) * 6 + (3 + 3) * 6
+    path = save_recording(tmp_path / "run.npz", [0.0, 0.5], np.ones((2, cells)))
     scenario = LoadScenario(filename=diagrams_dir() / "shadow_can_hand.yaml",
                             data=f"hand: {{taxels: {{recording: {path}}}}}")
+    assert taxel_cells(scenario.hand.taxels) == cells
     station = MakeHandStation(scenario, hardware=True)
     context = station.CreateDefaultContext()
-    assert np.array_equal(station.GetOutputPort("hand.taxels").Eval(context), np.ones(116))
+    assert np.array_equal(station.GetOutputPort("hand.taxels").Eval(context), np.ones(cells))
+    # the simulated station's sensor has the same cells, skins and all
+    simulated = MakeHandStation(LoadScenario(data="hand: {taxels: {}}"),
+                                outputs=("hand.taxels",))
+    pads = simulated.GetSubsystemByName("taxels").pads
+    assert sum(p.cells for p in pads) == cells
+    assert [p.name for p in pads if p.radius > 0][:2] == ["ffproximal_skin", "ffmiddle_skin"]
 
 
 @pytest.mark.parametrize("override, field", [

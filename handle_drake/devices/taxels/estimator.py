@@ -129,8 +129,9 @@ class PrimitiveShape:
 
 def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransform],
                  threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pad in contact: the centre of pressure ``c_B``, the pad's outward normal ``n_B``
-    and its force (N) from ``taxels`` (Pa). Arrays (k, 3), (k, 3), (k,)."""
+    """Per pad in contact: the centre of pressure ``c_B`` (on the pad's surface), the pad's
+    outward normal ``n_B`` there and its force (N) from ``taxels`` (Pa). Arrays (k, 3),
+    (k, 3), (k,)."""
     points, normals, forces = [], [], []
     start = 0
     for pad, X_BP in zip(pads, X_BPads, strict=True):
@@ -143,8 +144,10 @@ def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransfo
         if total <= threshold:
             continue
         uv = f @ profile.cell_centres() / total
-        points.append(X_BP.multiply([uv[0], uv[1], 0.0]))
-        normals.append(X_BP.rotation().matrix()[:, 2].copy())
+        # the centre of pressure on the pad's surface (a skin's curves) and its normal
+        p_P, n_P = pad.surface_point(uv[0], uv[1])
+        points.append(X_BP.multiply(p_P[0]))
+        normals.append(X_BP.rotation().multiply(n_P[0]))
         forces.append(total)
     if not points:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
@@ -227,6 +230,21 @@ class InHandPoseEstimator(LeafSystem):
             c.get_discrete_state(self._state).value()[7:43]), {self.xd_ticket()})
         self.DeclareVectorOutputPort("quality", 2, lambda c, o: o.SetFromVector(
             c.get_discrete_state(self._state).value()[43:45]), {self.xd_ticket()})
+
+    @property
+    def half_size(self) -> float:
+        """The object's smallest distance from its centre to its surface (m)."""
+        return self._half_size
+
+    @property
+    def shape_kind(self) -> str:
+        """The object's primitive: "sphere", "cylinder" or "box"."""
+        return self._shape.shape
+
+    @property
+    def hand_clearance(self) -> np.ndarray:
+        """The clearance each of :meth:`hand_points` needs from the object (m)."""
+        return self._clearance
 
     def _hand_geometry(self, inspector, hand):
         """Points inside every link of the hand with their clearance (the object is not
