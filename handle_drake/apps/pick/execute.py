@@ -61,6 +61,7 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from scipy.spatial.transform import Rotation
 
 from handle_drake.apps.pick.plan import replan_release
+from handle_drake.apps.pick.touch import locate_by_touch, senses_touch, with_taxels
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.arm.model import ARM_INSTANCE, get_arm_spec
 from handle_drake.geometry.objects import dimensions
@@ -306,12 +307,16 @@ def _correct_release(simulator, diagram, station, scenario, plan, reach, close, 
     context = plant.GetMyContextFromRoot(simulator.get_context())
     hand = plant.GetModelInstanceByName("hand")
     X_OB_planned = plan.X_WO.inverse() @ plan.grasp.X_WB
-    measured = measure_in_hand(plant, context,
-                               station.GetOutputPort("contact_results").Eval(
-                                   station.GetMyContextFromRoot(simulator.get_context())),
-                               plant.GetModelInstanceByName(plan.target), hand,
-                               get_hand_spec(scenario.hand.kind).base_body,
-                               plan.grasp.object_spec, X_OB_planned)
+    if senses_touch(station):  # the hand's taxels, joints and the arm's joints
+        measured = locate_by_touch(station, simulator.get_mutable_context(), scenario,
+                                   plan.grasp.object_spec, X_OB_planned)
+    else:  # the simulator's contact points
+        measured = measure_in_hand(plant, context,
+                                   station.GetOutputPort("contact_results").Eval(
+                                       station.GetMyContextFromRoot(simulator.get_context())),
+                                   plant.GetModelInstanceByName(plan.target), hand,
+                                   get_hand_spec(scenario.hand.kind).base_body,
+                                   plan.grasp.object_spec, X_OB_planned)
     if measured is None:
         return plan, None, None, {}
     X_OB, count = measured
@@ -419,6 +424,8 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     scenario = dc.replace(scenario, cameras=[])
     if still_bystanders:
         scenario = weld_bystanders(scenario, plan.target)
+    if reach is not None:  # the release is corrected from the hand's taxels
+        scenario = with_taxels(scenario)
     meshcat = None
     if html is not None:
         from pydrake.geometry import StartMeshcat

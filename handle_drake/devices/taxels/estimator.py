@@ -45,6 +45,7 @@ from pydrake.geometry import Box, Capsule, Cylinder, Role, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContactApproximation
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
+from scipy.ndimage import label
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
@@ -127,12 +128,27 @@ class PrimitiveShape:
         return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
 
 
+def interior(pad: Pad, uv) -> bool:
+    """Whether a centre of pressure ``uv`` lies three quarters of a cell or more inside the
+    grid's border: pressure on the pad (the object's face on it, its normal the pad's).
+    One nearer the border is where an object touching the body beyond the grid (a
+    fingertip's tip, a capsule's end) also reads: its normal, and its place to a few mm,
+    are uncertain."""
+    prof = pad.profile
+    return bool(abs(uv[0]) <= (prof.cols / 2 - 0.75) * prof.pitch_col
+                and abs(uv[1]) <= (prof.rows / 2 - 0.75) * prof.pitch_row)
+
+
 def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransform],
-                 threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pad in contact: the centre of pressure ``c_B`` (on the pad's surface), the pad's
-    outward normal ``n_B`` there and its force (N) from ``taxels`` (Pa). Arrays (k, 3),
-    (k, 3), (k,)."""
-    points, normals, forces = [], [], []
+                 threshold: float, with_interior: bool = False):
+    """Per contact patch of each pad (cells above three noise deviations, connected
+    through sides or corners, together above ``threshold`` N): its centre of pressure
+    ``c_B`` (on the pad's surface), the pad's outward normal ``n_B`` there and its force
+    (N) from ``taxels`` (Pa). Arrays (k, 3), (k, 3), (k,); ``with_interior``: and (k,)
+    bools, :func:`interior` of each. Two patches on one pad (a fingertip touching with
+    its tip and its side) are two contacts: one centre of pressure between them would
+    lie on neither."""
+    points, normals, forces, inside = [], [], [], []
     start = 0
     for pad, X_BP in zip(pads, X_BPads, strict=True):
         profile = pad.profile
@@ -140,18 +156,27 @@ def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransfo
         start += pad.cells
         # cells under three noise deviations are taken as empty
         f = np.where(f > 3.0 * profile.noise_std_pa * profile.cell_area, f, 0.0)
-        total = f.sum()
-        if total <= threshold:
+        if f.sum() <= threshold:
             continue
-        uv = f @ profile.cell_centres() / total
-        # the centre of pressure on the pad's surface (a skin's curves) and its normal
-        p_P, n_P = pad.surface_point(uv[0], uv[1])
-        points.append(X_BP.multiply(p_P[0]))
-        normals.append(X_BP.rotation().multiply(n_P[0]))
-        forces.append(total)
-    if not points:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-    return np.array(points), np.array(normals), np.array(forces)
+        labels, count = label(f.reshape(profile.rows, profile.cols) > 0,
+                              structure=np.ones((3, 3)))
+        labels = labels.ravel()
+        centres = profile.cell_centres()
+        for patch in range(1, count + 1):
+            w = np.where(labels == patch, f, 0.0)
+            total = w.sum()
+            if total <= threshold:
+                continue
+            uv = w @ centres / total
+            # the centre of pressure on the pad's surface (a skin's curves) and its normal
+            p_P, n_P = pad.surface_point(uv[0], uv[1])
+            points.append(X_BP.multiply(p_P[0]))
+            normals.append(X_BP.rotation().multiply(n_P[0]))
+            forces.append(total)
+            inside.append(interior(pad, uv))
+    out = (np.array(points).reshape(-1, 3), np.array(normals).reshape(-1, 3),
+           np.array(forces, float))
+    return (*out, np.array(inside, bool)) if with_interior else out
 
 
 class InHandPoseEstimator(LeafSystem):
@@ -170,11 +195,13 @@ class InHandPoseEstimator(LeafSystem):
                  X_WO_prior: RigidTransform, X_WB: RigidTransform | None = None,
                  X_OS: RigidTransform | None = None, rate_hz: float = 20.0,
                  prior_position_std: float = 0.01, prior_angle_std: float = 0.2,
-                 contact_threshold: float = 0.2, sigma_distance: float = 0.001,
-                 sigma_normal: float = 1.0, process_position_std: float = 0.002,
+                 contact_threshold: float = 0.2, sigma_distance: float = 0.0015,
+                 sigma_normal: float = 0.3, edge_sigma_distance: float = 0.004,
+                 edge_sigma_normal: float = 5.0, pad_compliance: float = 2e-4,
+                 process_position_std: float = 0.002,
                  process_angle_std: float = 0.05, camera_position_std: float = 0.005,
                  camera_angle_std: float = 0.1, gravity_std: float = 0.05,
-                 self_contact_distance: float = 0.002):
+                 self_contact_distance: float = 0.004):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._half_size = self._shape.half_size()
@@ -195,9 +222,17 @@ class InHandPoseEstimator(LeafSystem):
         self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
         self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
         self._self_contact_distance = self_contact_distance
+        self.touching: list[np.ndarray] = []  # the last contacts()' edge contacts' rows
         inspector = self._scene_graph.model_inspector()
         self._links, self._others = self._hand_geometry(inspector, hand)
         self._clearance = np.concatenate([c for _, _, c in self._links])
+        # per pad: the rows of hand_points() inside its body (an edge contact's body
+        # touches the object: the least clearance-reduced distance of them is 0)
+        sizes = np.cumsum([0] + [len(c) for _, _, c in self._links])
+        self._pad_rows = [np.concatenate([np.arange(sizes[k], sizes[k + 1])
+                                          for k, (body, _, _) in enumerate(self._links)
+                                          if body.name() == pad.body_name] or [np.zeros(0, int)])
+                          for pad in self._pads]
         self._q_index = np.array([self._plant.GetJointByName(n, hand).position_start()
                                   for n in spec_h.joint_names], dtype=int)
         self._q0 = self._plant.GetPositions(self._plant_context)
@@ -209,7 +244,8 @@ class InHandPoseEstimator(LeafSystem):
         self._sig = dict(prior_p=prior_position_std, prior_a=prior_angle_std,
                          d=sigma_distance, n=sigma_normal, proc_p=process_position_std,
                          proc_a=process_angle_std, cam_p=camera_position_std,
-                         cam_a=camera_angle_std, g=gravity_std)
+                         cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
+                         edge_n=edge_sigma_normal, compliance=pad_compliance)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
         nq, cells = len(spec_h.joint_names), sum(p.cells for p in self._pads)
@@ -301,28 +337,39 @@ class InHandPoseEstimator(LeafSystem):
                               for body, p, _ in self._links)])
 
     def contacts(self, q: np.ndarray, taxels: np.ndarray):
-        """The pads' contacts with the object (centres of pressure and outward normals in B)
-        and the face centres of the pads that feel nothing (``(points, normals, free)``):
-        a pad whose centre of pressure lies within ``self_contact_distance`` of another
-        link of the hand (one it can collide with) is pressed by the hand, not the object,
-        and is left out."""
+        """The pads' contacts with the object (centres of pressure and outward normals in B),
+        the face centres of the pads that feel nothing and each contact's terms for
+        :meth:`fit` (``(points, normals, free, terms)``; ``terms`` (k, 3): the distance's
+        and the normal's standard deviations and the expected signed distance, the pad
+        pressed ``pad_compliance`` m per N into the object): a pad whose centre of
+        pressure lies within ``self_contact_distance`` of another link of the hand (one it
+        can collide with) is pressed by the hand, not the object, and is left out. A
+        centre of pressure on the grid's border (:func:`pad_contacts`' interior false)
+        gets ``edge_sigma_distance`` and ``edge_sigma_normal``."""
         X_BPads = self.pad_poses(q)
         query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
         keep, free = [], []
         for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
-            points, normals, _ = pad_contacts([pad], taxels[self._offsets[i]:self._offsets[i + 1]],
-                                              [X_BP], self._threshold)
+            points, normals, force, inside = pad_contacts(
+                [pad], taxels[self._offsets[i]:self._offsets[i + 1]], [X_BP], self._threshold,
+                with_interior=True)
             if not len(points):
                 free.append(X_BP.translation())
                 continue
-            near = query.ComputeSignedDistanceToPoint(points[0], self._self_contact_distance)
-            if any(d.id_G in self._others[i] for d in near):
-                continue
-            keep.append((points[0], normals[0]))
+            s = self._sig
+            for point, normal, f, ok in zip(points, normals, force, inside, strict=True):
+                near = query.ComputeSignedDistanceToPoint(point, self._self_contact_distance)
+                if any(d.id_G in self._others[i] for d in near):
+                    continue
+                terms = (s["d"], s["n"]) if ok else (s["edge_d"], s["edge_n"])
+                keep.append((point, normal, (*terms, -s["compliance"] * f),
+                             None if ok else self._pad_rows[i]))
         free = np.array(free).reshape(-1, 3)
+        self.touching = [k[3] for k in keep if k[3] is not None]
         if not keep:
-            return np.zeros((0, 3)), np.zeros((0, 3)), free
-        return np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free
+            return np.zeros((0, 3)), np.zeros((0, 3)), free, np.zeros((0, 3))
+        return (np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free,
+                np.array([k[2] for k in keep]))
 
     @staticmethod
     def _unpack(x) -> RigidTransform:
@@ -341,8 +388,8 @@ class InHandPoseEstimator(LeafSystem):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
-        points, normals, free = self.contacts(self._q_port.Eval(context),
-                                              self._taxel_port.Eval(context))
+        points, normals, free, terms = self.contacts(self._q_port.Eval(context),
+                                                     self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
@@ -372,7 +419,8 @@ class InHandPoseEstimator(LeafSystem):
             starts.append(RigidTransform(X_BO_prev.rotation(), guess))
         best = None
         for start in starts:
-            result = self.fit(points, normals, priors, gravity, free, hand, start=start)
+            result = self.fit(points, normals, priors, gravity, free, hand, start=start,
+                              terms=terms, touching=self.touching)
             if best is None or result[3] < best[3]:
                 best = result
         X_BO, cov, rms, _ = best
@@ -388,7 +436,8 @@ class InHandPoseEstimator(LeafSystem):
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
 
-    def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None):
+    def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None,
+            terms=None, touching=()):
         """``(X_BO, covariance, rms)``: the least-squares pose (see the module doc).
 
         ``points``, ``normals``: (k, 3) contacts and the pads' outward normals in B;
@@ -396,7 +445,11 @@ class InHandPoseEstimator(LeafSystem):
         ``gravity``: ``(down_B, down_S)`` or None; ``free``: (m, 3) centres of the pads
         that feel nothing (not inside the object); ``hand``: ``(points, clearance)`` inside
         the hand's links (not inside the object); ``start``: where the search starts (default:
-        the first prior). Returns ``(X_BO, covariance, rms, cost)``.
+        the first prior); ``terms``: (k, 3) per contact, the distance's and the normal's
+        standard deviations and the expected signed distance (default: ``sigma_distance``,
+        ``sigma_normal``, 0); ``touching``: per edge contact the rows of ``hand`` inside
+        its pad's body, which touches the object (within ``edge_sigma_distance``).
+        Returns ``(X_BO, covariance, rms, cost)``.
         """
         free = np.asarray(free, float).reshape(-1, 3)
         points = np.asarray(points, float).reshape(-1, 3)
@@ -408,6 +461,13 @@ class InHandPoseEstimator(LeafSystem):
         prior_terms = [(Rotation.from_matrix(X.rotation().matrix()), X.translation(),
                         np.asarray(std, float)) for X, std in priors]
         R_OS = None if self._X_OS is None else self._X_OS.rotation().matrix()
+        if terms is None:
+            terms = np.tile([s["d"], s["n"], 0.0], (len(points), 1))
+        terms = np.asarray(terms, float).reshape(-1, 3)
+        if len(terms) != len(points):
+            raise ValueError(f"estimator.fit: terms: expected {len(points)} rows (one per "
+                             f"contact), got {len(terms)}")
+        sigma_d, sigma_n, expected = terms.T
 
         def pose(v):
             R = Rotation.from_rotvec(v[:3]).as_matrix() @ R0
@@ -418,16 +478,18 @@ class InHandPoseEstimator(LeafSystem):
             res = []
             if len(points):
                 p_O = (points - p) @ R  # R^T (c - p) per row
-                res.append(self._shape.distance(p_O) / s["d"])
+                res.append((self._shape.distance(p_O) - expected) / sigma_d)
                 n_B = self._shape.normal(p_O) @ R.T
-                res.append(((n_B + normals) / s["n"]).ravel())
+                res.append(((n_B + normals) / sigma_n[:, None]).ravel())
                 # the finger behind each contact is outside the object
                 inner = (points - INNER_DEPTH * normals - p) @ R
                 res.append(np.minimum(self._shape.distance(inner) - 0.8 * INNER_DEPTH, 0.0)
                            / s["d"])
             if hand is not None:
-                inside = self._shape.distance((hand[0] - p) @ R) - hand[1] + HAND_TOLERANCE
-                res.append(np.minimum(inside, 0.0) / s["d"])
+                gap = self._shape.distance((hand[0] - p) @ R) - hand[1]
+                res.append(np.minimum(gap + HAND_TOLERANCE, 0.0) / s["d"])
+                res.extend([np.atleast_1d(gap[rows].min()) / s["edge_d"]
+                            for rows in touching if len(rows)])
             if len(free):
                 # pads that feel nothing are not inside the object
                 res.append(np.minimum(self._shape.distance((free - p) @ R), 0.0) / s["d"])

@@ -8,8 +8,12 @@ cylinder of radius r whose axis is P's ``y`` line through ``(0, 0, -r)``: ``u`` 
 the arc length across it (cell ``u`` at angle ``u / r`` from P's ``z``), so one grid of
 cells covers a phalanx's palmar half. On the Shadow hand the distal pads are the
 model's ``<f>tip_pad`` boxes (their palmar, ``-y``, face: x across, the link's z
-along), the palm pad lies on the palm's palmar face (``y = -0.012`` of the ``palm``
-link, centred at x 0.011, z 0.06: the union of its palm boxes' faces) and the skins
+along), wrapped around the fingertip's axis (the link's z line; radius the face's
+distance from it, 9 mm, 10.5 mm on the thumb): the flat face at the grid's centre line
+and the fingertip capsule's rounded sides towards its edges, so a contact on the side of
+the fingertip reads at its own normal (14 mm of arc: +-45 degrees); the palm pad lies
+on the palm's palmar face (``y = -0.012`` of the ``palm`` link, centred at x 0.011, z
+0.06: the union of its palm boxes' faces) and the skins
 (``skin_profile``) wrap the palmar half of the proximal and middle phalanges' capsules
 (fingers and thumb; rows along the capsule's straight part, as many as fit).
 
@@ -17,8 +21,8 @@ link, centred at x 0.011, z 0.06: the union of its palm boxes' faces) and the sk
 
 - hydroelastic contact: every face of a contact surface with a geometry of the pad's
   body whose centroid lies within ``DEPTH_TOLERANCE`` of the pad's surface and inside the
-  grid adds ``pressure(centroid) * area * |n_face . n_P|`` to the cell containing the
-  centroid (a midpoint quadrature of the pressure field over each cell's patch);
+  grid adds ``pressure(centroid) * area`` to the cell containing the centroid (a
+  midpoint quadrature of the pressure field over each cell's patch);
 - point contact (no pressure field): the contact's normal force ``|f . n|`` is spread over
   the cells by a Gaussian of standard deviation ``profile.point_sigma`` centred at the
   contact point's surface coordinates (each cell gets the Gaussian's integral over its
@@ -134,8 +138,11 @@ def shadow_pads(plant, hand, scene_graph_inspector, profile: TaxelProfile,
         if not isinstance(box, Box):
             raise ValueError(f"taxels: {name} is a {type(box).__name__}, expected a Box")
         X_BG = scene_graph_inspector.GetPoseInFrame(found)
-        # the palmar face: -y of the box
-        X_BP = RigidTransform(R_LINK_PAD, X_BG.multiply([0.0, -box.depth() / 2, 0.0]))
+        # the palmar face: -y of the box; the grid wraps around the fingertip's axis (the
+        # link's z line) through the face's centre: a skin over the pad's face and its
+        # rounded sides (what touches the capsule's side reads there, at its own normal)
+        centre = X_BG.multiply([0.0, -box.depth() / 2, 0.0])
+        X_BP = RigidTransform(R_LINK_PAD, centre)
         across, along = box.width(), box.height()
         if profile.cols * profile.pitch_col > across + 1e-9 \
                 or profile.rows * profile.pitch_row > along + 1e-9:
@@ -143,7 +150,8 @@ def shadow_pads(plant, hand, scene_graph_inspector, profile: TaxelProfile,
                 f"taxels: profile {profile.name!r} ({profile.cols * profile.pitch_col * 1e3:.1f}"
                 f" x {profile.rows * profile.pitch_row * 1e3:.1f} mm) is larger than the "
                 f"{name} ({across * 1e3:.1f} x {along * 1e3:.1f} mm)")
-        pads.append(Pad(name, body.name(), int(body.index()), X_BP, profile))
+        pads.append(Pad(name, body.name(), int(body.index()), X_BP, profile,
+                        radius=float(np.hypot(centre[0], centre[1]))))
     if palm_profile is not None:
         palm = PalmPad()
         body = plant.GetBodyByName(palm.body, hand)
@@ -325,28 +333,23 @@ class PadForces:
                 continue
             n = surface.num_faces()
             centroids = np.empty((n, 3))
-            normals = np.empty((n, 3))
             force = np.empty(n)
             field = surface.tri_e_MN() if surface.is_triangle() else surface.poly_e_MN()
             for f in range(n):
                 c = surface.centroid(f)
                 centroids[f] = c
-                normals[f] = surface.face_normal(f)
                 force[f] = field.EvaluateCartesian(f, c) * surface.area(f)
             for body in bodies:
                 R_WB, p_WB = frame(body)
-                c_B, n_B = (centroids - p_WB) @ R_WB, normals @ R_WB
+                c_B = (centroids - p_WB) @ R_WB
                 for i in self._by_body[body]:
                     pad = self.pads[i]
                     u, v, depth = pad.surface_coordinates((c_B - self._p_BP[i]) @ self._R_BP[i])
                     cell = _cell_of(pad.profile, u, v)
                     keep = (cell >= 0) & (np.abs(depth) <= DEPTH_TOLERANCE)
                     if np.any(keep):
-                        _, n_P = pad.surface_point(u[keep], v[keep])
-                        w = force[keep] * np.abs(np.einsum(
-                            "ij,ij->i", n_B[keep] @ self._R_BP[i], n_P))
                         out[self.offsets[i]:self.offsets[i + 1]] += np.bincount(
-                            cell[keep], weights=w, minlength=pad.profile.cells)
+                            cell[keep], weights=force[keep], minlength=pad.profile.cells)
 
 
 def _body_index(i: int) -> BodyIndex:
