@@ -68,8 +68,10 @@ def _truth(plant, context, target_instance=None):
         context)
     if target_instance is None:
         palm = plant.GetBodyByName("palm", hand).EvalPoseInWorld(context).translation()
-        instances = [i for i in range(plant.num_model_instances())
-                     if plant.GetModelInstanceName(i).startswith("object")]
+        from pydrake.multibody.tree import ModelInstanceIndex
+
+        instances = [ModelInstanceIndex(i) for i in range(plant.num_model_instances())
+                     if plant.GetModelInstanceName(ModelInstanceIndex(i)).startswith("object")]
         target_instance = min(instances, key=lambda i: np.linalg.norm(
             plant.get_body(plant.GetBodyIndices(i)[0]).EvalPoseInWorld(context).translation()
             - palm))

@@ -5,6 +5,7 @@ here by code of its own, on development scenes (not the evaluation seeds)."""
 import numpy as np
 import pytest
 from pydrake.math import RotationMatrix
+from pydrake.multibody.tree import ModelInstanceIndex
 
 from handle_drake.apps.pick import cli, execute
 from handle_drake.apps.pick.scenes import EVALUATION_SEEDS, random_scene
@@ -36,8 +37,8 @@ def _locate_at_the_lift(hamburg, seed, kind, monkeypatch):
         X_WB = plant.GetBodyByName(get_hand_spec("shadow").base_body, hand).EvalPoseInWorld(
             context)
         palm = plant.GetBodyByName("palm", hand).EvalPoseInWorld(context).translation()
-        bodies = [plant.get_body(plant.GetBodyIndices(i)[0])
-                  for i in range(plant.num_model_instances())
+        instances = [ModelInstanceIndex(i) for i in range(plant.num_model_instances())]
+        bodies = [plant.get_body(plant.GetBodyIndices(i)[0]) for i in instances
                   if plant.GetModelInstanceName(i).startswith("object")]
         body = min(bodies, key=lambda b: np.linalg.norm(
             b.EvalPoseInWorld(context).translation() - palm))
