@@ -18,22 +18,27 @@ object's accelerometer (gravity direction).
 - output ``quality`` (2): the number of pads in contact and the RMS distance (m) of
   their centres of pressure to the fitted surface.
 
-The method (at ``rate_hz``, state in the context): each pad whose cells sum to more than
-``contact_threshold`` N gives a contact: its centre of pressure on the pad face and the
-pad's outward normal, placed in the hand base frame B by the forward kinematics of a
-plant of the hand alone; a pad whose centre of pressure is within
-``self_contact_distance`` of another link of the hand is pressed by the hand and left
-out. The object's pose ``X_BO`` is the least-squares fit (``scipy.optimize.least_squares``)
-of its primitive's signed distance (sphere, cylinder, cuboid) to the contacts
-(``sigma_distance``) and of its outward normal to the pads' inward normals
-(``sigma_normal``), the object kept out of every link of the hand and off the pads that
-feel nothing, with the previous estimate as a prior widened by ``process_position_std`` /
-``process_angle_std`` per update (a filter with a random-walk model), the camera's
-detection (``camera_position_std``, ``camera_angle_std``) and the gravity direction; the
-better of two starts (the last estimate, and a half-size beyond the contacts along their
-normals) is kept. Before the first contact the estimate is held in world (the
-``X_WO_prior``, refined by the camera and gravity when they are connected: the object
-rests where it was seen); from the first contact it is held in the hand.
+The method (at ``rate_hz``, state in the context): each connected patch of pressed cells
+of a pad (:func:`pad_contacts`) whose cells sum to more than ``contact_threshold`` N
+gives a contact: its centre of pressure on the pad's (flat or wrapped) surface and the
+outward normal there, placed in the hand base frame B by the forward kinematics of a
+plant of the hand alone; a contact within ``self_contact_distance`` of another link of
+the hand is pressed by the hand and left out. The object's pose ``X_BO`` is the
+least-squares fit (``scipy.optimize.least_squares``) of its primitive's signed distance
+(sphere, cylinder, cuboid) at the contacts to ``-pad_compliance * force`` (the pad pressed
+into the object; ``sigma_distance``) and of its outward normal to the pads' inward
+normals (``sigma_normal``); a contact on the grid's border (the object may touch the body
+beyond the grid: a fingertip's tip) gets ``edge_sigma_distance`` and ``edge_sigma_normal``
+and its body must touch the object (its least clearance to it 0 within
+``edge_sigma_distance``). The object is kept out of every link of the hand and off the
+pads that feel nothing, with the previous estimate as a prior widened by
+``process_position_std`` / ``process_angle_std`` per update (a filter with a random-walk
+model), the camera's detection (``camera_position_std``, ``camera_angle_std``) and the
+gravity direction; the better of two starts (the last estimate, and a half-size beyond
+the contacts along their normals) is kept. Before the first contact the estimate is
+held in world (the ``X_WO_prior``, refined by the camera and gravity when they are
+connected: the object rests where it was seen); from the first contact it is held in
+the hand.
 """
 
 from __future__ import annotations
