@@ -52,6 +52,7 @@ from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContact
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from scipy.ndimage import label
 from scipy.optimize import least_squares
+from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from handle_drake.base.hands import AddHand, get_hand_spec
@@ -93,36 +94,63 @@ def _shape_points(shape) -> tuple[np.ndarray, np.ndarray]:
 
 
 class PrimitiveShape:
-    """The signed distance (m) and outward normal of a sphere, cylinder (axis z) or box,
-    in the object frame O."""
+    """The signed distance (m) and outward normal of an object, in its frame O: one
+    primitive (sphere, cylinder with axis z, box: exact), or the union of an object's
+    convex pieces (:func:`~handle_drake.geometry.objects.pieces.pieces`: each convex hull's
+    distance is the largest of its face planes' and of its bounding box's distance --
+    exact inside and along a face's normal, less than the distance off its edges -- and
+    the union's the smallest of its pieces')."""
 
     def __init__(self, spec):
         parts = pieces(spec)
-        if len(parts) != 1 or parts[0].shape not in ("sphere", "cylinder", "box"):
-            raise ValueError(f"estimator: object kind {spec.kind!r} is not a single primitive; "
-                             "expected sphere, cylinder or cuboid")
-        piece = parts[0]
-        self.shape = piece.shape
-        self.params = np.array(piece.params, float)
-        self._R_PO = piece.X_OP.rotation().inverse().matrix()
-        self._p_OP = piece.X_OP.translation()
+        if not parts:
+            raise ValueError(f"estimator: object kind {spec.kind!r} has no pieces")
+        self._parts = []
+        for piece in parts:
+            frame = (piece.X_OP.rotation().inverse().matrix(), piece.X_OP.translation())
+            if piece.shape == "convex":
+                bounds = (piece.vertices.min(axis=0), piece.vertices.max(axis=0))
+                self._parts.append(("convex", (ConvexHull(piece.vertices).equations, bounds),
+                                    *frame))
+            else:
+                self._parts.append((piece.shape, np.array(piece.params, float), *frame))
+        self.shape = parts[0].shape if len(parts) == 1 else "union"
+        self.params = self._parts[0][1] if self.shape in ("sphere", "cylinder", "box") \
+            else np.zeros(0)
+        if self.shape in ("convex", "union"):
+            corners = np.vstack([m.vertices for m in (piece.mesh() for piece in parts)])
+            self._half = float(np.ptp(corners, axis=0).min() / 2)
 
     def half_size(self) -> float:
-        """The smallest distance from the centre to the surface (m)."""
+        """The smallest distance from the centre to the surface (m; a union's or hull's:
+        half its bounding box's least extent)."""
         if self.shape == "box":
             return float(self.params.min() / 2)
-        return float(self.params[0])
+        if self.shape in ("sphere", "cylinder"):
+            return float(self.params[0])
+        return self._half
 
     def distance(self, p_O: np.ndarray) -> np.ndarray:
         """Signed distance of each row of ``p_O`` (n, 3)."""
-        p = (p_O - self._p_OP) @ self._R_PO.T
-        if self.shape == "sphere":
-            return np.linalg.norm(p, axis=1) - self.params[0]
-        if self.shape == "cylinder":
-            r, length = self.params
+        return np.min([self._piece_distance(part, p_O) for part in self._parts], axis=0)
+
+    @staticmethod
+    def _piece_distance(part, p_O):
+        shape, params, R_PO, p_OP = part
+        p = (np.asarray(p_O, float) - p_OP) @ R_PO.T
+        if shape == "sphere":
+            return np.linalg.norm(p, axis=1) - params[0]
+        if shape == "convex":
+            planes, (low, high) = params
+            # outside: the larger of two lower bounds, the face planes' and the distance to
+            # the piece's bounding box (a thin piece's planes say little off its far end)
+            box = np.linalg.norm(np.maximum(np.maximum(low - p, p - high), 0.0), axis=1)
+            return np.maximum((p @ planes[:, :3].T + planes[:, 3]).max(axis=1), box)
+        if shape == "cylinder":
+            r, length = params
             q = np.column_stack([np.hypot(p[:, 0], p[:, 1]) - r, np.abs(p[:, 2]) - length / 2])
         else:
-            q = np.abs(p) - self.params / 2
+            q = np.abs(p) - params / 2
         outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
         return outside + np.minimum(q.max(axis=1), 0.0)
 
@@ -190,7 +218,7 @@ class InHandPoseEstimator(LeafSystem):
     Args:
         hand_kind, coupling_ratio: the hand (a plant of it alone gives the pads' poses).
         pads: the taxel pads (:func:`~.pads.shadow_pads`), their ``body_name`` and ``X_BP``.
-        spec: the object's ``ObjectSpec`` (a sphere, cylinder or cuboid).
+        spec: the object's ``ObjectSpec`` (any catalogue kind: :class:`PrimitiveShape`).
         X_WO_prior: the object's pose believed before the grasp (a detection, a plan).
         X_WB: the hand base's pose for a fixed mount (used when ``hand_pose`` is unconnected).
         X_OS: the accelerometer's frame on the object (for ``roll_pitch``).
@@ -279,7 +307,7 @@ class InHandPoseEstimator(LeafSystem):
 
     @property
     def shape_kind(self) -> str:
-        """The object's primitive: "sphere", "cylinder" or "box"."""
+        """The object's primitive: "sphere", "cylinder", "box", "convex" or "union"."""
         return self._shape.shape
 
     @property
