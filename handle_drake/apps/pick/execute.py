@@ -23,10 +23,12 @@ over ``CLOSE_TIME`` s, held ``HOLD_TIME`` s.
 The release is corrected by what the fingers feel (given the arm's ``reach``):
 the close can move the object in the hand (2.4 cm in a replay of a cuboid that
 then jammed on its hole's rim), and the release pose assumed the planned grasp.
-After the lift the object is located in the hand from its contacts with the hand
-(:func:`measure_in_hand`: each contact's point and the object's surface normal
-there, as fingertip sensors with contact location would give them, and the
-hand's pose from the arm's joints), and the carry and release are planned again
+After the lift the object is located in the hand from what the hand senses
+(:func:`handle_drake.apps.pick.touch.locate_by_touch`: a Shadow hand's taxels, its
+joints and the hand's pose from the arm's joints; the station gets taxels for it) or,
+for a hand without taxels, from its contacts with the hand (:func:`measure_in_hand`:
+each contact's point and the object's surface normal there, as the simulator reports
+them), and the carry and release are planned again
 for the object where it is (:func:`handle_drake.apps.pick.plan.replan_release`);
 the arm's trajectory from the lift on is replaced. Without contacts, or when no
 release is reachable with the measured grasp, the plan stands. Success: the object's centre is in
