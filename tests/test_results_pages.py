@@ -180,6 +180,7 @@ BUDGET_RUNS = {
     "bench_perception_scenes": (["--seeds", "0-29"], ["--seeds", "100-179"], "perception"),
     "bench_pick": (["--seeds", "0"], [], "pick"),
     "bench_pick_sim": (["--seeds", "0-9"], ["--seeds", "0-19"], "pick"),
+    "bench_pick_touch": (["--scenes", "0:sphere"], [], "sensing"),
     "bench_quality": (["--quick"], [], "quality"),
     "bench_quality_bw_row": (["--rounds", "1"], [], "quality"),
     "bench_scale": (["--quick"], ["--rounds", "3", "--waves", "16"], "scale"),

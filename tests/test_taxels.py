@@ -258,17 +258,29 @@ def test_playback_holds_the_recorded_frames_and_refuses_bad_files(tmp_path):
 
 
 def test_hardware_station_plays_the_recording_on_hand_taxels(tmp_path):
-    path = save_recording(tmp_path / "run.npz", [0.0, 0.5], np.ones((2, 116)))
+    from handle_drake.devices.taxels.wiring import taxel_cells
+    # five 4 x 4 pads, the 6 x 6 palm and the skins: 8 and 5 rows of 6 on each finger's
+    # proximal and middle phalanx, 3 and 3 rows on the thumb's
+    cells = 5 * 16 + 36 + 4 * (8 + 5) * 6 + (3 + 3) * 6
+    path = save_recording(tmp_path / "run.npz", [0.0, 0.5], np.ones((2, cells)))
     scenario = LoadScenario(filename=diagrams_dir() / "shadow_can_hand.yaml",
                             data=f"hand: {{taxels: {{recording: {path}}}}}")
+    assert taxel_cells(scenario.hand.taxels) == cells
     station = MakeHandStation(scenario, hardware=True)
     context = station.CreateDefaultContext()
-    assert np.array_equal(station.GetOutputPort("hand.taxels").Eval(context), np.ones(116))
+    assert np.array_equal(station.GetOutputPort("hand.taxels").Eval(context), np.ones(cells))
+    # the simulated station's sensor has the same cells, skins and all
+    simulated = MakeHandStation(LoadScenario(data="hand: {taxels: {}}"),
+                                outputs=("hand.taxels",))
+    pads = simulated.GetSubsystemByName("taxels").pads
+    assert sum(p.cells for p in pads) == cells
+    assert [p.name for p in pads][5:8] == ["palm_pad", "ffproximal_skin", "ffmiddle_skin"]
 
 
 @pytest.mark.parametrize("override, field", [
     ("hand: {taxels: {profile: nope}}", "hand.taxels.profile"),
     ("hand: {taxels: {palm: nope}}", "hand.taxels.palm"),
+    ("hand: {taxels: {skin: nope}}", "hand.taxels.skin"),
     ("hand: {taxels: {estimator_rate_hz: 0}}", "hand.taxels.estimator_rate_hz"),
     ("hand: {taxels: {rate_hz: 0}}", "hand.taxels.rate_hz"),
     ("hand: {taxels: {estimator: true}}\nobject: {kind: mug}", "hand.taxels.estimator"),
@@ -337,3 +349,64 @@ def test_before_touch_the_camera_and_gravity_refine_the_prior():
     assert abs(rpy[0]) < 0.02 and abs(rpy[1]) < 0.02
     assert abs(rpy[2] - 0.3) < 0.05
     assert np.allclose(level.translation(), prior.translation(), atol=1e-3)
+
+
+def test_each_pressed_patch_of_a_pad_is_a_contact_and_a_border_patch_is_marked():
+    """Two separated patches on one pad are two contacts, each at its own centre of
+    pressure on the pad's (wrapped) surface with its normal there; a patch in the grid's
+    corner is not interior (the object may touch beyond the grid)."""
+    from handle_drake.devices.taxels.estimator import pad_contacts
+    probe = MakeHandStation(LoadScenario(data="hand: {taxels: {palm: ''}}"),
+                            outputs=("hand.taxels",))
+    pad = probe.GetSubsystemByName("taxels").pads[0]
+    profile = pad.profile
+    image = np.zeros((profile.rows, profile.cols))
+    image[0, 0] = 1.0e5  # the proximal, -x corner
+    image[2, 2], image[2, 3] = 1.0e5, 4.0e5  # a patch across two cells
+    points, normals, forces, inside = pad_contacts(
+        [pad], image.ravel(), [RigidTransform()], 0.2, with_interior=True)
+    assert len(points) == 2
+    centres = profile.cell_centres()
+    cop = (centres[10] + 4 * centres[11]) / 5  # the second patch's centre of pressure
+    expected, normal = pad.surface_point(cop[0], cop[1])
+    np.testing.assert_allclose(points[1], expected[0], atol=1e-12)
+    np.testing.assert_allclose(normals[1], normal[0], atol=1e-12)
+    # on the wrapped pad the normal at u turns by u / radius about the pad's y axis
+    assert np.degrees(np.arccos(normal[0][2])) == pytest.approx(
+        np.degrees(abs(cop[0]) / pad.radius), abs=1e-9)
+    np.testing.assert_allclose(forces, [1.0e5 * profile.cell_area, 5.0e5 * profile.cell_area])
+    # the second's centre is 4.55 mm across, past the interior's 4.375 (3/4 cell in)
+    assert inside.tolist() == [False, False]
+    image[:] = 0.0
+    image[1:3, 1:3] = 1.0e5  # the middle four cells
+    _, normals, _, inside = pad_contacts([pad], image.ravel(), [RigidTransform()], 0.2,
+                                         with_interior=True)
+    assert inside.tolist() == [True]
+    np.testing.assert_allclose(normals[0], [0.0, 0.0, 1.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["sphere", "cylinder", "cuboid", "rotated_cuboid", "mug",
+                                  "wine_glass", "star_prism"])
+def test_the_estimators_signed_distance_of_every_kind_against_its_meshes(kind):
+    """Every vertex of the object's piece meshes (trimesh, made from the pieces by code of
+    its own) is on or inside the object; a point 2 cm beyond the meshes' bounds is 2 cm
+    out (within the facets' 10 %); the centre of the bounds' box is not outside the solid
+    kinds (0 where the pieces meet: a union's depth is its deepest piece's)."""
+    from handle_drake.devices.taxels.estimator import PrimitiveShape
+    from handle_drake.geometry.objects import ObjectSpec
+    from handle_drake.geometry.objects.pieces import pieces
+    spec = ObjectSpec(kind, 0.06)
+    shape = PrimitiveShape(spec)
+    meshes = [piece.mesh() for piece in pieces(spec)]
+    vertices = np.vstack([m.vertices for m in meshes])
+    # on a piece's surface: on or inside the union (sphere and cylinder facets lie inside)
+    assert shape.distance(vertices).max() < 1e-9
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    centre = (low + high) / 2
+    for axis in range(3):
+        for side, bound in ((1, high), (-1, low)):
+            point = centre.copy()
+            point[axis] = bound[axis] + side * 0.02
+            assert shape.distance(point[None])[0] > 0.018, (axis, side)
+    if kind in ("sphere", "cylinder", "cuboid", "rotated_cuboid", "star_prism"):
+        assert shape.distance(centre[None])[0] <= 1e-12

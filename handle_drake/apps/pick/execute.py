@@ -23,10 +23,12 @@ over ``CLOSE_TIME`` s, held ``HOLD_TIME`` s.
 The release is corrected by what the fingers feel (given the arm's ``reach``):
 the close can move the object in the hand (2.4 cm in a replay of a cuboid that
 then jammed on its hole's rim), and the release pose assumed the planned grasp.
-After the lift the object is located in the hand from its contacts with the hand
-(:func:`measure_in_hand`: each contact's point and the object's surface normal
-there, as fingertip sensors with contact location would give them, and the
-hand's pose from the arm's joints), and the carry and release are planned again
+After the lift the object is located in the hand from what the hand senses
+(:func:`handle_drake.apps.pick.touch.locate_by_touch`: a Shadow hand's taxels, its
+joints and the hand's pose from the arm's joints; the station gets taxels for it) or,
+for a hand without taxels, from its contacts with the hand (:func:`measure_in_hand`:
+each contact's point and the object's surface normal there, as the simulator reports
+them), and the carry and release are planned again
 for the object where it is (:func:`handle_drake.apps.pick.plan.replan_release`);
 the arm's trajectory from the lift on is replaced. Without contacts, or when no
 release is reachable with the measured grasp, the plan stands. Success: the object's centre is in
@@ -61,6 +63,7 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from scipy.spatial.transform import Rotation
 
 from handle_drake.apps.pick.plan import replan_release
+from handle_drake.apps.pick.touch import locate_by_touch, senses_touch, with_taxels
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.arm.model import ARM_INSTANCE, get_arm_spec
 from handle_drake.geometry.objects import dimensions
@@ -306,12 +309,16 @@ def _correct_release(simulator, diagram, station, scenario, plan, reach, close, 
     context = plant.GetMyContextFromRoot(simulator.get_context())
     hand = plant.GetModelInstanceByName("hand")
     X_OB_planned = plan.X_WO.inverse() @ plan.grasp.X_WB
-    measured = measure_in_hand(plant, context,
-                               station.GetOutputPort("contact_results").Eval(
-                                   station.GetMyContextFromRoot(simulator.get_context())),
-                               plant.GetModelInstanceByName(plan.target), hand,
-                               get_hand_spec(scenario.hand.kind).base_body,
-                               plan.grasp.object_spec, X_OB_planned)
+    if senses_touch(station):  # the hand's taxels, joints and the arm's joints
+        measured = locate_by_touch(station, simulator.get_mutable_context(), scenario,
+                                   plan.grasp.object_spec, X_OB_planned)
+    else:  # the simulator's contact points
+        measured = measure_in_hand(plant, context,
+                                   station.GetOutputPort("contact_results").Eval(
+                                       station.GetMyContextFromRoot(simulator.get_context())),
+                                   plant.GetModelInstanceByName(plan.target), hand,
+                                   get_hand_spec(scenario.hand.kind).base_body,
+                                   plan.grasp.object_spec, X_OB_planned)
     if measured is None:
         return plan, None, None, {}
     X_OB, count = measured
@@ -419,6 +426,8 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     scenario = dc.replace(scenario, cameras=[])
     if still_bystanders:
         scenario = weld_bystanders(scenario, plan.target)
+    if reach is not None:  # the release is corrected from the hand's taxels
+        scenario = with_taxels(scenario)
     meshcat = None
     if html is not None:
         from pydrake.geometry import StartMeshcat

@@ -5,5 +5,6 @@
   (hydroelastic pressure fields; point contacts spread by a Gaussian).
 - :mod:`.sensor`: the sensor, a recorded stream's playback, the Meshcat drawing.
 - :mod:`.estimator`: the object's pose in the hand from ports alone.
+- :mod:`.locate`: the object's pose in the hand from one reading (the pick's release).
 - :mod:`.wiring`: what the station calls.
 """

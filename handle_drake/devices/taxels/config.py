@@ -9,6 +9,7 @@ No ``from __future__ import annotations`` here: Drake's YAML reader needs real t
       taxels:
         profile: pad4x4      # a profile of handle_drake.devices.taxels.PROFILES (distal pads)
         palm: palm6x6        # the palm's profile; "" = no palm pad
+        skin: skin5mm        # the proximal and middle phalanges' skins; "" = none
         # noise: false       (still sampled, saturated and quantised)
         # rate_hz: 50        (the sample rate instead of the profile's)
         # seed: 3            (default: the scenario's random_seed)
@@ -27,6 +28,7 @@ __all__ = ["TaxelConfig"]
 class TaxelConfig:
     profile: str = "pad4x4"
     palm: str = "palm6x6"
+    skin: str = "skin5mm"
     noise: bool = True
     # the sample rate (Hz) instead of the profile's (pads and palm); None keeps it. Each
     # sample evaluates the plant's contact results: the station's main cost of taxels.
@@ -42,18 +44,19 @@ class TaxelConfig:
 
     def validate(self) -> None:
         """Raises ValueError naming the field (prefix ``hand.taxels.`` is the caller's)."""
-        for field in ("profile", "palm", "recording"):
+        for field in ("profile", "palm", "skin", "recording"):
             if not isinstance(getattr(self, field), str):
                 raise ValueError(f"{field}: expected a string, got {getattr(self, field)!r}")
         try:
             get_profile(self.profile)
         except ValueError as error:
             raise ValueError(f"profile: {error}") from None
-        if self.palm:
-            try:
-                get_profile(self.palm)
-            except ValueError as error:
-                raise ValueError(f"palm: {error}") from None
+        for field in ("palm", "skin"):
+            if getattr(self, field):
+                try:
+                    get_profile(getattr(self, field))
+                except ValueError as error:
+                    raise ValueError(f"{field}: {error}") from None
         if self.rate_hz is not None:
             try:
                 get_profile(self.profile).replace(rate_hz=self.rate_hz)

@@ -18,22 +18,27 @@ object's accelerometer (gravity direction).
 - output ``quality`` (2): the number of pads in contact and the RMS distance (m) of
   their centres of pressure to the fitted surface.
 
-The method (at ``rate_hz``, state in the context): each pad whose cells sum to more than
-``contact_threshold`` N gives a contact: its centre of pressure on the pad face and the
-pad's outward normal, placed in the hand base frame B by the forward kinematics of a
-plant of the hand alone; a pad whose centre of pressure is within
-``self_contact_distance`` of another link of the hand is pressed by the hand and left
-out. The object's pose ``X_BO`` is the least-squares fit (``scipy.optimize.least_squares``)
-of its primitive's signed distance (sphere, cylinder, cuboid) to the contacts
-(``sigma_distance``) and of its outward normal to the pads' inward normals
-(``sigma_normal``), the object kept out of every link of the hand and off the pads that
-feel nothing, with the previous estimate as a prior widened by ``process_position_std`` /
-``process_angle_std`` per update (a filter with a random-walk model), the camera's
-detection (``camera_position_std``, ``camera_angle_std``) and the gravity direction; the
-better of two starts (the last estimate, and a half-size beyond the contacts along their
-normals) is kept. Before the first contact the estimate is held in world (the
-``X_WO_prior``, refined by the camera and gravity when they are connected: the object
-rests where it was seen); from the first contact it is held in the hand.
+The method (at ``rate_hz``, state in the context): each connected patch of pressed cells
+of a pad (:func:`pad_contacts`) whose cells sum to more than ``contact_threshold`` N
+gives a contact: its centre of pressure on the pad's (flat or wrapped) surface and the
+outward normal there, placed in the hand base frame B by the forward kinematics of a
+plant of the hand alone; a contact within ``self_contact_distance`` of another link of
+the hand is pressed by the hand and left out. The object's pose ``X_BO`` is the
+least-squares fit (``scipy.optimize.least_squares``) of its primitive's signed distance
+(sphere, cylinder, cuboid) at the contacts to ``-pad_compliance * force`` (the pad pressed
+into the object; ``sigma_distance``) and of its outward normal to the pads' inward
+normals (``sigma_normal``); a contact on the grid's border (the object may touch the body
+beyond the grid: a fingertip's tip) gets ``edge_sigma_distance`` and ``edge_sigma_normal``
+and its body must touch the object (its least clearance to it 0 within
+``edge_sigma_distance``). The object is kept out of every link of the hand and off the
+pads that feel nothing, with the previous estimate as a prior widened by
+``process_position_std`` / ``process_angle_std`` per update (a filter with a random-walk
+model), the camera's detection (``camera_position_std``, ``camera_angle_std``) and the
+gravity direction; the better of two starts (the last estimate, and a half-size beyond
+the contacts along their normals) is kept. Before the first contact the estimate is
+held in world (the ``X_WO_prior``, refined by the camera and gravity when they are
+connected: the object rests where it was seen); from the first contact it is held in
+the hand.
 """
 
 from __future__ import annotations
@@ -45,7 +50,9 @@ from pydrake.geometry import Box, Capsule, Cylinder, Role, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContactApproximation
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
+from scipy.ndimage import label
 from scipy.optimize import least_squares
+from scipy.spatial import ConvexHull
 from scipy.spatial.transform import Rotation
 
 from handle_drake.base.hands import AddHand, get_hand_spec
@@ -87,36 +94,63 @@ def _shape_points(shape) -> tuple[np.ndarray, np.ndarray]:
 
 
 class PrimitiveShape:
-    """The signed distance (m) and outward normal of a sphere, cylinder (axis z) or box,
-    in the object frame O."""
+    """The signed distance (m) and outward normal of an object, in its frame O: one
+    primitive (sphere, cylinder with axis z, box: exact), or the union of an object's
+    convex pieces (:func:`~handle_drake.geometry.objects.pieces.pieces`: each convex hull's
+    distance is the largest of its face planes' and of its bounding box's distance --
+    exact inside and along a face's normal, less than the distance off its edges -- and
+    the union's the smallest of its pieces')."""
 
     def __init__(self, spec):
         parts = pieces(spec)
-        if len(parts) != 1 or parts[0].shape not in ("sphere", "cylinder", "box"):
-            raise ValueError(f"estimator: object kind {spec.kind!r} is not a single primitive; "
-                             "expected sphere, cylinder or cuboid")
-        piece = parts[0]
-        self.shape = piece.shape
-        self.params = np.array(piece.params, float)
-        self._R_PO = piece.X_OP.rotation().inverse().matrix()
-        self._p_OP = piece.X_OP.translation()
+        if not parts:
+            raise ValueError(f"estimator: object kind {spec.kind!r} has no pieces")
+        self._parts = []
+        for piece in parts:
+            frame = (piece.X_OP.rotation().inverse().matrix(), piece.X_OP.translation())
+            if piece.shape == "convex":
+                bounds = (piece.vertices.min(axis=0), piece.vertices.max(axis=0))
+                self._parts.append(("convex", (ConvexHull(piece.vertices).equations, bounds),
+                                    *frame))
+            else:
+                self._parts.append((piece.shape, np.array(piece.params, float), *frame))
+        self.shape = parts[0].shape if len(parts) == 1 else "union"
+        self.params = self._parts[0][1] if self.shape in ("sphere", "cylinder", "box") \
+            else np.zeros(0)
+        if self.shape in ("convex", "union"):
+            corners = np.vstack([m.vertices for m in (piece.mesh() for piece in parts)])
+            self._half = float(np.ptp(corners, axis=0).min() / 2)
 
     def half_size(self) -> float:
-        """The smallest distance from the centre to the surface (m)."""
+        """The smallest distance from the centre to the surface (m; a union's or hull's:
+        half its bounding box's least extent)."""
         if self.shape == "box":
             return float(self.params.min() / 2)
-        return float(self.params[0])
+        if self.shape in ("sphere", "cylinder"):
+            return float(self.params[0])
+        return self._half
 
     def distance(self, p_O: np.ndarray) -> np.ndarray:
         """Signed distance of each row of ``p_O`` (n, 3)."""
-        p = (p_O - self._p_OP) @ self._R_PO.T
-        if self.shape == "sphere":
-            return np.linalg.norm(p, axis=1) - self.params[0]
-        if self.shape == "cylinder":
-            r, length = self.params
+        return np.min([self._piece_distance(part, p_O) for part in self._parts], axis=0)
+
+    @staticmethod
+    def _piece_distance(part, p_O):
+        shape, params, R_PO, p_OP = part
+        p = (np.asarray(p_O, float) - p_OP) @ R_PO.T
+        if shape == "sphere":
+            return np.linalg.norm(p, axis=1) - params[0]
+        if shape == "convex":
+            planes, (low, high) = params
+            # outside: the larger of two lower bounds, the face planes' and the distance to
+            # the piece's bounding box (a thin piece's planes say little off its far end)
+            box = np.linalg.norm(np.maximum(np.maximum(low - p, p - high), 0.0), axis=1)
+            return np.maximum((p @ planes[:, :3].T + planes[:, 3]).max(axis=1), box)
+        if shape == "cylinder":
+            r, length = params
             q = np.column_stack([np.hypot(p[:, 0], p[:, 1]) - r, np.abs(p[:, 2]) - length / 2])
         else:
-            q = np.abs(p) - self.params / 2
+            q = np.abs(p) - params / 2
         outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
         return outside + np.minimum(q.max(axis=1), 0.0)
 
@@ -127,11 +161,27 @@ class PrimitiveShape:
         return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
 
 
+def interior(pad: Pad, uv) -> bool:
+    """Whether a centre of pressure ``uv`` lies three quarters of a cell or more inside the
+    grid's border: pressure on the pad (the object's face on it, its normal the pad's).
+    One nearer the border is where an object touching the body beyond the grid (a
+    fingertip's tip, a capsule's end) also reads: its normal, and its place to a few mm,
+    are uncertain."""
+    prof = pad.profile
+    return bool(abs(uv[0]) <= (prof.cols / 2 - 0.75) * prof.pitch_col
+                and abs(uv[1]) <= (prof.rows / 2 - 0.75) * prof.pitch_row)
+
+
 def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransform],
-                 threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per pad in contact: the centre of pressure ``c_B``, the pad's outward normal ``n_B``
-    and its force (N) from ``taxels`` (Pa). Arrays (k, 3), (k, 3), (k,)."""
-    points, normals, forces = [], [], []
+                 threshold: float, with_interior: bool = False):
+    """Per contact patch of each pad (cells above three noise deviations, connected
+    through sides or corners, together above ``threshold`` N): its centre of pressure
+    ``c_B`` (on the pad's surface), the pad's outward normal ``n_B`` there and its force
+    (N) from ``taxels`` (Pa). Arrays (k, 3), (k, 3), (k,); ``with_interior``: and (k,)
+    bools, :func:`interior` of each. Two patches on one pad (a fingertip touching with
+    its tip and its side) are two contacts: one centre of pressure between them would
+    lie on neither."""
+    points, normals, forces, inside = [], [], [], []
     start = 0
     for pad, X_BP in zip(pads, X_BPads, strict=True):
         profile = pad.profile
@@ -139,16 +189,27 @@ def pad_contacts(pads: list[Pad], taxels: np.ndarray, X_BPads: list[RigidTransfo
         start += pad.cells
         # cells under three noise deviations are taken as empty
         f = np.where(f > 3.0 * profile.noise_std_pa * profile.cell_area, f, 0.0)
-        total = f.sum()
-        if total <= threshold:
+        if f.sum() <= threshold:
             continue
-        uv = f @ profile.cell_centres() / total
-        points.append(X_BP.multiply([uv[0], uv[1], 0.0]))
-        normals.append(X_BP.rotation().matrix()[:, 2].copy())
-        forces.append(total)
-    if not points:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
-    return np.array(points), np.array(normals), np.array(forces)
+        labels, count = label(f.reshape(profile.rows, profile.cols) > 0,
+                              structure=np.ones((3, 3)))
+        labels = labels.ravel()
+        centres = profile.cell_centres()
+        for patch in range(1, count + 1):
+            w = np.where(labels == patch, f, 0.0)
+            total = w.sum()
+            if total <= threshold:
+                continue
+            uv = w @ centres / total
+            # the centre of pressure on the pad's surface (a skin's curves) and its normal
+            p_P, n_P = pad.surface_point(uv[0], uv[1])
+            points.append(X_BP.multiply(p_P[0]))
+            normals.append(X_BP.rotation().multiply(n_P[0]))
+            forces.append(total)
+            inside.append(interior(pad, uv))
+    out = (np.array(points).reshape(-1, 3), np.array(normals).reshape(-1, 3),
+           np.array(forces, float))
+    return (*out, np.array(inside, bool)) if with_interior else out
 
 
 class InHandPoseEstimator(LeafSystem):
@@ -157,7 +218,7 @@ class InHandPoseEstimator(LeafSystem):
     Args:
         hand_kind, coupling_ratio: the hand (a plant of it alone gives the pads' poses).
         pads: the taxel pads (:func:`~.pads.shadow_pads`), their ``body_name`` and ``X_BP``.
-        spec: the object's ``ObjectSpec`` (a sphere, cylinder or cuboid).
+        spec: the object's ``ObjectSpec`` (any catalogue kind: :class:`PrimitiveShape`).
         X_WO_prior: the object's pose believed before the grasp (a detection, a plan).
         X_WB: the hand base's pose for a fixed mount (used when ``hand_pose`` is unconnected).
         X_OS: the accelerometer's frame on the object (for ``roll_pitch``).
@@ -167,11 +228,13 @@ class InHandPoseEstimator(LeafSystem):
                  X_WO_prior: RigidTransform, X_WB: RigidTransform | None = None,
                  X_OS: RigidTransform | None = None, rate_hz: float = 20.0,
                  prior_position_std: float = 0.01, prior_angle_std: float = 0.2,
-                 contact_threshold: float = 0.2, sigma_distance: float = 0.001,
-                 sigma_normal: float = 1.0, process_position_std: float = 0.002,
+                 contact_threshold: float = 0.2, sigma_distance: float = 0.0015,
+                 sigma_normal: float = 0.3, edge_sigma_distance: float = 0.004,
+                 edge_sigma_normal: float = 5.0, pad_compliance: float = 2e-4,
+                 process_position_std: float = 0.002,
                  process_angle_std: float = 0.05, camera_position_std: float = 0.005,
                  camera_angle_std: float = 0.1, gravity_std: float = 0.05,
-                 self_contact_distance: float = 0.002):
+                 self_contact_distance: float = 0.004):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._half_size = self._shape.half_size()
@@ -192,9 +255,17 @@ class InHandPoseEstimator(LeafSystem):
         self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
         self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
         self._self_contact_distance = self_contact_distance
+        self.touching: list[np.ndarray] = []  # the last contacts()' edge contacts' rows
         inspector = self._scene_graph.model_inspector()
         self._links, self._others = self._hand_geometry(inspector, hand)
         self._clearance = np.concatenate([c for _, _, c in self._links])
+        # per pad: the rows of hand_points() inside its body (an edge contact's body
+        # touches the object: the least clearance-reduced distance of them is 0)
+        sizes = np.cumsum([0] + [len(c) for _, _, c in self._links])
+        self._pad_rows = [np.concatenate([np.arange(sizes[k], sizes[k + 1])
+                                          for k, (body, _, _) in enumerate(self._links)
+                                          if body.name() == pad.body_name] or [np.zeros(0, int)])
+                          for pad in self._pads]
         self._q_index = np.array([self._plant.GetJointByName(n, hand).position_start()
                                   for n in spec_h.joint_names], dtype=int)
         self._q0 = self._plant.GetPositions(self._plant_context)
@@ -206,7 +277,8 @@ class InHandPoseEstimator(LeafSystem):
         self._sig = dict(prior_p=prior_position_std, prior_a=prior_angle_std,
                          d=sigma_distance, n=sigma_normal, proc_p=process_position_std,
                          proc_a=process_angle_std, cam_p=camera_position_std,
-                         cam_a=camera_angle_std, g=gravity_std)
+                         cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
+                         edge_n=edge_sigma_normal, compliance=pad_compliance)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
         nq, cells = len(spec_h.joint_names), sum(p.cells for p in self._pads)
@@ -227,6 +299,21 @@ class InHandPoseEstimator(LeafSystem):
             c.get_discrete_state(self._state).value()[7:43]), {self.xd_ticket()})
         self.DeclareVectorOutputPort("quality", 2, lambda c, o: o.SetFromVector(
             c.get_discrete_state(self._state).value()[43:45]), {self.xd_ticket()})
+
+    @property
+    def half_size(self) -> float:
+        """The object's smallest distance from its centre to its surface (m)."""
+        return self._half_size
+
+    @property
+    def shape_kind(self) -> str:
+        """The object's primitive: "sphere", "cylinder", "box", "convex" or "union"."""
+        return self._shape.shape
+
+    @property
+    def hand_clearance(self) -> np.ndarray:
+        """The clearance each of :meth:`hand_points` needs from the object (m)."""
+        return self._clearance
 
     def _hand_geometry(self, inspector, hand):
         """Points inside every link of the hand with their clearance (the object is not
@@ -283,28 +370,39 @@ class InHandPoseEstimator(LeafSystem):
                               for body, p, _ in self._links)])
 
     def contacts(self, q: np.ndarray, taxels: np.ndarray):
-        """The pads' contacts with the object (centres of pressure and outward normals in B)
-        and the face centres of the pads that feel nothing (``(points, normals, free)``):
-        a pad whose centre of pressure lies within ``self_contact_distance`` of another
-        link of the hand (one it can collide with) is pressed by the hand, not the object,
-        and is left out."""
+        """The pads' contacts with the object (centres of pressure and outward normals in B),
+        the face centres of the pads that feel nothing and each contact's terms for
+        :meth:`fit` (``(points, normals, free, terms)``; ``terms`` (k, 3): the distance's
+        and the normal's standard deviations and the expected signed distance, the pad
+        pressed ``pad_compliance`` m per N into the object): a pad whose centre of
+        pressure lies within ``self_contact_distance`` of another link of the hand (one it
+        can collide with) is pressed by the hand, not the object, and is left out. A
+        centre of pressure on the grid's border (:func:`pad_contacts`' interior false)
+        gets ``edge_sigma_distance`` and ``edge_sigma_normal``."""
         X_BPads = self.pad_poses(q)
         query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
         keep, free = [], []
         for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
-            points, normals, _ = pad_contacts([pad], taxels[self._offsets[i]:self._offsets[i + 1]],
-                                              [X_BP], self._threshold)
+            points, normals, force, inside = pad_contacts(
+                [pad], taxels[self._offsets[i]:self._offsets[i + 1]], [X_BP], self._threshold,
+                with_interior=True)
             if not len(points):
                 free.append(X_BP.translation())
                 continue
-            near = query.ComputeSignedDistanceToPoint(points[0], self._self_contact_distance)
-            if any(d.id_G in self._others[i] for d in near):
-                continue
-            keep.append((points[0], normals[0]))
+            s = self._sig
+            for point, normal, f, ok in zip(points, normals, force, inside, strict=True):
+                near = query.ComputeSignedDistanceToPoint(point, self._self_contact_distance)
+                if any(d.id_G in self._others[i] for d in near):
+                    continue
+                terms = (s["d"], s["n"]) if ok else (s["edge_d"], s["edge_n"])
+                keep.append((point, normal, (*terms, -s["compliance"] * f),
+                             None if ok else self._pad_rows[i]))
         free = np.array(free).reshape(-1, 3)
+        self.touching = [k[3] for k in keep if k[3] is not None]
         if not keep:
-            return np.zeros((0, 3)), np.zeros((0, 3)), free
-        return np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free
+            return np.zeros((0, 3)), np.zeros((0, 3)), free, np.zeros((0, 3))
+        return (np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free,
+                np.array([k[2] for k in keep]))
 
     @staticmethod
     def _unpack(x) -> RigidTransform:
@@ -323,8 +421,8 @@ class InHandPoseEstimator(LeafSystem):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
-        points, normals, free = self.contacts(self._q_port.Eval(context),
-                                              self._taxel_port.Eval(context))
+        points, normals, free, terms = self.contacts(self._q_port.Eval(context),
+                                                     self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
@@ -354,7 +452,8 @@ class InHandPoseEstimator(LeafSystem):
             starts.append(RigidTransform(X_BO_prev.rotation(), guess))
         best = None
         for start in starts:
-            result = self.fit(points, normals, priors, gravity, free, hand, start=start)
+            result = self.fit(points, normals, priors, gravity, free, hand, start=start,
+                              terms=terms, touching=self.touching)
             if best is None or result[3] < best[3]:
                 best = result
         X_BO, cov, rms, _ = best
@@ -370,7 +469,8 @@ class InHandPoseEstimator(LeafSystem):
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
 
-    def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None):
+    def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None,
+            terms=None, touching=()):
         """``(X_BO, covariance, rms)``: the least-squares pose (see the module doc).
 
         ``points``, ``normals``: (k, 3) contacts and the pads' outward normals in B;
@@ -378,7 +478,11 @@ class InHandPoseEstimator(LeafSystem):
         ``gravity``: ``(down_B, down_S)`` or None; ``free``: (m, 3) centres of the pads
         that feel nothing (not inside the object); ``hand``: ``(points, clearance)`` inside
         the hand's links (not inside the object); ``start``: where the search starts (default:
-        the first prior). Returns ``(X_BO, covariance, rms, cost)``.
+        the first prior); ``terms``: (k, 3) per contact, the distance's and the normal's
+        standard deviations and the expected signed distance (default: ``sigma_distance``,
+        ``sigma_normal``, 0); ``touching``: per edge contact the rows of ``hand`` inside
+        its pad's body, which touches the object (within ``edge_sigma_distance``).
+        Returns ``(X_BO, covariance, rms, cost)``.
         """
         free = np.asarray(free, float).reshape(-1, 3)
         points = np.asarray(points, float).reshape(-1, 3)
@@ -390,6 +494,13 @@ class InHandPoseEstimator(LeafSystem):
         prior_terms = [(Rotation.from_matrix(X.rotation().matrix()), X.translation(),
                         np.asarray(std, float)) for X, std in priors]
         R_OS = None if self._X_OS is None else self._X_OS.rotation().matrix()
+        if terms is None:
+            terms = np.tile([s["d"], s["n"], 0.0], (len(points), 1))
+        terms = np.asarray(terms, float).reshape(-1, 3)
+        if len(terms) != len(points):
+            raise ValueError(f"estimator.fit: terms: expected {len(points)} rows (one per "
+                             f"contact), got {len(terms)}")
+        sigma_d, sigma_n, expected = terms.T
 
         def pose(v):
             R = Rotation.from_rotvec(v[:3]).as_matrix() @ R0
@@ -400,16 +511,18 @@ class InHandPoseEstimator(LeafSystem):
             res = []
             if len(points):
                 p_O = (points - p) @ R  # R^T (c - p) per row
-                res.append(self._shape.distance(p_O) / s["d"])
+                res.append((self._shape.distance(p_O) - expected) / sigma_d)
                 n_B = self._shape.normal(p_O) @ R.T
-                res.append(((n_B + normals) / s["n"]).ravel())
+                res.append(((n_B + normals) / sigma_n[:, None]).ravel())
                 # the finger behind each contact is outside the object
                 inner = (points - INNER_DEPTH * normals - p) @ R
                 res.append(np.minimum(self._shape.distance(inner) - 0.8 * INNER_DEPTH, 0.0)
                            / s["d"])
             if hand is not None:
-                inside = self._shape.distance((hand[0] - p) @ R) - hand[1] + HAND_TOLERANCE
-                res.append(np.minimum(inside, 0.0) / s["d"])
+                gap = self._shape.distance((hand[0] - p) @ R) - hand[1]
+                res.append(np.minimum(gap + HAND_TOLERANCE, 0.0) / s["d"])
+                res.extend([np.atleast_1d(gap[rows].min()) / s["edge_d"]
+                            for rows in touching if len(rows)])
             if len(free):
                 # pads that feel nothing are not inside the object
                 res.append(np.minimum(self._shape.distance((free - p) @ R), 0.0) / s["d"])

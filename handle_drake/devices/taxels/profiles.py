@@ -16,7 +16,9 @@ between a silicone skin and a rigid object.
 
 Profiles (ours): ``pad4x4``, a 4 x 4 grid on the Shadow hand's 14 x 18 mm distal pad
 (the layout of a PST/DSA-like fingertip array: 3.5 x 4.5 mm cells, 12 bits over 400 kPa,
-1 kPa noise, 100 Hz); ``palm6x6``, a 6 x 6 grid of 10 mm cells on the palm's palmar face.
+1 kPa noise, 100 Hz); ``palm6x6``, a 6 x 6 grid of 10 mm cells on the palm's palmar face;
+``skin5mm``, a skin around the palmar half of each proximal and middle phalanx (5 mm
+rows along it, 4.5 mm of arc across: 6 columns cover about 170 degrees of a 9 mm capsule).
 """
 
 from __future__ import annotations
@@ -134,6 +136,11 @@ PROFILES = {
     "palm6x6": TaxelProfile(
         "palm6x6", rows=6, cols=6, pitch_row=0.010, pitch_col=0.010, range_pa=1.0e5,
         noise_std_pa=2.5e2, description="6 x 6 cells of 10 mm on the palm, 12 bit, 100 kPa"),
+    "skin5mm": TaxelProfile(
+        "skin5mm", rows=8, cols=6, pitch_row=0.005, pitch_col=0.0045,
+        description="skins on the proximal and middle phalanges: 5 mm rows along the "
+                    "capsule (as many as fit, up to 8), 6 columns of 4.5 mm of arc across "
+                    "its palmar half, 12 bit, 400 kPa"),
 }
 
 

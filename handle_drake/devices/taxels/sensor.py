@@ -60,6 +60,8 @@ class TaxelArray(LeafSystem):
         self._noise = np.concatenate([np.full(p.cells, p.profile.noise_std_pa) for p in pads]) \
             if noise else np.zeros(n)
         self._seed = int(seed)
+        self._noisy = bool(np.any(self._noise))
+        self._rng = np.random.Generator(np.random.Philox(key=self._seed % 2 ** 64))
         self._period = pads[0].profile.period
         self._contacts = self.DeclareAbstractInputPort(
             "contact_results", AbstractValue.Make(ContactResults()))
@@ -89,7 +91,8 @@ class TaxelArray(LeafSystem):
         return self._poses
 
     def _ideal(self, context) -> np.ndarray:
-        return self._forces(self._contacts.Eval(context), self._poses.Eval(context))
+        # the body poses only when a contact touches a padded body
+        return self._forces(self._contacts.Eval(context), lambda: self._poses.Eval(context))
 
     def _calc_forces(self, context, out: BasicVector):
         out.SetFromVector(self._ideal(context))
@@ -97,12 +100,22 @@ class TaxelArray(LeafSystem):
     def _sample(self, context, state):
         pressure = self._ideal(context) / self._area
         k = int(round(context.get_time() / self._period))
-        if np.any(self._noise):
-            pressure = pressure + np.random.default_rng((self._seed, k)).standard_normal(
-                pressure.size) * self._noise
-        counts = np.rint(np.clip(pressure, 0.0, self._range) / self._lsb)
-        state.get_mutable_vector(self._state).SetFromVector(counts)
+        if self._noisy:
+            pressure += self._normal(k) * self._noise
+        counts = np.rint(np.minimum(np.maximum(pressure, 0.0), self._range) / self._lsb)
+        state.set_value(self._state, counts)
         return EventStatus.Succeeded()
+
+    def _normal(self, k: int) -> np.ndarray:
+        """Sample ``k``'s standard normal noise: Philox's stream at key ``seed``, counter
+        ``k`` (depends only on ``(seed, k)``)."""
+        bits = self._rng.bit_generator
+        state = bits.state
+        state["state"]["counter"][:] = (k, 0, 0, 0)
+        state["buffer_pos"] = 4  # the buffer is used up: the next draw starts at counter k
+        state["has_uint32"] = 0
+        bits.state = state
+        return self._rng.standard_normal(self._area.size)
 
 
 def save_recording(path, times, taxels) -> Path:

@@ -7,7 +7,7 @@ from pydrake.math import RigidTransform
 
 from handle_drake.devices.taxels.config import TaxelConfig
 from handle_drake.devices.taxels.estimator import InHandPoseEstimator
-from handle_drake.devices.taxels.pads import shadow_pads
+from handle_drake.devices.taxels.pads import SHADOW_SKINS, shadow_pads, skin_rows
 from handle_drake.devices.taxels.profiles import get_profile
 from handle_drake.devices.taxels.sensor import (
     TaxelArray,
@@ -27,24 +27,28 @@ CAMERA_INPUT = "object.pose_detected"
 
 
 def _profiles(config: TaxelConfig):
+    """``(pad, palm, skin)`` profiles (palm, skin None when not asked for)."""
     pad = get_profile(config.profile)
     palm = get_profile(config.palm) if config.palm else None
+    skin = get_profile(config.skin) if config.skin else None
     if config.rate_hz is not None:
-        pad = pad.replace(rate_hz=config.rate_hz)
-        palm = palm.replace(rate_hz=config.rate_hz) if palm is not None else None
-    return pad, palm
+        pad, palm, skin = (p.replace(rate_hz=config.rate_hz) if p is not None else None
+                           for p in (pad, palm, skin))
+    return pad, palm, skin
 
 
 def taxel_cells(config: TaxelConfig) -> int:
-    """Cells of ``hand.taxels``: five distal pads and the palm's, if any."""
-    pad, palm = _profiles(config)
-    return 5 * pad.cells + (palm.cells if palm is not None else 0)
+    """Cells of ``hand.taxels``: five distal pads, the palm's and the skins, if any."""
+    pad, palm, skin = _profiles(config)
+    skins = sum(skin_rows(skin, length) * skin.cols for length in SHADOW_SKINS.values()) \
+        if skin is not None else 0
+    return 5 * pad.cells + (palm.cells if palm is not None else 0) + skins
 
 
 def AddTaxels(builder, plant, scene_graph, hand, config: TaxelConfig, seed: int) -> TaxelArray:
     """The simulated taxel arrays (system ``taxels``), exported as ``hand.taxels``."""
-    pad, palm = _profiles(config)
-    pads = shadow_pads(plant, hand, scene_graph.model_inspector(), pad, palm)
+    pad, palm, skin = _profiles(config)
+    pads = shadow_pads(plant, hand, scene_graph.model_inspector(), pad, palm, skin)
     sensor = builder.AddNamedSystem("taxels", TaxelArray(plant, pads, noise=config.noise,
                                                          seed=seed))
     builder.Connect(plant.get_contact_results_output_port(),
