@@ -293,7 +293,7 @@ def reference_motions(effort_limits: str = "menagerie") -> dict:
     """``{name: (ScrewCapTrial, x)}``: every finger task's hand-written reference motion
     (docs/results/inhand.md) under the hand's ``effort_limits``."""
     def trial(**kw):
-        return ScrewCapTrial(ScrewCapTask(effort_limits=effort_limits, **kw))
+        return ScrewCapTrial(ScrewCapTask(**{**kw, "effort_limits": effort_limits}))
 
     one, four, regrasp = trial(), trial(**FOUR_FINGER_TURN), trial(**REGRASP_GAITS)
     cyl = trial(**TWO_STROKES)

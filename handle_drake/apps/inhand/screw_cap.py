@@ -202,8 +202,19 @@ DEFAULT_PLACEMENT = "clear"
 # the turn counted only while held (``held_turn``). A hand-written pair of strokes (J3
 # 0.6, J2 0.6 rad each, no release) turns it 5.6, 51.4, 76.5, 118.1 deg there, held
 # through the reversed weight, palm 0 N (tests/inhand/test_screw_cap.py).
+#
+# Its physics (issue 45, item 1): Menagerie's cited effort limits (1 N m finger joints) and a
+# compliant point contact of 3 kN/m (the fingertip pad and the cylinder lumped: 3 N presses
+# a pad 1 mm) with SAP's near-rigid softening off (``free_near_rigid_threshold`` 0). With
+# Drake's rigid default and the softening on (SAP then softens a contact to what the step
+# resolves: the 30 g cylinder's contacts are all in that regime), the step set the contact's
+# compliance: the settled grasp sank 1.45, 1.04, 0.78, 0.62 mm into it at 2, 1, 0.5, 0.25
+# ms and the hand-written strokes turned it 80.6, 109.7, 43.6, 23.1 deg. With the
+# compliance the model's, 1.05 mm at every step and the turn converges at 2 ms
+# (docs/results/inhand.md, "convergence"; the turn depends on the pad's stiffness there).
 TWO_STROKES = dict(free=True, stages=2, gait_duration=2.0, n_frames=100, target_deg=100.0,
-                   benchmark=(0.05, 0.4, 0.5, 1.0), held_turn=True)
+                   benchmark=(0.05, 0.4, 0.5, 1.0), held_turn=True, effort_limits="menagerie",
+                   free_stiffness=3000.0, free_near_rigid_threshold=0.0)
 
 
 # The hand's actuator effort limits (N m) in MuJoCo Menagerie's Shadow hand model
@@ -332,6 +343,13 @@ class ScrewCapScenario:
     parameters: list[float] = dc.field(default_factory=list)  # eq. 45
     # N: the free cylinder's reversal pushes its weight reversed plus this much more
     reverse_margin: float = 0.0
+    # SAP's "near rigid" threshold (MultibodyPlantConfig.sap_near_rigid_threshold; 1.0 is
+    # Drake's default). Above it SAP softens a contact to what the step resolves, so that a
+    # light object's contact compliance is set by the time step, not by the model (issue 45:
+    # the fingertip cylinder's settled grasp sank 1.45, 1.04, 0.78, 0.62 mm into it at 2, 1,
+    # 0.5, 0.25 ms and its turn did not converge); 0 turns that off (Drake's advice against
+    # "artificial softening"): the contact then has the stiffness the model gives it
+    near_rigid_threshold: float = 1.0
 
     def dump(self) -> str:
         return yaml_dump_typed(self)
@@ -492,11 +510,15 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     """
     cap = scenario.cap
     cap.validate()
+    if not (math.isfinite(scenario.near_rigid_threshold) and scenario.near_rigid_threshold >= 0):
+        raise ValueError(f"near_rigid_threshold: expected a finite value >= 0, got "
+                         f"{scenario.near_rigid_threshold!r}")
     gist = scenario.action_gist()
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
         time_step=scenario.time_step, contact_model="point",
-        discrete_contact_approximation="sap", use_sampled_output_ports=False), builder)
+        discrete_contact_approximation="sap", use_sampled_output_ports=False,
+        sap_near_rigid_threshold=scenario.near_rigid_threshold), builder)
     spec = get_hand_spec("shadow")
     hand = AddHand(plant, "shadow", coupling_ratio=1.0)
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
@@ -797,6 +819,12 @@ class ScrewCapTask:
     free_position: tuple = (0.387, -0.025, 0.066)
     free_diameter: float = 0.055
     free_mass: float = 0.03
+    # The free cylinder's contact: its point stiffness (N/m; 0: Drake's rigid default) and
+    # SAP's near-rigid threshold (ScrewCapScenario.near_rigid_threshold; 1: Drake's
+    # default). The defaults are the 60 deg pinch's as published; TWO_STROKES sets a
+    # compliant contact with the softening off (issue 45, item 1: see there)
+    free_stiffness: float = 0.0
+    free_near_rigid_threshold: float = 1.0
     reverse_time: float = 0.5
     reverse_travel: float = 0.01  # m, at most at any step of the reversal
     # N: the reversal pushes the weight reversed plus this margin (the grip's tangential
@@ -821,7 +849,8 @@ class ScrewCapTask:
             if isinstance(value, bool) or not (isinstance(value, int | float)
                                                and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
-        for name in ("hold", "tolerance_deg", "viscous", "reverse_margin"):
+        for name in ("hold", "tolerance_deg", "viscous", "reverse_margin", "free_stiffness",
+                     "free_near_rigid_threshold"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name}: expected a finite value >= 0, got {value!r}")
@@ -1082,7 +1111,7 @@ class ScrewCapTrial(GistTrial):
                               mass=ScrewCapModel.mass * c.mass_scale,
                               mu=ScrewCapModel.mu * c.mu_scale) if not c.free else
             ScrewCapModel(free=True, diameter=c.free_diameter, mass=c.free_mass * c.mass_scale,
-                          mu=ScrewCapModel.mu * c.mu_scale,
+                          mu=ScrewCapModel.mu * c.mu_scale, point_stiffness=c.free_stiffness,
                           position=[float(v) for v in c.free_position]),
             initial_position={n: float(v) for n, v in zip(_NAMES, q0, strict=True) if v != 0},
             time_step=c.time_step, effort_limits=c.effort_limits, effort_scale=c.effort_scale,
@@ -1090,7 +1119,8 @@ class ScrewCapTrial(GistTrial):
             gist=ScrewCapScenario.gist_data(self.gist),
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
             hold=c.hold, parameters=[float(v) for v in parameters],
-            reverse_margin=c.reverse_margin if c.free else 0.0)
+            reverse_margin=c.reverse_margin if c.free else 0.0,
+            near_rigid_threshold=c.free_near_rigid_threshold if c.free else 1.0)
 
     def _build(self, meshcat=None, driver: bool = False):
         """The diagram, settled (kept per process). ``driver``: with the Python hand
