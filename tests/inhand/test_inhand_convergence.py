@@ -151,13 +151,19 @@ def test_the_fingertip_cylinder_converges_at_its_2_ms_step():
     # issue 45, item 1: the two strokes' hand-written reference re-simulated at the task's
     # 2 ms and at 1 ms by the check's own code (reduced: the published table adds 0.5 ms;
     # measured 65.6, 64.2, 62.7 deg), held through the reversed weight, palm 0 N
-    trial, x = reference_motions()["fingertip cylinder, two strokes"]
+    motions = reference_motions()
+    trial, x = motions["fingertip cylinder, two strokes"]
     assert trial.config.time_step == 0.002 and trial.config.free_stiffness == 3000.0
     scenario = trial.scenario(x)
     runs = [resimulate(scenario, h, target_deg=trial.config.target_deg) for h in (2e-3, 1e-3)]
     assert converged(runs), [r.turn_deg for r in runs]
     assert all(55.0 < r.turn_deg < 80.0 and r.survived_reversal and r.palm_peak == 0.0
-               for r in runs)
+               and not r.reached for r in runs)
+    # a learned best trial (ipso, seed 100) likewise: 148.7, 142.2, 152.2 deg at 2, 1, 0.5
+    # ms, reached at each (held through the reversal, palm 0 N)
+    learned, y = motions["fingertip cylinder, two strokes, ipso's best (seed 100)"]
+    runs = [resimulate(learned.scenario(y), h, target_deg=100.0) for h in (2e-3, 1e-3)]
+    assert converged(runs) and all(r.reached for r in runs), [r.turn_deg for r in runs]
     # the cause: with Drake's rigid default and SAP's near-rigid softening on, the step set
     # the contact's compliance (the settled grasp sank 1.45, 1.04, 0.78 mm into it at 2, 1,
     # 0.5 ms); with the task's 3 kN/m and the softening off, the same depth at every step
