@@ -178,6 +178,53 @@ def test_the_fingertip_cylinder_converges_at_its_2_ms_step():
         build_screw_cap(dc.replace(scenario, near_rigid_threshold=-1.0))
 
 
+def test_the_per_step_contact_record_reads_as_the_contact_results_do(monkeypatch):
+    # issue 45, item 8: the trial's per-step read (step_contacts, run at every plant step)
+    # reads each contact once and only what it needs; at every step of two trials (a cap
+    # pressed into the palm; the one-gait placement, its ring finger on the welded bottle)
+    # its record equals one made with numpy from every hand contact of the results
+    import numpy as np
+
+    import handle_drake.apps.inhand.screw_cap as screw_cap
+
+    fast = screw_cap.step_contacts
+    checked = []
+
+    def both(plant, plant_context, built, st):
+        fast(plant, plant_context, built, st)
+        ref = st.setdefault("reference", screw_cap.new_contact_record())
+        results = plant.get_contact_results_output_port().Eval(plant_context)
+        obj, bottle = int(built["cap"].index()), int(built["bottle"].index())
+        digits = {}
+        for name, mine, force, info in screw_cap._hand_contacts(
+                results, built["hand_bodies"], (obj, bottle)):
+            magnitude = float(np.linalg.norm(force))
+            if name == "palm":
+                ref["palm_max"] = max(ref["palm_max"], magnitude)
+                ref["palm"] = ref["palm"] or magnitude > 0
+            if mine == bottle:
+                ref["welded_max"] = max(ref["welded_max"], magnitude)
+                ref["welded_bodies"].add(name)
+            elif name[:2] in ("th", "ff", "mf", "rf", "lf"):
+                normal = abs(float(force @ np.asarray(info.point_pair().nhat_BA_W)))
+                digits[name[:2]] = digits.get(name[:2], 0.0) + normal
+        for digit, value in digits.items():
+            ref["digit_peak"][digit] = max(ref["digit_peak"].get(digit, 0.0), value)
+        assert st["palm"] == ref["palm"] and st["welded_bodies"] == ref["welded_bodies"]
+        for key in ("palm_max", "welded_max"):
+            assert st[key] == pytest.approx(ref[key]), key
+        assert st["digit_peak"] == pytest.approx(ref["digit_peak"])
+        checked.append(st["palm"] or st["welded_max"] > 0)
+
+    monkeypatch.setattr(screw_cap, "step_contacts", both)
+    for task in (ScrewCapTask(cap_position=(0.36, -0.02, 0.03), lean_force=1e6),
+                 ScrewCapTask()):
+        trial = ScrewCapTrial(dc.replace(task, hold=0.0, gait_duration=0.6))
+        outcome = trial.evaluate(stroke_motion(trial.gist), early_stop=False)
+        assert outcome.palm_touched or outcome.leaned_on_welded
+    assert len(checked) > 500 and sum(checked) > 100  # palm and bottle contacts were read
+
+
 # ------------------------------------------------------------ held means held (item 6)
 def _record(i, metric, **contacts):
     from types import SimpleNamespace
