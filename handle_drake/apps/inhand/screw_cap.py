@@ -495,6 +495,19 @@ def _add_hand_command(builder, plant, hand, spec, q0, limits, max_joint_velocity
     return None, planned
 
 
+def _plant_config(scenario: ScrewCapScenario) -> MultibodyPlantConfig:
+    """The plant's settings: the scenario's step, point contact, SAP with the scenario's
+    near-rigid threshold (checked: finite, >= 0)."""
+    threshold = scenario.near_rigid_threshold
+    if not (isinstance(threshold, int | float) and math.isfinite(threshold) and threshold >= 0):
+        raise ValueError(f"near_rigid_threshold: expected a finite value >= 0, got "
+                         f"{threshold!r}")
+    return MultibodyPlantConfig(
+        time_step=scenario.time_step, contact_model="point",
+        discrete_contact_approximation="sap", use_sampled_output_ports=False,
+        sap_near_rigid_threshold=float(threshold))
+
+
 def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False,
                     driver: bool = True):
     """The diagram: plant (hand, bottle, cap), hand driver, gait source, cap friction.
@@ -510,15 +523,9 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     """
     cap = scenario.cap
     cap.validate()
-    if not (math.isfinite(scenario.near_rigid_threshold) and scenario.near_rigid_threshold >= 0):
-        raise ValueError(f"near_rigid_threshold: expected a finite value >= 0, got "
-                         f"{scenario.near_rigid_threshold!r}")
     gist = scenario.action_gist()
     builder = DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=scenario.time_step, contact_model="point",
-        discrete_contact_approximation="sap", use_sampled_output_ports=False,
-        sap_near_rigid_threshold=scenario.near_rigid_threshold), builder)
+    plant, scene_graph = AddMultibodyPlant(_plant_config(scenario), builder)
     spec = get_hand_spec("shadow")
     hand = AddHand(plant, "shadow", coupling_ratio=1.0)
     plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(spec.base_body, hand).body_frame(),
