@@ -16,8 +16,13 @@ def _stroke(trial):
     return x
 
 
+# The device against the plant, measured at 2 ms (the palm-up cylinder's step before issue
+# 45; its converged default is 0.5 ms, where the device was not re-examined)
+STEP = 0.002
+
+
 def test_the_score_reads_the_accelerometer_and_agrees_with_the_plant_at_rest():
-    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
+    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14", time_step=STEP))
     c = trial.config
     outcome = trial.evaluate(_stroke(trial), early_stop=False)
     t = np.array(outcome.times)
@@ -45,7 +50,7 @@ def test_held_is_the_instrumented_objects_own_a_fall_flagged_by_its_acceleromete
     # the plant's held is logged beside it (held_truth)
     from pydrake.math import RigidTransform
 
-    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
+    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14", time_step=STEP))
     held = trial.evaluate(_stroke(trial), early_stop=False)
     assert held.held and held.held_truth and held.reached_target
     # the same trial from the settled grasp with the object lifted 10 cm: it falls for

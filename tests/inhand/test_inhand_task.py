@@ -27,9 +27,32 @@ def _stroke(trial):
     return x
 
 
+@pytest.mark.parametrize("task, step, reached", [("cylinder_rotation", 0.0005, True),
+                                                  ("star_rotation", 0.002, False)])
+def test_each_palm_up_task_defaults_to_a_step_at_which_its_stroke_has_converged(task, step,
+                                                                              reached):
+    # issue 45, item 1: the hand-written stroke at the task's default step and at half of it
+    # (reduced: the published table adds a quarter) rolls the object the same within 10 %
+    # and reaches the target at both or at neither (the cylinder: 42.6, 41.8 deg at 0.5,
+    # 0.25 ms, where 2 ms gave 50.6; the star: 8.4, 7.9 at 2, 1 ms)
+    default = InHandTask(task=task)
+    assert default.time_step == step
+    assert InHandTask(task=task, time_step=0.001).time_step == 0.001  # still settable
+    runs = []
+    for h in (step, step / 2):
+        trial = InHandTrial(InHandTask(task=task, time_step=h))
+        runs.append(trial.evaluate(_stroke(trial), early_stop=False))
+    turns = [o.rotation_deg for o in runs]
+    assert abs(turns[0] - turns[1]) <= 0.1 * abs(turns[1]), turns
+    assert [o.reached_target for o in runs] == [reached, reached], turns
+
+
 def test_hand_written_stroke_rolls_the_cylinder_30_deg_and_holds_it():
     # the cylinder is an instrumented object: a JoyWarrior accelerometer at its origin
-    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14"))
+    # constructed at 2 ms (the task's default before issue 45; at its converged 0.5 ms the
+    # stroke rolls it 42.6 deg, tested above, and the device's first sample reads 3.1 deg):
+    # what is tested here is the device against the plant and the checks, at that step
+    trial = InHandTrial(InHandTask(accelerometer="joywarrior24f14", time_step=0.002))
     outcome = trial.evaluate(_stroke(trial))
     assert outcome.completed and outcome.held
     assert outcome.rotation_deg >= 30.0
@@ -93,8 +116,10 @@ def test_samples_read_the_touching_hand_bodies_from_the_geometry_query_as_from_t
 def test_a_palm_carried_cylinder_that_falls_under_reversed_weight_is_not_held():
     # the stroke, then a release back along its path: the fingers leave the cylinder lying
     # on the palm, rolled past the target. Before the held test at the end this trial was
-    # held and reached the target (score 29.0 >= 28); the palm carries all its weight
-    trial = InHandTrial(InHandTask())
+    # held and reached the target (score 29.0 >= 28); the palm carries all its weight.
+    # Constructed at 2 ms (at the converged 0.5 ms this release rolls it back to -15.6 deg
+    # instead; the held test's logic is what is tested, on this physical case)
+    trial = InHandTrial(InHandTask(time_step=0.002))
     x = _stroke(trial)
     for m, sl in zip(trial.gist.motions, trial.gist.slices(), strict=True):
         if m.finger != "TH" and m.variation[0] < 0:

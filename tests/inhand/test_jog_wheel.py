@@ -32,6 +32,11 @@ def test_midi_turn_equals_the_true_wheel_turn_within_one_tick(trial):
     err = np.abs(np.subtract(outcome.turn_deg_series, outcome.true_turn_deg_series))
     assert err.max() <= tick + 1e-9
     assert outcome.messages > 0 and outcome.rejected == 0
+    # issue 45, item 4: the target lies above what the demonstration's own parameters reach
+    # (61.9 deg by MIDI against 75); its parameters do not depend on the target
+    assert outcome.turn_deg < trial.config.target_deg and not outcome.reached_target
+    np.testing.assert_array_equal(JogWheelTask(target_deg=30.0).demonstration(),
+                                  trial.config.demonstration())
     # a turn the other way is not a turn in the demonstrated direction
     back = trial.evaluate(np.r_[1.0, -20.0, -20.0, -20.0, -20.0])
     assert back.true_turn_deg < -50.0 and abs(back.turn_deg - back.true_turn_deg) <= tick
@@ -55,8 +60,8 @@ def test_the_evaluator_scores_a_recorded_stream_with_no_plant():
     assert list(inspect.signature(evaluator.evaluate).parameters) == ["stream"]
     tick = evaluator.tick_deg
     t0, t1 = task.turn_start, task.turn_start + task.n_parts * task.segment_time
-    # a steady turn of 72 deg over the turning motion (closed form: 72 / tick ticks)
-    n = int(round(72.0 / tick))
+    # a steady turn of 90 deg over the turning motion (closed form: 90 / tick ticks)
+    n = int(round(90.0 / tick))
     stream = _recorded([(t0 + (k + 1) * (t1 - t0) / n, 1) for k in range(n)], mapping)
     # noise a real port delivers: another control, a foreign channel, broken bytes
     stream += [mido.Message("note_on", channel=15, note=1, velocity=64, time=1.5),

@@ -520,22 +520,24 @@ def test_two_strokes_each_its_own_parameters_checked_while_held(two_strokes):
                   & (t.gist.initial_parameters() <= t.bounds[:, 1]))
 
 
-def test_two_hand_written_strokes_reach_100_deg_held_by_the_fingers(two_strokes):
+def test_two_hand_written_strokes_turn_it_held_by_the_fingers(two_strokes):
+    # issue 45: on the converged physics (TWO_STROKES: Menagerie's limits, a 3 kN/m pad, no
+    # near-rigid softening) the hand-written strokes turn it 65.6 deg at 2 ms (64.2, 62.7
+    # at 1, 0.5 ms): short of the 100 deg target (before: 118.1, on a contact whose
+    # compliance the 2 ms step set)
     t = two_strokes
-    both = t.evaluate(_strokes(t))
+    assert t.config.effort_limits == "menagerie" and t.config.free_near_rigid_threshold == 0
+    both = t.evaluate(_strokes(t), early_stop=False)
     # held by the fingers: the palm never touches it, carries none of its weight, and it
     # stays in the hand through 0.5 s of reversed weight
     assert {"thdistal", "ffdistal"} <= set(both.gripped_at_start)
     assert not both.palm_touched and both.palm_force_max == 0.0
     assert both.palm_weight_share == 0.0 and both.survived_reversal is True
-    assert both.turn_deg >= 100.0 and both.reached_target and both.score >= t.target_score
-    assert both.checks_passed == 4
-    # the target needs both strokes: the first alone turns it half way, held (checks 1-3:
-    # 3, 38, 48 deg), and misses the last check
-    one = t.evaluate(_strokes(t, second=(0.0, 0.0)))
-    assert 40.0 <= one.turn_deg < 100.0 and one.survived_reversal is True
-    assert one.checks_passed == 3 and not one.reached_target
-    assert t.dims_per_part.sum() + 1 > one.score > t.dims_per_part.sum()
+    assert 55.0 <= both.turn_deg < 80.0 and not both.reached_target
+    # the turn needs both strokes: the first alone turns it about 21 deg, held
+    one = t.evaluate(_strokes(t, second=(0.0, 0.0)), early_stop=False)
+    assert 10.0 <= one.turn_deg < 30.0 and one.survived_reversal is True
+    assert both.turn_deg > 2 * one.turn_deg
     # re-simulated from its logged scenario alone (its own build; reads the plant)
     again = simulate_scenario(t(_strokes(t)).scenario)
     assert again["turn_deg"] == pytest.approx(both.turn_deg, abs=1.0)

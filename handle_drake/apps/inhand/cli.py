@@ -33,6 +33,7 @@ from handle_drake.apps.cli_support import (
     seed_int,
 )
 from handle_drake.apps.inhand.experiment import MAX_PARTICLES
+from handle_drake.apps.inhand.jog_wheel import JogWheelTask
 from handle_drake.apps.inhand.screw_cap import DEFAULT_PLACEMENT, PLACEMENTS, TWO_STROKES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
@@ -77,7 +78,7 @@ def register(subparsers) -> None:
                         "strokes: --strokes); "
                         "jog_wheel: the iControls Pro's jog wheel turned by a pinch, scored "
                         "from its MIDI ticks alone, the true wheel angle logged beside "
-                        "(default 60)")
+                        "(default 75, above the demonstration's 61.9)")
     p.add_argument("--gaits", type=int_in(1, MAX_GAITS), default=None,
                    help="screw_cap: repetitions of the gait (grip, turn, release, regrasp); "
                         "default 1 (the placement's)")
@@ -210,7 +211,8 @@ def _task_options(args) -> dict:
             raise ValueError("--task jog_wheel: the incremental evaluation from MIDI only (no "
                              "--accelerometer, --evaluation old, --gaits)")
         options = dict(progress=not args.no_progress,
-                       target_deg=60.0 if args.target_deg is None else args.target_deg)
+                       target_deg=JogWheelTask.target_deg if args.target_deg is None
+                       else args.target_deg)
     elif args.task in ("screw_cap", "fingertip_cylinder"):
         if args.accelerometer or args.evaluation != "incremental":
             raise ValueError(f"--task {args.task}: the incremental evaluation from the plant "
