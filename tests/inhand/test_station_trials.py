@@ -60,9 +60,14 @@ def test_the_station_built_cap_trial_equals_the_modules_own_diagram(clear):
     assert station.welded_force_max == own.welded_force_max
 
 
-def test_the_free_cylinder_on_the_station_equals_the_modules_own_diagram():
-    """The fingertip cylinder (a free bare cylinder, its weight reversed at the end)."""
-    trial = ScrewCapTrial(ScrewCapTask(free=True, hold=0.1))
+@pytest.mark.parametrize("contact", [{}, {"free_stiffness": 3000.0,
+                                      "free_near_rigid_threshold": 0.0}],
+                         ids=["rigid", "two-strokes-contact"])
+def test_the_free_cylinder_on_the_station_equals_the_modules_own_diagram(contact):
+    """The fingertip cylinder (a free bare cylinder, its weight reversed at the end), with
+    Drake's rigid default and with TWO_STROKES' compliant contact without SAP's near-rigid
+    softening (the station must carry the threshold into its plant)."""
+    trial = ScrewCapTrial(ScrewCapTask(free=True, hold=0.1, **contact))
     x = stroke_motion(trial.gist, j3=0.6, j2=0.6)
     station = trial.evaluate(x, early_stop=False)
     own = trial.evaluate(x, early_stop=False, build="planned")

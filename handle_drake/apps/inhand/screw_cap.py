@@ -466,7 +466,7 @@ def station_scenario(scenario: ScrewCapScenario, motion: bool = False) -> Scenar
                             contact_feet=False, point_stiffness=cap.point_stiffness,
                             joint=bare.joint),
         table=None,
-        plant_config=default_plant_config(time_step=scenario.time_step),
+        plant_config=_plant_config(scenario),
         driver=SimHandDriver(max_joint_velocity=scenario.max_joint_velocity,
                              control_period=PlannedCommands.period),
         simulation_duration=duration, script=script)
