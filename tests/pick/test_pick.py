@@ -262,7 +262,9 @@ def test_pick_scene_seed_out_of_range_is_refused_by_the_parser(seed, capsys):
 
 def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
     """Hand low over the table on either side of the sorting box: the straight joint
-    segment drives it through the box; KinematicTrajectoryOptimization finds a way."""
+    segment drives it through the box; free_path finds a way (a via point with the hand
+    raised, else KinematicTrajectoryOptimization), every segment of it collision free
+    and within the joint limits."""
     import dataclasses as dc
 
     from pydrake.math import RigidTransform, RollPitchYaw
@@ -279,7 +281,7 @@ def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
     assert a.ok and b.ok
     assert not reach.path_is_free(a.q, b.q, hand)
     path = free_path(reach, a.q, b.q, hand)
-    assert path is not None and len(path) > 2
+    assert path is not None and len(path) >= 1
     points = [a.q, *path, b.q]
     for p, q in zip(points, points[1:], strict=False):
         assert reach.path_is_free(p, q, hand)

@@ -171,6 +171,14 @@ class PickOutcome:
     in_hand_turn_deg: float | None = None
     in_hand_contacts: int = 0
     release_corrected: bool = False
+    # The measured pose against the plant's (mm, deg): how far the located object was
+    # from where it truly was in the hand after the lift.
+    in_hand_error_mm: float | None = None
+    in_hand_error_deg: float | None = None
+    # Where the object's centre was when the hand began to open, from the release pose
+    # planned for it (mm, horizontal), and its tilt from upright there (deg).
+    release_offset_mm: float | None = None
+    release_tilt_deg: float | None = None
 
     @property
     def real_time_rate(self) -> float:
@@ -316,10 +324,17 @@ def _correct_release(simulator, diagram, station, scenario, plan, reach, close, 
         return plan, None, None, {}
     X_OB, count = measured
     error = X_OB_planned.inverse() @ X_OB
+    X_WB = plant.GetBodyByName(get_hand_spec(scenario.hand.kind).base_body,
+                               hand).EvalPoseInWorld(context)
+    X_WO_true = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(
+        plan.target))[0]).EvalPoseInWorld(context)
+    truth = (X_WB @ X_OB.inverse()).inverse() @ X_WO_true
     report = dict(in_hand_offset_mm=round(float(np.linalg.norm(
         X_OB.translation() - X_OB_planned.translation())) * 1000, 1),
         in_hand_turn_deg=round(float(np.degrees(error.rotation().ToAngleAxis().angle())), 1),
-        in_hand_contacts=count)
+        in_hand_contacts=count,
+        in_hand_error_mm=round(float(np.linalg.norm(truth.translation())) * 1000, 1),
+        in_hand_error_deg=round(float(np.degrees(truth.rotation().ToAngleAxis().angle())), 1))
     again = replan_release(scenario, reach, plan, X_OB)
     if again is None:
         return plan, None, None, report
@@ -460,6 +475,7 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
             times, marks = new_times, new_marks
     advance("carry", marks["release"])
     p_release = position.Eval(station_context).copy()
+    close_report.update(_release_report(station, station_context, plan, p_release))
     end = _settle(simulator, station, station_context, plan.target, times[-1])
     advance("release", end)
     wall = time.perf_counter() - start
@@ -469,6 +485,19 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     inside = in_box(scenario, p)
     reason = _judge(plan, inside, p0, p_lift, p_release, p)
     return PickOutcome(inside, reason, p, end, wall, **close_report)
+
+
+def _release_report(station, station_context, plan, p_release) -> dict:
+    """The object's horizontal offset (mm) from the planned release and its tilt from
+    upright (deg) as the hand begins to open."""
+    plant = GetPlant(station)
+    context = station.GetSubsystemContext(plant, station_context)
+    body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(plan.target))[0])
+    # The object's axis nearest the vertical (a cuboid may rest on any face).
+    up = np.max(np.abs(body.EvalPoseInWorld(context).rotation().matrix()[2, :]))
+    return dict(release_offset_mm=round(float(np.linalg.norm(
+        p_release[:2] - plan.X_WO_release.translation()[:2])) * 1000, 1),
+        release_tilt_deg=round(float(np.degrees(np.arccos(np.clip(up, 0, 1)))), 1))
 
 
 def _build_diagram(station, scenario, plan, close):
