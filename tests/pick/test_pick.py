@@ -391,3 +391,4 @@ def test_a_cuboid_the_arm_cannot_reach_at_its_yaw_is_grasped_turned(hamburg):
     by_label = {w.label: w for w in plan.waypoints}
     X_reached = reach.hand_pose(by_label["grasp"].q)
     assert np.linalg.norm(X_reached.translation() - plan.grasp.X_WB.translation()) < 0.004
+

@@ -81,6 +81,11 @@ MIN_SEGMENT = 0.4  # s
 CLOSE_TIME = 0.6  # s, the scripted close's ramp
 HOLD_TIME = 0.3  # s, and its hold before the lift
 SETTLE_TIME = 1.2  # s
+#: Seconds the arm stands at the release pose, the object still held, before the hand
+#: opens: the arm's driver lags its trajectory and the object swings in the grasp after
+#: the descent (development seed 6 at 0.5 ms: the cuboid's centre 14 mm from the
+#: planned release as the hand opened, the hole's clearance 12 mm; it wedged in the hole).
+RELEASE_DWELL = 0.5  # s
 #: After ``SETTLE_TIME``, the run goes on in 0.1 s steps, up to ``MAX_SETTLE`` s more,
 #: while the object moves faster than ``SETTLED_SPEED`` (m/s, its centre): the verdict is
 #: on the object at rest, not bouncing (a ball let go over its hole was still bouncing
@@ -207,8 +212,10 @@ def _timeline(plan, velocity, close_time=CLOSE_TIME, hold_time=HOLD_TIME):
             # than six joints the wrist joints the IK set for b (plan.wrist_from_ik).
             hand.append(b.hand)
             previous = q
-        if b.label == "close" and hold_time > 0:
-            t += hold_time
+        dwell = hold_time if b.label == "close" else RELEASE_DWELL if b.label == "release" \
+            else 0.0
+        if dwell > 0:
+            t += dwell
             times.append(t)
             arm.append(b.q)
             hand.append(b.hand)
