@@ -4,7 +4,8 @@ The arm follows the plan's waypoints (and the paths between them) through
 ``arm.position``: each segment lasts long enough for the slowest joint at half
 its speed limit (at least ``MIN_SEGMENT`` s), linear in joint space, and the
 driver's own rate limit applies on top. The hand holds each waypoint's command
-through ``hand.position``; the release opens to the pre-shape and waits
+through ``hand.position``; at the release the arm stands ``RELEASE_DWELL`` s (the
+object still held) before the hand opens to the pre-shape, and waits
 ``SETTLE_TIME`` s for the object to fall (longer while it still moves: ``MAX_SETTLE``).
 
 The close (``close="reactive"``, the default) is the project's reactive tactile
@@ -74,7 +75,7 @@ from handle_drake.systems.reactive_grasp import (
 )
 
 __all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "filter_idle_contacts",
-           "MIN_SEGMENT", "CLOSES",
+           "MIN_SEGMENT", "CLOSES", "RELEASE_DWELL",
            "REACTIVE_CLOSE_TIME", "measure_in_hand", "locate_object", "PHASES"]
 
 MIN_SEGMENT = 0.4  # s

@@ -15,10 +15,14 @@ keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object
 the box's x, either way round; a sphere at its own yaw or a quarter or half turn from
 it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
 Between consecutive configurations the straight joint-space segment must be collision
-free (checked every 0.02 rad with the hand's posture of that phase); if one is not,
-Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free path between the
-two (:func:`free_path`). The first class whose whole chain exists is the plan; otherwise
-:class:`PickPlanningError` lists each class's reason.
+free (checked every 0.02 rad with the hand's posture of that phase); if one is not, a
+via point with the hand raised, then Drake's ``KinematicTrajectoryOptimization``, looks
+for a collision-free path between the two (:func:`free_path`). The first class whose
+whole chain exists is the plan; otherwise :class:`PickPlanningError` lists each class's
+reason. The arm's work is bounded by a count, not the clock: at most
+``PLAN_IK_BUDGET`` IK solves per plan (a path search counts ``PATH_SEARCH_COST``),
+each solve bounded by its iterations (:class:`~handle_drake.apps.pick.reach.ArmReach`);
+past it the planner stops and says so.
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from handle_drake.scene.config import box_pose, hole_centres
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
            "default_grasp_database", "grasp_db_requests", "build_grasp_database",
-           "free_path", "replan_release", "GRASP_SOURCES"]
+           "free_path", "replan_release", "GRASP_SOURCES", "PLAN_IK_BUDGET", "PATH_SEARCH_COST"]
 
 #: The pick application's grasp database (``handle-drake pick SCENARIO
 #: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
