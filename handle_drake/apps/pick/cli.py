@@ -276,7 +276,8 @@ def _execute(scenario, plan, reach, html, close, correct_release, monitor, repor
                   in_hand_error_mm=outcome.in_hand_error_mm,
                   in_hand_error_deg=outcome.in_hand_error_deg,
                   release_offset_mm=outcome.release_offset_mm,
-                  release_tilt_deg=outcome.release_tilt_deg)
+                  release_tilt_deg=outcome.release_tilt_deg,
+                  release_height_mm=outcome.release_height_mm)
     if outcome.close_mode is not None:
         result.update(close_mode=outcome.close_mode, fingers_touched=outcome.fingers_touched,
                       closing_at_squeeze=outcome.closing_at_squeeze)

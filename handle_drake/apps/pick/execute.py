@@ -185,6 +185,7 @@ class PickOutcome:
     # planned for it (mm, horizontal), and its tilt from upright there (deg).
     release_offset_mm: float | None = None
     release_tilt_deg: float | None = None
+    release_height_mm: float | None = None
 
     @property
     def real_time_rate(self) -> float:
@@ -483,7 +484,7 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
             times, marks = new_times, new_marks
     advance("carry", marks["release"])
     p_release = position.Eval(station_context).copy()
-    close_report.update(_release_report(station, station_context, plan, p_release))
+    close_report.update(_release_report(station, station_context, scenario, plan, p_release))
     end = _settle(simulator, station, station_context, plan.target, times[-1])
     advance("release", end)
     wall = time.perf_counter() - start
@@ -495,9 +496,14 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     return PickOutcome(inside, reason, p, end, wall, **close_report)
 
 
-def _release_report(station, station_context, plan, p_release) -> dict:
+def _release_report(station, station_context, scenario, plan, p_release) -> dict:
     """The object's horizontal offset (mm) from the planned release and its tilt from
-    upright (deg) as the hand begins to open."""
+    upright (deg) as the hand begins to open, and the planned height (mm) of its bottom
+    above the lid's top there."""
+    from handle_drake.apps.pick.plan import hole_centres, resting_height
+
+    bottom = (plan.X_WO_release.translation()[2] - hole_centres(scenario)[plan.kind][2]
+              - resting_height(plan.grasp.object_spec))
     plant = GetPlant(station)
     context = station.GetSubsystemContext(plant, station_context)
     body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(plan.target))[0])
@@ -505,7 +511,8 @@ def _release_report(station, station_context, plan, p_release) -> dict:
     up = np.max(np.abs(body.EvalPoseInWorld(context).rotation().matrix()[2, :]))
     return dict(release_offset_mm=round(float(np.linalg.norm(
         p_release[:2] - plan.X_WO_release.translation()[:2])) * 1000, 1),
-        release_tilt_deg=round(float(np.degrees(np.arccos(np.clip(up, 0, 1)))), 1))
+        release_tilt_deg=round(float(np.degrees(np.arccos(np.clip(up, 0, 1)))), 1),
+        release_height_mm=round(float(bottom) * 1000, 1))
 
 
 def _build_diagram(station, scenario, plan, close):

@@ -10,9 +10,10 @@ the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`, reac
 from the arm's base towards the object) gives the pre-grasp, grasp and lift poses of the
 hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm joints for each
 (limits, 3 mm clearance; each IK seeded by the previous configuration). The release pose
-keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object
-``DROP_HEIGHT`` above its hole, turned to the hole's orientation (a cuboid's width along
-the box's x, either way round; a sphere at its own yaw or a quarter or half turn from
+keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object's bottom
+``DROP_HEIGHT`` above its hole (a cuboid's first ``RELEASE_INSERTS`` into it), turned
+to the hole's orientation (a cuboid's width along the box's x, either way round; a
+sphere at its own yaw or a quarter or half turn from
 it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
 Between consecutive configurations the straight joint-space segment must be collision
 free (checked every 0.02 rad with the hand's posture of that phase); if one is not, a
@@ -48,7 +49,8 @@ from handle_drake.scene.config import box_pose, hole_centres
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
            "default_grasp_database", "grasp_db_requests", "build_grasp_database",
-           "free_path", "replan_release", "GRASP_SOURCES", "PLAN_IK_BUDGET", "PATH_SEARCH_COST"]
+           "free_path", "replan_release", "GRASP_SOURCES", "PLAN_IK_BUDGET", "PATH_SEARCH_COST",
+           "RELEASE_INSERTS"]
 
 #: The pick application's grasp database (``handle-drake pick SCENARIO
 #: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
@@ -110,6 +112,13 @@ PATH_SEARCH_COST = 20
 #: whose straight joint segment collides (:func:`free_path`).
 VIA_RISES = (0.10, 0.20)
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
+#: Heights (m, negative: below the lid's top) of a kind's bottom at the release tried
+#: before ``DROP_HEIGHT``, each at every turn over the hole: a cuboid let go 3 cm above
+#: its hole, centred within 1 mm and upright within 1 deg, was tipped by the opening
+#: fingers and wedged across the square hole (its face diagonal, 84.9 mm, is longer
+#: than the hole's side, 84 mm); let go with its bottom in the hole, the hole's sides
+#: hold it upright. The arm's IK (the hand 3 mm clear of the lid) decides how deep.
+RELEASE_INSERTS = {"cuboid": (-0.02, -0.01)}
 CARRY_HEIGHT = 0.12  # m, above the release pose
 
 
@@ -225,7 +234,6 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
     """Candidate (X_WO_release, X_WB_release), nearest turn first."""
 
     centre = hole_centres(scenario)[kind]
-    z = centre[2] + resting_height(spec) + DROP_HEIGHT
     yaw0 = _yaw(X_WO.rotation())
     if kind == "cuboid":  # its square hole takes it at every quarter turn
         box_yaw = _yaw(box_pose(scenario).rotation())
@@ -243,9 +251,11 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
         yaws.append(yaw0 + math.atan2(centre[1] - base[1], centre[0] - base[0])
                     - math.atan2(p_WO[1] - base[1], p_WO[0] - base[0]))
     out = []
-    for yaw in yaws:
-        X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
-        out.append((X, X @ X_OB))
+    for drop in (*RELEASE_INSERTS.get(kind, ()), DROP_HEIGHT):
+        z = centre[2] + resting_height(spec) + drop
+        for yaw in yaws:
+            X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
+            out.append((X, X @ X_OB))
     return out
 
 
