@@ -11,7 +11,7 @@ from the arm's base towards the object) gives the pre-grasp, grasp and lift pose
 hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm joints for each
 (limits, 3 mm clearance; each IK seeded by the previous configuration). The release pose
 keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object's bottom
-``DROP_HEIGHT`` above its hole (a cuboid's first ``RELEASE_INSERTS`` into it), turned
+``DROP_HEIGHT`` above its hole (first any ``RELEASE_INSERTS`` of its kind), turned
 to the hole's orientation (a cuboid's width along the box's x, either way round; a
 sphere at its own yaw or a quarter or half turn from
 it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
@@ -113,12 +113,14 @@ PATH_SEARCH_COST = 20
 VIA_RISES = (0.10, 0.20)
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 #: Heights (m, negative: below the lid's top) of a kind's bottom at the release tried
-#: before ``DROP_HEIGHT``, each at every turn over the hole: a cuboid let go 3 cm above
-#: its hole, centred within 1 mm and upright within 1 deg, was tipped by the opening
-#: fingers and wedged across the square hole (its face diagonal, 84.9 mm, is longer
-#: than the hole's side, 84 mm); let go with its bottom in the hole, the hole's sides
-#: hold it upright. The arm's IK (the hand 3 mm clear of the lid) decides how deep.
-RELEASE_INSERTS = {"cuboid": (-0.02, -0.01)}
+#: before ``DROP_HEIGHT``, each at every turn over the hole (none: measured worse). Tried:
+#: a cuboid's bottom 2 cm, else 1 cm, into its hole (the opening fingers tip a cuboid
+#: let go 3 cm above it, which then wedges across the hole: its face diagonal, 84.9 mm,
+#: is longer than the hole's side, 84 mm); development seed 6 at 0.5 ms: the cuboid hit
+#: the rim on the way down, turned 46 deg in the hand and wedged (in the box without it).
+#: The arm's IK checks the hand at the planned closing posture, not the reactive
+#: close's, and not the object against the lid.
+RELEASE_INSERTS: dict = {}
 CARRY_HEIGHT = 0.12  # m, above the release pose
 
 
