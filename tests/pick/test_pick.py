@@ -86,8 +86,10 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     with pytest.raises(PickPlanningError) as error:
         plan_pick(hamburg, reach, name, "sphere", sphere.size,
                   initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
-                  grasp_budget=1e-6, grasp_db=empty)
+                  grasp_budget=1e-6, total_budget=None, grasp_db=empty)
     # Every class the sphere's size allows ran out of its budget; the others are too small.
+    # (No total budget here: one search's solve overruns its budget, by seconds on a
+    # loaded machine, which would spend a total one and leave the next classes untried.)
     timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
                  in str(error.value)]
     assert timed_out == ["tripod", "parallel_extension", "palmar_pinch"]
