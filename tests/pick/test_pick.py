@@ -86,8 +86,10 @@ def test_each_grasp_class_gets_a_time_budget(hamburg):
     with pytest.raises(PickPlanningError) as error:
         plan_pick(hamburg, reach, name, "sphere", sphere.size,
                   initial_pose(sphere, hamburg.table), hamburg.hand.mount.initial_position,
-                  grasp_budget=1e-6, grasp_db=empty)
+                  grasp_budget=1e-6, total_budget=None, grasp_db=empty)
     # Every class the sphere's size allows ran out of its budget; the others are too small.
+    # (No total budget here: one search's solve overruns its budget, by seconds on a
+    # loaded machine, which would spend a total one and leave the next classes untried.)
     timed_out = [c for c in CLASS_ORDER["sphere"] if f"{c}: no grasp plan: time budget"
                  in str(error.value)]
     assert timed_out == ["tripod", "parallel_extension", "palmar_pinch"]
@@ -262,7 +264,9 @@ def test_pick_scene_seed_out_of_range_is_refused_by_the_parser(seed, capsys):
 
 def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
     """Hand low over the table on either side of the sorting box: the straight joint
-    segment drives it through the box; KinematicTrajectoryOptimization finds a way."""
+    segment drives it through the box; free_path finds a way (a via point with the hand
+    raised, else KinematicTrajectoryOptimization), every segment of it collision free
+    and within the joint limits."""
     import dataclasses as dc
 
     from pydrake.math import RigidTransform, RollPitchYaw
@@ -279,7 +283,7 @@ def test_free_path_goes_around_what_the_straight_segment_hits(hamburg):
     assert a.ok and b.ok
     assert not reach.path_is_free(a.q, b.q, hand)
     path = free_path(reach, a.q, b.q, hand)
-    assert path is not None and len(path) > 2
+    assert path is not None and len(path) >= 1
     points = [a.q, *path, b.q]
     for p, q in zip(points, points[1:], strict=False):
         assert reach.path_is_free(p, q, hand)
@@ -389,3 +393,4 @@ def test_a_cuboid_the_arm_cannot_reach_at_its_yaw_is_grasped_turned(hamburg):
     by_label = {w.label: w for w in plan.waypoints}
     X_reached = reach.hand_pose(by_label["grasp"].q)
     assert np.linalg.norm(X_reached.translation() - plan.grasp.X_WB.translation()) < 0.004
+

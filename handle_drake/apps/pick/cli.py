@@ -248,6 +248,7 @@ def _plan(scenario, world, reach, target, seen_name, true_name, grasp_db, start,
         return None
     planning = time.perf_counter() - start
     result.update(grasp_class=plan.grasp_class, planning_s=dict(plan.seconds),
+                  ik_solves=plan.ik_solves,
                   planned_size=plan.grasp.object_spec.size, grasp_stored=plan.grasp_stored,
                   grasp_source=plan.grasp_source,
                   grasp_log=[[c, src, round(t, 4)] for c, src, t in plan.grasp_log],
@@ -271,7 +272,12 @@ def _execute(scenario, plan, reach, html, close, correct_release, monitor, repor
     result.update(close=close, release_corrected=outcome.release_corrected,
                   in_hand_offset_mm=outcome.in_hand_offset_mm,
                   in_hand_turn_deg=outcome.in_hand_turn_deg,
-                  in_hand_contacts=outcome.in_hand_contacts)
+                  in_hand_contacts=outcome.in_hand_contacts,
+                  in_hand_error_mm=outcome.in_hand_error_mm,
+                  in_hand_error_deg=outcome.in_hand_error_deg,
+                  release_offset_mm=outcome.release_offset_mm,
+                  release_tilt_deg=outcome.release_tilt_deg,
+                  release_height_mm=outcome.release_height_mm)
     if outcome.close_mode is not None:
         result.update(close_mode=outcome.close_mode, fingers_touched=outcome.fingers_touched,
                       closing_at_squeeze=outcome.closing_at_squeeze)

@@ -4,7 +4,8 @@ The arm follows the plan's waypoints (and the paths between them) through
 ``arm.position``: each segment lasts long enough for the slowest joint at half
 its speed limit (at least ``MIN_SEGMENT`` s), linear in joint space, and the
 driver's own rate limit applies on top. The hand holds each waypoint's command
-through ``hand.position``; the release opens to the pre-shape and waits
+through ``hand.position``; at the release the arm stands ``RELEASE_DWELL`` s (the
+object still held) before the hand opens to the pre-shape, and waits
 ``SETTLE_TIME`` s for the object to fall (longer while it still moves: ``MAX_SETTLE``).
 
 The close (``close="reactive"``, the default) is the project's reactive tactile
@@ -77,13 +78,18 @@ from handle_drake.systems.reactive_grasp import (
 )
 
 __all__ = ["PickOutcome", "execute_pick", "weld_bystanders", "filter_idle_contacts",
-           "MIN_SEGMENT", "CLOSES",
+           "MIN_SEGMENT", "CLOSES", "RELEASE_DWELL",
            "REACTIVE_CLOSE_TIME", "measure_in_hand", "locate_object", "PHASES"]
 
 MIN_SEGMENT = 0.4  # s
 CLOSE_TIME = 0.6  # s, the scripted close's ramp
 HOLD_TIME = 0.3  # s, and its hold before the lift
 SETTLE_TIME = 1.2  # s
+#: Seconds the arm stands at the release pose, the object still held, before the hand
+#: opens: the arm's driver lags its trajectory and the object swings in the grasp after
+#: the descent (development seed 6 at 0.5 ms: the cuboid's centre 14 mm from the
+#: planned release as the hand opened, the hole's clearance 12 mm; it wedged in the hole).
+RELEASE_DWELL = 0.5  # s
 #: After ``SETTLE_TIME``, the run goes on in 0.1 s steps, up to ``MAX_SETTLE`` s more,
 #: while the object moves faster than ``SETTLED_SPEED`` (m/s, its centre): the verdict is
 #: on the object at rest, not bouncing (a ball let go over its hole was still bouncing
@@ -174,6 +180,15 @@ class PickOutcome:
     in_hand_turn_deg: float | None = None
     in_hand_contacts: int = 0
     release_corrected: bool = False
+    # The measured pose against the plant's (mm, deg): how far the located object was
+    # from where it truly was in the hand after the lift.
+    in_hand_error_mm: float | None = None
+    in_hand_error_deg: float | None = None
+    # Where the object's centre was when the hand began to open, from the release pose
+    # planned for it (mm, horizontal), and its tilt from upright there (deg).
+    release_offset_mm: float | None = None
+    release_tilt_deg: float | None = None
+    release_height_mm: float | None = None
 
     @property
     def real_time_rate(self) -> float:
@@ -202,8 +217,10 @@ def _timeline(plan, velocity, close_time=CLOSE_TIME, hold_time=HOLD_TIME):
             # than six joints the wrist joints the IK set for b (plan.wrist_from_ik).
             hand.append(b.hand)
             previous = q
-        if b.label == "close" and hold_time > 0:
-            t += hold_time
+        dwell = hold_time if b.label == "close" else RELEASE_DWELL if b.label == "release" \
+            else 0.0
+        if dwell > 0:
+            t += dwell
             times.append(t)
             arm.append(b.q)
             hand.append(b.hand)
@@ -323,10 +340,17 @@ def _correct_release(simulator, diagram, station, scenario, plan, reach, close, 
         return plan, None, None, {}
     X_OB, count = measured
     error = X_OB_planned.inverse() @ X_OB
+    X_WB = plant.GetBodyByName(get_hand_spec(scenario.hand.kind).base_body,
+                               hand).EvalPoseInWorld(context)
+    X_WO_true = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(
+        plan.target))[0]).EvalPoseInWorld(context)
+    truth = (X_WB @ X_OB.inverse()).inverse() @ X_WO_true
     report = dict(in_hand_offset_mm=round(float(np.linalg.norm(
         X_OB.translation() - X_OB_planned.translation())) * 1000, 1),
         in_hand_turn_deg=round(float(np.degrees(error.rotation().ToAngleAxis().angle())), 1),
-        in_hand_contacts=count)
+        in_hand_contacts=count,
+        in_hand_error_mm=round(float(np.linalg.norm(truth.translation())) * 1000, 1),
+        in_hand_error_deg=round(float(np.degrees(truth.rotation().ToAngleAxis().angle())), 1))
     again = replan_release(scenario, reach, plan, X_OB)
     if again is None:
         return plan, None, None, report
@@ -469,6 +493,7 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
             times, marks = new_times, new_marks
     advance("carry", marks["release"])
     p_release = position.Eval(station_context).copy()
+    close_report.update(_release_report(station, station_context, scenario, plan, p_release))
     end = _settle(simulator, station, station_context, plan.target, times[-1])
     advance("release", end)
     wall = time.perf_counter() - start
@@ -478,6 +503,25 @@ def execute_pick(scenario, plan, html=None, still_bystanders: bool = False,
     inside = in_box(scenario, p)
     reason = _judge(plan, inside, p0, p_lift, p_release, p)
     return PickOutcome(inside, reason, p, end, wall, **close_report)
+
+
+def _release_report(station, station_context, scenario, plan, p_release) -> dict:
+    """The object's horizontal offset (mm) from the planned release and its tilt from
+    upright (deg) as the hand begins to open, and the planned height (mm) of its bottom
+    above the lid's top there."""
+    from handle_drake.apps.pick.plan import hole_centres, resting_height
+
+    bottom = (plan.X_WO_release.translation()[2] - hole_centres(scenario)[plan.kind][2]
+              - resting_height(plan.grasp.object_spec))
+    plant = GetPlant(station)
+    context = station.GetSubsystemContext(plant, station_context)
+    body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(plan.target))[0])
+    # The object's axis nearest the vertical (a cuboid may rest on any face).
+    up = np.max(np.abs(body.EvalPoseInWorld(context).rotation().matrix()[2, :]))
+    return dict(release_offset_mm=round(float(np.linalg.norm(
+        p_release[:2] - plan.X_WO_release.translation()[:2])) * 1000, 1),
+        release_tilt_deg=round(float(np.degrees(np.arccos(np.clip(up, 0, 1)))), 1),
+        release_height_mm=round(float(bottom) * 1000, 1))
 
 
 def _build_diagram(station, scenario, plan, close):

@@ -10,15 +10,20 @@ the floating-wrist planner (:func:`handle_drake.grasp.planning.plan_grasp`, reac
 from the arm's base towards the object) gives the pre-grasp, grasp and lift poses of the
 hand base; :class:`handle_drake.apps.pick.reach.ArmReach` finds arm joints for each
 (limits, 3 mm clearance; each IK seeded by the previous configuration). The release pose
-keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object
-``DROP_HEIGHT`` above its hole, turned to the hole's orientation (a cuboid's width along
-the box's x, either way round; a sphere at its own yaw or a quarter or half turn from
+keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object's bottom
+``DROP_HEIGHT`` above its hole (first any ``RELEASE_INSERTS`` of its kind), turned
+to the hole's orientation (a cuboid's width along the box's x, either way round; a
+sphere at its own yaw or a quarter or half turn from
 it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
 Between consecutive configurations the straight joint-space segment must be collision
-free (checked every 0.02 rad with the hand's posture of that phase); if one is not,
-Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free path between the
-two (:func:`free_path`). The first class whose whole chain exists is the plan; otherwise
-:class:`PickPlanningError` lists each class's reason.
+free (checked every 0.02 rad with the hand's posture of that phase); if one is not, a
+via point with the hand raised, then Drake's ``KinematicTrajectoryOptimization``, looks
+for a collision-free path between the two (:func:`free_path`). The first class whose
+whole chain exists is the plan; otherwise :class:`PickPlanningError` lists each class's
+reason. The arm's work is bounded by a count, not the clock: at most
+``PLAN_IK_BUDGET`` IK solves per plan (a path search counts ``PATH_SEARCH_COST``),
+each solve bounded by its iterations (:class:`~handle_drake.apps.pick.reach.ArmReach`);
+past it the planner stops and says so.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
+from handle_drake.apps.pick.reach import BUDGET_SPENT
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.devices.arm.config import Arm
 from handle_drake.devices.arm.model import get_arm_spec
@@ -43,7 +49,8 @@ from handle_drake.scene.config import box_pose, hole_centres
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
            "default_grasp_database", "grasp_db_requests", "build_grasp_database",
-           "free_path", "replan_release", "GRASP_SOURCES"]
+           "free_path", "replan_release", "GRASP_SOURCES", "PLAN_IK_BUDGET", "PATH_SEARCH_COST",
+           "RELEASE_INSERTS"]
 
 #: The pick application's grasp database (``handle-drake pick SCENARIO
 #: --build-grasp-db`` writes it): the planner's answers for the sorting box's objects
@@ -90,7 +97,30 @@ GRASP_TURNS = {"cuboid": tuple(np.radians([0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 2
 #: turn costs the arm's IK of its poses (a held-out cuboid trying every turn of all eight
 #: classes planned for 77 s at load 14).
 TURNED_CLASSES = ("parallel_extension", "tripod")
+#: IK solves (:meth:`ArmReach.solve` calls, each at most two SNOPT solves of 100 major
+#: iterations; a path search counts ``PATH_SEARCH_COST``) one :func:`plan_pick` may
+#: make over every class, turn and release pose: past it nothing more is tried. Each
+#: pose is solved from the previous waypoint and from the start only (no random
+#: seeds: on development seeds 0-59 a random seed found none of 104 poses the two
+#: missed). A plan takes 5 (pre-grasp, grasp, lift, carry, release), one more per
+#: turn or release yaw the arm does not reach.
+PLAN_IK_BUDGET = 40
+#: What one path search (``KinematicTrajectoryOptimization``, :func:`free_path`)
+#: counts against ``PLAN_IK_BUDGET``, in IK solves.
+PATH_SEARCH_COST = 20
+#: Heights (m) the hand is raised to for a via point between two configurations
+#: whose straight joint segment collides (:func:`free_path`).
+VIA_RISES = (0.10, 0.20)
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
+#: Heights (m, negative: below the lid's top) of a kind's bottom at the release tried
+#: before ``DROP_HEIGHT``, each at every turn over the hole (none: measured worse). Tried:
+#: a cuboid's bottom 2 cm, else 1 cm, into its hole (the opening fingers tip a cuboid
+#: let go 3 cm above it, which then wedges across the hole: its face diagonal, 84.9 mm,
+#: is longer than the hole's side, 84 mm); development seed 6 at 0.5 ms: the cuboid hit
+#: the rim on the way down, turned 46 deg in the hand and wedged (in the box without it).
+#: The arm's IK checks the hand at the planned closing posture, not the reactive
+#: close's, and not the object against the lid.
+RELEASE_INSERTS: dict = {}
 CARRY_HEIGHT = 0.12  # m, above the release pose
 
 
@@ -183,6 +213,8 @@ class PickPlan:
     # Hand joints the arm's IK set per waypoint (an arm with fewer than six joints:
     # the wrist, reach.ArmReach); the hand's commands carry them.
     wrist_from_ik: tuple[str, ...] = ()
+    # The arm's IK solves the plan took (ArmReach.solve calls; ``ik_budget`` bounds them).
+    ik_solves: int = 0
 
     @property
     def grasp_stored(self) -> bool:
@@ -204,7 +236,6 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
     """Candidate (X_WO_release, X_WB_release), nearest turn first."""
 
     centre = hole_centres(scenario)[kind]
-    z = centre[2] + resting_height(spec) + DROP_HEIGHT
     yaw0 = _yaw(X_WO.rotation())
     if kind == "cuboid":  # its square hole takes it at every quarter turn
         box_yaw = _yaw(box_pose(scenario).rotation())
@@ -222,9 +253,11 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
         yaws.append(yaw0 + math.atan2(centre[1] - base[1], centre[0] - base[0])
                     - math.atan2(p_WO[1] - base[1], p_WO[0] - base[0]))
     out = []
-    for yaw in yaws:
-        X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
-        out.append((X, X @ X_OB))
+    for drop in (*RELEASE_INSERTS.get(kind, ()), DROP_HEIGHT):
+        z = centre[2] + resting_height(spec) + drop
+        for yaw in yaws:
+            X = RigidTransform(RollPitchYaw(0, 0, yaw), [centre[0], centre[1], z])
+            out.append((X, X @ X_OB))
     return out
 
 
@@ -234,15 +267,42 @@ def _raised(X: RigidTransform, dz: float) -> RigidTransform:
 
 def free_path(reach, q_from, q_to, q_hand, clearance: float = 0.002):
     """A collision-free joint path from ``q_from`` to ``q_to`` (list of arm
-    configurations, ends excluded) by Drake's ``KinematicTrajectoryOptimization``
-    (B-spline, minimum duration + length, joint position and velocity limits,
-    the minimum-distance constraint at sample points; 10 control points and 20
-    samples, then 14 and 28), or None. The result is checked densely
-    (:meth:`ArmReach.path_is_free` between consecutive samples)."""
+    configurations, ends excluded), or None. First through one via point (the hand
+    raised ``VIA_RISES`` above either end, by one IK solve each: two straight
+    segments, checked as :meth:`ArmReach.path_is_free`); then by Drake's
+    ``KinematicTrajectoryOptimization`` (B-spline, minimum duration + length, joint
+    position and velocity limits, the minimum-distance constraint at sample points;
+    10 control points and 20 samples, then 14 and 28; each solve counted as
+    ``PATH_SEARCH_COST`` IK solves against ``reach.ik_limit``), checked densely."""
+    path = _via_path(reach, q_from, q_to, q_hand, clearance)
+    if path is not None:
+        return path
     for num_control_points, samples in ((10, 20), (14, 28)):
+        if reach.ik_limit is not None and reach.ik_solves + PATH_SEARCH_COST > reach.ik_limit:
+            return None
+        reach.ik_solves += PATH_SEARCH_COST
         path = _kto_path(reach, q_from, q_to, q_hand, num_control_points, samples, clearance)
         if path is not None:
             return path
+    return None
+
+
+def _via_path(reach, q_from, q_to, q_hand, clearance):
+    """``[q_via]``: arm joints with the hand ``VIA_RISES`` above where it is at
+    ``q_from`` or ``q_to`` from which both straight segments are collision free, or
+    None (an arm whose IK moves the wrist is not tried: the hand's posture would
+    change on the way)."""
+    if _free_joints(reach):
+        return None
+    for rise in VIA_RISES:
+        for q_end in (q_from, q_to):
+            if reach.budget_spent():
+                return None
+            X = _raised(reach.hand_pose(q_end), rise)
+            result = reach.solve(X, q_end, q_hand, clearance=clearance)
+            if result.ok and reach.path_is_free(q_from, result.q, q_hand) and \
+                    reach.path_is_free(result.q, q_to, q_hand):
+                return [result.q]
     return None
 
 
@@ -306,7 +366,8 @@ def _check_target(scenario, target: str, kind: str) -> None:
 def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidTransform,
               q_start, classes=None, grasp_budget: float | None = GRASP_BUDGET,
               total_budget: float | None = GRASP_TOTAL_BUDGET,
-              grasp_db: GraspDatabase | None = None) -> PickPlan:
+              grasp_db: GraspDatabase | None = None,
+              ik_budget: int | None = PLAN_IK_BUDGET) -> PickPlan:
     """Plans picking ``target`` (a ``kind`` of ``size`` at ``X_WO``) into its hole
     (see the module doc). ``reach`` is an :class:`~handle_drake.apps.pick.reach.ArmReach`
     of the scenario ignoring ``target``; ``q_start`` the arm's joints now;
@@ -332,6 +393,19 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     q_start = np.asarray(q_start, dtype=float)
     r = _PickRequest(scenario, reach, target, kind, spec, X_WO, q_start, ratio, hand, base,
                      grasp_db)
+    first, limit = reach.ik_solves, reach.ik_limit
+    reach.ik_limit = None if ik_budget is None else first + int(ik_budget)
+    try:
+        plan = _plan_classes(r, classes, grasp_budget, total_budget, ik_budget)
+    finally:
+        reach.ik_limit = limit
+    plan.ik_solves = reach.ik_solves - first
+    return plan
+
+
+def _plan_classes(r, classes, grasp_budget, total_budget, ik_budget) -> PickPlan:
+    """plan_pick's search over the grasp classes (see there)."""
+    target, kind, reach = r.target, r.kind, r.reach
     # First every class from the database (stored or adapted: no search, no clock), then
     # the searches within the budgets, for the classes the database could not serve.
     order = list(classes or CLASS_ORDER[kind])
@@ -347,6 +421,9 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
                                    f"({total_budget} s) is spent")
                 continue
             budget = left if budget is None else min(budget, left)
+        if reach.budget_spent():
+            r.attempts[cls] = f"not tried: the planning budget ({ik_budget} IK solves) is spent"
+            continue
         found = _class_grasp(r, cls, search, budget)
         if found is not None:
             plan = _plan_with_grasp(r, cls, *found)
@@ -446,6 +523,8 @@ def _plan_with_grasp(r: _PickRequest, cls, grasp, source) -> PickPlan | None:
                 needs_search.append(turn)
             else:
                 reasons.append(reason)
+            if r.reach.budget_spent():
+                break
     reasons = reasons or ["no grasp at any turn"]
     r.attempts[cls] = reasons[0] if len(set(reasons)) == 1 else "; ".join(
         dict.fromkeys(reasons))
@@ -576,11 +655,12 @@ def _solve_chain(reach, chain, waypoints, seconds, symmetry=None) -> str:
             waypoints.append(Waypoint(label, previous.q,
                                       _with_wrist(reach, command, previous.hand)))
             continue
-        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=2,
+        result = reach.solve_from_seeds(X, [previous.q, waypoints[0].q], q_hand, tries=0,
                                         **options)
         seconds["ik"] += result.seconds
         if not result.ok:
-            return f"no IK for the {label} pose"
+            return f"no IK for the {label} pose" + (
+                f" ({BUDGET_SPENT})" if result.message == BUDGET_SPENT else "")
         if result.q_hand is not None:  # an arm with < 6 joints moved the hand's wrist
             hand_names = reach.hand_spec.joint_names
             command = _with_wrist(reach, command, None, {

@@ -48,7 +48,11 @@ from handle_drake.geometry.objects import AddObject, AddTable
 from handle_drake.scene.config import initial_pose, scene_objects, spec_of
 from handle_drake.scene.plant import AddSortingBox
 
-__all__ = ["ArmReach", "IkResult", "SPHERE_TURN", "CUBOID_TURN", "wrist_joints"]
+__all__ = ["ArmReach", "IkResult", "SPHERE_TURN", "CUBOID_TURN", "wrist_joints",
+           "BUDGET_SPENT"]
+
+#: :attr:`IkResult.message` of a solve refused because ``ArmReach.ik_limit`` is reached.
+BUDGET_SPENT = "the IK budget is spent"
 
 #: Largest turn (rad) of a sphere's grasp about its centre an arm with fewer than six
 #: joints may take instead of the planned one (ours: the fingers' approach stays
@@ -131,6 +135,11 @@ class ArmReach:
         self._free_in_hand = np.array([self.hand_spec.joint_names.index(n)
                                        for n in self.free_hand_joints], dtype=int)
         self.target_frame = self.base_frame
+        # Work done (:meth:`solve` calls, each one or two SNOPT solves of at most 100
+        # major iterations) and the limit a planner may set on it (None: none): a solve
+        # asked for past ``ik_limit`` fails at once with :data:`BUDGET_SPENT`.
+        self.ik_solves = 0
+        self.ik_limit: int | None = None
         if self.free_hand_joints:
             last = plant.GetJointByName(self.free_hand_joints[-1], self.hand)
             self.target_frame = last.child_body().body_frame()
@@ -170,6 +179,9 @@ class ArmReach:
         from this seed, neither has the full one), then, seeded by its answer,
         with the minimum-distance constraint."""
         start = time.perf_counter()
+        if self.budget_spent():
+            return IkResult(None, 0.0, message=BUDGET_SPENT)
+        self.ik_solves += 1
         q_hand = np.asarray(q_hand, dtype=float)
         seed = self.positions(q_seed, q_hand)
         X_target = X_WB
@@ -204,6 +216,10 @@ class ArmReach:
                         float(np.linalg.norm(X.translation() - X_target.translation())),
                         float(X.rotation().InvertAndCompose(X_target.rotation()).ToAngleAxis()
                               .angle()), q_hand=solved_hand)
+
+    def budget_spent(self) -> bool:
+        """Whether :attr:`ik_solves` has reached :attr:`ik_limit`."""
+        return self.ik_limit is not None and self.ik_solves >= self.ik_limit
 
     def _solve(self, X_WB, seed, q_hand, clearance, position_tolerance, angle_tolerance,
                pivot=None):
@@ -243,17 +259,22 @@ class ArmReach:
 
     def solve_from_seeds(self, X_WB: RigidTransform, seeds, q_hand, tries: int = 4,
                          rng=None, **options) -> IkResult:
-        """:meth:`solve` from each seed, then from ``tries`` random configurations
-        within the limits; the first success (total time in ``seconds``)."""
+        """:meth:`solve` from each seed (once each: repeats are skipped), then from
+        ``tries`` random configurations within the limits; the first success (total
+        time in ``seconds``)."""
         rng = np.random.default_rng(0) if rng is None else rng
-        seeds = [np.asarray(s, dtype=float) for s in seeds]
-        seeds += [rng.uniform(self.spec.lower, self.spec.upper) for _ in range(tries)]
+        given = []
+        for s in seeds:  # a seed equal to an earlier one would repeat its solve
+            s = np.asarray(s, dtype=float)
+            if not any(np.array_equal(s, t) for t in given):
+                given.append(s)
+        seeds = given + [rng.uniform(self.spec.lower, self.spec.upper) for _ in range(tries)]
         total = 0.0
         result = IkResult(None, 0.0, message="no seed")
         for seed in seeds:
             result = self.solve(X_WB, seed, q_hand, **options)
             total += result.seconds
-            if result.ok:
+            if result.ok or result.message == BUDGET_SPENT:
                 break
         result.seconds = total
         return result
