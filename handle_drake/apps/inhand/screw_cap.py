@@ -119,7 +119,6 @@ from handle_drake.scenario import (
     ObjectConfig,
     Scenario,
     SimHandDriver,
-    default_plant_config,
 )
 from handle_drake.scene.jointed import AddBareObject, BareObject, ObjectBase, ThreadJoint
 from handle_drake.station import _set_default_hand_positions, hand_initial_command

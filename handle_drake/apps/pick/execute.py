@@ -63,7 +63,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from scipy.spatial.transform import Rotation
 
-from handle_drake.apps.pick.plan import replan_release
+from handle_drake.apps.pick.plan import hole_centres, replan_release, resting_height
 from handle_drake.apps.pick.touch import locate_by_touch, senses_touch, with_taxels
 from handle_drake.base.hands import get_hand_spec
 from handle_drake.devices.arm.model import ARM_INSTANCE, get_arm_spec
@@ -509,8 +509,6 @@ def _release_report(station, station_context, scenario, plan, p_release) -> dict
     """The object's horizontal offset (mm) from the planned release and its tilt from
     upright (deg) as the hand begins to open, and the planned height (mm) of its bottom
     above the lid's top there."""
-    from handle_drake.apps.pick.plan import hole_centres, resting_height
-
     bottom = (plan.X_WO_release.translation()[2] - hole_centres(scenario)[plan.kind][2]
               - resting_height(plan.grasp.object_spec))
     plant = GetPlant(station)
