@@ -37,7 +37,8 @@ __all__ = ["register", "perceived_objects", "choose_target", "EXIT_CODES", "exit
 
 #: The catalogue kind the planner is given for each detected primitive.
 DETECTED_KIND = {"sphere": "sphere", "box": "cuboid", "cylinder": "cylinder"}
-PICKABLE = ("sphere", "cuboid")
+PICKABLE = ("sphere", "cuboid", "cylinder", "rotated_cuboid", "mug", "wine_glass",
+            "star_prism", "mesh")
 #: ``pick``'s result ``status`` -> the command's exit status (2 is bad input, raised
 #: before any work as a ValueError).
 EXIT_CODES = {"in_box": 0, "failed": 1, "nothing_to_pick": 3}
