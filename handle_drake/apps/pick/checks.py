@@ -40,7 +40,7 @@ def check_pick_arguments(args, scenario) -> None:
                          f"hand only, got {kind!r}")
     box = scenario.sorting_box
     if args.kind is not None and box is not None:
-        holes = [h.kind for h in box.holes if h.size]
+        holes = [h.kind for h in box.holes if h.size or h.kind == "mesh"]
         if args.kind not in holes:
             raise ValueError(f"--kind {args.kind}: the sorting box has no hole for a "
                              f"{args.kind} (sorting_box.holes: {holes})")
