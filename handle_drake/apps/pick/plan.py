@@ -91,6 +91,12 @@ GRASP_SOURCES = ("stored", "adapted", "searched")
 #: nearest object is a cuboid, parallel extension's pre-grasp and grasp reached: 15 at
 #: 0 deg, 16 with +-5, 17 with +-10, 18 with +-20.)
 GRASP_TURNS = {"cuboid": tuple(np.radians([0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 20.0]))}
+#: The proxied kinds' grasps turn as the cuboid's (apps/pick/kinds.py: each is a cuboid
+#: to the planner; the release turns the object back to a yaw its hole takes). Round ones
+#: further: a cylinder's, mug's and glass's grasp holds at any turn about their axis.
+GRASP_TURNS.update(dict.fromkeys(PROXY_KINDS, GRASP_TURNS["cuboid"]))
+GRASP_TURNS.update(dict.fromkeys(("cylinder", "wine_glass"), tuple(np.radians(
+    [0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 20.0, -45.0, 45.0, -90.0, 90.0]))))
 #: The classes whose grasp is turned (``GRASP_TURNS``): the ones that lift a cuboid; each
 #: turn costs the arm's IK of its poses (a held-out cuboid trying every turn of all eight
 #: classes planned for 77 s at load 14).
