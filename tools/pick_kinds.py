@@ -10,6 +10,12 @@ a rotated cuboid is told as a cuboid, the same solid, and asked for as one); one
 line per pick (``RESULT {...}``) on stdout. The default pairs are, per kind, the first two
 of the held-out ``SORTER_SEEDS`` (700-711) whose scene holds that kind. A pick takes
 20-50 s on a quiet machine (70-220 s under load 7).
+
+``--shapes 300-329``: the kinds perception tells instead (no pick): perception's seeded
+tables (:func:`handle_drake.apps.perception.scenes.random_scene`, Kinect v1), each true
+object's nearest detection (within 5 cm): the shape told, its size error (mm) and, for a
+star prism or a mug, the yaw error (deg; a star's modulo 72 deg); one ``SHAPES {...}`` line.
+The shape rules and the size biases were set on seeds 100-119.
 """
 
 from __future__ import annotations
@@ -70,11 +76,51 @@ def one_pick(scenario, seed: int, kind: str, perceived: bool) -> dict:
                 wall_s=round(time.perf_counter() - start, 1))
 
 
+def shapes(seeds) -> dict:
+    """The confusion of true kind -> shape told, and the size and yaw errors per kind."""
+    import collections
+    import math
+
+    import numpy as np
+
+    from handle_drake.apps.perception.scenes import TabletopScene
+    from handle_drake.apps.perception.scenes import random_scene as table_scene
+    from handle_drake.geometry.detect import detect
+
+    told, size, yaw = collections.Counter(), collections.defaultdict(list), \
+        collections.defaultdict(list)
+    for seed in seeds:
+        objects = table_scene(seed)
+        detections = detect(TabletopScene(objects, seed=seed).frame())
+        for o in objects:
+            near = min(detections, default=None,
+                       key=lambda d: np.linalg.norm(d.position[:2] - o.xy))
+            if near is None or np.linalg.norm(near.position[:2] - o.xy) > 0.05:
+                told[f"{o.kind}->missed"] += 1
+                continue
+            told[f"{o.kind}->{near.shape}"] += 1
+            if near.shape != o.kind:
+                continue
+            size[o.kind].append(round((near.shape_size - o.size) * 1000, 1))
+            period = {"star_prism": 2 * math.pi / 5, "mug": 2 * math.pi}.get(o.kind)
+            if period:
+                e = (near.shape_yaw - o.yaw + period / 2) % period - period / 2
+                yaw[o.kind].append(round(math.degrees(e), 1))
+    return {"seeds": [min(seeds), max(seeds)], "told": dict(sorted(told.items())),
+            "size_error_mm": dict(size), "yaw_error_deg": dict(yaw)}
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--perceived", action="store_true")
     parser.add_argument("--pairs", default=None, help="seed:kind,... (default: see doc)")
+    parser.add_argument("--shapes", default=None, metavar="A-B",
+                        help="perception's kinds on its seeded tables A..B (no pick)")
     args = parser.parse_args(argv)
+    if args.shapes is not None:
+        a, b = (int(v) for v in args.shapes.split("-"))
+        print("SHAPES", json.dumps(shapes(range(a, b + 1))), flush=True)
+        return 0
     scenario = LoadScenario(filename=SORTER)
     pairs = default_pairs(scenario) if args.pairs is None else [
         (int(p.split(":")[0]), p.split(":")[1]) for p in args.pairs.split(",")]

@@ -183,6 +183,17 @@ def test_a_pick_of_each_kind_ends_in_the_box_judged_from_the_plant(sorter, kind,
     assert result["true_kind"] == kind
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--scene-kinds", "all"], "--scene-kinds: only with --scene-seed"),
+    (["--scene-seed", "3", "--scene-kinds", "mug,teapot"], "--scene-kinds: expected 'all' or"),
+])
+def test_bad_scene_kinds_are_refused_with_exit_2(args, message, capsys):
+    from handle_drake.cli import main
+
+    code = main(["pick", str(SORTER), "--true-poses", *args])
+    assert code == 2 and message in capsys.readouterr().err
+
+
 def test_a_rotated_object_is_turned_back_to_its_hole(sorter):
     """A star prism standing 30 deg off its hole's yaw is released at a yaw of its hole
     (the hand turns it), not at its own."""

@@ -38,6 +38,13 @@ def check_pick_arguments(args, scenario) -> None:
     if kind not in PICK_HANDS:
         raise ValueError(f"hand.kind: pick plans grasps for the {' or '.join(PICK_HANDS)} "
                          f"hand only, got {kind!r}")
+    if getattr(args, "scene_kinds", "sphere,cuboid") != "sphere,cuboid":
+        if args.scene_seed is None:
+            raise ValueError("--scene-kinds: only with --scene-seed (it names the kinds a "
+                             "seeded scene draws)")
+        from handle_drake.apps.pick.scenes import scene_kinds
+
+        scene_kinds(args.scene_kinds)
     box = scenario.sorting_box
     if args.kind is not None and box is not None:
         holes = [h.kind for h in box.holes if h.size or h.kind == "mesh"]
