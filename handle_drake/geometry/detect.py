@@ -417,19 +417,28 @@ def _describe(cluster: np.ndarray, plane: TablePlane) -> Detection:
     # Yaw of the major axis, measured in world about the table normal.
     major_W = R_WT @ np.array([math.cos(angle), math.sin(angle), 0.0])
     yaw = float(np.mod(math.atan2(major_W[1], major_W[0]), np.pi))
-    shape, size, shape_yaw = {"sphere": ("sphere", extent[0], yaw),
-                              "box": ("cuboid", extent[0], yaw)}.get(kind, (None, 0, 0))
-    if shape is None:
-        shape, size, turn = round_shape(local, c_centre, c_radius, height)
-        size += SHAPE_SIZE_BIAS.get(shape, 0.0)
-        x_W = R_WT @ np.array([math.cos(turn), math.sin(turn), 0.0])
-        shape_yaw = math.atan2(x_W[1], x_W[0])
-        if shape == "star_prism":  # the top face's centre, not the side's circle
-            centre_local[:2] = _top_centre(local, height)
+    shape, size, shape_yaw = _shape(kind, extent, yaw, local, c_centre, c_radius, height,
+                                    R_WT, centre_local)
     return Detection(position=origin + R_WT @ centre_local, extent=extent, yaw=yaw, kind=kind,
                      residual=residuals[kind], residuals=residuals,
                      num_points=len(cluster), shape=shape, shape_size=float(size),
                      shape_yaw=float(shape_yaw))
+
+
+def _shape(kind, extent, yaw, local, c_centre, c_radius, height, R_WT, centre_local):
+    """``(shape, size, yaw)`` of a detection (:class:`Detection`'s fields): a sphere's and
+    a box's their own; a round one's by :func:`round_shape`, its size corrected by
+    ``SHAPE_SIZE_BIAS`` and its yaw turned into the world (a star's centre moved to its
+    top face's, in ``centre_local``)."""
+    if kind == "sphere":
+        return "sphere", extent[0], yaw
+    if kind == "box":
+        return "cuboid", extent[0], yaw
+    shape, size, turn = round_shape(local, c_centre, c_radius, height)
+    x_W = R_WT @ np.array([math.cos(turn), math.sin(turn), 0.0])
+    if shape == "star_prism":  # the top face's centre, not the side's circle
+        centre_local[:2] = _top_centre(local, height)
+    return shape, size + SHAPE_SIZE_BIAS.get(shape, 0.0), math.atan2(x_W[1], x_W[0])
 
 
 def _top_centre(local: np.ndarray, height: float) -> np.ndarray:

@@ -28,9 +28,11 @@ import math
 import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform
+from scipy.spatial import ConvexHull
 
 from handle_drake.geometry.objects import (
     DEFAULT_SIZE,
+    ROTATED_CUBOID_YAW,
     ObjectSpec,
     dimensions,
     resting_height,
@@ -257,8 +259,6 @@ def _footprint_polygon(spec, clearance: float) -> np.ndarray:
     in O), grown by ``clearance`` (m): each hull vertex moved out along the bisector of its
     edges' normals by ``clearance / cos(half the turn)``, so every edge moves out by
     ``clearance``. Counter-clockwise (scipy's ``ConvexHull`` order in 2-D)."""
-    from scipy.spatial import ConvexHull
-
     xy = np.asarray(surface_mesh(spec).vertices)[:, :2]
     corners = xy[ConvexHull(xy).vertices]
     prev, nxt = np.roll(corners, 1, axis=0), np.roll(corners, -1, axis=0)
@@ -387,7 +387,6 @@ def release_yaws(scenario, kind: str) -> list[float] | None:
         n = _HOLE_SYMMETRY[kind]
     else:
         return None
-    from handle_drake.geometry.objects.catalogue import ROTATED_CUBOID_YAW
 
     m = box_pose(scenario).rotation().matrix()
     yaw = math.atan2(m[1, 0], m[0, 0]) - (ROTATED_CUBOID_YAW if kind == "rotated_cuboid"

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from handle_drake.apps.pick.plan import GRASP_DB
+from handle_drake.apps.pick.scenes import scene_kinds
 from handle_drake.base.paths import check_output
 from handle_drake.devices.arm.model import ARM_SPECS
 from handle_drake.scene.config import box_pose, scene_objects
@@ -42,8 +43,6 @@ def check_pick_arguments(args, scenario) -> None:
         if args.scene_seed is None:
             raise ValueError("--scene-kinds: only with --scene-seed (it names the kinds a "
                              "seeded scene draws)")
-        from handle_drake.apps.pick.scenes import scene_kinds
-
         scene_kinds(args.scene_kinds)
     box = scenario.sorting_box
     if args.kind is not None and box is not None:
