@@ -14,6 +14,10 @@ keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object
 ``DROP_HEIGHT`` above its hole, turned to the hole's orientation (a cuboid's width along
 the box's x, either way round; a sphere at its own yaw or a quarter or half turn from
 it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
+The kinds beyond the planner's sphere and upright cuboid (a cylinder, a rotated cuboid, a
+mug, a wine glass, a star prism, a user's mesh) are planned through an upright cuboid proxy
+(:mod:`handle_drake.apps.pick.kinds`; their stored grasps in :data:`GRASP_DB_KINDS`) and
+released upright at a yaw their hole takes (:func:`handle_drake.scene.config.release_yaws`).
 Between consecutive configurations the straight joint-space segment must be collision
 free (checked every 0.02 rad with the hand's posture of that phase); if one is not,
 Drake's ``KinematicTrajectoryOptimization`` looks for a collision-free path between the

@@ -1,10 +1,11 @@
 """Seeded random scenes: 2-5 objects on the scenario's table, clear of the box.
 
-The kinds are those the grasp planner grasps standing on the table and the box
-has a hole for: spheres and upright cuboids (the planner grasps a cylinder only
-lying on its side, which no hole takes, and does not plan the star prism). Sizes
-are the holes' objects' sizes; places and yaws are drawn uniformly in
-``REGION`` (m, world x and y) and redrawn until every two objects stand
+The kinds drawn are ``SCENE_KINDS`` by default (spheres and upright cuboids: the Hamburg
+table's published blocks), or any of ``SORTER_KINDS`` the box has a hole for
+(``--scene-kinds all``: the shape sorter, diagrams/sorter_setup.yaml; the kinds beyond the
+planner's own are grasped through a cuboid proxy, :mod:`handle_drake.apps.pick.kinds`).
+Sizes are the holes' objects' sizes (a mesh: the hole's mesh); places and yaws are drawn
+uniformly in ``REGION`` (m, world x and y) and redrawn until every two objects stand
 ``GAP`` apart (room for the fingers) and off the box.
 """
 
