@@ -56,17 +56,21 @@ def test_hole_matches_its_object_with_the_clearance():
     # A wine glass's hole: its bowl's widest circle (8 cm) plus the clearance.
     glass = hole_polygon(Hole("wine_glass", 0.08, clearance=0.01))
     assert np.min(np.linalg.norm(glass, axis=1)) >= 0.05 - 1e-12
-    # A mug's: the convex hull of its footprint (the cup's 8 cm circle and the handle
-    # reaching 2.4 cm out along +x), every edge moved out by the clearance.
+    # A mug's: the circle about its cup's axis through its handle's end (8 cm cup, the
+    # handle reaching 2.4 cm out), plus the clearance: it passes at any yaw.
     mug = hole_polygon(Hole("mug", 0.08, clearance=0.01))
-    edges = np.roll(mug, -1, axis=0) - mug
+    assert np.min(np.linalg.norm(mug, axis=1)) >= 0.04 + 0.024 + 0.01 - 1e-9
+    # A user's mesh's: the convex hull of its footprint (a hexagonal prism, 3.2 cm to a
+    # corner), every edge moved out by the clearance, counter-clockwise.
+    from handle_drake.base.models import diagrams_dir
+
+    hexagon = hole_polygon(Hole("mesh", file=str(diagrams_dir() / "meshes" / "hex_prism.obj"),
+                                clearance=0.01))
+    edges = np.roll(hexagon, -1, axis=0) - hexagon
     outward = np.column_stack([edges[:, 1], -edges[:, 0]])
     outward /= np.linalg.norm(outward, axis=1, keepdims=True)
-    # Each edge's distance from the cup's axis: the cup's faces (4 cm from it) plus the
-    # clearance, nearer on none; counter-clockwise (all positive).
-    distance = np.einsum("ij,ij->i", outward, mug)
-    assert np.min(distance) == pytest.approx(0.04 + 0.01, abs=1e-4)
-    assert np.max(mug[:, 0]) == pytest.approx(0.04 + 0.024 + 0.01, abs=1e-3)
+    distance = np.einsum("ij,ij->i", outward, hexagon)
+    np.testing.assert_allclose(distance, 0.032 * np.cos(np.pi / 6) + 0.01, atol=1e-6)
 
 
 def _scene(extra=""):
