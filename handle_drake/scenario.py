@@ -440,12 +440,16 @@ def DumpScenario(scenario: Scenario) -> str:
 
 
 def _resolve_mesh_file(scenario: Scenario, folder: Path) -> None:
-    # A relative mesh path in a scenario file names a file next to the scenario.
-    o = scenario.object
-    if o is not None and o.file and not Path(o.file).expanduser().is_absolute():
-        candidate = folder / o.file
-        if candidate.is_file():
-            o.file = str(candidate.resolve())
+    # A relative mesh path in a scenario file names a file next to the scenario (the
+    # objects' and the sorting box's mesh holes' too).
+    items = [scenario.object, *scenario.objects]
+    if scenario.sorting_box is not None:
+        items += scenario.sorting_box.holes
+    for o in items:
+        if o is not None and o.file and not Path(o.file).expanduser().is_absolute():
+            candidate = folder / o.file
+            if candidate.is_file():
+                o.file = str(candidate.resolve())
 
 
 def _load(text: str, defaults: Scenario, source: str) -> Scenario:

@@ -1,7 +1,8 @@
 """The scene's further objects and the toy-sorting box in a plant.
 
 The box's lid is cut by shaped holes. Each hole is a polygon star-shaped about
-its centre (a circle as a 24-gon, a square, a five-pointed star); the lid
+its centre (a circle as a 24-gon, a square, a five-pointed star, a footprint's convex
+hull about the object's origin); the lid
 around it is tiled by convex prisms, one per polygon edge: the part of the
 hole's cell between the edge and the cell's border inside the wedge the edge
 spans from the hole's centre (the intersection of the wedge, the cell and the
@@ -24,6 +25,7 @@ from handle_drake.geometry.objects import (
 )
 from handle_drake.scene.config import (
     box_pose,
+    hole_cells,
     hole_polygon,
     initial_pose,
     object_instance_name,
@@ -92,14 +94,11 @@ def AddSortingBox(plant, scenario):
                                                                       w + inner_h / 2]))
         add(f"wall_y{sign:+d}", Box(sx - 2 * w, w, inner_h),
             RigidTransform([0, sign * (sy - w) / 2, w + inner_h / 2]))
-    cell = sx / len(box.holes)
-    half = np.array([cell / 2, sy / 2])
-    for i, hole in enumerate(box.holes):
-        x = -sx / 2 + cell * (i + 0.5)
+    for i, (hole, (centre, half)) in enumerate(zip(box.holes, hole_cells(box), strict=True)):
         for k, piece in enumerate(lid_pieces(hole_polygon(hole), half)):
             vertices = np.vstack([np.column_stack([piece, np.full(len(piece), z)])
                                   for z in (sz - w, sz)])
-            vertices[:, 0] += x
+            vertices[:, :2] += centre
             add(f"lid_{i}_{k}", Convex(np.ascontiguousarray(vertices.T), f"lid_{i}_{k}"),
                 RigidTransform())
     plant.WeldFrames(plant.world_frame(), body.body_frame(), box_pose(scenario))

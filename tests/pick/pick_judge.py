@@ -3,8 +3,10 @@ application's verdict (``execute._judge`` and ``scene.config.in_box``, which loo
 object's centre only): every collision point of the object inside the box's cavity, and
 the object at rest on the box's floor (issue 49, item 8).
 
-Collision points: the corners of each box-shaped collision geometry, and the six
-extreme points of each sphere (the cuboid's corner feet and the ball), in the world,
+Collision points: the corners of each box-shaped collision geometry, the six
+extreme points of each sphere (the cuboid's corner feet and the ball), 32 points on each
+rim of a cylinder and the hull vertices of a convex piece (a mug's, a wine glass's, a
+star prism's, a mesh's), in the world,
 from the plant's body pose and SceneGraph's geometry poses. The cavity: the sorting
 box body's frame as the plant has it, inside the walls, above the floor and below the
 lid, by the box's specification (outer size, wall thickness). At rest: not falling
@@ -20,7 +22,7 @@ import dataclasses as dc
 import itertools
 
 import numpy as np
-from pydrake.geometry import Box, Role, Sphere
+from pydrake.geometry import Box, Convex, Cylinder, Role, Sphere
 
 from handle_drake.station import GetPlant, MakeHandStation
 
@@ -29,8 +31,9 @@ REST_SPEED = 0.01
 FLOOR_GAP = 0.003
 MAX_ROLL = 0.1
 #: How far (m) a point may be inside the floor or a wall: the contact's compliance (a ball
-#: resting on the floor sinks 0.08 mm into it).
-PENETRATION = 0.001
+#: resting on the floor sinks 0.08 mm into it; a cylinder lying on it and a mesh prism on a
+#: face, at rest, 1.1-1.7 mm: point contact at Drake's default penetration allowance).
+PENETRATION = 0.002
 
 
 class FinalState:
@@ -60,6 +63,16 @@ def _points(shape, X_WG, R_WB) -> np.ndarray:
         r = shape.radius()
         axes = R_WB.matrix().T  # rows: the box's axes in the world
         return X_WG.translation() + np.vstack([r * axes, -r * axes])
+    if isinstance(shape, Cylinder):  # its two rims, 32 points each
+        a = 2 * np.pi * np.arange(32) / 32
+        r, half = shape.radius(), shape.length() / 2
+        local = np.vstack([np.column_stack([r * np.cos(a), r * np.sin(a), np.full(32, z)])
+                           for z in (-half, half)])
+        return np.array([X_WG @ p for p in local])
+    if isinstance(shape, Convex):  # its hull's vertices
+        hull = shape.GetConvexHull()
+        local = np.array([hull.vertex(i) for i in range(hull.num_vertices())])
+        return np.array([X_WG @ p for p in local])
     raise NotImplementedError(f"collision points of a {type(shape).__name__}")
 
 

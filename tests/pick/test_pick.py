@@ -222,9 +222,11 @@ def test_pick_command_puts_the_sphere_in_the_box(close, capsys, monkeypatch):
 
 
 @pytest.mark.parametrize("override, message", [
-    # Nothing of a kind pick takes: a cylinder and a star prism only.
-    ("{objects: [{kind: star_prism, size: 0.08, X_WO: {translation: [0.12, 0.0, 0]}}]}",
-     "no pickable object on the table (found ['cylinder', 'star_prism'])"),
+    # Nothing the box has a hole for (Hamburg's: cylinder, cuboid, star prism, sphere): a
+    # mug and a wine glass only.
+    ("{object: {kind: mug, size: 0.06, X_WO: {translation: [-0.12, -0.12, 0]}}, "
+     "objects: [{kind: wine_glass, size: 0.06, X_WO: {translation: [0.12, 0.0, 0]}}]}",
+     "no pickable object on the table (found ['mug', 'wine_glass'])"),
     # A ball on the table's far corner, 1.5 m from the arm's base: no class reachable.
     ("{object: {kind: sphere, size: 0.06, X_WO: {translation: [0.45, -0.4, 0]}}, "
      "objects: []}", "object (sphere): no reachable pick; tripod: no IK"),

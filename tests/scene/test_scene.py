@@ -26,10 +26,12 @@ def _hull_area(points):
     return ConvexHull(points).volume  # 2-D: the area
 
 
-@pytest.mark.parametrize("kind", ["cylinder", "cuboid", "star_prism", "sphere"])
+@pytest.mark.parametrize("kind", ["cylinder", "cuboid", "star_prism", "sphere", "mug",
+                                  "wine_glass", "rotated_cuboid"])
 def test_lid_pieces_tile_the_cell_around_the_hole(kind):
-    half = np.array([0.0625, 0.09])
     polygon = hole_polygon(Hole(kind))
+    # The toy's cell, or larger for a hole that reaches further (the mug's handle)
+    half = np.maximum([0.0625, 0.09], np.max(np.abs(polygon), axis=0) + 0.01)
     pieces = lid_pieces(polygon, half)
     assert len(pieces) == len(polygon)
     total = sum(_hull_area(p) for p in pieces)
@@ -51,6 +53,24 @@ def test_hole_matches_its_object_with_the_clearance():
     np.testing.assert_allclose(np.ptp(square, axis=0), [0.06 + 0.02, 0.06 + 0.02])
     star = hole_polygon(Hole("star_prism", 0.08, clearance=0.01))
     np.testing.assert_allclose(np.max(np.linalg.norm(star, axis=1)), 0.05)
+    # A wine glass's hole: its bowl's widest circle (8 cm) plus the clearance.
+    glass = hole_polygon(Hole("wine_glass", 0.08, clearance=0.01))
+    assert np.min(np.linalg.norm(glass, axis=1)) >= 0.05 - 1e-12
+    # A mug's: the circle about its cup's axis through its handle's end (8 cm cup, the
+    # handle reaching 2.4 cm out), plus the clearance: it passes at any yaw.
+    mug = hole_polygon(Hole("mug", 0.08, clearance=0.01))
+    assert np.min(np.linalg.norm(mug, axis=1)) >= 0.04 + 0.024 + 0.01 - 1e-9
+    # A user's mesh's: the convex hull of its footprint (a hexagonal prism, 3.2 cm to a
+    # corner), every edge moved out by the clearance, counter-clockwise.
+    from handle_drake.base.models import diagrams_dir
+
+    hexagon = hole_polygon(Hole("mesh", file=str(diagrams_dir() / "meshes" / "hex_prism.obj"),
+                                clearance=0.01))
+    edges = np.roll(hexagon, -1, axis=0) - hexagon
+    outward = np.column_stack([edges[:, 1], -edges[:, 0]])
+    outward /= np.linalg.norm(outward, axis=1, keepdims=True)
+    distance = np.einsum("ij,ij->i", outward, hexagon)
+    np.testing.assert_allclose(distance, 0.032 * np.cos(np.pi / 6) + 0.01, atol=1e-6)
 
 
 def _scene(extra=""):
@@ -94,8 +114,12 @@ def test_a_single_object_scenario_is_unchanged():
     ("sorting_box: {X_WB: {translation: [0, 0, 0]}}", "object: starts on or in the sorting box"),
     ("sorting_box: {size: [0.2, 0.18, 0.14], X_WB: {translation: [0, 0.3, 0]}}",
      "does not fit its"),
-    ("sorting_box: {holes: [{kind: mug}], X_WB: {translation: [0, 0.3, 0]}}",
-     "sorting_box.holes[0].kind: no hole shape for 'mug'"),
+    ("sorting_box: {holes: [{kind: joywarrior}], X_WB: {translation: [0, 0.3, 0]}}",
+     "sorting_box.holes[0].kind: no hole shape for 'joywarrior'"),
+    ("sorting_box: {holes: [{kind: mesh}], X_WB: {translation: [0, 0.3, 0]}}",
+     "sorting_box.holes[0].file: a mesh hole needs"),
+    ("sorting_box: {rows: 3, holes: [{kind: mug}, {kind: sphere}], "
+     "X_WB: {translation: [0, 0.3, 0]}}", "sorting_box.rows: expected an integer from 1"),
 ])
 def test_bad_scenes_are_refused_with_the_field_named(extra, message):
     with pytest.raises(ScenarioError) as error:

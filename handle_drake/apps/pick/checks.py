@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from handle_drake.apps.pick.plan import GRASP_DB
+from handle_drake.apps.pick.scenes import scene_kinds
 from handle_drake.base.paths import check_output
 from handle_drake.devices.arm.model import ARM_SPECS
 from handle_drake.scene.config import box_pose, scene_objects
@@ -38,9 +39,14 @@ def check_pick_arguments(args, scenario) -> None:
     if kind not in PICK_HANDS:
         raise ValueError(f"hand.kind: pick plans grasps for the {' or '.join(PICK_HANDS)} "
                          f"hand only, got {kind!r}")
+    if getattr(args, "scene_kinds", "sphere,cuboid") != "sphere,cuboid":
+        if args.scene_seed is None:
+            raise ValueError("--scene-kinds: only with --scene-seed (it names the kinds a "
+                             "seeded scene draws)")
+        scene_kinds(args.scene_kinds)
     box = scenario.sorting_box
     if args.kind is not None and box is not None:
-        holes = [h.kind for h in box.holes if h.size]
+        holes = [h.kind for h in box.holes if h.size or h.kind == "mesh"]
         if args.kind not in holes:
             raise ValueError(f"--kind {args.kind}: the sorting box has no hole for a "
                              f"{args.kind} (sorting_box.holes: {holes})")

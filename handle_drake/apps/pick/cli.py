@@ -8,8 +8,9 @@ The scenario needs an ``!Arm`` mount, a ``sorting_box`` and (unless
 seeded random scene of 2-5 (:mod:`handle_drake.apps.pick.scenes`). The objects are
 perceived (the first camera that sees the table; ``--true-poses``: the
 scenario's own poses) and listed nearest to the arm's base first; ``--object
-N`` picks the N-th, ``--kind K`` the first of kind K, else the first the
-planner grasps (spheres and upright cuboids). The plan (:func:`plan_pick`) is
+N`` picks the N-th, ``--kind K`` the first of kind K, else the first of a kind the
+sorting box has a hole for (every catalogue kind standing upright and a user's mesh:
+:data:`PICKABLE`; the kind as perceived, :func:`seen_kind`). The plan (:func:`plan_pick`) is
 made on what was perceived: the objects as detected are the obstacles of the
 arm's IK. The run is simulated. A line is printed as each phase ends
 (perceive, plan, approach, close, lift, carry, release) with its time (the
@@ -37,7 +38,8 @@ __all__ = ["register", "perceived_objects", "choose_target", "EXIT_CODES", "exit
 
 #: The catalogue kind the planner is given for each detected primitive.
 DETECTED_KIND = {"sphere": "sphere", "box": "cuboid", "cylinder": "cylinder"}
-PICKABLE = ("sphere", "cuboid")
+PICKABLE = ("sphere", "cuboid", "cylinder", "rotated_cuboid", "mug", "wine_glass",
+            "star_prism", "mesh")
 #: ``pick``'s result ``status`` -> the command's exit status (2 is bad input, raised
 #: before any work as a ValueError).
 EXIT_CODES = {"in_box": 0, "failed": 1, "nothing_to_pick": 3}
@@ -51,6 +53,9 @@ def register(subparsers) -> None:
     p.add_argument("--override", default=None, help="YAML text applied on top of the file")
     p.add_argument("--scene-seed", type=seed_int, default=None, metavar="N",
                    help="replace the objects with a seeded random scene of 2-5")
+    p.add_argument("--scene-kinds", default="sphere,cuboid", metavar="K,K|all",
+                   help="with --scene-seed: the kinds drawn (default sphere,cuboid; 'all': "
+                        "every kind the sorting box has a hole for)")
     which = p.add_mutually_exclusive_group()
     which.add_argument("--object", type=int, default=None, metavar="N",
                        help="pick the N-th object (0 = nearest to the arm)")
@@ -97,11 +102,13 @@ def perceived_objects(scenario):
     table = scenario.table.top_height if scenario.table is not None else 0.0
     out = []
     for d in view.detections:
-        kind = DETECTED_KIND[d.kind]
-        if kind in PICKABLE:
+        kind = seen_kind(scenario, d)
+        if kind in ("sphere", "cuboid"):
             size, X_WO = planner_input(kind, d, table)
             out.append(ObjectConfig(kind=kind, size=size, X_WO=Transform(X_WO), on_table=False,
                                     fixed=True))
+        elif kind in PICKABLE:  # standing upright where seen, turned as seen
+            out.append(_upright(scenario, kind, d, table))
         else:  # an obstacle only: a cylinder of the detected extent
             diameter, height = float(d.extent[0]), float(d.extent[2])
             X = Transform(translation=[float(v) for v in d.position])
@@ -111,8 +118,66 @@ def perceived_objects(scenario):
     return out, view.message
 
 
-def choose_target(objects, base_xy, index=None, kind=None) -> int:
-    """Index (into ``objects``) of the object to pick; see the module doc."""
+#: A round detection is the sorting box's user mesh when its height and its footprint's
+#: half length are this close (m) to the mesh's (and not to the kind it was told as).
+MESH_MATCH = 0.006
+
+
+def seen_kind(scenario, detection) -> str:
+    """The catalogue kind of a detection: the detector's shape
+    (:func:`handle_drake.geometry.detect.round_shape`: sphere, cuboid, cylinder, mug,
+    wine glass, star prism), or ``mesh`` when the sorting box has a mesh hole and a round
+    or box detection has that mesh's height and footprint (``MESH_MATCH``) but not its
+    own kind's catalogue object's (the object of its hole, or of the default size)."""
+    from handle_drake.geometry.objects import DEFAULT_SIZE, ObjectSpec, total_height
+    from handle_drake.scene.config import footprint_radius, hole_spec
+
+    kind = detection.shape or DETECTED_KIND[detection.kind]
+    box = scenario.sorting_box
+    meshes = [h for h in (box.holes if box is not None else []) if h.kind == "mesh"]
+    if not meshes or kind == "sphere":
+        return kind
+    height, half = float(detection.extent[2]), float(detection.extent[0]) / 2
+
+    def matches(spec):
+        return (abs(total_height(spec) - height) < MESH_MATCH
+                and abs(footprint_radius(spec) - half) < MESH_MATCH)
+
+    sizes = [h.size for h in box.holes if h.kind == kind and h.size] or [DEFAULT_SIZE[kind]]
+    if matches(hole_spec(meshes[0])) and not any(
+            matches(ObjectSpec(kind=kind, size=s)) for s in sizes):
+        return "mesh"
+    return kind
+
+
+def _upright(scenario, kind, detection, table):
+    """The ObjectConfig of an upright ``kind`` seen as ``detection``: its shape's size
+    (a mesh: the box's), resting on the table at the detected xy, turned by its shape's
+    yaw (a mesh: the footprint's major axis)."""
+    from pydrake.common.schema import Transform
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from handle_drake.geometry.objects import ObjectSpec, resting_height
+    from handle_drake.scenario import ObjectConfig
+    from handle_drake.scene.config import hole_spec
+
+    if kind == "mesh":
+        hole = next(h for h in scenario.sorting_box.holes if h.kind == "mesh")
+        spec, size, yaw = hole_spec(hole), 0.05, float(detection.yaw)
+        extra = dict(file=hole.file, scale=hole.scale)
+    else:
+        size, yaw = float(detection.shape_size), float(detection.shape_yaw)
+        spec, extra = ObjectSpec(kind=kind, size=size), {}
+    p = [float(detection.position[0]), float(detection.position[1]),
+         table + resting_height(spec)]
+    X = RigidTransform(RotationMatrix.MakeZRotation(yaw), p)
+    return ObjectConfig(kind=kind, size=size, X_WO=Transform(X), on_table=False, fixed=True,
+                        **extra)
+
+
+def choose_target(objects, base_xy, index=None, kind=None, pickable=PICKABLE) -> int:
+    """Index (into ``objects``) of the object to pick; see the module doc. ``pickable``:
+    the kinds taken without ``--kind`` (those the sorting box has a hole for)."""
     order = sorted(range(len(objects)), key=lambda i: math.dist(
         np.asarray(objects[i].X_WO.translation[:2], dtype=float), base_xy))
     if index is not None:
@@ -121,7 +186,7 @@ def choose_target(objects, base_xy, index=None, kind=None) -> int:
                              f"(0 to {len(order) - 1})")
         return order[index]
     for i in order:
-        if objects[i].kind == kind if kind else objects[i].kind in PICKABLE:
+        if objects[i].kind == kind if kind else objects[i].kind in pickable:
             return i
     raise LookupError(f"no {kind or 'pickable'} object on the table (found "
                       f"{[objects[i].kind for i in order]})")
@@ -163,7 +228,8 @@ def pick(scenario, true_poses: bool = False, index=None, kind=None, html=None,
                       outcome=f"not in the box: nothing to pick ({message})")
         return result
     try:
-        i = choose_target(seen, base_xy, index, kind)
+        holes = {h.kind for h in scenario.sorting_box.holes}
+        i = choose_target(seen, base_xy, index, kind, [k for k in PICKABLE if k in holes])
     except LookupError as error:
         result.update(status="nothing_to_pick", outcome=f"not in the box: {error}")
         return result
@@ -328,9 +394,9 @@ def _cmd_pick(args) -> int:
     if args.scene_seed is not None:
         if args.scene_seed < 0:
             raise ValueError(f"--scene-seed: expected an integer >= 0, got {args.scene_seed}")
-        from handle_drake.apps.pick.scenes import random_scene
+        from handle_drake.apps.pick.scenes import random_scene, scene_kinds
 
-        scenario = random_scene(scenario, args.scene_seed)
+        scenario = random_scene(scenario, args.scene_seed, scene_kinds(args.scene_kinds))
     # One line per phase as it ends: on stdout, or on stderr under --json (whose stdout
     # is the JSON and the verdict).
     stream = sys.stderr if args.json else sys.stdout

@@ -105,6 +105,8 @@ REACTIVE_CLOSE_TIME = (REACTIVE_PARAMS.max_closing / REACTIVE_PARAMS.close_rate
                        + REACTIVE_PARAMS.squeeze_time + REACTIVE_PARAMS.hold_time + 0.1)
 _FAR = 10.0  # m, the pose the close trigger reports before the grasp
 PRIOR_WEIGHT = 0.01  # the predicted orientation's weight against each contact normal
+#: The kinds :func:`measure_in_hand` locates; the others are released as planned.
+LOCATED_KINDS = ("sphere", "cuboid")
 
 
 class _CloseTrigger(LeafSystem):
@@ -322,6 +324,8 @@ def _correct_release(simulator, diagram, station, scenario, plan, reach, close, 
     Returns ``(plan, times, marks, report)``."""
     from pydrake.trajectories import PiecewisePolynomial
 
+    if plan.kind not in LOCATED_KINDS:  # measure_in_hand locates these only
+        return plan, None, None, {}
     plant = GetPlant(station)
     context = plant.GetMyContextFromRoot(simulator.get_context())
     hand = plant.GetModelInstanceByName("hand")

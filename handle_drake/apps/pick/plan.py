@@ -15,6 +15,10 @@ keeps the grasp (``X_OB``, object to hand base, as planned) and puts the object'
 to the hole's orientation (a cuboid's width along the box's x, either way round; a
 sphere at its own yaw or a quarter or half turn from
 it, whichever the arm reaches); a carry pose ``CARRY_HEIGHT`` higher comes before it.
+The kinds beyond the planner's sphere and upright cuboid (a cylinder, a rotated cuboid, a
+mug, a wine glass, a star prism, a user's mesh) are planned through an upright cuboid proxy
+(:mod:`handle_drake.apps.pick.kinds`; their stored grasps in :data:`GRASP_DB_KINDS`) and
+released upright at a yaw their hole takes (:func:`handle_drake.scene.config.release_yaws`).
 Between consecutive configurations the straight joint-space segment must be collision
 free (checked every 0.02 rad with the hand's posture of that phase); if one is not, a
 via point with the hand raised, then Drake's ``KinematicTrajectoryOptimization``, looks
@@ -38,13 +42,14 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from handle_drake.apps.pick.reach import BUDGET_SPENT
+from handle_drake.apps.pick.kinds import PROXY_KINDS, grasp_proxy, proxied_plan, proxy_height
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.devices.arm.config import Arm
 from handle_drake.devices.arm.model import get_arm_spec
 from handle_drake.geometry.objects import ObjectSpec, resting_height
 from handle_drake.grasp.database import GraspDatabase, build_database
 from handle_drake.grasp.planning import grasp_key, plan_grasp
-from handle_drake.scene.config import box_pose, hole_centres
+from handle_drake.scene.config import box_pose, hole_centres, hole_spec, release_yaws
 
 __all__ = ["PickPlan", "PickPlanningError", "plan_pick", "CLASS_ORDER", "GRASP_BUDGET",
            "GRASP_TOTAL_BUDGET", "GRASP_DB", "SIZE_TOLERANCE", "catalogue_size",
@@ -71,6 +76,10 @@ CLASS_ORDER = {
                "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
     "cuboid": ("parallel_extension", "tripod", "palmar_pinch", "lateral_tripod",
                "writing_tripod", "tip_pinch", "adduction_grip", "lateral"),
+    # The other kinds, grasped through their cuboid proxies (apps/pick/kinds.py): the
+    # grasps that close across a 5-6 cm object (Table 1's size ranges) in the
+    # cuboid's order.
+    **dict.fromkeys(PROXY_KINDS, ("parallel_extension", "tripod", "palmar_pinch")),
 }
 #: Seconds each class's grasp search may take (``plan_grasp``'s ``time_budget``). Every
 #: class is first served from the database (stored, or adapted to the size: 0.1-0.8 s on
@@ -93,6 +102,12 @@ GRASP_SOURCES = ("stored", "adapted", "searched")
 #: nearest object is a cuboid, parallel extension's pre-grasp and grasp reached: 15 at
 #: 0 deg, 16 with +-5, 17 with +-10, 18 with +-20.)
 GRASP_TURNS = {"cuboid": tuple(np.radians([0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 20.0]))}
+#: The proxied kinds' grasps turn as the cuboid's (apps/pick/kinds.py: each is a cuboid
+#: to the planner; the release turns the object back to a yaw its hole takes). Round ones
+#: further: a cylinder's, mug's and glass's grasp holds at any turn about their axis.
+GRASP_TURNS.update(dict.fromkeys(PROXY_KINDS, GRASP_TURNS["cuboid"]))
+GRASP_TURNS.update(dict.fromkeys(("cylinder", "wine_glass"), tuple(np.radians(
+    [0.0, -5.0, 5.0, -10.0, 10.0, -20.0, 20.0, -45.0, 45.0, -90.0, 90.0]))))
 #: The classes whose grasp is turned (``GRASP_TURNS``): the ones that lift a cuboid; each
 #: turn costs the arm's IK of its poses (a held-out cuboid trying every turn of all eight
 #: classes planned for 77 s at load 14).
@@ -111,6 +126,9 @@ PATH_SEARCH_COST = 20
 #: Heights (m) the hand is raised to for a via point between two configurations
 #: whose straight joint segment collides (:func:`free_path`).
 VIA_RISES = (0.10, 0.20)
+#: Where the grasp database of the kinds planned through a cuboid proxy is kept (its
+#: entries are read with :data:`GRASP_DB`'s: :func:`default_grasp_database`).
+GRASP_DB_KINDS = GRASP_DB.with_name("grasp_database_kinds.json")
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 #: Heights (m, negative: below the lid's top) of a kind's bottom at the release tried
 #: before ``DROP_HEIGHT``, each at every turn over the hole (none: measured worse). Tried:
@@ -133,8 +151,37 @@ class PickPlanningError(ValueError):
 
 @functools.lru_cache(maxsize=1)
 def default_grasp_database() -> GraspDatabase:
-    """The shipped database (:data:`GRASP_DB`), read once per process."""
-    return GraspDatabase.load(GRASP_DB)
+    """The shipped database (:data:`GRASP_DB` and :data:`GRASP_DB_KINDS`'s entries),
+    read once per process."""
+    database = GraspDatabase.load(GRASP_DB)
+    if GRASP_DB_KINDS.exists():
+        kinds = GraspDatabase.load(GRASP_DB_KINDS)
+        database = GraspDatabase({**kinds.entries, **database.entries}, database.version,
+                                 database.path, database.stale + kinds.stale)
+    return database
+
+
+def _plan_grasp(grasp_class, spec, X_WO, **kwargs):
+    """``plan_grasp``, through the kind's cuboid proxy for :data:`PROXY_KINDS`
+    (:func:`handle_drake.apps.pick.kinds.proxied_plan`)."""
+    if spec.kind in PROXY_KINDS:
+        return proxied_plan(plan_grasp, grasp_class, spec, X_WO, **kwargs)
+    return plan_grasp(grasp_class, spec, X_WO, **kwargs)
+
+
+def _grasp_key(grasp_class, spec, height, ratio):
+    """``grasp_key`` of the grasp ``_plan_grasp`` plans (a proxy's for a proxied kind)."""
+    if spec.kind in PROXY_KINDS:
+        return grasp_key(grasp_class, grasp_proxy(spec)[0], proxy_height(spec, height), ratio)
+    return grasp_key(grasp_class, spec, height, ratio)
+
+
+def _spec(scenario, kind, size):
+    """The object spec of a ``kind`` of ``size`` (a user's mesh: the sorting box's)."""
+    if kind == "mesh":
+        holes = [h for h in scenario.sorting_box.holes if h.kind == "mesh"]
+        return hole_spec(holes[0])
+    return ObjectSpec(kind=kind, size=size)
 
 
 def catalogue_size(scenario, kind: str, size: float) -> float:
@@ -152,7 +199,7 @@ def _as_catalogue(scenario, kind, size, X_WO):
     """``(size, X_WO)``: the catalogue object's size (:func:`catalogue_size`) and, if
     it is not ``size``, the pose of that object resting on the table where it was seen."""
     known = catalogue_size(scenario, kind, size)
-    if known == size:
+    if known == size or kind == "mesh":
         return size, X_WO
     z = scenario.table.top_height + resting_height(ObjectSpec(kind=kind, size=known))
     return known, RigidTransform(X_WO.rotation(), [*X_WO.translation()[:2], z])
@@ -163,9 +210,14 @@ def grasp_db_requests(scenario) -> list:
     pickable object the scenario's sorting box has a hole for, resting on the table."""
     out = []
     for hole in scenario.sorting_box.holes if scenario.sorting_box is not None else []:
-        if hole.kind not in CLASS_ORDER or not hole.size:
+        if hole.kind not in CLASS_ORDER or not (hole.size or hole.kind == "mesh"):
             continue
-        spec = ObjectSpec(kind=hole.kind, size=float(hole.size))
+        spec = hole_spec(hole)
+        if hole.kind in PROXY_KINDS:  # the cuboid proxy's grasps (apps/pick/kinds.py)
+            proxy = grasp_proxy(spec)[0]
+            height = proxy_height(spec, resting_height(spec))
+            out += [(cls, proxy, height) for cls in CLASS_ORDER[hole.kind]]
+            continue
         out += [(cls, (hole.kind, float(hole.size)), resting_height(spec))
                 for cls in CLASS_ORDER[hole.kind]]
     return out
@@ -240,6 +292,8 @@ def _release_poses(scenario, kind, spec, X_WO, X_OB):
     if kind == "cuboid":  # its square hole takes it at every quarter turn
         box_yaw = _yaw(box_pose(scenario).rotation())
         yaws = [box_yaw + k * math.pi / 2 for k in range(4)]
+    elif release_yaws(scenario, kind) is not None:  # its hole's yaws (a star, a mug...)
+        yaws = release_yaws(scenario, kind)
     else:
         yaws = [yaw0 + k * math.pi / 2 for k in (0, 1, -1, 2)]
     yaws.sort(key=lambda y: abs((y - yaw0 + math.pi) % (2 * math.pi) - math.pi))
@@ -389,7 +443,7 @@ def plan_pick(scenario, reach, target: str, kind: str, size: float, X_WO: RigidT
     base = scenario.hand.mount.X_WB.GetDeterministicValue().translation()
     grasp_db = default_grasp_database() if grasp_db is None else grasp_db
     size, X_WO = _as_catalogue(scenario, kind, size, X_WO)
-    spec = ObjectSpec(kind=kind, size=size)
+    spec = _spec(scenario, kind, size)
     q_start = np.asarray(q_start, dtype=float)
     r = _PickRequest(scenario, reach, target, kind, spec, X_WO, q_start, ratio, hand, base,
                      grasp_db)
@@ -461,8 +515,8 @@ def _class_grasp(r: _PickRequest, cls, search: bool, budget):
     adapted) or, with ``search``, searched within ``budget`` s; source one of
     ``GRASP_SOURCES``. None when there is none (the reason in ``r.attempts``)."""
     start = time.perf_counter()
-    stored = grasp_key(cls, r.spec, r.X_WO.translation()[2] - r.scenario.table.top_height,
-                       r.ratio) in r.grasp_db
+    stored = _grasp_key(cls, r.spec, r.X_WO.translation()[2] - r.scenario.table.top_height,
+                        r.ratio) in r.grasp_db
     if not stored and not search:
         # Adapting takes 0.1-0.8 s a class: first whether the arm reaches the stored
         # grasp it would start from (its hand poses are within mm of the adapted one's).
@@ -475,7 +529,7 @@ def _class_grasp(r: _PickRequest, cls, search: bool, budget):
             r.seconds["grasp"] += time.perf_counter() - start
             return None
     try:
-        grasp = plan_grasp(cls, r.spec, r.X_WO, table_height=r.scenario.table.top_height,
+        grasp = _plan_grasp(cls, r.spec, r.X_WO, table_height=r.scenario.table.top_height,
                            reach_direction=r.X_WO.translation()[:2] - r.base[:2],
                            coupling_ratio=r.ratio, time_budget=budget if search else None,
                            database=r.grasp_db, search=search)
@@ -506,7 +560,7 @@ def _plan_with_grasp(r: _PickRequest, cls, grasp, source) -> PickPlan | None:
             turned = grasp
             if turn:
                 try:
-                    turned = plan_grasp(cls, r.spec, _turned(r.X_WO, turn),
+                    turned = _plan_grasp(cls, r.spec, _turned(r.X_WO, turn),
                                         table_height=r.scenario.table.top_height,
                                         reach_direction=r.X_WO.translation()[:2] - r.base[:2],
                                         coupling_ratio=r.ratio, database=r.grasp_db,
@@ -548,7 +602,7 @@ def _stored_grasp_unreachable(scenario, reach, cls, kind, spec, X_WO, base, rati
     reason = ""
     for turn in _turns(kind, cls):
         try:
-            grasp = plan_grasp(cls, known, _turned(X_known, turn),
+            grasp = _plan_grasp(cls, known, _turned(X_known, turn),
                                table_height=scenario.table.top_height,
                                reach_direction=X_WO.translation()[:2] - base[:2],
                                coupling_ratio=ratio, database=grasp_db, search=False)
