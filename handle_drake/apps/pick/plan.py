@@ -41,8 +41,8 @@ from pathlib import Path
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
-from handle_drake.apps.pick.reach import BUDGET_SPENT
 from handle_drake.apps.pick.kinds import PROXY_KINDS, grasp_proxy, proxied_plan, proxy_height
+from handle_drake.apps.pick.reach import BUDGET_SPENT
 from handle_drake.base.hands import actuated_to_joint_positions, get_hand_spec
 from handle_drake.devices.arm.config import Arm
 from handle_drake.devices.arm.model import get_arm_spec
