@@ -234,6 +234,10 @@ class ReactiveGraspParams:
     # top of the approach's shift
     cop_shift_gain: float = 0.0
     max_cop_shift: float = 0.015
+    # N, a pad's force (cells over their noise floor) from which its centre of pressure
+    # counts: less than contact_threshold, as a fingertip pressed at its tip, beyond
+    # the grid, leaves only a fraction of its force on the border cells
+    cop_min_force: float = 0.05
 
     def validate(self) -> None:
         for f in dc.fields(self):
@@ -249,7 +253,7 @@ class ReactiveGraspParams:
         for name in ("shift_speed", "max_shift", "contact_threshold", "squeeze", "hold_time",
                      "lift_height", "arrival_timeout", "close_shift_speed", "max_close_shift",
                      "recentre_threshold", "max_recentre", "recentre_reopen", "cop_shift_gain",
-                     "max_cop_shift"):
+                     "max_cop_shift", "cop_min_force"):
             if getattr(self, name) < 0:
                 raise ValueError(f"ReactiveGraspParams.{name} must be >= 0, "
                                  f"got {getattr(self, name)}")
@@ -302,9 +306,10 @@ class TaxelPadLayout:
     def cells(self) -> int:
         return len(self.cell_centres)
 
-    def centre_of_pressure(self, taxels) -> tuple[np.ndarray, float]:
+    def centre_of_pressure(self, taxels, along: bool = True) -> tuple[np.ndarray, float]:
         """``(p_P, force)``: the centre of pressure on the pad's surface, in P (m; the
-        zero vector without force), and the pad's total normal force (N)."""
+        zero vector without force), and the pad's total normal force (N). ``along``
+        False: its ``u`` only (the point on the pad's centre line across from it)."""
         p = np.asarray(taxels, float)[self.start:self.start + self.cells]
         f = np.where(p > self.noise_floor, p, 0.0) * self.cell_area
         total = float(f.sum())
@@ -312,9 +317,10 @@ class TaxelPadLayout:
             return np.zeros(3), 0.0
         u, v = f @ self.cell_centres / total
         if self.radius <= 0.0:
-            return np.array([u, v, 0.0]), total
+            return np.array([u, v if along else 0.0, 0.0]), total
         a = u / self.radius
-        return np.array([self.radius * np.sin(a), v, self.radius * (np.cos(a) - 1.0)]), total
+        return np.array([self.radius * np.sin(a), v if along else 0.0,
+                         self.radius * (np.cos(a) - 1.0)]), total
 
 
 def finger_command_groups(hand_kind: str) -> list[list[int]]:
@@ -566,9 +572,13 @@ class ReactiveGrasp(LeafSystem):
 
     def cop_offset(self, context, fingers) -> np.ndarray:
         """(3,) m, world: the mean, over the ``fingers`` ((n,) bool) whose pad feels more
-        than ``contact_threshold``, of the pad's centre of pressure minus its centre
-        (zeros when none does, or without ``taxel_pads``). Moving the hand by it
-        brings the pads' centres onto the centres of pressure."""
+        than ``cop_min_force``, of the pad's centre of pressure across the pad (``u``:
+        :meth:`TaxelPadLayout.centre_of_pressure` with ``along`` False) minus its
+        centre (zeros when none does, or without ``taxel_pads``). Moving the hand by
+        it brings the pads' centre lines onto the centres of pressure. Along the
+        finger (``v``) is left out: a closing finger meets an object with its tip
+        first wherever the object is (a pinched cuboid moved towards the thumb was
+        met 6.7 mm towards the thumb's tip, beyond its grid)."""
         if self._taxel_pads is None:
             return np.zeros(3)
         taxels = self._taxels.Eval(context)
@@ -578,8 +588,8 @@ class ReactiveGrasp(LeafSystem):
             pad = self._taxel_pads[i]
             if pad is None:
                 continue
-            p_P, force = pad.centre_of_pressure(taxels)
-            if force <= self.params.contact_threshold:
+            p_P, force = pad.centre_of_pressure(taxels, along=False)
+            if force <= self.params.cop_min_force:
                 continue
             poses = self._body_poses.Eval(context) if poses is None else poses
             R_WP = poses[pad.body_index].rotation() @ pad.X_BP.rotation()
