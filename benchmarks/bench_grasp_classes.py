@@ -90,6 +90,7 @@ def trial(args):
                 held_reactive=held_through_lift(reactive), lift_reactive=reactive.object_lift(),
                 reactive_final_mode=runner.final_mode().name,
                 in_hand_offset_mm=runner.in_hand_offset() * 1e3,
+                reactive_shift_mm=(runner.approach_shift() * 1e3).tolist(),
                 centre_source=plan.centre_source, centre_offset_mm=plan.centre_offset * 1e3,
                 plan_time=plan_time, sim_wall_time=open_loop.wall_time,
                 sim_wall_time_reactive=reactive.wall_time)

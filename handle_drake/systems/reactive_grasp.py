@@ -70,7 +70,8 @@ Modes (abstract state, :class:`ReactiveGraspMode`):
   fingers' pad centres of pressure from their pad centres (:meth:`ReactiveGrasp.
   cop_offset`), horizontal and across the approach, at most ``shift_speed``,
   up to ``max_cop_shift``: an object met off the pads' centre lines (which no
-  fingertip force tells) is brought between the pads before the others close.
+  fingertip force tells) is brought between the pads before the others close;
+  with ``cop_hold_above`` > 0 those wait while the offset is larger than it.
 - ``RECENTRE`` (with ``planned_object`` and ``max_recentres`` > 0; off by
   default, see the parameter): the first grasp finger to touch the object in
   the close locates it from its contact point and normal
@@ -238,6 +239,9 @@ class ReactiveGraspParams:
     # counts: less than contact_threshold, as a fingertip pressed at its tip, beyond
     # the grid, leaves only a fraction of its force on the border cells
     cop_min_force: float = 0.05
+    # m: while the centring's offset is above this (and its shift under its cap), the
+    # grasp fingers that do not touch yet wait (0: they close on meanwhile)
+    cop_hold_above: float = 0.0
 
     def validate(self) -> None:
         for f in dc.fields(self):
@@ -253,7 +257,7 @@ class ReactiveGraspParams:
         for name in ("shift_speed", "max_shift", "contact_threshold", "squeeze", "hold_time",
                      "lift_height", "arrival_timeout", "close_shift_speed", "max_close_shift",
                      "recentre_threshold", "max_recentre", "recentre_reopen", "cop_shift_gain",
-                     "max_cop_shift", "cop_min_force"):
+                     "max_cop_shift", "cop_min_force", "cop_hold_above"):
             if getattr(self, name) < 0:
                 raise ValueError(f"ReactiveGraspParams.{name} must be >= 0, "
                                  f"got {getattr(self, name)}")
@@ -819,12 +823,13 @@ class ReactiveGrasp(LeafSystem):
             w.target, w.recentres, w.t_recentred = w.shift + d, w.recentres + 1, np.inf
             w.recentre_from = w.s.copy()
             return ReactiveGraspMode.RECENTRE
+        step, hold = self._cop_step(context, tips, w.shift)
         for i in np.flatnonzero(self._grasp):
             if w.touched[i]:
                 continue
             if tips[i]:
                 w.touched[i] = 1.0  # this finger stops where it is
-            else:
+            elif not hold:
                 w.s[i] = min(w.s[i] + p.close_rate * h, p.max_closing)
         done = (w.touched > 0) | (w.s >= p.max_closing)
         if p.close_shift_speed > 0 and tips[self._grasp].any() and not np.all(
@@ -832,14 +837,25 @@ class ReactiveGrasp(LeafSystem):
             d = self._shift_direction(context, tips & self._grasp, direction_W)
             w.shift = _capped(w.shift + p.close_shift_speed * h * d,
                               p.max_shift + p.max_close_shift)
-        if p.cop_shift_gain > 0 and self._taxel_pads is not None \
-                and tips[self._grasp].any() and not np.all(done[self._grasp]):
-            w.shift = _capped(w.shift + self._cop_shift(context, tips),
-                              p.max_shift + p.max_cop_shift)
+        if not np.all(done[self._grasp]):
+            w.shift = _capped(w.shift + step, p.max_shift + p.max_cop_shift)
         if np.all(done[self._grasp]):
             w.squeeze_from = w.s.copy()
             return ReactiveGraspMode.SQUEEZE
         return ReactiveGraspMode.CLOSE
+
+    def _cop_step(self, context, tips, shift) -> tuple[np.ndarray, bool]:
+        """The close's step on the centres of pressure (zeros when off or no grasp finger
+        touches) and whether the open grasp fingers wait for it: the offset is above
+        ``cop_hold_above`` and the step still moves the wrist (under the cap)."""
+        p = self.params
+        if p.cop_shift_gain <= 0 or self._taxel_pads is None or not tips[self._grasp].any():
+            return np.zeros(3), False
+        step = self._cop_shift(context, tips)
+        moved = _capped(shift + step, p.max_shift + p.max_cop_shift) - shift
+        hold = (p.cop_hold_above > 0 and np.linalg.norm(moved) > 1e-9
+                and np.linalg.norm(step) > p.cop_shift_gain * self._period * p.cop_hold_above)
+        return step, hold
 
     def _step_recentre(self, context, w: _Step, now: float) -> ReactiveGraspMode:
         """RECENTRE: undo recentre_reopen of the closing, then shift, then settle, then
