@@ -268,6 +268,27 @@ def test_the_cop_centring_close_moves_the_wrist_onto_the_pads_centres_of_pressur
     np.testing.assert_allclose(at(0.5)["wrist"], pose)
 
 
+def test_the_open_fingers_wait_while_the_cop_offset_is_over_cop_hold_above():
+    """cop_hold_above: the open grasp finger (MF) does not close while the touching
+    pads' offset (5.25, then 4.375 mm) is over 2 mm and the centring still moves the
+    wrist; once the shift reaches its cap (2 mm: after 0.525 mm with FF alone and
+    17 steps of 0.0875 mm) it closes on at close_rate."""
+    preshape, closed = _hand()
+    pose = np.zeros(6)
+    pads, connect = _cop_pads()
+    p = ReactiveGraspParams(close_rate=1.0, cop_shift_gain=2.0, max_shift=0.0,
+                            max_cop_shift=0.002, cop_hold_above=0.002)
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params=p, period=H,
+                          taxel_pads=pads, taxel_cells=32)
+    at, _ = _simulate(grasp, _force_script([0.105, None, None, None, 0.155]), connect=connect)
+    before = at(0.1049)["closing"][MF]
+    assert before == pytest.approx(p.close_rate * H * 10)
+    assert at(0.3249)["closing"][MF] == pytest.approx(before, abs=1e-12)  # waited
+    out = at(0.4049)  # the cap was reached at 0.32 s: closing again from 0.33 s
+    assert out["closing"][MF] == pytest.approx(before + p.close_rate * H * 8, abs=1e-12)
+    np.testing.assert_allclose(out["wrist"][:3], [0.0, p.max_cop_shift, 0.0], atol=1e-12)
+
+
 def test_taxel_pads_are_checked():
     preshape, closed = _hand()
     pads, _ = _cop_pads()
