@@ -21,7 +21,10 @@ Dask scheduler, ``handle_drake.learning.cluster``); prints a table and writes
 ``benchmarks/results/grasp_classes.json``. Under HANDLE_DRAKE_REDUCED=1 it runs
 two sizes of two classes on cuboids only. ``--reactive NAME=VALUE`` overrides a
 ``ReactiveGraspParams`` field of the reactive runs (e.g. ``close_shift_speed=0.03``
-switches the centring close on); the results file name then carries it.
+switches the centring close on, ``cop_shift_gain=10 --reactive cop_hold_above=0.002``
+the centring on the taxels' centres of pressure); the results file name then carries
+it. Each reactive run also records the object's in-hand offset (from where the plan
+put it in the hand, read from the plant after the lift) and the wrist's shift.
 
 Perceived against true object (report sections 3.3 and 4: the object is not
 where the plan thinks): ``--offset MM [--directions N]`` plans on the object

@@ -17,6 +17,12 @@ ReactiveGrasp` controller (report section 3.3) in one diagram:
   at most half the grasp width for the side grips: :func:`plan_params`);
 - the hand lifts the plan's ``lift_height``.
 
+With ``cop_shift_gain`` > 0 the runner gives the hand its distal taxel pads (a
+scenario without ``hand.taxels`` gets ``pad4x4`` pads, no palm, no skins) and the
+close centres the hand on the pads' centres of pressure (:func:`taxel_pad_layouts`);
+:meth:`ReactiveGraspRunner.in_hand_offset` reads from the plant how far the object
+ends from where the plan put it in the hand.
+
 The open-loop alternative is the plan's keyframe script (``plan_scenario(plan)``
 run by :class:`~handle_drake.trial.simulate.ScenarioRunner`). Both return a
 :class:`~handle_drake.trial.simulate.RunResult`, so :func:`handle_drake.apps.demo.held_through_lift`
