@@ -649,6 +649,17 @@ class ReactiveGrasp(LeafSystem):
                                   + p.max_recentre / p.shift_speed + p.arrival_timeout
                                   + 4 * self._period)
 
+    def cop_hold_duration(self) -> float:
+        """Longest time (s) the open fingers wait for the centring on the centres of
+        pressure (``cop_hold_above``): the whole capped shift at the slowest rate a
+        waiting step moves (0 when off)."""
+        p = self.params
+        if self._taxel_pads is None or p.cop_shift_gain <= 0 or p.cop_hold_above <= 0 \
+                or p.shift_speed == 0:
+            return 0.0
+        rate = min(p.shift_speed, p.cop_shift_gain * p.cop_hold_above)
+        return (p.max_shift + p.max_cop_shift) / rate + 4 * self._period
+
     # ---- helpers ---------------------------------------------------------------
     def _hand_command(self, s) -> np.ndarray:
         command = self._preshape.copy()

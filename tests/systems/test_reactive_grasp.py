@@ -287,6 +287,8 @@ def test_the_open_fingers_wait_while_the_cop_offset_is_over_cop_hold_above():
     out = at(0.4049)  # the cap was reached at 0.32 s: closing again from 0.33 s
     assert out["closing"][MF] == pytest.approx(before + p.close_rate * H * 8, abs=1e-12)
     np.testing.assert_allclose(out["wrist"][:3], [0.0, p.max_cop_shift, 0.0], atol=1e-12)
+    # the longest wait: the 2 mm cap at the slowest waiting rate, gain x 2 mm = 4 mm/s
+    assert grasp.cop_hold_duration() == pytest.approx(0.002 / 0.004 + 4 * H)
 
 
 def test_taxel_pads_are_checked():

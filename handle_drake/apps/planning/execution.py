@@ -184,7 +184,7 @@ class ReactiveGraspRunner:
                                       - self.plan.X_WB_pregrasp.translation()))
         slowed = length / (p.approach_speed * p.slow_factor) - length / p.approach_speed
         return (self.controller.nominal_duration() + self.controller.recentre_duration()
-                + slowed + p.arrival_timeout + SETTLE)
+                + self.controller.cop_hold_duration() + slowed + p.arrival_timeout + SETTLE)
 
     def _finished(self, root_context) -> str | None:
         mode = self.controller.get_mode(self._controller_context)
