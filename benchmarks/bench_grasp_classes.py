@@ -21,7 +21,10 @@ Dask scheduler, ``handle_drake.learning.cluster``); prints a table and writes
 ``benchmarks/results/grasp_classes.json``. Under HANDLE_DRAKE_REDUCED=1 it runs
 two sizes of two classes on cuboids only. ``--reactive NAME=VALUE`` overrides a
 ``ReactiveGraspParams`` field of the reactive runs (e.g. ``close_shift_speed=0.03``
-switches the centring close on); the results file name then carries it.
+switches the centring close on, ``cop_shift_gain=10 --reactive cop_hold_above=0.002``
+the centring on the taxels' centres of pressure); the results file name then carries
+it. Each reactive run also records the object's in-hand offset (from where the plan
+put it in the hand, read from the plant after the lift) and the wrist's shift.
 
 Perceived against true object (report sections 3.3 and 4: the object is not
 where the plan thinks): ``--offset MM [--directions N]`` plans on the object
@@ -89,9 +92,18 @@ def trial(args):
                 held=held_through_lift(open_loop), lift=open_loop.object_lift(),
                 held_reactive=held_through_lift(reactive), lift_reactive=reactive.object_lift(),
                 reactive_final_mode=runner.final_mode().name,
+                in_hand_offset_mm=runner.in_hand_offset() * 1e3,
+                reactive_shift_mm=(runner.approach_shift() * 1e3).tolist(),
                 centre_source=plan.centre_source, centre_offset_mm=plan.centre_offset * 1e3,
                 plan_time=plan_time, sim_wall_time=open_loop.wall_time,
                 sim_wall_time_reactive=reactive.wall_time)
+
+
+def _offset_text(row) -> str:
+    """The reactive run's in-hand offset (the object from where the plan put it in the
+    hand, read from the plant after the run) for the progress line."""
+    offset = row.get("in_hand_offset_mm")
+    return "" if offset is None else f", in-hand offset {offset:.1f} mm"
 
 
 def main(argv=None) -> int:
@@ -178,13 +190,14 @@ def main(argv=None) -> int:
                      f"{e[1] * 1e3:+.1f} mm, size x{e[2]:g}, yaw {np.degrees(e[3]):g} deg)")
             print(f"{done}/{len(jobs)} {r['grasp_class']} {r['kind']} {r['width'] * 1e3:.0f} mm"
                   f"{error}: open loop {'held' if r['held'] else 'dropped'}, "
-                  f"reactive {'held' if r['held_reactive'] else 'dropped'}", flush=True)
+                  f"reactive {'held' if r['held_reactive'] else 'dropped'}"
+                  f"{_offset_text(r)}", flush=True)
     wall = time.perf_counter() - start
 
     print(f"{len(rows)} trials in {wall:.0f} s\n")
     print("| class | shape | planned | open loop held | reactive held | widths (mm): "
-          "open loop / reactive |")
-    print("|---|---|---|---|---|---|")
+          "open loop / reactive | reactive in-hand offset (mm, held: mean, max) |")
+    print("|---|---|---|---|---|---|---|")
     summary = {}
     for info in classes:
         for kind in kinds:
@@ -197,18 +210,25 @@ def main(argv=None) -> int:
             def marks(key, sub=sub):
                 return ", ".join(f"{r['width'] * 1e3:.0f}{'*' if r[key] else ''}" for r in sub)
 
+            offsets = [r["in_hand_offset_mm"] for r in sub if r["held_reactive"]]
             summary[f"{info.name}/{kind}"] = dict(
                 trials=n, planned=planned, held_open_loop=held, held_reactive=held_r,
-                success_rate_open_loop=held / n, success_rate_reactive=held_r / n)
+                success_rate_open_loop=held / n, success_rate_reactive=held_r / n,
+                in_hand_offset_mm_mean=float(np.mean(offsets)) if offsets else None)
+            spread = (f"{np.mean(offsets):.1f}, {np.max(offsets):.1f}" if offsets else "-")
             print(f"| {info.name} | {kind} | {planned}/{n} | {held}/{n} ({held / n:.0%}) "
                   f"| {held_r}/{n} ({held_r / n:.0%}) | {marks('held')} / "
-                  f"{marks('held_reactive')} |")
+                  f"{marks('held_reactive')} | {spread} |")
     total = sum(r["held"] for r in rows)
     total_r = sum(r["held_reactive"] for r in rows)
     n = len(rows)
     print(f"\noverall: open loop {total}/{n} held ({total / n:.0%}), reactive {total_r}/{n} "
           f"({total_r / n:.0%}); ratio reactive/open loop {total_r / max(total, 1):.2f}; "
           "* = held")
+    held_offsets = [r["in_hand_offset_mm"] for r in rows if r.get("held_reactive")]
+    if held_offsets:
+        print(f"reactive in-hand offset over the {len(held_offsets)} held: mean "
+              f"{np.mean(held_offsets):.1f} mm, median {np.median(held_offsets):.1f} mm")
     label += "".join(f"_{name}{value:g}" for name, value in sorted(overrides.items()))
     out = RESULTS.with_name(f"grasp_classes{label}.json")
     run.finish(table_rows(summary, "class/object"), dict(

@@ -21,6 +21,10 @@ port                       dir    size                         units / frame
 ``contact_results``        in     abstract ``ContactResults``  optional (with ``hand_bodies``):
                                                                the side-shift direction; other
                                                                hand bodies' contacts slow down
+``taxels``                 in     cells                        optional (with ``taxel_pads``): Pa,
+                                                               the station's ``hand.taxels``
+``body_poses``             in     abstract ``X_WB`` list        optional (with ``taxel_pads``): the
+                                                               pads' bodies (station ``body_poses``)
 ``wrist_pose``             out    6                            same convention, the commanded base
                                                                pose (station's ``wrist.pose``)
 ``hand_position``          out    nu                           rad, hand command (``hand.position``)
@@ -59,7 +63,15 @@ Modes (abstract state, :class:`ReactiveGraspMode`):
   along the contact normals into the hand: the hand centres itself on an
   object that is not where the plan put it, bringing the open fingers to it,
   instead of the first finger shoving it towards the others (which is what
-  the open-loop close does).
+  the open-loop close does). With ``taxel_pads`` and ``cop_shift_gain`` > 0
+  (off by default) the close centres the hand on the pads' centres of pressure
+  instead: while some grasp fingers touch and others do not, the wrist moves at
+  ``cop_shift_gain`` times the mean offset (world) of the touching grasp
+  fingers' pad centres of pressure from their pad centres (:meth:`ReactiveGrasp.
+  cop_offset`), horizontal and across the approach, at most ``shift_speed``,
+  up to ``max_cop_shift``: an object met off the pads' centre lines (which no
+  fingertip force tells) is brought between the pads before the others close;
+  with ``cop_hold_above`` > 0 those wait while the offset is larger than it.
 - ``RECENTRE`` (with ``planned_object`` and ``max_recentres`` > 0; off by
   default, see the parameter): the first grasp finger to touch the object in
   the close locates it from its contact point and normal
@@ -90,14 +102,14 @@ import enum
 import numpy as np
 from pydrake.common.containers import namedview
 from pydrake.common.value import AbstractValue
-from pydrake.math import RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import ContactResults
 from pydrake.systems.framework import LeafSystem
 
 from handle_drake.base.hands import get_hand_spec
 
 __all__ = ["ObjectEstimate", "ReactiveGrasp", "ReactiveGraspMode", "ReactiveGraspParams",
-           "ReactiveGraspProgress", "finger_command_groups"]
+           "ReactiveGraspProgress", "TaxelPadLayout", "finger_command_groups"]
 
 
 #: The controller's progress (discrete state): travel along the approach (m),
@@ -218,6 +230,18 @@ class ReactiveGraspParams:
     recentre_threshold: float = 0.003  # m
     max_recentre: float = 0.025  # m
     recentre_reopen: float = 0.0  # share of each finger's closing undone before the shift
+    # 1/s, the close's centring on the pads' centres of pressure (needs taxel_pads; 0: off,
+    # the default, so results without taxels are unchanged); at most max_cop_shift (m) on
+    # top of the approach's shift
+    cop_shift_gain: float = 0.0
+    max_cop_shift: float = 0.015
+    # N, a pad's force (cells over their noise floor) from which its centre of pressure
+    # counts: less than contact_threshold, as a fingertip pressed at its tip, beyond
+    # the grid, leaves only a fraction of its force on the border cells
+    cop_min_force: float = 0.05
+    # m: while the centring's offset is above this (and its shift under its cap), the
+    # grasp fingers that do not touch yet wait (0: they close on meanwhile)
+    cop_hold_above: float = 0.0
 
     def validate(self) -> None:
         for f in dc.fields(self):
@@ -232,7 +256,8 @@ class ReactiveGraspParams:
                                  f"got {getattr(self, name)}")
         for name in ("shift_speed", "max_shift", "contact_threshold", "squeeze", "hold_time",
                      "lift_height", "arrival_timeout", "close_shift_speed", "max_close_shift",
-                     "recentre_threshold", "max_recentre", "recentre_reopen"):
+                     "recentre_threshold", "max_recentre", "recentre_reopen", "cop_shift_gain",
+                     "max_cop_shift", "cop_min_force", "cop_hold_above"):
             if getattr(self, name) < 0:
                 raise ValueError(f"ReactiveGraspParams.{name} must be >= 0, "
                                  f"got {getattr(self, name)}")
@@ -254,6 +279,52 @@ def _capped(shift: np.ndarray, cap: float) -> np.ndarray:
     """``shift`` scaled down to length ``cap`` if it is longer."""
     norm = np.linalg.norm(shift)
     return shift * (cap / norm) if norm > cap else shift
+
+
+@dc.dataclass(frozen=True)
+class TaxelPadLayout:
+    """One finger's taxel pad as the centring on the centre of pressure reads it (the
+    taxel device's ``Pad`` in plain numbers; ``systems`` does not import ``devices``).
+
+    Attributes:
+        start: index of the pad's first cell in the ``taxels`` vector.
+        cell_centres: (cells, 2) ``(u, v)`` of each cell in the pad frame P (m): ``u``
+            across the pad (P's x), ``v`` along it (P's y).
+        cell_area: m^2 of one cell.
+        body_index: the pad's body (an index into ``body_poses``).
+        X_BP: the pad frame in that body's frame (origin at the grid's centre, +z out).
+        radius: 0 for a flat pad; r > 0: wrapped around a cylinder of radius r whose
+            axis is P's y line through ``(0, 0, -r)`` (``u`` is the arc length).
+        noise_floor: Pa; cells at or below it read as empty.
+    """
+
+    start: int
+    cell_centres: np.ndarray
+    cell_area: float
+    body_index: int
+    X_BP: RigidTransform
+    radius: float = 0.0
+    noise_floor: float = 0.0
+
+    @property
+    def cells(self) -> int:
+        return len(self.cell_centres)
+
+    def centre_of_pressure(self, taxels, along: bool = True) -> tuple[np.ndarray, float]:
+        """``(p_P, force)``: the centre of pressure on the pad's surface, in P (m; the
+        zero vector without force), and the pad's total normal force (N). ``along``
+        False: its ``u`` only (the point on the pad's centre line across from it)."""
+        p = np.asarray(taxels, float)[self.start:self.start + self.cells]
+        f = np.where(p > self.noise_floor, p, 0.0) * self.cell_area
+        total = float(f.sum())
+        if total <= 0.0:
+            return np.zeros(3), 0.0
+        u, v = f @ self.cell_centres / total
+        if self.radius <= 0.0:
+            return np.array([u, v if along else 0.0, 0.0]), total
+        a = u / self.radius
+        return np.array([self.radius * np.sin(a), v if along else 0.0,
+                         self.radius * (np.cos(a) - 1.0)]), total
 
 
 def finger_command_groups(hand_kind: str) -> list[list[int]]:
@@ -345,6 +416,41 @@ def _checked_arguments(start_pose6, goal_pose6, preshape, closed, finger_groups,
     return start, goal, preshape, closed, groups, grasp, params, finger_directions_B
 
 
+def _checked_taxel_pads(taxel_pads, taxel_cells, n: int) -> list | None:
+    """``taxel_pads`` checked against ``n`` fingers and ``taxel_cells`` cells."""
+    if taxel_pads is None:
+        if taxel_cells is not None:
+            raise ValueError("taxel_cells needs taxel_pads (the pads the cells belong to)")
+        return None
+    pads = list(taxel_pads)
+    if len(pads) != n:
+        raise ValueError(f"taxel_pads: expected {n} entries (one per tactile channel, None "
+                         f"for a finger without a pad), got {len(pads)}")
+    if isinstance(taxel_cells, bool) or not isinstance(taxel_cells, int | np.integer) \
+            or taxel_cells < 1:
+        raise ValueError(f"taxel_cells: expected the taxels port's size (an integer >= 1), "
+                         f"got {taxel_cells!r}")
+    for i, pad in enumerate(pads):
+        if pad is None:
+            continue
+        if not isinstance(pad, TaxelPadLayout):
+            raise TypeError(f"taxel_pads[{i}]: expected a TaxelPadLayout or None, got "
+                            f"{type(pad).__name__}")
+        centres = np.asarray(pad.cell_centres)
+        if centres.ndim != 2 or centres.shape[1] != 2 or not np.isfinite(centres).all():
+            raise ValueError(f"taxel_pads[{i}].cell_centres: expected (cells, 2) finite "
+                             f"values, got shape {centres.shape}")
+        if not 0 <= pad.start <= taxel_cells - len(centres):
+            raise ValueError(f"taxel_pads[{i}]: cells {pad.start}..{pad.start + len(centres)}"
+                             f" do not fit the {taxel_cells} taxels")
+        if not (np.isfinite(pad.cell_area) and pad.cell_area > 0):
+            raise ValueError(f"taxel_pads[{i}].cell_area: expected > 0 (m^2), got "
+                             f"{pad.cell_area}")
+    if all(pad is None for pad in pads):
+        raise ValueError("taxel_pads: every entry is None (no finger has a pad)")
+    return pads
+
+
 class ReactiveGrasp(LeafSystem):
     """Reactive approach, per-finger tactile closing, squeeze and lift (see module doc).
 
@@ -373,13 +479,18 @@ class ReactiveGrasp(LeafSystem):
             fingertip on the table says nothing about the object). Needed with
             ``planned_object``.
         period: control period (s).
+        taxel_pads, taxel_cells: optional, per tactile channel its distal pad
+            (:class:`TaxelPadLayout`, None for a finger without one) and the size
+            of the taxel vector: with them the system has ``taxels`` and
+            ``body_poses`` inputs, and ``cop_shift_gain`` > 0 centres the close
+            on the pads' centres of pressure.
     """
 
     def __init__(self, start_pose6, goal_pose6, preshape, closed, finger_groups,
                  grasp_fingers=None, params: ReactiveGraspParams | None = None,
                  finger_directions_B=None, hand_bodies=None, fingertip_bodies=None,
                  planned_object: ObjectEstimate | None = None, object_bodies=None,
-                 period: float = 0.004):
+                 period: float = 0.004, taxel_pads=None, taxel_cells: int | None = None):
         super().__init__()
         (start, goal, preshape, closed, groups, grasp, self.params,
          finger_directions_B) = _checked_arguments(
@@ -387,6 +498,8 @@ class ReactiveGrasp(LeafSystem):
             finger_directions_B, hand_bodies, fingertip_bodies, planned_object, object_bodies,
             period)
         n = len(groups)
+        self._taxel_pads = _checked_taxel_pads(taxel_pads, taxel_cells, n)
+        self._taxel_cells = taxel_cells
         self._object = planned_object
         self._object_bodies = (set() if object_bodies is None
                                else {int(b) for b in object_bodies})
@@ -413,6 +526,11 @@ class ReactiveGrasp(LeafSystem):
         if hand_bodies is not None:
             self._contacts = self.DeclareAbstractInputPort(
                 "contact_results", AbstractValue.Make(ContactResults()))
+        self._taxels = self._body_poses = None
+        if self._taxel_pads is not None:
+            self._taxels = self.DeclareVectorInputPort("taxels", int(self._taxel_cells))
+            self._body_poses = self.DeclareAbstractInputPort(
+                "body_poses", AbstractValue.Make([RigidTransform()]))
 
         self._wrist = self.DeclareDiscreteState(start)
         self._hand = self.DeclareDiscreteState(preshape)
@@ -443,6 +561,57 @@ class ReactiveGrasp(LeafSystem):
             raise RuntimeError("this ReactiveGrasp was built without hand_bodies: "
                                "it has no contact_results input")
         return self._contacts
+
+    def get_taxels_input_port(self):
+        if self._taxels is None:
+            raise RuntimeError("this ReactiveGrasp was built without taxel_pads: "
+                               "it has no taxels input")
+        return self._taxels
+
+    def get_body_poses_input_port(self):
+        if self._body_poses is None:
+            raise RuntimeError("this ReactiveGrasp was built without taxel_pads: "
+                               "it has no body_poses input")
+        return self._body_poses
+
+    def cop_offset(self, context, fingers) -> np.ndarray:
+        """(3,) m, world: the mean, over the ``fingers`` ((n,) bool) whose pad feels more
+        than ``cop_min_force``, of the pad's centre of pressure across the pad (``u``:
+        :meth:`TaxelPadLayout.centre_of_pressure` with ``along`` False) minus its
+        centre (zeros when none does, or without ``taxel_pads``). Moving the hand by
+        it brings the pads' centre lines onto the centres of pressure. Along the
+        finger (``v``) is left out: a closing finger meets an object with its tip
+        first wherever the object is (a pinched cuboid moved towards the thumb was
+        met 6.7 mm towards the thumb's tip, beyond its grid)."""
+        if self._taxel_pads is None:
+            return np.zeros(3)
+        taxels = self._taxels.Eval(context)
+        poses = None
+        offsets = []
+        for i in np.flatnonzero(fingers):
+            pad = self._taxel_pads[i]
+            if pad is None:
+                continue
+            p_P, force = pad.centre_of_pressure(taxels, along=False)
+            if force <= self.params.cop_min_force:
+                continue
+            poses = self._body_poses.Eval(context) if poses is None else poses
+            R_WP = poses[pad.body_index].rotation() @ pad.X_BP.rotation()
+            offsets.append(R_WP.multiply(p_P))
+        return np.mean(offsets, axis=0) if offsets else np.zeros(3)
+
+    def _cop_shift(self, context, touching) -> np.ndarray:
+        """The wrist's step (m, world) centring the close on the pads' centres of pressure:
+        ``cop_shift_gain`` h times :meth:`cop_offset` of the touching grasp fingers,
+        horizontal and across the approach, at most ``shift_speed`` h long."""
+        p, h = self.params, self._period
+        d = self.cop_offset(context, touching & self._grasp)
+        d[2] = 0.0  # the object rests on the table: never push the hand into it
+        a = np.array([self._direction[0], self._direction[1], 0.0])
+        if np.linalg.norm(a) > 1e-9:
+            a /= np.linalg.norm(a)
+            d -= (d @ a) * a
+        return _capped(p.cop_shift_gain * h * d, p.shift_speed * h)
 
     def get_mode(self, context) -> ReactiveGraspMode:
         return ReactiveGraspMode(int(context.get_discrete_state(self._mode_value).GetAtIndex(0)))
@@ -479,6 +648,17 @@ class ReactiveGrasp(LeafSystem):
         return p.max_recentres * (1.5 * p.max_closing / p.close_rate
                                   + p.max_recentre / p.shift_speed + p.arrival_timeout
                                   + 4 * self._period)
+
+    def cop_hold_duration(self) -> float:
+        """Longest time (s) the open fingers wait for the centring on the centres of
+        pressure (``cop_hold_above``): the whole capped shift at the slowest rate a
+        waiting step moves (0 when off)."""
+        p = self.params
+        if self._taxel_pads is None or p.cop_shift_gain <= 0 or p.cop_hold_above <= 0 \
+                or p.shift_speed == 0:
+            return 0.0
+        rate = min(p.shift_speed, p.cop_shift_gain * p.cop_hold_above)
+        return (p.max_shift + p.max_cop_shift) / rate + 4 * self._period
 
     # ---- helpers ---------------------------------------------------------------
     def _hand_command(self, s) -> np.ndarray:
@@ -654,12 +834,13 @@ class ReactiveGrasp(LeafSystem):
             w.target, w.recentres, w.t_recentred = w.shift + d, w.recentres + 1, np.inf
             w.recentre_from = w.s.copy()
             return ReactiveGraspMode.RECENTRE
+        step, hold = self._cop_step(context, tips, w.shift)
         for i in np.flatnonzero(self._grasp):
             if w.touched[i]:
                 continue
             if tips[i]:
                 w.touched[i] = 1.0  # this finger stops where it is
-            else:
+            elif not hold:
                 w.s[i] = min(w.s[i] + p.close_rate * h, p.max_closing)
         done = (w.touched > 0) | (w.s >= p.max_closing)
         if p.close_shift_speed > 0 and tips[self._grasp].any() and not np.all(
@@ -667,10 +848,25 @@ class ReactiveGrasp(LeafSystem):
             d = self._shift_direction(context, tips & self._grasp, direction_W)
             w.shift = _capped(w.shift + p.close_shift_speed * h * d,
                               p.max_shift + p.max_close_shift)
+        if not np.all(done[self._grasp]):
+            w.shift = _capped(w.shift + step, p.max_shift + p.max_cop_shift)
         if np.all(done[self._grasp]):
             w.squeeze_from = w.s.copy()
             return ReactiveGraspMode.SQUEEZE
         return ReactiveGraspMode.CLOSE
+
+    def _cop_step(self, context, tips, shift) -> tuple[np.ndarray, bool]:
+        """The close's step on the centres of pressure (zeros when off or no grasp finger
+        touches) and whether the open grasp fingers wait for it: the offset is above
+        ``cop_hold_above`` and the step still moves the wrist (under the cap)."""
+        p = self.params
+        if p.cop_shift_gain <= 0 or self._taxel_pads is None or not tips[self._grasp].any():
+            return np.zeros(3), False
+        step = self._cop_shift(context, tips)
+        moved = _capped(shift + step, p.max_shift + p.max_cop_shift) - shift
+        hold = (p.cop_hold_above > 0 and np.linalg.norm(moved) > 1e-9
+                and np.linalg.norm(step) > p.cop_shift_gain * self._period * p.cop_hold_above)
+        return step, hold
 
     def _step_recentre(self, context, w: _Step, now: float) -> ReactiveGraspMode:
         """RECENTRE: undo recentre_reopen of the closing, then shift, then settle, then

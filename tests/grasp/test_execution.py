@@ -176,3 +176,46 @@ def test_side_grips_squeeze_at_most_half_the_grasp_width():
     assert plan_params(wide).squeeze == pytest.approx(CLOSING_SQUEEZE / stroke)
     small = plan_grasp("tip_pinch", ("sphere", 0.0155), resting_pose("sphere", 0.0155))
     assert plan_params(small).squeeze == pytest.approx(CLOSING_SQUEEZE / stroke)
+
+
+def _in_hand(runner):
+    """The object's position in the hand base frame (m), read from the plant now."""
+    plant, context = runner.harness.plant, runner.harness.plant_context()
+    base = plant.GetBodyByName("forearm", plant.GetModelInstanceByName("hand"))
+    obj = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName("object"))[0])
+    return (plant.EvalBodyPoseInWorld(context, base).inverse()
+            @ plant.EvalBodyPoseInWorld(context, obj)).translation()
+
+
+def test_cop_centring_close_holds_a_ball_met_off_the_pads_centre_lines():
+    """The tip pinch on a 22.5 mm ball planned at the origin, executed on the ball 10 mm
+    away (6.6, 7.5 mm): the force-only reactive close meets it off the pads' centre
+    lines and squeezes it out; the close centred on the pads' centres of pressure
+    (``cop_shift_gain``, the open finger waiting while the offset is over 2 mm) holds
+    it, nearer where the plan put it in the hand. Truth: the plant's object and hand
+    poses after the lift, against the plan's ``X_WB^-1 X_WO``."""
+    import numpy as np
+    from pydrake.common.schema import Transform
+
+    from handle_drake.scenario import ObjectConfig
+
+    size = 0.0225
+    offset = 0.010 * np.array([7.0, 8.0]) / np.hypot(7.0, 8.0)
+    plan = plan_grasp("tip_pinch", ("sphere", size), resting_pose("sphere", size))
+    true_object = ObjectConfig(kind="sphere", size=size, on_table=False,
+                               X_WO=Transform(resting_pose("sphere", size, xy=offset)))
+    planned = (plan.X_WB.inverse() @ plan.X_WO).translation()
+    force = ReactiveGraspRunner(plan, world_object=true_object)
+    force_result = force.run()
+    force_offset = np.linalg.norm(_in_hand(force) - planned)
+    cop = ReactiveGraspRunner(plan, world_object=true_object, params=plan_params(
+        plan, cop_shift_gain=10.0, cop_hold_above=0.002))
+    cop_result = cop.run()
+    cop_offset = np.linalg.norm(_in_hand(cop) - planned)
+    assert force.scenario.hand.taxels is None  # off by default: no taxels added
+    assert not held_through_lift(force_result)
+    assert held_through_lift(cop_result), cop_result.object_position[::25]
+    assert cop_offset < 0.5 * force_offset and cop_offset < 0.012, (cop_offset, force_offset)
+    assert np.isclose(cop_offset, cop.in_hand_offset())
+    # the hand moved towards the ball (its shift has a positive share of the offset)
+    assert cop.approach_shift()[:2] @ offset > 0.5 * 0.010 ** 2, cop.approach_shift()

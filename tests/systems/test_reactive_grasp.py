@@ -13,15 +13,18 @@ import math
 
 import numpy as np
 import pytest
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from handle_drake.systems.reactive_grasp import (
     ReactiveGrasp,
     ReactiveGraspMode,
     ReactiveGraspParams,
+    TaxelPadLayout,
     finger_command_groups,
 )
 
@@ -46,9 +49,11 @@ def _force_script(step_times, t_end=10.0):
     return PiecewisePolynomial.ZeroOrderHold(times, values)
 
 
-def _simulate(controller, forces, measured=None):
+def _simulate(controller, forces, measured=None, connect=None):
     builder = DiagramBuilder()
     grasp = builder.AddSystem(controller)
+    if connect is not None:  # the test's own extra inputs
+        connect(builder, grasp)
     tactile = builder.AddSystem(TrajectorySource(forces))
     builder.Connect(tactile.get_output_port(), grasp.get_tactile_input_port())
     if measured is None:  # perfect tracking: the command is the measurement
@@ -193,6 +198,111 @@ def test_the_optional_centring_close_shifts_the_wrist_while_only_some_fingers_to
                           finger_directions_B=outward)
     at, _ = _simulate(grasp, forces)
     np.testing.assert_allclose(at(0.5)["wrist"], pose)
+
+
+def _cop_pads():
+    """FF's and TH's 4 x 4 pads (3.5 mm across, 4.5 mm along) facing each other: FF's
+    pad (body 1, at the identity) looks along world +x, its u along +y, its v along
+    +z; TH's (body 2, turned half a turn about z) looks along -x, its u along -y.
+    Pressed: FF's cell (row 1, col 3) at u = +5.25 mm, TH's cells (row 2, cols 0 and 1)
+    at u = -5.25 and -1.75 mm (centre of pressure u = -3.5 mm); a reading under the
+    noise floor on FF's cell (row 3, col 0) is empty."""
+    centres = np.array([[(c - 1.5) * 0.0035, (r - 1.5) * 0.0045]
+                        for r in range(4) for c in range(4)])
+    R_BP = RotationMatrix(np.column_stack([[0.0, 1, 0], [0.0, 0, 1], [1.0, 0, 0]]))
+    pads = [None] * 5
+    pads[FF] = TaxelPadLayout(0, centres, 0.0035 * 0.0045, 1, RigidTransform(R_BP, [0, 0, 0]),
+                              noise_floor=3000.0)
+    pads[TH] = TaxelPadLayout(16, centres, 0.0035 * 0.0045, 2, RigidTransform(R_BP, [0, 0, 0]),
+                              noise_floor=3000.0)
+    taxels = np.zeros(32)
+    taxels[1 * 4 + 3] = 1e5
+    taxels[3 * 4 + 0] = 2000.0  # under the floor
+    taxels[16 + 2 * 4 + 0] = taxels[16 + 2 * 4 + 1] = 1e5
+    poses = [RigidTransform(), RigidTransform(),
+             RigidTransform(RollPitchYaw(0, 0, np.pi), [0.3, 0.0, 0.0])]
+
+    def connect(builder, grasp):
+        source = builder.AddSystem(ConstantVectorSource(taxels))
+        builder.Connect(source.get_output_port(), grasp.get_taxels_input_port())
+        body = builder.AddSystem(ConstantValueSource(AbstractValue.Make(poses)))
+        builder.Connect(body.get_output_port(), grasp.get_body_poses_input_port())
+
+    return pads, connect
+
+
+def test_the_cop_centring_close_moves_the_wrist_onto_the_pads_centres_of_pressure():
+    """cop_shift_gain > 0: while some grasp fingers touch (FF from 0.105 s, TH from
+    0.155 s, MF never), each update moves the wrist by gain h times the mean offset
+    (world) of the touching fingers' centres of pressure from their pad centres,
+    horizontal (z dropped), capped at max_shift + max_cop_shift; off (the default),
+    the wrist stays."""
+    preshape, closed = _hand()
+    pose = np.zeros(6)
+    pads, connect = _cop_pads()
+    forces = _force_script([0.105, None, None, None, 0.155])
+    p = ReactiveGraspParams(close_rate=1.0, cop_shift_gain=2.0, max_shift=0.0,
+                            max_cop_shift=0.002)
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params=p, period=H,
+                          taxel_pads=pads, taxel_cells=32)
+    at, context = _simulate(grasp, forces, connect=connect)
+    # FF alone: its centre of pressure is 5.25 mm along +y (and 2.25 mm down along the
+    # pad, which the centring leaves out)
+    ff = np.array([0.0, 0.00525, 0.0])
+    np.testing.assert_allclose(grasp.cop_offset(context, np.array([1, 0, 0, 0, 0], bool)), ff,
+                               atol=1e-12)
+    # TH's is 3.5 mm along -u, which is world +y on the opposing pad
+    both = grasp.cop_offset(context, np.array([1, 0, 0, 0, 1], bool))
+    np.testing.assert_allclose(both, [0.0, 0.5 * (0.00525 + 0.0035), 0.0], atol=1e-12)
+    out = at(0.2049)  # updates 0.11 ... 0.15 saw FF alone, 0.16 ... 0.20 both
+    assert out["mode"] is ReactiveGraspMode.CLOSE
+    expected = p.cop_shift_gain * H * (5 * 0.00525 + 5 * 0.5 * (0.00525 + 0.0035))
+    np.testing.assert_allclose(out["wrist"][:3], [0.0, expected, 0.0], atol=1e-12)
+    np.testing.assert_allclose(out["wrist"][3:], 0.0)
+    out = at(0.5)  # capped at max_cop_shift
+    np.testing.assert_allclose(out["wrist"][:3], [0.0, p.max_cop_shift, 0.0], atol=1e-12)
+    # the default (gain 0), same images: the wrist stays where the approach left it
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, period=H, taxel_pads=pads,
+                          taxel_cells=32)
+    at, _ = _simulate(grasp, forces, connect=connect)
+    np.testing.assert_allclose(at(0.5)["wrist"], pose)
+
+
+def test_the_open_fingers_wait_while_the_cop_offset_is_over_cop_hold_above():
+    """cop_hold_above: the open grasp finger (MF) does not close while the touching
+    pads' offset (5.25, then 4.375 mm) is over 2 mm and the centring still moves the
+    wrist; once the shift reaches its cap (2 mm: after 0.525 mm with FF alone and
+    17 steps of 0.0875 mm) it closes on at close_rate."""
+    preshape, closed = _hand()
+    pose = np.zeros(6)
+    pads, connect = _cop_pads()
+    p = ReactiveGraspParams(close_rate=1.0, cop_shift_gain=2.0, max_shift=0.0,
+                            max_cop_shift=0.002, cop_hold_above=0.002)
+    grasp = ReactiveGrasp(pose, pose, preshape, closed, GROUPS, params=p, period=H,
+                          taxel_pads=pads, taxel_cells=32)
+    at, _ = _simulate(grasp, _force_script([0.105, None, None, None, 0.155]), connect=connect)
+    before = at(0.1049)["closing"][MF]
+    assert before == pytest.approx(p.close_rate * H * 10)
+    assert at(0.3249)["closing"][MF] == pytest.approx(before, abs=1e-12)  # waited
+    out = at(0.4049)  # the cap was reached at 0.32 s: closing again from 0.33 s
+    assert out["closing"][MF] == pytest.approx(before + p.close_rate * H * 8, abs=1e-12)
+    np.testing.assert_allclose(out["wrist"][:3], [0.0, p.max_cop_shift, 0.0], atol=1e-12)
+    # the longest wait: the 2 mm cap at the slowest waiting rate, gain x 2 mm = 4 mm/s
+    assert grasp.cop_hold_duration() == pytest.approx(0.002 / 0.004 + 4 * H)
+
+
+def test_taxel_pads_are_checked():
+    preshape, closed = _hand()
+    pads, _ = _cop_pads()
+    pose = np.zeros(6)
+    with pytest.raises(ValueError, match="taxel_pads: expected 5 entries"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS, taxel_pads=pads[:4], taxel_cells=32)
+    with pytest.raises(ValueError, match="do not fit the 20 taxels"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS, taxel_pads=pads, taxel_cells=20)
+    with pytest.raises(ValueError, match="taxel_cells needs taxel_pads"):
+        ReactiveGrasp(pose, pose, preshape, closed, GROUPS, taxel_cells=20)
+    with pytest.raises(ValueError, match="cop_shift_gain must be >= 0"):
+        ReactiveGraspParams(cop_shift_gain=-1.0).validate()
 
 
 def test_multiple_unexpected_contacts_stop_the_approach():

@@ -17,6 +17,12 @@ ReactiveGrasp` controller (report section 3.3) in one diagram:
   at most half the grasp width for the side grips: :func:`plan_params`);
 - the hand lifts the plan's ``lift_height``.
 
+With ``cop_shift_gain`` > 0 the runner gives the hand its distal taxel pads (a
+scenario without ``hand.taxels`` gets ``pad4x4`` pads, no palm, no skins) and the
+close centres the hand on the pads' centres of pressure (:func:`taxel_pad_layouts`);
+:meth:`ReactiveGraspRunner.in_hand_offset` reads from the plant how far the object
+ends from where the plan put it in the hand.
+
 The open-loop alternative is the plan's keyframe script (``plan_scenario(plan)``
 run by :class:`~handle_drake.trial.simulate.ScenarioRunner`). Both return a
 :class:`~handle_drake.trial.simulate.RunResult`, so :func:`handle_drake.apps.demo.held_through_lift`
@@ -28,6 +34,8 @@ from __future__ import annotations
 import numpy as np
 
 from handle_drake.base.hands import get_hand_spec
+from handle_drake.devices.taxels.config import TaxelConfig
+from handle_drake.devices.taxels.wiring import TAXEL_PORT
 from handle_drake.geometry.objects import dimensions
 from handle_drake.grasp.planning import CLOSING_SQUEEZE, PRESHAPE_OPENING, GraspPlan
 from handle_drake.grasp.taxonomy import GraspClass
@@ -37,13 +45,15 @@ from handle_drake.systems.reactive_grasp import (
     ReactiveGrasp,
     ReactiveGraspMode,
     ReactiveGraspParams,
+    TaxelPadLayout,
     finger_command_groups,
 )
 from handle_drake.trial.harness import DEFAULT_LOG, RunResult, TrialHarness
 from handle_drake.trial.plans import plan_scenario
 from handle_drake.trial.simulate import ScenarioRunner
 
-__all__ = ["ReactiveGraspRunner", "object_estimate", "plan_params", "run_plan"]
+__all__ = ["ReactiveGraspRunner", "in_hand_offset", "object_estimate", "plan_params",
+           "run_plan", "taxel_pad_layouts"]
 
 SETTLE = 0.5  # s simulated after the lift completes (held_through_lift looks at 0.3 s)
 
@@ -89,6 +99,25 @@ def object_estimate(plan: GraspPlan) -> ObjectEstimate | None:
     return ObjectEstimate(spec.kind, plan.X_WO, radius=0.5 * d["diameter"])
 
 
+def taxel_pad_layouts(station, spec) -> tuple[list | None, int | None]:
+    """Per fingertip (``spec.fingertip_frames`` order) its distal taxel pad as
+    :class:`TaxelPadLayout`, and the size of ``hand.taxels``; ``(None, None)`` for a
+    station without taxels."""
+    if not station.HasSubsystemNamed("taxels"):
+        return None, None
+    pads = station.GetSubsystemByName("taxels").pads
+    starts = np.cumsum([0] + [p.cells for p in pads])
+    by_body = {p.body_name: (p, int(start)) for p, start in zip(pads, starts, strict=False)
+               if p.radius >= 0 and p.name.endswith("tip_pad")}
+    layouts = []
+    for body, _ in spec.pad_geometries:
+        pad, start = by_body.get(body, (None, 0))
+        layouts.append(None if pad is None else TaxelPadLayout(
+            start, pad.profile.cell_centres(), pad.profile.cell_area, pad.body_index,
+            pad.X_BP, pad.radius, 3.0 * pad.profile.noise_std_pa))
+    return layouts, int(starts[-1])
+
+
 class ReactiveGraspRunner:
     """Station + ReactiveGrasp + loggers for one plan (a :class:`TrialHarness`); runs many times.
 
@@ -107,6 +136,9 @@ class ReactiveGraspRunner:
         self.scenario = plan_scenario(plan, world_object=world_object)
         self.scenario.script = []  # the controller drives the station, not keyframes
         self._params = params if params is not None else plan_params(plan)
+        if self._params.cop_shift_gain > 0 and self.scenario.hand.taxels is None:
+            # the centring on the centres of pressure reads the distal pads' taxels
+            self.scenario.hand.taxels = TaxelConfig(palm="", skin="")
         self.harness = TrialHarness(self.scenario, self._add_controller, meshcat=meshcat,
                                     log=(*DEFAULT_LOG, "mode"))
         self.station = self.harness.station
@@ -124,13 +156,18 @@ class ReactiveGraspRunner:
         hand = plant.GetModelInstanceByName("hand")
         spec = get_hand_spec(self.scenario.hand.kind)
         tips = [plant.GetFrameByName(n, hand).body().index() for n in spec.fingertip_frames]
+        pads, cells = taxel_pad_layouts(station, spec)
         c = builder.AddNamedSystem("reactive_grasp", ReactiveGrasp(
             plan.wrist(plan.X_WB_pregrasp), plan.wrist(plan.X_WB), plan.preshape_command,
             plan.close_command, finger_command_groups(spec.name), params=self._params,
             hand_bodies=plant.GetBodyIndices(hand), fingertip_bodies=tips,
             planned_object=object_estimate(plan),
-            object_bodies=plant.GetBodyIndices(plant.GetModelInstanceByName(OBJECT_INSTANCE))))
+            object_bodies=plant.GetBodyIndices(plant.GetModelInstanceByName(OBJECT_INSTANCE)),
+            taxel_pads=pads, taxel_cells=cells))
         s = station
+        if pads is not None:
+            builder.Connect(s.GetOutputPort(TAXEL_PORT), c.get_taxels_input_port())
+            builder.Connect(s.GetOutputPort("body_poses"), c.get_body_poses_input_port())
         builder.Connect(s.GetOutputPort("hand.tactile"), c.get_tactile_input_port())
         builder.Connect(s.GetOutputPort("wrist.pose_measured"),
                         c.get_wrist_pose_measured_input_port())
@@ -147,7 +184,7 @@ class ReactiveGraspRunner:
                                       - self.plan.X_WB_pregrasp.translation()))
         slowed = length / (p.approach_speed * p.slow_factor) - length / p.approach_speed
         return (self.controller.nominal_duration() + self.controller.recentre_duration()
-                + slowed + p.arrival_timeout + SETTLE)
+                + self.controller.cop_hold_duration() + slowed + p.arrival_timeout + SETTLE)
 
     def _finished(self, root_context) -> str | None:
         mode = self.controller.get_mode(self._controller_context)
@@ -187,9 +224,26 @@ class ReactiveGraspRunner:
         p = self.controller.get_progress(self._controller_context)
         return np.array([p.shift_x, p.shift_y, p.shift_z])
 
+    def in_hand_offset(self) -> float:
+        """m: how far the object is, in the hand base frame, from where the plan put it
+        in the hand (read from the plant now: after the last run)."""
+        return in_hand_offset(self.plan, self.harness.plant, self.harness.plant_context(),
+                              get_hand_spec(self.scenario.hand.kind).base_body)
+
     def closing_at_squeeze(self) -> np.ndarray:
         """(fingers,) closing fraction of each finger when the squeeze began (last run)."""
         return self.controller.closing_at_squeeze(self._controller_context)
+
+
+def in_hand_offset(plan: GraspPlan, plant, plant_context, base_body: str) -> float:
+    """m: the object's position in the hand base frame (the plant's state) minus the
+    plan's (``X_WB^-1 X_WO`` of the plan), its length."""
+    X_WB = plant.EvalBodyPoseInWorld(plant_context, plant.GetBodyByName(
+        base_body, plant.GetModelInstanceByName("hand")))
+    body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(OBJECT_INSTANCE))[0])
+    X_WO = plant.EvalBodyPoseInWorld(plant_context, body)
+    planned = plan.X_WB.inverse() @ plan.X_WO
+    return float(np.linalg.norm((X_WB.inverse() @ X_WO).translation() - planned.translation()))
 
 
 def run_plan(plan: GraspPlan, reactive: bool = True, meshcat=None, html=None,
