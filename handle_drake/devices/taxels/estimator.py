@@ -255,7 +255,6 @@ class InHandPoseEstimator(LeafSystem):
         self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
         self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
         self._self_contact_distance = self_contact_distance
-        self.touching: list[np.ndarray] = []  # the last contacts()' edge contacts' rows
         inspector = self._scene_graph.model_inspector()
         self._links, self._others = self._hand_geometry(inspector, hand)
         self._clearance = np.concatenate([c for _, _, c in self._links])
@@ -372,13 +371,14 @@ class InHandPoseEstimator(LeafSystem):
     def contacts(self, q: np.ndarray, taxels: np.ndarray):
         """The pads' contacts with the object (centres of pressure and outward normals in B),
         the face centres of the pads that feel nothing and each contact's terms for
-        :meth:`fit` (``(points, normals, free, terms)``; ``terms`` (k, 3): the distance's
+        :meth:`fit` (``(points, normals, free, terms, touching)``; ``terms`` (k, 3): the distance's
         and the normal's standard deviations and the expected signed distance, the pad
         pressed ``pad_compliance`` m per N into the object): a pad whose centre of
         pressure lies within ``self_contact_distance`` of another link of the hand (one it
         can collide with) is pressed by the hand, not the object, and is left out. A
         centre of pressure on the grid's border (:func:`pad_contacts`' interior false)
-        gets ``edge_sigma_distance`` and ``edge_sigma_normal``."""
+        gets ``edge_sigma_distance`` and ``edge_sigma_normal``; ``touching``: per such
+        border contact the rows of :meth:`hand_points` of its link (:meth:`fit`'s)."""
         X_BPads = self.pad_poses(q)
         query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
         keep, free = [], []
@@ -398,11 +398,11 @@ class InHandPoseEstimator(LeafSystem):
                 keep.append((point, normal, (*terms, -s["compliance"] * f),
                              None if ok else self._pad_rows[i]))
         free = np.array(free).reshape(-1, 3)
-        self.touching = [k[3] for k in keep if k[3] is not None]
+        touching = [k[3] for k in keep if k[3] is not None]
         if not keep:
-            return np.zeros((0, 3)), np.zeros((0, 3)), free, np.zeros((0, 3))
+            return np.zeros((0, 3)), np.zeros((0, 3)), free, np.zeros((0, 3)), touching
         return (np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free,
-                np.array([k[2] for k in keep]))
+                np.array([k[2] for k in keep]), touching)
 
     @staticmethod
     def _unpack(x) -> RigidTransform:
@@ -421,7 +421,7 @@ class InHandPoseEstimator(LeafSystem):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
-        points, normals, free, terms = self.contacts(self._q_port.Eval(context),
+        points, normals, free, terms, touching = self.contacts(self._q_port.Eval(context),
                                                      self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
@@ -453,7 +453,7 @@ class InHandPoseEstimator(LeafSystem):
         best = None
         for start in starts:
             result = self.fit(points, normals, priors, gravity, free, hand, start=start,
-                              terms=terms, touching=self.touching)
+                              terms=terms, touching=touching)
             if best is None or result[3] < best[3]:
                 best = result
         X_BO, cov, rms, _ = best

@@ -78,7 +78,7 @@ def locate_in_hand(estimator: InHandPoseEstimator, q: np.ndarray, taxels: np.nda
     """The object's pose in the hand base frame from the hand's joints ``q`` and one
     ``taxels`` reading, near ``X_BO_prior`` (see the module doc); None when no pad
     feels the object."""
-    points, normals, free, terms = estimator.contacts(np.asarray(q, float),
+    points, normals, free, terms, touching = estimator.contacts(np.asarray(q, float),
                                                       np.asarray(taxels, float))
     if not len(points):
         return None
@@ -87,7 +87,7 @@ def locate_in_hand(estimator: InHandPoseEstimator, q: np.ndarray, taxels: np.nda
     best = None
     for start in _starts(estimator, X_BO_prior, points, normals):
         result = estimator.fit(points, normals, [(X_BO_prior, std)], None, free, hand,
-                               start=start, terms=terms, touching=estimator.touching)
+                               start=start, terms=terms, touching=touching)
         if best is None or result[3] < best[3]:
             best = result
     X_BO, cov, rms, _ = best
