@@ -87,6 +87,52 @@ def base_rate(n, seed, db, workers, options) -> dict:
             "run_id": run_id}
 
 
+def base_rate_curve(n, seed, targets, options) -> dict:
+    """The base rate at several targets from one set of ``n`` uniform draws in the box (numpy
+    ``seed``), each run to its end at the task's own target: reached at target T when every
+    check passed (gripped, turn >= T x its fraction - tolerance, read at the check's sample),
+    the final turn >= T and neither palm nor welded body leaned on. The rule is the trial's;
+    at the task's own target the count is checked against the trial's ``reached_target``."""
+    from scipy.stats import beta
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    c, rec, gripped = trial.config, [], trial._gripped
+
+    def spy(st, t, *a):
+        rec.append((float(t), bool(g := gripped(st, t, *a))))
+        return g
+
+    trial._gripped = spy
+    b, rng = trial.bounds, np.random.default_rng(seed)
+    checks, fractions = c.check_times(), c.benchmark_fractions()
+    draws = []
+    for _ in range(n):
+        x = b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])
+        rec.clear()
+        o = trial.evaluate(x, early_stop=False)
+        ts = np.array([r[0] for r in rec])
+        at = [int(np.argmin(abs(ts - t))) for t in checks]
+        draws.append((o, [o.turn_deg_series[k] for k in at], [rec[k][1] for k in at]))
+
+    def reached(o, turns, grips, target):
+        return bool(all(g and turn >= target * f - c.tolerance_deg
+                        for g, turn, f in zip(grips, turns, fractions, strict=True))
+                    and o.turn_deg >= target and not o.palm_touched and not o.leaned_on_welded)
+
+    own = sum(reached(*d, c.target_deg) for d in draws)
+    assert own == sum(d[0].reached_target for d in draws), "the curve's rule is not the trial's"
+    rows = []
+    for target in targets:
+        k = sum(reached(*d, target) for d in draws)
+        rows.append({"target_deg": target, "draws": n, "reached": k, "base_rate": k / n,
+                     "upper_95_one_sided": float(beta.ppf(0.95, k + 1, n - k))})
+        print(f"| {target:g} | {n} | {k} | {100 * k / n:.2f} % | "
+              f"{100 * rows[-1]['upper_95_one_sided']:.2f} % |", flush=True)
+    return {"seed": seed, "rows": rows,
+            "turn_deg_quantiles": np.quantile([d[0].turn_deg for d in draws],
+                                              [0.1, 0.5, 0.9, 1.0]).round(1).tolist()}
+
+
 def table(seeds, budget, db, workers, options, optimizers=OPTIMIZERS, random_budget=None,
           fresh=0) -> dict:
     """``random_budget``: random search's budget (default 3 x ``budget``, issue 45 item 4);
@@ -424,6 +470,11 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base-rate", type=int, default=0, metavar="N")
     p.add_argument("--table", action="store_true")
+    p.add_argument("--base-rate-curve", type=int, default=0, metavar="N",
+                   help="N uniform draws (numpy seed 4545) run to their end: the base rate "
+                        "at each of --curve-targets (and its one-sided 95 %% upper bound)")
+    p.add_argument("--curve-targets", nargs="+", type=float,
+                   default=[90.0, 180.0, 240.0, 270.0, 300.0, 360.0], metavar="DEG")
     p.add_argument("--resimulate", action="store_true")
     p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
     p.add_argument("--designs", action="store_true",
@@ -510,6 +561,7 @@ def main(argv=None) -> int:
     if args.grip_digits is not None:
         options["grip_digits"] = args.grip_digits
     for flag, value in (("--robust", args.robust), ("--fresh", args.fresh),
+                        ("--base-rate-curve", args.base_rate_curve),
                         ("--random-budget", args.random_budget or 0)):
         if not 0 <= value <= 1000:
             p.error(f"{flag}: expected an integer in [0, 1000], got {value}")
@@ -532,6 +584,9 @@ def main(argv=None) -> int:
         entry["diagnosis"] = diagnose(args.db)
     if args.summarize:
         entry["summary"] = summarize(args.db, args.budget, args.resimulate, args.more_db)
+    if args.base_rate_curve:
+        entry["base_rate_curve"] = base_rate_curve(args.base_rate_curve, 4545,
+                                                   args.curve_targets, options)
     if args.base_rate:
         entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)
         print(json.dumps(entry["base_rate"]), flush=True)
