@@ -509,6 +509,9 @@ def main(argv=None) -> int:
     p.add_argument("--target-deg", type=float, default=None,
                    help="default: 90 (screw cap), 60 (fingertip cylinder)")
     p.add_argument("--gaits", type=int, default=None, help="default: 1 (the placement's)")
+    p.add_argument("--benchmark", nargs="+", type=float, default=None, metavar="F",
+                   help="the turn / target required at each check (ScrewCapTask.benchmark; "
+                        "default (0, 0.05, 0.3, 1) for one gait, k/K for more)")
     p.add_argument("--placement", choices=sorted(PLACEMENTS), default=None,
                    help="the screw cap's placement: clear (the default, as `handle-drake "
                         "inhand`: CLEAR, nothing wedged against the welded bottle, 1 ms); the "
@@ -567,12 +570,17 @@ def main(argv=None) -> int:
             p.error(f"{flag}: expected an integer in [0, 1000], got {value}")
     if args.robust:
         options["robust_k"] = args.robust
+    if args.benchmark is not None:
+        if len(args.benchmark) != 4 or not all(0 <= f <= 1 for f in args.benchmark):
+            p.error(f"--benchmark: expected 4 fractions in [0, 1], got {args.benchmark}")
+        options["benchmark"] = tuple(args.benchmark)
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
         f"-{args.placement if args.task == 'screw_cap' else args.fingertip}" if preset else ""
     ) + (f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "") + (
-        f"-robust{args.robust}" if args.robust else "")
+        f"-robust{args.robust}" if args.robust else "") + (
+        "-benchmark" + "_".join(f"{f:g}" for f in args.benchmark) if args.benchmark else "")
     entry = result.setdefault(key, {})
     if args.designs:
         result["four_finger_designs"] = designs()
