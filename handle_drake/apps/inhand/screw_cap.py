@@ -122,8 +122,7 @@ from handle_drake.station import _set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 
 __all__ = ["CLEAR", "DEFAULT_PLACEMENT", "ONE_GAIT", "FOUR_FINGER_GRIP", "FOUR_FINGER_TURN",
-           "PLACEMENTS",
-           "REGRASP_GAITS", "TWO_STROKES", "ScrewCapModel",
+           "PLACEMENTS", "REGRASP_GAITS", "TWO_STROKES", "ScrewCapModel",
            "ScrewCapScenario", "FOUR_FINGER_TURN_MOTION", "four_finger_turn_motion",
            "ScrewCapTask", "ScrewCapTrial", "ScrewCapOutcome", "GaitMotionSource",
            "build_screw_cap", "contact_forces", "simulate_scenario", "draw_perturbations",
@@ -201,10 +200,10 @@ REGRASP_GAITS = dict(_WEDGED, cap_position=(0.405, -0.02, 0.075), n_gaits=5,
 # step is 1 ms: the hand-written stroke turns it 113.6, 104.7, 109.7 deg at 1, 0.5, 0.25 ms
 # with no contact on the bottle (at 2 ms, without the neck: 124.0 deg, the little finger
 # brushing the bottle with 3.8 N): docs/results/inhand.md, "Convergence".
-# Its target, 270 deg in one gait: 90 deg (the first target) was reached by 25 % of
-# uniformly random parameter vectors (10 of 40) once a turn past the target counts; 270 by
-# a measured share (docs/results/inhand.md). The demonstration's own parameters turn it
-# -1.8 deg, the hand-written stroke 113.6 deg.
+# Its target, 270 deg in one gait: 90 deg (the first target) is reached by 25 % of
+# uniformly random parameter vectors (40 of 163) once a turn past the target counts, 270 by
+# 1.8 % (3 of 163: one-sided 95 % bound 4.7 %; docs/results/inhand.md). The demonstration's
+# own parameters turn it -1.8 deg, the hand-written stroke 113.6 deg.
 CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, bottle_neck=0.01,
              effort_limits="menagerie", time_step=0.001, target_deg=270.0)
 #: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
