@@ -38,6 +38,7 @@ import numpy as np  # noqa: E402
 
 from handle_drake.apps.inhand.experiment import EVALUATION_SEEDS, run_inhand  # noqa: E402
 from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
+    DEFAULT_PLACEMENT,
     FOUR_FINGER_GRIP,
     FOUR_FINGER_TURN,
     FOUR_FINGER_TURN_MOTION,
@@ -48,6 +49,7 @@ from handle_drake.apps.inhand.screw_cap import (  # noqa: E402
     contact_forces,
     contact_summary,
     four_finger_turn_motion,
+    fresh_success,
     simulate_scenario,
 )
 from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows  # noqa: E402
@@ -85,28 +87,86 @@ def base_rate(n, seed, db, workers, options) -> dict:
             "run_id": run_id}
 
 
-def table(seeds, budget, db, workers, options, optimizers=OPTIMIZERS) -> dict:
+def base_rate_curve(n, seed, targets, options) -> dict:
+    """The base rate at several targets from one set of ``n`` uniform draws in the box (numpy
+    ``seed``), each run to its end at the task's own target: reached at target T when every
+    check passed (gripped, turn >= T x its fraction - tolerance, read at the check's sample),
+    the final turn >= T and neither palm nor welded body leaned on. The rule is the trial's;
+    at the task's own target the count is checked against the trial's ``reached_target``."""
+    from scipy.stats import beta
+
+    trial = ScrewCapTrial(ScrewCapTask(**options))
+    c, rec, gripped = trial.config, [], trial._gripped
+
+    def spy(st, t, *a):
+        rec.append((float(t), bool(g := gripped(st, t, *a))))
+        return g
+
+    trial._gripped = spy
+    b, rng = trial.bounds, np.random.default_rng(seed)
+    checks, fractions = c.check_times(), c.benchmark_fractions()
+    draws = []
+    for _ in range(n):
+        x = b[:, 0] + rng.random(len(b)) * (b[:, 1] - b[:, 0])
+        rec.clear()
+        o = trial.evaluate(x, early_stop=False)
+        ts = np.array([r[0] for r in rec])
+        at = [int(np.argmin(abs(ts - t))) for t in checks]
+        draws.append((o, [o.turn_deg_series[k] for k in at], [rec[k][1] for k in at]))
+
+    def reached(o, turns, grips, target):
+        return bool(all(g and turn >= target * f - c.tolerance_deg
+                        for g, turn, f in zip(grips, turns, fractions, strict=True))
+                    and o.turn_deg >= target and not o.palm_touched and not o.leaned_on_welded)
+
+    own = sum(reached(*d, c.target_deg) for d in draws)
+    assert own == sum(d[0].reached_target for d in draws), "the curve's rule is not the trial's"
+    rows = []
+    for target in targets:
+        k = sum(reached(*d, target) for d in draws)
+        rows.append({"target_deg": target, "draws": n, "reached": k, "base_rate": k / n,
+                     "upper_95_one_sided": float(beta.ppf(0.95, k + 1, n - k))})
+        print(f"| {target:g} | {n} | {k} | {100 * k / n:.2f} % | "
+              f"{100 * rows[-1]['upper_95_one_sided']:.2f} % |", flush=True)
+    return {"seed": seed, "rows": rows,
+            "turn_deg_quantiles": np.quantile([d[0].turn_deg for d in draws],
+                                              [0.1, 0.5, 0.9, 1.0]).round(1).tolist()}
+
+
+def table(seeds, budget, db, workers, options, optimizers=OPTIMIZERS, random_budget=None,
+          fresh=0) -> dict:
+    """``random_budget``: random search's budget (default 3 x ``budget``, issue 45 item 4);
+    ``fresh``: each run's best trial that reached the target tried on that many fresh
+    perturbed physics (``screw_cap.fresh_success``: never used while learning)."""
     rows = {}
     best_trials = []
     by_optimizer = {optimizer: [] for optimizer in optimizers}
+    budgets = {o: (3 * budget if random_budget is None else random_budget)
+               if o == "random" else budget for o in optimizers}
     for seed in seeds:  # seed-major: an interrupted table has every optimiser's first seeds
         for optimizer in optimizers:
             task = "fingertip_cylinder" if options["free"] else "screw_cap"
-            run = run_inhand(task, optimizer, budget, workers, seed, db, progress=False,
+            run = run_inhand(task, optimizer, budgets[optimizer], workers, seed, db,
+                             progress=False,
                              **{k: v for k, v in options.items() if k != "free"})
             s = run.summary()
-            by_optimizer[optimizer].append({
-                "seed": seed, "trials": s["done"], "to_target": s["trials_to_target"],
-                "best_turn_deg": s["best_held_rotation_deg"], "best_score": s["best_score"],
-                "run_id": run.run_id})
+            row = {"seed": seed, "trials": s["done"], "to_target": s["trials_to_target"],
+                   "best_turn_deg": s["best_held_rotation_deg"], "best_score": s["best_score"],
+                   "run_id": run.run_id}
             done = [r for r in run.records if r.status == "done"]
             best = max(done, key=lambda r: r.metric)
             best_trials.append((run.run_id, best.index, best.scenario, best.contacts["turn_deg"]))
+            if fresh and s["trials_to_target"]:
+                f = fresh_success(run.trial.config, best.parameters, fresh)
+                row.update(fresh_success=f["success"], fresh_turns=f["turns"])
+            by_optimizer[optimizer].append(row)
             print(f"{optimizer} seed {seed}: {s['done']} trials, to target "
-                  f"{s['trials_to_target']}, best turn {s['best_held_rotation_deg']:.1f} deg",
+                  f"{s['trials_to_target']}, best turn {s['best_held_rotation_deg']:.1f} deg"
+                  + (f", best trial over {fresh} fresh perturbations: reached in "
+                     f"{100 * row['fresh_success']:.0f} %" if "fresh_success" in row else ""),
                   flush=True)
     for optimizer, runs in by_optimizer.items():
-        to = [r["to_target"] if r["to_target"] else budget + 1 for r in runs]
+        to = [r["to_target"] if r["to_target"] else budgets[optimizer] + 1 for r in runs]
         rows[optimizer] = {
             "runs": runs, "median_trials_to_target": float(np.median(to)),
             "reached": sum(bool(r["to_target"]) for r in runs),
@@ -410,6 +470,11 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--base-rate", type=int, default=0, metavar="N")
     p.add_argument("--table", action="store_true")
+    p.add_argument("--base-rate-curve", type=int, default=0, metavar="N",
+                   help="N uniform draws (numpy seed 4545) run to their end: the base rate "
+                        "at each of --curve-targets (and its one-sided 95 %% upper bound)")
+    p.add_argument("--curve-targets", nargs="+", type=float,
+                   default=[90.0, 180.0, 240.0, 270.0, 300.0, 360.0], metavar="DEG")
     p.add_argument("--resimulate", action="store_true")
     p.add_argument("--speed", type=int, default=0, metavar="ROUNDS")
     p.add_argument("--designs", action="store_true",
@@ -432,15 +497,27 @@ def main(argv=None) -> int:
                         "--seeds: never used for tuning")
     p.add_argument("--optimizers", nargs="+", choices=OPTIMIZERS, default=list(OPTIMIZERS))
     p.add_argument("--budget", type=int, default=60)
+    p.add_argument("--random-budget", type=int, default=None, metavar="N",
+                   help="--table: random search's budget (default 3 x --budget)")
+    p.add_argument("--robust", type=int, default=0, metavar="K",
+                   help="score each trial by its worst over K perturbed physics drawn per "
+                        "trial (ScrewCapTask.robust_k; 0: the nominal physics)")
+    p.add_argument("--fresh", type=int, default=0, metavar="N",
+                   help="--table: each run's best trial that reached the target tried on N "
+                        "fresh perturbed physics never used while learning")
     p.add_argument("--task", choices=("screw_cap", "fingertip_cylinder"), default="screw_cap")
     p.add_argument("--target-deg", type=float, default=None,
                    help="default: 90 (screw cap), 60 (fingertip cylinder)")
     p.add_argument("--gaits", type=int, default=None, help="default: 1 (the placement's)")
-    p.add_argument("--placement", choices=sorted(PLACEMENTS), default="one-gait",
-                   help="the screw cap's placement: one-gait (the 90 deg task), four-finger "
-                        "(FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 deg), "
-                        "four-finger-turn (FOUR_FINGER_TURN: four digits on the cap, the "
-                        "fingers turn it)")
+    p.add_argument("--benchmark", nargs="+", type=float, default=None, metavar="F",
+                   help="the turn / target required at each check (ScrewCapTask.benchmark; "
+                        "default (0, 0.05, 0.3, 1) for one gait, k/K for more)")
+    p.add_argument("--placement", choices=sorted(PLACEMENTS), default=None,
+                   help="the screw cap's placement: clear (the default, as `handle-drake "
+                        "inhand`: CLEAR, nothing wedged against the welded bottle, 1 ms); the "
+                        "older ones, a finger wedged against the bottle: one-gait (ONE_GAIT), "
+                        "four-finger (FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 "
+                        "deg), four-finger-turn (FOUR_FINGER_TURN)")
     p.add_argument("--grip-digits", type=int, default=None, choices=range(1, 6),
                    metavar="N", help="screw_cap: digits that must each touch the cap within "
                    "the contact window for a check (ScrewCapTask.grip_digits; default 1)")
@@ -458,9 +535,11 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.evaluation:
         args.seeds = list(EVALUATION_SEEDS)
-    preset = PLACEMENTS[args.placement]
-    if preset and args.task != "screw_cap":
+    if args.placement is not None and args.task != "screw_cap":
         p.error("--placement: only with --task screw_cap")
+    if args.placement is None:
+        args.placement = DEFAULT_PLACEMENT
+    preset = PLACEMENTS[args.placement] if args.task == "screw_cap" else {}
     if args.fingertip is not None and args.task != "fingertip_cylinder":
         p.error("--fingertip: only with --task fingertip_cylinder")
     if args.task == "fingertip_cylinder" and args.fingertip is None:
@@ -484,11 +563,24 @@ def main(argv=None) -> int:
                "free": args.task == "fingertip_cylinder"}
     if args.grip_digits is not None:
         options["grip_digits"] = args.grip_digits
+    for flag, value in (("--robust", args.robust), ("--fresh", args.fresh),
+                        ("--base-rate-curve", args.base_rate_curve),
+                        ("--random-budget", args.random_budget or 0)):
+        if not 0 <= value <= 1000:
+            p.error(f"{flag}: expected an integer in [0, 1000], got {value}")
+    if args.robust:
+        options["robust_k"] = args.robust
+    if args.benchmark is not None:
+        if len(args.benchmark) != 4 or not all(0 <= f <= 1 for f in args.benchmark):
+            p.error(f"--benchmark: expected 4 fractions in [0, 1], got {args.benchmark}")
+        options["benchmark"] = tuple(args.benchmark)
     args.db.parent.mkdir(parents=True, exist_ok=True)
     result = json.loads(args.out.read_text()) if args.out.exists() else {}
     key = f"{args.task}-target{args.target_deg:g}-gaits{args.gaits}" + (
         f"-{args.placement if args.task == 'screw_cap' else args.fingertip}" if preset else ""
-    ) + (f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "")
+    ) + (f"-grip{args.grip_digits}" if args.grip_digits not in (None, 1) else "") + (
+        f"-robust{args.robust}" if args.robust else "") + (
+        "-benchmark" + "_".join(f"{f:g}" for f in args.benchmark) if args.benchmark else "")
     entry = result.setdefault(key, {})
     if args.designs:
         result["four_finger_designs"] = designs()
@@ -500,11 +592,15 @@ def main(argv=None) -> int:
         entry["diagnosis"] = diagnose(args.db)
     if args.summarize:
         entry["summary"] = summarize(args.db, args.budget, args.resimulate, args.more_db)
+    if args.base_rate_curve:
+        entry["base_rate_curve"] = base_rate_curve(args.base_rate_curve, 4545,
+                                                   args.curve_targets, options)
     if args.base_rate:
         entry["base_rate"] = base_rate(args.base_rate, 1000, args.db, args.workers, options)
         print(json.dumps(entry["base_rate"]), flush=True)
     if args.table:
-        t = table(args.seeds, args.budget, args.db, args.workers, options, args.optimizers)
+        t = table(args.seeds, args.budget, args.db, args.workers, options, args.optimizers,
+                  args.random_budget, args.fresh)
         entry.setdefault("table", {}).update(t["rows"])
         entry["budget"] = args.budget
         if args.resimulate:

@@ -1,7 +1,6 @@
 """The Gymnasium environments (handle_drake.envs): the checker, determinism, the reads
 against the plant, the actions' checks and the vectorised trials against the trial objects."""
 
-import dataclasses as dc
 import os
 import signal
 import subprocess
@@ -15,7 +14,7 @@ from gymnasium.utils.env_checker import check_env
 from pydrake.math import RollPitchYaw
 
 import handle_drake.envs as envs
-from handle_drake.apps.inhand.screw_cap import ScrewCapTask
+from handle_drake.apps.inhand.screw_cap import ONE_GAIT
 from handle_drake.base.hands import actuated_position_limits, get_hand_spec
 from handle_drake.envs.gist import GistEnv, TrialVectorEnv, gist_trial
 from handle_drake.learning.executors import InlineExecutor
@@ -149,9 +148,9 @@ def test_a_turn_made_leaning_on_the_bottle_is_not_reached():
     welded bottle) with a 20 deg target: the hand-written stroke turns the cap past it, but
     the env, as the trial, does not count it (the bottle's force read from the plant); on the
     default placement holding the grasp leans on nothing."""
-    wedged = {f.name: f.default for f in dc.fields(ScrewCapTask)
-              if f.name in ("cap_position", "cap_length", "bottle_neck", "effort_limits",
-                            "time_step")}
+    wedged = {k: v for k, v in ONE_GAIT.items()
+              if k in ("cap_position", "cap_length", "bottle_neck", "effort_limits",
+                       "time_step")}
     assert wedged["time_step"] == 0.002 and wedged["effort_limits"] == "sheet"
     env = envs.InHandEnv("screw_cap", task_options=dict(wedged, target_deg=20.0))
     obs, _ = env.reset(seed=0)

@@ -12,6 +12,7 @@ from handle_drake.apps.inhand.convergence import (
     stroke_motion,
 )
 from handle_drake.apps.inhand.screw_cap import (
+    ONE_GAIT,
     ScrewCapTask,
     ScrewCapTrial,
     build_screw_cap,
@@ -49,7 +50,7 @@ def test_the_built_plant_has_the_cited_effort_limits():
 
 @pytest.fixture(scope="module")
 def one_gait():
-    trial = ScrewCapTrial(ScrewCapTask())  # the sheet's limits, 2 ms: as published
+    trial = ScrewCapTrial(ScrewCapTask(**ONE_GAIT))  # the sheet's limits, 2 ms: as published
     return trial, stroke_motion(trial.gist)
 
 
@@ -278,7 +279,8 @@ def test_the_reversal_check_fails_when_the_grip_cannot_hold_the_margin():
 def test_the_palm_check_fails_when_the_palm_touches():
     # a cap pressed into the palm (15 mm lower, nearer the wrist): the palm touches it at
     # some step (read at every step) and the trial is not reached, whatever the turn
-    trial = ScrewCapTrial(ScrewCapTask(cap_position=(0.36, -0.02, 0.03), lean_force=1e6))
+    trial = ScrewCapTrial(ScrewCapTask(**{**ONE_GAIT, "cap_position": (0.36, -0.02, 0.03)},
+                                      lean_force=1e6))
     outcome = trial.evaluate(stroke_motion(trial.gist), early_stop=False)
     assert outcome.palm_touched and outcome.palm_force_max > 0.0
     assert not outcome.reached_target

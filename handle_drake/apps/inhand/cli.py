@@ -198,7 +198,8 @@ def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
     if args.placement is None:  # the screw cap's default: the one whose physics converges
         args.placement = DEFAULT_PLACEMENT if args.task == "screw_cap" else "one-gait"
-    preset = PLACEMENTS[args.placement]
+    # the placement is the screw cap's alone (the fingertip cylinder has no bottle)
+    preset = PLACEMENTS[args.placement] if args.task == "screw_cap" else {}
     if args.placement != "one-gait" and args.task != "screw_cap":
         raise ValueError(f"--placement {args.placement}: only with --task screw_cap")
     if args.robust and args.task not in ("screw_cap", "fingertip_cylinder"):

@@ -69,9 +69,11 @@ def _task_config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
             if name in task and task[name] == defaults.get(name):
                 del task[name]
         # version 2 (issue 45): contacts read at every step, the welded bottle's lean rule,
-        # the reversal's margin and its travel at every step: scores differ from version 1
+        # the reversal's margin and its travel at every step: scores differ from version 1;
+        # version 3: the cap's touch rule from its last stroke's end for one gait too (a turn
+        # past the target is reached), the default placement CLEAR
         return {"task": task, "optimizer": optimizer, "n_particles": n_particles,
-                "screw_cap_version": 2}
+                "screw_cap_version": 3}
     if not task["accelerometer"]:  # a setting added later: logs written before still resume
         del task["accelerometer"]
     return {"task": task, "optimizer": optimizer,
