@@ -487,8 +487,13 @@ def round_shape(local: np.ndarray, centre, radius: float, height: float):
         angles = -np.pi + np.radians(10) * (np.arange(36) + 0.5)
         if seen.sum() >= 24:
             mean = outline[seen].mean()
+            harmonics = np.abs([np.sum((outline[seen] - mean) * np.exp(-k * 1j * angles[seen]))
+                                for k in range(1, 7)]) * 2 / seen.sum()
             five = np.sum((outline[seen] - mean) * np.exp(-5j * angles[seen])) * 2 / seen.sum()
-            if abs(five) > STAR_HARMONIC * mean:
+            # A star's outline is five-fold above all; a top seen in part (its near edge
+            # out of the camera's range, a glass's rim over its far wall) is lopsided:
+            # its first or second harmonic leads.
+            if abs(five) > STAR_HARMONIC * mean and np.argmax(harmonics) == 4:
                 return ("star_prism", 2 * float(np.percentile(r, 98)),
                         -float(np.angle(five)) / 5)
     r_side = np.linalg.norm(local[:, :2] - centre, axis=1)
