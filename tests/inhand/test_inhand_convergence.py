@@ -218,8 +218,9 @@ def test_the_per_step_contact_record_reads_as_the_contact_results_do(monkeypatch
         checked.append(st["palm"] or st["welded_max"] > 0)
 
     monkeypatch.setattr(screw_cap, "step_contacts", both)
-    for task in (ScrewCapTask(cap_position=(0.36, -0.02, 0.03), lean_force=1e6),
-                 ScrewCapTask()):
+    for task in (ScrewCapTask(**{**ONE_GAIT, "cap_position": (0.36, -0.02, 0.03)},
+                              lean_force=1e6),
+                 ScrewCapTask(**ONE_GAIT)):
         trial = ScrewCapTrial(dc.replace(task, hold=0.0, gait_duration=0.6))
         outcome = trial.evaluate(stroke_motion(trial.gist), early_stop=False)
         assert outcome.palm_touched or outcome.leaned_on_welded
