@@ -954,32 +954,7 @@ class ScrewCapTask:
         if self.benchmark is not None and len(self.benchmark) != self.n_checks:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
-        for name in ("mu_scale", "mass_scale"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
-        if not (isinstance(self.effort_scale, int | float) and 0 < self.effort_scale <= 1):
-            raise ValueError(f"effort_scale: expected a value in (0, 1], got "
-                             f"{self.effort_scale!r}")
-        if isinstance(self.robust_k, bool) or not isinstance(self.robust_k, int) \
-                or self.robust_k < 0:
-            raise ValueError(f"robust_k: expected an integer >= 0, got {self.robust_k!r}")
-        if not 0 <= self.robust_quantile <= 1:
-            raise ValueError(f"robust_quantile: expected a value in [0, 1], got "
-                             f"{self.robust_quantile!r}")
-        for f in self.perturb_steps:
-            if not (0 < f <= 1 and _divides(self.time_step * f)):
-                raise ValueError(f"perturb_steps: expected factors in (0, 1] whose step "
-                                 f"divides 2 ms, got {self.perturb_steps!r}")
-        for name, high in (("perturb_mu", 0.9), ("perturb_mass", 0.9), ("perturb_effort", 0.9),
-                           ("perturb_place", 0.01)):
-            if not 0 <= getattr(self, name) <= high:
-                raise ValueError(f"{name}: expected a value in [0, {high:g}], got "
-                                 f"{getattr(self, name)!r}")
-        if not (len(self.perturb_thread) == 2 and 0 < self.perturb_thread[0]
-                <= self.perturb_thread[1]):
-            raise ValueError(f"perturb_thread: expected (low, high) N m with 0 < low <= high, "
-                             f"got {self.perturb_thread!r}")
+        self._check_robustness()
         if self.effort_limits not in EFFORT_LIMITS:
             raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got "
                              f"{self.effort_limits!r}")
@@ -1009,6 +984,36 @@ class ScrewCapTask:
                     or not (isinstance(item[1], int | float) and abs(item[1]) <= 1.0)):
                 raise ValueError(f"grasp_closure: expected (actuated joint name, offset in "
                                  f"[-1, 1] rad) pairs, got {item!r}")
+
+    def _check_robustness(self) -> None:
+        """The physics' scales and the domain randomisation's settings (one-line errors
+        naming the field)."""
+        for name in ("mu_scale", "mass_scale"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite value > 0, got {value!r}")
+        if not (isinstance(self.effort_scale, int | float) and 0 < self.effort_scale <= 1):
+            raise ValueError(f"effort_scale: expected a value in (0, 1], got "
+                             f"{self.effort_scale!r}")
+        if isinstance(self.robust_k, bool) or not isinstance(self.robust_k, int) \
+                or self.robust_k < 0:
+            raise ValueError(f"robust_k: expected an integer >= 0, got {self.robust_k!r}")
+        if not 0 <= self.robust_quantile <= 1:
+            raise ValueError(f"robust_quantile: expected a value in [0, 1], got "
+                             f"{self.robust_quantile!r}")
+        for f in self.perturb_steps:
+            if not (0 < f <= 1 and _divides(self.time_step * f)):
+                raise ValueError(f"perturb_steps: expected factors in (0, 1] whose step "
+                                 f"divides 2 ms, got {self.perturb_steps!r}")
+        for name, high in (("perturb_mu", 0.9), ("perturb_mass", 0.9), ("perturb_effort", 0.9),
+                           ("perturb_place", 0.01)):
+            if not 0 <= getattr(self, name) <= high:
+                raise ValueError(f"{name}: expected a value in [0, {high:g}], got "
+                                 f"{getattr(self, name)!r}")
+        if not (len(self.perturb_thread) == 2 and 0 < self.perturb_thread[0]
+                <= self.perturb_thread[1]):
+            raise ValueError(f"perturb_thread: expected (low, high) N m with 0 < low <= high, "
+                             f"got {self.perturb_thread!r}")
 
     def closure(self) -> tuple:
         """The grasp closure as ((actuated joint name, offset rad), ...)."""
