@@ -130,6 +130,7 @@ WALK: tuple[Step, ...] = (
          "handle-drake pick diagrams/hamburg_setup.yaml --build-grasp-db --grasp-db "
          "out/grasp_db.json", why="into out/ (the README's line rewrites the shipped file)"),
     Step("handle-drake pick diagrams/paris_setup.yaml --scene-seed 1"),
+    Step("handle-drake pick diagrams/sorter_setup.yaml --kind star_prism --true-poses"),
     Step("python benchmarks/bench_pick.py --seeds 0-19",
          "python benchmarks/bench_pick.py --seeds 0 --plan-only --out out/bench_pick --no-page",
          why="1 seed, planned only; no page"),
