@@ -29,6 +29,7 @@ import numpy as np
 from handle_drake.base.models import add_package, model_path, package_url
 
 __all__ = [
+    "pad_surface_point",
     "HandSpec",
     "HAND_SPECS",
     "SHADOW_COUPLING_RATIO_C5",
@@ -480,3 +481,22 @@ def _model_data(name: str) -> dict:
     for array in data.values():
         array.setflags(write=False)
     return data
+
+
+def pad_surface_point(u, v, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points (n, 3) at surface coordinates ``(u, v)`` (m) of a tactile pad and the outward
+    normals there, in the pad's frame P: a flat pad (``radius`` 0) lies in P's ``z = 0``
+    plane; a skin (``radius`` r > 0) is wrapped around a cylinder of radius r whose axis
+    is P's ``y`` line through ``(0, 0, -r)``, ``u`` its arc length. The one definition
+    of a pad's surface for the taxel sensor (``devices/taxels``) and the reactive grasp's
+    centre of pressure (``systems/reactive_grasp``)."""
+    u, v = np.atleast_1d(np.asarray(u, float)), np.atleast_1d(np.asarray(v, float))
+    if radius <= 0.0:
+        return (np.column_stack([u, v, np.zeros_like(u)]),
+                np.tile([0.0, 0.0, 1.0], (len(u), 1)))
+    a = u / radius
+    n = np.column_stack([np.sin(a), np.zeros_like(a), np.cos(a)])
+    p = radius * n
+    p[:, 2] -= radius
+    p[:, 1] = v
+    return p, n

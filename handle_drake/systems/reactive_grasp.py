@@ -106,7 +106,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import ContactResults
 from pydrake.systems.framework import LeafSystem
 
-from handle_drake.base.hands import get_hand_spec
+from handle_drake.base.hands import get_hand_spec, pad_surface_point
 
 __all__ = ["ObjectEstimate", "ReactiveGrasp", "ReactiveGraspMode", "ReactiveGraspParams",
            "ReactiveGraspProgress", "TaxelPadLayout", "finger_command_groups"]
@@ -320,11 +320,7 @@ class TaxelPadLayout:
         if total <= 0.0:
             return np.zeros(3), 0.0
         u, v = f @ self.cell_centres / total
-        if self.radius <= 0.0:
-            return np.array([u, v if along else 0.0, 0.0]), total
-        a = u / self.radius
-        return np.array([self.radius * np.sin(a), v if along else 0.0,
-                         self.radius * (np.cos(a) - 1.0)]), total
+        return pad_surface_point(u, v if along else 0.0, self.radius)[0][0], total
 
 
 def finger_command_groups(hand_kind: str) -> list[list[int]]:

@@ -40,6 +40,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.tree import BodyIndex
 from scipy.special import erf
 
+from handle_drake.base.hands import pad_surface_point
 from handle_drake.devices.taxels.profiles import TaxelProfile
 
 __all__ = ["Pad", "shadow_pads", "pad_forces", "DEPTH_TOLERANCE", "PalmPad", "SHADOW_SKINS",
@@ -105,17 +106,8 @@ class Pad:
 
     def surface_point(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Points (n, 3) on the pad's surface at ``(u, v)`` and the outward normals there,
-        in the pad frame."""
-        u, v = np.atleast_1d(np.asarray(u, float)), np.atleast_1d(np.asarray(v, float))
-        if self.radius <= 0.0:
-            return (np.column_stack([u, v, np.zeros_like(u)]),
-                    np.tile([0.0, 0.0, 1.0], (len(u), 1)))
-        a = u / self.radius
-        n = np.column_stack([np.sin(a), np.zeros_like(a), np.cos(a)])
-        p = self.radius * n
-        p[:, 2] -= self.radius
-        p[:, 1] = v
-        return p, n
+        in the pad frame (:func:`~handle_drake.base.hands.pad_surface_point`)."""
+        return pad_surface_point(u, v, self.radius)
 
 
 def shadow_pads(plant, hand, scene_graph_inspector, profile: TaxelProfile,
