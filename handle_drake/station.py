@@ -135,6 +135,7 @@ __all__ = [
     "hand_initial_command",
     "object_body",
     "object_initial_pose",
+    "set_default_hand_positions",
 ]
 
 #: The simulated station's outputs of the table above (cameras, scene objects and the
@@ -270,7 +271,7 @@ def _add_hand_systems(builder, plant, hand, scenario: Scenario,
     spec = get_hand_spec(scenario.hand.kind)
     lower, upper = actuated_position_limits(spec, scenario.hand.coupling_ratio)
     initial = hand_initial_command(scenario)
-    _set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
+    set_default_hand_positions(plant, hand, spec, initial, scenario.hand.coupling_ratio)
 
     # the Python driver computes its measured outputs itself (no systems to leave out)
     options = {"measured": [s for s in MEASURED_OUTPUTS if wanted(f"{HAND}.{s}") or (
@@ -528,7 +529,9 @@ def hand_initial_command(scenario: Scenario) -> np.ndarray:
     return np.clip(command, lower, upper)
 
 
-def _set_default_hand_positions(plant, hand, spec, command, coupling_ratio) -> None:
+def set_default_hand_positions(plant, hand, spec, command, coupling_ratio) -> None:
+    """Sets the ``hand`` instance's joints' default positions to the actuated ``command``
+    (one value per actuated joint of ``spec``, coupled joints by ``coupling_ratio``)."""
     q = actuated_to_joint_positions(spec, command, coupling_ratio)
     for name, value in zip(spec.joint_names, q, strict=True):
         plant.GetJointByName(name, hand).set_default_positions([value])

@@ -126,7 +126,7 @@ from handle_drake.scenario import (
     SimHandDriver,
 )
 from handle_drake.scene.jointed import AddBareObject, BareObject, ObjectBase, ThreadJoint
-from handle_drake.station import _set_default_hand_positions, hand_initial_command
+from handle_drake.station import hand_initial_command, set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 from handle_drake.trial.gist_trial import GistTrial as StationGistTrial
 
@@ -591,7 +591,7 @@ def build_screw_cap(scenario: ScrewCapScenario, meshcat=None, bare: bool = False
     q0 = np.array([float(scenario.initial_position.get(n, 0.0)) for n in _NAMES])
     q0 = np.clip(q0, lower, upper)
 
-    _set_default_hand_positions(plant, hand, spec, q0, 1.0)
+    set_default_hand_positions(plant, hand, spec, q0, 1.0)
     if bare:
         _add_bare_source(builder, plant, hand, spec, scenario, gist, q0, joint, instance)
         return dict(diagram=builder.Build(), plant=plant)
