@@ -1091,10 +1091,6 @@ class ScrewCapOutcome:
         return dc.asdict(self)
 
 
-class _EarlyStop(Exception):
-    pass
-
-
 def draw_perturbations(config: "ScrewCapTask", rng, n: int) -> list[dict]:
     """``n`` perturbed physics (ScrewCapTask settings) drawn within the task's ranges."""
     c, out = config, []
@@ -1399,24 +1395,23 @@ class ScrewCapTrial(GistObjective):
         context, reverse = simulator.get_mutable_context(), built["reverse"]
         p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
         reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
-        credits, held, worst = [], False, [0.0]
+        credits, held, worst = [], [False], [0.0]
 
-        def monitor(root_context):  # the travel at every step, not only at the samples
+        def each_step(root_context):  # the travel at every step, not only at the samples
             worst[0] = max(worst[0], float(np.linalg.norm(
                 plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end)))
-            return EventStatus.Succeeded()
 
-        simulator.set_monitor(monitor)
-        for t in c.reversal_sample_times():
-            simulator.AdvanceTo(float(t))
+        def at_sample(i, t) -> bool:
             travel = worst[0]  # the largest so far
             touching = contact_summary(plant, plant_context, built)["touching"]
             touched = any(b != "palm" for b in touching)
-            held = touched and travel < c.reverse_travel
-            credits.append(1.0 if held else (min(1.0, c.reverse_travel / travel)
-                                             if touched and c.partial_credit else 0.0))
-        simulator.clear_monitor()
-        return bool(held), np.asarray(credits)
+            held[0] = touched and travel < c.reverse_travel
+            credits.append(1.0 if held[0] else (min(1.0, c.reverse_travel / travel)
+                                                if touched and c.partial_credit else 0.0))
+            return False
+
+        advance_sampling(simulator, c.reversal_sample_times(), each_step, at_sample)
+        return bool(held[0]), np.asarray(credits)
 
     def _reset(self, built: dict, x):
         """The simulator at the settled grasp, time 0, with the parameters ``x`` (and their
@@ -1456,30 +1451,25 @@ class ScrewCapTrial(GistObjective):
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
 
-        def monitor(root_context):  # every step: palm, welded bodies, the digits' forces
+        def each_step(root_context):  # every step: palm, welded bodies, the digits' forces
             step_contacts(plant, plant_context, built, st)
-            return EventStatus.Succeeded()
 
-        simulator.set_monitor(monitor)
-        try:
-            for i, t in enumerate(samples):
-                simulator.AdvanceTo(float(t))
-                truth, turn = _turn(st, built, plant_context, R0_inv, q_start, counts)
-                summary = _sample_contacts(plant, plant_context, built, contact_results)
-                gripped = self._gripped(st, t, summary, built, plant_context, p0)
-                turns.append(turn)
-                truths.append(truth)
-                contacts.append(summary["touching"])
-                matches[i] = sample_credit(gripped, turn, float(benchmark[i]),
-                                           c.tolerance_deg, c.partial_credit)
-                k = st["next_check"]
-                if k < checks.size and t >= checks[k] - step:
-                    ok = gripped and turn >= c.target_deg * fractions[k] - c.tolerance_deg
-                    if self._checked(st, k, ok) and early_stop:
-                        raise _EarlyStop
-        except _EarlyStop:
-            st["stopped"] = True
-        simulator.clear_monitor()
+        def at_sample(i, t) -> bool:  # whether the trial stops here
+            truth, turn = _turn(st, built, plant_context, R0_inv, q_start, counts)
+            summary = _sample_contacts(plant, plant_context, built, contact_results)
+            gripped = self._gripped(st, t, summary, built, plant_context, p0)
+            turns.append(turn)
+            truths.append(truth)
+            contacts.append(summary["touching"])
+            matches[i] = sample_credit(gripped, turn, float(benchmark[i]),
+                                       c.tolerance_deg, c.partial_credit)
+            k = st["next_check"]
+            if k < checks.size and t >= checks[k] - step:
+                ok = gripped and turn >= c.target_deg * fractions[k] - c.tolerance_deg
+                return self._checked(st, k, ok) and early_stop
+            return False
+
+        st["stopped"] = advance_sampling(simulator, samples, each_step, at_sample)
         return matches, turns, truths, contacts
 
     def evaluate(self, x, meshcat=None, html=None, early_stop: bool = True,
@@ -1541,6 +1531,45 @@ class ScrewCapTrial(GistObjective):
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
+
+
+def advance_sampling(simulator, times, each_step, at_sample) -> bool:
+    """Simulates to ``times[-1]`` in one ``AdvanceTo``, a monitor calling ``each_step(root
+    context)`` after every step and ``at_sample(i, times[i])`` at the first step at or after
+    each time (the state ``AdvanceTo(times[i])`` ends in: it applies the discrete update
+    due before ``times[i]``, which the next step's monitor sees; tested), in order; stops
+    there when ``at_sample`` returns True.
+    Returns whether it stopped. One ``AdvanceTo`` per sample cost the trial 0.1 of the bare
+    plant's time (issue 45, item 8)."""
+    times = [float(t) for t in times]
+    if not times:
+        return False
+    pending, errors, stop = [0], [], [False]
+    diagram = simulator.get_system()
+
+    def monitor(root_context):
+        try:
+            each_step(root_context)
+            now = root_context.get_time()  # exactly: AdvanceTo(t) applies updates before t
+            while pending[0] < len(times) and times[pending[0]] <= now:
+                i = pending[0]
+                pending[0] += 1
+                if at_sample(i, times[i]):
+                    stop[0] = True
+                    return EventStatus.ReachedTermination(diagram, "stopped at a sample")
+        except Exception as error:  # raised again outside the simulator
+            errors.append(error)
+            return EventStatus.ReachedTermination(diagram, "raised")
+        return EventStatus.Succeeded()
+
+    simulator.set_monitor(monitor)
+    try:
+        simulator.AdvanceTo(times[-1])
+    finally:
+        simulator.clear_monitor()
+    if errors:
+        raise errors[0]
+    return stop[0]
 
 
 def _sample_contacts(plant, plant_context, built, contact_results: bool) -> dict:
