@@ -771,25 +771,25 @@ def step_contacts(plant, plant_context, built, st: dict) -> None:
     with the object or the bottle; the force's magnitude only for the palm and the bottle,
     its normal part only for a digit on the object (issue 45, item 8: numpy's norm and the
     generator cost the trial 0.3 of the bare plant's time)."""
-    results = plant.get_contact_results_output_port().Eval(plant_context)
-    hand = built["hand_bodies"]
-    obj = int(built["cap"].index())
-    bottle = int(built["bottle"].index()) if built["bottle"] is not None else -1
+    port, obj, bottle, hand = _contact_roles(built)
+    results = port.Eval(plant_context)
+    contact = results.point_pair_contact_info
     digits = {}
     for k in range(results.num_point_pair_contacts()):
-        info = results.point_pair_contact_info(k)
+        info = contact(k)
         a, b = int(info.bodyA_index()), int(info.bodyB_index())
         if b == obj or b == bottle:
-            mine, name = b, hand.get(a)
+            mine, body = b, hand.get(a)
         elif a == obj or a == bottle:
-            mine, name = a, hand.get(b)
+            mine, body = a, hand.get(b)
         else:
             continue
-        if name is None:  # the object and something not the hand's
+        if body is None:  # the object and something not the hand's
             continue
+        name, digit = body
         force = info.contact_force()
         if name == "palm" or mine == bottle:
-            magnitude = math.sqrt(float(force @ force))
+            magnitude = math.sqrt(float(force.dot(force)))
             if name == "palm":
                 st["palm_max"] = max(st["palm_max"], magnitude)
                 st["palm"] = st["palm"] or magnitude > 0
@@ -797,12 +797,27 @@ def step_contacts(plant, plant_context, built, st: dict) -> None:
                 st["welded_max"] = max(st["welded_max"], magnitude)
                 st["welded_bodies"].add(name)
                 continue
-        digit = name[:2]
-        if digit in _DIGITS:
-            normal = abs(float(force @ info.point_pair().nhat_BA_W))
+        if digit is not None:
+            normal = abs(float(force.dot(info.point_pair().nhat_BA_W)))
             digits[digit] = digits.get(digit, 0.0) + normal
+    peak = st["digit_peak"]
     for digit, value in digits.items():
-        st["digit_peak"][digit] = max(st["digit_peak"].get(digit, 0.0), value)
+        peak[digit] = max(peak.get(digit, 0.0), value)
+
+
+def _contact_roles(built: dict) -> tuple:
+    """:func:`step_contacts`' look-ups, made once per build (kept in ``built``): the
+    plant's contact results port, the object's and the bottle's body indices (-1: none)
+    and per hand body index its ``(name, digit)`` (digit None for the palm, wrist)."""
+    roles = built.get("contact_roles")
+    if roles is None:
+        hand = {int(i): (name, name[:2] if name[:2] in _DIGITS else None)
+                for i, name in built["hand_bodies"].items()}
+        bottle = int(built["bottle"].index()) if built["bottle"] is not None else -1
+        roles = (built["plant"].get_contact_results_output_port(),
+                 int(built["cap"].index()), bottle, hand)
+        built["contact_roles"] = roles
+    return roles
 
 
 def touching_geometry(plant, plant_context, built) -> tuple[list, bool]:
