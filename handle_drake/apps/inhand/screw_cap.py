@@ -1449,9 +1449,10 @@ class ScrewCapTrial(GistObjective):
 
     def _run_samples(self, built: dict, plant_context, st: dict, early_stop: bool,
                      contact_results: bool):
-        """The trial's samples and checks (contacts read at every step by a monitor into
-        ``st``); returns eq. 48's credits, the turns (encoder, truth) and contacts per
-        sample taken (fewer when a check stopped it: ``st["stopped"]``)."""
+        """The trial's samples and checks in one :func:`advance_sampling` (contacts read at
+        every step by its monitor into ``st``); returns eq. 48's credits, the turns
+        (encoder, truth) and contacts per sample taken (fewer when a check stopped it:
+        ``st["stopped"]``)."""
         c, simulator, plant = self.config, built["simulator"], built["plant"]
         joint, body = built["joint"], built["cap"]
         counts = ScrewCapModel().encoder_counts
