@@ -35,6 +35,7 @@ from handle_drake.apps.cli_support import (
 from handle_drake.apps.inhand.experiment import MAX_PARTICLES
 from handle_drake.apps.inhand.jog_wheel import JogWheelTask
 from handle_drake.apps.inhand.screw_cap import DEFAULT_PLACEMENT, PLACEMENTS, TWO_STROKES
+from handle_drake.apps.inhand.sensed import SCORES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
@@ -58,6 +59,11 @@ def _add_robust_arguments(p) -> None:
                         "--fresh fresh perturbations. Default 0: the nominal physics only")
     p.add_argument("--fresh", type=int_in(1, 1000), default=20, metavar="N",
                    help="with --robust: fresh perturbations the best trial is tried on (20)")
+    p.add_argument("--score", choices=SCORES, default="plant",
+                   help="screw_cap / fingertip_cylinder: plant (default: the cap's joint, the "
+                        "cylinder's pose) or estimated: the turn from what the hand senses "
+                        "alone (taxels and joints; with --accelerometer the object's gravity "
+                        "direction), apps/inhand/sensed.py; the plant's turn is logged beside")
 
 
 def register(subparsers) -> None:
@@ -196,6 +202,9 @@ def _replay_on_hardware(args, run) -> None:
 
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
+    if args.score != "plant" and args.task not in ("screw_cap", "fingertip_cylinder"):
+        raise ValueError(f"--score {args.score}: only with --task screw_cap or "
+                         f"fingertip_cylinder")
     if args.placement is None:  # the screw cap's default: the one whose physics converges
         args.placement = DEFAULT_PLACEMENT if args.task == "screw_cap" else "one-gait"
     # the placement is the screw cap's alone (the fingertip cylinder has no bottle)
@@ -215,9 +224,10 @@ def _task_options(args) -> dict:
                        target_deg=JogWheelTask.target_deg if args.target_deg is None
                        else args.target_deg)
     elif args.task in ("screw_cap", "fingertip_cylinder"):
-        if args.accelerometer or args.evaluation != "incremental":
-            raise ValueError(f"--task {args.task}: the incremental evaluation from the plant "
-                             "only (no --accelerometer, --evaluation old)")
+        if (args.accelerometer and args.score != "estimated") \
+                or args.evaluation != "incremental":
+            raise ValueError(f"--task {args.task}: the incremental evaluation only (no "
+                             "--evaluation old; --accelerometer only with --score estimated)")
         default = preset.get("target_deg", 90.0) if args.task == "screw_cap" else 60.0
         options = dict(preset, progress=not args.no_progress,
                        n_gaits=preset.get("n_gaits", 1) if args.gaits is None else args.gaits)
@@ -229,6 +239,8 @@ def _task_options(args) -> dict:
             options["grip_digits"] = args.grip_digits
         if args.robust:
             options["robust_k"] = args.robust
+        if args.score != "plant":
+            options.update(score=args.score, accelerometer=args.accelerometer or "")
     else:
         if args.gaits is not None:
             raise ValueError(f"--gaits {args.gaits}: only with --task screw_cap or "

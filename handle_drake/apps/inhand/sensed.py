@@ -1,0 +1,91 @@
+"""The screw cap's and the fingertip cylinder's turn from what the hand senses (issue 47).
+
+``ScrewCapTask(score="estimated")`` (``handle-drake inhand --score estimated``) scores a
+trial from :class:`SensedTurn` instead of the plant's joint or pose: the station then has
+taxels (``hand.taxels``) and, with ``accelerometer``, an accelerometer on the object. At
+every taxel sample (10 ms) it reads the station's ports alone -- ``hand.position_measured``,
+``hand.taxels`` and ``object.acceleration`` -- and updates
+:class:`~handle_drake.devices.taxels.turn.ContactTurn` (touch and joints) and
+:class:`~handle_drake.devices.taxels.turn.GravityTurn` (the accelerometer: both objects
+turn about a horizontal axis, world y). The estimate is the accelerometer's when the
+object has one, else the touch's. What it knows beforehand is the task's setup (the hand's
+mount, the object's size and its placed axis), never the plant's state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from handle_drake.devices.taxels.turn import ContactTurn, GravityTurn
+
+__all__ = ["SensedTurn", "SENSED_OUTPUTS", "SCORES"]
+
+#: ``ScrewCapTask.score``: the plant's joint / pose, or the sensed estimate.
+SCORES = ("plant", "estimated")
+#: The station outputs the estimate reads.
+SENSED_OUTPUTS = ("hand.position_measured", "hand.taxels", "object.acceleration")
+PERIOD = 0.01  # s: the taxels' sample period (profile pad4x4: 100 Hz)
+
+
+class SensedTurn:
+    """The turn (deg) of a station-built screw-cap trial from its sensed ports.
+
+    ``scenario``: the trial's :class:`~handle_drake.apps.inhand.screw_cap.ScrewCapScenario`;
+    ``X_WO``: the object's placed pose (its axis: z); ``sign``: +1 when the trial counts
+    the turn about +z of the object (the cap's joint), -1 about -z (the free cylinder)."""
+
+    def __init__(self, station, scenario, X_WO: RigidTransform, sign: float, **options):
+        self._station = station
+        ports = {station.get_output_port(i).get_name()
+                 for i in range(station.num_output_ports())}
+        self._q = station.GetOutputPort("hand.position_measured")
+        self._taxels = station.GetOutputPort("hand.taxels")
+        self._accel = station.GetOutputPort("object.acceleration") \
+            if "object.acceleration" in ports else None
+        X_WB = RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
+                              np.asarray(scenario.hand_xyz, float))
+        X_BO = X_WB.inverse() @ X_WO
+        axis_B = sign * X_BO.rotation().matrix()[:, 2]
+        cap = scenario.cap
+        self.contact = ContactTurn("shadow", 1.0, station.GetSubsystemByName("taxels").pads,
+                                   X_BO.translation(), axis_B, cap.diameter / 2, cap.length,
+                                   free=cap.free, **options)
+        # the sensor's axes are the object's (default_sensor_pose)
+        self.gravity = GravityTurn((0.0, 0.0, sign)) if self._accel is not None else None
+        self._next = 0.0
+
+    def reset(self, root_context) -> None:
+        """The trial's start: turn 0, a first reading now."""
+        self.contact.reset()
+        if self.gravity is not None:
+            self.gravity.reset()
+        self._next = root_context.get_time()
+        self.step(root_context)
+
+    def step(self, root_context) -> None:
+        """After a simulator step: a reading when a taxel sample is due."""
+        if root_context.get_time() < self._next - 1e-9:
+            return
+        self._next += PERIOD
+        context = self._station.GetMyContextFromRoot(root_context)
+        self.contact.update(self._q.Eval(context), self._taxels.Eval(context))
+        if self.gravity is not None:
+            self.gravity.update(self._accel.Eval(context))
+
+    @property
+    def touch_deg(self) -> float:
+        return float(np.degrees(self.contact.turn))
+
+    @property
+    def gravity_deg(self) -> float | None:
+        return None if self.gravity is None else float(np.degrees(self.gravity.turn))
+
+    @property
+    def turn_deg(self) -> float:
+        """The estimate: the accelerometer's when the object has one, else the touch's."""
+        return self.touch_deg if self.gravity is None else self.gravity_deg
+
+    def touching(self) -> list[str]:
+        """The pads pressed at the last reading (their names)."""
+        return list(self.contact.touching)

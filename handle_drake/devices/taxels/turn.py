@@ -1,0 +1,219 @@
+"""An object's turn about its own axis, from what the hand senses (never the plant's state).
+
+The pose estimator (:mod:`.estimator`) fits the object's signed distance to the contacts: a
+cylinder's turn about its own axis leaves that distance unchanged, so the turn of a cap or
+a cylinder is not in it. Two sensed sources give it instead:
+
+- :class:`ContactTurn` (touch and joints): the hand's joint positions (forward kinematics of
+  the pads on a plant of the hand alone) and the taxels' contact patches
+  (:func:`~.estimator.pad_contacts`). Between two readings, the pad's material point under
+  each contact moves with the pad; a contact that sticks (rolling without slip) moves the
+  object's surface with it, so that point's angular displacement about the object's axis is
+  the object's turn. A pad counts when it touches at both readings and its centre of
+  pressure lies on the object's surface (within ``surface_tolerance`` of the radius, within
+  the length); the turn's increment is the force-weighted mean over those pads
+  (``combine="mean"``), or their median. The axis: given (the cap's, on its thread: the
+  task's setup), or for a free object refitted at every reading to the contacts on a
+  circle of the known radius (a prior the last centre within ``centre_std``).
+- :class:`GravityTurn` (the object's accelerometer): about a horizontal axis the gravity
+  direction in the sensor frame turns by minus the object's turn, so the angle of the
+  specific force in the plane across the axis, unwrapped, is the turn (exact at rest; the
+  sensor on the axis feels no centripetal part).
+
+Both are plain Python (a trial reads the station's ports and calls ``update``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContactApproximation
+from pydrake.systems.framework import DiagramBuilder
+from scipy.optimize import least_squares
+
+from handle_drake.base.hands import AddHand, get_hand_spec
+from handle_drake.devices.taxels.estimator import pad_contacts
+from handle_drake.devices.taxels.pads import Pad
+
+__all__ = ["ContactTurn", "GravityTurn", "COMBINES"]
+
+COMBINES = ("mean", "median")
+
+
+class ContactTurn:
+    """The turn (rad, about ``axis_B``) of a cylinder of ``radius`` touched by ``pads``.
+
+    Args:
+        hand_kind, coupling_ratio: the hand (a plant of it alone gives the pads' poses).
+        pads: the taxel pads of the station's ``hand.taxels`` (their order).
+        centre_B, axis_B: a point on the object's axis and its direction in the hand base
+            frame B (the turn counts positive about ``axis_B``).
+        radius, length: the object's (m).
+        free: the axis moves with the object (refitted at every reading).
+    """
+
+    def __init__(self, hand_kind: str, coupling_ratio, pads: list[Pad], centre_B, axis_B,
+                 radius: float, length: float, free: bool = False,
+                 contact_threshold: float = 0.2, surface_tolerance: float = 0.004,
+                 centre_std: float = 0.002, combine: str = "mean", min_lever: float = 0.3):
+        if combine not in COMBINES:
+            raise ValueError(f"combine: expected one of {COMBINES}, got {combine!r}")
+        axis = np.asarray(axis_B, float)
+        if axis.shape != (3,) or not np.linalg.norm(axis) > 0:
+            raise ValueError(f"axis_B: expected a non-zero 3-vector, got {axis_B!r}")
+        if not (radius > 0 and length > 0):
+            raise ValueError(f"radius, length: expected values > 0 m, got {radius!r}, "
+                             f"{length!r}")
+        self._axis = axis / np.linalg.norm(axis)
+        self._centre0 = np.asarray(centre_B, float).reshape(3)
+        self._radius, self._length, self._free = float(radius), float(length), bool(free)
+        self._threshold, self._tol = float(contact_threshold), float(surface_tolerance)
+        self._centre_std, self._combine = float(centre_std), combine
+        self._min_lever = float(min_lever)
+        self._pads = list(pads)
+        self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
+        spec = get_hand_spec(hand_kind)
+        builder = DiagramBuilder()
+        self._plant, _ = AddMultibodyPlantSceneGraph(builder, 0.001)
+        self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
+        hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
+        self._plant.WeldFrames(self._plant.world_frame(),
+                               self._plant.GetBodyByName(spec.base_body, hand).body_frame())
+        self._plant.Finalize()
+        self._diagram = builder.Build()
+        self._context = self._plant.GetMyContextFromRoot(self._diagram.CreateDefaultContext())
+        self._q_index = np.array([self._plant.GetJointByName(n, hand).position_start()
+                                  for n in spec.joint_names], dtype=int)
+        self._q0 = self._plant.GetPositions(self._context)
+        self._bodies = [self._plant.GetBodyByName(p.body_name, hand) for p in self._pads]
+        self.reset()
+
+    def reset(self) -> None:
+        """Turn 0, the axis at its given place, no previous reading."""
+        self.turn = 0.0
+        self.centre = self._centre0.copy()
+        self._previous = None  # per pad: (X_BP, contact points (k, 3), forces (k,))
+        self.touching: list[str] = []
+
+    def pad_poses(self, q) -> list[RigidTransform]:
+        """``X_BP`` of every pad at hand joint positions ``q`` (forward kinematics)."""
+        full = self._q0.copy()
+        full[self._q_index] = np.asarray(q, float)
+        self._plant.SetPositions(self._context, full)
+        return [self._plant.EvalBodyPoseInWorld(self._context, b) @ p.X_BP
+                for b, p in zip(self._bodies, self._pads, strict=True)]
+
+    def _on_object(self, points: np.ndarray, side: bool = False) -> np.ndarray:
+        """Which contact points lie on the object: within its radius (``side``: on its
+        side, within ``surface_tolerance`` of the radius), at least ``min_lever`` of it
+        from the axis, and (on a thread: a bottle is near) within its length."""
+        rel = points - self.centre
+        along = rel @ self._axis
+        across = np.linalg.norm(rel - np.outer(along, self._axis), axis=1)
+        ok = (across <= self._radius + self._tol) & (across >= self._min_lever * self._radius)
+        if side:
+            ok &= np.abs(across - self._radius) <= self._tol
+        return ok if self._free else ok & (np.abs(along) <= self._length / 2 + self._tol)
+
+    def _refit_centre(self, points: np.ndarray) -> None:
+        """A free object's axis: through the contacts' circle of the known radius."""
+        a = self._axis
+
+        e1 = np.cross(np.eye(3)[int(np.argmin(np.abs(a)))], a)
+        e1 /= np.linalg.norm(e1)
+        plane = np.column_stack([e1, np.cross(a, e1)])  # the axis moves across itself
+
+        def residuals(m):
+            rel = points - (self.centre + plane @ m)
+            rel -= np.outer(rel @ a, a)
+            # the radius within 1 mm, the centre's move within centre_std
+            return np.r_[(np.linalg.norm(rel, axis=1) - self._radius) / 1e-3,
+                         m / self._centre_std]
+
+        if len(points) >= 2:
+            self.centre = self.centre + plane @ least_squares(residuals, np.zeros(2)).x
+
+    def update(self, q, taxels) -> float:
+        """One reading (joint positions ``q``, taxels in Pa): the turn so far (rad)."""
+        X_BPads = self.pad_poses(q)
+        taxels = np.asarray(taxels, float)
+        current, everything = [], []
+        for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
+            points, _, forces = pad_contacts([pad], taxels[self._offsets[i]:self._offsets[
+                i + 1]], [X_BP], self._threshold)
+            current.append((X_BP, points, forces))
+            everything.append(points)
+        self.touching = [p.name for p, (_, pts, _) in zip(self._pads, current, strict=True)
+                         if len(pts)]
+        centre_before = self.centre.copy()
+        if self._free:
+            allpoints = np.concatenate(everything)
+            if len(allpoints):
+                side = self._on_object(allpoints, side=True)
+                self._refit_centre(allpoints[side] if side.sum() >= 2 else allpoints)
+        if self._previous is not None:
+            steps, weights = [], []
+            for (X_prev, p_prev, f_prev), (X_now, p_now, f_now) in zip(
+                    self._previous, current, strict=True):
+                if not len(p_prev) or not len(p_now):
+                    continue
+                ok = self._on_object(p_prev)
+                if not ok.any():
+                    continue
+                c = p_prev[ok]
+                # the pad's material point, less the axis' own move (a free object)
+                moved = (X_now @ X_prev.inverse()).multiply(c.T).T \
+                    - (self.centre - centre_before)
+                lever = c - self.centre
+                lever -= np.outer(lever @ self._axis, self._axis)
+                dtheta = np.cross(lever, moved - c) @ self._axis / np.maximum(
+                    np.sum(lever ** 2, axis=1), 1e-12)
+                steps.extend(dtheta)
+                weights.extend(np.minimum(f_prev[ok], f_now.sum()))
+            if steps:
+                steps, weights = np.asarray(steps), np.asarray(weights)
+                self.turn += float(np.average(steps, weights=weights)
+                                   if self._combine == "mean" else np.median(steps))
+        self._previous = current
+        return self.turn
+
+
+class GravityTurn:
+    """The turn (rad) about ``axis_S`` (the sensor frame; horizontal in world) from the
+    accelerometer's specific force: minus the unwrapped angle of the force across the
+    axis. Readings under ``min_across`` of g across the axis (the axis near vertical) are
+    skipped, and so are readings off 1 g by more than ``rest_tolerance`` (g): the object
+    accelerating (a pinched cylinder shaken by the fingers) is not at rest."""
+
+    def __init__(self, axis_S=(0.0, 0.0, 1.0), min_across: float = 0.3,
+                 rest_tolerance: float = 0.1, window: int = 1):
+        a = np.asarray(axis_S, float)
+        if a.shape != (3,) or not np.linalg.norm(a) > 0:
+            raise ValueError(f"axis_S: expected a non-zero 3-vector, got {axis_S!r}")
+        self._a = a / np.linalg.norm(a)
+        helper = np.eye(3)[int(np.argmin(np.abs(self._a)))]
+        self._e1 = np.cross(helper, self._a)
+        self._e1 /= np.linalg.norm(self._e1)
+        self._e2 = np.cross(self._a, self._e1)
+        self._min, self._rest = float(min_across), float(rest_tolerance)
+        self._window = int(window)
+        self.reset()
+
+    def reset(self) -> None:
+        self.turn = 0.0
+        self._phi = None
+        self._recent = []
+
+    def update(self, f_S) -> float:
+        # the mean of the last ``window`` readings (a contact's vibration averages out)
+        self._recent = [*self._recent, np.asarray(f_S, float).reshape(3)][-self._window:]
+        f = np.mean(self._recent, axis=0)
+        x, y = f @ self._e1, f @ self._e2
+        if np.hypot(x, y) < self._min * 9.81 \
+                or abs(np.linalg.norm(f) / 9.81 - 1.0) > self._rest:
+            return self.turn
+        phi = float(np.arctan2(y, x))
+        if self._phi is not None:
+            self.turn -= (phi - self._phi + np.pi) % (2 * np.pi) - np.pi
+        self._phi = phi
+        return self.turn
