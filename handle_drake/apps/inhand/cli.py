@@ -59,7 +59,8 @@ def _add_robust_arguments(p) -> None:
                         "--fresh fresh perturbations. Default 0: the nominal physics only")
     p.add_argument("--fresh", type=int_in(1, 1000), default=20, metavar="N",
                    help="with --robust: fresh perturbations the best trial is tried on (20)")
-    p.add_argument("--score", choices=SCORES, default="plant",
+    # checked by _task_options (a one-line error naming the flag, exit 2)
+    p.add_argument("--score", default="plant", metavar="{" + ",".join(SCORES) + "}",
                    help="screw_cap / fingertip_cylinder: plant (default: the cap's joint, the "
                         "cylinder's pose) or estimated: the turn from what the hand senses "
                         "alone (taxels and joints; with --accelerometer the object's gravity "
@@ -202,6 +203,8 @@ def _replay_on_hardware(args, run) -> None:
 
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
+    if args.score not in SCORES:
+        raise ValueError(f"--score: expected one of {', '.join(SCORES)}, got {args.score!r}")
     if args.score != "plant" and args.task not in ("screw_cap", "fingertip_cylinder"):
         raise ValueError(f"--score {args.score}: only with --task screw_cap or "
                          f"fingertip_cylinder")

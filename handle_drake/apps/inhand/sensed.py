@@ -50,10 +50,13 @@ class SensedTurn:
         cap = scenario.cap
         self.contact = ContactTurn("shadow", 1.0, station.GetSubsystemByName("taxels").pads,
                                    X_BO.translation(), axis_B, cap.diameter / 2, cap.length,
-                                   free=cap.free, **options)
+                                   free=cap.free, R_BO=X_BO.rotation(),
+                                   up_B=X_WB.rotation().inverse().multiply([0.0, 0.0, 1.0]),
+                                   **options)
         # the sensor's axes are the object's (default_sensor_pose)
         self.gravity = GravityTurn((0.0, 0.0, sign)) if self._accel is not None else None
         self._next = 0.0
+        self._fused = cap.free and self._accel is not None
 
     def reset(self, root_context) -> None:
         """The trial's start: turn 0, a first reading now."""
@@ -69,9 +72,13 @@ class SensedTurn:
             return
         self._next += PERIOD
         context = self._station.GetMyContextFromRoot(root_context)
-        self.contact.update(self._q.Eval(context), self._taxels.Eval(context))
+        f_S = None if self._accel is None else self._accel.Eval(context)
+        # a free object: its touch and its accelerometer fused (ContactTurn); a cap on its
+        # thread (a fixed horizontal axis): each alone
+        self.contact.update(self._q.Eval(context), self._taxels.Eval(context),
+                            f_S if self._fused else None)
         if self.gravity is not None:
-            self.gravity.update(self._accel.Eval(context))
+            self.gravity.update(f_S)
 
     @property
     def touch_deg(self) -> float:

@@ -30,6 +30,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, DiscreteContactApproximation
 from pydrake.systems.framework import DiagramBuilder
 from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from handle_drake.base.hands import AddHand, get_hand_spec
 from handle_drake.devices.taxels.estimator import pad_contacts
@@ -55,7 +56,9 @@ class ContactTurn:
     def __init__(self, hand_kind: str, coupling_ratio, pads: list[Pad], centre_B, axis_B,
                  radius: float, length: float, free: bool = False,
                  contact_threshold: float = 0.2, surface_tolerance: float = 0.004,
-                 centre_std: float = 0.002, combine: str = "mean", min_lever: float = 0.3):
+                 centre_std: float = 0.002, combine: str = "mean", min_lever: float = 0.3,
+                 R_BO=None, ridge: float = 0.05, up_B=None, gravity_weight: float = 1.0,
+                 rest_tolerance: float = 0.1):
         if combine not in COMBINES:
             raise ValueError(f"combine: expected one of {COMBINES}, got {combine!r}")
         axis = np.asarray(axis_B, float)
@@ -69,7 +72,16 @@ class ContactTurn:
         self._radius, self._length, self._free = float(radius), float(length), bool(free)
         self._threshold, self._tol = float(contact_threshold), float(surface_tolerance)
         self._centre_std, self._combine = float(centre_std), combine
-        self._min_lever = float(min_lever)
+        self._min_lever, self._ridge = float(min_lever), float(ridge)
+        self._axis0 = self._axis.copy()
+        self._up_B = None if up_B is None else np.asarray(up_B, float).reshape(3)
+        self._gravity_weight, self._rest = float(gravity_weight), float(rest_tolerance)
+        self._R_BO = np.eye(3) if R_BO is None else np.asarray(
+            R_BO.matrix() if hasattr(R_BO, "matrix") else R_BO, float).reshape(3, 3)
+        # the turn counts about +z of the object's frame, or -z
+        self._sign = 1.0 if self._axis @ self._R_BO[:, 2] >= 0 else -1.0
+        if free and R_BO is None:
+            raise ValueError("R_BO: a free object's initial orientation in B is needed")
         self._pads = list(pads)
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
         spec = get_hand_spec(hand_kind)
@@ -92,6 +104,8 @@ class ContactTurn:
         """Turn 0, the axis at its given place, no previous reading."""
         self.turn = 0.0
         self.centre = self._centre0.copy()
+        self._axis = self._axis0.copy()
+        self._R, self._raw = np.eye(3), 0.0
         self._previous = None  # per pad: (X_BP, contact points (k, 3), forces (k,))
         self.touching: list[str] = []
 
@@ -110,6 +124,9 @@ class ContactTurn:
         rel = points - self.centre
         along = rel @ self._axis
         across = np.linalg.norm(rel - np.outer(along, self._axis), axis=1)
+        if self._free and not side:  # a free object turns about any axis: within its bounds
+            return np.linalg.norm(rel, axis=1) <= np.hypot(self._radius, self._length / 2) \
+                + self._tol
         ok = (across <= self._radius + self._tol) & (across >= self._min_lever * self._radius)
         if side:
             ok &= np.abs(across - self._radius) <= self._tol
@@ -133,49 +150,98 @@ class ContactTurn:
         if len(points) >= 2:
             self.centre = self.centre + plane @ least_squares(residuals, np.zeros(2)).x
 
-    def update(self, q, taxels) -> float:
-        """One reading (joint positions ``q``, taxels in Pa): the turn so far (rad)."""
+    def update(self, q, taxels, f_S=None) -> float:
+        """One reading (joint positions ``q``, taxels in Pa; a free object's accelerometer
+        ``f_S``, m/s^2, the sensor's axes the object's, or None): the turn so far (rad)."""
         X_BPads = self.pad_poses(q)
         taxels = np.asarray(taxels, float)
-        current, everything = [], []
+        current = []
         for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
             points, _, forces = pad_contacts([pad], taxels[self._offsets[i]:self._offsets[
                 i + 1]], [X_BP], self._threshold)
             current.append((X_BP, points, forces))
-            everything.append(points)
         self.touching = [p.name for p, (_, pts, _) in zip(self._pads, current, strict=True)
                          if len(pts)]
-        centre_before = self.centre.copy()
+        pairs = self._pairs(current) if self._previous is not None else []
         if self._free:
-            allpoints = np.concatenate(everything)
-            if len(allpoints):
-                side = self._on_object(allpoints, side=True)
-                self._refit_centre(allpoints[side] if side.sum() >= 2 else allpoints)
-        if self._previous is not None:
-            steps, weights = [], []
-            for (X_prev, p_prev, f_prev), (X_now, p_now, f_now) in zip(
-                    self._previous, current, strict=True):
-                if not len(p_prev) or not len(p_now):
-                    continue
-                ok = self._on_object(p_prev)
-                if not ok.any():
-                    continue
-                c = p_prev[ok]
-                # the pad's material point, less the axis' own move (a free object)
-                moved = (X_now @ X_prev.inverse()).multiply(c.T).T \
-                    - (self.centre - centre_before)
-                lever = c - self.centre
-                lever -= np.outer(lever @ self._axis, self._axis)
-                dtheta = np.cross(lever, moved - c) @ self._axis / np.maximum(
-                    np.sum(lever ** 2, axis=1), 1e-12)
-                steps.extend(dtheta)
-                weights.extend(np.minimum(f_prev[ok], f_now.sum()))
-            if steps:
-                steps, weights = np.asarray(steps), np.asarray(weights)
-                self.turn += float(np.average(steps, weights=weights)
-                                   if self._combine == "mean" else np.median(steps))
+            self._rigid_step(pairs, self._up_measured(f_S))
+            allpoints = np.concatenate([pts for _, pts, _ in current])
+            side = self._on_object(allpoints, side=True)
+            if side.sum() >= 2:
+                self._refit_centre(allpoints[side])
+        elif pairs:
+            self._axis_step(pairs)
         self._previous = current
         return self.turn
+
+    def _pairs(self, current) -> list:
+        """Per pad touching at both readings: its contacts on the object at the last
+        reading ``c`` (k, 3), where the pad's material points there are now, and weights
+        (the force)."""
+        pairs = []
+        for (X_prev, p_prev, f_prev), (X_now, p_now, f_now) in zip(
+                self._previous, current, strict=True):
+            if not len(p_prev) or not len(p_now):
+                continue
+            ok = self._on_object(p_prev)
+            if ok.any():
+                c = p_prev[ok]
+                pairs.append((c, (X_now @ X_prev.inverse()).multiply(c.T).T,
+                              np.minimum(f_prev[ok], f_now.sum())))
+        return pairs
+
+    def _axis_step(self, pairs) -> None:
+        """The object on a fixed axis: each sticking contact's angular displacement about
+        it, combined (``combine``)."""
+        c = np.concatenate([p[0] for p in pairs])
+        moved = np.concatenate([p[1] for p in pairs])
+        weights = np.concatenate([p[2] for p in pairs])
+        lever = c - self.centre
+        lever -= np.outer(lever @ self._axis, self._axis)
+        steps = np.cross(lever, moved - c) @ self._axis / np.maximum(
+            np.sum(lever ** 2, axis=1), 1e-12)
+        self.turn += float(np.average(steps, weights=weights)
+                           if self._combine == "mean" else np.median(steps))
+
+    def _up_measured(self, f_S):
+        """The up direction in the object frame from a reading near 1 g (else None)."""
+        if f_S is None or self._up_B is None:
+            return None
+        f = np.asarray(f_S, float).reshape(3)
+        g = np.linalg.norm(f)
+        return f / g if abs(g / 9.81 - 1.0) <= self._rest else None
+
+    def _rigid_step(self, pairs, up_O=None) -> None:
+        """A free object: the rigid motion (twist about the centre) that moves the
+        sticking contacts as the pads moved them (robust least squares: a sliding pad
+        is an outlier; a small penalty on the rotation fixes the turn about the line of
+        two contacts), integrated; the turn is its rotation about the object's initial
+        axis read as the task reads the plant's (``R_BO``)."""
+        if sum(len(p[0]) for p in pairs) >= 2 or up_O is not None:
+            c = np.concatenate([p[0] for p in pairs] or [np.zeros((0, 3))])
+            d = np.concatenate([p[1] for p in pairs] or [np.zeros((0, 3))]) - c
+            w = np.sqrt(np.concatenate([p[2] for p in pairs] or [np.zeros(0)]))
+            r = c - self.centre
+            scale = self._radius * max(float(np.sqrt(np.sum(w ** 2))), 1.0)
+            R_O = self._R @ self._R_BO
+
+            def residuals(x):
+                res = [((x[:3] + np.cross(x[3:], r) - d) * w[:, None]).ravel(),
+                       self._ridge * scale * x[3:]]
+                if up_O is not None:  # the accelerometer: up in the object frame
+                    R = Rotation.from_rotvec(x[3:]).as_matrix() @ R_O
+                    res.append(self._gravity_weight * scale * (R.T @ self._up_B - up_O))
+                return np.concatenate(res)
+
+            x = least_squares(residuals, np.zeros(6), loss="soft_l1",
+                              f_scale=5e-4 * float(np.mean(w)) if len(w) else 1e-3).x
+            self._R = Rotation.from_rotvec(x[3:]).as_matrix() @ self._R
+            self.centre = self.centre + x[:3]
+            self._axis = self._R @ self._axis0
+        M = self._R_BO.T @ self._R @ self._R_BO
+        raw = self._sign * float(np.arctan2(M[1, 0], M[0, 0]))
+        self.turn += (raw - self._raw + np.pi) % (2 * np.pi) - np.pi
+        self._raw = raw
 
 
 class GravityTurn:
