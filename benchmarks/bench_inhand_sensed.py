@@ -3,7 +3,8 @@
 The screw cap's clear-placement stroke and the fingertip cylinder's two strokes (hand-written,
 and ipso's learned best, ``convergence.LEARNED_TWO_STROKES``) run with
 ``ScrewCapTask(score="estimated", accelerometer=DEVICE)``: per trial the plant's turn at
-the end, the touch estimate's (taxels and joints: ``devices/taxels/turn.ContactTurn``) and
+the end, the touch estimate's (taxels and joints: ``devices/taxels/turn.ContactTurn``; the free
+cylinder's fused with the accelerometer) and
 the accelerometer's (``GravityTurn``), their relative errors and whether each is within
 ``--tolerance`` (10 %). ``--step-scale 0.5`` re-runs at half the task's step. Prints a
 Markdown table (and writes ``--json``); it writes no results page.
@@ -38,8 +39,8 @@ def _row(name, trial, x, device, step_scale, tolerance) -> dict:
     wall = time.perf_counter()
     o = t.evaluate(x, early_stop=False)
     plant, touch, gravity = o.sensed_series[-1]
-    err = {k: abs(v - plant) / max(abs(plant), 1e-9) for k, v in
-           (("touch", touch), ("gravity", gravity))}
+    err = {k: float("nan") if v is None else abs(v - plant) / max(abs(plant), 1e-9)
+           for k, v in (("touch", touch), ("gravity", gravity))}
     return dict(name=name, time_step=t.config.time_step, plant_deg=plant, touch_deg=touch,
                 gravity_deg=gravity, touch_rel=err["touch"], gravity_rel=err["gravity"],
                 touch_ok=err["touch"] <= tolerance, gravity_ok=err["gravity"] <= tolerance,
@@ -48,7 +49,9 @@ def _row(name, trial, x, device, step_scale, tolerance) -> dict:
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--device", default="joywarrior24f14")
+    p.add_argument("--device", default="joywarrior24f14",
+                   help="the object's accelerometer; '' for none (the touch alone; with one, "
+                        "a free object's touch is fused with it)")
     p.add_argument("--step-scale", type=float, default=1.0, choices=(1.0, 0.5, 0.25))
     p.add_argument("--tolerance", type=float, default=0.10)
     p.add_argument("--json", type=Path, default=None)
@@ -62,8 +65,9 @@ def main(argv=None) -> int:
     for r in rows:
         print(f"| {r['name']} | {1e3 * r['time_step']:g} | {r['plant_deg']:.1f} | "
               f"{r['touch_deg']:.1f} ({100 * r['touch_rel']:.0f} %"
-              f"{', met' if r['touch_ok'] else ''}) | {r['gravity_deg']:.1f} "
-              f"({100 * r['gravity_rel']:.0f} %{', met' if r['gravity_ok'] else ''}) |")
+              f"{', met' if r['touch_ok'] else ''}) | " + ("none" if r["gravity_deg"] is None
+                                                           else f"{r['gravity_deg']:.1f} "
+              f"({100 * r['gravity_rel']:.0f} %{', met' if r['gravity_ok'] else ''})") + " |")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(rows, indent=1, default=float))
