@@ -47,9 +47,8 @@ def test_the_estimated_turn_against_the_plant_on_the_cap_stroke(stroke):
     """The turn from the accelerometer's gravity direction and from touch (taxels and
     joints) against the cap joint's angle (the plant; the estimate never reads it): the
     accelerometer within 2 % at the end and 10 deg at every sample (it skips readings off 1 g:
-    it lags while the cap spins up), the touch within 20 %
-    (measured 14 % at 1 ms, 8 % at 0.5 ms: docs/results/sensing.md); the score reads the
-    estimate."""
+    it lags while the cap spins up), the touch within 20 % (measured 14 % at 1 ms, 8 % at
+    0.5 ms: docs/results/sensing.md, tools/inhand_sensed.py); the score reads the estimate."""
     trial, outcome = stroke
     series = np.array(outcome.sensed_series, float)
     plant, touch, gravity = series[-1]

@@ -9,7 +9,7 @@ the accelerometer's (``GravityTurn``), their relative errors and whether each is
 ``--tolerance`` (10 %). ``--step-scale 0.5`` re-runs at half the task's step. Prints a
 Markdown table (and writes ``--json``); it writes no results page.
 
-Run: ``python benchmarks/bench_inhand_sensed.py [--device joywarrior24f14]
+Run: ``python tools/inhand_sensed.py [--device joywarrior24f14]
 [--step-scale 1] [--json out/results/inhand_sensed.json]``.
 """
 
