@@ -65,6 +65,27 @@ def test_the_estimated_turn_against_the_plant_on_the_cap_stroke(stroke):
     assert o.turn_deg == pytest.approx(touch, abs=1.0)
 
 
+def test_the_sensed_touch_against_the_plants_contacts(stroke):
+    """Scored from the estimate, "gripped" reads the taxels (pads pressing the cap's side):
+    at each sample the bodies they report touch the cap in the plant's contact results too, at
+    that sample or the one before (read by the plant-scored run of the same stroke), and they
+    report some at more than half the samples the plant does (29 of 48: the light touches
+    fall under the taxels' contact threshold; "gripped" looks back 0.3 s)."""
+    trial, outcome = stroke
+    plant = ScrewCapTrial(dc.replace(trial.config, score="plant", accelerometer=""))
+    truth = plant.evaluate(stroke_motion(plant.gist), early_stop=False)
+    assert len(truth.contacts) == len(outcome.contacts)
+    agree = both = 0
+    before = []
+    for sensed, real in zip(outcome.contacts, truth.contacts, strict=True):
+        # a taxel sample is held up to 10 ms: a body may have left since the last sample
+        assert "palm" not in sensed and set(sensed) <= set(real) | set(before), (sensed, real)
+        before = real
+        both += bool(real)
+        agree += bool(real) and bool(sensed)
+    assert both > 10 and agree >= 0.5 * both  # 29 of 48 (light touches under the threshold)
+
+
 def test_score_setting_refusals():
     with pytest.raises(ValueError, match="^score: expected one of"):
         ScrewCapTask(score="truth")

@@ -1368,7 +1368,8 @@ class ScrewCapTrial(GistObjective):
             if t > end + 1e-9:
                 gripped = st["touch_at_stroke_end"] and not st["palm"]
         if built["joint"] is None:  # a free cylinder must also not have dropped
-            p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation()
+            p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation() \
+                if built.get("sensed") is None else built["sensed"].centre_W()
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
 
@@ -1422,22 +1423,30 @@ class ScrewCapTrial(GistObjective):
         ``partial_credit`` ``reverse_travel / travel`` when it slid further while a
         finger still touches it (0 when none does), without it 0."""
         c, plant, body = self.config, built["plant"], built["cap"]
-        simulator = built["simulator"]
+        simulator, sensed = built["simulator"], built.get("sensed")
         context, reverse = simulator.get_mutable_context(), built["reverse"]
-        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+
+        def position():  # the plant's, or the sensed centre (score "estimated")
+            if sensed is None:
+                return plant.EvalBodyPoseInWorld(plant_context, body).translation()
+            return sensed.centre_W()
+
+        p_end = position().copy()
         reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         credits, held, worst = [], False, [0.0]
 
         def monitor(root_context):  # the travel at every step, not only at the samples
-            worst[0] = max(worst[0], float(np.linalg.norm(
-                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end)))
+            if sensed is not None:
+                sensed.step(root_context)
+            worst[0] = max(worst[0], float(np.linalg.norm(position() - p_end)))
             return EventStatus.Succeeded()
 
         simulator.set_monitor(monitor)
         for t in c.reversal_sample_times():
             simulator.AdvanceTo(float(t))
             travel = worst[0]  # the largest so far
-            touching = contact_summary(plant, plant_context, built)["touching"]
+            touching = (contact_summary(plant, plant_context, built) if sensed is None
+                        else sensed.summary())["touching"]
             touched = any(b != "palm" for b in touching)
             held = touched and travel < c.reverse_travel
             credits.append(1.0 if held else (min(1.0, c.reverse_travel / travel)
@@ -1477,6 +1486,9 @@ class ScrewCapTrial(GistObjective):
         X0 = plant.EvalBodyPoseInWorld(plant_context, body)
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
         q_start = joint.get_angle(plant_context) if joint is not None else 0.0
+        sensed = built.get("sensed")
+        if sensed is not None:  # the drop measured from the sensed centre
+            p0 = sensed.centre_W()
         simulator.Initialize()
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
@@ -1485,7 +1497,6 @@ class ScrewCapTrial(GistObjective):
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
 
-        sensed = built.get("sensed")
 
         def monitor(root_context):  # every step: palm, welded bodies, the digits' forces
             step_contacts(plant, plant_context, built, st)
@@ -1501,7 +1512,8 @@ class ScrewCapTrial(GistObjective):
                 if sensed is not None:  # scored from the estimate (issue 47)
                     turn = sensed.turn_deg
                     st["sensed"].append((truth, sensed.touch_deg, sensed.gravity_deg))
-                summary = _sample_contacts(plant, plant_context, built, contact_results)
+                summary = _sample_contacts(plant, plant_context, built, contact_results) \
+                    if sensed is None else sensed.summary()  # the taxels' touch
                 gripped = self._gripped(st, t, summary, built, plant_context, p0)
                 turns.append(turn)
                 truths.append(truth)

@@ -45,6 +45,7 @@ class SensedTurn:
             if "object.acceleration" in ports else None
         X_WB = RigidTransform(RollPitchYaw(np.radians(scenario.hand_rpy_deg)),
                               np.asarray(scenario.hand_xyz, float))
+        self._X_WB = X_WB
         X_BO = X_WB.inverse() @ X_WO
         axis_B = sign * X_BO.rotation().matrix()[:, 2]
         cap = scenario.cap
@@ -93,6 +94,16 @@ class SensedTurn:
         """The estimate: the accelerometer's when the object has one, else the touch's."""
         return self.touch_deg if self.gravity is None else self.gravity_deg
 
-    def touching(self) -> list[str]:
-        """The pads pressed at the last reading (their names)."""
-        return list(self.contact.touching)
+    def summary(self) -> dict:
+        """What the taxels felt at the last reading, as the trial's contact summary: the
+        hand bodies whose pads press the object's side (``touching``; ``"palm"`` for the
+        palm pad) and the palm pad's force (N) on anything (``palm_force``)."""
+        bodies = {p.name: p.body_name for p in self.contact.pads}
+        palm = sum(self.contact.forces.get(n, 0.0) for n, b in bodies.items() if b == "palm")
+        return {"touching": sorted({bodies[n] for n in self.contact.on_object}),
+                "palm_force": float(palm)}
+
+    def centre_W(self) -> np.ndarray:
+        """The object's axis point (its centre as placed, or refitted for a free object),
+        in world."""
+        return self._X_WB.multiply(self.contact.centre)

@@ -108,6 +108,12 @@ class ContactTurn:
         self._R, self._raw = np.eye(3), 0.0
         self._previous = None  # per pad: (X_BP, contact points (k, 3), forces (k,))
         self.touching: list[str] = []
+        self.on_object: dict[str, float] = {}
+        self.forces: dict[str, float] = {}
+
+    @property
+    def pads(self) -> list[Pad]:
+        return list(self._pads)
 
     def pad_poses(self, q) -> list[RigidTransform]:
         """``X_BP`` of every pad at hand joint positions ``q`` (forward kinematics)."""
@@ -162,6 +168,12 @@ class ContactTurn:
             current.append((X_BP, points, forces))
         self.touching = [p.name for p, (_, pts, _) in zip(self._pads, current, strict=True)
                          if len(pts)]
+        self.forces = {p.name: float(f.sum()) for p, (_, _, f) in zip(
+            self._pads, current, strict=True) if len(f)}
+        # per pad its force (N) on the object: its contacts within the object's bounds
+        self.on_object = {p.name: float(f[self._on_object(pts, side=True)].sum())
+                          for p, (_, pts, f) in zip(self._pads, current, strict=True)
+                          if len(pts) and self._on_object(pts, side=True).any()}
         pairs = self._pairs(current) if self._previous is not None else []
         if self._free:
             self._rigid_step(pairs, self._up_measured(f_S))
