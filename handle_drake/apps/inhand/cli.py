@@ -308,6 +308,12 @@ def _cmd_inhand(args) -> int:
     if s.get("best_digit_peak_normal"):
         print("best trial's peak normal force per digit (N, any step): " + ", ".join(
             f"{d} {v:.1f}" for d, v in s["best_digit_peak_normal"].items()))
+    if args.score == "estimated":  # the estimate's truth, beside (never in the score)
+        best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
+        detail = best.contacts if isinstance(best.contacts, dict) else {}
+        if "turn_deg_truth" in detail:
+            print(f"best trial's turn: {detail['turn_deg']:.1f} deg estimated, "
+                  f"{detail['turn_deg_truth']:.1f} deg the plant's (not scored)")
     if args.robust:
         from handle_drake.apps.inhand.screw_cap import fresh_success
 
