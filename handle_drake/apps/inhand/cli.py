@@ -203,6 +203,9 @@ def _replay_on_hardware(args, run) -> None:
 
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
+    if args.strokes is not None and args.task != "fingertip_cylinder":
+        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
+                         f"{args.task}")
     if args.score not in SCORES:
         raise ValueError(f"--score: expected one of {', '.join(SCORES)}, got {args.score!r}")
     if args.score != "plant" and args.task not in ("screw_cap", "fingertip_cylinder"):
@@ -253,6 +256,18 @@ def _task_options(args) -> dict:
     return options
 
 
+def _print_estimate(args, run) -> None:
+    """``--score estimated``: the best trial's estimated turn beside the plant's (never in
+    the score)."""
+    if args.score != "estimated":
+        return
+    best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
+    detail = best.contacts if isinstance(best.contacts, dict) else {}
+    if "turn_deg_truth" in detail:
+        print(f"best trial's turn: {detail['turn_deg']:.1f} deg estimated, "
+              f"{detail['turn_deg_truth']:.1f} deg the plant's (not scored)")
+
+
 def _cmd_inhand(args) -> int:
     from handle_drake.apps.inhand.experiment import plot_learning_curve, replay_best, run_inhand
     from handle_drake.learning.cluster import trial_executor
@@ -261,9 +276,6 @@ def _cmd_inhand(args) -> int:
     for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
         if path is not None and path.suffix.lower() != suffix:
             raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
-    if args.strokes is not None and args.task != "fingertip_cylinder":
-        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
-                         f"{args.task}")
     options = _task_options(args)  # every refusal before the log is created
     _check_hardware(args)
     if args.db.exists():
@@ -308,12 +320,7 @@ def _cmd_inhand(args) -> int:
     if s.get("best_digit_peak_normal"):
         print("best trial's peak normal force per digit (N, any step): " + ", ".join(
             f"{d} {v:.1f}" for d, v in s["best_digit_peak_normal"].items()))
-    if args.score == "estimated":  # the estimate's truth, beside (never in the score)
-        best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
-        detail = best.contacts if isinstance(best.contacts, dict) else {}
-        if "turn_deg_truth" in detail:
-            print(f"best trial's turn: {detail['turn_deg']:.1f} deg estimated, "
-                  f"{detail['turn_deg_truth']:.1f} deg the plant's (not scored)")
+    _print_estimate(args, run)
     if args.robust:
         from handle_drake.apps.inhand.screw_cap import fresh_success
 

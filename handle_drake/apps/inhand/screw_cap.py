@@ -1497,7 +1497,6 @@ class ScrewCapTrial(GistObjective):
         matches = np.zeros(samples.size)  # eq. 48's q_i (credits in [0, 1])
         turns, truths, contacts = [], [], []
 
-
         def monitor(root_context):  # every step: palm, welded bodies, the digits' forces
             step_contacts(plant, plant_context, built, st)
             if sensed is not None:  # the sensed turn at every taxel sample
