@@ -662,8 +662,8 @@ def _validate_bare_objects(scenario: Scenario) -> None:
     if scenario.plant_config.contact_model != "point":
         raise ScenarioError(f"{what}: point contact only (plant_config.contact_model: point), "
                             f"got {short(scenario.plant_config.contact_model)}")
-    if o.accelerometer is not None or o.fixed:
-        raise ScenarioError(f"{what}: no accelerometer and not fixed")
+    if o.fixed:  # an accelerometer may ride on it (issue 47: the in-hand turn's gravity)
+        raise ScenarioError(f"{what}: not fixed")
     if o.joint is not None:
         if o.on_table:
             raise ScenarioError("object.joint: the joint is at X_WO: expected on_table: false")

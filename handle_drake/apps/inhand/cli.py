@@ -35,6 +35,7 @@ from handle_drake.apps.cli_support import (
 from handle_drake.apps.inhand.experiment import MAX_PARTICLES
 from handle_drake.apps.inhand.jog_wheel import JogWheelTask
 from handle_drake.apps.inhand.screw_cap import DEFAULT_PLACEMENT, PLACEMENTS, TWO_STROKES
+from handle_drake.apps.inhand.sensed import SCORES
 from handle_drake.apps.inhand.task import EVALUATIONS, TASKS
 from handle_drake.devices.accelerometer.profiles import PROFILES
 from handle_drake.learning.cluster import add_executor_arguments
@@ -58,6 +59,12 @@ def _add_robust_arguments(p) -> None:
                         "--fresh fresh perturbations. Default 0: the nominal physics only")
     p.add_argument("--fresh", type=int_in(1, 1000), default=20, metavar="N",
                    help="with --robust: fresh perturbations the best trial is tried on (20)")
+    # checked by _task_options (a one-line error naming the flag, exit 2)
+    p.add_argument("--score", default="plant", metavar="{" + ",".join(SCORES) + "}",
+                   help="screw_cap / fingertip_cylinder: plant (default: the cap's joint, the "
+                        "cylinder's pose) or estimated: the turn from what the hand senses "
+                        "alone (taxels and joints; with --accelerometer the object's gravity "
+                        "direction), apps/inhand/sensed.py; the plant's turn is logged beside")
 
 
 def register(subparsers) -> None:
@@ -196,6 +203,14 @@ def _replay_on_hardware(args, run) -> None:
 
 def _task_options(args) -> dict:
     """The task's settings from the command line (refusing flags of other tasks)."""
+    if args.strokes is not None and args.task != "fingertip_cylinder":
+        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
+                         f"{args.task}")
+    if args.score not in SCORES:
+        raise ValueError(f"--score: expected one of {', '.join(SCORES)}, got {args.score!r}")
+    if args.score != "plant" and args.task not in ("screw_cap", "fingertip_cylinder"):
+        raise ValueError(f"--score {args.score}: only with --task screw_cap or "
+                         f"fingertip_cylinder")
     if args.placement is None:  # the screw cap's default: the one whose physics converges
         args.placement = DEFAULT_PLACEMENT if args.task == "screw_cap" else "one-gait"
     # the placement is the screw cap's alone (the fingertip cylinder has no bottle)
@@ -215,9 +230,10 @@ def _task_options(args) -> dict:
                        target_deg=JogWheelTask.target_deg if args.target_deg is None
                        else args.target_deg)
     elif args.task in ("screw_cap", "fingertip_cylinder"):
-        if args.accelerometer or args.evaluation != "incremental":
-            raise ValueError(f"--task {args.task}: the incremental evaluation from the plant "
-                             "only (no --accelerometer, --evaluation old)")
+        if (args.accelerometer and args.score != "estimated") \
+                or args.evaluation != "incremental":
+            raise ValueError(f"--task {args.task}: the incremental evaluation only (no "
+                             "--evaluation old; --accelerometer only with --score estimated)")
         default = preset.get("target_deg", 90.0) if args.task == "screw_cap" else 60.0
         options = dict(preset, progress=not args.no_progress,
                        n_gaits=preset.get("n_gaits", 1) if args.gaits is None else args.gaits)
@@ -229,6 +245,8 @@ def _task_options(args) -> dict:
             options["grip_digits"] = args.grip_digits
         if args.robust:
             options["robust_k"] = args.robust
+        if args.score != "plant":
+            options.update(score=args.score, accelerometer=args.accelerometer or "")
     else:
         if args.gaits is not None:
             raise ValueError(f"--gaits {args.gaits}: only with --task screw_cap or "
@@ -236,6 +254,18 @@ def _task_options(args) -> dict:
         options = dict(progress=not args.no_progress, evaluation=args.evaluation,
                        target_deg=30.0 if args.target_deg is None else args.target_deg)
     return options
+
+
+def _print_estimate(args, run) -> None:
+    """``--score estimated``: the best trial's estimated turn beside the plant's (never in
+    the score)."""
+    if args.score != "estimated":
+        return
+    best = max((r for r in run.records if r.status == "done"), key=lambda r: r.metric)
+    detail = best.contacts if isinstance(best.contacts, dict) else {}
+    if "turn_deg_truth" in detail:
+        print(f"best trial's turn: {detail['turn_deg']:.1f} deg estimated, "
+              f"{detail['turn_deg_truth']:.1f} deg the plant's (not scored)")
 
 
 def _cmd_inhand(args) -> int:
@@ -246,9 +276,6 @@ def _cmd_inhand(args) -> int:
     for flag, path, suffix in (("--plot", args.plot, ".png"), ("--html", args.html, ".html")):
         if path is not None and path.suffix.lower() != suffix:
             raise ValueError(f"{flag}: expected a {suffix} file name, got {str(path)!r}")
-    if args.strokes is not None and args.task != "fingertip_cylinder":
-        raise ValueError(f"--strokes: only with --task fingertip_cylinder, got --task "
-                         f"{args.task}")
     options = _task_options(args)  # every refusal before the log is created
     _check_hardware(args)
     if args.db.exists():
@@ -293,6 +320,7 @@ def _cmd_inhand(args) -> int:
     if s.get("best_digit_peak_normal"):
         print("best trial's peak normal force per digit (N, any step): " + ", ".join(
             f"{d} {v:.1f}" for d, v in s["best_digit_peak_normal"].items()))
+    _print_estimate(args, run)
     if args.robust:
         from handle_drake.apps.inhand.screw_cap import fresh_success
 

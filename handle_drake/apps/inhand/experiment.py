@@ -65,7 +65,8 @@ def _task_config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
         # settings added later leave the config at their defaults: logs written before resume
         defaults = {f.name: f.default for f in dc.fields(trial.config)}
         for name in ("cap_diameter", "cap_axis_yaw_deg", "cap_length", "cap_axis_reversed",
-                     "grasp_closure", "grip_digits", "stages", "held_turn"):
+                     "grasp_closure", "grip_digits", "stages", "held_turn", "score",
+                     "accelerometer"):
             if name in task and task[name] == defaults.get(name):
                 del task[name]
         # version 2 (issue 45): contacts read at every step, the welded bottle's lean rule,

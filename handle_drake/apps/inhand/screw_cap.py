@@ -93,6 +93,7 @@ from handle_drake.apps.inhand.gist import (
 )
 from handle_drake.apps.inhand.glove import load_glove
 from handle_drake.apps.inhand.mapping import glove_to_shadow
+from handle_drake.apps.inhand.sensed import SCORES, SENSED_OUTPUTS, SensedTurn
 from handle_drake.apps.inhand.task import (
     DATA_DIR,
     GistMotionData,
@@ -116,6 +117,8 @@ from handle_drake.base.hands import (
     get_hand_spec,
     set_effort_limits,
 )
+from handle_drake.devices.accelerometer.config import AccelerometerConfig
+from handle_drake.devices.taxels.config import TaxelConfig
 from handle_drake.learning.executors import TrialResult
 from handle_drake.learning.log import scenario_fingerprint
 from handle_drake.scenario import (
@@ -342,6 +345,10 @@ class ScrewCapScenario:
     # 0.5, 0.25 ms and its turn did not converge); 0 turns that off (Drake's advice against
     # "artificial softening"): the contact then has the stiffness the model gives it
     near_rigid_threshold: float = 1.0
+    # issue 47: the hand's taxel arrays (the station's hand.taxels: the turn estimated from
+    # touch) and an accelerometer on the object (a device profile; "": none)
+    taxels: bool = False
+    accelerometer: str = ""
 
     def dump(self) -> str:
         return yaml_dump_typed(self)
@@ -475,12 +482,15 @@ def station_scenario(scenario: ScrewCapScenario, motion: bool = False) -> Scenar
                         initial_position={n: float(v) for n, v in
                                           scenario.initial_position.items()},
                         effort_limits=scenario.effort_limits,
-                        effort_scale=float(scenario.effort_scale)),
+                        effort_scale=float(scenario.effort_scale),
+                        taxels=TaxelConfig() if scenario.taxels else None),
         object=ObjectConfig(kind="cylinder", size=cap.diameter,
                             dimensions={"height": cap.length}, mass=cap.mass, mu=cap.mu,
                             X_WO=_schema_pose(cap, cap.position), on_table=False,
                             contact_feet=False, point_stiffness=cap.point_stiffness,
-                            joint=bare.joint),
+                            joint=bare.joint, accelerometer=AccelerometerConfig(
+                                device=scenario.accelerometer, calibrated=False)
+                            if scenario.accelerometer else None),
         table=None,
         plant_config=_plant_config(scenario),
         driver=SimHandDriver(max_joint_velocity=scenario.max_joint_velocity,
@@ -937,6 +947,11 @@ class ScrewCapTask:
     # (eq. 48: 0; the reversal's own samples keep their graded credit) and the last check
     # fails. False: the score of the 60 deg task as published.
     held_turn: bool = False
+    # issue 47: "plant" scores the turn read from the plant (the cap's joint, the cylinder's
+    # pose); "estimated" from what the hand senses (apps/inhand/sensed.py: taxels and
+    # joints, and the object's accelerometer, a device profile, when ``accelerometer``)
+    score: str = "plant"
+    accelerometer: str = ""
 
     def __post_init__(self):
         if self.target_deg is None:  # the task's own (frozen: set once, here)
@@ -970,6 +985,11 @@ class ScrewCapTask:
             raise ValueError(f"benchmark: expected {self.n_checks} values (one per check), got "
                              f"{len(self.benchmark)}")
         self._check_robustness()
+        if self.score not in SCORES:
+            raise ValueError(f"score: expected one of {SCORES}, got {self.score!r}")
+        if self.accelerometer and self.score != "estimated":
+            raise ValueError(f"accelerometer: only with score 'estimated', got "
+                             f"{self.accelerometer!r}")
         if self.effort_limits not in EFFORT_LIMITS:
             raise ValueError(f"effort_limits: expected one of {EFFORT_LIMITS}, got "
                              f"{self.effort_limits!r}")
@@ -1101,6 +1121,8 @@ class ScrewCapOutcome:
     contacts: list  # per sample: hand bodies touching the cap
     sim_time: float
     wall_time: float
+    # score "estimated": per sample (plant, touch, accelerometer or None) turns (deg)
+    sensed_series: list = dc.field(default_factory=list)
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
@@ -1155,7 +1177,8 @@ def station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
     """The trial on the station (:class:`~handle_drake.trial.gist_trial.GistTrial`), the grasp
     settled with the ``still`` parameters; the handles the trial reads, under the names of
     :func:`build_screw_cap`'s."""
-    trial = StationGistTrial(scenario.station(), meshcat=meshcat,
+    outputs = SENSED_OUTPUTS[:2 + bool(scenario.accelerometer)] if scenario.taxels else ()
+    trial = StationGistTrial(scenario.station(), meshcat=meshcat, outputs=outputs,
                              reverse_margin=scenario.reverse_margin)
     source = _motion_source(scenario)
     trial.settle(source.held_frames(still, PlannedCommands.period, scenario.settle_time),
@@ -1167,7 +1190,10 @@ def station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
                 geometry={g: names.get(n, n) for g, n in trial.geometry.items()},
                 q0=hand_initial_command(trial.scenario), gist=scenario.action_gist(),
                 reverse=trial.reverse_system, planned=None, weight=trial.weight,
-                simulator=trial.simulator, settled=trial.settled)
+                simulator=trial.simulator, settled=trial.settled,
+                sensed=SensedTurn(trial.harness.station, scenario, bare_object(
+                    scenario.cap).X_WO, -1.0 if scenario.cap.free else 1.0)
+                if scenario.taxels else None)
 
 
 def _reference_build(scenario: ScrewCapScenario, still, meshcat=None,
@@ -1266,7 +1292,8 @@ class ScrewCapTrial(GistObjective):
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
             hold=c.hold, parameters=[float(v) for v in parameters],
             reverse_margin=c.reverse_margin if c.free else 0.0,
-            near_rigid_threshold=c.free_near_rigid_threshold if c.free else 1.0)
+            near_rigid_threshold=c.free_near_rigid_threshold if c.free else 1.0,
+            taxels=c.score == "estimated", accelerometer=c.accelerometer)
 
     def _build(self, meshcat=None, driver: bool = False, build: str | None = None):
         """The trial, settled (kept per process): on the station (``build`` "station", the
@@ -1352,7 +1379,8 @@ class ScrewCapTrial(GistObjective):
             if t > end + 1e-9:
                 gripped = st["touch_at_stroke_end"] and not st["palm"]
         if built["joint"] is None:  # a free cylinder must also not have dropped
-            p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation()
+            p = built["plant"].EvalBodyPoseInWorld(plant_context, built["cap"]).translation() \
+                if built.get("sensed") is None else built["sensed"].centre_W()
             gripped = gripped and p[2] - p0[2] > -c.drop
         return gripped
 
@@ -1376,7 +1404,7 @@ class ScrewCapTrial(GistObjective):
         return dict(new_contact_record(), passed=0, failed=False, stopped=False,
                     last_touch=0.0, next_check=0, angle=0.0, previous=0.0,
                     stroke_end=self.last_stroke_end(x) if cap else None,
-                    touch_at_stroke_end=False, digit_touch={})
+                    touch_at_stroke_end=False, digit_touch={}, sensed=[])
 
     def last_stroke_end(self, x) -> float:
         """The end (s) of the last gait's turn stroke with parameters ``x``: the latest end
@@ -1406,19 +1434,27 @@ class ScrewCapTrial(GistObjective):
         ``partial_credit`` ``reverse_travel / travel`` when it slid further while a
         finger still touches it (0 when none does), without it 0."""
         c, plant, body = self.config, built["plant"], built["cap"]
-        simulator = built["simulator"]
+        simulator, sensed = built["simulator"], built.get("sensed")
         context, reverse = simulator.get_mutable_context(), built["reverse"]
-        p_end = plant.EvalBodyPoseInWorld(plant_context, body).translation().copy()
+
+        def position():  # the plant's, or the sensed centre (score "estimated")
+            if sensed is None:
+                return plant.EvalBodyPoseInWorld(plant_context, body).translation()
+            return sensed.centre_W()
+
+        p_end = position().copy()
         reverse.set_reversed(reverse.GetMyContextFromRoot(context), True)
         credits, held, worst = [], [False], [0.0]
 
         def each_step(root_context):  # the travel at every step, not only at the samples
-            worst[0] = max(worst[0], float(np.linalg.norm(
-                plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end)))
+            if sensed is not None:
+                sensed.step(root_context)
+            worst[0] = max(worst[0], float(np.linalg.norm(position() - p_end)))
 
         def at_sample(i, t) -> bool:
             travel = worst[0]  # the largest so far
-            touching = contact_summary(plant, plant_context, built)["touching"]
+            touching = (contact_summary(plant, plant_context, built) if sensed is None
+                        else sensed.summary())["touching"]
             touched = any(b != "palm" for b in touching)
             held[0] = touched and travel < c.reverse_travel
             credits.append(1.0 if held[0] else (min(1.0, c.reverse_travel / travel)
@@ -1436,6 +1472,8 @@ class ScrewCapTrial(GistObjective):
         if "trial" in built:  # the station: the frames' zero-order hold at the driver's samples
             built["trial"].start(built["source"].held_frames(x, PlannedCommands.period, end),
                                  built["settled"])
+            if built["sensed"] is not None:
+                built["sensed"].reset(built["simulator"].get_context())
             return built["plant"].GetMyContextFromRoot(context)
         context.SetTimeStateAndParametersFrom(built["settled"])
         source = built["source"]
@@ -1459,6 +1497,9 @@ class ScrewCapTrial(GistObjective):
         X0 = plant.EvalBodyPoseInWorld(plant_context, body)
         R0_inv, p0 = X0.rotation().inverse(), X0.translation().copy()
         q_start = joint.get_angle(plant_context) if joint is not None else 0.0
+        sensed = built.get("sensed")
+        if sensed is not None:  # the drop measured from the sensed centre
+            p0 = sensed.centre_W()
         simulator.Initialize()
         samples, checks = c.sample_times(), c.check_times()
         fractions = c.benchmark_fractions()
@@ -1469,10 +1510,16 @@ class ScrewCapTrial(GistObjective):
 
         def each_step(root_context):  # every step: palm, welded bodies, the digits' forces
             step_contacts(plant, plant_context, built, st)
+            if sensed is not None:  # the sensed turn at every taxel sample
+                sensed.step(root_context)
 
         def at_sample(i, t) -> bool:  # whether the trial stops here
             truth, turn = _turn(st, built, plant_context, R0_inv, q_start, counts)
-            summary = _sample_contacts(plant, plant_context, built, contact_results)
+            if sensed is not None:  # scored from the estimate (issue 47)
+                turn = sensed.turn_deg
+                st["sensed"].append((truth, sensed.touch_deg, sensed.gravity_deg))
+            summary = _sample_contacts(plant, plant_context, built, contact_results) \
+                if sensed is None else sensed.summary()  # the taxels' touch
             gripped = self._gripped(st, t, summary, built, plant_context, p0)
             turns.append(turn)
             truths.append(truth)
@@ -1546,7 +1593,8 @@ class ScrewCapTrial(GistObjective):
             checks_passed=passed,
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
-            sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall)
+            sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall,
+            sensed_series=st["sensed"])
 
 
 def advance_sampling(simulator, times, each_step, at_sample) -> bool:
