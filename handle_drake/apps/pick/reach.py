@@ -64,7 +64,8 @@ CUBOID_TURN = 0.17
 #: SNOPT major iterations of one IK stage: the kinematic problem alone, and the one with
 #: the minimum-distance constraint (an arm of six joints or more; fewer: the kinematic
 #: limit). Measured on the 564 IK solves of the pick plans of development scenes
-#: (Hamburg seeds 0-50 perceived, the shape sorter's 600-619 each kind, true poses),
+#: (Hamburg seeds 0-35 but 7, and 39, 40, 49, 50, perceived; the shape sorter's 600-619
+#: each kind, true poses),
 #: each solved again with fewer iterations: the collision stage's 5 successes of 53 all
 #: converged within 20 iterations (3 lost at 10), its 48 failures ran to the limit
 #: (0.1-2.9 s each at 100: 22.1 s of the 26.6 s all 564 solves took); at 20 that
