@@ -179,6 +179,8 @@ BUDGET_RUNS = {
     "bench_perception_objects": (["--objects", "sphere"], [], "perception"),
     "bench_perception_scenes": (["--seeds", "0-29"], ["--seeds", "100-179"], "perception"),
     "bench_pick": (["--seeds", "0"], [], "pick"),
+    "bench_pick_plan": (["--scenes", "sorter:600"], ["--scenes", "sizes:eval,sorter:eval,"
+                                                    "hamburg:eval"], "pick"),
     "bench_pick_sim": (["--seeds", "0-9"], ["--seeds", "0-19"], "pick"),
     "bench_pick_touch": (["--scenes", "0:sphere"], [], "sensing"),
     "bench_quality": (["--quick"], [], "quality"),

@@ -108,8 +108,16 @@ REACTIVE_CLOSE_TIME = (REACTIVE_PARAMS.max_closing / REACTIVE_PARAMS.close_rate
                        + REACTIVE_PARAMS.squeeze_time + REACTIVE_PARAMS.hold_time + 0.1)
 _FAR = 10.0  # m, the pose the close trigger reports before the grasp
 PRIOR_WEIGHT = 0.01  # the predicted orientation's weight against each contact normal
-#: The kinds :func:`measure_in_hand` locates; the others are released as planned.
-LOCATED_KINDS = ("sphere", "cuboid")
+#: The kinds located in the hand after the lift (from touch: their own geometry's fit,
+#: :func:`~handle_drake.apps.pick.touch.locate_by_touch`), their release planned again
+#: from it; the others are released as planned. Development sorter scenes 600-615 (true
+#: poses, tools/locate_kinds.py): the fit nearer the plant's pose than the plan in
+#: position in every scene, within 10 mm and 10 deg in 17 of 22 (docs/results/pick.md).
+#: In the box with the located release: mesh 609 and 612, wine glass 605, mug 612,
+#: cylinder 610, and tests/pick/test_pick_kinds.py's cylinder, mug, glass and mesh. Not
+#: the star prism (the sorter's own scene: in the box as planned, on the rim as located;
+#: dev 606 and 610 on the rim either way) nor the rotated cuboid (dev 611 likewise).
+LOCATED_KINDS = ("sphere", "cuboid", "cylinder", "mug", "wine_glass", "mesh")
 
 
 class _CloseTrigger(LeafSystem):
