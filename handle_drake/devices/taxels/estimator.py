@@ -234,7 +234,9 @@ class InHandPoseEstimator(LeafSystem):
                  process_position_std: float = 0.002,
                  process_angle_std: float = 0.05, camera_position_std: float = 0.005,
                  camera_angle_std: float = 0.1, gravity_std: float = 0.05,
-                 self_contact_distance: float = 0.004):
+                 self_contact_distance: float = 0.004, motion_model: bool = True,
+                 still_position_std: float = 0.0005, still_angle_std: float = 0.01,
+                 motion_noise: float = 0.5):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._half_size = self._shape.half_size()
@@ -277,7 +279,10 @@ class InHandPoseEstimator(LeafSystem):
                          d=sigma_distance, n=sigma_normal, proc_p=process_position_std,
                          proc_a=process_angle_std, cam_p=camera_position_std,
                          cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
-                         edge_n=edge_sigma_normal, compliance=pad_compliance)
+                         edge_n=edge_sigma_normal, compliance=pad_compliance,
+                         still_p=still_position_std, still_a=still_angle_std,
+                         motion=motion_noise)
+        self._motion_model = bool(motion_model)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
         nq, cells = len(spec_h.joint_names), sum(p.cells for p in self._pads)
@@ -288,7 +293,8 @@ class InHandPoseEstimator(LeafSystem):
                                                      AbstractValue.Make(RigidTransform()))
         self._roll_pitch = self.DeclareVectorInputPort("roll_pitch", 2)
         # state: quaternion wxyz and p of X_BO (or X_WO before contact), 36 covariance,
-        # contacts, rms, in_hand
+        # contacts, rms, in_hand, then the joints of the last update (the pads' motion)
+        self._nq = nq
         self._state = self.DeclareDiscreteState(self._initial_state())
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
         self.DeclareAbstractOutputPort("pose", lambda: AbstractValue.Make(RigidTransform()),
@@ -336,7 +342,7 @@ class InHandPoseEstimator(LeafSystem):
         return links, others
 
     def _initial_state(self) -> np.ndarray:
-        x = np.zeros(46)
+        x = np.zeros(47 + len(self._q_index))
         x[:4] = self._X_WO_prior.rotation().ToQuaternion().wxyz()
         x[4:7] = self._X_WO_prior.translation()
         s = self._sig
@@ -382,6 +388,8 @@ class InHandPoseEstimator(LeafSystem):
         X_BPads = self.pad_poses(q)
         query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
         keep, free = [], []
+        #: per contact kept: its pad's index and force (N), for the pads' motion model
+        self.last_contact_pads = []
         for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
             points, normals, force, inside = pad_contacts(
                 [pad], taxels[self._offsets[i]:self._offsets[i + 1]], [X_BP], self._threshold,
@@ -394,6 +402,7 @@ class InHandPoseEstimator(LeafSystem):
                 near = query.ComputeSignedDistanceToPoint(point, self._self_contact_distance)
                 if any(d.id_G in self._others[i] for d in near):
                     continue
+                self.last_contact_pads.append((i, float(f)))
                 terms = (s["d"], s["n"]) if ok else (s["edge_d"], s["edge_n"])
                 keep.append((point, normal, (*terms, -s["compliance"] * f),
                              None if ok else self._pad_rows[i]))
@@ -421,19 +430,26 @@ class InHandPoseEstimator(LeafSystem):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
-        points, normals, free, terms, touching = self.contacts(self._q_port.Eval(context),
-                                                     self._taxel_port.Eval(context))
+        q = np.asarray(self._q_port.Eval(context), float)
+        points, normals, free, terms, touching = self.contacts(q, self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
         camera = self._camera.HasValue(context)
         gravity_in = self._roll_pitch.HasValue(context) and self._X_OS is not None
+        q_prev, had_q = x[47:47 + self._nq].copy(), x[46] > 0.5
+        x[46], x[47:47 + self._nq] = 1.0, q
         if not in_hand and len(points) == 0 and not camera and not gravity_in:
-            return EventStatus.DidNothing()
+            state.get_mutable_vector(self._state).SetFromVector(x)
+            return EventStatus.Succeeded()
         s = self._sig
-        # the prior: the last estimate, widened by the process noise
-        prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0)
-                            + np.array([s["proc_a"] ** 2] * 3 + [s["proc_p"] ** 2] * 3))
+        # the prior: the last estimate (in the hand: carried by the touching pads' motion),
+        # widened by the process noise
+        process = np.array([s["proc_a"]] * 3 + [s["proc_p"]] * 3)
+        if self._motion_model and in_hand and had_q and self.last_contact_pads:
+            X_BO_prev, process = self.carry(X_BO_prev, q_prev, q, self.last_contact_pads)
+            self.pad_poses(q)  # the joints of now again, for hand_points()
+        prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0) + process ** 2)
         priors = [(X_BO_prev, prior_std)]
         if camera:
             priors.append((X_BW @ self._camera.Eval(context),
@@ -468,6 +484,32 @@ class InHandPoseEstimator(LeafSystem):
         x[45] = float(in_hand)
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
+
+    def carry(self, X_BO: RigidTransform, q_prev, q, contact_pads):
+        """The object carried by the pads that touch it from joints ``q_prev`` to ``q``
+        (it moves rigidly with them: each touching pad's motion moves it; the
+        force-weighted mean of those poses) and the process noise of the step (std of
+        ``[rotation vector, position]``): ``still_*_std`` plus ``motion_noise`` times the
+        pads' mean motion and their disagreement. ``contact_pads``: ``[(pad index,
+        force)]``. Returns ``(X_BO, std6)``."""
+        pads = sorted({i for i, _ in contact_pads})
+        force = np.array([sum(f for j, f in contact_pads if j == i) for i in pads])
+        w = force / force.sum() if force.sum() > 0 else np.full(len(pads), 1 / len(pads))
+        before = self.pad_poses(q_prev)
+        after = self.pad_poses(q)
+        moved = [after[i] @ before[i].inverse() @ X_BO for i in pads]
+        p = np.array([X.translation() for X in moved])
+        R = Rotation.from_matrix(np.array([X.rotation().matrix() for X in moved]))
+        p_mean, R_mean = w @ p, R.mean(weights=w)
+        spread_p = float(np.sqrt(w @ np.sum((p - p_mean) ** 2, axis=1)))
+        spread_a = float(np.sqrt(w @ np.sum((R * R_mean.inv()).as_rotvec() ** 2, axis=1)))
+        R_prev = Rotation.from_matrix(X_BO.rotation().matrix())
+        step_p = float(np.linalg.norm(p_mean - X_BO.translation()))
+        step_a = float(np.linalg.norm((R_mean * R_prev.inv()).as_rotvec()))
+        s = self._sig
+        std = np.array([np.hypot(s["still_a"], s["motion"] * (step_a + spread_a))] * 3
+                       + [np.hypot(s["still_p"], s["motion"] * (step_p + spread_p))] * 3)
+        return RigidTransform(RotationMatrix(R_mean.as_matrix()), p_mean), std
 
     def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None,
             terms=None, touching=()):
