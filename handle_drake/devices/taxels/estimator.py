@@ -236,7 +236,7 @@ class InHandPoseEstimator(LeafSystem):
                  camera_angle_std: float = 0.1, gravity_std: float = 0.05,
                  self_contact_distance: float = 0.004, motion_model: bool = True,
                  still_position_std: float = 0.0005, still_angle_std: float = 0.01,
-                 motion_noise: float = 0.5):
+                 motion_noise: float = 0.5, gravity_consistency: float = 0.1):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._half_size = self._shape.half_size()
@@ -281,7 +281,7 @@ class InHandPoseEstimator(LeafSystem):
                          cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
                          edge_n=edge_sigma_normal, compliance=pad_compliance,
                          still_p=still_position_std, still_a=still_angle_std,
-                         motion=motion_noise)
+                         motion=motion_noise, g_consistency=gravity_consistency)
         self._motion_model = bool(motion_model)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
@@ -293,7 +293,8 @@ class InHandPoseEstimator(LeafSystem):
                                                      AbstractValue.Make(RigidTransform()))
         self._roll_pitch = self.DeclareVectorInputPort("roll_pitch", 2)
         # state: quaternion wxyz and p of X_BO (or X_WO before contact), 36 covariance,
-        # contacts, rms, in_hand, then the joints of the last update (the pads' motion)
+        # contacts, rms, in_hand, then whether the last update saw the joints, its joints
+        # (the pads' motion), its roll and pitch and whether it read them
         self._nq = nq
         self._state = self.DeclareDiscreteState(self._initial_state())
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
@@ -342,7 +343,7 @@ class InHandPoseEstimator(LeafSystem):
         return links, others
 
     def _initial_state(self) -> np.ndarray:
-        x = np.zeros(47 + len(self._q_index))
+        x = np.zeros(50 + len(self._q_index))
         x[:4] = self._X_WO_prior.rotation().ToQuaternion().wxyz()
         x[4:7] = self._X_WO_prior.translation()
         s = self._sig
@@ -439,6 +440,15 @@ class InHandPoseEstimator(LeafSystem):
         gravity_in = self._roll_pitch.HasValue(context) and self._X_OS is not None
         q_prev, had_q = x[47:47 + self._nq].copy(), x[46] > 0.5
         x[46], x[47:47 + self._nq] = 1.0, q
+        if gravity_in:
+            # a reading is gravity when it agrees with the last one (not a transient: a
+            # first sample, a jerk)
+            n = 47 + self._nq
+            rp = np.asarray(self._roll_pitch.Eval(context), float)
+            steady = x[n + 2] > 0.5 and np.all(np.isfinite(rp)) and np.linalg.norm(
+                rp - x[n:n + 2]) <= self._sig["g_consistency"]
+            x[n:n + 2], x[n + 2] = rp, 1.0
+            gravity_in = bool(steady)
         if not in_hand and len(points) == 0 and not camera and not gravity_in:
             state.get_mutable_vector(self._state).SetFromVector(x)
             return EventStatus.Succeeded()
@@ -456,7 +466,7 @@ class InHandPoseEstimator(LeafSystem):
                            np.array([s["cam_a"]] * 3 + [s["cam_p"]] * 3)))
         gravity = None
         if gravity_in:
-            r, p = self._roll_pitch.Eval(context)
+            r, p = rp
             down_S = RollPitchYaw(r, p, 0.0).ToRotationMatrix().inverse().multiply([0, 0, -1.0])
             gravity = (X_BW.rotation().multiply([0, 0, -1.0]), down_S)
         hand = (self.hand_points(), self._clearance)
