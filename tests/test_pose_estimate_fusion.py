@@ -128,3 +128,25 @@ def test_the_station_estimate_with_the_accelerometer_holds_the_cuboid(name):
                        min(abs((R @ S).ToAngleAxis().angle()) for S in SYMMETRY)))
     position, angle = np.sqrt(np.mean(np.square(errors), axis=0))
     assert position < 0.005 and np.degrees(angle) < 5.0, (position, np.degrees(angle))
+
+
+def test_a_pinch_reports_its_unobserved_turn_and_slide_as_the_prior_spread():
+    """Two contacts on opposite faces of a 5 cm cuboid (x = +-25 mm, the pads' normals
+    against the faces): the fit's covariance keeps the prior's spread (0.2 rad, 1 cm) for
+    the turn about the contacts' line and the slide along the faces, is far tighter across
+    the faces and tighter for their tilt (the normals): closed form, no simulation."""
+    estimator = _estimator(_pads())
+    points = np.array([[0.025, 0.0, 0.0], [-0.025, 0.0, 0.0]])
+    normals = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    prior = RigidTransform(RollPitchYaw(0.0, 0.05, -0.04), [0.002, 0.003, -0.002])
+    std = np.array([0.2] * 3 + [0.01] * 3)
+    X_BO, cov, rms, _ = estimator.fit(points, normals, [(prior, std)])
+    assert rms < 1e-4
+    assert abs(X_BO.translation()[0]) < 1e-4  # centred between the faces
+    np.testing.assert_allclose(X_BO.translation()[1:], [0.003, -0.002], atol=1e-4)
+    sd = np.sqrt(np.diag(cov))
+    assert sd[0] == pytest.approx(0.2, rel=0.05)  # the turn about x: the prior's
+    assert np.all(sd[4:] == pytest.approx(0.01, rel=0.05))  # the slide along y, z
+    assert sd[3] < 0.002  # the faces' distance: observed by the touch
+    # the tilt: by the two normals (0.3 rad each): tighter than the prior's
+    assert sd[1] < 0.8 * sd[0] and sd[2] < 0.8 * sd[0]

@@ -236,7 +236,8 @@ class InHandPoseEstimator(LeafSystem):
                  camera_angle_std: float = 0.1, gravity_std: float = 0.05,
                  self_contact_distance: float = 0.004, motion_model: bool = True,
                  still_position_std: float = 0.0005, still_angle_std: float = 0.01,
-                 motion_noise: float = 0.5, gravity_consistency: float = 0.1):
+                 motion_noise: float = 0.5, gravity_consistency: float = 0.1,
+                 base_motion_noise: float = 0.1):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._half_size = self._shape.half_size()
@@ -281,7 +282,8 @@ class InHandPoseEstimator(LeafSystem):
                          cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
                          edge_n=edge_sigma_normal, compliance=pad_compliance,
                          still_p=still_position_std, still_a=still_angle_std,
-                         motion=motion_noise, g_consistency=gravity_consistency)
+                         motion=motion_noise, g_consistency=gravity_consistency,
+                         base_motion=base_motion_noise)
         self._motion_model = bool(motion_model)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
@@ -343,7 +345,7 @@ class InHandPoseEstimator(LeafSystem):
         return links, others
 
     def _initial_state(self) -> np.ndarray:
-        x = np.zeros(50 + len(self._q_index))
+        x = np.zeros(58 + len(self._q_index))
         x[:4] = self._X_WO_prior.rotation().ToQuaternion().wxyz()
         x[4:7] = self._X_WO_prior.translation()
         s = self._sig
@@ -456,9 +458,25 @@ class InHandPoseEstimator(LeafSystem):
         # the prior: the last estimate (in the hand: carried by the touching pads' motion),
         # widened by the process noise
         process = np.array([s["proc_a"]] * 3 + [s["proc_p"]] * 3)
+        m = 50 + self._nq  # the hand base's pose at the last update: p, quaternion, flag
+        base_step = np.zeros(2)
+        if x[m + 7] > 0.5:
+            X_prev = RigidTransform(Quaternion(x[m + 3:m + 7] / np.linalg.norm(x[m + 3:m + 7])),
+                                    x[m:m + 3])
+            base_step = np.array([np.linalg.norm(X_WB.translation() - X_prev.translation()),
+                                  (X_prev.rotation().inverse() @ X_WB.rotation())
+                                  .ToAngleAxis().angle()])
+        x[m:m + 3], x[m + 3:m + 7], x[m + 7] = (X_WB.translation(),
+                                                X_WB.rotation().ToQuaternion().wxyz(), 1.0)
         if self._motion_model and in_hand and had_q and self.last_contact_pads:
             X_BO_prev, process = self.carry(X_BO_prev, q_prev, q, self.last_contact_pads)
             self.pad_poses(q)  # the joints of now again, for hand_points()
+            # the hand base's motion loads the grasp (inertia): the object may slip or turn
+            # in it, most where the touch does not see
+            k = s["base_motion"]
+            process = np.hypot(process, k * np.array(
+                [base_step[0] / self._half_size + base_step[1]] * 3
+                + [base_step[0] + self._half_size * base_step[1]] * 3))
         prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0) + process ** 2)
         priors = [(X_BO_prev, prior_std)]
         if camera:
