@@ -31,14 +31,21 @@ normals (``sigma_normal``); a contact on the grid's border (the object may touch
 beyond the grid: a fingertip's tip) gets ``edge_sigma_distance`` and ``edge_sigma_normal``
 and its body must touch the object (its least clearance to it 0 within
 ``edge_sigma_distance``). The object is kept out of every link of the hand and off the
-pads that feel nothing, with the previous estimate as a prior widened by
-``process_position_std`` / ``process_angle_std`` per update (a filter with a random-walk
-model), the camera's detection (``camera_position_std``, ``camera_angle_std``) and the
-gravity direction; the better of two starts (the last estimate, and a half-size beyond
-the contacts along their normals) is kept. Before the first contact the estimate is
-held in world (the ``X_WO_prior``, refined by the camera and gravity when they are
-connected: the object rests where it was seen); from the first contact it is held in
-the hand.
+pads that feel nothing, with the previous estimate as a prior, the camera's detection
+(``camera_position_std``, ``camera_angle_std``) and the gravity direction; the better of
+two starts (the last estimate, and a half-size beyond the contacts along their normals)
+is kept. The prior (a filter): in the hand, the last estimate carried by the touching
+pads' motion since the last update (:meth:`InHandPoseEstimator.carry`: the object moves
+rigidly with the pads that hold it) and widened by ``still_*_std`` plus ``motion_noise``
+times that motion and the pads' disagreement, plus ``base_motion_noise`` times the hand
+base's step (the lift's load turns the object in the grasp where touch does not see: the
+reported covariance grows there); ``motion_model=False``, or no pad touching: a random
+walk of ``process_position_std`` / ``process_angle_std`` per update. A roll/pitch reading
+counts as gravity only when it agrees with the one before within
+``gravity_consistency`` (the device's first sample, a jerk: left out). Before the first
+contact the estimate is held in world (the ``X_WO_prior``, refined by the camera and
+gravity when they are connected: the object rests where it was seen); from the first
+contact it is held in the hand.
 """
 
 from __future__ import annotations
