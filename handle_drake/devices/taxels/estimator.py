@@ -250,20 +250,7 @@ class InHandPoseEstimator(LeafSystem):
         self._half_size = self._shape.half_size()
         self._pads = list(pads)
         spec_h = get_hand_spec(hand_kind)
-        # kinematics and the hand's own geometry only (never stepped); AddHand asks for a
-        # SAP plant (its couplers)
-        builder = DiagramBuilder()
-        self._plant, self._scene_graph = AddMultibodyPlantSceneGraph(builder, 0.001)
-        self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
-        hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
-        self._plant.WeldFrames(self._plant.world_frame(),
-                               self._plant.GetBodyByName(spec_h.base_body, hand).body_frame())
-        self._plant.Finalize()
-        self._kinematics = builder.Build()
-        # a scratch context, overwritten whole at each use (no result depends on its past)
-        self._kin_context = self._kinematics.CreateDefaultContext()
-        self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
-        self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
+        hand = self._build_kinematics(hand_kind, coupling_ratio, spec_h)
         self._self_contact_distance = self_contact_distance
         inspector = self._scene_graph.model_inspector()
         self._links, self._others = self._hand_geometry(inspector, hand)
@@ -283,14 +270,13 @@ class InHandPoseEstimator(LeafSystem):
         self._X_WB = None if X_WB is None else RigidTransform(X_WB)
         self._X_OS = None if X_OS is None else RigidTransform(X_OS)
         self._period = 1.0 / rate_hz
-        self._sig = dict(prior_p=prior_position_std, prior_a=prior_angle_std,
-                         d=sigma_distance, n=sigma_normal, proc_p=process_position_std,
-                         proc_a=process_angle_std, cam_p=camera_position_std,
-                         cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
-                         edge_n=edge_sigma_normal, compliance=pad_compliance,
-                         still_p=still_position_std, still_a=still_angle_std,
-                         motion=motion_noise, g_consistency=gravity_consistency,
-                         base_motion=base_motion_noise)
+        self._sig = dict(
+            prior_p=prior_position_std, prior_a=prior_angle_std, d=sigma_distance,
+            n=sigma_normal, proc_p=process_position_std, proc_a=process_angle_std,
+            cam_p=camera_position_std, cam_a=camera_angle_std, g=gravity_std,
+            edge_d=edge_sigma_distance, edge_n=edge_sigma_normal, compliance=pad_compliance,
+            still_p=still_position_std, still_a=still_angle_std, motion=motion_noise,
+            g_consistency=gravity_consistency, base_motion=base_motion_noise)
         self._motion_model = bool(motion_model)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
@@ -314,6 +300,24 @@ class InHandPoseEstimator(LeafSystem):
             c.get_discrete_state(self._state).value()[7:43]), {self.xd_ticket()})
         self.DeclareVectorOutputPort("quality", 2, lambda c, o: o.SetFromVector(
             c.get_discrete_state(self._state).value()[43:45]), {self.xd_ticket()})
+
+    def _build_kinematics(self, hand_kind, coupling_ratio, spec_h):
+        """A plant of the hand alone, its base welded to the world: kinematics and the
+        hand's own geometry only (never stepped; AddHand asks for a SAP plant: its
+        couplers), and a scratch context, overwritten whole at each use (no result depends
+        on its past). Returns the hand's model instance."""
+        builder = DiagramBuilder()
+        self._plant, self._scene_graph = AddMultibodyPlantSceneGraph(builder, 0.001)
+        self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
+        hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
+        self._plant.WeldFrames(self._plant.world_frame(),
+                               self._plant.GetBodyByName(spec_h.base_body, hand).body_frame())
+        self._plant.Finalize()
+        self._kinematics = builder.Build()
+        self._kin_context = self._kinematics.CreateDefaultContext()
+        self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
+        self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
+        return hand
 
     @property
     def half_size(self) -> float:
@@ -436,6 +440,34 @@ class InHandPoseEstimator(LeafSystem):
         out.set_value(X)
 
     # -- the update ------------------------------------------------------------------------
+    def _steady_roll_pitch(self, context, x):
+        """The accelerometer's roll and pitch when connected and it agrees with the
+        reading of the last update (kept in ``x``) within ``gravity_consistency`` (not a
+        transient: a first sample, a jerk), else None."""
+        if not self._roll_pitch.HasValue(context) or self._X_OS is None:
+            return None
+        n = 47 + self._nq
+        rp = np.asarray(self._roll_pitch.Eval(context), float)
+        steady = x[n + 2] > 0.5 and np.all(np.isfinite(rp)) and np.linalg.norm(
+            rp - x[n:n + 2]) <= self._sig["g_consistency"]
+        x[n:n + 2], x[n + 2] = rp, 1.0
+        return rp if steady else None
+
+    def _base_step(self, x, X_WB: RigidTransform) -> np.ndarray:
+        """The hand base's motion since the last update (m, rad; 0 at the first), its
+        pose of now kept in ``x``."""
+        m = 50 + self._nq  # the hand base's pose at the last update: p, quaternion, flag
+        step = np.zeros(2)
+        if x[m + 7] > 0.5:
+            X_prev = RigidTransform(Quaternion(x[m + 3:m + 7] / np.linalg.norm(x[m + 3:m + 7])),
+                                    x[m:m + 3])
+            step = np.array([np.linalg.norm(X_WB.translation() - X_prev.translation()),
+                             (X_prev.rotation().inverse() @ X_WB.rotation())
+                             .ToAngleAxis().angle()])
+        x[m:m + 3], x[m + 3:m + 7], x[m + 7] = (X_WB.translation(),
+                                                X_WB.rotation().ToQuaternion().wxyz(), 1.0)
+        return step
+
     def _update(self, context, state):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
@@ -446,18 +478,10 @@ class InHandPoseEstimator(LeafSystem):
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
         camera = self._camera.HasValue(context)
-        gravity_in = self._roll_pitch.HasValue(context) and self._X_OS is not None
         q_prev, had_q = x[47:47 + self._nq].copy(), x[46] > 0.5
         x[46], x[47:47 + self._nq] = 1.0, q
-        if gravity_in:
-            # a reading is gravity when it agrees with the last one (not a transient: a
-            # first sample, a jerk)
-            n = 47 + self._nq
-            rp = np.asarray(self._roll_pitch.Eval(context), float)
-            steady = x[n + 2] > 0.5 and np.all(np.isfinite(rp)) and np.linalg.norm(
-                rp - x[n:n + 2]) <= self._sig["g_consistency"]
-            x[n:n + 2], x[n + 2] = rp, 1.0
-            gravity_in = bool(steady)
+        rp = self._steady_roll_pitch(context, x)
+        gravity_in = rp is not None
         if not in_hand and len(points) == 0 and not camera and not gravity_in:
             state.get_mutable_vector(self._state).SetFromVector(x)
             return EventStatus.Succeeded()
@@ -465,16 +489,7 @@ class InHandPoseEstimator(LeafSystem):
         # the prior: the last estimate (in the hand: carried by the touching pads' motion),
         # widened by the process noise
         process = np.array([s["proc_a"]] * 3 + [s["proc_p"]] * 3)
-        m = 50 + self._nq  # the hand base's pose at the last update: p, quaternion, flag
-        base_step = np.zeros(2)
-        if x[m + 7] > 0.5:
-            X_prev = RigidTransform(Quaternion(x[m + 3:m + 7] / np.linalg.norm(x[m + 3:m + 7])),
-                                    x[m:m + 3])
-            base_step = np.array([np.linalg.norm(X_WB.translation() - X_prev.translation()),
-                                  (X_prev.rotation().inverse() @ X_WB.rotation())
-                                  .ToAngleAxis().angle()])
-        x[m:m + 3], x[m + 3:m + 7], x[m + 7] = (X_WB.translation(),
-                                                X_WB.rotation().ToQuaternion().wxyz(), 1.0)
+        base_step = self._base_step(x, X_WB)
         if self._motion_model and in_hand and had_q and self.last_contact_pads:
             X_BO_prev, process = self.carry(X_BO_prev, q_prev, q, self.last_contact_pads)
             self.pad_poses(q)  # the joints of now again, for hand_points()
