@@ -5,14 +5,24 @@ and the station's cost with taxels against without, in the same run.
   estimator's prior (its initial state) is the object's start pose moved by
   ``PRIOR_OFFSET`` (8 mm, 8 deg), so it must find the object from touch. Errors are the
   RMS over the holding phase (from ``HOLD_FROM`` to the end, sampled at 20 Hz) against
-  the plant's ``object.pose`` (read only here). Angle errors: cuboid the smallest over
+  the plant's ``object.pose`` (read only here); each grasp runs twice, touch alone and
+  with the object's accelerometer (``object.accelerometer: {}``, the JoyWarrior at the
+  object's origin). Reported std: the estimate's covariance along its largest axis (the
+  least observed direction), median over the phase, and the share of samples whose
+  errors lie within twice it. Angle errors: cuboid the smallest over
   its symmetry (180 deg about each axis); sphere none (its rotation is not observable).
+- The pick's carry (``--picks``): each kind picked once (true poses; sphere and cuboid
+  from diagrams/hamburg_setup.yaml's development scene 0, the others from the shape
+  sorter) with taxels at 20 Hz; the estimator's inputs recorded every 0.05 s and replayed
+  through an estimator built from those ports alone (prior: the start pose moved by
+  ``PRIOR_OFFSET``); errors over the carry (the lift's end to the release). Angles: the
+  smallest over the kind's symmetries (:func:`angle_error`).
 - Images: the taxel readings at the end of the run, one PNG per grasp.
 - Cost: the demo grasp (2 s) with taxels (and with taxels and the estimator) against
   without, CPU time of this process, ``--rounds`` rounds in alternating order; the median
   of the per-round ratios.
 
-Usage: ``python benchmarks/bench_sensing.py [--rounds N] [--quick]``
+Usage: ``python benchmarks/bench_sensing.py [--rounds N] [--quick] [--picks K,K]``
 """
 
 from __future__ import annotations
@@ -39,6 +49,9 @@ ROOT = Path(__file__).resolve().parents[1]
 GRASPS = ("shadow_sphere_grasp.yaml", "grasp_writing_tripod.yaml", "grasp_adduction_grip.yaml",
           "grasp_tripod.yaml", "grasp_lateral_tripod.yaml", "grasp_palmar_pinch.yaml",
           "grasp_tip_pinch.yaml", "grasp_parallel_extension.yaml", "grasp_lateral.yaml")
+#: the shape sorter's kinds (diagrams/sorter_setup.yaml), each picked once for the carry
+PICK_KINDS = ("sphere", "cuboid", "cylinder", "rotated_cuboid", "mug", "wine_glass",
+              "star_prism", "mesh")
 HOLD_FROM = 1.3  # s: the hands have closed in every grasp scenario by then
 PRIOR_OFFSET = RigidTransform(RollPitchYaw(np.radians([5.0, -4.0, 4.6])), [0.005, -0.004, 0.0045])
 SYMMETRY = [RotationMatrix(), RotationMatrix.MakeXRotation(np.pi),
@@ -56,9 +69,27 @@ def _build(scenario):
     return station, Simulator(builder.Build())
 
 
-def accuracy(name: str, duration: float | None = None):
-    scenario = LoadScenario(filename=diagrams_dir() / name,
-                            data="hand: {taxels: {estimator: true}}")
+def angle_error(kind: str, R_truth: RotationMatrix, R_estimate: RotationMatrix) -> float:
+    """The angle (rad) between two orientations of an object of ``kind``, the smallest over
+    its symmetries: none for a sphere (nan), the axis's tilt for a cylinder or a wine
+    glass, a fifth of a turn about the axis for the star prism, half turns for a cuboid."""
+    if kind == "sphere":
+        return np.nan
+    R = R_truth.inverse() @ R_estimate
+    if kind in ("cylinder", "wine_glass"):
+        tilt = abs(float(np.arccos(np.clip(R.matrix()[2, 2], -1.0, 1.0))))
+        return min(tilt, np.pi - tilt) if kind == "cylinder" else tilt
+    turns = [RotationMatrix()] if kind in ("mug", "mesh") else SYMMETRY + (
+        [RotationMatrix.MakeZRotation(k * 2 * np.pi / 5) for k in range(1, 5)]
+        if kind == "star_prism" else [])
+    return min(abs((R @ S).ToAngleAxis().angle()) for S in turns)
+
+
+def accuracy(name: str, duration: float | None = None, accelerometer: bool = False):
+    data = "hand: {taxels: {estimator: true}}"
+    if accelerometer:
+        data += "\nobject: {accelerometer: {}}"
+    scenario = LoadScenario(filename=diagrams_dir() / name, data=data)
     station, simulator = _build(scenario)
     context = simulator.get_mutable_context()
     estimator = station.GetSubsystemByName("object_pose_estimator")
@@ -79,15 +110,119 @@ def accuracy(name: str, duration: float | None = None):
         truth = station.GetOutputPort("object.pose").Eval(sc)
         estimate = station.GetOutputPort("object.pose_estimated").Eval(sc)
         dp = np.linalg.norm(truth.translation() - estimate.translation())
-        R = truth.rotation().inverse() @ estimate.rotation()
-        angle = min(abs((R @ S).ToAngleAxis().angle()) for S in SYMMETRY) \
-            if kind != "sphere" else np.nan
+        angle = angle_error(kind, truth.rotation(), estimate.rotation())
         quality = station.GetOutputPort("object.pose_quality").Eval(sc)
-        rows.append((t, dp, angle, quality[0], truth.translation()[2]))
+        cov = station.GetOutputPort("object.pose_covariance").Eval(sc).reshape(6, 6)
+        # the reported spread along its largest axis (the least observed direction)
+        std_a, std_p = (np.sqrt(max(np.linalg.eigvalsh(cov[k:k + 3, k:k + 3]).max(), 0.0))
+                        for k in (0, 3))
+        rows.append((t, dp, angle, quality[0], truth.translation()[2], std_p, std_a))
     rows = np.array(rows)
     taxels = station.GetOutputPort("hand.taxels").Eval(sc)
     pads = station.GetSubsystemByName("taxels").pads
     return kind, rows, taxels, pads
+
+
+def _record_pick(kind: str) -> dict:
+    """One pick of ``kind`` (true poses; a sphere or cuboid of diagrams/hamburg_setup.yaml's
+    development scene 0, the other kinds from the shape sorter, diagrams/sorter_setup.yaml)
+    with the hand's taxels at 20 Hz, recording every 0.05 s the estimator's inputs (the
+    hand's measured joints, the taxels, the hand base by the arm's measured joints' forward
+    kinematics) and the target's pose (the plant's, to score only); the phase marks, the
+    target's spec and whether it ended in the box."""
+    import dataclasses as dc
+
+    from handle_drake.apps.pick import cli, execute, touch
+    from handle_drake.apps.pick.scenes import random_scene
+    from handle_drake.devices.taxels.config import TaxelConfig
+    from handle_drake.scenario import object_spec
+    from handle_drake.scene.config import scene_objects
+    from handle_drake.station import GetPlant
+
+    if kind in ("sphere", "cuboid"):
+        scenario = random_scene(LoadScenario(filename=diagrams_dir() / "hamburg_setup.yaml"), 0)
+    else:
+        scenario = LoadScenario(filename=diagrams_dir() / "sorter_setup.yaml")
+    scenario = dc.replace(scenario, hand=dc.replace(scenario.hand, taxels=TaxelConfig(
+        rate_hz=20.0)))
+    record = {"samples": []}
+    original = execute._build_diagram
+
+    def build(station, scenario, plan, close):
+        out = original(station, scenario, plan, close)
+        plant = GetPlant(station)
+        body = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(plan.target))[0])
+        config = dict(scene_objects(scenario))[plan.target]
+        record.update(scenario=scenario, marks=dict(out[1]), plant=plant, body=body,
+                      pads=station.GetSubsystemByName("taxels").pads,
+                      spec=object_spec(dc.replace(scenario, object=config, objects=[])))
+        return out
+
+    def monitor(station, context):
+        t = context.get_time()
+        if record["samples"] and t - record["samples"][-1][0] < 0.05 - 1e-9:
+            return
+        plant_context = station.GetSubsystemContext(record["plant"], context)
+        record["samples"].append((
+            t, station.GetOutputPort("hand.position_measured").Eval(context).copy(),
+            station.GetOutputPort("hand.taxels").Eval(context).copy(),
+            touch._hand_base_pose(station, context, record["scenario"]),
+            record["body"].EvalPoseInWorld(plant_context)))
+
+    execute._build_diagram = build
+    try:
+        result = cli.pick(scenario, true_poses=True, kind=kind, monitor=monitor)
+    finally:
+        execute._build_diagram = original
+    record["in_box"] = result.get("status") == "in_box"
+    return record
+
+
+def pick_carry(kind: str):
+    """The estimator (built here from the recorded ports alone, its prior the target's
+    start pose moved by ``PRIOR_OFFSET``) over one sorter pick of ``kind``: rows as
+    :func:`accuracy`'s over the carry (the lift's end to the release), and whether the
+    object ended in the box; None when the pick did not reach the carry."""
+    from handle_drake.devices.taxels.estimator import InHandPoseEstimator
+
+    record = _record_pick(kind)
+    if "spec" not in record:
+        return None
+    samples = record["samples"]
+    estimator = InHandPoseEstimator("shadow", record["scenario"].hand.coupling_ratio,
+                                    record["pads"], record["spec"], samples[0][4] @ PRIOR_OFFSET)
+    context = estimator.CreateDefaultContext()
+    lift, release = record["marks"]["lift"], record["marks"]["release"]
+    rows = []
+    for t, q, taxels, X_WB, truth in samples:
+        context.SetTime(t)
+        hand_pose = np.concatenate([X_WB.translation(), RollPitchYaw(X_WB.rotation()).vector()])
+        for port, value in (("hand_positions", q), ("taxels", taxels), ("hand_pose", hand_pose)):
+            estimator.GetInputPort(port).FixValue(context, value)
+        if lift <= t <= release:
+            estimate = estimator.GetOutputPort("pose").Eval(context)
+            cov = estimator.GetOutputPort("covariance").Eval(context).reshape(6, 6)
+            std_a, std_p = (np.sqrt(max(np.linalg.eigvalsh(cov[k:k + 3, k:k + 3]).max(), 0.0))
+                            for k in (0, 3))
+            rows.append((t, np.linalg.norm(truth.translation() - estimate.translation()),
+                         angle_error(kind, truth.rotation(), estimate.rotation()),
+                         estimator.GetOutputPort("quality").Eval(context)[0],
+                         truth.translation()[2], std_p, std_a))
+        # the estimator's periodic update at this sample (as a simulator would run it)
+        context.SetDiscreteState(
+            estimator.EvalUniquePeriodicDiscreteUpdate(context).get_vector().value().copy())
+    return (np.array(rows), record["in_box"]) if rows else None
+
+
+def _rms(rows, kind):
+    """Position (mm) and angle (deg; None for a sphere) RMS of :func:`accuracy`'s rows."""
+    pos = float(np.sqrt(np.mean(rows[:, 1] ** 2))) * 1e3
+    return pos, float(np.degrees(np.sqrt(np.mean(rows[:, 2] ** 2)))) if kind != "sphere" \
+        else None
+
+
+def _deg(angle):
+    return "n/a" if angle is None else round(angle, 1)
 
 
 def save_image(path: Path, title: str, taxels, pads) -> None:
@@ -133,33 +268,70 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--quick", action="store_true")
-    add_page_arguments(parser, "sensing", published={"rounds": 5, "quick": False})
+    parser.add_argument("--picks", default=",".join(PICK_KINDS),
+                        help="kinds picked from the shape sorter, carry scored (comma list)")
+    add_page_arguments(parser, "sensing", published={"rounds": 5, "quick": False,
+                                                     "picks": ",".join(PICK_KINDS)})
     args = parser.parse_args(argv)
     run = ResultsRun("The sensing hand: the pose estimate per grasp and the station's cost",
                      args, section="quick" if args.quick else None)
     table = []
     grasps = GRASPS[:2] if args.quick else GRASPS
-    lines = ["| scenario | kind | pads in contact (median) | position RMS (mm) | "
-             "angle RMS (deg) | held (object z rose > 5 cm) | verdict (5 mm, 5 deg) |",
-             "|---|---|---|---|---|---|---|"]
+    if args.quick and args.picks == ",".join(PICK_KINDS):
+        args.picks = "sphere"
+    lines = ["| scenario | kind | pads (median) | touch: mm, deg RMS | touch: reported std "
+             "(mm, deg) | within 2 std | + accelerometer: mm, deg RMS | held | verdict "
+             "(5 mm, 5 deg): touch, + acc. |", "|---|---|---|---|---|---|---|---|---|"]
     for name in grasps:
         kind, rows, taxels, pads = accuracy(name)
-        pos = float(np.sqrt(np.mean(rows[:, 1] ** 2))) * 1e3
-        ang = float(np.degrees(np.sqrt(np.mean(rows[:, 2] ** 2)))) if kind != "sphere" else None
+        _, rows_acc, _, _ = accuracy(name, accelerometer=True)
+        (pos, ang), (pos_acc, ang_acc) = (_rms(r, kind) for r in (rows, rows_acc))
         held = rows[-1, 4] - rows[0, 4] > 0.05
-        ok = pos <= 5 and (ang is None or ang <= 5)
+        ok = [p <= 5 and (a is None or a <= 5) for p, a in ((pos, ang), (pos_acc, ang_acc))]
+        std = (float(np.median(rows[:, 5])) * 1e3, float(np.degrees(np.median(rows[:, 6]))))
+        # the share of samples whose errors lie within twice the reported std (honesty)
+        within = float(np.mean((rows[:, 1] <= 2 * rows[:, 5])
+                               & ((rows[:, 2] <= 2 * rows[:, 6]) | (kind == "sphere"))))
         table.append({"scenario": name, "kind": kind,
                       "pads in contact (median)": int(np.median(rows[:, 3])),
-                      "position RMS (mm)": round(pos, 1),
-                      "angle RMS (deg)": "n/a" if ang is None else round(ang, 1),
+                      "touch: mm, deg RMS": f"{pos:.1f}, {_deg(ang)}",
+                      "touch: reported std (mm, deg)": f"{std[0]:.1f}, {std[1]:.0f}",
+                      "touch: within 2 std": round(within, 2),
+                      "+ accelerometer: mm, deg RMS": f"{pos_acc:.1f}, {_deg(ang_acc)}",
                       "held (z rose > 5 cm)": bool(held),
-                      "verdict (5 mm, 5 deg)": "met" if ok else "not met"})
-        lines.append(f"| {name} | {kind} | {np.median(rows[:, 3]):.0f} | {pos:.1f} | "
-                     f"{'n/a' if ang is None else f'{ang:.1f}'} | {'yes' if held else 'no'} | "
-                     f"{'met' if ok else 'not met'} |")
+                      "verdict (5 mm, 5 deg): touch, + acc.": ", ".join(
+                          "met" if k else "not met" for k in ok)})
+        lines.append(f"| {name} | {kind} | {np.median(rows[:, 3]):.0f} | {pos:.1f}, "
+                     f"{_deg(ang)} | {std[0]:.1f}, {std[1]:.0f} | {within:.2f} | {pos_acc:.1f}, "
+                     f"{_deg(ang_acc)} | {'yes' if held else 'no'} | "
+                     f"{', '.join('met' if k else 'not met' for k in ok)} |")
         print(lines[-1], flush=True)
         save_image(ROOT / "docs" / "results" / f"taxels_{Path(name).stem}.png",
                    f"{name}: taxels at {rows[-1, 0]:.2f} s", taxels, pads)
+    for kind in filter(None, args.picks.split(",")):
+        carried = pick_carry(kind)
+        if carried is None:  # the pick did not hold it to the carry
+            table.append(dict.fromkeys(table[0], "n/a") | {
+                "scenario": "pick, carry", "kind": kind,
+                "verdict (5 mm, 5 deg): touch, + acc.": "not met (no carry)"})
+            lines.append("| " + " | ".join(str(v) for v in table[-1].values()) + " |")
+            continue
+        rows, in_box = carried
+        pos, ang = _rms(rows, kind)
+        std = (float(np.median(rows[:, 5])) * 1e3, float(np.degrees(np.median(rows[:, 6]))))
+        within = float(np.mean((rows[:, 1] <= 2 * rows[:, 5])
+                               & ((rows[:, 2] <= 2 * rows[:, 6]) | np.isnan(rows[:, 2]))))
+        ok = pos <= 5 and (ang is None or ang <= 5)
+        table.append({"scenario": "pick, carry", "kind": kind,
+                      "pads in contact (median)": int(np.median(rows[:, 3])),
+                      "touch: mm, deg RMS": f"{pos:.1f}, {_deg(ang)}",
+                      "touch: reported std (mm, deg)": f"{std[0]:.1f}, {std[1]:.0f}",
+                      "touch: within 2 std": round(within, 2),
+                      "+ accelerometer: mm, deg RMS": "",
+                      "held (z rose > 5 cm)": f"in the box: {'yes' if in_box else 'no'}",
+                      "verdict (5 mm, 5 deg): touch, + acc.": "met" if ok else "not met"})
+        lines.append("| " + " | ".join(str(v) for v in table[-1].values()) + " |")
+        print(lines[-1], flush=True)
     times, ratios = cost(args.rounds, 1.0 if args.quick else 2.0)
     lines += ["", "| station | CPU s per run (median) | ratio to without (median of rounds) |",
               "|---|---|---|"]

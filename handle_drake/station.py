@@ -80,6 +80,7 @@ from handle_drake.base.port_names import HAND, HAND_COMMAND, HAND_SIGNALS, WRIST
 from handle_drake.devices.accelerometer.wiring import (
     AddSimulatedInstruments,
     WithHardwareInstruments,
+    instrument_X_OS,
 )
 from handle_drake.devices.arm.model import AddArm, AddArmDriver
 from handle_drake.devices.camera.sensors import AddCameras
@@ -390,12 +391,17 @@ def _add_taxel_systems(builder, plant, scene_graph, hand, scenario: Scenario, me
         mount = scenario.hand.mount
         wrist = builder.GetSubsystemByName("wrist_driver") \
             if isinstance(mount, FloatingWrist) else None
+        # the object's accelerometer, when it has one (added before: _add_object_systems)
+        instrumented = scenario.object.accelerometer is not None
         AddPoseEstimator(
             builder, sensor, config, scenario.hand.kind, scenario.hand.coupling_ratio,
             object_spec(scenario), object_initial_pose(scenario),
             builder.GetSubsystemByName("hand_driver").GetOutputPort("position_measured"),
             hand_pose=None if wrist is None else wrist.GetOutputPort("pose_measured"),
-            X_WB=None if wrist is not None else mount.X_WB.GetDeterministicValue())
+            X_WB=None if wrist is not None else mount.X_WB.GetDeterministicValue(),
+            roll_pitch=builder.GetSubsystemByName("object_accelerometer").GetOutputPort(
+                "roll_pitch") if instrumented else None,
+            X_OS=instrument_X_OS(scenario, object_spec(scenario)) if instrumented else None)
 
 
 def _free_body_position(builder, plant, body):

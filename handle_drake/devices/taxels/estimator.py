@@ -31,14 +31,21 @@ normals (``sigma_normal``); a contact on the grid's border (the object may touch
 beyond the grid: a fingertip's tip) gets ``edge_sigma_distance`` and ``edge_sigma_normal``
 and its body must touch the object (its least clearance to it 0 within
 ``edge_sigma_distance``). The object is kept out of every link of the hand and off the
-pads that feel nothing, with the previous estimate as a prior widened by
-``process_position_std`` / ``process_angle_std`` per update (a filter with a random-walk
-model), the camera's detection (``camera_position_std``, ``camera_angle_std``) and the
-gravity direction; the better of two starts (the last estimate, and a half-size beyond
-the contacts along their normals) is kept. Before the first contact the estimate is
-held in world (the ``X_WO_prior``, refined by the camera and gravity when they are
-connected: the object rests where it was seen); from the first contact it is held in
-the hand.
+pads that feel nothing, with the previous estimate as a prior, the camera's detection
+(``camera_position_std``, ``camera_angle_std``) and the gravity direction; the better of
+two starts (the last estimate, and a half-size beyond the contacts along their normals)
+is kept. The prior (a filter): in the hand, the last estimate carried by the touching
+pads' motion since the last update (:meth:`InHandPoseEstimator.carry`: the object moves
+rigidly with the pads that hold it) and widened by ``still_*_std`` plus ``motion_noise``
+times that motion and the pads' disagreement, plus ``base_motion_noise`` times the hand
+base's step (the lift's load turns the object in the grasp where touch does not see: the
+reported covariance grows there); ``motion_model=False``, or no pad touching: a random
+walk of ``process_position_std`` / ``process_angle_std`` per update. A roll/pitch reading
+counts as gravity only when it agrees with the one before within
+``gravity_consistency`` (the device's first sample, a jerk: left out). Before the first
+contact the estimate is held in world (the ``X_WO_prior``, refined by the camera and
+gravity when they are connected: the object rests where it was seen); from the first
+contact it is held in the hand.
 """
 
 from __future__ import annotations
@@ -234,26 +241,16 @@ class InHandPoseEstimator(LeafSystem):
                  process_position_std: float = 0.002,
                  process_angle_std: float = 0.05, camera_position_std: float = 0.005,
                  camera_angle_std: float = 0.1, gravity_std: float = 0.05,
-                 self_contact_distance: float = 0.004):
+                 self_contact_distance: float = 0.004, motion_model: bool = True,
+                 still_position_std: float = 0.0005, still_angle_std: float = 0.01,
+                 motion_noise: float = 0.5, gravity_consistency: float = 0.1,
+                 base_motion_noise: float = 0.1):
         super().__init__()
         self._shape = PrimitiveShape(spec)
         self._half_size = self._shape.half_size()
         self._pads = list(pads)
         spec_h = get_hand_spec(hand_kind)
-        # kinematics and the hand's own geometry only (never stepped); AddHand asks for a
-        # SAP plant (its couplers)
-        builder = DiagramBuilder()
-        self._plant, self._scene_graph = AddMultibodyPlantSceneGraph(builder, 0.001)
-        self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
-        hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
-        self._plant.WeldFrames(self._plant.world_frame(),
-                               self._plant.GetBodyByName(spec_h.base_body, hand).body_frame())
-        self._plant.Finalize()
-        self._kinematics = builder.Build()
-        # a scratch context, overwritten whole at each use (no result depends on its past)
-        self._kin_context = self._kinematics.CreateDefaultContext()
-        self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
-        self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
+        hand = self._build_kinematics(hand_kind, coupling_ratio, spec_h)
         self._self_contact_distance = self_contact_distance
         inspector = self._scene_graph.model_inspector()
         self._links, self._others = self._hand_geometry(inspector, hand)
@@ -273,11 +270,14 @@ class InHandPoseEstimator(LeafSystem):
         self._X_WB = None if X_WB is None else RigidTransform(X_WB)
         self._X_OS = None if X_OS is None else RigidTransform(X_OS)
         self._period = 1.0 / rate_hz
-        self._sig = dict(prior_p=prior_position_std, prior_a=prior_angle_std,
-                         d=sigma_distance, n=sigma_normal, proc_p=process_position_std,
-                         proc_a=process_angle_std, cam_p=camera_position_std,
-                         cam_a=camera_angle_std, g=gravity_std, edge_d=edge_sigma_distance,
-                         edge_n=edge_sigma_normal, compliance=pad_compliance)
+        self._sig = dict(
+            prior_p=prior_position_std, prior_a=prior_angle_std, d=sigma_distance,
+            n=sigma_normal, proc_p=process_position_std, proc_a=process_angle_std,
+            cam_p=camera_position_std, cam_a=camera_angle_std, g=gravity_std,
+            edge_d=edge_sigma_distance, edge_n=edge_sigma_normal, compliance=pad_compliance,
+            still_p=still_position_std, still_a=still_angle_std, motion=motion_noise,
+            g_consistency=gravity_consistency, base_motion=base_motion_noise)
+        self._motion_model = bool(motion_model)
         self._threshold = contact_threshold
         self._offsets = np.cumsum([0] + [p.cells for p in self._pads])
         nq, cells = len(spec_h.joint_names), sum(p.cells for p in self._pads)
@@ -288,7 +288,9 @@ class InHandPoseEstimator(LeafSystem):
                                                      AbstractValue.Make(RigidTransform()))
         self._roll_pitch = self.DeclareVectorInputPort("roll_pitch", 2)
         # state: quaternion wxyz and p of X_BO (or X_WO before contact), 36 covariance,
-        # contacts, rms, in_hand
+        # contacts, rms, in_hand, then whether the last update saw the joints, its joints
+        # (the pads' motion), its roll and pitch and whether it read them
+        self._nq = nq
         self._state = self.DeclareDiscreteState(self._initial_state())
         self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
         self.DeclareAbstractOutputPort("pose", lambda: AbstractValue.Make(RigidTransform()),
@@ -298,6 +300,24 @@ class InHandPoseEstimator(LeafSystem):
             c.get_discrete_state(self._state).value()[7:43]), {self.xd_ticket()})
         self.DeclareVectorOutputPort("quality", 2, lambda c, o: o.SetFromVector(
             c.get_discrete_state(self._state).value()[43:45]), {self.xd_ticket()})
+
+    def _build_kinematics(self, hand_kind, coupling_ratio, spec_h):
+        """A plant of the hand alone, its base welded to the world: kinematics and the
+        hand's own geometry only (never stepped; AddHand asks for a SAP plant: its
+        couplers), and a scratch context, overwritten whole at each use (no result depends
+        on its past). Returns the hand's model instance."""
+        builder = DiagramBuilder()
+        self._plant, self._scene_graph = AddMultibodyPlantSceneGraph(builder, 0.001)
+        self._plant.set_discrete_contact_approximation(DiscreteContactApproximation.kSap)
+        hand = AddHand(self._plant, hand_kind, coupling_ratio=coupling_ratio)
+        self._plant.WeldFrames(self._plant.world_frame(),
+                               self._plant.GetBodyByName(spec_h.base_body, hand).body_frame())
+        self._plant.Finalize()
+        self._kinematics = builder.Build()
+        self._kin_context = self._kinematics.CreateDefaultContext()
+        self._plant_context = self._plant.GetMyContextFromRoot(self._kin_context)
+        self._sg_context = self._scene_graph.GetMyContextFromRoot(self._kin_context)
+        return hand
 
     @property
     def half_size(self) -> float:
@@ -336,7 +356,7 @@ class InHandPoseEstimator(LeafSystem):
         return links, others
 
     def _initial_state(self) -> np.ndarray:
-        x = np.zeros(46)
+        x = np.zeros(58 + len(self._q_index))
         x[:4] = self._X_WO_prior.rotation().ToQuaternion().wxyz()
         x[4:7] = self._X_WO_prior.translation()
         s = self._sig
@@ -382,6 +402,8 @@ class InHandPoseEstimator(LeafSystem):
         X_BPads = self.pad_poses(q)
         query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
         keep, free = [], []
+        #: per contact kept: its pad's index and force (N), for the pads' motion model
+        self.last_contact_pads = []
         for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
             points, normals, force, inside = pad_contacts(
                 [pad], taxels[self._offsets[i]:self._offsets[i + 1]], [X_BP], self._threshold,
@@ -394,6 +416,7 @@ class InHandPoseEstimator(LeafSystem):
                 near = query.ComputeSignedDistanceToPoint(point, self._self_contact_distance)
                 if any(d.id_G in self._others[i] for d in near):
                     continue
+                self.last_contact_pads.append((i, float(f)))
                 terms = (s["d"], s["n"]) if ok else (s["edge_d"], s["edge_n"])
                 keep.append((point, normal, (*terms, -s["compliance"] * f),
                              None if ok else self._pad_rows[i]))
@@ -417,30 +440,73 @@ class InHandPoseEstimator(LeafSystem):
         out.set_value(X)
 
     # -- the update ------------------------------------------------------------------------
+    def _steady_roll_pitch(self, context, x):
+        """The accelerometer's roll and pitch when connected and it agrees with the
+        reading of the last update (kept in ``x``) within ``gravity_consistency`` (not a
+        transient: a first sample, a jerk), else None."""
+        if not self._roll_pitch.HasValue(context) or self._X_OS is None:
+            return None
+        n = 47 + self._nq
+        rp = np.asarray(self._roll_pitch.Eval(context), float)
+        steady = x[n + 2] > 0.5 and np.all(np.isfinite(rp)) and np.linalg.norm(
+            rp - x[n:n + 2]) <= self._sig["g_consistency"]
+        x[n:n + 2], x[n + 2] = rp, 1.0
+        return rp if steady else None
+
+    def _base_step(self, x, X_WB: RigidTransform) -> np.ndarray:
+        """The hand base's motion since the last update (m, rad; 0 at the first), its
+        pose of now kept in ``x``."""
+        m = 50 + self._nq  # the hand base's pose at the last update: p, quaternion, flag
+        step = np.zeros(2)
+        if x[m + 7] > 0.5:
+            X_prev = RigidTransform(Quaternion(x[m + 3:m + 7] / np.linalg.norm(x[m + 3:m + 7])),
+                                    x[m:m + 3])
+            step = np.array([np.linalg.norm(X_WB.translation() - X_prev.translation()),
+                             (X_prev.rotation().inverse() @ X_WB.rotation())
+                             .ToAngleAxis().angle()])
+        x[m:m + 3], x[m + 3:m + 7], x[m + 7] = (X_WB.translation(),
+                                                X_WB.rotation().ToQuaternion().wxyz(), 1.0)
+        return step
+
     def _update(self, context, state):
         x = context.get_discrete_state(self._state).value().copy()
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
-        points, normals, free, terms, touching = self.contacts(self._q_port.Eval(context),
-                                                     self._taxel_port.Eval(context))
+        q = np.asarray(self._q_port.Eval(context), float)
+        points, normals, free, terms, touching = self.contacts(q, self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
         camera = self._camera.HasValue(context)
-        gravity_in = self._roll_pitch.HasValue(context) and self._X_OS is not None
+        q_prev, had_q = x[47:47 + self._nq].copy(), x[46] > 0.5
+        x[46], x[47:47 + self._nq] = 1.0, q
+        rp = self._steady_roll_pitch(context, x)
+        gravity_in = rp is not None
         if not in_hand and len(points) == 0 and not camera and not gravity_in:
-            return EventStatus.DidNothing()
+            state.get_mutable_vector(self._state).SetFromVector(x)
+            return EventStatus.Succeeded()
         s = self._sig
-        # the prior: the last estimate, widened by the process noise
-        prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0)
-                            + np.array([s["proc_a"] ** 2] * 3 + [s["proc_p"] ** 2] * 3))
+        # the prior: the last estimate (in the hand: carried by the touching pads' motion),
+        # widened by the process noise
+        process = np.array([s["proc_a"]] * 3 + [s["proc_p"]] * 3)
+        base_step = self._base_step(x, X_WB)
+        if self._motion_model and in_hand and had_q and self.last_contact_pads:
+            X_BO_prev, process = self.carry(X_BO_prev, q_prev, q, self.last_contact_pads)
+            self.pad_poses(q)  # the joints of now again, for hand_points()
+            # the hand base's motion loads the grasp (inertia): the object may slip or turn
+            # in it, most where the touch does not see
+            k = s["base_motion"]
+            process = np.hypot(process, k * np.array(
+                [base_step[0] / self._half_size + base_step[1]] * 3
+                + [base_step[0] + self._half_size * base_step[1]] * 3))
+        prior_std = np.sqrt(np.maximum(np.diag(cov_prev), 0.0) + process ** 2)
         priors = [(X_BO_prev, prior_std)]
         if camera:
             priors.append((X_BW @ self._camera.Eval(context),
                            np.array([s["cam_a"]] * 3 + [s["cam_p"]] * 3)))
         gravity = None
         if gravity_in:
-            r, p = self._roll_pitch.Eval(context)
+            r, p = rp
             down_S = RollPitchYaw(r, p, 0.0).ToRotationMatrix().inverse().multiply([0, 0, -1.0])
             gravity = (X_BW.rotation().multiply([0, 0, -1.0]), down_S)
         hand = (self.hand_points(), self._clearance)
@@ -468,6 +534,32 @@ class InHandPoseEstimator(LeafSystem):
         x[45] = float(in_hand)
         state.get_mutable_vector(self._state).SetFromVector(x)
         return EventStatus.Succeeded()
+
+    def carry(self, X_BO: RigidTransform, q_prev, q, contact_pads):
+        """The object carried by the pads that touch it from joints ``q_prev`` to ``q``
+        (it moves rigidly with them: each touching pad's motion moves it; the
+        force-weighted mean of those poses) and the process noise of the step (std of
+        ``[rotation vector, position]``): ``still_*_std`` plus ``motion_noise`` times the
+        pads' mean motion and their disagreement. ``contact_pads``: ``[(pad index,
+        force)]``. Returns ``(X_BO, std6)``."""
+        pads = sorted({i for i, _ in contact_pads})
+        force = np.array([sum(f for j, f in contact_pads if j == i) for i in pads])
+        w = force / force.sum() if force.sum() > 0 else np.full(len(pads), 1 / len(pads))
+        before = self.pad_poses(q_prev)
+        after = self.pad_poses(q)
+        moved = [after[i] @ before[i].inverse() @ X_BO for i in pads]
+        p = np.array([X.translation() for X in moved])
+        R = Rotation.from_matrix(np.array([X.rotation().matrix() for X in moved]))
+        p_mean, R_mean = w @ p, R.mean(weights=w)
+        spread_p = float(np.sqrt(w @ np.sum((p - p_mean) ** 2, axis=1)))
+        spread_a = float(np.sqrt(w @ np.sum((R * R_mean.inv()).as_rotvec() ** 2, axis=1)))
+        R_prev = Rotation.from_matrix(X_BO.rotation().matrix())
+        step_p = float(np.linalg.norm(p_mean - X_BO.translation()))
+        step_a = float(np.linalg.norm((R_mean * R_prev.inv()).as_rotvec()))
+        s = self._sig
+        std = np.array([np.hypot(s["still_a"], s["motion"] * (step_a + spread_a))] * 3
+                       + [np.hypot(s["still_p"], s["motion"] * (step_p + spread_p))] * 3)
+        return RigidTransform(RotationMatrix(R_mean.as_matrix()), p_mean), std
 
     def fit(self, points, normals, priors, gravity=None, free=(), hand=None, start=None,
             terms=None, touching=()):

@@ -68,15 +68,21 @@ def AddTaxelMeshcat(builder, plant, sensor: TaxelArray, meshcat, period: float):
 
 def AddPoseEstimator(builder, sensor: TaxelArray, config: TaxelConfig, hand_kind: str,
                      coupling_ratio, spec, X_WO_prior: RigidTransform, hand_positions,
-                     hand_pose=None, X_WB: RigidTransform | None = None):
+                     hand_pose=None, X_WB: RigidTransform | None = None,
+                     roll_pitch=None, X_OS: RigidTransform | None = None):
     """The object's pose estimator (system ``object_pose_estimator``) fed by ports only:
     ``hand_positions`` (the measured joints), the sensor's taxels and ``hand_pose`` (the
-    wrist's measured pose; None: the fixed ``X_WB``). Exports :data:`ESTIMATE_PORTS` and
-    the camera input ``object.pose_detected``."""
+    wrist's measured pose; None: the fixed ``X_WB``), and ``roll_pitch`` (the object's
+    accelerometer's, its sensor at ``X_OS`` on the object; None: no accelerometer).
+    Exports :data:`ESTIMATE_PORTS` and the camera input ``object.pose_detected``."""
+    if (roll_pitch is None) != (X_OS is None):
+        raise ValueError("AddPoseEstimator: roll_pitch and X_OS go together")
     estimator = builder.AddNamedSystem("object_pose_estimator", InHandPoseEstimator(
-        hand_kind, coupling_ratio, sensor.pads, spec, X_WO_prior, X_WB=X_WB,
+        hand_kind, coupling_ratio, sensor.pads, spec, X_WO_prior, X_WB=X_WB, X_OS=X_OS,
         rate_hz=config.estimator_rate_hz, prior_position_std=config.prior_position_std,
         prior_angle_std=config.prior_angle_std))
+    if roll_pitch is not None:
+        builder.Connect(roll_pitch, estimator.GetInputPort("roll_pitch"))
     builder.Connect(hand_positions, estimator.GetInputPort("hand_positions"))
     builder.Connect(sensor.GetOutputPort("taxels"), estimator.GetInputPort("taxels"))
     if hand_pose is not None:
