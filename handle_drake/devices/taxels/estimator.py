@@ -389,8 +389,14 @@ class InHandPoseEstimator(LeafSystem):
                               for body, p, _ in self._links)])
 
     def contacts(self, q: np.ndarray, taxels: np.ndarray):
-        """The pads' contacts with the object (centres of pressure and outward normals in B),
-        the face centres of the pads that feel nothing and each contact's terms for
+        """:meth:`contact_pads`' contacts without the pads (``(points, normals, free, terms,
+        touching)``)."""
+        return self.contact_pads(q, taxels)[0]
+
+    def contact_pads(self, q: np.ndarray, taxels: np.ndarray):
+        """``(contacts, pads)``, ``pads`` per contact kept its pad's index and force (N): the
+        pads' contacts with the object (centres of pressure and outward normals in B), the
+        face centres of the pads that feel nothing and each contact's terms for
         :meth:`fit` (``(points, normals, free, terms, touching)``; ``terms`` (k, 3): the distance's
         and the normal's standard deviations and the expected signed distance, the pad
         pressed ``pad_compliance`` m per N into the object): a pad whose centre of
@@ -402,8 +408,7 @@ class InHandPoseEstimator(LeafSystem):
         X_BPads = self.pad_poses(q)
         query = self._scene_graph.get_query_output_port().Eval(self._sg_context)
         keep, free = [], []
-        #: per contact kept: its pad's index and force (N), for the pads' motion model
-        self.last_contact_pads = []
+        pads = []  # per contact kept: its pad's index and force (N), for the motion model
         for i, (pad, X_BP) in enumerate(zip(self._pads, X_BPads, strict=True)):
             points, normals, force, inside = pad_contacts(
                 [pad], taxels[self._offsets[i]:self._offsets[i + 1]], [X_BP], self._threshold,
@@ -416,16 +421,16 @@ class InHandPoseEstimator(LeafSystem):
                 near = query.ComputeSignedDistanceToPoint(point, self._self_contact_distance)
                 if any(d.id_G in self._others[i] for d in near):
                     continue
-                self.last_contact_pads.append((i, float(f)))
+                pads.append((i, float(f)))
                 terms = (s["d"], s["n"]) if ok else (s["edge_d"], s["edge_n"])
                 keep.append((point, normal, (*terms, -s["compliance"] * f),
                              None if ok else self._pad_rows[i]))
         free = np.array(free).reshape(-1, 3)
         touching = [k[3] for k in keep if k[3] is not None]
         if not keep:
-            return np.zeros((0, 3)), np.zeros((0, 3)), free, np.zeros((0, 3)), touching
+            return (np.zeros((0, 3)), np.zeros((0, 3)), free, np.zeros((0, 3)), touching), pads
         return (np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), free,
-                np.array([k[2] for k in keep]), touching)
+                np.array([k[2] for k in keep]), touching), pads
 
     @staticmethod
     def _unpack(x) -> RigidTransform:
@@ -473,7 +478,8 @@ class InHandPoseEstimator(LeafSystem):
         X_WB = self._X_WB_of(context)
         X_BW = X_WB.inverse()
         q = np.asarray(self._q_port.Eval(context), float)
-        points, normals, free, terms, touching = self.contacts(q, self._taxel_port.Eval(context))
+        (points, normals, free, terms, touching), pads = self.contact_pads(
+            q, self._taxel_port.Eval(context))
         in_hand = x[45] > 0.5
         X_BO_prev = self._unpack(x) if in_hand else X_BW @ self._unpack(x)
         cov_prev = x[7:43].reshape(6, 6)
@@ -490,8 +496,8 @@ class InHandPoseEstimator(LeafSystem):
         # widened by the process noise
         process = np.array([s["proc_a"]] * 3 + [s["proc_p"]] * 3)
         base_step = self._base_step(x, X_WB)
-        if self._motion_model and in_hand and had_q and self.last_contact_pads:
-            X_BO_prev, process = self.carry(X_BO_prev, q_prev, q, self.last_contact_pads)
+        if self._motion_model and in_hand and had_q and pads:
+            X_BO_prev, process = self.carry(X_BO_prev, q_prev, q, pads)
             self.pad_poses(q)  # the joints of now again, for hand_points()
             # the hand base's motion loads the grasp (inertia): the object may slip or turn
             # in it, most where the touch does not see
