@@ -133,7 +133,7 @@ DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 #: Heights (m, negative: below the lid's top) of a kind's bottom at the release tried
 #: before ``DROP_HEIGHT``, each at every turn over the hole. A cuboid 1 cm above its hole:
 #: the opening fingers tip it as it slides out (tilted 8 deg in the hand), and let go
-#: 3 cm above the lid it came down to the lid 22-24 deg tilted (development seeds 2 and 4,
+#: 3 cm above the lid it came down to the lid 22-25 deg tilted (development seeds 2 and 4,
 #: perceived, at 1 and 0.5 ms), 1 cm above it 7-8 deg: well under the 36.9 deg at which
 #: a 6 cm cube spans its 84 mm hole (60 (cos t + sin t) = 84) and wedges across it.
 #: 5 mm measured the same; 1 cm leaves the IK's 4 mm and the tilted cube's lower corner
