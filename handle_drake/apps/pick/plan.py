@@ -132,11 +132,12 @@ GRASP_DB_KINDS = GRASP_DB.with_name("grasp_database_kinds.json")
 DROP_HEIGHT = 0.03  # m, object bottom above the lid's top when let go
 #: Heights (m, negative: below the lid's top) of a kind's bottom at the release tried
 #: before ``DROP_HEIGHT``, each at every turn over the hole. A cuboid 1 cm above its hole:
-#: the opening fingers tip it as it slides out (tilted 8 deg in the hand), and let go
-#: 3 cm above the lid it came down to the lid 22-25 deg tilted (development seeds 2 and 4,
-#: perceived, at 1 and 0.5 ms), 1 cm above it 7-8 deg: well under the 36.9 deg at which
-#: a 6 cm cube spans its 84 mm hole (60 (cos t + sin t) = 84) and wedges across it.
-#: 5 mm measured the same; 1 cm leaves the IK's 4 mm and the tilted cube's lower corner
+#: the opening fingers tip it as it slides out (tilted 8 deg in the hand). Development
+#: seeds 2, 4, 6, 8, 9, 10, 13 (perceived, 1 and 0.5 ms): let go 3 cm above the lid it came
+#: down to the lid 8.7-25.3 deg tilted (8 of 14 over 15), 13/14 in the box (10 at 0.5 ms
+#: wedged); 1 cm above, 6.5-10.1 deg in 12 of 14 (24 twice), 14/14 in the box. A 6 cm cube
+#: spans its 84 mm hole (60 (cos t + sin t) = 84) and can wedge across it from 36.9 deg.
+#: 5 mm measured the same (2, 4, 6); 1 cm leaves the IK's 4 mm and the tilted cube's lower corner
 #: room. Tried: the bottom 2 cm, else 1 cm, into the hole (development seed 6 at 0.5 ms,
 #: the release 14 mm off before ``execute.RELEASE_DWELL``: it hit the rim on the way down
 #: and wedged). The arm's IK checks the hand at the planned closing posture, not the
