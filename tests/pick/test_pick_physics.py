@@ -91,8 +91,8 @@ def test_a_cuboid_picks_verdict_is_the_same_at_the_step_and_at_half_of_it(hambur
     box's cavity, at rest), and that way is in the box. The cuboid goes through its hole
     upright: as its bottom comes down to the lid's top it is tilted well under the
     36.9 deg at which a 6 cm cube spans the 84 mm hole (60 (cos t + sin t) = 84) and can
-    wedge across it (seed 2 perceived, let go 3 cm above the lid: 22.9 deg at h, 24.6 at
-    h/2; 1 cm above, plan.RELEASE_INSERTS: 6.5 and 7.5)."""
+    wedge across it (this plan let go 3 cm above the lid, ``RELEASE_INSERTS`` empty: 21.9
+    deg at h, 24.4 at h/2, and this test fails; 1 cm above, the default: it passes)."""
     from pick_judge import judge_in_box
 
     from handle_drake.apps.pick.execute import execute_pick
