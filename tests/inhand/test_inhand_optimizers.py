@@ -310,3 +310,58 @@ def test_ipso_is_the_interpreted_algorithm_2_and_its_settings_are_part_of_the_ru
     assert _config(trial, "ipso", 10)["ipso_settings"] == IPSO_SETTINGS
     assert "ipso_settings" not in _config(trial, "ipso-report", 10)
     assert _config(trial, "ipso", 10)["task"]["partial_credit"] is True
+
+
+def test_the_gist_timing_seeds_the_swarm_and_the_variations_stay_uniform():
+    # 5.4 / Figure 29: the particles start at the meta motions' begin times "slightly
+    # changed"; the joint variations over the whole box (1*). Dimensions 0 and 3 are
+    # start times (centre 0.2 and 0.9), the others variations (NaN: uniform).
+    centre = np.array([0.2, np.nan, np.nan, 0.9, np.nan, np.nan])
+    seeded = IncrementalPSO([[0, 1]] * 6, seed=3, n_particles=400, init_centre=centre,
+                            init_spread=0.1)
+    plain = IncrementalPSO([[0, 1]] * 6, seed=3, n_particles=400)
+    x = seeded.x
+    assert np.all(np.abs(x[:, 0] - 0.2) <= 0.1 + 1e-12)
+    assert np.all((x[:, 3] >= 0.8 - 1e-12) & (x[:, 3] <= 1.0))  # clipped to the box
+    # the same uniform draws moved, not other draws: the variations are the plain swarm's
+    np.testing.assert_array_equal(x[:, [1, 2, 4, 5]], plain.x[:, [1, 2, 4, 5]])
+    np.testing.assert_allclose(x[:, 0], 0.2 + 0.1 * (2 * plain.x[:, 0] - 1))
+    # the variations still cover the box (uniform: every fifth of it about a fifth)
+    counts = np.histogram(x[:, [1, 2, 4, 5]], bins=5, range=(0, 1))[0] / (4 * 400)
+    assert np.all(np.abs(counts - 0.2) < 0.04)
+    # a re-initialised particle is drawn from the same seeded box
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        seeded._reinitialise(0, rng)
+        assert abs(seeded.x[0, 0] - 0.2) <= 0.1 + 1e-12 and seeded.x[0, 3] >= 0.8 - 1e-12
+    for kwargs, message in (({"init_centre": [0.5] * 5}, "init_centre"),
+                            ({"init_centre": [1.5] + [np.nan] * 5}, "init_centre"),
+                            ({"init_centre": centre, "init_spread": 0.0}, "init_spread")):
+        with pytest.raises(ValueError, match=message):
+            IncrementalPSO([[0, 1]] * 6, **kwargs)
+
+
+def test_ipso_is_seeded_by_the_screw_caps_demonstrated_start_times():
+    # the in-hand runs give ipso the gist's start times (experiment.gist_prior), read here
+    # from the demonstration's meta motions; pso, cmaes and random search stay unseeded
+    from handle_drake.apps.inhand.experiment import gist_prior
+    from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
+    from handle_drake.learning.optim.factory import IPSO_SETTINGS
+
+    trial = ScrewCapTrial(ScrewCapTask())
+    centre = gist_prior(trial)
+    k = 0
+    for m in trial.gist.motions:
+        assert centre[k] == pytest.approx(m.start)  # start times live in [0, 1]
+        assert np.all(np.isnan(centre[k + 1: k + 1 + len(m.joints)]))
+        k += 1 + len(m.joints)
+    assert k == trial.dimension
+    ipso = make_optimizer("ipso", trial.bounds, 5, n_particles=50, init_centre=centre)
+    starts = np.isfinite(centre)
+    spread = IPSO_SETTINGS["init_spread"]
+    assert np.all(np.abs(ipso.x[:, starts] - centre[starts]) <= spread + 1e-12)
+    for name in ("ipso-report", "pso"):
+        other = make_optimizer(name, trial.bounds, 5, n_particles=50, init_centre=centre)
+        assert other.init_centre is None
+    random = make_optimizer("random", trial.bounds, 5, init_centre=centre)
+    assert random.ask().shape == (trial.dimension,)

@@ -136,7 +136,7 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
         trial = InHandTrial(InHandTask(task=task, **task_options))
     opt = make_optimizer(optimizer, trial.bounds, seed, n_particles=n_particles,
                          stop_score=trial.target_score,
-                         min_active=int(trial.dims_per_part[0]))
+                         min_active=int(trial.dims_per_part[0]), init_centre=gist_prior(trial))
     config = _config(trial, optimizer, n_particles)
     if run_id is None:  # the settings' fingerprint: other settings, another run
         run_id = (f"{trial.name}-{optimizer}-n{n_particles}-seed{seed}-"
@@ -157,6 +157,21 @@ def run_inhand(task: str = "cylinder_rotation", optimizer: str = "ipso", trials:
         runner.run(trials)
         records = log.trials(run_id)
     return InHandRun(run_id, db, trial, optimizer, n_particles, seed, records)
+
+
+def gist_prior(trial) -> np.ndarray | None:
+    """The swarm's seed for ``ipso`` (population.py's doc): each meta motion's demonstrated
+    start time in the unit cube of the trial's box, NaN (uniform) for the joint variations;
+    None for a task without a gist (the jog wheel's pinch)."""
+    if not hasattr(trial, "gist"):
+        return None
+    centre = np.full(trial.dimension, np.nan)
+    bounds = np.asarray(trial.bounds, dtype=float)
+    starts = [sl.start for sl in trial.gist.slices()]
+    lo, hi = bounds[starts, 0], bounds[starts, 1]
+    own = trial.gist.initial_parameters()[starts]
+    centre[starts] = np.clip((own - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
+    return centre
 
 
 def learning_curve(records, batch: int) -> tuple[np.ndarray, np.ndarray]:

@@ -34,8 +34,10 @@ SWARMS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes")
 #: coefficients instead of 0.4 (with 0.4 the swarm contracted around its first best: the
 #: measurements in docs/results/inhand.md), velocities clamped to 0.3 of the box, and a
 #: particle outside the best cluster drawn anew after 2 iterations without a better
-#: personal best.
-IPSO_SETTINGS = dict(w=0.7298, phi_p=1.49618, phi_c=1.49618, v_max=0.3, reinit_after=2)
+#: personal best; the gist's start times seed the swarm (``init_centre``, given by the task:
+#: ``apps.inhand.experiment.gist_prior``) within +- ``init_spread`` (population.py's doc).
+IPSO_SETTINGS = dict(w=0.7298, phi_p=1.49618, phi_c=1.49618, v_max=0.3, reinit_after=2,
+                     init_spread=0.1)
 OPTIMIZERS = ("bo", "random", *SWARMS)
 
 
@@ -44,7 +46,8 @@ def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
 
     ``options`` go to the optimiser: BO's keyword arguments; ``stop_score`` for random
     search; ``n_particles``, ``stop_score`` and (the incremental swarms) ``min_active``
-    for the swarms. The swarms' options are taken by every optimiser but BO and used
+    for the swarms; ``init_centre`` (``ipso`` alone: the gist's timing that seeds the swarm,
+    population.py's doc). The swarms' options are taken by every optimiser but BO and used
     where they mean something (random search has no population; PSO and CMA-ES have no
     activated dimensions), so every in-hand optimiser takes the same arguments.
     """
@@ -54,6 +57,7 @@ def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
         stop_score = options.pop("stop_score", None)
         options.pop("n_particles", None)
         options.pop("min_active", None)
+        options.pop("init_centre", None)
         if options:
             raise TypeError(f"RandomSearch takes no options, got {sorted(options)}")
         if stop_score is None:
@@ -61,15 +65,17 @@ def make_optimizer(strategy: str, bounds, seed: int = 0, **options):
         return StoppingRandomSearch(bounds, seed, stop_score=stop_score)
     if strategy not in SWARMS:
         raise ValueError(f"strategy: expected one of {OPTIMIZERS}, got {strategy!r}")
-    unknown = sorted(set(options) - {"n_particles", "stop_score", "min_active"})
+    unknown = sorted(set(options) - {"n_particles", "stop_score", "min_active", "init_centre"})
     if unknown:
-        raise TypeError(f"{strategy} takes n_particles, stop_score, min_active, got {unknown}")
+        raise TypeError(f"{strategy} takes n_particles, stop_score, min_active, init_centre, "
+                        f"got {unknown}")
     n_particles = options.get("n_particles", 10)
     stop_score = options.get("stop_score")
     min_active = options.get("min_active", 1)
     if strategy == "ipso":
         return IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
-                              stop_score=stop_score, **IPSO_SETTINGS)
+                              stop_score=stop_score, init_centre=options.get("init_centre"),
+                              **IPSO_SETTINGS)
     if strategy == "ipso-report":  # the report's literal settings (5.5.4)
         opt = IncrementalPSO(bounds, seed, n_particles, min_active=min_active,
                              stop_score=stop_score)

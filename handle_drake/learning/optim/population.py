@@ -16,7 +16,15 @@
   (a synchronous swarm: the report updates ``g`` particle by particle), so the
   trials of an iteration run in parallel and a run depends only on its seed.
   Positions leaving the box are clipped to it and that velocity component is
-  set to zero.
+  set to zero. ``init_centre`` (``ipso``: the action gist's start times, see
+  :func:`handle_drake.apps.inhand.experiment.gist_prior`): the dimensions where it
+  is finite start in ``centre +- init_spread`` instead of the whole box (at the
+  start, a re-initialisation and a restart), the others uniformly. 5.4: "based on
+  action gist, we have already had a rough view of when and how the fingers should
+  move"; Figure 29: the particles are the meta motions' values whose "begin time
+  and joint angle variation will be slightly changed". The gist's direction is the
+  box already (1*); its timing seeds the swarm; how far each joint moves is left to
+  the whole box ``[0, A_lim]``.
 - standard PSO (``make_optimizer("pso")`` of :mod:`handle_drake.learning.optim.factory`):
   the same swarm with every dimension updated, global best (cluster of one) and Clerc's constriction
   coefficients ``w = 0.7298, phi_p = phi_c = 1.49618``, so the comparison
@@ -153,8 +161,10 @@ class IncrementalPSO(_Generational):
                  min_active: int = 1, cluster_size: int | None = None,
                  freeze_inactive: bool = True, stop_score: float | None = None,
                  restart_after: int | None = None, v_max: float | None = None,
-                 reinit_after: int | None = None):
+                 reinit_after: int | None = None, init_centre=None,
+                 init_spread: float = 0.1):
         super().__init__(bounds, seed, n_particles, stop_score)
+        self._init_prior(init_centre, init_spread)
         # velocity clamping: |v_d| <= v_max (a share of the box's width); None: unclamped
         if v_max is not None and not (isinstance(v_max, int | float)
                                       and not isinstance(v_max, bool) and 0 < v_max <= 1):
@@ -185,12 +195,37 @@ class IncrementalPSO(_Generational):
                              f"{self.cluster_size}")
         self.freeze_inactive = bool(freeze_inactive)
         rng = np.random.default_rng([self.seed, 0x15A0])  # own stream: not random search's
-        self.x = rng.random((self.batch_size, self.dim))  # U(b_lo, b_up) in the unit cube
+        self.x = self._seeded(rng.random((self.batch_size, self.dim)))  # U(b_lo, b_up)
         self.v = rng.uniform(-1.0, 1.0, (self.batch_size, self.dim))
         self.p = self.x.copy()
         self.f_p = np.full(self.batch_size, -math.inf)
         self.active = np.full(self.batch_size, self.dim if not incremental else self.min_active)
         self._stagnant = np.zeros(self.batch_size, dtype=int)  # iterations without a better p_i
+
+    def _init_prior(self, init_centre, init_spread) -> None:
+        """Checks and keeps the seeded dimensions' centre (unit cube; NaN: uniform)."""
+        if isinstance(init_spread, bool) or not (isinstance(init_spread, int | float)
+                                                 and 0 < init_spread <= 1):
+            raise ValueError(f"init_spread: expected a number in (0, 1], got {init_spread!r}")
+        self.init_spread = float(init_spread)
+        if init_centre is None:
+            self.init_centre = None
+            return
+        centre = np.asarray(init_centre, dtype=float)
+        finite = np.isfinite(centre)
+        if centre.shape != (self.dim,) or np.any((centre[finite] < 0) | (centre[finite] > 1)):
+            raise ValueError(f"init_centre: expected {self.dim} values in [0, 1] (NaN: "
+                             f"uniform), got shape {centre.shape}")
+        self.init_centre = centre
+
+    def _seeded(self, u: np.ndarray) -> np.ndarray:
+        """Uniform draws ``u`` (unit cube) moved into ``init_centre +- init_spread`` where
+        the centre is finite (clipped to the box); unchanged elsewhere."""
+        if self.init_centre is None:
+            return u
+        finite = np.isfinite(self.init_centre)
+        seeded = np.clip(self.init_centre + self.init_spread * (2.0 * u - 1.0), 0.0, 1.0)
+        return np.where(finite, seeded, u)
 
     def _new_population(self) -> np.ndarray:
         return self.x.copy()
@@ -219,7 +254,7 @@ class IncrementalPSO(_Generational):
             self._best_seen = max(self._best_seen, best)
             if self._stale >= self.restart_after:
                 rng = np.random.default_rng([self.seed, 0x15A0, 0xF00D, self.generation])
-                self.x = rng.random((self.batch_size, self.dim))
+                self.x = self._seeded(rng.random((self.batch_size, self.dim)))
                 self.v = rng.uniform(-1.0, 1.0, (self.batch_size, self.dim))
                 self.p = self.x.copy()
                 self.f_p = np.full(self.batch_size, -math.inf)
@@ -253,7 +288,7 @@ class IncrementalPSO(_Generational):
         """Particle ``i`` drawn anew (uniform in the box, velocity within ``v_max``); its
         personal best is forgotten, the others' (and so the cluster) are kept."""
         limit = 1.0 if self.v_max is None else self.v_max
-        self.x[i] = rng.random(self.dim)
+        self.x[i] = self._seeded(rng.random(self.dim))
         self.v[i] = rng.uniform(-limit, limit, self.dim)
         self.p[i] = self.x[i]
         self.f_p[i] = -math.inf
