@@ -56,7 +56,7 @@ from handle_drake.base.results import ResultsRun, add_page_arguments, table_rows
 from handle_drake.learning.log import TrialLog  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "screw_cap.json"
-OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
+OPTIMIZERS = ("ipso", "ipso-gist", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
 # the fingertip cylinder's targets: the 60 deg pinch (default) and TWO_STROKES
 FINGERTIP = {"pinch": {}, "two-strokes": {k: v for k, v in TWO_STROKES.items() if k != "free"}}
 

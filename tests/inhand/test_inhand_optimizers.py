@@ -341,12 +341,12 @@ def test_the_gist_timing_seeds_the_swarm_and_the_variations_stay_uniform():
             IncrementalPSO([[0, 1]] * 6, **kwargs)
 
 
-def test_ipso_is_seeded_by_the_screw_caps_demonstrated_start_times():
+def test_ipso_gist_is_seeded_by_the_screw_caps_demonstrated_start_times():
     # the in-hand runs give ipso the gist's start times (experiment.gist_prior), read here
     # from the demonstration's meta motions; pso, cmaes and random search stay unseeded
     from handle_drake.apps.inhand.experiment import gist_prior
     from handle_drake.apps.inhand.screw_cap import ScrewCapTask, ScrewCapTrial
-    from handle_drake.learning.optim.factory import IPSO_SETTINGS
+    from handle_drake.learning.optim.factory import GIST_SPREAD
 
     trial = ScrewCapTrial(ScrewCapTask())
     centre = gist_prior(trial)
@@ -356,11 +356,11 @@ def test_ipso_is_seeded_by_the_screw_caps_demonstrated_start_times():
         assert np.all(np.isnan(centre[k + 1: k + 1 + len(m.joints)]))
         k += 1 + len(m.joints)
     assert k == trial.dimension
-    ipso = make_optimizer("ipso", trial.bounds, 5, n_particles=50, init_centre=centre)
+    ipso = make_optimizer("ipso-gist", trial.bounds, 5, n_particles=50, init_centre=centre)
     starts = np.isfinite(centre)
-    spread = IPSO_SETTINGS["init_spread"]
+    spread = GIST_SPREAD
     assert np.all(np.abs(ipso.x[:, starts] - centre[starts]) <= spread + 1e-12)
-    for name in ("ipso-report", "pso"):
+    for name in ("ipso", "ipso-report", "pso"):
         other = make_optimizer(name, trial.bounds, 5, n_particles=50, init_centre=centre)
         assert other.init_centre is None
     random = make_optimizer("random", trial.bounds, 5, init_centre=centre)

@@ -110,6 +110,7 @@ def register(subparsers) -> None:
     _add_robust_arguments(p)
     p.add_argument("--optimizer", choices=INHAND_OPTIMIZERS, default="ipso",
                    help="ipso: Algorithm 2 (incremental PSO, docs/inhand.md's interpretation); "
+                        "ipso-gist: ipso seeded by the gist's start times (5.4); "
                         "ipso-report: its literal settings (w = phi = 0.4); ipso-restart: "
                         "with the restarts of 5.5.4; pso: standard PSO; cmaes: CMA-ES; "
                         "random: random search")

@@ -28,7 +28,7 @@ from handle_drake.learning.cluster import as_executor, executor_workers, max_loc
 from handle_drake.learning.executors import InlineExecutor
 from handle_drake.learning.log import TrialLog
 from handle_drake.learning.loop import TrialRunner
-from handle_drake.learning.optim.factory import IPSO_SETTINGS, make_optimizer
+from handle_drake.learning.optim.factory import GIST_SPREAD, IPSO_SETTINGS, make_optimizer
 from handle_drake.learning.optim.population import INHAND_OPTIMIZERS
 
 __all__ = ["run_inhand", "InHandRun", "run_summary", "learning_curve", "plot_learning_curve",
@@ -51,8 +51,10 @@ class InHandRun:
 
 def _config(trial: InHandTrial, optimizer: str, n_particles: int) -> dict:
     config = _task_config(trial, optimizer, n_particles)
-    if optimizer == "ipso":  # its interpretation is part of the run: another, another run
+    if optimizer in ("ipso", "ipso-gist"):  # its interpretation is part of the run
         config["ipso_settings"] = dict(IPSO_SETTINGS)
+    if optimizer == "ipso-gist":
+        config["ipso_settings"]["init_spread"] = GIST_SPREAD
     return config
 
 

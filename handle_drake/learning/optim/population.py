@@ -55,7 +55,8 @@ from handle_drake.learning.optim.base import Optimizer, RandomSearch, _derived_s
 __all__ = ["IncrementalPSO", "CMAES", "StoppingRandomSearch", "INHAND_OPTIMIZERS"]
 
 # the optimisers the in-hand command offers (built by optim.factory.make_optimizer)
-INHAND_OPTIMIZERS = ("ipso", "ipso-report", "ipso-restart", "pso", "cmaes", "random")
+INHAND_OPTIMIZERS = ("ipso", "ipso-gist", "ipso-report", "ipso-restart", "pso", "cmaes",
+                     "random")
 
 
 def _positive_int(name, value) -> int:
