@@ -28,8 +28,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "pick"))
 
-import numpy as np  # noqa: E402
-from pick_judge import FinalState, judge_in_box  # noqa: E402
+from pick_judge import TiltAtTheLid, judge_in_box  # noqa: E402
 
 from handle_drake.apps.pick import execute  # noqa: E402
 from handle_drake.apps.pick.cli import pick  # noqa: E402
@@ -39,30 +38,6 @@ from handle_drake.scene.config import hole_centres  # noqa: E402
 
 HAMBURG = ROOT / "diagrams" / "hamburg_setup.yaml"
 MODES = ("perceived", "true")
-
-
-class _Watch(FinalState):
-    """The plant's last state (``FinalState``) and the object's tilt (deg) as its centre
-    first comes down through ``z`` after having been above ``z`` + 1 cm."""
-
-    def __init__(self, instance: str, z: float):
-        super().__init__()
-        self.instance, self.z, self.above, self.tilt = instance, z, False, None
-
-    def __call__(self, station, station_context):
-        super().__call__(station, station_context)
-        from handle_drake.station import GetPlant
-
-        plant = GetPlant(station)
-        context = station.GetSubsystemContext(plant, station_context)
-        (index,) = plant.GetBodyIndices(plant.GetModelInstanceByName(self.instance))
-        X_WO = plant.get_body(index).EvalPoseInWorld(context)
-        z = X_WO.translation()[2]
-        if z > self.z + 0.01:
-            self.above = True
-        elif self.above and self.tilt is None and z < self.z:
-            up = float(np.max(np.abs(X_WO.rotation().matrix()[2, :])))
-            self.tilt = round(math.degrees(math.acos(min(1.0, up))), 1)
 
 
 def _with_step(scenario, step: float):
@@ -81,7 +56,7 @@ def one_seed(base, seed: int, mode: str, steps, kind=None) -> list[dict]:
         first = None
         for step in steps:
             lid = hole_centres(scenario)[plan.kind][2]
-            watch = _Watch(plan.target, lid + plan.grasp.object_spec.size / 2)
+            watch = TiltAtTheLid(plan.target, lid + plan.grasp.object_spec.size / 2)
             out = run(_with_step(scenario, step), plan, **dict(kwargs, monitor=watch))
             verdict = judge_in_box(scenario, plan.target, watch.x)
             rows.append(dict(seed=seed, mode=mode, time_step=step, kind=plan.kind,
@@ -90,7 +65,8 @@ def one_seed(base, seed: int, mode: str, steps, kind=None) -> list[dict]:
                              release_offset_mm=out.release_offset_mm,
                              release_tilt_deg=out.release_tilt_deg,
                              release_height_mm=out.release_height_mm,
-                             tilt_at_lid_deg=watch.tilt, outcome=out.reason,
+                             tilt_at_lid_deg=None if watch.tilt is None else round(watch.tilt, 1),
+                             outcome=out.reason,
                              final_position=out.p_WO_final.round(3).tolist()))
             first = out if first is None else first
         return first

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 import itertools
+import math
 
 import numpy as np
 from pydrake.geometry import Box, Convex, Cylinder, Role, Sphere
@@ -49,6 +50,29 @@ class FinalState:
         context = station.GetSubsystemContext(plant, station_context)
         self.x = plant.GetPositionsAndVelocities(context).copy()
         self.t = station_context.get_time()
+
+
+class TiltAtTheLid(FinalState):
+    """:class:`FinalState` and the object's tilt from upright (deg, the body axis nearest the
+    vertical) as its centre first comes down through ``z`` (m) after having been above
+    ``z`` + 1 cm (a cube wedges across its hole from a tilt; issue 49, item 3)."""
+
+    def __init__(self, instance: str, z: float):
+        super().__init__()
+        self.instance, self.z, self.above, self.tilt = instance, z, False, None
+
+    def __call__(self, station, station_context):
+        super().__call__(station, station_context)
+        plant = GetPlant(station)
+        context = station.GetSubsystemContext(plant, station_context)
+        (index,) = plant.GetBodyIndices(plant.GetModelInstanceByName(self.instance))
+        X_WO = plant.get_body(index).EvalPoseInWorld(context)
+        z = X_WO.translation()[2]
+        if z > self.z + 0.01:
+            self.above = True
+        elif self.above and self.tilt is None and z < self.z:
+            up = float(np.max(np.abs(X_WO.rotation().matrix()[2, :])))
+            self.tilt = math.degrees(math.acos(min(1.0, up)))
 
 
 def _points(shape, X_WG, R_WB) -> np.ndarray:
