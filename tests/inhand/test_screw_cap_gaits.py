@@ -1,0 +1,67 @@
+"""Issue 45 item 5: the screw cap's several-gait task (``clear-gaits``): one gait whose
+parameters are learned, repeated ``n_gaits`` times (a task setting), so the search space
+stays one gait's."""
+
+import numpy as np
+import pytest
+
+from handle_drake.apps.inhand.screw_cap import (
+    CLEAR,
+    CLEAR_GAITS,
+    PLACEMENTS,
+    ScrewCapTask,
+    ScrewCapTrial,
+    build_screw_cap,
+)
+
+
+def test_the_several_gait_task_is_clear_repeated_and_searches_one_gait():
+    assert PLACEMENTS["clear-gaits"] is CLEAR_GAITS
+    task = ScrewCapTask(**CLEAR_GAITS)
+    assert task.n_gaits == 3 and task.target_deg == 360.0
+    for name, value in CLEAR.items():  # the same cap, hand and physics as the one gait
+        if name != "target_deg":
+            assert getattr(task, name) == value, name
+    one, several = ScrewCapTrial(ScrewCapTask(**CLEAR)), ScrewCapTrial(task)
+    assert several.dimension == one.dimension == 26
+    np.testing.assert_array_equal(several.bounds, one.bounds)
+    assert task.total_time == pytest.approx(3 * task.gait_duration + task.hold)
+
+
+def _motion_at(built, times) -> np.ndarray:
+    """The diagram's gait source output (the hand's commanded positions) at ``times``."""
+    source = built["source"]
+    context = built["diagram"].CreateDefaultContext()
+    out = []
+    for t in times:
+        context.SetTime(float(t))
+        out.append(source.get_output_port().Eval(
+            source.GetMyContextFromRoot(context)).copy())
+    return np.array(out)
+
+
+def test_the_commanded_motion_is_the_one_gait_tiled_with_the_regrasp_between():
+    # read from the two built diagrams (one gait, three gaits) with the same parameters:
+    # at every time in gait k the three-gait command is the one gait's at t - k d; at each
+    # gait's end the command returns from the gait's last frame to its first (the regrasp),
+    # and after the last gait it holds the last frame
+    one = ScrewCapTrial(ScrewCapTask(**CLEAR))
+    several = ScrewCapTrial(ScrewCapTask(**CLEAR_GAITS))
+    b = one.bounds
+    x = b[:, 0] + np.random.default_rng(5).random(len(b)) * (b[:, 1] - b[:, 0])
+    built_one = build_screw_cap(one.scenario(x), driver=False)
+    built_several = build_screw_cap(several.scenario(x), driver=False)
+    d = several.config.gait_duration
+    t = np.linspace(0.0, d, 97, endpoint=False)
+    single = _motion_at(built_one, t)
+    assert np.ptp(single, axis=0).max() > 0.3  # the gait moves the fingers
+    for k in range(3):
+        np.testing.assert_array_equal(_motion_at(built_several, t + k * d), single)
+    last, first = _motion_at(built_one, [d - 1e-6, 0.0])
+    assert np.abs(last - first).max() > 0.1  # so the regrasp is a real return
+    for k in (1, 2):
+        before, after = _motion_at(built_several, [k * d - 1e-6, k * d + 1e-6])
+        np.testing.assert_array_equal(before, last)
+        np.testing.assert_array_equal(after, first)
+    held = _motion_at(built_several, [3 * d + 1e-6, 3 * d + 0.15])
+    np.testing.assert_array_equal(held, [last, last])
