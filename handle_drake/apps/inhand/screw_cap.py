@@ -221,9 +221,9 @@ CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, bottle_neck=0.0
 # Issue 45 item 5, 360 deg over several gaits (``--placement clear-gaits``): CLEAR's cap and
 # physics, one gait (grip, stroke, release, regrasp: the gist's 26 parameters, learned)
 # repeated n_gaits = 3 times (a task setting), so the search space stays one gait's. What
-# limits it (measured, docs/results/inhand.md "Screw cap"): after the first gait the fingers
-# return to the grasp frame in contact with the cap, so each later gait adds -110 to +60
-# deg (25 uniform draws, 1 ms), and that later turn does not converge in the time step.
+# limits it (measured, docs/results/inhand.md "Screw cap"): the later gaits, each starting
+# from the regrasp (the return to the grasp frame), add -114 to +104 deg each (25 uniform
+# draws, 1 ms) against the first gait's -29 to +265, and their turn is step-sensitive.
 CLEAR_GAITS = dict(CLEAR, n_gaits=3, target_deg=360.0)
 #: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
 #: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
