@@ -2,6 +2,8 @@
 parameters are learned, repeated ``n_gaits`` times (a task setting), so the search space
 stays one gait's."""
 
+import argparse
+
 import numpy as np
 import pytest
 
@@ -26,6 +28,22 @@ def test_the_several_gait_task_is_clear_repeated_and_searches_one_gait():
     assert several.dimension == one.dimension == 26
     np.testing.assert_array_equal(several.bounds, one.bounds)
     assert task.total_time == pytest.approx(3 * task.gait_duration + task.hold)
+
+
+def test_the_command_line_takes_the_several_gait_task_by_name():
+    from handle_drake.apps.inhand.cli import _task_options, register
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="command"))
+    options = _task_options(parser.parse_args(["inhand", "--task", "screw_cap", "--placement",
+                                               "clear-gaits"]))
+    assert options["n_gaits"] == 3 and options["target_deg"] == 360.0
+    assert {k: options[k] for k in CLEAR if k != "target_deg"} == {
+        k: v for k, v in CLEAR.items() if k != "target_deg"}
+    # the repetitions stay a setting: --gaits overrides the preset's 3
+    options = _task_options(parser.parse_args(["inhand", "--task", "screw_cap", "--placement",
+                                               "clear-gaits", "--gaits", "4"]))
+    assert options["n_gaits"] == 4
 
 
 def _motion_at(built, times) -> np.ndarray:
