@@ -28,6 +28,9 @@ def test_the_several_gait_task_is_clear_repeated_and_searches_one_gait():
     assert several.dimension == one.dimension == 26
     np.testing.assert_array_equal(several.bounds, one.bounds)
     assert task.total_time == pytest.approx(3 * task.gait_duration + task.hold)
+    # its checks at the end of each gait (the last after the hold): a quarter, half, all
+    np.testing.assert_allclose(task.check_times(), [1.0, 2.0, 3.2])
+    np.testing.assert_allclose(task.benchmark_at(task.check_times()), [90.0, 180.0, 360.0])
 
 
 def test_the_command_line_takes_the_several_gait_task_by_name():

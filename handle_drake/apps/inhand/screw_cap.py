@@ -224,7 +224,11 @@ CLEAR = dict(cap_position=(0.405, -0.005, 0.07), cap_length=0.1, bottle_neck=0.0
 # limits it (measured, docs/results/inhand.md "Screw cap"): the later gaits, each starting
 # from the regrasp (the return to the grasp frame), add -114 to +104 deg each (25 uniform
 # draws, 1 ms) against the first gait's -29 to +265, and their turn is step-sensitive.
-CLEAR_GAITS = dict(CLEAR, n_gaits=3, target_deg=360.0)
+# Its checks follow the gaits: at the end of the first and second gait (1, 2 s) a quarter
+# and half of the target, at the end all of it. The default k/K checks (a quarter of the
+# motion time each: 90 deg at 0.75 s) failed a draw turning 362 deg at its first check (39
+# deg at 0.75 s: its stroke turns late in the gait, 197 deg by 1 s).
+CLEAR_GAITS = dict(CLEAR, n_gaits=3, target_deg=360.0, n_checks=3, benchmark=(0.25, 0.5, 1.0))
 #: The screw cap's placements by name (``--placement`` of ``handle-drake inhand --task
 #: screw_cap`` and of benchmarks/bench_screw_cap.py): ScrewCapTask settings.
 PLACEMENTS = {"one-gait": ONE_GAIT, "four-finger": FOUR_FINGER_GRIP,
