@@ -517,7 +517,8 @@ def main(argv=None) -> int:
                         "inhand`: CLEAR, nothing wedged against the welded bottle, 1 ms); the "
                         "older ones, a finger wedged against the bottle: one-gait (ONE_GAIT), "
                         "four-finger (FOUR_FINGER_GRIP), regrasp (REGRASP_GAITS: 5 gaits, 360 "
-                        "deg), four-finger-turn (FOUR_FINGER_TURN)")
+                        "deg), four-finger-turn (FOUR_FINGER_TURN); clear-gaits "
+                        "(CLEAR_GAITS: clear's cap, one learned gait repeated 3 times, 360 deg)")
     p.add_argument("--grip-digits", type=int, default=None, choices=range(1, 6),
                    metavar="N", help="screw_cap: digits that must each touch the cap within "
                    "the contact window for a check (ScrewCapTask.grip_digits; default 1)")

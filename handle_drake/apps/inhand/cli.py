@@ -97,7 +97,8 @@ def register(subparsers) -> None:
                         "against the bottle: one-gait (first and ring finger on the cap), "
                         "four-finger-turn (thumb, first, middle and ring finger; the fingers "
                         "turn it), four-finger (FOUR_FINGER_GRIP: four digits, squeezed: they "
-                        "jam), regrasp (5 gaits, 360 deg)")
+                        "jam), regrasp (5 gaits, 360 deg); clear-gaits: clear's cap, "
+                        "one learned gait repeated 3 times, 360 deg")
     p.add_argument("--grip-digits", type=positive_int, default=None, metavar="N",
                    help="screw_cap: digits (thumb and fingers) that must each touch the cap "
                         "within the contact window at a check (default 1: any finger)")

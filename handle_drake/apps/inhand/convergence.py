@@ -44,7 +44,7 @@ from handle_drake.apps.inhand.screw_cap import (
 )
 
 __all__ = ["Resimulation", "resimulate", "convergence", "converged", "DIGITS",
-           "LEAN_FORCE", "LEARNED_TWO_STROKES"]
+           "LEAN_FORCE", "LEARNED_TWO_STROKES", "LEARNED_GAIT_360"]
 
 DIGITS = ("th", "ff", "mf", "rf", "lf")
 # N: a contact force between the hand and a welded body (or the palm and the object) above
@@ -309,6 +309,20 @@ LEARNED_TWO_STROKES = (
     0.5946576701015374, 0.41668503602050855, 0.48029357868763156, 1.31708871025099,
     0.8753841407745186, 0.5573727899646391, 1.3842634800856966, 0.7598797038313639,
     0.16119102815239844, 0.005112749832716668)
+
+
+# A learned gait of the screw cap's 360 deg over 3 gaits (issue 45 item 5, CLEAR_GAITS): pso,
+# development seed 1, K = 2, 2026-12-08: reached at trial 9 (this is trial index 8's vector,
+# 26 values; worst of its 2 physics 582.2 deg); nominal 398.4 / 430.0 / 459.3 deg at 1 / 0.5
+# / 0.25 ms, 0 N on the bottle; 75 % of 20 fresh perturbations (docs/results/inhand.md)
+LEARNED_GAIT_360 = (
+    0.056938213385912206, 1.7222694241075502, 0.37900374281882165, 1.2057859770707264,
+    0.7294563635100563, 1.640706655272503, 1.2822433009996639, 0.5148951503082857,
+    1.2895925423904882, 1.4412205792341932, 0.46759667542694594, 0.41996987965740995,
+    1.5045279748364455, 0.2317793540686005, 1.1288848700207474, 0.39380528761943984,
+    0.7862922740381268, 1.8372234493251878, 0.1286426504814823, 1.7709552810203815,
+    0.6369153238388274, 0.869767905515707, 0.7921057067893064, 0.9294541370418112,
+    1.2187230053987455, 0.19988063552763866)
 
 
 def reference_motions(effort_limits: str = "menagerie") -> dict:
