@@ -9,10 +9,18 @@ import dataclasses as dc
 import numpy as np
 import pytest
 from cli_runner import cli_exit
+from pydrake.math import RigidTransform, RollPitchYaw
 from scipy.spatial.transform import Rotation
 
 from handle_drake.apps.inhand.convergence import stroke_motion
-from handle_drake.apps.inhand.screw_cap import CLEAR, ScrewCapTask, ScrewCapTrial
+from handle_drake.apps.inhand.screw_cap import (
+    CLEAR,
+    ONE_GAIT,
+    ScrewCapTask,
+    ScrewCapTrial,
+    bottle_cylinders,
+)
+from handle_drake.apps.inhand.sensed import cylinder_distance
 from handle_drake.devices.taxels.turn import GravityTurn
 
 
@@ -84,6 +92,43 @@ def test_the_sensed_touch_against_the_plants_contacts(stroke):
         both += bool(real)
         agree += bool(real) and bool(sensed)
     assert both > 10 and agree >= 0.5 * both  # 29 of 48 (light touches under the threshold)
+
+
+def test_cylinder_distance_closed_form():
+    """Unsigned distance to a solid cylinder's surface: side, end face, rim and inside."""
+    X = RigidTransform(RollPitchYaw(np.pi / 2, 0, 0), [1.0, 2.0, 3.0])  # axis: world -y
+    local = np.array([[0.05, 0, 0], [0, 0, 0.09], [0.04, 0, 0.08], [0.005, 0, 0.0],
+                      [0.02, 0.0, 0.01], [0.0, 0.0, 0.075]])
+    d = cylinder_distance(X.multiply(local.T).T, X, 0.02, 0.1)
+    assert d == pytest.approx([0.03, 0.04, np.hypot(0.02, 0.03), 0.015, 0.0, 0.025])
+
+
+@pytest.mark.parametrize("preset, wedged", [(ONE_GAIT, True), (CLEAR, False)])
+def test_the_sensed_lean_on_the_welded_bottle(preset, wedged):
+    """Scored from the estimate, the rule against leaning on the welded bottle reads the
+    taxels' patches on the bottle's known surface; truth: the plant's contact results at
+    every step of the same run (``welded_force_truth``). The wedged one-gait placement's
+    ring finger presses the bottle with > 100 N in the plant (the taxels feel 8 N of it on
+    the ring finger's distal and middle pads); the clear placement's 0 N, and no patch
+    lies on the bottle. A short trial: the demonstration's parameters, stopped at the
+    first failed check (0.5, 0.75 s)."""
+    trial = ScrewCapTrial(ScrewCapTask(**preset, score="estimated"))
+    x = trial.gist.initial_parameters()
+    o = trial.evaluate(x)
+    assert o.sim_time <= 0.75
+    assert bottle_cylinders(trial.scenario(x).cap)  # the bottle is known to the task
+    if wedged:
+        assert o.welded_force_truth > 100.0
+        assert o.leaned_on_welded and o.welded_force_max > trial.config.lean_force
+        assert "rfdistal" in o.welded_bodies and not o.reached_target
+    else:
+        assert o.welded_force_truth == 0.0
+        assert not o.leaned_on_welded and o.welded_force_max == 0.0 and not o.welded_bodies
+    # scored from the plant, the rule reads the plant's record, as before
+    plant = ScrewCapTrial(dc.replace(trial.config, score="plant")).evaluate(x)
+    assert plant.welded_force_max == plant.welded_force_truth
+    assert plant.welded_force_max == pytest.approx(o.welded_force_truth, rel=0.01, abs=1e-9)
+    assert plant.leaned_on_welded == wedged
 
 
 def test_score_setting_refusals():

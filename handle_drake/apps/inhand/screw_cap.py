@@ -1112,6 +1112,8 @@ class ScrewCapOutcome:
     palm_force_max: float  # N, at any step
     # the hand's largest force on a body welded to the world (the bottle; N, at any step),
     # the hand bodies that touched it, and whether it exceeded lean_force (not reached)
+    # (score "estimated": from the taxels, apps/inhand/sensed.py; the plant's, read at every
+    # step, in welded_force_truth)
     welded_force_max: float
     welded_bodies: list
     leaned_on_welded: bool
@@ -1135,6 +1137,7 @@ class ScrewCapOutcome:
     wall_time: float
     # score "estimated": per sample (plant, touch, accelerometer or None) turns (deg)
     sensed_series: list = dc.field(default_factory=list)
+    welded_force_truth: float = 0.0  # N: the plant's welded_force_max (any score)
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
@@ -1185,6 +1188,20 @@ def _demonstration(name: str = "screw_cap_rotation.json"):
 BUILDS = ("station", "planned", "driver")
 
 
+def bottle_cylinders(cap: ScrewCapModel) -> list:
+    """The welded bottle as the task knows it: ``[(X_WC, radius, length)]`` of its body and
+    its neck (if any), as :func:`bare_object` places them; empty for the free cylinder."""
+    base = bare_object(cap).joint
+    if base is None:
+        return []
+    base, X_WB = base.base, _base_pose(cap)
+    out = [(X_WB, base.diameter / 2, base.length)]
+    if base.neck_length > 0:
+        out.append((X_WB @ RigidTransform([0.0, 0.0, base.neck_offset]),
+                    base.neck_diameter / 2, base.neck_length))
+    return out
+
+
 def station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
     """The trial on the station (:class:`~handle_drake.trial.gist_trial.GistTrial`), the grasp
     settled with the ``still`` parameters; the handles the trial reads, under the names of
@@ -1204,7 +1221,8 @@ def station_build(scenario: ScrewCapScenario, still, meshcat=None) -> dict:
                 reverse=trial.reverse_system, planned=None, weight=trial.weight,
                 simulator=trial.simulator, settled=trial.settled,
                 sensed=SensedTurn(trial.harness.station, scenario, bare_object(
-                    scenario.cap).X_WO, -1.0 if scenario.cap.free else 1.0)
+                    scenario.cap).X_WO, -1.0 if scenario.cap.free else 1.0,
+                    welded=bottle_cylinders(scenario.cap))
                 if scenario.taxels else None)
 
 
@@ -1585,8 +1603,12 @@ class ScrewCapTrial(GistObjective):
             matches[:] = 0.0
             passed = min(passed, c.n_checks - 1)
         # nothing welded does the work: a trial whose hand leaned on the bottle with more
-        # than lean_force (N) at some step is not turned by the fingers
-        leaned = st["welded_max"] > c.lean_force
+        # than lean_force (N) at some step (score "estimated": at some taxel sample, the
+        # taxels' patches on the bottle) is not turned by the fingers
+        sensed = built.get("sensed")
+        welded, bodies = (st["welded_max"], st["welded_bodies"]) if sensed is None else (
+            sensed.welded_max, sensed.welded_bodies)
+        leaned = welded > c.lean_force
         reached = bool(not st["stopped"] and passed == c.n_checks and turns[-1] >= c.target_deg
                        and not st["palm"] and not leaned and survived is not False)
         if st["failed"]:
@@ -1597,7 +1619,8 @@ class ScrewCapTrial(GistObjective):
             score=float(score), turn_deg=turns[-1], turn_deg_truth=truths[-1],
             max_turn_deg=max(turns), gripped_at_start=list(built["gripped"]),
             palm_touched=st["palm"], palm_force_max=st["palm_max"],
-            welded_force_max=st["welded_max"], welded_bodies=sorted(st["welded_bodies"]),
+            welded_force_max=float(welded), welded_bodies=sorted(bodies),
+            welded_force_truth=st["welded_max"],
             leaned_on_welded=bool(leaned),
             digit_peak_normal={d: float(v) for d, v in sorted(st["digit_peak"].items())},
             palm_weight_share=float(palm_share), survived_reversal=survived,

@@ -110,6 +110,7 @@ class ContactTurn:
         self.touching: list[str] = []
         self.on_object: dict[str, float] = {}
         self.forces: dict[str, float] = {}
+        self.contacts: list = []  # per pad: (X_BP, contact points (k, 3) in B, forces (k,))
 
     @property
     def pads(self) -> list[Pad]:
@@ -166,6 +167,7 @@ class ContactTurn:
             points, _, forces = pad_contacts([pad], taxels[self._offsets[i]:self._offsets[
                 i + 1]], [X_BP], self._threshold)
             current.append((X_BP, points, forces))
+        self.contacts = current
         self.touching = [p.name for p, (_, pts, _) in zip(self._pads, current, strict=True)
                          if len(pts)]
         self.forces = {p.name: float(f.sum()) for p, (_, _, f) in zip(
