@@ -146,10 +146,15 @@ def _cmd_simulate(args) -> int:
     # said, as a learner would be told (the experiments' runner; a script drives the hand).
     midi = (scenario.midi_controller is not None and not args.hardware
             and scenario.controller is None)
+    reversal = _logged_reversal(logged, args)
     if midi:
         from handle_drake.apps.figure9.experiments import MidiScenarioRunner
 
         runner = MidiScenarioRunner(scenario, meshcat, log=log)
+    elif reversal is not None:
+        from handle_drake.apps.inhand.replay import ReversalRunner
+
+        runner = ReversalRunner(scenario, reversal.margin, meshcat, log=log)
     else:
         runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
     result = runner.run(args.duration, html=args.html)
@@ -161,6 +166,8 @@ def _cmd_simulate(args) -> int:
         _warn_below_table(scenario, result.object_position[:, 2])
     if jointed and not args.hardware:
         print(_joint_turn(scenario, runner.harness.logs()["object.joint_position"]))
+    if reversal is not None:
+        print(_replayed_reversal(runner, reversal, logged[4]))
     if result.score is not None:
         m, score = scenario.metric, result.score
         over = (f"; the mean over {len(m.placements)} start placements (metric.placements), "
@@ -196,7 +203,8 @@ SQLITE_HEADER = b"SQLite format 3\x00"
 
 
 def _logged_trial(args):
-    """With a trial log as SCENARIO: ``(scenario text, trial index, run id, score)`` of
+    """With a trial log as SCENARIO: ``(scenario text, trial index, run id, score, logged
+    detail)`` of
     its best finished trial (or ``--trial``) of ``--run-id`` (or its only run); None for a
     scenario file. ``--run-id`` and ``--trial`` are refused without a log."""
     path = args.scenario
@@ -233,7 +241,37 @@ def _logged_trial(args):
         raise ValueError(f"SCENARIO: run {run_id!r} in {path} has no finished trial with a "
                          f"scenario")
     best = max(done, key=lambda r: r.metric)
-    return best.scenario, best.index, run_id, best.metric
+    return best.scenario, best.index, run_id, best.metric, best.contacts
+
+
+def _logged_reversal(logged, args):
+    """The logged in-hand trial's reversed weight (the fingertip cylinder's: held means it
+    survives it), replayed after the scenario's duration; None without one, on hardware
+    (no plant) or with ``--duration`` (the reversal follows the trial's whole motion)."""
+    if logged is None or args.hardware:
+        return None
+    from handle_drake.apps.inhand.replay import logged_reversal
+
+    reversal = logged_reversal(logged[0])
+    if reversal is not None and args.duration is not None:
+        print("reversed weight: not replayed with --duration (it follows the whole motion)")
+        return None
+    return reversal
+
+
+def _replayed_reversal(runner, reversal, contacts) -> str:
+    """The replay's held verdict (read from its plant), then the logged trial's."""
+    from handle_drake.apps.inhand.replay import replay_reversal
+
+    out = replay_reversal(runner, reversal)
+    logged = (contacts or {}).get("survived_reversal")
+    said = ("the trial stopped before its reversal" if logged is None else
+            f"{'held' if logged else 'not held'}, travel "
+            f"{(contacts or {}).get('reversal_travel')!r} m")
+    return (f"reversed weight (its weight reversed plus {reversal.margin:g} N, for "
+            f"{reversal.time:g} s): {'held' if out['held'] else 'not held'}; travel "
+            f"{out['travel']!r} m (held: < {reversal.travel:g} m and a finger touching at "
+            f"the end); touching: {', '.join(out['touching']) or 'nothing'}; logged: {said}")
 
 
 def _joint_turn(scenario, log) -> str:
