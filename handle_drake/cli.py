@@ -118,7 +118,6 @@ def _cmd_diagrams_copy(args) -> int:
 def _cmd_simulate(args) -> int:
     from handle_drake.scenario import LoadScenario, object_spec
     from handle_drake.trial.harness import DEFAULT_LOG
-    from handle_drake.trial.simulate import ScenarioRunner
 
     logged = _logged_trial(args)
     if logged is not None:
@@ -147,16 +146,7 @@ def _cmd_simulate(args) -> int:
     midi = (scenario.midi_controller is not None and not args.hardware
             and scenario.controller is None)
     reversal = _logged_reversal(logged, args)
-    if midi:
-        from handle_drake.apps.figure9.experiments import MidiScenarioRunner
-
-        runner = MidiScenarioRunner(scenario, meshcat, log=log)
-    elif reversal is not None:
-        from handle_drake.apps.inhand.replay import ReversalRunner
-
-        runner = ReversalRunner(scenario, reversal.margin, meshcat, log=log)
-    else:
-        runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
+    runner = _simulate_runner(scenario, args, meshcat, log, midi, reversal)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
           f"({result.realtime_factor:.1f}x real time)")
@@ -242,6 +232,22 @@ def _logged_trial(args):
                          f"scenario")
     best = max(done, key=lambda r: r.metric)
     return best.scenario, best.index, run_id, best.metric, best.contacts
+
+
+def _simulate_runner(scenario, args, meshcat, log, midi: bool, reversal):
+    """simulate's runner: the MIDI experiments' (a MIDI controller model), one whose object's
+    weight can be reversed (a logged fingertip-cylinder trial), else the scenario's."""
+    if midi:
+        from handle_drake.apps.figure9.experiments import MidiScenarioRunner
+
+        return MidiScenarioRunner(scenario, meshcat, log=log)
+    if reversal is not None:
+        from handle_drake.apps.inhand.replay import ReversalRunner
+
+        return ReversalRunner(scenario, reversal.margin, meshcat, log=log)
+    from handle_drake.trial.simulate import ScenarioRunner
+
+    return ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
 
 
 def _logged_reversal(logged, args):

@@ -20,6 +20,8 @@ import dataclasses as dc
 import numpy as np
 
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource
+from handle_drake.apps.inhand.screw_cap import ScrewCapScenario
+from handle_drake.apps.inhand.task import TRIAL_MARKER
 from handle_drake.scenario import Scenario
 from handle_drake.station import object_body
 from handle_drake.trial.gist_trial import ReversedGravity
@@ -76,9 +78,6 @@ def logged_reversal(text: str) -> Reversal | None:
     """The reversal of a logged in-hand trial's text (its trial scenario after the station's,
     :func:`~handle_drake.apps.inhand.task.logged_scenario`): the fingertip cylinder's; None
     for a text without one (the screw cap on its thread, a scenario file)."""
-    from handle_drake.apps.inhand.screw_cap import ScrewCapScenario
-    from handle_drake.apps.inhand.task import TRIAL_MARKER
-
     if f"\n{TRIAL_MARKER}: fingertip cylinder" not in text:
         return None
     trial = ScrewCapScenario.load(text)
