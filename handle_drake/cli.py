@@ -271,13 +271,15 @@ def _replayed_reversal(runner, reversal, contacts) -> str:
 
     out = replay_reversal(runner, reversal)
     logged = (contacts or {}).get("survived_reversal")
+    where = "the largest over every step" if reversal.every_step else "at the end"
     said = ("the trial stopped before its reversal" if logged is None else
             f"{'held' if logged else 'not held'}, travel "
             f"{(contacts or {}).get('reversal_travel')!r} m")
     return (f"reversed weight (its weight reversed plus {reversal.margin:g} N, for "
             f"{reversal.time:g} s): {'held' if out['held'] else 'not held'}; travel "
-            f"{out['travel']!r} m (held: < {reversal.travel:g} m and a finger touching at "
-            f"the end); touching: {', '.join(out['touching']) or 'nothing'}; logged: {said}")
+            f"{out['travel']!r} m ({where}; held: < {reversal.travel:g} m and a finger "
+            f"touching at the end); touching: {', '.join(out['touching']) or 'nothing'}; "
+            f"logged: {said}")
 
 
 def _joint_turn(scenario, log) -> str:

@@ -63,6 +63,20 @@ def test_the_replayed_reversal_says_what_the_trial_logged(log, capsys):
     assert verdicts == {True, False}  # one run's best is held, the other's is lost
 
 
+def test_a_palm_up_trial_replays_its_reversal(tmp_path, capsys):
+    """The palm-up tasks (InHandTrial) log a reversal verdict too (their weight reversed
+    with no margin, the travel read where the reversal leaves the object)."""
+    run = run_inhand("cylinder_rotation", "cmaes", 1, n_particles=2, seed=0,
+                     db=tmp_path / "palm.sqlite", progress=False)
+    logged = run.records[0].contacts
+    assert logged["survived_reversal"] is not None
+    margin, time, held, travel, _ = _replay(["simulate", str(tmp_path / "palm.sqlite")],
+                                            capsys)
+    assert margin == 0.0 and time == 0.5
+    assert held == logged["survived_reversal"] == logged["held"]
+    assert travel == pytest.approx(logged["reversal_travel"], rel=1e-6, abs=1e-9)
+
+
 def test_a_trial_stopped_before_its_reversal_is_said_so(log, capsys):
     db, runs = log
     stopped = [r for r in runs[0].records if r.contacts["survived_reversal"] is None]

@@ -21,7 +21,7 @@ import numpy as np
 
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource
 from handle_drake.apps.inhand.screw_cap import ScrewCapScenario
-from handle_drake.apps.inhand.task import TRIAL_MARKER
+from handle_drake.apps.inhand.task import TRIAL_MARKER, InHandScenario
 from handle_drake.scenario import Scenario
 from handle_drake.station import object_body
 from handle_drake.trial.gist_trial import ReversedGravity
@@ -70,24 +70,36 @@ class Reversal:
     """A logged trial's reversal settings (from its trial scenario)."""
 
     time: float  # s, the weight reversed after the scenario's duration
-    travel: float  # m, held only if the object moves less at every step
+    travel: float  # m, held only if the object moves less
     margin: float  # N beyond the reversed weight
+    # the travel as the trial reads it: the largest over every step (the fingertip
+    # cylinder), or where the reversal leaves it (the palm-up tasks, InHandTrial)
+    every_step: bool = True
 
 
 def logged_reversal(text: str) -> Reversal | None:
     """The reversal of a logged in-hand trial's text (its trial scenario after the station's,
-    :func:`~handle_drake.apps.inhand.task.logged_scenario`): the fingertip cylinder's; None
-    for a text without one (the screw cap on its thread, a scenario file)."""
-    if f"\n{TRIAL_MARKER}: fingertip cylinder" not in text:
+    :func:`~handle_drake.apps.inhand.task.logged_scenario`): the fingertip cylinder's or a
+    palm-up task's; None for a text without one (the screw cap on its thread, a scenario
+    file)."""
+    marker = next((line for line in text.splitlines() if line.startswith(TRIAL_MARKER)), "")
+    if marker.endswith(", palm up"):
+        palm_up = InHandScenario.load(text)
+        return _checked_reversal(palm_up.reverse_time, palm_up.reverse_travel, 0.0, False)
+    if not marker.endswith(": fingertip cylinder"):
         return None
     trial = ScrewCapScenario.load(text)
-    for name, value in (("reverse_time", trial.reverse_time),
-                        ("reverse_travel", trial.reverse_travel)):
+    return _checked_reversal(trial.reverse_time, trial.reverse_travel, trial.reverse_margin,
+                             True)
+
+
+def _checked_reversal(time, travel, margin, every_step: bool) -> Reversal:
+    trial = Reversal(time, travel, margin, every_step)
+    for name, value in (("reverse_time", trial.time), ("reverse_travel", trial.travel)):
         if not (np.isfinite(value) and value > 0):
             raise ValueError(f"{name}: expected a finite value > 0 in the logged trial, got "
                              f"{value!r}")
-    return Reversal(float(trial.reverse_time), float(trial.reverse_travel),
-                    float(trial.reverse_margin))
+    return Reversal(float(time), float(travel), float(margin), every_step)
 
 
 class ReversalRunner(ScenarioRunner):
@@ -112,8 +124,9 @@ class ReversalRunner(ScenarioRunner):
 def replay_reversal(runner: ReversalRunner, reversal: Reversal, html=None) -> dict:
     """After :meth:`ReversalRunner.run` (the scenario's whole duration): the weight reversed
     for ``reversal.time``; returns ``held`` (moved less than ``reversal.travel`` from where
-    the run left it at every step, and a hand body other than the palm touches it at the
-    end), ``travel`` (m, the largest) and ``touching`` (hand bodies, at the end)."""
+    the run left it, and a hand body other than the palm touches it at the end),
+    ``travel`` (m: the largest over every step, or at the end, as ``reversal.every_step``)
+    and ``touching`` (hand bodies, at the end)."""
     plant, context = runner.harness.plant, runner.context
     plant_context = plant.GetMyContextFromRoot(context)
     body = object_body(plant)
@@ -143,5 +156,7 @@ def replay_reversal(runner: ReversalRunner, reversal: Reversal, html=None) -> di
         for mine, other in ((a, b), (b, a)):
             if mine == int(body.index()) and other in hand:
                 touching.add(hand[other])
-    held = worst[0] < reversal.travel and any(name != "palm" for name in touching)
-    return dict(held=bool(held), travel=worst[0], touching=sorted(touching))
+    travel = worst[0] if reversal.every_step else float(np.linalg.norm(
+        plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
+    held = travel < reversal.travel and any(name != "palm" for name in touching)
+    return dict(held=bool(held), travel=travel, touching=sorted(touching))
