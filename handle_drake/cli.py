@@ -145,7 +145,7 @@ def _cmd_simulate(args) -> int:
     # said, as a learner would be told (the experiments' runner; a script drives the hand).
     midi = (scenario.midi_controller is not None and not args.hardware
             and scenario.controller is None)
-    reversal = _logged_reversal(logged, args)
+    reversal = _logged_reversal(logged, args, scenario)
     runner = _simulate_runner(scenario, args, meshcat, log, midi, reversal)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
@@ -250,17 +250,24 @@ def _simulate_runner(scenario, args, meshcat, log, midi: bool, reversal):
     return ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
 
 
-def _logged_reversal(logged, args):
-    """The logged in-hand trial's reversed weight (the fingertip cylinder's: held means it
-    survives it), replayed after the scenario's duration; None without one, on hardware
-    (no plant) or with ``--duration`` (the reversal follows the trial's whole motion)."""
+def _logged_reversal(logged, args, scenario):
+    """The logged in-hand trial's reversed weight (a free object's: held means it survives
+    it), replayed after the scenario's duration; None without one, on hardware (no plant),
+    with ``--duration`` (the reversal follows the trial's whole motion) or when
+    ``--override`` left no free object."""
     if logged is None or args.hardware:
         return None
     from handle_drake.apps.inhand.replay import logged_reversal
 
     reversal = logged_reversal(logged[0])
-    if reversal is not None and args.duration is not None:
-        print("reversed weight: not replayed with --duration (it follows the whole motion)")
+    if reversal is None:
+        return None
+    o = scenario.object
+    why = ("--duration: it follows the whole motion" if args.duration is not None else
+           "--override: no free object" if o is None or o.joint is not None or o.fixed
+           else "")
+    if why:
+        print(f"reversed weight: not replayed ({why})")
         return None
     return reversal
 

@@ -92,6 +92,11 @@ def test_the_cap_has_no_reversal_and_bad_log_flags_are_one_line_errors(log, tmp_
     cap = run_inhand("screw_cap", "random", 1, seed=0, db=tmp_path / "cap.sqlite",
                      hold=0.1, progress=False)
     assert logged_reversal(cap.records[0].scenario) is None  # on its thread: nothing to lose
+    run = ["simulate", str(db), "--run-id", runs[1].run_id]
+    for extra, why in ((["--duration", "0.3"], "--duration"),
+                       (["--override", "object: null"], "--override: no free object")):
+        assert cli_main(run + extra) == 0  # the motion alone: no reversal to replay
+        assert f"reversed weight: not replayed ({why}" in capsys.readouterr().out
     for argv, flag in (([str(db)], "--run-id"),  # two runs: which one
                        ([str(db), "--run-id", "nope"], "--run-id"),
                        ([str(db), "--run-id", runs[0].run_id, "--trial", "7"], "--trial"),
