@@ -118,7 +118,6 @@ def _cmd_diagrams_copy(args) -> int:
 def _cmd_simulate(args) -> int:
     from handle_drake.scenario import LoadScenario, object_spec
     from handle_drake.trial.harness import DEFAULT_LOG
-    from handle_drake.trial.simulate import ScenarioRunner
 
     logged = _logged_trial(args)
     if logged is not None:
@@ -146,12 +145,8 @@ def _cmd_simulate(args) -> int:
     # said, as a learner would be told (the experiments' runner; a script drives the hand).
     midi = (scenario.midi_controller is not None and not args.hardware
             and scenario.controller is None)
-    if midi:
-        from handle_drake.apps.figure9.experiments import MidiScenarioRunner
-
-        runner = MidiScenarioRunner(scenario, meshcat, log=log)
-    else:
-        runner = ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
+    reversal = _logged_reversal(logged, args, scenario)
+    runner = _simulate_runner(scenario, args, meshcat, log, midi, reversal)
     result = runner.run(args.duration, html=args.html)
     print(f"simulated {result.sim_time:.2f} s in {result.wall_time:.2f} s "
           f"({result.realtime_factor:.1f}x real time)")
@@ -161,6 +156,8 @@ def _cmd_simulate(args) -> int:
         _warn_below_table(scenario, result.object_position[:, 2])
     if jointed and not args.hardware:
         print(_joint_turn(scenario, runner.harness.logs()["object.joint_position"]))
+    if reversal is not None:
+        print(_replayed_reversal(runner, reversal, logged[4]))
     if result.score is not None:
         m, score = scenario.metric, result.score
         over = (f"; the mean over {len(m.placements)} start placements (metric.placements), "
@@ -196,7 +193,8 @@ SQLITE_HEADER = b"SQLite format 3\x00"
 
 
 def _logged_trial(args):
-    """With a trial log as SCENARIO: ``(scenario text, trial index, run id, score)`` of
+    """With a trial log as SCENARIO: ``(scenario text, trial index, run id, score, logged
+    detail)`` of
     its best finished trial (or ``--trial``) of ``--run-id`` (or its only run); None for a
     scenario file. ``--run-id`` and ``--trial`` are refused without a log."""
     path = args.scenario
@@ -233,7 +231,62 @@ def _logged_trial(args):
         raise ValueError(f"SCENARIO: run {run_id!r} in {path} has no finished trial with a "
                          f"scenario")
     best = max(done, key=lambda r: r.metric)
-    return best.scenario, best.index, run_id, best.metric
+    return best.scenario, best.index, run_id, best.metric, best.contacts
+
+
+def _simulate_runner(scenario, args, meshcat, log, midi: bool, reversal):
+    """simulate's runner: the MIDI experiments' (a MIDI controller model), one whose object's
+    weight can be reversed (a logged fingertip-cylinder trial), else the scenario's."""
+    if midi:
+        from handle_drake.apps.figure9.experiments import MidiScenarioRunner
+
+        return MidiScenarioRunner(scenario, meshcat, log=log)
+    if reversal is not None:
+        from handle_drake.apps.inhand.replay import ReversalRunner
+
+        return ReversalRunner(scenario, reversal.margin, meshcat, log=log)
+    from handle_drake.trial.simulate import ScenarioRunner
+
+    return ScenarioRunner(scenario, meshcat, hardware=args.hardware, log=log)
+
+
+def _logged_reversal(logged, args, scenario):
+    """The logged in-hand trial's reversed weight (a free object's: held means it survives
+    it), replayed after the scenario's duration; None without one, on hardware (no plant),
+    with ``--duration`` (the reversal follows the trial's whole motion) or when
+    ``--override`` left no free object."""
+    if logged is None or args.hardware:
+        return None
+    from handle_drake.apps.inhand.replay import logged_reversal
+
+    reversal = logged_reversal(logged[0])
+    if reversal is None:
+        return None
+    o = scenario.object
+    why = ("--duration: it follows the whole motion" if args.duration is not None else
+           "--override: no free object" if o is None or o.joint is not None or o.fixed
+           else "")
+    if why:
+        print(f"reversed weight: not replayed ({why})")
+        return None
+    return reversal
+
+
+def _replayed_reversal(runner, reversal, contacts) -> str:
+    """The replay's held verdict (read from its plant), then the logged trial's."""
+    from handle_drake.apps.inhand.replay import replay_reversal
+
+    out = replay_reversal(runner, reversal)
+    logged = (contacts or {}).get("survived_reversal")
+    where = "the largest over every step" if reversal.every_step else "at the end"
+    said = ("the trial stopped before its reversal" if logged is None else
+            f"{'held' if logged else 'not held'}, travel "
+            f"{(contacts or {}).get('reversal_travel')!r} m")
+    return (f"reversed weight (its weight reversed plus {reversal.margin:g} N, for "
+            f"{reversal.time:g} s): {'held' if out['held'] else 'not held'}; travel "
+            f"{out['travel']!r} m ({where}; held: < {reversal.travel:g} m and a finger "
+            f"touching at the end); touching: {', '.join(out['touching']) or 'nothing'}; "
+            f"logged: {said}")
 
 
 def _joint_turn(scenario, log) -> str:

@@ -350,6 +350,10 @@ class ScrewCapScenario:
     parameters: list[float] = dc.field(default_factory=list)  # eq. 45
     # N: the free cylinder's reversal pushes its weight reversed plus this much more
     reverse_margin: float = 0.0
+    # the free cylinder's reversal after the hold: s, and the travel (m) beyond which it is
+    # not held (ScrewCapTask's; ``handle-drake simulate`` replays it from the log)
+    reverse_time: float = 0.5
+    reverse_travel: float = 0.01
     # SAP's "near rigid" threshold (MultibodyPlantConfig.sap_near_rigid_threshold; 1.0 is
     # Drake's default). Above it SAP softens a contact to what the step resolves, so that a
     # light object's contact compliance is set by the time step, not by the model (issue 45:
@@ -1138,6 +1142,9 @@ class ScrewCapOutcome:
     # score "estimated": per sample (plant, touch, accelerometer or None) turns (deg)
     sensed_series: list = dc.field(default_factory=list)
     welded_force_truth: float = 0.0  # N: the plant's welded_force_max (any score)
+    # m: the free cylinder's largest travel from where the hold left it, over every step of
+    # the reversal (None: not run, or a cap)
+    reversal_travel: float | None = None
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
@@ -1322,6 +1329,7 @@ class ScrewCapTrial(GistObjective):
             gait_duration=c.gait_duration, n_frames=c.n_frames, n_gaits=c.n_gaits,
             hold=c.hold, parameters=[float(v) for v in parameters],
             reverse_margin=c.reverse_margin if c.free else 0.0,
+            reverse_time=c.reverse_time, reverse_travel=c.reverse_travel,
             near_rigid_threshold=c.free_near_rigid_threshold if c.free else 1.0,
             taxels=c.score == "estimated", accelerometer=c.accelerometer)
 
@@ -1446,16 +1454,18 @@ class ScrewCapTrial(GistObjective):
         return (c.n_gaits - 1 + max(ends)) * c.gait_duration
 
     def _reversal(self, built: dict, plant_context, stopped: bool):
-        """``(survived, credits)``: for the free cylinder whose trial was not stopped,
-        :meth:`_survives_reversal`; its reversal samples are planned samples of eq. 48
-        too, so they count 0 when the trial stopped before them (the cap has none)."""
+        """``(survived, credits, travel)``: for the free cylinder whose trial was not
+        stopped, :meth:`_survives_reversal`; its reversal samples are planned samples of
+        eq. 48 too, so they count 0 when the trial stopped before them (the cap has none;
+        travel None when not run)."""
         if built["joint"] is not None:
-            return None, np.zeros(0)
+            return None, np.zeros(0), None
         if stopped:
-            return None, np.zeros(self.config.reversal_sample_times().size)
+            return None, np.zeros(self.config.reversal_sample_times().size), None
         return self._survives_reversal(built, plant_context)
 
-    def _survives_reversal(self, built: dict, plant_context) -> tuple[bool, np.ndarray]:
+    def _survives_reversal(self, built: dict, plant_context) -> tuple[bool, np.ndarray,
+                                                                      float]:
         """Weight reversed for ``reverse_time`` (the hand turned palm down, for the free
         cylinder): still within ``reverse_travel`` and touched by a finger at the end.
 
@@ -1492,7 +1502,7 @@ class ScrewCapTrial(GistObjective):
             return False
 
         advance_sampling(simulator, c.reversal_sample_times(), each_step, at_sample)
-        return bool(held[0]), np.asarray(credits)
+        return bool(held[0]), np.asarray(credits), float(worst[0])
 
     def _reset(self, built: dict, x):
         """The simulator at the settled grasp, time 0, with the parameters ``x`` (and their
@@ -1593,7 +1603,7 @@ class ScrewCapTrial(GistObjective):
         # the palm's share of the object's weight at the end (before any reversal)
         final = contact_summary(plant, plant_context, built)
         palm_share = final["lift"].get("palm", 0.0) / built["weight"]
-        survived, reversal = self._reversal(built, plant_context, st["stopped"])
+        survived, reversal, travel = self._reversal(built, plant_context, st["stopped"])
         if html is not None:
             meshcat.StopRecording()
             meshcat.PublishRecording()
@@ -1629,7 +1639,7 @@ class ScrewCapTrial(GistObjective):
             completed=not st["stopped"], reached_target=reached, s_b=s_b, s_a=s_a,
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall,
-            sensed_series=st["sensed"])
+            sensed_series=st["sensed"], reversal_travel=travel)
 
 
 def advance_sampling(simulator, times, each_step, at_sample) -> bool:

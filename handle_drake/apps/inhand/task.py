@@ -261,6 +261,7 @@ class TrialOutcome:
     # reversed for reverse_time (None: the trial stopped early)
     palm_weight_share: float | None = None
     survived_reversal: bool | None = None
+    reversal_travel: float | None = None  # m, where the reversal left it (None: not run)
 
     def as_dict(self) -> dict:
         return dc.asdict(self)
@@ -335,6 +336,11 @@ class InHandScenario:
     motion_duration: float = 1.0
     n_frames: int = 50
     parameters: list[float] = dc.field(default_factory=list)  # eq. 45
+    # the held test after the hold: the weight reversed for reverse_time (s); survived if
+    # the object then is less than reverse_travel (m) from where the hold left it
+    # (InHandTask's; ``handle-drake simulate`` replays it from the log)
+    reverse_time: float = 0.5
+    reverse_travel: float = 0.01
 
     def dump(self) -> str:
         return yaml_dump_typed(self)
@@ -544,7 +550,8 @@ class InHandTrial(GistObjective):
         return InHandScenario(station=station, settle_time=c.settle_time,
                               gist_name=self.gist.name, gist=gist_data(self.gist),
                               motion_duration=c.motion_duration, n_frames=c.n_frames,
-                              parameters=[float(v) for v in parameters])
+                              parameters=[float(v) for v in parameters],
+                              reverse_time=c.reverse_time, reverse_travel=c.reverse_travel)
 
     # ------------------------------------------------------------ building
     def _build(self, meshcat=None):
@@ -622,6 +629,7 @@ class InHandTrial(GistObjective):
         touching = _touching(plant.get_contact_results_output_port().Eval(plant_context),
                              body, built["hand_bodies"])
         st.survived = bool(travel < c.reverse_travel and any(b != "palm" for b in touching))
+        st.travel = travel
 
     def _sample(self, st: "_Sampling", built: dict) -> None:
         """One sample of the running trial: rotation, held, contacts, the checks."""
@@ -713,7 +721,8 @@ class InHandTrial(GistObjective):
             accelerometer_rotation_deg_series=st.accel_rotations, contacts=st.contacts,
             sim_time=float(samples[len(rotations) - 1]), wall_time=wall_time,
             held_truth=st.held_truth and not st.stopped and st.survived is True,
-            palm_weight_share=st.palm_share, survived_reversal=st.survived)
+            palm_weight_share=st.palm_share, survived_reversal=st.survived,
+            reversal_travel=st.travel)
 
 
 @dc.dataclass(eq=False)
@@ -744,6 +753,7 @@ class _Sampling:
     acc_prev: float | None = None
     palm_share: float | None = None  # the palm's share of the weight at the end of the hold
     survived: bool | None = None  # the reversed-weight test (None: not run)
+    travel: float | None = None  # m, the object's travel over the reversal (None: not run)
     acc_angle: float = 0.0
     rotations: list = dc.field(default_factory=list)  # deg per sample
     accel_rotations: list = dc.field(default_factory=list)
