@@ -21,7 +21,7 @@ import numpy as np
 
 from handle_drake.apps.inhand.gist import ActionGist, GistMotionSource
 from handle_drake.apps.inhand.screw_cap import ScrewCapScenario
-from handle_drake.apps.inhand.task import TRIAL_MARKER, InHandScenario
+from handle_drake.apps.inhand.task import TRIAL_MARKER, InHandScenario, touching_hand_bodies
 from handle_drake.scenario import Scenario
 from handle_drake.station import object_body
 from handle_drake.trial.gist_trial import ReversedGravity
@@ -148,15 +148,9 @@ def replay_reversal(runner: ReversalRunner, reversal: Reversal, html=None) -> di
         runner.harness.stop_when(None)
     hand = {int(i): plant.get_body(i).name()
             for i in plant.GetBodyIndices(plant.GetModelInstanceByName("hand"))}
-    results = plant.get_contact_results_output_port().Eval(plant_context)
-    touching = set()
-    for k in range(results.num_point_pair_contacts()):
-        info = results.point_pair_contact_info(k)
-        a, b = int(info.bodyA_index()), int(info.bodyB_index())
-        for mine, other in ((a, b), (b, a)):
-            if mine == int(body.index()) and other in hand:
-                touching.add(hand[other])
+    touching = touching_hand_bodies(
+        plant.get_contact_results_output_port().Eval(plant_context), body, hand)
     travel = worst[0] if reversal.every_step else float(np.linalg.norm(
         plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
     held = travel < reversal.travel and any(name != "palm" for name in touching)
-    return dict(held=bool(held), travel=travel, touching=sorted(touching))
+    return dict(held=bool(held), travel=travel, touching=touching)

@@ -94,7 +94,7 @@ from handle_drake.trial.gist_trial import ReversedGravity
 
 __all__ = ["TASKS", "InHandTask", "InHandTrial", "InHandScenario", "TrialOutcome", "EVALUATIONS",
            "task_gist", "build_inhand", "ReversedGravity", "inhand_fingerprint", "GistMotionData",
-           "gist_data", "gist_from_data", "penetrating_hand_bodies",
+           "gist_data", "gist_from_data", "penetrating_hand_bodies", "touching_hand_bodies",
            "logged_scenario", "trial_text", "motion_script", "TRIAL_MARKER"]
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -626,8 +626,9 @@ class InHandTrial(GistObjective):
         harness.advance(c.total_time + c.reverse_time)
         travel = float(np.linalg.norm(
             plant.EvalBodyPoseInWorld(plant_context, body).translation() - p_end))
-        touching = _touching(plant.get_contact_results_output_port().Eval(plant_context),
-                             body, built["hand_bodies"])
+        touching = touching_hand_bodies(
+            plant.get_contact_results_output_port().Eval(plant_context), body,
+            built["hand_bodies"])
         st.survived = bool(travel < c.reverse_travel and any(b != "palm" for b in touching))
         st.travel = travel
 
@@ -644,8 +645,9 @@ class InHandTrial(GistObjective):
         if built["touching_query"] is not None:
             touching = built["touching_query"](st.plant_context)
         else:
-            touching = _touching(plant.get_contact_results_output_port().Eval(st.plant_context),
-                                 body, built["hand_bodies"])
+            touching = touching_hand_bodies(
+                plant.get_contact_results_output_port().Eval(st.plant_context), body,
+                built["hand_bodies"])
         p = X.translation()
         if touching:
             st.last_touch = t
@@ -793,8 +795,8 @@ def penetrating_hand_bodies(query_object, names: dict, objects) -> dict:
 
 
 def _touching_query(plant, body, hand_bodies):
-    """With point contact: ``touching(plant_context)``, :func:`_touching`'s names from the
-    geometry query's point pairs (:func:`penetrating_hand_bodies`), which are the pairs the
+    """With point contact: ``touching(plant_context)``, :func:`touching_hand_bodies`' names
+    from the geometry query's point pairs (:func:`penetrating_hand_bodies`), which are the pairs the
     point-contact results report (tested: equal at every sample), without solving for the
     forces (the contact results evaluated at a sample are solved again by the next step:
     ~0.5 ms each). None with hydroelastic contact (its results are not point pairs)."""
@@ -812,7 +814,9 @@ def _touching_query(plant, body, hand_bodies):
     return touching
 
 
-def _touching(results, body, hand_bodies) -> list[str]:
+def touching_hand_bodies(results, body, hand_bodies) -> list[str]:
+    """The names (sorted) of the hand bodies (``{body index: name}``) in point contact with
+    ``body`` in the contact ``results``."""
     index = int(body.index())
     names = set()
     for k in range(results.num_point_pair_contacts()):
