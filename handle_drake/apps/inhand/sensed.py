@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
+from handle_drake.devices.taxels.estimator import cylinder_signed_distance
 from handle_drake.devices.taxels.turn import ContactTurn, GravityTurn
 
 __all__ = ["SensedTurn", "SENSED_OUTPUTS", "SCORES", "WELDED_TOLERANCE", "cylinder_distance"]
@@ -40,11 +41,7 @@ def cylinder_distance(points_W, X_WC: RigidTransform, radius: float, length: flo
     """The distance (m, unsigned) of each of ``points_W`` (k, 3) from the surface of a
     solid cylinder (axis: z of ``X_WC``, centred there, ``radius``, ``length``)."""
     p = X_WC.inverse().multiply(np.asarray(points_W, float).reshape(-1, 3).T).T
-    r, h = np.hypot(p[:, 0], p[:, 1]), np.abs(p[:, 2])
-    dr, dh = r - radius, h - length / 2
-    inside = (dr <= 0) & (dh <= 0)
-    return np.where(inside, np.minimum(-dr, -dh),
-                    np.hypot(np.maximum(dr, 0.0), np.maximum(dh, 0.0)))
+    return np.abs(cylinder_signed_distance(p, radius, length))
 
 
 class SensedTurn:

@@ -66,7 +66,7 @@ from handle_drake.base.hands import AddHand, get_hand_spec
 from handle_drake.devices.taxels.pads import Pad
 from handle_drake.geometry.objects.pieces import pieces
 
-__all__ = ["InHandPoseEstimator", "PrimitiveShape", "pad_contacts"]
+__all__ = ["InHandPoseEstimator", "PrimitiveShape", "pad_contacts", "cylinder_signed_distance"]
 
 #: m: a point this far behind a contact, inside the finger, must be outside the object
 #: (at least 0.8 of it): the fit's guard against the mirror solution (the object on the
@@ -154,18 +154,27 @@ class PrimitiveShape:
             box = np.linalg.norm(np.maximum(np.maximum(low - p, p - high), 0.0), axis=1)
             return np.maximum((p @ planes[:, :3].T + planes[:, 3]).max(axis=1), box)
         if shape == "cylinder":
-            r, length = params
-            q = np.column_stack([np.hypot(p[:, 0], p[:, 1]) - r, np.abs(p[:, 2]) - length / 2])
-        else:
-            q = np.abs(p) - params / 2
-        outside = np.linalg.norm(np.maximum(q, 0.0), axis=1)
-        return outside + np.minimum(q.max(axis=1), 0.0)
+            return cylinder_signed_distance(p, *params)
+        return _box_distance(np.abs(p) - params / 2)
 
     def normal(self, p_O: np.ndarray, h: float = 1e-5) -> np.ndarray:
         """Unit outward normal (the distance's gradient, central differences) at each row."""
         g = np.column_stack([self.distance(p_O + h * e) - self.distance(p_O - h * e)
                              for e in np.eye(3)]) / (2 * h)
         return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+
+
+def cylinder_signed_distance(p: np.ndarray, radius: float, length: float) -> np.ndarray:
+    """Signed distance of each row of ``p`` (n, 3, in the cylinder's frame: axis z, centred)
+    from a solid cylinder's surface (negative inside)."""
+    p = np.asarray(p, float).reshape(-1, 3)
+    return _box_distance(np.column_stack([np.hypot(p[:, 0], p[:, 1]) - radius,
+                                          np.abs(p[:, 2]) - length / 2]))
+
+
+def _box_distance(q: np.ndarray) -> np.ndarray:
+    """Signed distance from the excess ``q`` (n, k) of each point over a box's half-sizes."""
+    return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
 
 
 def interior(pad: Pad, uv) -> bool:
