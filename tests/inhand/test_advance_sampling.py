@@ -1,5 +1,6 @@
-"""advance_sampling (the screw cap trial's one AdvanceTo per phase) reads at each sample time
-the state that AdvanceTo(sample time) ends in, on a discrete plant (issue 45, item 8)."""
+"""advance_sampling (trial.harness; the screw cap trial's one AdvanceTo per phase) reads at
+each sample time the state that AdvanceTo(sample time) ends in, on a discrete plant (issue 45,
+item 8)."""
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from handle_drake.apps.inhand.screw_cap import advance_sampling
+from handle_drake.trial.harness import advance_sampling
 
 STEP = 0.002
 # on the steps (0.05, 0.15: 0.15 / 0.002 is not exact in floating point) and between them

@@ -73,7 +73,7 @@ from pydrake.multibody.tree import (
     BodyIndex,
 )
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, EventStatus
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
@@ -132,6 +132,7 @@ from handle_drake.scene.jointed import AddBareObject, BareObject, ObjectBase, Th
 from handle_drake.station import hand_initial_command, set_default_hand_positions
 from handle_drake.systems.hand_driver import PdHandDriver, actuated_order
 from handle_drake.trial.gist_trial import GistTrial as StationGistTrial
+from handle_drake.trial.harness import advance_sampling
 
 __all__ = ["CLEAR", "CLEAR_GAITS", "DEFAULT_PLACEMENT", "ONE_GAIT", "FOUR_FINGER_GRIP",
            "FOUR_FINGER_TURN", "PLACEMENTS", "REGRASP_GAITS", "TWO_STROKES", "ScrewCapModel",
@@ -1640,45 +1641,6 @@ class ScrewCapTrial(GistObjective):
             times=samples[: len(turns)].tolist(), turn_deg_series=turns, contacts=contacts,
             sim_time=float(samples[len(turns) - 1]), wall_time=time.perf_counter() - start_wall,
             sensed_series=st["sensed"], reversal_travel=travel)
-
-
-def advance_sampling(simulator, times, each_step, at_sample) -> bool:
-    """Simulates to ``times[-1]`` in one ``AdvanceTo``, a monitor calling ``each_step(root
-    context)`` after every step and ``at_sample(i, times[i])`` at the first step at or after
-    each time (the state ``AdvanceTo(times[i])`` ends in: it applies the discrete update
-    due before ``times[i]``, which the next step's monitor sees; tested), in order; stops
-    there when ``at_sample`` returns True.
-    Returns whether it stopped. One ``AdvanceTo`` per sample cost the trial 0.1 of the bare
-    plant's time (issue 45, item 8)."""
-    times = [float(t) for t in times]
-    if not times:
-        return False
-    pending, errors, stop = [0], [], [False]
-    diagram = simulator.get_system()
-
-    def monitor(root_context):
-        try:
-            each_step(root_context)
-            now = root_context.get_time()  # exactly: AdvanceTo(t) applies updates before t
-            while pending[0] < len(times) and times[pending[0]] <= now:
-                i = pending[0]
-                pending[0] += 1
-                if at_sample(i, times[i]):
-                    stop[0] = True
-                    return EventStatus.ReachedTermination(diagram, "stopped at a sample")
-        except Exception as error:  # raised again outside the simulator
-            errors.append(error)
-            return EventStatus.ReachedTermination(diagram, "raised")
-        return EventStatus.Succeeded()
-
-    simulator.set_monitor(monitor)
-    try:
-        simulator.AdvanceTo(times[-1])
-    finally:
-        simulator.clear_monitor()
-    if errors:
-        raise errors[0]
-    return stop[0]
 
 
 def _sample_contacts(plant, plant_context, built, contact_results: bool) -> dict:
